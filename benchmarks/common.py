@@ -1,0 +1,71 @@
+"""Benchmark harness: every benchmark writes results/<name>.json, results/<name>.md and results/<name>.png."""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import time
+from pathlib import Path
+
+RESULTS = Path(__file__).resolve().parent / "results"
+
+
+def machine() -> dict:
+    import numpy as np
+
+    info = {"python": platform.python_version(), "machine": platform.machine(), "cpus": os.cpu_count(),
+            "numpy": np.__version__, "date": time.strftime("%Y-%m-%d %H:%M:%S")}
+    try:
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                if line.startswith("model name"):
+                    info["cpu"] = line.split(":", 1)[1].strip()
+                    break
+    except OSError:
+        pass
+    return info
+
+
+def markdown_table(rows: list[dict], columns: list[tuple[str, str, str]]) -> str:
+    """columns: (key, header, format) e.g. ("p50_ms", "p50 (ms)", "{:.2f}")."""
+    head = "| " + " | ".join(h for _, h, _ in columns) + " |"
+    sep = "|" + "|".join("---" for _ in columns) + "|"
+    body = []
+    for r in rows:
+        cells = []
+        for k, _, fmt in columns:
+            v = r.get(k, "")
+            try:
+                cells.append(fmt.format(v) if v != "" and v is not None else "")
+            except (ValueError, TypeError):
+                cells.append(str(v))
+        body.append("| " + " | ".join(cells) + " |")
+    return "\n".join([head, sep, *body])
+
+
+def save(name: str, rows: list[dict], columns, title: str, notes: str = "", plot=None, extra: dict | None = None) -> Path:
+    """Write the JSON (rows + machine), the markdown table and, if ``plot(ax_or_fig)`` is given, a PNG."""
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    doc = {"benchmark": name, "title": title, "machine": machine(), "rows": rows}
+    if extra:
+        doc.update(extra)
+    (RESULTS / f"{name}.json").write_text(json.dumps(doc, indent=2, default=float))
+    md = [f"# {title}", "", markdown_table(rows, columns), ""]
+    if notes:
+        md += [notes, ""]
+    m = doc["machine"]
+    md.append(f"Machine: {m.get('cpu', '?')}, {m['cpus']} CPUs, Python {m['python']}, {m['date']}.")
+    if plot is not None:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        fig = plot(plt)
+        fig.savefig(RESULTS / f"{name}.png", dpi=110, bbox_inches="tight")
+        plt.close(fig)
+        md += ["", f"![{title}]({name}.png)"]
+    (RESULTS / f"{name}.md").write_text("\n".join(md) + "\n")
+    print("\n".join(md))
+    return RESULTS / f"{name}.json"

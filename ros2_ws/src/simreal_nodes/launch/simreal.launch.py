@@ -1,0 +1,28 @@
+"""ros2 launch simreal_nodes simreal.launch.py scene:=/path/to/scene.yaml [lossless:=false]
+
+The same node set as `simreal launch SCENE.yaml` (computed by simreal_nodes.scene.graph), as
+launch_ros Node actions, for users with a full ROS install.
+"""
+
+from launch import LaunchDescription
+from launch.actions import DeclareLaunchArgument, OpaqueFunction
+from launch.substitutions import LaunchConfiguration
+from launch_ros.actions import Node
+
+
+def _nodes(context):
+    from simreal_nodes.scene.graph import required_nodes
+    from simreal_nodes.scene.schema import load_scene
+
+    scene = load_scene(LaunchConfiguration("scene").perform(context))
+    lossless = LaunchConfiguration("lossless").perform(context).lower() == "true"
+    return [Node(package="simreal_nodes", executable=spec.name, name=spec.name, parameters=[spec.parameters],
+                 output="screen", respawn=True) for spec in required_nodes(scene, lossless)]
+
+
+def generate_launch_description():
+    return LaunchDescription([
+        DeclareLaunchArgument("scene", description="scene YAML"),
+        DeclareLaunchArgument("lossless", default_value="false"),
+        OpaqueFunction(function=_nodes),
+    ])

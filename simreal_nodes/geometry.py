@@ -1,0 +1,136 @@
+"""Rigid transforms: 4x4 homogeneous matrices, quaternions (x, y, z, w as in ROS), SO(3) maps.
+
+Naming: ``T_a_b`` maps coordinates in frame b to frame a (x_a = T_a_b @ x_b), so ``T_map_cam`` is
+the camera pose in the map, the transform that TF publishes as parent ``map``, child ``camera``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def quat_to_matrix(q) -> np.ndarray:
+    """(x, y, z, w) -> 3x3 rotation; normalizes; a zero quaternion is an error."""
+    x, y, z, w = (float(v) for v in q)
+    n = x * x + y * y + z * z + w * w
+    if not np.isfinite(n) or n < 1e-12:
+        raise ValueError(f"quaternion {list(q)} has no rotation (zero or non-finite norm)")
+    s = 2.0 / n
+    return np.array([
+        [1 - s * (y * y + z * z), s * (x * y - z * w), s * (x * z + y * w)],
+        [s * (x * y + z * w), 1 - s * (x * x + z * z), s * (y * z - x * w)],
+        [s * (x * z - y * w), s * (y * z + x * w), 1 - s * (x * x + y * y)],
+    ])
+
+
+def matrix_to_quat(R) -> np.ndarray:
+    """3x3 rotation -> (x, y, z, w) with w >= 0 (Shepperd's method)."""
+    R = np.asarray(R, dtype=np.float64)
+    t = np.trace(R)
+    if t > 0:
+        s = 2.0 * np.sqrt(t + 1.0)
+        q = np.array([(R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s, 0.25 * s])
+    elif R[0, 0] > R[1, 1] and R[0, 0] > R[2, 2]:
+        s = 2.0 * np.sqrt(1.0 + R[0, 0] - R[1, 1] - R[2, 2])
+        q = np.array([0.25 * s, (R[0, 1] + R[1, 0]) / s, (R[0, 2] + R[2, 0]) / s, (R[2, 1] - R[1, 2]) / s])
+    elif R[1, 1] > R[2, 2]:
+        s = 2.0 * np.sqrt(1.0 + R[1, 1] - R[0, 0] - R[2, 2])
+        q = np.array([(R[0, 1] + R[1, 0]) / s, 0.25 * s, (R[1, 2] + R[2, 1]) / s, (R[0, 2] - R[2, 0]) / s])
+    else:
+        s = 2.0 * np.sqrt(1.0 + R[2, 2] - R[0, 0] - R[1, 1])
+        q = np.array([(R[0, 2] + R[2, 0]) / s, (R[1, 2] + R[2, 1]) / s, 0.25 * s, (R[1, 0] - R[0, 1]) / s])
+    q /= np.linalg.norm(q)
+    return q if q[3] >= 0 else -q
+
+
+def pose7_to_matrix(p) -> np.ndarray:
+    """[x, y, z, qx, qy, qz, qw] -> 4x4."""
+    T = np.eye(4)
+    T[:3, :3] = quat_to_matrix(p[3:7])
+    T[:3, 3] = p[:3]
+    return T
+
+
+def matrix_to_pose7(T) -> np.ndarray:
+    T = np.asarray(T)
+    return np.concatenate([T[:3, 3], matrix_to_quat(T[:3, :3])])
+
+
+def make_T(R=None, t=None) -> np.ndarray:
+    T = np.eye(4)
+    if R is not None:
+        T[:3, :3] = R
+    if t is not None:
+        T[:3, 3] = np.asarray(t).ravel()
+    return T
+
+
+def inv(T) -> np.ndarray:
+    """Inverse of a rigid 4x4 transform."""
+    T = np.asarray(T)
+    Ti = np.eye(4)
+    Ti[:3, :3] = T[:3, :3].T
+    Ti[:3, 3] = -T[:3, :3].T @ T[:3, 3]
+    return Ti
+
+
+def transform(T, P) -> np.ndarray:
+    """Apply a 4x4 transform to (N, 3) points."""
+    P = np.asarray(P, dtype=np.float64)
+    return P @ T[:3, :3].T + T[:3, 3]
+
+
+def hat(w) -> np.ndarray:
+    """so(3) hat: w -> [w]x."""
+    return np.array([[0, -w[2], w[1]], [w[2], 0, -w[0]], [-w[1], w[0], 0]], dtype=np.float64)
+
+
+def exp_so3(w) -> np.ndarray:
+    """Rodrigues: rotation vector -> rotation matrix."""
+    w = np.asarray(w, dtype=np.float64)
+    th = np.linalg.norm(w)
+    K = hat(w)
+    if th < 1e-10:
+        return np.eye(3) + K + 0.5 * K @ K
+    return np.eye(3) + np.sin(th) / th * K + (1 - np.cos(th)) / th**2 * K @ K
+
+
+def log_so3(R) -> np.ndarray:
+    """Rotation matrix -> rotation vector (angle in [0, pi])."""
+    R = np.asarray(R, dtype=np.float64)
+    c = np.clip((np.trace(R) - 1) / 2, -1.0, 1.0)
+    th = np.arccos(c)
+    if th < 1e-8:
+        return np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]]) / 2
+    if np.pi - th < 1e-6:
+        # near pi: axis from the symmetric part
+        A = (R + np.eye(3)) / 2
+        k = int(np.argmax(np.diag(A)))
+        axis = A[:, k] / np.sqrt(max(A[k, k], 1e-15))
+        return axis / np.linalg.norm(axis) * th
+    return th / (2 * np.sin(th)) * np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+
+
+def rot_axis(axis: str, angle: float) -> np.ndarray:
+    """Rotation about a principal axis 'x', 'y' or 'z' by ``angle`` radians."""
+    c, s = np.cos(angle), np.sin(angle)
+    if axis == "x":
+        return np.array([[1, 0, 0], [0, c, -s], [0, s, c]])
+    if axis == "y":
+        return np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
+    if axis == "z":
+        return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+    raise ValueError(f"axis must be 'x', 'y' or 'z', not {axis!r}")
+
+
+def look_at(eye, target, up=(0, 0, 1)) -> np.ndarray:
+    """Camera pose T_world_cam (optical frame: z forward, x right, y down) looking at target."""
+    eye, target, up = (np.asarray(v, dtype=np.float64) for v in (eye, target, up))
+    z = target - eye
+    z /= np.linalg.norm(z)
+    x = np.cross(z, up)
+    if np.linalg.norm(x) < 1e-9:
+        x = np.cross(z, [0, 1, 0] if abs(z[1]) < 0.9 else [1, 0, 0])
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    return make_T(np.stack([x, y, z], axis=1), eye)

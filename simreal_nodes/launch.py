@@ -1,0 +1,173 @@
+"""`simreal launch SCENE.yaml`: start only the nodes a scene requires, one OS process each.
+
+There is no ros2 launch on PyPI, so this is a small process supervisor: each node runs as
+``python -m <module> --ros-args --params-file <generated.yaml> [-r from:=to ...]``, its output is
+prefixed with its name, a node that exits unexpectedly is reported and restarted (up to
+``respawn`` times), and SIGINT / SIGTERM stop every node cleanly (SIGINT, then SIGTERM, then SIGKILL).
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import yaml
+
+from simreal_nodes.scene.graph import NodeSpec
+
+FASTDDS_PROFILE = Path(__file__).resolve().parent / "ros" / "fastdds_shm.xml"
+
+
+def ros_environment(base: dict | None = None) -> dict:
+    """Environment for node processes: SHM transport profile, ament prefix of the venv."""
+    env = dict(os.environ if base is None else base)
+    env.setdefault("FASTRTPS_DEFAULT_PROFILES_FILE", str(FASTDDS_PROFILE))
+    prefix = sys.prefix
+    ament = env.get("AMENT_PREFIX_PATH", "")
+    if prefix not in ament.split(os.pathsep):
+        env["AMENT_PREFIX_PATH"] = prefix + (os.pathsep + ament if ament else "")
+    env["PYTHONUNBUFFERED"] = "1"
+    return env
+
+
+@dataclass
+class _Proc:
+    spec: NodeSpec
+    cmd: list[str]
+    popen: subprocess.Popen | None = None
+    restarts: int = 0
+    exit_codes: list[int] = field(default_factory=list)
+
+
+class Launcher:
+    """Start, watch and stop a set of node processes."""
+
+    def __init__(self, nodes: list[NodeSpec], remaps: dict[str, str] | None = None, respawn: int = 2,
+                 env: dict | None = None, echo=print, log_dir: str | Path | None = None):
+        self.nodes = nodes
+        self.remaps = remaps or {}
+        self.respawn = respawn
+        self.env = ros_environment(env)
+        self.echo = echo
+        self._tmp = tempfile.TemporaryDirectory(prefix="simreal-launch-")
+        if log_dir is None:
+            base = Path(os.environ.get("ROS_LOG_DIR", Path(os.environ.get("ROS_HOME", Path.home() / ".ros")) / "log"))
+            log_dir = base / time.strftime("simreal-%Y%m%d-%H%M%S")
+        self.log_dir = Path(log_dir)
+        self.log_dir.mkdir(parents=True, exist_ok=True)
+        self.procs: list[_Proc] = []
+        self._stopping = False
+        self._lock = threading.Lock()
+        for spec in nodes:
+            pfile = Path(self._tmp.name) / f"{spec.name}.params.yaml"
+            pfile.write_text(yaml.safe_dump({spec.name: {"ros__parameters": spec.parameters}}))
+            cmd = [sys.executable, "-m", spec.module, "--ros-args", "-r", f"__node:={spec.name}",
+                   "--params-file", str(pfile)]
+            for a, b in self.remaps.items():
+                cmd += ["-r", f"{a}:={b}"]
+            self.procs.append(_Proc(spec, cmd))
+
+    # -----------------------------------------------------------------------------------------
+    def start(self) -> "Launcher":
+        for p in self.procs:
+            self._spawn(p)
+        threading.Thread(target=self._watch, daemon=True).start()
+        return self
+
+    def _spawn(self, p: _Proc) -> None:
+        log = open(self.log_dir / f"{p.spec.name}.log", "ab")
+        p.popen = subprocess.Popen(p.cmd, env=self.env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                                   stdin=subprocess.DEVNULL, start_new_session=True)
+        threading.Thread(target=self._pump, args=(p, p.popen, log), daemon=True).start()
+        self.echo(f"[launch] started {p.spec.name} (pid {p.popen.pid})")
+
+    def _pump(self, p: _Proc, popen: subprocess.Popen, log) -> None:
+        with log:
+            for line in iter(popen.stdout.readline, b""):
+                log.write(line)
+                log.flush()
+                self.echo(f"[{p.spec.name}] {line.decode(errors='replace').rstrip()}")
+
+    def _watch(self) -> None:
+        while not self._stopping:
+            time.sleep(0.2)
+            with self._lock:
+                if self._stopping:
+                    return
+                for p in self.procs:
+                    rc = p.popen.poll() if p.popen else None
+                    if rc is None:
+                        continue
+                    p.exit_codes.append(rc)
+                    if p.restarts < self.respawn:
+                        p.restarts += 1
+                        self.echo(f"[launch] {p.spec.name} exited with code {rc}; restarting "
+                                  f"({p.restarts}/{self.respawn}), log: {self.log_dir / (p.spec.name + '.log')}")
+                        self._spawn(p)
+                    else:
+                        self.echo(f"[launch] {p.spec.name} exited with code {rc}; not restarting")
+                        p.popen = None
+
+    def alive(self) -> dict[str, bool]:
+        return {p.spec.name: p.popen is not None and p.popen.poll() is None for p in self.procs}
+
+    def stop(self, timeout: float = 8.0) -> dict[str, int | None]:
+        """SIGINT every node, wait, then SIGTERM, then SIGKILL. Returns exit codes."""
+        with self._lock:
+            self._stopping = True
+        live = [p for p in self.procs if p.popen is not None and p.popen.poll() is None]
+        for sig, wait in ((signal.SIGINT, timeout), (signal.SIGTERM, 3.0), (signal.SIGKILL, 2.0)):
+            for p in live:
+                if p.popen.poll() is None:
+                    try:
+                        p.popen.send_signal(sig)
+                    except ProcessLookupError:
+                        pass
+            t_end = time.monotonic() + wait
+            while time.monotonic() < t_end and any(p.popen.poll() is None for p in live):
+                time.sleep(0.05)
+            live = [p for p in live if p.popen.poll() is None]
+            if not live:
+                break
+        codes = {p.spec.name: (p.popen.returncode if p.popen else (p.exit_codes[-1] if p.exit_codes else None))
+                 for p in self.procs}
+        self._tmp.cleanup()
+        return codes
+
+    def __enter__(self) -> "Launcher":
+        return self.start()
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
+
+
+def run_until_signal(launcher: Launcher) -> int:
+    """Block until SIGINT / SIGTERM, then stop the nodes; exit code 0 if all stopped cleanly."""
+    stop = threading.Event()
+
+    def handler(signum, _frame):
+        launcher.echo(f"[launch] {signal.Signals(signum).name}: stopping {len(launcher.procs)} nodes")
+        stop.set()
+
+    old = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        launcher.start()
+        while not stop.wait(0.5):
+            if not any(launcher.alive().values()) and all(p.restarts >= launcher.respawn for p in launcher.procs):
+                launcher.echo("[launch] every node has exited")
+                break
+    finally:
+        codes = launcher.stop()
+        for s, h in old.items():
+            signal.signal(s, h)
+    bad = {n: c for n, c in codes.items() if c not in (0, None, -signal.SIGINT)}
+    for n, c in codes.items():
+        launcher.echo(f"[launch] {n}: exit code {c}")
+    return 1 if bad else 0

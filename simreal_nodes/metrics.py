@@ -1,0 +1,94 @@
+"""Rate, latency and drop counters (ROS-free; the nodes publish them on /diagnostics)."""
+
+from __future__ import annotations
+
+import time
+from collections import deque
+
+import numpy as np
+
+
+class WindowStats:
+    """Rolling window of samples with percentiles."""
+
+    def __init__(self, size: int = 300):
+        self._buf: deque[float] = deque(maxlen=size)
+
+    def add(self, x: float) -> None:
+        if np.isfinite(x):
+            self._buf.append(float(x))
+
+    def __len__(self) -> int:
+        return len(self._buf)
+
+    def percentile(self, q: float) -> float:
+        return float(np.percentile(self._buf, q)) if self._buf else float("nan")
+
+    def mean(self) -> float:
+        return float(np.mean(self._buf)) if self._buf else float("nan")
+
+    def values(self) -> np.ndarray:
+        return np.asarray(self._buf)
+
+
+class StageMetrics:
+    """Per-node statistics: input rate, processing latency, end-to-end age, drops, errors."""
+
+    def __init__(self, window: int = 300, clock=time.monotonic):
+        self.clock = clock
+        self._arrivals: deque[float] = deque(maxlen=window)
+        self.processing_ms = WindowStats(window)
+        self.age_ms = WindowStats(window)
+        self.processed = 0
+        self.dropped = 0
+        self.errors = 0
+        self.last_error = ""
+        self.last_drop_reason = ""
+        self.extra: dict[str, str] = {}
+
+    def arrived(self) -> float:
+        t = self.clock()
+        self._arrivals.append(t)
+        return t
+
+    def done(self, t_start: float, age_ms: float | None = None) -> float:
+        ms = (self.clock() - t_start) * 1e3
+        self.processing_ms.add(ms)
+        if age_ms is not None:
+            self.age_ms.add(age_ms)
+        self.processed += 1
+        return ms
+
+    def drop(self, reason: str) -> None:
+        self.dropped += 1
+        self.last_drop_reason = reason
+
+    def error(self, what: str) -> None:
+        self.errors += 1
+        self.last_error = what
+
+    def rate_hz(self) -> float:
+        a = self._arrivals
+        if len(a) < 2:
+            return 0.0
+        span = a[-1] - a[0]
+        if self.clock() - a[-1] > max(2.0, 5 * span / max(len(a) - 1, 1)):
+            return 0.0  # input stopped
+        return (len(a) - 1) / span if span > 0 else 0.0
+
+    def as_dict(self) -> dict[str, str]:
+        d = {
+            "rate_hz": f"{self.rate_hz():.2f}",
+            "processing_ms_p50": f"{self.processing_ms.percentile(50):.2f}",
+            "processing_ms_p95": f"{self.processing_ms.percentile(95):.2f}",
+            "age_ms_p50": f"{self.age_ms.percentile(50):.2f}",
+            "processed": str(self.processed),
+            "dropped": str(self.dropped),
+            "errors": str(self.errors),
+        }
+        if self.last_drop_reason:
+            d["last_drop_reason"] = self.last_drop_reason
+        if self.last_error:
+            d["last_error"] = self.last_error
+        d.update(self.extra)
+        return d

@@ -1,0 +1,292 @@
+"""Bag replay into a live graph and recording of live topics (rclpy side; bag I/O is in io.bags).
+
+- :class:`Player` publishes a bag's camera topics as raw CDR (no conversion) at the recorded
+  rate, a scaled rate, or losslessly: every image is published once, in order, and the next is
+  held until every node of the graph reported the frame finished (or dropped) on
+  ``/simreal/progress``.
+- :class:`Recorder` subscribes raw to topics and writes them to a self-describing bag; it closes
+  the bag on SIGINT / SIGTERM, so what was recorded stays readable.
+"""
+
+from __future__ import annotations
+
+import importlib
+import time
+from collections import defaultdict, deque
+from dataclasses import dataclass, field
+
+import numpy as np
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from std_msgs.msg import Header
+
+from simreal_nodes.io import bags
+from simreal_nodes.ros.common import data_qos, reliable_qos, stamp_ns
+from simreal_nodes.scene import graph
+
+
+def message_class(msgtype: str):
+    """'sensor_msgs/msg/Image' -> the rclpy message class."""
+    pkg, _, name = bags.normalize_type(msgtype).split("/")
+    return getattr(importlib.import_module(f"{pkg}.msg"), name)
+
+
+# ---------------------------------------------------------------------------------------------
+
+
+class Recorder:
+    """Raw subscriptions on a node, written to a :class:`bags.BagWriter`."""
+
+    def __init__(self, node: Node, path, storage: str = "mcap", topics: dict[str, str] | None = None,
+                 discover: bool = False, exclude: tuple[str, ...] = ("/rosout", "/parameter_events")):
+        self.node = node
+        self.writer = bags.BagWriter(path, storage).open()
+        self.exclude = exclude
+        self._subs = {}
+        self._pending: dict[str, str] = {}  # topics waiting for a publisher (to match its QoS)
+        self.counts: dict[str, int] = defaultdict(int)
+        for t, ty in (topics or {}).items():
+            self.add(t, ty)
+        node.create_timer(0.2, self._subscribe_pending)
+        if discover:
+            node.create_timer(0.5, self._discover)
+
+    def ready(self) -> bool:
+        """True when every requested topic has a publisher and our subscription to it."""
+        self._subscribe_pending()
+        return not self._pending
+
+    def _qos_for(self, topic: str) -> QoSProfile:
+        infos = self.node.get_publishers_info_by_topic(topic)
+        reliable = bool(infos) and all(i.qos_profile.reliability == ReliabilityPolicy.RELIABLE for i in infos)
+        latched = bool(infos) and all(i.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL for i in infos)
+        if latched:
+            return QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        return reliable_qos(1000) if reliable else data_qos(False, depth=100)
+
+    def add(self, topic: str, msgtype: str) -> None:
+        """Record ``topic``; the subscription waits for a publisher so that its QoS can match."""
+        if topic in self._subs or topic in self.exclude:
+            return
+        if not self.node.get_publishers_info_by_topic(topic):
+            self._pending[topic] = msgtype
+            return
+        self._pending.pop(topic, None)
+        try:
+            cls = message_class(msgtype)
+            self.writer.add_topic(topic, msgtype)
+        except Exception as e:  # noqa: BLE001 - a type we cannot record is reported, not fatal
+            self.node.get_logger().warning(f"not recording {topic} ({msgtype}): {e}")
+            self._subs[topic] = None
+            return
+
+        def cb(raw: bytes, topic=topic):
+            self.writer.write_raw(topic, self.node.get_clock().now().nanoseconds, raw)
+            self.counts[topic] += 1
+
+        self._subs[topic] = self.node.create_subscription(cls, topic, cb, self._qos_for(topic), raw=True)
+
+    def _subscribe_pending(self) -> None:
+        for t, ty in list(self._pending.items()):
+            self.add(t, ty)
+
+    def _discover(self) -> None:
+        for topic, types in self.node.get_topic_names_and_types():
+            if topic not in self._subs and types:
+                self.add(topic, types[0])
+
+    def close(self) -> None:
+        self.writer.close()
+
+
+# ---------------------------------------------------------------------------------------------
+
+
+@dataclass
+class PlayStats:
+    frames_published: int = 0
+    frames_completed: int = 0
+    frames_dropped: int = 0
+    frames_timed_out: int = 0
+    drop_reasons: dict[str, int] = field(default_factory=lambda: defaultdict(int))
+    latency_ms: dict[str, list[float]] = field(default_factory=lambda: defaultdict(list))
+    wall_s: float = 0.0
+    published_stamps: list[int] = field(default_factory=list)
+
+    def summary(self) -> str:
+        fps = self.frames_published / self.wall_s if self.wall_s > 0 else 0.0
+        lines = [f"published {self.frames_published} frames in {self.wall_s:.2f} s ({fps:.1f} fps); "
+                 f"completed {self.frames_completed}, dropped {self.frames_dropped}, timed out {self.frames_timed_out}"]
+        for why, n in sorted(self.drop_reasons.items(), key=lambda kv: -kv[1])[:10]:
+            lines.append(f"  dropped x{n}: {why}")
+        for node, lat in sorted(self.latency_ms.items()):
+            if lat:
+                a = np.asarray(lat)
+                lines.append(f"  {node}: {len(a)} frames, latency from publish p50 {np.percentile(a, 50):.1f} ms, "
+                             f"p95 {np.percentile(a, 95):.1f} ms")
+        return "\n".join(lines)
+
+    def as_dict(self) -> dict:
+        out = {k: getattr(self, k) for k in ("frames_published", "frames_completed", "frames_dropped",
+                                             "frames_timed_out", "wall_s")}
+        out["fps"] = self.frames_published / self.wall_s if self.wall_s > 0 else 0.0
+        out["drop_reasons"] = dict(self.drop_reasons)
+        out["latency_ms"] = {n: {"p50": float(np.percentile(v, 50)), "p95": float(np.percentile(v, 95)),
+                                 "n": len(v)} for n, v in self.latency_ms.items() if v}
+        return out
+
+
+class Player:
+    """Publish a bag's input topics into the graph."""
+
+    def __init__(self, node: Node, executor, input_topics: dict[str, str], image_topic: str,
+                 nodes: list[str], lossless: bool, rate: float = 1.0, frame_timeout_s: float = 30.0,
+                 echo=print):
+        self.node, self.executor = node, executor
+        self.image_topic = image_topic
+        self.nodes = list(nodes)
+        self.lossless, self.rate, self.frame_timeout_s = lossless, rate, frame_timeout_s
+        self.echo = echo
+        self.stats = PlayStats()
+        self.should_stop = lambda: False
+        self.extra_ready = lambda: True
+        self.pubs = {t: node.create_publisher(message_class(ty), t, data_qos(lossless)) for t, ty in input_topics.items()}
+        self._reports: dict[int, dict[str, str]] = defaultdict(dict)
+        self._t_pub: dict[int, float] = {}
+        node.create_subscription(Header, graph.PROGRESS, self._on_progress, reliable_qos(1000))
+
+    def _on_progress(self, h: Header) -> None:
+        s = stamp_ns(h.stamp)
+        name, _, why = h.frame_id.partition(":dropped:")
+        self._reports[s][name] = why
+        if s in self._t_pub:
+            self.stats.latency_ms[name].append((time.monotonic() - self._t_pub[s]) * 1e3)
+
+    def wait_ready(self, timeout_s: float = 60.0) -> bool:
+        """Wait until every node is up and the ingest subscribes to the image topic."""
+        t_end = time.monotonic() + timeout_s
+        want = set(self.nodes)
+        while time.monotonic() < t_end:
+            self.executor.spin_once(timeout_sec=0.1)
+            names = set(self.node.get_node_names())
+            if want <= names and self.pubs[self.image_topic].get_subscription_count() > 0 and self.extra_ready():
+                # give discovery of the remaining endpoints a moment
+                t1 = time.monotonic() + 0.5
+                while time.monotonic() < t1:
+                    self.executor.spin_once(timeout_sec=0.05)
+                return True
+        missing = want - set(self.node.get_node_names())
+        self.echo(f"[replay] graph not ready after {timeout_s:.0f} s; missing nodes: {', '.join(sorted(missing)) or 'none'}"
+                  f"; image subscribers: {self.pubs[self.image_topic].get_subscription_count()}")
+        return False
+
+    def _frame_done(self, s: int) -> str | None:
+        rep = self._reports.get(s, {})
+        dropped = [f"{n}: {w}" for n, w in rep.items() if w]
+        if dropped:
+            return "dropped:" + "; ".join(dropped)
+        if all(n in rep for n in self.nodes):
+            return "done"
+        return None
+
+    def _publish_image(self, raw: bytes, s: int) -> None:
+        self._t_pub[s] = time.monotonic()
+        self.pubs[self.image_topic].publish(raw)
+        self.stats.frames_published += 1
+        self.stats.published_stamps.append(s)
+
+    def _wait_frame(self, s: int) -> None:
+        t_end = time.monotonic() + self.frame_timeout_s
+        grace_end = None
+        while True:
+            self.executor.spin_once(timeout_sec=0.005)
+            st = self._frame_done(s)
+            if st == "done":
+                self.stats.frames_completed += 1
+                return
+            if st and st.startswith("dropped"):
+                # a node dropped it: its downstream nodes will not report; give others a moment
+                grace_end = grace_end or time.monotonic() + 0.3
+                if time.monotonic() > grace_end or all(n in self._reports[s] for n in self.nodes):
+                    self.stats.frames_dropped += 1
+                    self.stats.drop_reasons[st[8:]] += 1
+                    return
+            if time.monotonic() > t_end:
+                self.stats.frames_timed_out += 1
+                missing = [n for n in self.nodes if n not in self._reports.get(s, {})]
+                self.echo(f"[replay] frame {s * 1e-9:.3f} s not finished after {self.frame_timeout_s:.0f} s "
+                          f"(no report from {', '.join(missing)})")
+                return
+
+    def play(self, messages, hold_for: tuple[str, ...] = ()) -> PlayStats:
+        """Play an iterable of :class:`bags.BagMessage` (already filtered to the input topics)."""
+        t0_wall = time.monotonic()
+        t0_bag = None
+        held: list[tuple[bytes, int, set]] = []  # images waiting for same-stamp companions
+        seen_since: list[int] = []
+        recent: dict[str, deque] = {t: deque(maxlen=64) for t in hold_for}  # stamps already published
+        ts = bags.typestore()
+
+        def release(i):
+            raw, s, _ = held.pop(i)
+            self._publish_image(raw, s)
+            if self.lossless:
+                self._wait_frame(s)
+
+        for m in messages:
+            if self.should_stop():
+                self.echo("[replay] stopped by signal")
+                break
+            if t0_bag is None:
+                t0_bag = m.log_time_ns
+            if not self.lossless:
+                due = t0_wall + (m.log_time_ns - t0_bag) * 1e-9 / self.rate
+                while True:
+                    now = time.monotonic()
+                    if now >= due:
+                        break
+                    self.executor.spin_once(timeout_sec=min(0.005, due - now))
+                if m.topic == self.image_topic:
+                    s = bags.stamp_ns(ts.deserialize_cdr(m.raw, m.msgtype))
+                    self._publish_image(m.raw, s)
+                else:
+                    self.pubs[m.topic].publish(m.raw)
+                self.executor.spin_once(timeout_sec=0)
+                continue
+            # lossless: images wait until their same-stamp companions (depth, right image) are out
+            if m.topic == self.image_topic:
+                s = bags.stamp_ns(ts.deserialize_cdr(m.raw, m.msgtype))
+                held.append((m.raw, s, {t for t in hold_for if s in recent[t]}))
+                seen_since.append(0)
+            else:
+                self.pubs[m.topic].publish(m.raw)
+                if m.topic in hold_for:
+                    try:
+                        s2 = bags.stamp_ns(ts.deserialize_cdr(m.raw, m.msgtype))
+                    except Exception:  # noqa: BLE001
+                        s2 = None
+                    recent[m.topic].append(s2)
+                    for _, s, got in held:
+                        if s == s2:
+                            got.add(m.topic)
+            seen_since = [k + 1 for k in seen_since]
+            while held and (held[0][2] >= set(hold_for) or seen_since[0] > 8):
+                seen_since.pop(0)
+                release(0)
+        while held:
+            seen_since.pop(0)
+            release(0)
+        # let the graph drain what is in flight (outputs travel on other topics than progress)
+        t_end = time.monotonic() + (2.0 if not self.lossless else 0.5)
+        while time.monotonic() < t_end:
+            self.executor.spin_once(timeout_sec=0.02)
+        if not self.lossless:
+            for s in self.stats.published_stamps:
+                st = self._frame_done(s)
+                if st == "done":
+                    self.stats.frames_completed += 1
+                elif st:
+                    self.stats.frames_dropped += 1
+                    self.stats.drop_reasons[st[8:]] += 1
+        self.stats.wall_s = time.monotonic() - t0_wall
+        return self.stats

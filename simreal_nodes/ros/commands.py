@@ -1,0 +1,131 @@
+"""`simreal replay` and `simreal record` (they need rclpy; the CLI imports this lazily)."""
+
+from __future__ import annotations
+
+import json
+import signal
+import threading
+from pathlib import Path
+
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
+
+from simreal_nodes.errors import BagError
+from simreal_nodes.io import bags
+from simreal_nodes.launch import Launcher, ros_environment
+from simreal_nodes.ros.bagplay import Player, Recorder
+from simreal_nodes.scene.graph import output_topics, required_nodes
+from simreal_nodes.scene.schema import load_scene
+
+
+class _StopFlag:
+    def __init__(self):
+        self.event = threading.Event()
+        self._old = {}
+
+    def __enter__(self):
+        for s in (signal.SIGINT, signal.SIGTERM):
+            self._old[s] = signal.signal(s, lambda *_: self.event.set())
+        return self
+
+    def __exit__(self, *exc):
+        for s, h in self._old.items():
+            signal.signal(s, h)
+
+
+def replay(bag: str, scene_file: str, rate: float = 1.0, lossless: bool = False, record: str | None = None,
+           storage: str = "mcap", launch: bool = True, frame_timeout_s: float = 30.0, ready_timeout_s: float = 90.0,
+           metrics_json: str | None = None, echo=print, extra_params: dict | None = None):
+    """Replay ``bag`` into the graph of ``scene_file``; returns (PlayStats, BagReport, recorder counts)."""
+    scene = load_scene(scene_file)
+    cam = scene["camera"]
+    nodes = required_nodes(scene, lossless=lossless)
+    for n in nodes:
+        if n.name == "ingest":
+            n.parameters["source"] = "topic"  # the player is the source
+        n.parameters.update((extra_params or {}).get(n.name, {}))
+    report = bags.BagReport()
+    topics = bags.bag_topics(bag)
+    if cam["image"] not in topics:
+        raise BagError(f"bag {bag} has no topic {cam['image']} (the scene's camera.image); it has: "
+                       f"{', '.join(sorted(topics)) or 'no topics'}")
+    wanted = [cam["image"], cam["camera_info"], cam["depth"], cam["right_image"], cam["right_camera_info"]]
+    inputs = {t: topics[t] for t in wanted if t and t in topics}
+    hold_for = tuple(t for t in (cam["depth"], cam["right_image"], cam["right_camera_info"]) if t and t in topics)
+
+    launcher = Launcher(nodes, echo=echo) if launch else None
+    env = ros_environment()
+    import os
+    os.environ.setdefault("FASTRTPS_DEFAULT_PROFILES_FILE", env["FASTRTPS_DEFAULT_PROFILES_FILE"])
+    rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
+    node = Node("simreal_player")
+    ex = SingleThreadedExecutor()
+    ex.add_node(node)
+    recorder = None
+    stats = None
+    try:
+        with _StopFlag() as stop:
+            if record:
+                recorder = Recorder(node, record, storage, topics=output_topics(nodes))
+            player = Player(node, ex, inputs, cam["image"], [n.name for n in nodes], lossless, rate,
+                            frame_timeout_s, echo=echo)
+            player.should_stop = stop.event.is_set
+            if recorder:
+                player.extra_ready = recorder.ready
+            if launcher:
+                launcher.start()
+            if not player.wait_ready(ready_timeout_s):
+                raise RuntimeError("the graph did not come up; see the node output above")
+            stats = player.play(bags.read_bag(bag, report, topics=inputs.keys()), hold_for=hold_for)
+    finally:
+        if recorder:
+            recorder.close()
+        if launcher:
+            launcher.stop()
+        node.destroy_node()
+        rclpy.shutdown()
+    echo(report.summary())
+    if stats:
+        echo("[replay] " + stats.summary())
+    if recorder:
+        echo(f"[replay] recorded {recorder.writer.count} messages to {record}: " +
+             ", ".join(f"{t} {n}" for t, n in sorted(recorder.counts.items())))
+    if metrics_json and stats:
+        Path(metrics_json).write_text(json.dumps({"play": stats.as_dict(), "bag_problems": report.problems}, indent=2))
+    return stats, report, (dict(recorder.counts) if recorder else {})
+
+
+def record(out: str, topics: list[str] | None = None, storage: str = "mcap", echo=print,
+           duration_s: float | None = None) -> dict[str, int]:
+    """Record live topics (all, if none are named) until SIGINT / SIGTERM or ``duration_s``."""
+    import os
+    import time
+
+    os.environ.setdefault("FASTRTPS_DEFAULT_PROFILES_FILE", ros_environment()["FASTRTPS_DEFAULT_PROFILES_FILE"])
+    rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
+    node = Node("simreal_recorder")
+    ex = SingleThreadedExecutor()
+    ex.add_node(node)
+    rec = None
+    try:
+        with _StopFlag() as stop:
+            rec = Recorder(node, out, storage, discover=not topics)
+            pending = set(topics or [])
+            t_end = time.monotonic() + duration_s if duration_s else None
+            echo(f"[record] recording {'all topics' if not topics else ', '.join(topics)} to {out}; Ctrl-C stops")
+            while not stop.event.is_set() and (t_end is None or time.monotonic() < t_end):
+                ex.spin_once(timeout_sec=0.1)
+                if pending:
+                    for t, types in node.get_topic_names_and_types():
+                        if t in pending and types:
+                            rec.add(t, types[0])
+                            pending.discard(t)
+    finally:
+        if rec:
+            rec.close()
+        node.destroy_node()
+        rclpy.shutdown()
+    echo(f"[record] wrote {rec.writer.count if rec else 0} messages to {out}")
+    return dict(rec.counts) if rec else {}

@@ -1,0 +1,242 @@
+"""What every simreal node shares: QoS, message conversions, diagnostics, progress, main().
+
+Nodes are thin: they declare parameters, convert messages to numpy, call the ROS-free core and
+convert back. A callback that raises is caught here, logged, counted in diagnostics, and the
+node keeps running.
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+import signal
+import time
+import traceback
+
+import numpy as np
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import Pose, PoseStamped, TransformStamped
+from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy,
+                       qos_profile_sensor_data)
+from std_msgs.msg import Header
+
+from simreal_nodes import geometry
+from simreal_nodes.metrics import StageMetrics
+from simreal_nodes.scene import graph
+
+# ------------------------------------------------------------------------------------------
+# QoS
+
+
+def data_qos(lossless: bool, depth: int = 5) -> QoSProfile:
+    """Sensor-data QoS (best effort, keep last) live; reliable with a deep queue when lossless."""
+    if lossless:
+        return QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST,
+                          depth=1000, durability=DurabilityPolicy.VOLATILE)
+    q = QoSProfile(**{k: getattr(qos_profile_sensor_data, k) for k in ("reliability", "history", "durability")},
+                   depth=depth)
+    return q
+
+
+def reliable_qos(depth: int = 10) -> QoSProfile:
+    return QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST, depth=depth)
+
+
+def latched_qos() -> QoSProfile:
+    return QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST, depth=1,
+                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+
+TF_QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST, depth=100)
+
+# ------------------------------------------------------------------------------------------
+# Conversions
+
+
+def stamp_ns(stamp) -> int:
+    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
+
+
+def ns_to_stamp(ns: int, msg=None):
+    from builtin_interfaces.msg import Time
+
+    t = msg or Time()
+    t.sec, t.nanosec = int(ns // 1_000_000_000), int(ns % 1_000_000_000)
+    return t
+
+
+def pose_to_matrix(p: Pose) -> np.ndarray:
+    q = (p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w)
+    T = np.eye(4)
+    T[:3, :3] = geometry.quat_to_matrix(q)
+    T[:3, 3] = (p.position.x, p.position.y, p.position.z)
+    return T
+
+
+def matrix_to_pose(T: np.ndarray, p: Pose | None = None) -> Pose:
+    p = p or Pose()
+    q = geometry.matrix_to_quat(T[:3, :3])
+    p.position.x, p.position.y, p.position.z = (float(v) for v in T[:3, 3])
+    p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w = (float(v) for v in q)
+    return p
+
+
+def pose_stamped(T: np.ndarray, header: Header, frame_id: str) -> PoseStamped:
+    m = PoseStamped()
+    m.header.stamp = header.stamp
+    m.header.frame_id = frame_id
+    matrix_to_pose(T, m.pose)
+    return m
+
+
+def transform_stamped(T: np.ndarray, stamp, parent: str, child: str) -> TransformStamped:
+    m = TransformStamped()
+    m.header.stamp = stamp
+    m.header.frame_id = parent
+    m.child_frame_id = child
+    q = geometry.matrix_to_quat(T[:3, :3])
+    m.transform.translation.x, m.transform.translation.y, m.transform.translation.z = (float(v) for v in T[:3, 3])
+    r = m.transform.rotation
+    r.x, r.y, r.z, r.w = (float(v) for v in q)
+    return m
+
+
+# ------------------------------------------------------------------------------------------
+# Node base
+
+
+class SimrealNode(Node):
+    """Base of simreal nodes: declared parameters, diagnostics on /diagnostics, progress reports."""
+
+    def __init__(self, name: str, **kw):
+        super().__init__(name, **kw)
+        self.lossless = self.param("lossless", False, "reliable QoS and per-frame progress for lossless replay")
+        self.scene_file = self.param("scene_file", "", "scene YAML this node serves")
+        self.map_frame = self.param("map_frame", "map", "fixed frame (REP-105)")
+        self.camera_frame = self.param("camera_frame", "camera_optical_frame", "camera optical frame (REP-103)")
+        self.metrics = StageMetrics()
+        self._diag_pub = self.create_publisher(DiagnosticArray, graph.DIAGNOSTICS, reliable_qos(10))
+        self._progress_pub = self.create_publisher(Header, graph.PROGRESS, reliable_qos(1000))
+        self._diag_level = DiagnosticStatus.OK
+        self._diag_message = "starting"
+        self._last_immediate = 0.0
+        self.create_timer(1.0, self._publish_diagnostics)
+
+    # parameters -----------------------------------------------------------------------------
+    def param(self, name: str, default, description: str, read_only: bool = False):
+        d = ParameterDescriptor(description=description, read_only=read_only)
+        return self.declare_parameter(name, default, d).value
+
+    # diagnostics ----------------------------------------------------------------------------
+    def set_status(self, level: str, message: str) -> None:
+        """Set the diagnostic level and message; a change of level is published at once."""
+        new = {"ok": DiagnosticStatus.OK, "warn": DiagnosticStatus.WARN,
+               "error": DiagnosticStatus.ERROR, "stale": DiagnosticStatus.STALE}[level]
+        changed = new != self._diag_level
+        self._diag_level, self._diag_message = new, message
+        now = time.monotonic()
+        if changed and now - self._last_immediate > 0.1:
+            self._last_immediate = now
+            self._publish_diagnostics()
+
+    def _publish_diagnostics(self) -> None:
+        st = DiagnosticStatus()
+        st.level = self._diag_level
+        st.name = f"simreal/{self.get_name()}"
+        st.hardware_id = "simreal"
+        st.message = self._diag_message
+        st.values = [KeyValue(key=k, value=v) for k, v in self.metrics.as_dict().items()]
+        arr = DiagnosticArray()
+        arr.header.stamp = self.get_clock().now().to_msg()
+        arr.status = [st]
+        self._diag_pub.publish(arr)
+
+    # progress (lossless replay) ------------------------------------------------------------
+    def progress(self, stamp, dropped: str = "") -> None:
+        """Report that the frame with this stamp is finished here (or dropped, with why)."""
+        h = Header()
+        h.stamp = stamp
+        h.frame_id = self.get_name() + (f":dropped:{dropped}" if dropped else "")
+        self._progress_pub.publish(h)
+
+    def drop(self, stamp, reason: str) -> None:
+        self.metrics.drop(reason)
+        self.get_logger().warning(f"dropped frame: {reason}", throttle_duration_sec=2.0)
+        self.set_status("warn", reason)
+        if stamp is not None:
+            self.progress(stamp, dropped=reason)
+
+    def age_ms(self, stamp) -> float:
+        """How old an input stamped ``stamp`` is now (meaningful for live sources only)."""
+        return (self.get_clock().now().nanoseconds - stamp_ns(stamp)) * 1e-6
+
+
+def guarded(fn):
+    """Decorator for callbacks: an exception is logged and counted, never kills the node."""
+
+    @functools.wraps(fn)
+    def wrapper(self, *a, **kw):
+        try:
+            return fn(self, *a, **kw)
+        except Exception as e:  # noqa: BLE001
+            what = f"{type(e).__name__}: {e}"
+            self.metrics.error(what)
+            self.set_status("error", what)
+            self.get_logger().error(f"{fn.__name__} failed: {what}\n{traceback.format_exc(limit=4)}",
+                                    throttle_duration_sec=1.0)
+            stamp = _stamp_of(a)
+            if stamp is not None:
+                self.progress(stamp, dropped=what)
+            return None
+
+    return wrapper
+
+
+def _stamp_of(args):
+    for a in args:
+        h = getattr(a, "header", None)
+        if h is not None and hasattr(h, "stamp"):
+            return h.stamp
+    return None
+
+
+def run_node(node_cls, args=None) -> int:
+    """main() body for every node: one process, one SingleThreadedExecutor, clean shutdown."""
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = node_cls()
+        ex = SingleThreadedExecutor()
+        ex.add_node(node)
+        ex.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            close = getattr(node, "close", None)
+            if close:
+                try:
+                    close()
+                except Exception as e:  # noqa: BLE001
+                    print(f"[{node.get_name()}] close failed: {e}", flush=True)
+            node.destroy_node()
+        if rclpy.ok():
+            rclpy.shutdown()
+    return 0
+
+
+def ignore_sigint_in_children() -> None:
+    """Used by launchers: children get SIGINT from the terminal's process group anyway."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def wall_ms() -> float:
+    return time.monotonic() * 1e3
+
+
+def env_summary() -> str:
+    return f"ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID', '0')}"

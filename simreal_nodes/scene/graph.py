@@ -1,0 +1,110 @@
+"""Which nodes a scene needs, what each is called, and which topics connect them (ROS-free).
+
+The launcher starts exactly :func:`required_nodes`; the player in lossless mode waits for a
+progress report from every one of them. Topic names follow ROS conventions; the inputs are the
+scene's ``camera.*`` topics (defaults ``/camera/image_raw``, ``/camera/camera_info``,
+``/camera/depth/image_raw``), everything simreal publishes lives under ``/simreal`` except TF.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+# Topics between nodes (the ingest node's validated outputs and the products of each stage).
+CAM_IMAGE = "/simreal/camera/image"
+CAM_INFO = "/simreal/camera/camera_info"
+CAM_DEPTH = "/simreal/camera/depth"
+CAM_RIGHT_IMAGE = "/simreal/camera/right/image"
+CAM_RIGHT_INFO = "/simreal/camera/right/camera_info"
+POSE = "/simreal/localization/pose"
+LOC_STATUS = "/simreal/localization/status"
+LOC_MAP = "/simreal/localization/map"
+LOC_OBS = "/simreal/localization/observations"
+TRACKER_STATUS = "/simreal/tracker/status"
+OVERLAY_IMAGE = "/simreal/overlay/image_raw"
+OVERLAY_MARKERS = "/simreal/overlay/markers"
+PROGRESS = "/simreal/progress"
+DIAGNOSTICS = "/diagnostics"
+TF = "/tf"
+TF_STATIC = "/tf_static"
+
+
+def params_topic(object_id: str) -> str:
+    return f"/simreal/objects/{object_id}/parameters"
+
+
+def contact_topic(object_id: str) -> str:
+    return f"/simreal/objects/{object_id}/contact"
+
+
+@dataclass
+class NodeSpec:
+    """One node process: ROS name, Python module (``python -m``), parameters, topics."""
+
+    name: str
+    module: str
+    parameters: dict = field(default_factory=dict)
+    inputs: list[str] = field(default_factory=list)
+    outputs: dict[str, str] = field(default_factory=dict)  # topic -> message type
+
+
+def required_nodes(scene: dict, lossless: bool = False) -> list[NodeSpec]:
+    """The nodes the scene requires, in pipeline order. Only those are started."""
+    common = {"scene_file": scene["_source"], "lossless": lossless,
+              "map_frame": scene["frames"]["map"], "camera_frame": scene["frames"]["camera"]}
+    cam, loc, objs = scene["camera"], scene["localization"], scene["objects"]
+    stereo = cam["right_image"] is not None
+    depth = cam["depth"] is not None
+    nodes: list[NodeSpec] = []
+
+    ingest_out = {CAM_IMAGE: "sensor_msgs/msg/Image", CAM_INFO: "sensor_msgs/msg/CameraInfo"}
+    if depth:
+        ingest_out[CAM_DEPTH] = "sensor_msgs/msg/Image"
+    if stereo:
+        ingest_out[CAM_RIGHT_IMAGE] = "sensor_msgs/msg/Image"
+        ingest_out[CAM_RIGHT_INFO] = "sensor_msgs/msg/CameraInfo"
+    ingest_in = [t for t in (cam["image"], cam["camera_info"], cam["depth"], cam["right_image"],
+                             cam["right_camera_info"]) if t] if cam["source"] == "topic" else []
+    nodes.append(NodeSpec("ingest", "simreal_nodes.ros.nodes.ingest", dict(common), ingest_in, ingest_out))
+
+    if loc["mode"] != "static":
+        nodes.append(NodeSpec(
+            "localization", "simreal_nodes.ros.nodes.localization", dict(common),
+            [CAM_IMAGE, CAM_INFO] + ([CAM_DEPTH] if depth else []) + ([CAM_RIGHT_IMAGE, CAM_RIGHT_INFO] if stereo else []),
+            {POSE: "geometry_msgs/msg/PoseStamped", TF: "tf2_msgs/msg/TFMessage",
+             LOC_STATUS: "simreal_msgs/msg/TrackingStatus", LOC_MAP: "sensor_msgs/msg/PointCloud2",
+             LOC_OBS: "simreal_msgs/msg/FeatureObservations"}))
+
+    tracked = [o for o in objs if o["tracking"]["enabled"]]
+    if tracked:
+        nodes.append(NodeSpec(
+            "tracker", "simreal_nodes.ros.nodes.tracker", dict(common),
+            [LOC_OBS if loc["mode"] != "static" else CAM_IMAGE, CAM_INFO, CAM_IMAGE],
+            {**{params_topic(o["id"]): "simreal_msgs/msg/ModelParameters" for o in tracked},
+             TRACKER_STATUS: "simreal_msgs/msg/TrackingStatus"}))
+
+    colliding = [o for o in objs if o["collision"]["enabled"]]
+    if colliding:
+        out = {}
+        for o in colliding:
+            out[contact_topic(o["id"])] = "simreal_msgs/msg/ContactState"
+            out[params_topic(o["id"])] = "simreal_msgs/msg/ModelParameters"
+        nodes.append(NodeSpec("collision", "simreal_nodes.ros.nodes.collision", dict(common),
+                              [CAM_DEPTH, CAM_INFO] + ([POSE] if loc["mode"] != "static" else []), out))
+
+    if scene["overlay"]["enabled"]:
+        ins = [CAM_IMAGE, CAM_INFO] + ([CAM_DEPTH] if depth else []) + ([POSE] if loc["mode"] != "static" else [])
+        ins += [params_topic(o["id"]) for o in objs if o["tracking"]["enabled"] or o["collision"]["enabled"]]
+        nodes.append(NodeSpec("overlay", "simreal_nodes.ros.nodes.overlay", dict(common), ins,
+                              {OVERLAY_IMAGE: "sensor_msgs/msg/Image",
+                               OVERLAY_MARKERS: "visualization_msgs/msg/MarkerArray"}))
+    return nodes
+
+
+def output_topics(nodes: list[NodeSpec]) -> dict[str, str]:
+    """Every topic the graph publishes (what `replay --record` records), plus diagnostics."""
+    out: dict[str, str] = {}
+    for n in nodes:
+        out.update(n.outputs)
+    out[DIAGNOSTICS] = "diagnostic_msgs/msg/DiagnosticArray"
+    return out

@@ -1,0 +1,206 @@
+"""The scene file: which camera inputs exist, how the camera is localized, which objects are
+modelled and what each of them does (tracked parameters, collision, overlay).
+
+``load_scene(path)`` validates the YAML and returns a plain dict with every default filled in.
+docs/scene-format.md is the reference for users; this module is the executable version of it.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import yaml
+
+from simreal_nodes.errors import SceneError
+from simreal_nodes.scene.validate import (Bool, Context, Enum, FilePath, ListOf, MapOf, Number,
+                                          Record, Str, Topic, Vector)
+
+SCENE_FORMAT = 1
+IDENT = dict(pattern=lambda s: s.replace("_", "a").isalnum() and s[:1].isalpha(),
+             what="an identifier (letters, digits, '_', starting with a letter)")
+POSE7 = "a pose [x, y, z, qx, qy, qz, qw] (metres, unit quaternion)"
+
+CAMERA = Record({
+    "image": Topic("colour or grey image topic", default="/camera/image_raw"),
+    "camera_info": Topic("CameraInfo of the image", default="/camera/camera_info"),
+    "depth": Topic("depth image (16UC1 mm or 32FC1 m), registered to the colour image", nullable=True),
+    "right_image": Topic("right image of a rectified-or-not stereo pair", nullable=True),
+    "right_camera_info": Topic("CameraInfo of the right camera", nullable=True),
+    "calibration": FilePath("ROS calibration YAML that overrides CameraInfo", nullable=True),
+    "undistort": Bool("undistort images in the ingest node", default=False),
+    "source": Enum(("topic", "bag", "video", "images"), "where the ingest node reads frames", default="topic"),
+    "path": FilePath("bag, video file or image folder for non-topic sources", nullable=True),
+    "rate_hz": Number("publishing rate for video / image-folder sources", lo=0, lo_open=True, default=30.0),
+    "loop": Bool("restart a bag / video / folder source at its end", default=False),
+})
+
+MARKERS = Record({
+    "dictionary": Str("OpenCV ArUco / AprilTag dictionary name, e.g. DICT_4X4_50", default="DICT_4X4_50"),
+    "size_m": Number("marker side length, metres", lo=0, lo_open=True, default=0.05),
+    "poses": MapOf(Vector(7, what=POSE7), key=Number(integer=True, lo=0), doc="marker id -> pose of its centre in the map frame", default={}),
+})
+
+LOCALIZATION = Record({
+    "mode": Enum(("markers", "mono", "rgbd", "stereo", "static"), "how the camera pose is found", default="static"),
+    "features": Number("ORB features per frame", integer=True, lo=50, hi=20000, default=1000),
+    "pyramid_levels": Number("ORB scale pyramid levels", integer=True, lo=1, hi=16, default=8),
+    "scale_factor": Number("ORB pyramid scale factor", lo=1.0, lo_open=True, hi=2.0, default=1.2),
+    "markers": MARKERS,
+    "static_pose": Vector(7, what=POSE7, doc="camera pose in the map for mode 'static'", nullable=True),
+    "map_file": FilePath("load a saved map (HDF5) at start", nullable=True),
+    "localization_only": Bool("start with mapping frozen", default=False),
+    "known_scale_m": Number("monocular: distance between the first two keyframes, metres", lo=0, lo_open=True, nullable=True),
+})
+
+PARAMETER = Record({
+    "mode": Enum(("tracked", "constant", "fixed"), "tracked: estimated every frame; constant: estimated over the "
+                 "first deformed frames then frozen; fixed: held at 'value'", default="tracked"),
+    "initial": Number("starting value (model units)", nullable=True),
+    "value": Number("value for mode 'fixed' (model units)", nullable=True),
+})
+
+ANCHOR = Record({
+    "kind": Enum(("pose", "registration"), "pose: given below; registration: found by RANSAC + ICP on the map", default="pose"),
+    "pose": Vector(7, what=POSE7, doc="object frame in the map frame", default=[0, 0, 0, 0, 0, 0, 1]),
+    "with_scale": Bool("registration also estimates scale (monocular maps)", default=False),
+})
+
+TRACKING = Record({
+    "enabled": Bool("estimate the tracked parameters from the images", default=False),
+    "measurements": Enum(("map_points", "dots", "homography"), "what gives the image measurements", default="map_points"),
+    "huber_px": Number("Huber threshold of the robust loss, pixels", lo=0, lo_open=True, default=2.0),
+    "modes": Number("number of PGD modes used (0 = all)", integer=True, lo=0, default=0),
+    "max_iterations": Number("Levenberg-Marquardt iterations per frame", integer=True, lo=1, hi=500, default=20),
+    "constant_frames": Number("deformed frames used to estimate 'constant' parameters before freezing", integer=True, lo=1, default=15),
+    "min_measurements": Number("fewer inlier measurements than this -> lost", integer=True, lo=1, default=6),
+    "points": Number("most model-linked points used per frame (0 = all)", integer=True, lo=0, default=0),
+})
+
+COLLISION = Record({
+    "enabled": Bool("real points in depth (or other objects) push this object", default=False),
+    "threshold_m": Number("contact distance delta, metres", lo=0, lo_open=True, default=0.01),
+    "decimation": Number("use every N-th depth pixel in each direction", integer=True, lo=1, hi=64, default=4),
+    "step": Number("pseudo-time increment per frame while in contact (and decrement after)", lo=0, lo_open=True, hi=1, default=0.05),
+    "pushes": ListOf(Str(**IDENT), "ids of objects this object can press when deformed (virtual-virtual contact)", default=[]),
+    "max_depth_m": Number("ignore depth beyond this, metres", lo=0, lo_open=True, default=5.0),
+})
+
+OBJECT_OVERLAY = Record({
+    "field": Enum(("displacement", "von_mises", "none"), "what the colour map shows", default="displacement"),
+    "colormap": Enum(("turbo", "viridis", "jet", "inferno"), default="turbo"),
+    "modes": Number("PGD modes for drawing (0 = choose live to keep truncation error below max_error_px)", integer=True, lo=0, default=0),
+    "max_error_px": Number("truncation error bound on screen, pixels", lo=0, lo_open=True, default=0.5),
+    "magnify": Number("displacement magnification for drawing", lo=0, lo_open=True, default=1.0),
+    "range": Vector(2, what="[min, max] of the colour bar (model units)", nullable=True),
+})
+
+OBJECT = Record({
+    "id": Str("object id (also its TF frame name)", required=True, **IDENT),
+    "model": FilePath("HDF5 model file built by `simreal build-model`", required=True),
+    "anchor": ANCHOR,
+    "parameters": MapOf(PARAMETER, doc="per model parameter: tracked / constant / fixed", default={}),
+    "tracking": TRACKING,
+    "collision": COLLISION,
+    "overlay": OBJECT_OVERLAY,
+})
+
+OVERLAY = Record({
+    "enabled": Bool("run the overlay node", default=True),
+    "video": FilePath("also write the overlay to this MP4", must_exist=False, nullable=True),
+    "occlusion": Bool("hide virtual pixels behind closer real depth", default=True),
+    "marker": Bool("publish an RViz Marker mesh per object", default=True),
+    "colorbar": Bool("draw a colour bar with units", default=True),
+})
+
+SCENE = Record({
+    "simreal_scene": Number("scene format version", integer=True, required=True),
+    "name": Str("scene name", required=True, **IDENT),
+    "description": Str("free text", default=""),
+    "frames": Record({
+        "map": Str("fixed frame (REP-105)", default="map"),
+        "camera": Str("camera optical frame (REP-103: z forward, x right, y down)", default="camera_optical_frame"),
+    }),
+    "camera": CAMERA,
+    "localization": LOCALIZATION,
+    "objects": ListOf(OBJECT, "deformable objects", default=[]),
+    "overlay": OVERLAY,
+    "ground_truth": Record({
+        "topic_prefix": Str("prefix of ground-truth topics in synthetic bags (never read by estimators)", default="/ground_truth"),
+    }),
+})
+
+
+def _cross_checks(scene: dict, ctx: Context) -> None:
+    src = ctx.source
+    if scene["simreal_scene"] != SCENE_FORMAT:
+        raise SceneError(f"{src}: simreal_scene: expected format version {SCENE_FORMAT}; found {scene['simreal_scene']}")
+    ids = [o["id"] for o in scene["objects"]]
+    for i, oid in enumerate(ids):
+        if ids.index(oid) != i:
+            raise SceneError(f"{src}: objects[{i}].id: expected a unique id; found '{oid}' twice")
+    loc, cam = scene["localization"], scene["camera"]
+    if loc["mode"] == "static" and loc["static_pose"] is None:
+        raise SceneError(f"{src}: localization.static_pose: required when localization.mode is 'static'; found nothing")
+    if loc["mode"] == "markers" and not loc["markers"]["poses"]:
+        raise SceneError(f"{src}: localization.markers.poses: expected at least one marker pose for mode 'markers'; found none")
+    if loc["mode"] == "rgbd" and cam["depth"] is None:
+        raise SceneError(f"{src}: camera.depth: required for localization.mode 'rgbd'; found nothing")
+    if loc["mode"] == "stereo" and (cam["right_image"] is None or cam["right_camera_info"] is None):
+        raise SceneError(f"{src}: camera.right_image / camera.right_camera_info: required for localization.mode 'stereo'")
+    if cam["source"] != "topic" and cam["path"] is None:
+        raise SceneError(f"{src}: camera.path: required for camera.source '{cam['source']}'; found nothing")
+    for i, o in enumerate(scene["objects"]):
+        for j, other in enumerate(o["collision"]["pushes"]):
+            if other not in ids or other == o["id"]:
+                raise SceneError(f"{src}: objects[{i}].collision.pushes[{j}]: expected the id of another object "
+                                 f"({', '.join(x for x in ids if x != o['id']) or 'none defined'}); found '{other}'")
+        if o["collision"]["enabled"] and cam["depth"] is None and cam["right_image"] is None and not any(
+                o["id"] in p["collision"]["pushes"] for p in scene["objects"]):
+            raise SceneError(f"{src}: objects[{i}].collision.enabled: collision needs camera.depth or a stereo pair "
+                             "(or another object that pushes it); found neither")
+        if o["anchor"]["kind"] == "registration" and loc["mode"] in ("static", "markers"):
+            raise SceneError(f"{src}: objects[{i}].anchor.kind: 'registration' needs a SLAM map "
+                             f"(localization.mode mono, rgbd or stereo); found mode '{loc['mode']}'")
+        _check_model_parameters(o, i, ctx)
+
+
+def _check_model_parameters(obj: dict, i: int, ctx: Context) -> None:
+    """Parameter names in the scene must exist in the model file (read lazily from its header)."""
+    from simreal_nodes.rom.model_file import read_header
+
+    try:
+        header = read_header(obj["model"])
+    except Exception as e:  # noqa: BLE001 - report any failure to read as a scene error
+        raise SceneError(f"{ctx.source}: objects[{i}].model: {e}") from None
+    names = [a["name"] for a in header["axes"]]
+    for p, cfg in obj["parameters"].items():
+        if p not in names and p not in header.get("rigid_parameters", []):
+            raise SceneError(f"{ctx.source}: objects[{i}].parameters.{p}: the model {Path(obj['model']).name} has no "
+                             f"parameter '{p}' (it has: {', '.join(names + header.get('rigid_parameters', []))})")
+        if cfg["mode"] == "fixed" and cfg["value"] is None:
+            raise SceneError(f"{ctx.source}: objects[{i}].parameters.{p}.value: required for mode 'fixed'; found nothing")
+    obj["_model_header"] = header
+
+
+def validate_scene(doc, source: str = "<scene>", base_dir: str | Path = ".") -> dict:
+    ctx = Context(source=source, base_dir=Path(base_dir).resolve())
+    if not isinstance(doc, dict):
+        raise SceneError(f"{source}: expected a mapping at the top level; found {type(doc).__name__}")
+    scene = SCENE.validate(doc, "", ctx)
+    _cross_checks(scene, ctx)
+    scene["_source"] = source
+    return scene
+
+
+def load_scene(path: str | Path) -> dict:
+    """Read and validate a scene YAML; raises SceneError naming key, expectation and finding."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except FileNotFoundError:
+        raise SceneError(f"scene file not found: {path}") from None
+    try:
+        doc = yaml.safe_load(text)
+    except yaml.YAMLError as e:
+        raise SceneError(f"{path}: not valid YAML: {e}") from None
+    return validate_scene(doc, str(path), path.parent)

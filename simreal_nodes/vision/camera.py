@@ -1,0 +1,203 @@
+"""Pinhole camera with OpenCV distortion: the one camera model every part of simreal uses.
+
+Conventions (REP-103 optical frame): x right, y down, z forward. Pixel (u, v) with the centre of
+the top-left pixel at (0, 0), as in OpenCV and sensor_msgs/CameraInfo.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from simreal_nodes.errors import CameraInfoError
+
+DISTORTION_MODELS = ("plumb_bob", "rational_polynomial", "equidistant", "none", "")
+
+
+@dataclass
+class CameraModel:
+    """Intrinsics of one camera: image size, K (3x3), distortion D (OpenCV order)."""
+
+    width: int
+    height: int
+    K: np.ndarray
+    D: np.ndarray = field(default_factory=lambda: np.zeros(5))
+    distortion_model: str = "plumb_bob"
+    frame_id: str = "camera_optical_frame"
+
+    def __post_init__(self):
+        self.K = np.asarray(self.K, dtype=np.float64).reshape(3, 3)
+        self.D = np.asarray(self.D, dtype=np.float64).ravel()
+        self.validate()
+
+    # -- construction -------------------------------------------------------------------
+    @classmethod
+    def from_intrinsics(cls, width, height, fx, fy, cx, cy, D=None, **kw) -> "CameraModel":
+        K = np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1]], dtype=np.float64)
+        return cls(int(width), int(height), K, np.zeros(5) if D is None else np.asarray(D), **kw)
+
+    @classmethod
+    def from_camera_info(cls, msg) -> "CameraModel":
+        """From a sensor_msgs/CameraInfo (rclpy or rosbags message); validates it."""
+        k = np.asarray(msg.k, dtype=np.float64)
+        if k.size != 9:
+            raise CameraInfoError(f"CameraInfo.k has {k.size} values, expected 9")
+        d = np.asarray(msg.d, dtype=np.float64)
+        model = str(msg.distortion_model)
+        frame = str(msg.header.frame_id) or "camera_optical_frame"
+        return cls(int(msg.width), int(msg.height), k.reshape(3, 3), d, model, frame)
+
+    def validate(self) -> None:
+        if self.width <= 0 or self.height <= 0:
+            raise CameraInfoError(f"camera image size {self.width}x{self.height} is not positive")
+        K = self.K
+        if not np.all(np.isfinite(K)):
+            raise CameraInfoError("camera matrix K has NaN or inf entries")
+        fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
+        if fx <= 0 or fy <= 0:
+            raise CameraInfoError(
+                f"camera focal lengths must be positive, found fx={fx:g}, fy={fy:g} "
+                "(an all-zero CameraInfo means the camera is not calibrated)")
+        if abs(K[2, 2] - 1.0) > 1e-9 or abs(K[1, 0]) > 1e-9 or K[2, 0] != 0 or K[2, 1] != 0:
+            raise CameraInfoError(f"camera matrix K is not of the form [[fx,s,cx],[0,fy,cy],[0,0,1]]: {K.tolist()}")
+        if not (-self.width < cx < 2 * self.width and -self.height < cy < 2 * self.height):
+            raise CameraInfoError(
+                f"principal point ({cx:g}, {cy:g}) is far outside the {self.width}x{self.height} image")
+        if self.distortion_model not in DISTORTION_MODELS:
+            raise CameraInfoError(
+                f"distortion model '{self.distortion_model}' is not supported "
+                f"(expected one of {', '.join(m for m in DISTORTION_MODELS if m)})")
+        if not np.all(np.isfinite(self.D)):
+            raise CameraInfoError("distortion coefficients have NaN or inf entries")
+
+    # -- properties ---------------------------------------------------------------------
+    @property
+    def fx(self) -> float:
+        return float(self.K[0, 0])
+
+    @property
+    def fy(self) -> float:
+        return float(self.K[1, 1])
+
+    @property
+    def cx(self) -> float:
+        return float(self.K[0, 2])
+
+    @property
+    def cy(self) -> float:
+        return float(self.K[1, 2])
+
+    @property
+    def has_distortion(self) -> bool:
+        return self.distortion_model not in ("none", "") and bool(np.any(self.D != 0))
+
+    def cv_dist(self) -> np.ndarray:
+        """Distortion vector as OpenCV wants it (zeros when none)."""
+        return self.D.copy() if self.has_distortion else np.zeros(5)
+
+    def scaled(self, factor: float) -> "CameraModel":
+        """The same camera at a resolution scaled by ``factor`` (pixel-centre convention kept)."""
+        K = self.K.copy()
+        K[0, 0] *= factor
+        K[1, 1] *= factor
+        K[0, 2] = (K[0, 2] + 0.5) * factor - 0.5
+        K[1, 2] = (K[1, 2] + 0.5) * factor - 0.5
+        return CameraModel(int(round(self.width * factor)), int(round(self.height * factor)), K,
+                           self.D.copy(), self.distortion_model, self.frame_id)
+
+    # -- geometry -----------------------------------------------------------------------
+    def project(self, points_cam: np.ndarray, distort: bool = True) -> np.ndarray:
+        """Project (N, 3) points in the optical frame to (N, 2) pixels. z <= 0 gives NaN."""
+        P = np.asarray(points_cam, dtype=np.float64).reshape(-1, 3)
+        out = np.full((P.shape[0], 2), np.nan)
+        ok = P[:, 2] > 1e-9
+        if not np.any(ok):
+            return out
+        if distort and self.has_distortion:
+            import cv2
+
+            uv, _ = cv2.projectPoints(P[ok], np.zeros(3), np.zeros(3), self.K, self.D)
+            out[ok] = uv.reshape(-1, 2)
+        else:
+            x = P[ok, 0] / P[ok, 2]
+            y = P[ok, 1] / P[ok, 2]
+            out[ok, 0] = self.fx * x + self.K[0, 1] * y + self.cx
+            out[ok, 1] = self.fy * y + self.cy
+        return out
+
+    def undistort_points(self, uv: np.ndarray) -> np.ndarray:
+        """Distorted pixels -> ideal (undistorted) pixels of the same K."""
+        uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
+        if not self.has_distortion or uv.size == 0:
+            return uv.copy()
+        import cv2
+
+        und = cv2.undistortPoints(
+            uv.reshape(-1, 1, 2), self.K, self.D, None, self.K,
+            criteria=(cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-10))
+        return und.reshape(-1, 2)
+
+    def backproject(self, uv: np.ndarray, depth: np.ndarray) -> np.ndarray:
+        """Ideal (undistorted) pixels + z-depth -> (N, 3) points in the optical frame."""
+        uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
+        z = np.asarray(depth, dtype=np.float64).ravel()
+        y = (uv[:, 1] - self.cy) / self.fy
+        x = (uv[:, 0] - self.cx - self.K[0, 1] * y) / self.fx
+        return np.stack([x * z, y * z, z], axis=1)
+
+    # -- CameraInfo / calibration files -------------------------------------------------
+    def camera_info_fields(self) -> dict:
+        """Field values for a sensor_msgs/CameraInfo (R = I, P = [K|0])."""
+        P = np.zeros((3, 4))
+        P[:, :3] = self.K
+        return dict(height=self.height, width=self.width,
+                    distortion_model=self.distortion_model or "plumb_bob",
+                    d=[float(x) for x in self.D], k=[float(x) for x in self.K.ravel()],
+                    r=[1.0, 0, 0, 0, 1.0, 0, 0, 0, 1.0], p=[float(x) for x in P.ravel()])
+
+    def to_calibration_yaml(self, path: str | Path, camera_name: str = "camera") -> None:
+        """Write the ROS camera_calibration YAML format (readable by camera_info_manager)."""
+        f = self.camera_info_fields()
+        doc = {
+            "image_width": self.width, "image_height": self.height, "camera_name": camera_name,
+            "camera_matrix": {"rows": 3, "cols": 3, "data": f["k"]},
+            "distortion_model": f["distortion_model"],
+            "distortion_coefficients": {"rows": 1, "cols": len(f["d"]), "data": f["d"]},
+            "rectification_matrix": {"rows": 3, "cols": 3, "data": f["r"]},
+            "projection_matrix": {"rows": 3, "cols": 4, "data": f["p"]},
+        }
+        Path(path).write_text(yaml.safe_dump(doc, sort_keys=False))
+
+    @classmethod
+    def from_calibration_yaml(cls, path: str | Path) -> "CameraModel":
+        """Read the ROS camera_calibration YAML format; errors name the missing or bad key."""
+        path = Path(path)
+        try:
+            doc = yaml.safe_load(path.read_text())
+        except FileNotFoundError:
+            raise CameraInfoError(f"calibration file not found: {path}") from None
+        except yaml.YAMLError as e:
+            raise CameraInfoError(f"{path}: not valid YAML: {e}") from None
+        if not isinstance(doc, dict):
+            raise CameraInfoError(f"{path}: expected a mapping at the top level")
+
+        def get(key):
+            if key not in doc:
+                raise CameraInfoError(f"{path}: missing key '{key}'")
+            return doc[key]
+
+        def matrix(key, n):
+            m = get(key)
+            data = m.get("data") if isinstance(m, dict) else None
+            if not isinstance(data, list) or (n and len(data) != n):
+                raise CameraInfoError(f"{path}: '{key}.data' must be a list of {n or 'some'} numbers")
+            return np.asarray(data, dtype=np.float64)
+
+        K = matrix("camera_matrix", 9).reshape(3, 3)
+        D = matrix("distortion_coefficients", 0) if "distortion_coefficients" in doc else np.zeros(5)
+        return cls(int(get("image_width")), int(get("image_height")), K, D,
+                   str(doc.get("distortion_model", "plumb_bob")),
+                   frame_id=str(doc.get("frame_id", "camera_optical_frame")))

@@ -1,0 +1,57 @@
+import textwrap
+
+import pytest
+
+from simreal_nodes.errors import SceneError
+from simreal_nodes.scene.graph import required_nodes
+from simreal_nodes.scene.schema import load_scene
+
+BASE = """
+simreal_scene: 1
+name: cam_only
+localization: {mode: static, static_pose: [0, 0, 0, 0, 0, 0, 1]}
+overlay: {enabled: false}
+"""
+
+
+def write(tmp_path, text):
+    f = tmp_path / "scene.yaml"
+    f.write_text(textwrap.dedent(text))
+    return f
+
+
+def test_minimal_scene_gets_defaults_and_starts_only_ingest(tmp_path):
+    s = load_scene(write(tmp_path, BASE))
+    assert s["camera"]["image"] == "/camera/image_raw"
+    assert s["camera"]["depth"] is None
+    assert [n.name for n in required_nodes(s)] == ["ingest"]
+
+
+@pytest.mark.parametrize("text,match", [
+    (BASE + "camra: {}\n", r"camra: unknown key \(did you mean 'camera'\?\)"),
+    (BASE.replace("mode: static", "mode: sttic"), r"localization.mode: expected one of 'markers', 'mono'.*found 'sttic'"),
+    (BASE + "camera: {undistort: 3}\n", r"camera.undistort: expected true or false; found 3 \(int\)"),
+    (BASE + "camera: {image: camera/image}\n", r"camera.image: expected a ROS topic name"),
+    (BASE.replace("simreal_scene: 1", "simreal_scene: 7"), r"simreal_scene: expected format version 1; found 7"),
+    (BASE.replace("name: cam_only\n", ""), r"name: required key is missing"),
+    (BASE + "objects:\n  - {id: beam, model: no_such_model.h5}\n", r"objects\[0\].model: file not found: .*no_such_model.h5"),
+    (BASE + "objects:\n  - {id: beam}\n", r"objects\[0\].model: required key is missing"),
+    (BASE.replace("static_pose: [0, 0, 0, 0, 0, 0, 1]", "static_pose: [0, 0, 0]"), r"localization.static_pose: expected a pose"),
+    (BASE + "localization: {mode: rgbd}\n", r"duplicate|camera.depth: required"),
+    ("- just a list\n", r"expected a mapping at the top level"),
+    ("a: [unclosed\n", r"not valid YAML"),
+])
+def test_mistakes_name_key_expected_and_found(tmp_path, text, match):
+    with pytest.raises(SceneError, match=match):
+        load_scene(write(tmp_path, text))
+
+
+def test_rgbd_without_depth_topic(tmp_path):
+    text = BASE.replace("localization: {mode: static, static_pose: [0, 0, 0, 0, 0, 0, 1]}", "localization: {mode: rgbd}")
+    with pytest.raises(SceneError, match="camera.depth: required for localization.mode 'rgbd'"):
+        load_scene(write(tmp_path, text))
+
+
+def test_missing_scene_file(tmp_path):
+    with pytest.raises(SceneError, match="scene file not found"):
+        load_scene(tmp_path / "nope.yaml")

@@ -1,0 +1,48 @@
+import numpy as np
+import pytest
+
+from simreal_nodes.errors import CameraInfoError
+from simreal_nodes.vision.camera import CameraModel
+
+
+class Info:
+    def __init__(self, w, h, k, d=(0, 0, 0, 0, 0), model="plumb_bob"):
+        class H:
+            frame_id = "cam"
+        self.header, self.width, self.height, self.k, self.d, self.distortion_model = H(), w, h, k, d, model
+
+
+def test_zero_camera_info_is_rejected_clearly():
+    with pytest.raises(CameraInfoError, match="focal lengths must be positive"):
+        CameraModel.from_camera_info(Info(640, 480, [0.0] * 9))
+    with pytest.raises(CameraInfoError, match="size 0x0"):
+        CameraModel.from_camera_info(Info(0, 0, [500, 0, 320, 0, 500, 240, 0, 0, 1]))
+    with pytest.raises(CameraInfoError, match="has 4 values"):
+        CameraModel.from_camera_info(Info(640, 480, [1, 2, 3, 4]))
+    with pytest.raises(CameraInfoError, match="distortion model"):
+        CameraModel.from_camera_info(Info(640, 480, [500, 0, 320, 0, 500, 240, 0, 0, 1], model="fisheye9"))
+
+
+def test_project_backproject_and_yaml(tmp_path):
+    cam = CameraModel.from_intrinsics(640, 480, 520.0, 515.0, 319.5, 239.5, D=[0.1, -0.05, 0.001, 0.002, 0.0])
+    rng = np.random.default_rng(1)
+    P = np.c_[rng.uniform(-0.5, 0.5, (50, 2)), rng.uniform(1, 3, 50)]
+    uv = cam.project(P)
+    ideal = cam.undistort_points(uv)
+    back = cam.backproject(ideal, P[:, 2])
+    np.testing.assert_allclose(back, P, atol=1e-6)
+    assert np.isnan(cam.project(np.array([[0, 0, -1.0]]))).all()
+    f = tmp_path / "calib.yaml"
+    cam.to_calibration_yaml(f)
+    again = CameraModel.from_calibration_yaml(f)
+    np.testing.assert_allclose(again.K, cam.K)
+    np.testing.assert_allclose(again.D, cam.D)
+
+
+def test_bad_calibration_yaml(tmp_path):
+    f = tmp_path / "c.yaml"
+    f.write_text("image_width: 640\nimage_height: 480\ncamera_matrix: {rows: 3, cols: 3, data: [1, 2]}\n")
+    with pytest.raises(CameraInfoError, match="camera_matrix.data"):
+        CameraModel.from_calibration_yaml(f)
+    with pytest.raises(CameraInfoError, match="not found"):
+        CameraModel.from_calibration_yaml(tmp_path / "missing.yaml")
