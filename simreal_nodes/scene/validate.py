@@ -54,6 +54,16 @@ class Context:
     base_dir: Path = field(default_factory=Path.cwd)
 
 
+def _yaml_float(x):
+    """'69.0e9' (a string to PyYAML) -> 69e9; anything else unchanged."""
+    if isinstance(x, str):
+        try:
+            return float(x)
+        except ValueError:
+            return x
+    return x
+
+
 class Str(Spec):
     def __init__(self, doc="", pattern: Callable[[str], bool] | None = None, what="a string", **kw):
         super().__init__(doc, **kw)
@@ -114,6 +124,12 @@ class Number(Spec):
         return s
 
     def check(self, v, path, ctx):
+        if isinstance(v, str):
+            # PyYAML reads 69.0e9 (no sign in the exponent) as a string: accept it as the number it is
+            try:
+                v = float(v)
+            except ValueError:
+                self.fail(path, self.describe(), v, ctx)
         if isinstance(v, bool) or not isinstance(v, (int, float)):
             self.fail(path, self.describe(), v, ctx)
         if self.integer and not (isinstance(v, int) or float(v).is_integer()):
@@ -137,6 +153,8 @@ class Vector(Spec):
         return self.what
 
     def check(self, v, path, ctx):
+        if isinstance(v, list):
+            v = [_yaml_float(x) for x in v]
         if not isinstance(v, list) or len(v) not in self.n or not all(
                 isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in v):
             self.fail(path, self.what, v, ctx)

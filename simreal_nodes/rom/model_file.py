@@ -1,0 +1,217 @@
+"""Versioned HDF5 model files (no pickle anywhere).
+
+Layout (format ``simreal-model``, version 1)::
+
+    /                       attrs: format, format_version, name, description, created, simreal_version
+    /mesh/points            (n, 3) float64, object frame, metres
+    /mesh/cells             (n_cells, k) int64, attr cell_type
+    /mesh/surface           (n_tri, 3) int64, outward triangles
+    /axes/<name>            grid values; attrs unit, kind, interpolation, description, order
+    /fields/<name>/space    (n_modes, n_nodes, n_comp); attrs unit, components (JSON)
+    /fields/<name>/params/<axis>   (n_modes, n_axis)
+    /fields/<name>/error_vs_modes  (n_modes,)
+    /load_points, /load_directions (optional)
+    /meta                   attrs (JSON): material, boundary_conditions, loads, rigid_parameters, provenance
+
+Loading validates everything and raises :class:`ModelFileError` with the reason; a reader may ask for
+some fields only and for the first ``n_modes`` modes only (read by slicing, not loaded then cut).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import time
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from simreal_nodes import __version__
+from simreal_nodes.errors import ModelFileError
+from simreal_nodes.rom.model import ReducedModel
+from simreal_nodes.rom.separated import Axis, SeparatedField
+
+FORMAT = "simreal-model"
+FORMAT_VERSION = 1
+CELL_TYPES = {"tet4": 4, "hex8": 8, "tri3": 3, "quad4": 4}
+
+
+def save_model(model: ReducedModel, path: str | Path) -> str:
+    """Write ``model``; returns its id (name@sha256 prefix of the file)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(path.suffix + ".partial")
+    with h5py.File(tmp, "w") as f:
+        f.attrs.update(format=FORMAT, format_version=FORMAT_VERSION, name=model.name, description=model.description,
+                       created=time.strftime("%Y-%m-%dT%H:%M:%S%z"), simreal_version=__version__)
+        g = f.create_group("mesh")
+        g.create_dataset("points", data=np.asarray(model.points, np.float64), compression="gzip")
+        c = g.create_dataset("cells", data=np.asarray(model.cells, np.int64), compression="gzip")
+        c.attrs["cell_type"] = model.cell_type
+        g.create_dataset("surface", data=np.asarray(model.surface, np.int64).reshape(-1, 3), compression="gzip")
+        ga = f.create_group("axes")
+        for i, a in enumerate(model.axes):
+            d = ga.create_dataset(a.name, data=a.values)
+            d.attrs.update(unit=a.unit, kind=a.kind, interpolation=a.interpolation, description=a.description, order=i)
+        gf = f.create_group("fields")
+        for name, fld in model.fields.items():
+            h = gf.create_group(name)
+            s = h.create_dataset("space", data=np.asarray(fld.space, np.float64), compression="gzip",
+                                 chunks=(1,) + fld.space.shape[1:])
+            s.attrs.update(unit=fld.unit, components=json.dumps(list(fld.components)))
+            hp = h.create_group("params")
+            for a, p in zip(fld.axes, fld.params):
+                hp.create_dataset(a.name, data=np.asarray(p, np.float64))
+            if fld.error_vs_modes is not None:
+                h.create_dataset("error_vs_modes", data=np.asarray(fld.error_vs_modes, np.float64))
+        if model.load_points is not None:
+            f.create_dataset("load_points", data=np.asarray(model.load_points, np.int64))
+        if model.load_directions is not None:
+            f.create_dataset("load_directions", data=np.asarray(model.load_directions, np.float64))
+        m = f.create_group("meta")
+        for key in ("material", "boundary_conditions", "loads", "rigid_parameters", "provenance"):
+            m.attrs[key] = json.dumps(getattr(model, key), default=_json_default)
+    tmp.replace(path)  # never leave a half-written model under the real name
+    model.path = str(path)
+    model.model_id = model_id(path, model.name)
+    return model.model_id
+
+
+def _json_default(o):
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, (np.floating, np.integer)):
+        return o.item()
+    return str(o)
+
+
+def model_id(path: str | Path, name: str) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for chunk in iter(lambda: fh.read(1 << 20), b""):
+            h.update(chunk)
+    return f"{name}@{h.hexdigest()[:12]}"
+
+
+def _open(path: Path) -> h5py.File:
+    if not path.exists():
+        raise ModelFileError(f"model file not found: {path}")
+    try:
+        f = h5py.File(path, "r")
+    except OSError as e:
+        raise ModelFileError(f"{path} is not a readable HDF5 file (truncated or corrupt?): {e}") from None
+    try:
+        if f.attrs.get("format") != FORMAT:
+            raise ModelFileError(f"{path} is not a simreal model file (format attribute: {f.attrs.get('format')!r})")
+        v = int(f.attrs.get("format_version", -1))
+        if v > FORMAT_VERSION or v < 1:
+            raise ModelFileError(f"{path} has model format version {v}; this simreal reads version {FORMAT_VERSION}")
+    except ModelFileError:
+        f.close()
+        raise
+    return f
+
+
+def _get(f, key: str, path: Path):
+    if key not in f:
+        raise ModelFileError(f"{path}: missing '{key}' (the file is incomplete or of another schema)")
+    return f[key]
+
+
+def _read(ds, path: Path, sel=()):
+    try:
+        return ds[sel] if sel != () else ds[()]
+    except Exception as e:  # noqa: BLE001 - h5py raises OSError/KeyError/RuntimeError on corrupt data
+        raise ModelFileError(f"{path}: cannot read '{ds.name}' (corrupt file?): {e}") from None
+
+
+def _axes(f, path: Path) -> list[Axis]:
+    axes = []
+    g = _get(f, "axes", path)
+    items = sorted(g.items(), key=lambda kv: int(kv[1].attrs.get("order", 0)))
+    for name, d in items:
+        try:
+            axes.append(Axis(name, _read(d, path), str(d.attrs.get("unit", "")), str(d.attrs.get("kind", "continuous")),
+                             str(d.attrs.get("interpolation", "cubic")), str(d.attrs.get("description", ""))))
+        except ValueError as e:
+            raise ModelFileError(f"{path}: axis '{name}': {e}") from None
+    return axes
+
+
+def read_header(path: str | Path) -> dict:
+    """Name, parameters, fields and rigid parameters, without reading modes (cheap; for scene checks)."""
+    path = Path(path)
+    with _open(path) as f:
+        axes = _axes(f, path)
+        fields = list(_get(f, "fields", path).keys())
+        meta = _get(f, "meta", path)
+        rigid = json.loads(meta.attrs.get("rigid_parameters", "[]"))
+        n_modes = {k: int(_get(f, f"fields/{k}/space", path).shape[0]) for k in fields}
+        return {"name": str(f.attrs.get("name", "")), "axes": [a.as_dict() for a in axes], "fields": fields,
+                "n_modes": n_modes, "rigid_parameters": [r["name"] for r in rigid],
+                "rigid": rigid}
+
+
+def load_model(path: str | Path, fields: list[str] | tuple[str, ...] | None = None,
+               n_modes: int | None = None, mesh: bool = True) -> ReducedModel:
+    """Read and validate a model. ``fields``: only these (default all); ``n_modes``: only the first modes."""
+    path = Path(path)
+    with _open(path) as f:
+        name = str(f.attrs.get("name", path.stem))
+        axes = _axes(f, path)
+        pts = _read(_get(f, "mesh/points", path), path)
+        if pts.ndim != 2 or pts.shape[1] != 3:
+            raise ModelFileError(f"{path}: mesh/points has shape {pts.shape}, expected (n, 3)")
+        n_nodes = pts.shape[0]
+        cells_ds = _get(f, "mesh/cells", path)
+        cell_type = str(cells_ds.attrs.get("cell_type", ""))
+        if cell_type not in CELL_TYPES:
+            raise ModelFileError(f"{path}: unknown cell type '{cell_type}'")
+        cells = _read(cells_ds, path) if mesh else np.zeros((0, CELL_TYPES[cell_type]), np.int64)
+        surface = _read(_get(f, "mesh/surface", path), path)
+        for what, arr in (("cells", cells), ("surface", surface)):
+            if arr.size and (arr.min() < 0 or arr.max() >= n_nodes):
+                raise ModelFileError(f"{path}: mesh/{what} refers to nodes outside 0..{n_nodes - 1}")
+        gf = _get(f, "fields", path)
+        wanted = list(gf.keys()) if fields is None else list(fields)
+        out = {}
+        for fname in wanted:
+            if fname not in gf:
+                raise ModelFileError(f"{path}: no field '{fname}' (the file has: {', '.join(gf.keys())})")
+            h = gf[fname]
+            s = _get(h, "space", path)
+            m_all = s.shape[0]
+            m = m_all if n_modes in (None, 0) else int(n_modes)
+            if m > m_all:
+                raise ModelFileError(f"{path}: field '{fname}' has {m_all} modes; {m} were requested")
+            space = _read(s, path, np.s_[:m])
+            if space.ndim != 3 or space.shape[1] != n_nodes:
+                raise ModelFileError(f"{path}: field '{fname}' space modes have shape {space.shape}, "
+                                     f"expected (modes, {n_nodes}, components)")
+            params = []
+            for a in axes:
+                p = _read(_get(h, f"params/{a.name}", path), path, np.s_[:m])
+                if p.shape != (m, len(a.values)):
+                    raise ModelFileError(f"{path}: field '{fname}' modes of '{a.name}' have shape {p.shape}, "
+                                         f"expected ({m}, {len(a.values)})")
+                params.append(p)
+            for arr in [space] + params:
+                if not np.all(np.isfinite(arr)):
+                    raise ModelFileError(f"{path}: field '{fname}' has NaN or inf in its modes")
+            err = _read(h["error_vs_modes"], path, np.s_[:m]) if "error_vs_modes" in h else None
+            out[fname] = SeparatedField(fname, space, params, axes, str(s.attrs.get("unit", "")),
+                                        json.loads(s.attrs.get("components", "[]")), err)
+        meta = _get(f, "meta", path)
+        try:
+            md = {k: json.loads(meta.attrs.get(k, "null")) for k in
+                  ("material", "boundary_conditions", "loads", "rigid_parameters", "provenance")}
+        except (TypeError, ValueError) as e:
+            raise ModelFileError(f"{path}: metadata is not valid JSON: {e}") from None
+        lp = _read(f["load_points"], path) if "load_points" in f else None
+        ld = _read(f["load_directions"], path) if "load_directions" in f else None
+        model = ReducedModel(name, pts, cells, cell_type, axes, out, surface, str(f.attrs.get("description", "")),
+                             md["material"] or {}, md["boundary_conditions"] or [], md["loads"] or {}, lp, ld,
+                             md["rigid_parameters"] or [], md["provenance"] or {}, path=str(path))
+    model.model_id = model_id(path, name)
+    return model

@@ -1,0 +1,227 @@
+"""Evaluation of a separated field u(x, mu) = sum_i F_i(x) prod_k G_i^k(mu_k) and of its sensitivities.
+
+Thesis Eq. 2.9 (evaluation) and Eq. 4.9 / the sensitivity formula of §4.4:
+
+    du/dmu_k = sum_i F_i(x) dG_i^k/dmu_k(mu_k) prod_{l != k} G_i^l(mu_l)
+
+The parameter modes G_i^k are nodal values on the axis grid; between nodes they are interpolated
+(``cubic``: C2 spline, smooth sensitivities; ``linear``: the finite-element interpolation of the
+axis, exact for loads between two load points of a linear model). A ``discrete`` axis (e.g. the
+index of a precomputed contact point) takes integer values and has no sensitivity.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.interpolate import CubicSpline
+
+AXIS_KINDS = ("continuous", "discrete")
+INTERPOLATIONS = ("cubic", "linear")
+
+
+@dataclass
+class Axis:
+    name: str
+    values: np.ndarray
+    unit: str = ""
+    kind: str = "continuous"
+    interpolation: str = "cubic"
+    description: str = ""
+
+    def __post_init__(self):
+        self.values = np.asarray(self.values, dtype=np.float64)
+        if self.values.ndim != 1 or len(self.values) < 1:
+            raise ValueError(f"axis '{self.name}' needs a 1-D grid of values")
+        if len(self.values) > 1 and np.any(np.diff(self.values) <= 0):
+            raise ValueError(f"axis '{self.name}' values must increase strictly")
+        if self.kind not in AXIS_KINDS:
+            raise ValueError(f"axis kind must be one of {AXIS_KINDS}, got '{self.kind}'")
+        if self.interpolation not in INTERPOLATIONS:
+            raise ValueError(f"axis interpolation must be one of {INTERPOLATIONS}, got '{self.interpolation}'")
+
+    @property
+    def range(self) -> tuple[float, float]:
+        return float(self.values[0]), float(self.values[-1])
+
+    def contains(self, x: float, tol: float = 1e-9) -> bool:
+        lo, hi = self.range
+        span = max(hi - lo, 1e-300)
+        return lo - tol * span <= x <= hi + tol * span
+
+    def as_dict(self) -> dict:
+        return {"name": self.name, "unit": self.unit, "kind": self.kind, "interpolation": self.interpolation,
+                "range": list(self.range), "n": len(self.values), "description": self.description}
+
+
+class AxisModes:
+    """All parameter modes of one axis, interpolated together: values and derivatives, shape (m,)."""
+
+    def __init__(self, axis: Axis, modes: np.ndarray):
+        self.axis = axis
+        self.modes = np.asarray(modes, dtype=np.float64)  # (m, n)
+        x = axis.values
+        if axis.kind == "discrete" or len(x) == 1:
+            self._pp = None
+        elif axis.interpolation == "linear" or len(x) < 4:
+            slope = np.diff(self.modes, axis=1) / np.diff(x)  # (m, n-1)
+            self._pp = ("linear", x, self.modes, slope)
+        else:
+            cs = CubicSpline(x, self.modes.T, axis=0, bc_type="not-a-knot")
+            self._pp = ("cubic", cs.x, cs.c)  # c: (4, n-1, m)
+
+    def _interval(self, t: float) -> int:
+        x = self.axis.values
+        return int(np.clip(np.searchsorted(x, t, side="right") - 1, 0, len(x) - 2))
+
+    def value(self, t: float, m: int) -> np.ndarray:
+        if self._pp is None:
+            return self.modes[:m, self._index(t)]
+        if self._pp[0] == "linear":
+            _, x, y, slope = self._pp
+            i = self._interval(t)
+            return y[:m, i] + slope[:m, i] * (t - x[i])
+        _, x, c = self._pp
+        i = self._interval(t)
+        d = t - x[i]
+        return ((c[0, i, :m] * d + c[1, i, :m]) * d + c[2, i, :m]) * d + c[3, i, :m]
+
+    def derivative(self, t: float, m: int) -> np.ndarray:
+        if self._pp is None:
+            raise ValueError(f"axis '{self.axis.name}' is discrete: it has no sensitivity")
+        if self._pp[0] == "linear":
+            _, x, y, slope = self._pp
+            return slope[:m, self._interval(t)].copy()
+        _, x, c = self._pp
+        i = self._interval(t)
+        d = t - x[i]
+        return (3 * c[0, i, :m] * d + 2 * c[1, i, :m]) * d + c[2, i, :m]
+
+    def _index(self, t: float) -> int:
+        i = int(round(t))
+        if abs(t - i) > 1e-9 or not 0 <= i < self.modes.shape[1]:
+            if len(self.axis.values) == 1:
+                return 0
+            raise ValueError(f"axis '{self.axis.name}' is discrete: value {t} is not an index 0..{self.modes.shape[1] - 1}")
+        return i
+
+
+@dataclass
+class SeparatedField:
+    """One field (displacement, stress, ...) of a reduced model."""
+
+    name: str
+    space: np.ndarray  # (n_modes, n_nodes, n_comp)
+    params: list[np.ndarray]  # per axis: (n_modes, n_axis)
+    axes: list[Axis]
+    unit: str = ""
+    components: list[str] = field(default_factory=list)
+    error_vs_modes: np.ndarray | None = None  # relative error after 1..n modes (against the full-order truth)
+
+    def __post_init__(self):
+        self.space = np.asarray(self.space)
+        if self.space.ndim == 2:
+            self.space = self.space[:, :, None]
+        m = self.space.shape[0]
+        if len(self.params) != len(self.axes):
+            raise ValueError(f"field '{self.name}': {len(self.params)} parameter-mode sets for {len(self.axes)} axes")
+        for p, ax in zip(self.params, self.axes):
+            if p.shape != (m, len(ax.values)):
+                raise ValueError(f"field '{self.name}': modes of axis '{ax.name}' have shape {p.shape}, "
+                                 f"expected ({m}, {len(ax.values)})")
+        self._axis_modes = [AxisModes(ax, p) for ax, p in zip(self.axes, self.params)]
+
+    @property
+    def n_modes(self) -> int:
+        return self.space.shape[0]
+
+    @property
+    def n_nodes(self) -> int:
+        return self.space.shape[1]
+
+    @property
+    def n_comp(self) -> int:
+        return self.space.shape[2]
+
+    def _m(self, n_modes: int | None) -> int:
+        if n_modes is None or n_modes == 0:
+            return self.n_modes
+        if n_modes < 0 or n_modes > self.n_modes:
+            raise ValueError(f"field '{self.name}' has {self.n_modes} modes; {n_modes} were requested")
+        return int(n_modes)
+
+    def check_mu(self, mu) -> np.ndarray:
+        mu = np.asarray(mu, dtype=np.float64).ravel()
+        if mu.size != len(self.axes):
+            raise ValueError(f"expected {len(self.axes)} parameters ({', '.join(a.name for a in self.axes)}), got {mu.size}")
+        for v, ax in zip(mu, self.axes):
+            if not np.isfinite(v):
+                raise ValueError(f"parameter '{ax.name}' is not finite: {v}")
+            if not ax.contains(v):
+                raise ValueError(f"parameter '{ax.name}' = {v:g} is outside the model's range [{ax.range[0]:g}, {ax.range[1]:g}]")
+        return mu
+
+    def coefficients(self, mu, n_modes: int | None = None, with_derivatives: bool = False):
+        """c_i = prod_k G_i^k(mu_k) and, optionally, dc_i/dmu_k (m, n_params; NaN columns for discrete axes)."""
+        m = self._m(n_modes)
+        mu = self.check_mu(mu)
+        vals = [am.value(t, m) for am, t in zip(self._axis_modes, mu)]
+        c = np.prod(vals, axis=0) if vals else np.ones(m)
+        if not with_derivatives:
+            return c
+        dc = np.full((m, len(mu)), np.nan)
+        for k, (am, t) in enumerate(zip(self._axis_modes, mu)):
+            if am._pp is None:
+                continue
+            others = np.prod([v for l, v in enumerate(vals) if l != k], axis=0) if len(vals) > 1 else np.ones(m)
+            dc[:, k] = am.derivative(t, m) * others
+        return c, dc
+
+    def evaluate(self, mu, nodes=None, n_modes: int | None = None) -> np.ndarray:
+        """u(x, mu): (n_nodes or len(nodes), n_comp)."""
+        c = self.coefficients(mu, n_modes)
+        S = self.space[: len(c)] if nodes is None else self.space[: len(c), nodes]
+        return np.tensordot(c, S, axes=(0, 0))
+
+    def sensitivity(self, mu, k: int, nodes=None, n_modes: int | None = None) -> np.ndarray:
+        """du/dmu_k: (n_sel, n_comp)."""
+        c, dc = self.coefficients(mu, n_modes, with_derivatives=True)
+        if np.isnan(dc[0, k]):
+            raise ValueError(f"parameter '{self.axes[k].name}' is discrete: it has no sensitivity")
+        S = self.space[: len(c)] if nodes is None else self.space[: len(c), nodes]
+        return np.tensordot(dc[:, k], S, axes=(0, 0))
+
+    def view(self, nodes=None, n_modes: int | None = None) -> "FieldView":
+        return FieldView(self, nodes, self._m(n_modes))
+
+    def truncated(self, n_modes: int) -> "SeparatedField":
+        m = self._m(n_modes)
+        return SeparatedField(self.name, self.space[:m], [p[:m] for p in self.params], self.axes, self.unit,
+                              self.components, None if self.error_vs_modes is None else self.error_vs_modes[:m])
+
+
+class FieldView:
+    """A field restricted to some nodes and modes, laid out for fast repeated evaluation
+    (one small matrix product per call: what the tracker and the overlay call every frame)."""
+
+    def __init__(self, f: SeparatedField, nodes, n_modes: int):
+        self.field = f
+        self.n_modes = n_modes
+        sel = f.space[:n_modes] if nodes is None else f.space[:n_modes, nodes]
+        self.n_sel, self.n_comp = sel.shape[1], sel.shape[2]
+        # modes as rows (m, n_sel * n_comp): one streaming pass over memory per evaluation
+        self.S = np.ascontiguousarray(sel.reshape(n_modes, -1), dtype=np.float64)
+
+    def evaluate(self, mu) -> np.ndarray:
+        c = self.field.coefficients(mu, self.n_modes)
+        return (c @ self.S).reshape(self.n_sel, self.n_comp)
+
+    def evaluate_with_jacobian(self, mu) -> tuple[np.ndarray, np.ndarray]:
+        """u (n_sel, n_comp) and du/dmu (n_sel, n_comp, n_params) in one product."""
+        c, dc = self.field.coefficients(mu, self.n_modes, with_derivatives=True)
+        C = np.vstack([c, np.nan_to_num(dc).T])  # (1 + n_params, m)
+        out = C @ self.S  # (1 + n_params, n_sel * n_comp)
+        u = out[0].reshape(self.n_sel, self.n_comp)
+        J = out[1:].reshape(-1, self.n_sel, self.n_comp).transpose(1, 2, 0)
+        return u, J

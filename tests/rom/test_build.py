@@ -1,0 +1,112 @@
+"""Builders for every kind of seed object, at test sizes (the full-size builds are benchmarks)."""
+
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+
+from simreal_nodes.rom.build import build_model, load_spec
+from tests.conftest import shared
+
+FOAM = """
+simreal_model_spec: 1
+name: foam_small
+kind: beam_snapshots
+material: {law: saint_venant_kirchhoff, E: 1.1e+5, nu: 0.2}
+geometry: {length: 0.7975, width: 0.2, height: 0.105}
+mesh: {cells: [12, 3, 2]}
+supports:
+  - {region: {face: zmin, box: [[0.0, 0.07], null, null]}, kind: pinned}
+  - {region: {face: zmin, box: [[0.73, 0.7975], null, null]}, kind: sliding, component: z}
+load: {force: 15.0, patch_radius: 0.08, x_range: [0.2, 0.6], n: 5}
+steps: 2
+nipgd: {max_terms: 10, tol: 1.0e-8}
+"""
+
+BOOT = """
+simreal_model_spec: 1
+name: boot_small
+kind: joint_boot
+material: {law: neo_hookean, E: 5.0e+6, nu: 0.45}
+mesh: {n_profile: 12, n_around: 12, n_thick: 1}
+lever: {theta_deg: [0, 30], n: 6}
+nipgd: {max_terms: 10, tol: 1.0e-6}
+"""
+
+BUNNY = """
+simreal_model_spec: 1
+name: bunny_tiny
+kind: probe_nipgd
+surface: data:meshes/stanford-bunny.ply
+transform: {rotate_deg: [90, 0, 0], height_m: 0.15}
+mesh: {cell_size: 0.16}
+material: {law: neo_hookean_decoupled, E: 5.0e+5, nu: 0.4}
+contact: {points: 3, rings: 1, force: 2.0, increments: 3}
+nipgd: {max_terms: 40, tol: 1.0e-5}
+"""
+
+
+def spec(tmp_path, text):
+    f = tmp_path / "spec.yaml"
+    f.write_text(textwrap.dedent(text))
+    return load_spec(f)
+
+
+def test_foam_beam_snapshots_and_nipgd(tmp_path):
+    m = build_model(spec(tmp_path, FOAM))
+    u = m.field("displacement")
+    assert u.error_vs_modes[-1] < 1e-8  # NI-PGD reconstructs its snapshots to the stated tolerance
+    assert m.displacement([0.4])[:, 2].min() < -0.005  # a 15 N disk sags a soft foam beam visibly
+    mid = m.provenance["midpoint_interpolation_error"]
+    assert all(e < 0.05 for e in mid.values())  # between snapshots the spline in s stays close to the FEM
+    assert "stress" in m.fields and m.field("stress").n_comp == 6
+
+
+def test_joint_boot_lever_sweep(tmp_path):
+    m = build_model(spec(tmp_path, BOOT))
+    assert m.axes[0].name == "theta" and m.axes[0].range[1] == pytest.approx(np.deg2rad(30))
+    top = np.flatnonzero(np.isclose(m.points[:, 2], m.points[:, 2].max()))
+    u = m.displacement([np.deg2rad(30)], nodes=top)
+    # the top ring follows the lever: rigid rotation of 30 deg about y through the base centre
+    c, s = np.cos(np.deg2rad(30)), np.sin(np.deg2rad(30))
+    P = m.points[top]
+    expected = np.stack([c * P[:, 0] + s * P[:, 2], P[:, 1], -s * P[:, 0] + c * P[:, 2]], 1) - P
+    np.testing.assert_allclose(u, expected, atol=1e-4)
+    assert m.rigid_parameters[0]["name"] == "alpha_z"
+
+
+def test_bunny_probe_nipgd_reconstructs_snapshots(tmp_path):
+    shared("meshes", "stanford-bunny.ply")
+    from simreal_nodes.rom import build as B
+    B.KEEP_SNAPSHOTS = True
+    try:
+        m = build_model(spec(tmp_path, BUNNY))
+    finally:
+        B.KEEP_SNAPSHOTS = False
+    f = m.field("displacement")
+    assert f.error_vs_modes[-1] < 1e-5
+    U = m.snapshots["displacement"]
+    nv = U.shape[0]
+    for lp in range(3):
+        for k in range(4):
+            ref = U[:, :, lp, k]
+            got = f.evaluate([lp, k / 3])[:nv]
+            assert np.linalg.norm(got - ref) <= 1e-4 * max(np.linalg.norm(U), 1e-30)
+    assert m.points.shape[0] > nv and m.surface.min() >= nv  # the scan surface rides on the volume mesh
+    assert m.field("displacement").evaluate([1, 1.0])[:, 2].std() > 0
+
+
+def test_cli_build_model_and_bad_spec(tmp_path):
+    f = tmp_path / "boot.yaml"
+    f.write_text(textwrap.dedent(BOOT))
+    out = tmp_path / "boot.h5"
+    r = subprocess.run([sys.executable, "-m", "simreal_nodes.cli", "build-model", str(f), "-o", str(out), "-q"],
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert out.exists() and "boot_small@" in r.stdout
+    f.write_text(textwrap.dedent(BOOT).replace("theta_deg: [0, 30]", "theta_deg: [0]"))
+    r = subprocess.run([sys.executable, "-m", "simreal_nodes.cli", "build-model", str(f), "-o", str(out), "-q"],
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and "lever.theta_deg: expected a list of 2 numbers" in r.stderr
