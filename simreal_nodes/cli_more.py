@@ -59,7 +59,41 @@ def cmd_model_info(a) -> int:
     return 0
 
 
+def cmd_make_bag(a) -> int:
+    from simreal_nodes.synth.makebag import make_bag
+
+    w, h = (int(x) for x in a.resolution.lower().split("x"))
+    progress = TqdmProgress() if not a.quiet else None
+    try:
+        info = make_bag(a.scene, a.output, w, h, a.duration, a.fps, a.storage, a.seed, a.scene_out, a.ssaa, progress,
+                        image_format=a.image_format, jpeg_quality=a.jpeg_quality)
+    finally:
+        if progress:
+            progress.close()
+    print(f"wrote {info['path']}: {info['frames']} frames {info['resolution']}, {info['bytes'] / 1e6:.1f} MB, "
+          f"rendered in {info['seconds']:.1f} s" + (f"; scene file {a.scene_out}" if a.scene_out else ""))
+    return 0
+
+
 def add_commands(sub) -> None:
+    from simreal_nodes.synth.scenes import SCENES
+
+    s = sub.add_parser("make-bag", help="render a synthetic seed scene with ground truth into a bag")
+    s.add_argument("scene", choices=sorted(SCENES))
+    s.add_argument("-o", "--output", required=True)
+    s.add_argument("--resolution", default="640x480")
+    s.add_argument("--duration", type=float, help="seconds (default: the scene's)")
+    s.add_argument("--fps", type=float, default=30.0)
+    s.add_argument("--storage", choices=("mcap", "sqlite3"), default="mcap")
+    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--ssaa", type=int, default=2, help="supersampling factor (anti-aliasing)")
+    s.add_argument("--scene-out", help="also write the scene YAML that runs the graph on this bag")
+    s.add_argument("--image-format", choices=("raw", "jpeg", "png"), default="raw",
+                   help="raw sensor_msgs/Image, or CompressedImage on <topic>/compressed (image_transport convention)")
+    s.add_argument("--jpeg-quality", type=int, default=90)
+    s.add_argument("-q", "--quiet", action="store_true")
+    s.set_defaults(fn=cmd_make_bag)
+
     s = sub.add_parser("build-model", help="build a reduced-order model file from a spec")
     s.add_argument("spec", help="model spec YAML (or the name of a built-in spec, e.g. aluminium_beam.yaml)")
     s.add_argument("-o", "--output", required=True, help="output .h5")

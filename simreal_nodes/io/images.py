@@ -154,3 +154,23 @@ def depth_to_metres(img: np.ndarray, encoding: str) -> np.ndarray:
         return d
     raise ImageFormatError(
         f"depth encoding '{encoding}' is not supported (16UC1 millimetres or 32FC1 metres)")
+
+
+def decode_compressed(msg) -> tuple[np.ndarray, str]:
+    """sensor_msgs/CompressedImage (jpeg / png, image_transport's 'compressed' plugin) -> (array, encoding)."""
+    import cv2
+
+    fmt = str(getattr(msg, "format", "")).lower()
+    if "compresseddepth" in fmt:
+        raise ImageFormatError(f"compressedDepth images are not supported here (format '{msg.format}')")
+    buf = np.frombuffer(bytes(msg.data) if not isinstance(msg.data, np.ndarray) else msg.data, dtype=np.uint8)
+    if buf.size == 0:
+        raise ImageFormatError("compressed image has no data")
+    img = cv2.imdecode(buf, cv2.IMREAD_UNCHANGED)
+    if img is None:
+        raise ImageFormatError(f"compressed image (format '{msg.format}') cannot be decoded")
+    if img.ndim == 2:
+        return img, "mono8" if img.dtype == np.uint8 else "mono16"
+    if img.shape[2] == 4:
+        img = cv2.cvtColor(img, cv2.COLOR_BGRA2BGR)
+    return img, "bgr8"

@@ -83,7 +83,7 @@ def folder_frames(path: str | Path, rate_hz: float = 30.0) -> Iterator[Frame]:
 def bag_frames(path: str | Path, image_topic: str, info_topic: str, depth_topic: str | None = None,
                report: bags.BagReport | None = None) -> Iterator[Frame]:
     """Frames of a bag: each image with the latest CameraInfo and the depth of the same stamp."""
-    wanted = [t for t in (image_topic, info_topic, depth_topic) if t]
+    wanted = [t for t in (image_topic, image_topic + "/compressed", info_topic, depth_topic) if t]
     info = None
     pending_depth: dict[int, tuple[np.ndarray, str]] = {}
     pending_img: list[tuple[int, int, object]] = []
@@ -94,9 +94,10 @@ def bag_frames(path: str | Path, image_topic: str, info_topic: str, depth_topic:
         f = Frame(i, stamp, camera_info=info)
         i += 1
         try:
-            arr = images.image_to_array(msg)
-            f.image = arr
-            f.encoding = msg.encoding
+            if hasattr(msg, "format"):  # CompressedImage
+                f.image, f.encoding = images.decode_compressed(msg)
+            else:
+                f.image, f.encoding = images.image_to_array(msg), msg.encoding
         except images.ImageFormatError as e:
             f.error = str(e)
         if depth_topic and stamp in pending_depth:
@@ -118,7 +119,7 @@ def bag_frames(path: str | Path, image_topic: str, info_topic: str, depth_topic:
                 pending_depth[bags.stamp_ns(obj)] = (images.image_to_array(obj, copy=True), obj.encoding)
             except images.ImageFormatError:
                 pass
-        elif m.topic == image_topic:
+        elif m.topic in (image_topic, image_topic + "/compressed"):
             pending_img.append((bags.stamp_ns(obj), m.log_time_ns, obj))
         # images wait (briefly) for their depth of the same stamp
         while pending_img and (not depth_topic or pending_img[0][0] in pending_depth or len(pending_img) > 3):

@@ -118,7 +118,9 @@ SPECS = {
         "mesh": Record({"n_profile": Number(integer=True, lo=4, default=36), "n_around": Number(integer=True, lo=8, default=24),
                         "n_thick": Number(integer=True, lo=1, default=1), "order": Number(integer=True, lo=1, hi=2, default=1)}),
         "lever": Record({"pivot": Vector(3, default=[0, 0, 0]), "axis": Enum(("x", "y"), default="y"),
-                         "theta_deg": Vector(2, default=[0, 52]), "n": Number(integer=True, lo=3, default=27)}),
+                         "theta_deg": Vector(2, default=[0, 52]), "n": Number(integer=True, lo=3, default=27),
+                         "bar": Vector(4, what="[width, depth, z_from, z_to] of the rigid lever bar (metres)",
+                                       default=[0.016, 0.016, 0.02, 0.26])}),
         "nipgd": NIPGD,
     }),
     "probe_nipgd": Record({**COMMON,
@@ -413,18 +415,25 @@ def build_joint_boot(spec, progress=None) -> ReducedModel:
     nv = mesh.p.shape[1]
     U = np.stack([solid.vertex_displacement(v) for v in path], axis=-1)
     S = np.stack([solid.stress(v)["cauchy"] for v in path], axis=-1)
+    # the rigid lever rides on the same parameter: its surface points move by (R(theta) - I)(p - pivot)
+    lever_pts = lever_points(*lv["bar"])
+    Ul = np.stack([(lever_pts - pivot) @ rot_axis(lv["axis"], t).T + pivot - lever_pts for t in thetas], axis=-1)
+    U = np.concatenate([U, Ul], axis=0)
+    S = np.concatenate([S, np.zeros((len(lever_pts), 6, len(thetas)))], axis=0)
     axes = [Axis("theta", thetas, "rad", description=f"lever rotation about {lv['axis']} through {lv['pivot']}")]
     fields = _nipgd_fields(["theta"], U, S, axes, spec["nipgd"], progress)
     snaps = fields.pop("_snapshots", None)
     rigid = [{"name": "alpha_z", "axis": "z", "unit": "rad", "range": [-np.pi, np.pi], "origin": [0.0, 0.0, 0.0],
               "description": "rotation of the whole boot (and the lever plane) about its axis: the rotation-axis "
                              "orientation of thesis §4.5.4, a rigid parameter estimated by the tracker"}]
-    model = ReducedModel(spec["name"], mesh.p.T.copy(), mesh.t.T.copy(), _cell_type(mesh), axes, fields,
-                         meshes.boundary_triangles(mesh), spec["description"], mat.as_dict(),
+    model = ReducedModel(spec["name"], np.concatenate([mesh.p.T, lever_pts]), mesh.t.T.copy(), _cell_type(mesh), axes,
+                         fields, meshes.boundary_triangles(mesh), spec["description"], mat.as_dict(),
                          [{"region": "zmin", "kind": "clamped"}, {"region": "zmax", "kind": "prescribed lever rotation"}],
                          {"lever": lv}, rigid_parameters=rigid)
     model.provenance = _provenance(spec, t0, {"method": "Newton along theta + NI-PGD", "newton_iterations": info.newton_iterations,
-                                              "note": "self-contact of the folds is not modelled"})
+                                              "lever_nodes": [int(nv), int(len(lever_pts))],
+                                              "note": "self-contact of the folds is not modelled; nodes from lever_nodes[0] "
+                                                      "are points of the rigid lever bar"})
     model.snapshots = snaps
     return model
 
@@ -503,6 +512,18 @@ def build_probe_nipgd(spec, progress=None) -> ReducedModel:
                                               "note": "nodes >= volume_nodes are the scan surface, embedded in the tetrahedra"})
     model.snapshots = snaps
     return model
+
+
+def lever_points(width: float, depth: float, z0: float, z1: float, step: float = 0.008) -> np.ndarray:
+    """Points on the four long faces of the lever bar (centred on the z axis), every ``step`` metres."""
+    zs = np.arange(z0, z1 + 1e-9, step)
+    a = np.arange(-width / 2, width / 2 + 1e-9, step / 2)
+    b = np.arange(-depth / 2, depth / 2 + 1e-9, step / 2)
+    pts = []
+    for z in zs:
+        pts += [[x, -depth / 2, z] for x in a] + [[x, depth / 2, z] for x in a]
+        pts += [[-width / 2, y, z] for y in b[1:-1]] + [[width / 2, y, z] for y in b[1:-1]]
+    return np.asarray(pts, dtype=np.float64)
 
 
 def _farthest_points(P: np.ndarray, k: int) -> np.ndarray:

@@ -16,7 +16,7 @@ from simreal_nodes.errors import BagError
 from simreal_nodes.io import bags
 from simreal_nodes.launch import Launcher, ros_environment
 from simreal_nodes.ros.bagplay import Player, Recorder
-from simreal_nodes.scene.graph import output_topics, required_nodes
+from simreal_nodes.scene.graph import image_topic, output_topics, required_nodes
 from simreal_nodes.scene.schema import load_scene
 
 
@@ -48,12 +48,17 @@ def replay(bag: str, scene_file: str, rate: float = 1.0, lossless: bool = False,
         n.parameters.update((extra_params or {}).get(n.name, {}))
     report = bags.BagReport()
     topics = bags.bag_topics(bag)
-    if cam["image"] not in topics:
-        raise BagError(f"bag {bag} has no topic {cam['image']} (the scene's camera.image); it has: "
+    img = image_topic(cam)
+    if img not in topics:
+        hint = ""
+        if not cam["compressed"] and img + "/compressed" in topics:
+            hint = " (the bag has compressed images: set camera.compressed: true in the scene)"
+        raise BagError(f"bag {bag} has no topic {img} (the scene's camera.image){hint}; it has: "
                        f"{', '.join(sorted(topics)) or 'no topics'}")
-    wanted = [cam["image"], cam["camera_info"], cam["depth"], cam["right_image"], cam["right_camera_info"]]
+    right = image_topic(cam, right=True)
+    wanted = [img, cam["camera_info"], cam["depth"], right, cam["right_camera_info"]]
     inputs = {t: topics[t] for t in wanted if t and t in topics}
-    hold_for = tuple(t for t in (cam["depth"], cam["right_image"], cam["right_camera_info"]) if t and t in topics)
+    hold_for = tuple(t for t in (cam["depth"], right, cam["right_camera_info"]) if t and t in topics)
 
     launcher = Launcher(nodes, echo=echo) if launch else None
     env = ros_environment()
@@ -69,7 +74,7 @@ def replay(bag: str, scene_file: str, rate: float = 1.0, lossless: bool = False,
         with _StopFlag() as stop:
             if record:
                 recorder = Recorder(node, record, storage, topics=output_topics(nodes))
-            player = Player(node, ex, inputs, cam["image"], [n.name for n in nodes], lossless, rate,
+            player = Player(node, ex, inputs, img, [n.name for n in nodes], lossless, rate,
                             frame_timeout_s, echo=echo)
             player.should_stop = stop.event.is_set
             if recorder:

@@ -29,6 +29,14 @@ TF = "/tf"
 TF_STATIC = "/tf_static"
 
 
+def image_topic(camera: dict, right: bool = False) -> str | None:
+    """The image topic as it travels: <image>/compressed when the scene says the images are compressed."""
+    t = camera["right_image"] if right else camera["image"]
+    if t and camera.get("compressed"):
+        return t + "/compressed"
+    return t
+
+
 def params_topic(object_id: str) -> str:
     return f"/simreal/objects/{object_id}/parameters"
 
@@ -63,7 +71,7 @@ def required_nodes(scene: dict, lossless: bool = False) -> list[NodeSpec]:
     if stereo:
         ingest_out[CAM_RIGHT_IMAGE] = "sensor_msgs/msg/Image"
         ingest_out[CAM_RIGHT_INFO] = "sensor_msgs/msg/CameraInfo"
-    ingest_in = [t for t in (cam["image"], cam["camera_info"], cam["depth"], cam["right_image"],
+    ingest_in = [t for t in (image_topic(cam), cam["camera_info"], cam["depth"], image_topic(cam, right=True),
                              cam["right_camera_info"]) if t] if cam["source"] == "topic" else []
     nodes.append(NodeSpec("ingest", "simreal_nodes.ros.nodes.ingest", dict(common), ingest_in, ingest_out))
 

@@ -15,6 +15,22 @@ from simreal_nodes.errors import SceneError
 from simreal_nodes.scene.validate import (Bool, Context, Enum, FilePath, ListOf, MapOf, Number,
                                           Record, Str, Topic, Vector)
 
+class ModelRef(FilePath):
+    """A model file path, or ``spec:NAME``: the model built from a built-in spec (cached; built on first use)."""
+
+    def check(self, v, path, ctx):
+        if isinstance(v, str) and v.startswith("spec:"):
+            from simreal_nodes.rom.build import cached_model
+
+            try:
+                return str(cached_model(v[5:]))
+            except SceneError as e:
+                raise SceneError(f"{ctx.source}: {path}: {e}") from None
+            except Exception as e:  # noqa: BLE001 - a failed build is a scene error with its reason
+                raise SceneError(f"{ctx.source}: {path}: building {v} failed: {e}") from None
+        return super().check(v, path, ctx)
+
+
 SCENE_FORMAT = 1
 IDENT = dict(pattern=lambda s: s.replace("_", "a").isalnum() and s[:1].isalpha(),
              what="an identifier (letters, digits, '_', starting with a letter)")
@@ -28,6 +44,7 @@ CAMERA = Record({
     "right_camera_info": Topic("CameraInfo of the right camera", nullable=True),
     "calibration": FilePath("ROS calibration YAML that overrides CameraInfo", nullable=True),
     "undistort": Bool("undistort images in the ingest node", default=False),
+    "compressed": Bool("images arrive as sensor_msgs/CompressedImage on <image>/compressed (image_transport)", default=False),
     "source": Enum(("topic", "bag", "video", "images"), "where the ingest node reads frames", default="topic"),
     "path": FilePath("bag, video file or image folder for non-topic sources", nullable=True),
     "rate_hz": Number("publishing rate for video / image-folder sources", lo=0, lo_open=True, default=30.0),
@@ -74,6 +91,9 @@ TRACKING = Record({
     "constant_frames": Number("deformed frames used to estimate 'constant' parameters before freezing", integer=True, lo=1, default=15),
     "min_measurements": Number("fewer inlier measurements than this -> lost", integer=True, lo=1, default=6),
     "points": Number("most model-linked points used per frame (0 = all)", integer=True, lo=0, default=0),
+    "dots": ListOf(Vector(3, what="[x, y, z] in the object frame"), "measurements 'dots': reference positions of glued dots",
+                   default=[]),
+    "dot_color": Vector(3, what="[r, g, b] in 0..1", default=[0.1, 0.25, 0.95]),
 })
 
 COLLISION = Record({
@@ -96,7 +116,8 @@ OBJECT_OVERLAY = Record({
 
 OBJECT = Record({
     "id": Str("object id (also its TF frame name)", required=True, **IDENT),
-    "model": FilePath("HDF5 model file built by `simreal build-model`", required=True),
+    "model": ModelRef("HDF5 model file built by `simreal build-model`, or spec:NAME for a built-in spec "
+                      "(built once into the cache)", required=True),
     "anchor": ANCHOR,
     "parameters": MapOf(PARAMETER, doc="per model parameter: tracked / constant / fixed", default={}),
     "tracking": TRACKING,

@@ -9,10 +9,8 @@ reason on /diagnostics; the node keeps going.
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
-from sensor_msgs.msg import CameraInfo, Image
+from sensor_msgs.msg import CameraInfo, CompressedImage, Image
 
 from simreal_nodes.errors import CameraInfoError, ImageFormatError, SimrealError
 from simreal_nodes.io import images, sources
@@ -39,6 +37,8 @@ class IngestNode(SimrealNode):
         self.depth_topic = self.param("depth_topic", cam.get("depth") or "", "input depth topic ('' = none)")
         self.right_topic = self.param("right_image_topic", cam.get("right_image") or "", "right image topic ('' = mono)")
         self.right_info_topic = self.param("right_camera_info_topic", cam.get("right_camera_info") or "", "right CameraInfo topic")
+        self.compressed = self.param("compressed", bool(cam.get("compressed", False)),
+                                     "subscribe to <image>/compressed (sensor_msgs/CompressedImage) instead of raw images")
 
         self.calibration = CameraModel.from_calibration_yaml(calib) if calib else None
         self.cam: CameraModel | None = self.calibration
@@ -56,12 +56,18 @@ class IngestNode(SimrealNode):
         if self.source == "topic":
             sq = data_qos(self.lossless)
             self.create_subscription(CameraInfo, self.info_topic, self.on_info, sq)
-            self.create_subscription(Image, self.image_topic, self.on_image, sq)
+            if self.compressed:
+                self.create_subscription(CompressedImage, self.image_topic + "/compressed", self.on_compressed, sq)
+            else:
+                self.create_subscription(Image, self.image_topic, self.on_image, sq)
             if self.depth_topic:
                 self.create_subscription(Image, self.depth_topic, self.on_depth, sq)
             if self.right_topic:
                 self.create_subscription(CameraInfo, self.right_info_topic, self.on_right_info, sq)
-                self.create_subscription(Image, self.right_topic, self.on_right_image, sq)
+                if self.compressed:
+                    self.create_subscription(CompressedImage, self.right_topic + "/compressed", self.on_right_compressed, sq)
+                else:
+                    self.create_subscription(Image, self.right_topic, self.on_right_image, sq)
         else:
             self._frames = self._open_source()
             self._t0 = None
@@ -114,17 +120,43 @@ class IngestNode(SimrealNode):
             self._set_camera(cam)
 
     @guarded
-    def on_image(self, msg: Image) -> None:
+    def on_compressed(self, msg: CompressedImage) -> None:
+        try:
+            arr, enc = images.decode_compressed(msg)
+        except ImageFormatError as e:
+            self.metrics.arrived()
+            self.drop(msg.header.stamp, f"malformed compressed image: {e}")
+            return
+        out = Image()
+        out.header = msg.header
+        images.fill_image_msg(out, arr, enc)
+        self.on_image(out, arr)
+
+    @guarded
+    def on_right_compressed(self, msg: CompressedImage) -> None:
+        try:
+            arr, enc = images.decode_compressed(msg)
+        except ImageFormatError as e:
+            self.metrics.drop(f"malformed right compressed image: {e}")
+            return
+        out = Image()
+        out.header = msg.header
+        images.fill_image_msg(out, arr, enc)
+        self.on_right_image(out)
+
+    @guarded
+    def on_image(self, msg: Image, arr=None) -> None:
         t0 = self.metrics.arrived()
         if self.cam is None:
             why = f"unusable CameraInfo: {self._info_error}" if self._info_error else "waiting for a valid CameraInfo"
             self.drop(msg.header.stamp, why)
             return
-        try:
-            arr = images.image_to_array(msg)
-        except ImageFormatError as e:
-            self.drop(msg.header.stamp, f"malformed image: {e}")
-            return
+        if arr is None:
+            try:
+                arr = images.image_to_array(msg)
+            except ImageFormatError as e:
+                self.drop(msg.header.stamp, f"malformed image: {e}")
+                return
         if (arr.shape[1], arr.shape[0]) != (self.cam.width, self.cam.height):
             self.drop(msg.header.stamp, f"image is {arr.shape[1]}x{arr.shape[0]} but CameraInfo says "
                                         f"{self.cam.width}x{self.cam.height}")

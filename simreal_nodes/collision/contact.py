@@ -1,0 +1,177 @@
+"""Collision between real points (depth) or another virtual object and a virtual deformable object,
+thesis Algorithm 5.1, and the mapping from contact state to model parameters.
+
+Per frame:
+
+    points  <- decimate(depth points, N_step)                       (the caller)
+    d_min, node <- min over contact nodes of the distance to the nearest point   (KD-tree)
+    if d_min < delta and tau < tau_max:  tau += step  (the node is fixed while tau > 0: one contact at a
+                                                       time, superposition does not hold for non-linear laws)
+    elif tau > tau_min:                  tau -= step
+
+The contact nodes are the model's precomputed load points at their *deformed* positions, so a virtual
+surface pushed by a finger moves away from it and the pseudo-time settles where the surface follows
+the finger.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from simreal_nodes import geometry as G
+from simreal_nodes.rom.model import ReducedModel
+
+FREE, CONTACT, RELEASING, NO_DATA = 0, 1, 2, 3
+
+
+@dataclass
+class ContactState:
+    pseudo_time: float = 0.0
+    load_point: int = -1  # index into the model's load points (-1: none)
+    node: int = -1  # model node of that load point
+    min_distance: float = float("inf")
+    nearest_load_point: int = -1  # where the nearest real point is now (may differ while a contact is held)
+    state: int = FREE
+    points_used: int = 0
+    contact_point: tuple = (np.nan, np.nan, np.nan)
+    reason: str = ""
+
+    @property
+    def in_contact(self) -> bool:
+        return self.state == CONTACT
+
+
+class ContactTracker:
+    """Alg. 5.1 for one virtual object.
+
+    ``model``: the object's reduced model; its load points are the contact nodes. Parameters are
+    (load_point, pseudo_time) for probe models (NI-PGD over contact point x pseudo-time), and
+    (s_x[, s_y], load_scale) for linear PGD beams, where the pseudo-time scales the precomputed load.
+    ``T_world_object``: where the virtual object sits.
+    """
+
+    def __init__(self, model: ReducedModel, T_world_object: np.ndarray, threshold: float = 0.01, step: float = 0.05,
+                 tau_min: float = 0.0, tau_max: float = 1.0, n_modes: int | None = None):
+        if model.load_points is None or len(model.load_points) == 0:
+            raise ValueError(f"model '{model.name}' has no load points: it cannot take contacts")
+        self.model = model
+        self.T = np.asarray(T_world_object, dtype=np.float64)
+        self.threshold, self.step, self.tau_min, self.tau_max = threshold, step, tau_min, tau_max
+        self.state = ContactState()
+        self.lp_nodes = np.asarray(model.load_points, dtype=np.int64)
+        self.field = model.field("displacement")
+        self.view = self.field.view(self.lp_nodes, n_modes)
+        names = [a.name for a in model.axes]
+        self.kind = "probe" if "pseudo_time" in names else "linear"
+        if self.kind == "linear" and model.material.get("law") != "linear_elastic":
+            raise ValueError(f"model '{model.name}' has no pseudo_time axis and is not linear: cannot scale its load")
+        self._lp_param = self._load_point_parameters()
+
+    # -- parameters ----------------------------------------------------------------------------------
+    def _load_point_parameters(self) -> np.ndarray:
+        """Model parameters (without pseudo-time) that put the load at each load point."""
+        P = self.model.points[self.lp_nodes]
+        names = [a.name for a in self.model.axes]
+        if self.kind == "probe":
+            return np.arange(len(self.lp_nodes), dtype=np.float64)[:, None]
+        cols = []
+        for n in names:
+            cols.append(P[:, {"s": 0, "s_x": 0, "s_y": 1}[n]])
+        return np.stack(cols, axis=1)
+
+    def parameter_names(self) -> list[str]:
+        names = [a.name for a in self.model.axes]
+        return names if self.kind == "probe" else names + ["load_scale"]
+
+    def parameters(self, state: ContactState | None = None) -> np.ndarray:
+        """mu for the current contact: (load_point, pseudo_time) or (s..., load_scale)."""
+        st = state or self.state
+        lp = max(st.load_point, 0)
+        return np.concatenate([self._lp_param[lp], [st.pseudo_time]])
+
+    def displacement(self, nodes=None, state: ContactState | None = None, n_modes=None) -> np.ndarray:
+        st = state or self.state
+        if st.pseudo_time <= 0 or st.load_point < 0:
+            n = self.model.n_nodes if nodes is None else len(nodes)
+            return np.zeros((n, 3))
+        mu = self.parameters(st)
+        if self.kind == "probe":
+            return self.field.evaluate(mu, nodes, n_modes)
+        return mu[-1] * self.field.evaluate(mu[:-1], nodes, n_modes)
+
+    def contact_nodes_world(self) -> np.ndarray:
+        """Load points at their current deformed positions, world frame."""
+        P = self.model.points[self.lp_nodes]
+        if self.state.pseudo_time > 0 and self.state.load_point >= 0:
+            mu = self.parameters()
+            if self.kind == "probe":
+                P = P + self.view.evaluate(mu)
+            else:
+                P = P + mu[-1] * self.field.evaluate(mu[:-1], self.lp_nodes)
+        return G.transform(self.T, P)
+
+    # -- Alg. 5.1 ------------------------------------------------------------------------------------------
+    def update(self, points_world: np.ndarray | None) -> ContactState:
+        """One frame. ``points_world``: (n, 3) real (or other virtual) points, world frame; None or empty
+        means no valid data this frame (the deformation relaxes, state NO_DATA)."""
+        st = self.state
+        pts = None if points_world is None else np.asarray(points_world, dtype=np.float64)
+        if pts is not None and pts.size:
+            pts = pts[np.all(np.isfinite(pts), axis=1)]
+        nodes = self.contact_nodes_world()
+        if pts is None or len(pts) == 0:
+            d_min, nearest = np.inf, -1
+            st.points_used = 0
+        else:
+            tree = cKDTree(pts)
+            d, idx = tree.query(nodes, k=1)
+            nearest = int(np.argmin(d))
+            d_min = float(d[nearest])
+            st.points_used = len(pts)
+            st.contact_point = tuple(float(x) for x in pts[idx[nearest]])
+        st.min_distance, st.nearest_load_point = d_min, nearest
+        if d_min < self.threshold and st.pseudo_time < self.tau_max - 1e-12:
+            if st.pseudo_time <= 0 or st.load_point < 0:
+                st.load_point = nearest  # a new contact starts where the real point is
+            st.pseudo_time = min(self.tau_max, st.pseudo_time + self.step)
+            st.state, st.reason = CONTACT, ""
+        elif d_min < self.threshold:
+            st.state, st.reason = CONTACT, "largest precomputed deformation reached"
+        elif st.pseudo_time > self.tau_min + 1e-12:
+            st.pseudo_time = max(self.tau_min, st.pseudo_time - self.step)
+            st.state = RELEASING
+            st.reason = "" if pts is not None and len(pts) else "no valid points: relaxing"
+        else:
+            st.state = NO_DATA if pts is None or len(pts) == 0 else FREE
+            st.reason = "no valid points" if st.state == NO_DATA else ""
+        if st.pseudo_time <= 1e-12:
+            st.pseudo_time = 0.0
+            st.load_point = -1
+        st.node = int(self.lp_nodes[st.load_point]) if st.load_point >= 0 else -1
+        return st
+
+
+def surface_samples(V: np.ndarray, F: np.ndarray, spacing: float) -> np.ndarray:
+    """Points spread over triangles (V, F) about ``spacing`` apart: a virtual surface seen as a point set
+    (virtual-virtual contact, §5.4.1), dense enough that point distances approximate surface distances."""
+    V = np.asarray(V, dtype=np.float64)
+    F = np.asarray(F, dtype=np.int64)
+    if len(F) == 0:
+        return np.zeros((0, 3))
+    A, B, C = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
+    edge = np.max(np.stack([np.linalg.norm(B - A, axis=1), np.linalg.norm(C - B, axis=1), np.linalg.norm(A - C, axis=1)]), axis=0)
+    out = [V[np.unique(F)]]
+    for n in np.unique(np.clip(np.ceil(edge / max(spacing, 1e-9)).astype(int), 1, 16)):
+        sel = np.ceil(edge / max(spacing, 1e-9)).clip(1, 16).astype(int) == n
+        if n < 2:
+            continue
+        i, j = np.meshgrid(np.arange(n + 1), np.arange(n + 1), indexing="ij")
+        keep = i + j <= n
+        a, b = i[keep] / n, j[keep] / n
+        c = 1 - a - b
+        P = (a[None, :, None] * A[sel][:, None, :] + b[None, :, None] * B[sel][:, None, :] + c[None, :, None] * C[sel][:, None, :])
+        out.append(P.reshape(-1, 3))
+    return np.concatenate(out)

@@ -1,0 +1,555 @@
+"""The seed scenes, rendered from the physics with exact ground truth (thesis §4.5, §5.4).
+
+Each scene builds a static textured environment, places the objects (deformed by their reduced
+models along a ground-truth parameter trajectory when they are real, absent from the images when
+they are virtual), moves a hand-held camera, and moves the props (the load, the lever, the probe).
+It also writes the scene YAML that runs the graph on its bag; that file describes the set-up a
+user would know (camera topics, marker layout, where a virtual object is placed), never the truth.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from simreal_nodes import geometry as G
+from simreal_nodes.collision.contact import ContactTracker, surface_samples
+from simreal_nodes.render.gl import Mesh, Renderer
+from simreal_nodes.rom.model import ReducedModel
+from simreal_nodes.synth import world as W
+from simreal_nodes.vision.camera import CameraModel
+
+
+@dataclass
+class Truth:
+    params: dict = field(default_factory=dict)  # object id -> (names, units, values)
+    contacts: dict = field(default_factory=dict)  # object id -> ContactState (copy)
+    object_poses: dict = field(default_factory=dict)  # object id -> T_map_object
+
+
+@dataclass
+class SynthScene:
+    name: str
+    description: str
+    camera: CameraModel
+    fps: float
+    duration: float
+    models: dict  # object id -> built-in spec name
+    build: Callable  # (scene, renderer, models) -> None
+    update: Callable  # (scene, renderer, t) -> Truth
+    camera_pose: Callable  # t -> T_world_cam
+    scene_yaml: Callable  # (scene) -> dict
+    depth: bool = False
+    stereo_baseline: float | None = None
+    pixel_sigma: float = 1.5
+    depth_noise: bool = True
+    blur_subframes: int = 1
+    map_is_world: bool = False  # markers scenes: the map frame is the world frame
+    state: dict = field(default_factory=dict)
+
+    def T_map_world(self) -> np.ndarray:
+        """The map frame of the estimators: the world (markers) or the first camera frame (SLAM)."""
+        return np.eye(4) if self.map_is_world else G.inv(self.camera_pose(0.0))
+
+
+def default_camera(width=640, height=480) -> CameraModel:
+    f = 525.0 * width / 640
+    return CameraModel.from_intrinsics(width, height, f, f, (width - 1) / 2 + 0.3, (height - 1) / 2 - 0.2,
+                                       D=[-0.04, 0.01, 0.0, 0.0, 0.0])
+
+
+# ------------------------------------------------------------------------------------------------
+# Environment
+
+
+def add_environment(r: Renderer, center=(0.3, 0.0), seed: int = 0) -> None:
+    """Table, walls and clutter with photographic textures: features for localization."""
+    cx, cy = center
+    V, F = W.box((2.4, 2.4, 0.04), (cx, cy, -0.02))
+    r.add(Mesh("table", V, F, mode="texture", texture=W.texture("wood"), tex_scale=1.6, smooth=False))
+    V, F = W.box((2.4, 0.05, 1.4), (cx, cy + 1.0, 0.7))
+    r.add(Mesh("wall_back", V, F, mode="texture", texture=W.texture("brick"), tex_scale=1.2, smooth=False))
+    V, F = W.box((0.05, 2.4, 1.4), (cx - 1.1, cy, 0.7))
+    r.add(Mesh("wall_left", V, F, mode="texture", texture=W.texture("gravel"), tex_scale=1.5, smooth=False))
+    V, F = W.box((0.05, 2.4, 1.4), (cx + 1.1, cy, 0.7))
+    r.add(Mesh("wall_right", V, F, mode="texture", texture=W.texture("grass"), tex_scale=1.5, smooth=False))
+    rng = np.random.default_rng(seed)
+    for k in range(7):
+        size = rng.uniform(0.06, 0.16, 3)
+        # behind the work area (the camera looks from -y) or far to the sides: never in the line of sight
+        if k < 4:
+            pos = (cx - 0.6 + 0.4 * k + rng.uniform(-0.05, 0.05), cy + rng.uniform(0.45, 0.8), size[2] / 2)
+        else:
+            side = -1 if k % 2 else 1
+            pos = (cx + side * rng.uniform(0.75, 0.95), cy + rng.uniform(-0.3, 0.4), size[2] / 2)
+        V, F = W.box(size, (0, 0, 0))
+        tex = ["grass", "gravel", "brick", "probe"][k % 4]
+        r.add(Mesh(f"clutter{k}", V, F, mode="texture", texture=W.texture(tex), tex_scale=4.0, smooth=False,
+                   pose=G.make_T(G.rot_axis("z", rng.uniform(0, np.pi)), pos)))
+
+
+def deformable_mesh(model: ReducedModel, name: str, texture: str, tex_scale: float, pose, smooth=False) -> Mesh:
+    return Mesh(name, model.points.copy(), model.surface, mode="texture", texture=W.texture(texture), tex_scale=tex_scale,
+                ref=model.points.copy(), smooth=smooth, pose=np.asarray(pose, dtype=np.float64))
+
+
+def _truth_params(model: ReducedModel, values) -> tuple:
+    return ([a.name for a in model.axes], [a.unit for a in model.axes], [float(v) for v in values])
+
+
+def _camera_yaml(scene: SynthScene) -> dict:
+    cam = {"image": "/camera/image_raw", "camera_info": "/camera/camera_info"}
+    if scene.depth:
+        cam["depth"] = "/camera/depth/image_raw"
+    if scene.stereo_baseline:
+        cam["right_image"] = "/camera/right/image_raw"
+        cam["right_camera_info"] = "/camera/right/camera_info"
+    return cam
+
+
+def _pose7(T) -> list:
+    return [round(float(x), 9) for x in G.matrix_to_pose7(T)]
+
+
+# ------------------------------------------------------------------------------------------------
+# Aluminium beam with markers (§4.5.1)
+
+BEAM_ORIGIN = np.array([0.0, 0.0, 0.10])
+MARKERS = {0: (-0.12, -0.12), 1: (0.44, -0.13), 2: (0.02, 0.2), 3: (0.44, 0.2)}
+MARKER_SIZE = 0.07
+DOT_X = np.arange(0.03, 0.481, 0.03)
+
+
+def beam_dots(model: ReducedModel) -> np.ndarray:
+    """Reference positions (object frame) of the blue dots glued on the beam's front face (y = 0)."""
+    h = model.points[:, 2].max()
+    return np.c_[DOT_X, np.zeros(len(DOT_X)), np.full(len(DOT_X), h / 2)]
+
+
+def _interp_disp(model: ReducedModel, mu, P: np.ndarray, k: int = 4) -> np.ndarray:
+    """Displacement at arbitrary reference points: inverse-distance weights of the k nearest nodes."""
+    from scipy.spatial import cKDTree
+
+    key = ("tree", id(model))
+    tree = _CACHE.get(key) or _CACHE.setdefault(key, cKDTree(model.points))
+    d, idx = tree.query(P, k=k)
+    w = 1.0 / np.maximum(d, 1e-9) ** 2
+    w /= w.sum(axis=1, keepdims=True)
+    u = model.displacement(mu, nodes=np.unique(idx))
+    lookup = {n: i for i, n in enumerate(np.unique(idx))}
+    U = u[np.vectorize(lookup.get)(idx)]
+    return np.einsum("nk,nkc->nc", w, U)
+
+
+_CACHE: dict = {}
+
+
+def aluminium_beam(width=640, height=480, duration=6.0, fps=30.0) -> SynthScene:
+    positions = [0.12, 0.24, 0.36, 0.48, 0.30, 0.18]
+
+    def s_of_t(t):
+        return float(W.holds(np.array([t]), positions, hold_s=0.6, move_s=0.35)[0])
+
+    def build(sc, r, models):
+        m = models["beam"]
+        add_environment(r, center=(0.25, 0.05), seed=1)
+        V, F = W.box((0.08, 0.1, BEAM_ORIGIN[2] + 0.03), (-0.04, 0.02, (BEAM_ORIGIN[2] + 0.03) / 2))
+        r.add(Mesh("clamp", V, F, mode="texture", texture=W.texture("plate"), tex_scale=5.0, smooth=False))
+        r.add(deformable_mesh(m, "beam", "aluminium", 6.0, G.make_T(t=BEAM_ORIGIN)))
+        for mid, (x, y) in MARKERS.items():
+            Vq, Fq, UV = W.quad(MARKER_SIZE, MARKER_SIZE)
+            r.add(Mesh(f"marker{mid}", Vq, Fq, mode="uv", ref=UV, texture=W.aruco_image(mid), unlit=True,
+                       pose=G.make_T(t=[x, y, 0.0008])))
+        Vd, Fd = W.disk(0.0032, 16)
+        for k in range(len(DOT_X)):
+            r.add(Mesh(f"dot{k}", Vd, Fd, mode="flat", tint=(0.1, 0.25, 0.95), unlit=True))
+        Vw, Fw = W.box((0.022, 0.022, 0.016), (0, 0, 0.008))
+        r.add(Mesh("weight", Vw, Fw, mode="texture", texture=W.texture("rubber"), tex_scale=20, smooth=False))
+        sc.state["dots_ref"] = beam_dots(m)
+
+    def update(sc, r, t):
+        m = sc.state["models"]["beam"]
+        s = s_of_t(t)
+        P = m.deformed_points([s])
+        r.update("beam", vertices=P)
+        T_wo = G.make_T(t=BEAM_ORIGIN)
+        dots = sc.state["dots_ref"]
+        dd = dots + _interp_disp(m, [s], dots)
+        for k, p in enumerate(dd):
+            # a disk on the front face (normal -y), slightly in front of it
+            r.update(f"dot{k}", pose=T_wo @ G.make_T(G.rot_axis("x", np.pi / 2), p + [0, -0.0004, 0]))
+        top = np.array([[s, 0.02, m.points[:, 2].max()]])
+        wt = top + _interp_disp(m, [s], top)
+        r.update("weight", pose=T_wo @ G.make_T(t=wt[0]))
+        return Truth(params={"beam": _truth_params(m, [s])}, object_poses={"beam": sc.T_map_world() @ T_wo})
+
+    def cam_pose(t):
+        return W.arc_trajectory(np.array([t]), [0.21, 0.02, 0.06], 0.42, 0.46, np.deg2rad(-108), np.deg2rad(-76),
+                                jitter=0.003, seed=11, period=duration * 1.0)[0]
+
+    def yaml(sc):
+        m_dots = sc.state["dots_ref"]
+        return {
+            "simreal_scene": 1, "name": "aluminium_beam",
+            "description": "Aluminium cantilever with a moving point load, fiducial markers and glued blue dots (thesis §4.5.1).",
+            "camera": _camera_yaml(sc),
+            "localization": {"mode": "markers", "markers": {
+                "dictionary": "DICT_4X4_50", "size_m": MARKER_SIZE,
+                "poses": {mid: [x, y, 0.0008, 0, 0, 0, 1] for mid, (x, y) in MARKERS.items()}}},
+            "objects": [{
+                "id": "beam", "model": "spec:aluminium_beam",
+                "anchor": {"kind": "pose", "pose": _pose7(G.make_T(t=BEAM_ORIGIN))},
+                "parameters": {"s": {"mode": "tracked", "initial": 0.24}},
+                "tracking": {"enabled": True, "measurements": "dots", "huber_px": 1.5, "modes": 19,
+                             "dots": [[round(float(v), 6) for v in p] for p in m_dots], "dot_color": [0.1, 0.25, 0.95]},
+                "overlay": {"field": "displacement", "magnify": 10.0},
+            }],
+            "overlay": {"enabled": True},
+        }
+
+    return SynthScene("aluminium_beam", "Aluminium beam, moving 20 N point load, ArUco markers, blue dots",
+                      default_camera(width, height), fps, duration, {"beam": "aluminium_beam"}, build, update, cam_pose, yaml,
+                      map_is_world=True)
+
+
+# ------------------------------------------------------------------------------------------------
+# Foam beam with texture (§4.5.2)
+
+FOAM_ORIGIN = np.array([0.0, 0.0, 0.15])
+
+
+def foam_beam(width=640, height=480, duration=8.0, fps=30.0) -> SynthScene:
+    positions = [0.2, 0.4, 0.6, 0.3, 0.5]
+    t_free = 1.5  # the camera maps the unloaded scene first (thesis: scanning before deformation)
+
+    def s_of_t(t):
+        return float(W.holds(np.array([max(t - t_free, 0.0)]), positions, hold_s=0.9, move_s=0.4)[0])
+
+    def build(sc, r, models):
+        m = models["beam"]
+        add_environment(r, center=(0.4, 0.1), seed=2)
+        for name, x0, x1 in (("support_left", -0.02, 0.05), ("support_right", 0.7475, 0.8175)):
+            V, F = W.box((x1 - x0, 0.26, FOAM_ORIGIN[2]), ((x0 + x1) / 2, 0.1, FOAM_ORIGIN[2] / 2))
+            r.add(Mesh(name, V, F, mode="texture", texture=W.texture("plate"), tex_scale=4.0, smooth=False))
+        r.add(deformable_mesh(m, "beam", "foam", 3.0, G.make_T(t=FOAM_ORIGIN)))
+        V, F = W.cylinder(0.04, 0.02, 32)
+        r.add(Mesh("disk", V, F, mode="flat", tint=(0.35, 0.35, 0.38), smooth=False, visible=False))
+
+    def update(sc, r, t):
+        m = sc.state["models"]["beam"]
+        T_wo = G.make_T(t=FOAM_ORIGIN)
+        loaded = t >= t_free
+        s = s_of_t(t)
+        r.update("beam", vertices=m.deformed_points([s]) if loaded else m.points)
+        r.meshes["disk"].visible = loaded
+        top = np.array([[s, 0.1, m.points[:, 2].max()]])
+        r.update("disk", pose=T_wo @ G.make_T(t=(top + _interp_disp(m, [s], top))[0]))
+        truth = Truth(object_poses={"beam": sc.T_map_world() @ T_wo})
+        truth.params["beam"] = _truth_params(m, [s]) if loaded else (["s"], ["m"], [float("nan")])
+        return truth
+
+    def cam_pose(t):
+        return W.arc_trajectory(np.array([t]), [0.4, 0.1, 0.2], 1.0, 0.55, np.deg2rad(-125), np.deg2rad(-55),
+                                jitter=0.004, seed=21, period=duration)[0]
+
+    def yaml(sc):
+        T_map_obj = sc.T_map_world() @ G.make_T(t=FOAM_ORIGIN)
+        return {
+            "simreal_scene": 1, "name": "foam_beam",
+            "description": "Hyperelastic foam beam tracked through its own texture, 15 N lead disk (thesis §4.5.2).",
+            "camera": _camera_yaml(sc),
+            "localization": {"mode": "rgbd" if sc.depth else "mono", "features": 1500},
+            "objects": [{
+                "id": "beam", "model": "spec:foam_beam",
+                "anchor": {"kind": "pose", "pose": _pose7(T_map_obj)},
+                "parameters": {"s": {"mode": "tracked", "initial": 0.4}},
+                "tracking": {"enabled": True, "measurements": "map_points", "huber_px": 2.0, "modes": 19},
+                "overlay": {"field": "displacement"},
+            }],
+            "overlay": {"enabled": True},
+        }
+
+    return SynthScene("foam_beam", "Foam beam (SVK) under a lead disk at s, textured, hand-held arc",
+                      default_camera(width, height), fps, duration, {"beam": "foam_beam"}, build, update, cam_pose, yaml,
+                      depth=True)
+
+
+# ------------------------------------------------------------------------------------------------
+# Joint boot: virtual boot + real lever (§4.5.3), real boot with unknown alpha_z (§4.5.4)
+
+BOOT_ORIGIN = np.array([0.3, 0.1, 0.04])
+PLATE = (0.34, 0.34, 0.04)
+
+
+def _theta_of_t(t, t_free, duration):
+    if t < t_free:
+        return 0.0
+    u = (t - t_free) / max(duration - t_free, 1e-9)
+    return float(np.deg2rad(50.0) * 0.5 * (1 - np.cos(2 * np.pi * 1.0 * u)))
+
+
+def _joint_boot_scene(real_boot: bool, width, height, duration, fps, alpha_z: float) -> SynthScene:
+    t_free = 1.5
+    name = "joint_boot" if real_boot else "virtual_boot_lever"
+
+    def build(sc, r, models):
+        m = models["boot"]
+        add_environment(r, center=(0.3, 0.1), seed=3)
+        V, F = W.box(PLATE, (BOOT_ORIGIN[0], BOOT_ORIGIN[1], PLATE[2] / 2))
+        r.add(Mesh("plate", V, F, mode="texture", texture=W.texture("plate"), tex_scale=6.0, smooth=False))
+        width_, depth_, z0, z1 = m.loads["lever"]["bar"]
+        V, F = W.box((width_, depth_, z1 - z0), (0, 0, (z0 + z1) / 2))
+        r.add(Mesh("lever", V, F, mode="texture", texture=W.texture("lever"), tex_scale=12.0, smooth=False))
+        V, F = W.sphere(0.018, 12)
+        r.add(Mesh("knob", V, F, mode="texture", texture=W.texture("rubber"), tex_scale=30.0))
+        if real_boot:
+            r.add(deformable_mesh(m, "boot", "rubber", 18.0, np.eye(4), smooth=True))
+
+    def T_world_obj():
+        return G.make_T(G.rot_axis("z", alpha_z), BOOT_ORIGIN)
+
+    def update(sc, r, t):
+        m = sc.state["models"]["boot"]
+        th = _theta_of_t(t, t_free, duration)
+        T_wo = T_world_obj()
+        lv = m.loads["lever"]
+        R = G.rot_axis(lv["axis"], th)
+        T_lever = T_wo @ G.make_T(R, np.asarray(lv["pivot"]) - R @ np.asarray(lv["pivot"]))
+        r.update("lever", pose=T_lever)
+        r.update("knob", pose=T_lever @ G.make_T(t=[0, 0, lv["bar"][3] + 0.01]))
+        if real_boot:
+            nb = m.provenance.get("lever_nodes", [m.n_nodes])[0]
+            P = m.deformed_points([th])
+            P[nb:] = m.points[nb:]
+            r.update("boot", vertices=P, pose=T_wo)
+        truth = Truth(object_poses={"boot": sc.T_map_world() @ G.make_T(t=BOOT_ORIGIN)})
+        names, units, vals = _truth_params(m, [th])
+        if real_boot:
+            names, units, vals = names + ["alpha_z"], units + ["rad"], vals + [alpha_z]
+        truth.params["boot"] = (names, units, vals)
+        return truth
+
+    def cam_pose(t):
+        return W.arc_trajectory(np.array([t]), [BOOT_ORIGIN[0], BOOT_ORIGIN[1], 0.12], 0.62, 0.38, np.deg2rad(-130),
+                                np.deg2rad(-50), jitter=0.004, seed=31, period=duration)[0]
+
+    def yaml(sc):
+        # the user knows where the boot sits (its axis), not how it is turned about that axis
+        T_map_obj = sc.T_map_world() @ G.make_T(t=BOOT_ORIGIN)
+        params = {"theta": {"mode": "tracked", "initial": 0.2}}
+        if real_boot:
+            params["alpha_z"] = {"mode": "constant", "initial": 0.0}
+        return {
+            "simreal_scene": 1, "name": name,
+            "description": ("Real rubber joint boot on a plate, lever angle theta and unknown rotation alpha_z (thesis §4.5.4)."
+                            if real_boot else "Virtual joint boot driven by a real lever: theta from the lever's features (thesis §4.5.3)."),
+            "camera": _camera_yaml(sc),
+            "localization": {"mode": "rgbd" if sc.depth else "mono", "features": 1500},
+            "objects": [{
+                "id": "boot", "model": "spec:joint_boot",
+                "anchor": {"kind": "pose", "pose": _pose7(T_map_obj)},
+                "parameters": params,
+                "tracking": {"enabled": True, "measurements": "map_points", "huber_px": 2.0, "constant_frames": 20},
+                "overlay": {"field": "von_mises"},
+            }],
+            "overlay": {"enabled": True},
+        }
+
+    return SynthScene(name, "Joint boot and lever" + (" (real boot, alpha_z unknown)" if real_boot else " (virtual boot)"),
+                      default_camera(width, height), fps, duration, {"boot": "joint_boot"}, build, update, cam_pose, yaml,
+                      depth=True)
+
+
+def joint_boot(width=640, height=480, duration=8.0, fps=30.0) -> SynthScene:
+    return _joint_boot_scene(True, width, height, duration, fps, alpha_z=np.deg2rad(20.0))
+
+
+def virtual_boot_lever(width=640, height=480, duration=8.0, fps=30.0) -> SynthScene:
+    return _joint_boot_scene(False, width, height, duration, fps, alpha_z=0.0)
+
+
+# ------------------------------------------------------------------------------------------------
+# Probe scenes: a real probe pushes virtual objects (§5.4)
+
+
+def _probe_mesh(r: Renderer, radius: float):
+    Vs, Fs = W.sphere(radius, 14)
+    Vc, Fc = W.cylinder(radius * 0.6, 0.35, 16)
+    Vc = Vc + [0, 0, radius * 0.5]
+    V, F = W.merge([(Vs, Fs), (Vc, Fc)])
+    r.add(Mesh("probe", V, F, mode="texture", texture=W.texture("probe"), tex_scale=25.0))
+
+
+def _probe_path(t, contacts, T_wo, model, radius, presses, approach=0.06, seg=(0.8, 0.8, 0.6, 0.8)):
+    """Probe centre (world) and axis direction: approach a load point along its load direction, press in
+    (by ``presses[k]`` past the undeformed surface), hold, retract; then the next contact."""
+    period = sum(seg)
+    k = min(int(t // period), len(contacts) - 1)
+    tl = t - k * period
+    lp = contacts[k]
+    press = presses[k]
+    node = model.load_points[lp]
+    d_obj = model.load_directions[lp] / np.linalg.norm(model.load_directions[lp])
+    p_surf = G.transform(T_wo, model.points[node][None])[0]
+    d = T_wo[:3, :3] @ d_obj  # the force pushes along d (into the object)
+    a, b, c, e = seg
+    if tl < a:
+        depth = -approach + approach * (0.5 - 0.5 * np.cos(np.pi * tl / a))
+    elif tl < a + b:
+        depth = press * (0.5 - 0.5 * np.cos(np.pi * (tl - a) / b))
+    elif tl < a + b + c:
+        depth = press
+    else:
+        depth = press - (press + approach) * (0.5 - 0.5 * np.cos(np.pi * min((tl - a - b - c) / e, 1.0)))
+    center = p_surf + d * (depth - radius)
+    return center, d
+
+
+def _probe_scene(kind: str, width, height, duration, fps, stereo: bool) -> SynthScene:
+    spec = {"bunny": "bunny", "dragon": "dragon", "crossed_beams": "crossed_beams"}[kind]
+    radius = 0.012
+    contacts = {"bunny": [3, 9], "dragon": [2, 7], "crossed_beams": [None]}[kind]
+    origin = np.array([0.35, 0.15, 0.0])
+    beam_b_origin = None
+
+    def build(sc, r, models):
+        add_environment(r, center=(0.35, 0.15), seed=4)
+        _probe_mesh(r, radius)
+        m = models["object"]
+        if kind == "crossed_beams":
+            V, F = W.box((0.06, 0.08, 0.24), (origin[0] - 0.03, origin[1] + 0.015, 0.12))
+            r.add(Mesh("clamp_a", V, F, mode="texture", texture=W.texture("plate"), tex_scale=5.0, smooth=False))
+        sc.state["tracker"] = ContactTracker(m, sc.state["T_wo"], threshold=sc.state["delta"], step=0.04)
+        if kind == "crossed_beams":
+            sc.state["tracker_b"] = ContactTracker(m, sc.state["T_wo_b"], threshold=0.002, step=0.04)
+
+    def prepare(sc, models):
+        m = models["object"]
+        if kind == "crossed_beams":
+            sc.state["T_wo"] = G.make_T(t=origin + [0, 0, 0.20])
+            # beam B along y, under beam A's free end, its top 3 mm below A's bottom
+            L = m.points[:, 0].max()
+            Hh = m.points[:, 2].max()
+            sc.state["T_wo_b"] = G.make_T(G.rot_axis("z", np.pi / 2), origin + [L - 0.02 + m.points[:, 1].max() / 2, -0.12, 0.20 - Hh - 0.003])
+            # contact point on A: the top-face load point nearest (L - 0.02, W/2)
+            P = m.points[m.load_points]
+            target = np.array([L - 0.015, m.points[:, 1].max() / 2, Hh])
+            contacts[0] = int(np.argmin(np.linalg.norm(P - target, axis=1)))
+        else:
+            sc.state["T_wo"] = G.make_T(G.rot_axis("z", 0.4), origin)
+        # press about 70 % of the largest precomputed deflection: the virtual surface then follows the probe
+        tr = ContactTracker(m, sc.state["T_wo"])
+        presses = []
+        for lp in contacts:
+            mu = np.concatenate([tr._load_point_parameters()[lp], [1.0]])
+            node = m.load_points[lp]
+            u = (m.field("displacement").evaluate(mu if tr.kind == "probe" else mu[:-1], nodes=[node])[0])
+            presses.append(0.7 * float(abs(u @ m.load_directions[lp])))
+        sc.state["presses"] = presses
+        # contact distance: a fifth of the largest deflection, never under 3 mm (depth noise at ~0.6 m)
+        sc.state["delta"] = round(max(0.003, 0.2 * max(presses) / 0.7), 4)
+
+    def update(sc, r, t):
+        m = sc.state["models"]["object"]
+        T_wo = sc.state["T_wo"]
+        center, d = _probe_path(t, contacts, T_wo, m, radius, sc.state["presses"], seg=(0.7, 0.9, 0.6, 0.8))
+        # probe axis points back against the push direction
+        z = -d
+        x = np.cross(z, [0, 0, 1.0]) if abs(z[2]) < 0.95 else np.cross(z, [1.0, 0, 0])
+        x /= np.linalg.norm(x)
+        R = np.stack([x, np.cross(z, x), z], axis=1)
+        r.update("probe", pose=G.make_T(R, center))
+        # ground truth: Alg. 5.1 on exact geometry (probe surface points, no noise, no decimation)
+        Vs, _ = W.sphere(radius, 24)
+        probe_pts = center + Vs
+        tr = sc.state["tracker"]
+        st = tr.update(probe_pts)
+        truth = Truth()
+        T_map = sc.T_map_world()
+        truth.object_poses["object"] = T_map @ T_wo
+        truth.contacts["object"] = _copy_state(st)
+        truth.params["object"] = (tr.parameter_names(), [a.unit for a in m.axes] + ([""] if tr.kind == "linear" else []),
+                                  [float(v) for v in tr.parameters()])
+        if kind == "crossed_beams":
+            tb = sc.state["tracker_b"]
+            # beam A's deformed bottom surface pushes beam B
+            PA = G.transform(T_wo, m.points + tr.displacement())
+            tris = m.surface[np.all(m.points[m.surface][:, :, 2] < 1e-9, axis=1)]
+            stb = tb.update(surface_samples(PA, tris, 0.002))
+            truth.contacts["beam_b"] = _copy_state(stb)
+            truth.object_poses["beam_b"] = T_map @ sc.state["T_wo_b"]
+            truth.params["beam_b"] = (tb.parameter_names(), ["m", "m", ""], [float(v) for v in tb.parameters()])
+        return truth
+
+    target = origin + [0.1, 0.0, 0.12] if kind == "crossed_beams" else origin + [0, 0, 0.07]
+
+    def cam_pose(t):
+        return W.arc_trajectory(np.array([t]), target, 0.55, 0.38, np.deg2rad(-118), np.deg2rad(-72), jitter=0.003,
+                                seed=41, period=duration)[0]
+
+    def yaml(sc):
+        T_map = sc.T_map_world()
+        objs = [{
+            "id": "object" if kind != "crossed_beams" else "beam_a", "model": f"spec:{spec}",
+            "anchor": {"kind": "pose", "pose": _pose7(T_map @ sc.state["T_wo"])},
+            "collision": {"enabled": True, "threshold_m": sc.state["delta"], "step": 0.04, "decimation": 2,
+                          "pushes": ["beam_b"] if kind == "crossed_beams" else []},
+            "overlay": {"field": "von_mises" if kind != "crossed_beams" else "displacement"},
+        }]
+        if kind == "crossed_beams":
+            objs.append({"id": "beam_b", "model": f"spec:{spec}",
+                         "anchor": {"kind": "pose", "pose": _pose7(T_map @ sc.state["T_wo_b"])},
+                         "collision": {"enabled": True, "threshold_m": 0.002, "step": 0.04},
+                         "overlay": {"field": "displacement"}})
+        return {
+            "simreal_scene": 1, "name": sc.name,
+            "description": f"A real probe pushes the virtual {kind.replace('_', ' ')} (thesis §5.4); "
+                           f"{'stereo (SGBM) depth' if stereo else 'RGB-D depth'}.",
+            "camera": _camera_yaml(sc),
+            "localization": {"mode": "stereo" if stereo else "rgbd", "features": 1500},
+            "objects": objs,
+            "overlay": {"enabled": True, "occlusion": True},
+        }
+
+    name = f"{kind}_probe" + ("_stereo" if stereo else "")
+    sc = SynthScene(name, f"Probe touching the virtual {kind}", default_camera(width, height), fps, duration,
+                    {"object": spec}, build, update, cam_pose, yaml, depth=not stereo,
+                    stereo_baseline=0.12 if stereo else None)
+    sc.state["prepare"] = prepare
+    return sc
+
+
+def _copy_state(st):
+    from dataclasses import replace
+
+    return replace(st)
+
+
+def bunny_probe(width=640, height=480, duration=6.0, fps=30.0) -> SynthScene:
+    return _probe_scene("bunny", width, height, duration, fps, stereo=False)
+
+
+def bunny_probe_stereo(width=640, height=480, duration=6.0, fps=30.0) -> SynthScene:
+    return _probe_scene("bunny", width, height, duration, fps, stereo=True)
+
+
+def dragon_probe(width=640, height=480, duration=6.0, fps=30.0) -> SynthScene:
+    return _probe_scene("dragon", width, height, duration, fps, stereo=False)
+
+
+def crossed_beams_probe(width=640, height=480, duration=3.2, fps=30.0) -> SynthScene:
+    return _probe_scene("crossed_beams", width, height, duration, fps, stereo=False)
+
+
+SCENES = {
+    "aluminium_beam": aluminium_beam,
+    "foam_beam": foam_beam,
+    "virtual_boot_lever": virtual_boot_lever,
+    "joint_boot": joint_boot,
+    "crossed_beams_probe": crossed_beams_probe,
+    "bunny_probe": bunny_probe,
+    "bunny_probe_stereo": bunny_probe_stereo,
+    "dragon_probe": dragon_probe,
+}
