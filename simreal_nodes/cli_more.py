@@ -75,7 +75,56 @@ def cmd_make_bag(a) -> int:
     return 0
 
 
+def _load_trajectory(path: str, topic: str):
+    from simreal_nodes.vision.trajectory import read_bag_poses, read_tum
+
+    p = Path(path)
+    if p.is_dir() or p.suffix in (".mcap", ".db3"):
+        return read_bag_poses(p, topic)
+    return read_tum(p)
+
+
+def cmd_eval_trajectory(a) -> int:
+    import json
+
+    import numpy as np
+
+    from simreal_nodes.vision.trajectory import associate, ate, rpe, write_tum
+
+    te, Te = _load_trajectory(a.estimate, a.topic)
+    tr, Tr = _load_trajectory(a.truth or a.estimate, a.truth_topic)
+    ie, ir = associate(te, tr, a.max_dt)
+    if len(ie) < 3:
+        from simreal_nodes.errors import SimrealError
+        raise SimrealError(f"only {len(ie)} estimated poses have a reference within {a.max_dt} s (need 3)")
+    E = np.array([Te[i][:3, 3] for i in ie])
+    R = np.array([Tr[i][:3, 3] for i in ir])
+    res = ate(E, R, with_scale=a.scale)
+    rp = rpe([Te[i] for i in ie], [Tr[i] for i in ir], delta=a.delta, scale=res["scale"])
+    print(f"poses: {len(ie)} associated of {len(te)} estimated / {len(tr)} reference; trajectory length {res['length']:.3f} m")
+    print(f"ATE  rmse {res['rmse'] * 1e3:.2f} mm ({res['rmse_pct_length']:.3f} % of length), mean {res['mean'] * 1e3:.2f}, "
+          f"median {res['median'] * 1e3:.2f}, max {res['max'] * 1e3:.2f} mm" + (f"; scale {res['scale']:.5f}" if a.scale else ""))
+    print(f"RPE  ({a.delta} frames) translation rmse {rp['trans_rmse'] * 1e3:.2f} mm, rotation rmse {rp['rot_rmse_deg']:.3f} deg")
+    if a.json:
+        Path(a.json).write_text(json.dumps({k: v for k, v in res.items() if k not in ("R", "t", "errors")} | {"rpe": rp}, indent=2))
+    if a.save_tum:
+        write_tum(a.save_tum, te, Te)
+    return 0
+
+
 def add_commands(sub) -> None:
+    s = sub.add_parser("eval-trajectory", help="ATE / RPE of a camera trajectory (TUM files or bags)")
+    s.add_argument("estimate", help="TUM file or bag with the estimated poses")
+    s.add_argument("--truth", help="TUM file or bag with the reference (default: the estimate bag)")
+    s.add_argument("--topic", default="/simreal/localization/pose", help="estimate topic in a bag")
+    s.add_argument("--truth-topic", default="/ground_truth/camera_pose", help="reference topic in a bag")
+    s.add_argument("--scale", action="store_true", help="align with scale (monocular)")
+    s.add_argument("--delta", type=int, default=1, help="RPE frame step")
+    s.add_argument("--max-dt", type=float, default=0.005, help="stamp association tolerance, s")
+    s.add_argument("--json", help="write the numbers here")
+    s.add_argument("--save-tum", help="write the estimate as TUM")
+    s.set_defaults(fn=cmd_eval_trajectory)
+
     from simreal_nodes.synth.scenes import SCENES
 
     s = sub.add_parser("make-bag", help="render a synthetic seed scene with ground truth into a bag")

@@ -240,3 +240,31 @@ def wall_ms() -> float:
 
 def env_summary() -> str:
     return f"ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID', '0')}"
+
+
+def cloud_msg(points: np.ndarray, header: Header, frame_id: str):
+    """sensor_msgs/PointCloud2 with float32 x, y, z (no sensor_msgs_py on PyPI)."""
+    import array
+
+    from sensor_msgs.msg import PointCloud2, PointField
+
+    P = np.ascontiguousarray(np.asarray(points, dtype=np.float32).reshape(-1, 3))
+    m = PointCloud2()
+    m.header.stamp = header.stamp
+    m.header.frame_id = frame_id
+    m.height, m.width = 1, len(P)
+    m.fields = [PointField(name=n, offset=4 * i, datatype=PointField.FLOAT32, count=1) for i, n in enumerate("xyz")]
+    m.is_bigendian = False
+    m.point_step, m.row_step = 12, 12 * len(P)
+    m.is_dense = True
+    m.data = array.array("B", P.tobytes())
+    return m
+
+
+def cloud_to_array(msg) -> np.ndarray:
+    """x, y, z (float32) of a PointCloud2 into (N, 3)."""
+    offs = {f.name: f.offset for f in msg.fields}
+    if not all(k in offs for k in "xyz"):
+        raise ValueError("PointCloud2 without x, y, z fields")
+    raw = np.frombuffer(bytes(msg.data), np.uint8).reshape(-1, msg.point_step)
+    return np.stack([raw[:, offs[k]:offs[k] + 4].copy().view(np.float32).ravel() for k in "xyz"], axis=1)

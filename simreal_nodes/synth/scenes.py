@@ -117,8 +117,9 @@ def _pose7(T) -> list:
 # Aluminium beam with markers (§4.5.1)
 
 BEAM_ORIGIN = np.array([0.0, 0.0, 0.10])
-MARKERS = {0: (-0.12, -0.12), 1: (0.44, -0.13), 2: (0.02, 0.2), 3: (0.44, 0.2)}
-MARKER_SIZE = 0.07
+MARKERS = {0: (-0.02, -0.14), 1: (0.44, -0.14), 2: (0.14, 0.21), 3: (0.44, 0.21)}
+MARKER_SIZE = 0.08  # printed square including the white quiet zone
+MARKER_BLACK = MARKER_SIZE * 6 / 8  # the marker itself: 4x4 bits + 1-bit border of the 8-module print
 DOT_X = np.arange(0.03, 0.481, 0.03)
 
 
@@ -186,7 +187,7 @@ def aluminium_beam(width=640, height=480, duration=6.0, fps=30.0) -> SynthScene:
         return Truth(params={"beam": _truth_params(m, [s])}, object_poses={"beam": sc.T_map_world() @ T_wo})
 
     def cam_pose(t):
-        return W.arc_trajectory(np.array([t]), [0.21, 0.02, 0.06], 0.42, 0.46, np.deg2rad(-108), np.deg2rad(-76),
+        return W.arc_trajectory(np.array([t]), [0.21, 0.03, 0.05], 0.45, 0.48, np.deg2rad(-108), np.deg2rad(-76),
                                 jitter=0.003, seed=11, period=duration * 1.0)[0]
 
     def yaml(sc):
@@ -196,7 +197,7 @@ def aluminium_beam(width=640, height=480, duration=6.0, fps=30.0) -> SynthScene:
             "description": "Aluminium cantilever with a moving point load, fiducial markers and glued blue dots (thesis §4.5.1).",
             "camera": _camera_yaml(sc),
             "localization": {"mode": "markers", "markers": {
-                "dictionary": "DICT_4X4_50", "size_m": MARKER_SIZE,
+                "dictionary": "DICT_4X4_50", "size_m": MARKER_BLACK,
                 "poses": {mid: [x, y, 0.0008, 0, 0, 0, 1] for mid, (x, y) in MARKERS.items()}}},
             "objects": [{
                 "id": "beam", "model": "spec:aluminium_beam",
@@ -543,7 +544,42 @@ def crossed_beams_probe(width=640, height=480, duration=3.2, fps=30.0) -> SynthS
     return _probe_scene("crossed_beams", width, height, duration, fps, stereo=False)
 
 
+# ------------------------------------------------------------------------------------------------
+# A static room for localization benchmarks (RGB, depth and a rectified stereo pair at once)
+
+
+def slam_room(width=640, height=480, duration=10.0, fps=30.0) -> SynthScene:
+    center = np.array([0.3, 0.2, 0.15])
+
+    def build(sc, r, models):
+        add_environment(r, center=(0.3, 0.2), seed=5)
+        rng = np.random.default_rng(7)
+        for k in range(6):
+            size = rng.uniform(0.08, 0.2, 3)
+            pos = center + [rng.uniform(-0.3, 0.3), rng.uniform(-0.15, 0.25), 0]
+            pos[2] = size[2] / 2
+            V, F = W.box(size, (0, 0, 0))
+            r.add(Mesh(f"obj{k}", V, F, mode="texture", texture=W.texture(["brick", "gravel", "grass", "foam", "plate", "probe"][k]),
+                       tex_scale=6.0, smooth=False, pose=G.make_T(G.rot_axis("z", rng.uniform(0, np.pi)), pos)))
+
+    def update(sc, r, t):
+        return Truth()
+
+    def cam_pose(t):
+        return W.arc_trajectory(np.array([t]), center, 1.0, 0.45, np.deg2rad(-140), np.deg2rad(-40), jitter=0.01,
+                                seed=51, period=duration)[0]
+
+    def yaml(sc):
+        return {"simreal_scene": 1, "name": "slam_room", "description": "Static textured room for localization.",
+                "camera": _camera_yaml(sc), "localization": {"mode": "rgbd", "features": 1000},
+                "overlay": {"enabled": False}}
+
+    return SynthScene("slam_room", "Static room, hand-held arc, RGB + depth + stereo", default_camera(width, height), fps,
+                      duration, {}, build, update, cam_pose, yaml, depth=True, stereo_baseline=0.12)
+
+
 SCENES = {
+    "slam_room": slam_room,
     "aluminium_beam": aluminium_beam,
     "foam_beam": foam_beam,
     "virtual_boot_lever": virtual_boot_lever,

@@ -36,12 +36,13 @@ def texture(name: str) -> np.ndarray:
     return (rgb * 255).astype(np.uint8)
 
 
-def aruco_image(marker_id: int, dictionary: str = "DICT_4X4_50", pixels: int = 200, border_bits: int = 1) -> np.ndarray:
-    """RGB image of an ArUco marker with a white quiet zone of one module."""
+def aruco_image(marker_id: int, dictionary: str = "DICT_4X4_50", module_px: int = 40, border_bits: int = 1) -> np.ndarray:
+    """RGB image of an ArUco marker with a white quiet zone of one module; every module is exactly
+    ``module_px`` pixels, so the black square is exactly (bits + 2 border) / (bits + 4) of the print."""
     d = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, dictionary))
-    img = cv2.aruco.generateImageMarker(d, int(marker_id), pixels, borderBits=border_bits)
     n = d.markerSize + 2 * border_bits
-    pad = pixels // n
+    img = cv2.aruco.generateImageMarker(d, int(marker_id), n * module_px, borderBits=border_bits)
+    pad = module_px
     img = cv2.copyMakeBorder(img, pad, pad, pad, pad, cv2.BORDER_CONSTANT, value=255)
     return np.repeat(img[:, :, None], 3, axis=2)
 

@@ -1,0 +1,289 @@
+"""Map of a feature-based SLAM: keyframes (pose, ORB features, feature -> map point links) and map
+points (position, representative descriptor, observations), with save / load to HDF5 (no pickle)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from simreal_nodes.errors import SimrealError
+from simreal_nodes.vision.orb import Features
+
+MAP_FORMAT = "simreal-slam-map"
+MAP_VERSION = 1
+
+
+class MapPoint:
+    """A map point; its position and descriptor live in the map's arrays (fast batch access)."""
+
+    __slots__ = ("id", "_m", "obs", "first_kf", "bad", "deformable")
+
+    def __init__(self, id: int, store: "Map", obs=None, deformable: bool = False):
+        self.id, self._m = id, store
+        self.obs: dict = obs if obs is not None else {}  # keyframe id -> feature index
+        store._nvis[id] = 1
+        store._nfound[id] = 1
+        self.first_kf = -1
+        self.bad = False
+        self.deformable = deformable
+
+    @property
+    def pos(self) -> np.ndarray:
+        return self._m._pos[self.id]
+
+    @pos.setter
+    def pos(self, v) -> None:
+        self._m._pos[self.id] = v
+
+    @property
+    def desc(self) -> np.ndarray:
+        return self._m._desc[self.id]
+
+    @desc.setter
+    def desc(self, v) -> None:
+        self._m._desc[self.id] = v
+
+    @property
+    def n_visible(self) -> int:
+        return int(self._m._nvis[self.id])
+
+    @n_visible.setter
+    def n_visible(self, v) -> None:
+        self._m._nvis[self.id] = v
+
+    @property
+    def n_found(self) -> int:
+        return int(self._m._nfound[self.id])
+
+    @n_found.setter
+    def n_found(self, v) -> None:
+        self._m._nfound[self.id] = v
+
+    @property
+    def found_ratio(self) -> float:
+        return self.n_found / max(self.n_visible, 1)
+
+
+@dataclass
+class KeyFrame:
+    id: int
+    stamp: int
+    T_wc: np.ndarray  # camera pose in the map (camera -> map)
+    feats: Features
+    mp: np.ndarray  # (N,) map point id per feature, -1 none
+    depth: np.ndarray | None = None  # (N,) metric depth per feature (RGB-D / stereo), NaN unknown
+
+    @property
+    def T_cw(self) -> np.ndarray:
+        R = self.T_wc[:3, :3]
+        T = np.eye(4)
+        T[:3, :3] = R.T
+        T[:3, 3] = -R.T @ self.T_wc[:3, 3]
+        return T
+
+    @property
+    def center(self) -> np.ndarray:
+        return self.T_wc[:3, 3]
+
+
+class Map:
+    def __init__(self):
+        self.points: dict[int, MapPoint] = {}
+        self.keyframes: dict[int, KeyFrame] = {}
+        self._next_pt = 0
+        self._next_kf = 0
+        self.scale_known = False
+        self._pos = np.zeros((1024, 3))
+        self._desc = np.zeros((1024, 32), np.uint8)
+        self._nvis = np.zeros(1024, np.int64)
+        self._nfound = np.zeros(1024, np.int64)
+        self._alive = np.zeros(1024, bool)
+        self.version = 0  # bumped by every keyframe change (caches key on it)
+
+    def _reserve(self, n: int) -> None:
+        if n > len(self._pos):
+            cap = max(n, 2 * len(self._pos))
+            self._pos = np.resize(self._pos, (cap, 3))
+            self._desc = np.resize(self._desc, (cap, 32))
+            self._nvis = np.resize(self._nvis, cap)
+            self._nfound = np.resize(self._nfound, cap)
+            alive = np.zeros(cap, bool)
+            alive[: len(self._alive)] = self._alive
+            self._alive = alive
+
+    def alive(self, ids: np.ndarray) -> np.ndarray:
+        """Mask of the ids that are live points."""
+        ids = np.asarray(ids, np.int64)
+        return self._alive[ids] if len(ids) else np.zeros(0, bool)
+
+    # -- editing --------------------------------------------------------------------------------------------
+    def new_keyframe(self, stamp, T_wc, feats, depth=None) -> KeyFrame:
+        kf = KeyFrame(self._next_kf, stamp, np.array(T_wc, dtype=np.float64), feats, -np.ones(len(feats), np.int64), depth)
+        self.keyframes[kf.id] = kf
+        self.version += 1
+        self._next_kf += 1
+        return kf
+
+    def new_point(self, pos, desc, kf: KeyFrame | None = None, idx: int | None = None) -> MapPoint:
+        self._reserve(self._next_pt + 1)
+        p = MapPoint(self._next_pt, self)
+        p.pos, p.desc = pos, desc
+        self._alive[p.id] = True
+        self._next_pt += 1
+        self.points[p.id] = p
+        if kf is not None:
+            p.first_kf = kf.id
+            self.link(p, kf, idx)
+        return p
+
+    def link(self, p: MapPoint, kf: KeyFrame, idx: int) -> None:
+        old = kf.mp[idx]
+        if old >= 0 and old != p.id and old in self.points:
+            self.points[old].obs.pop(kf.id, None)
+        kf.mp[idx] = p.id
+        p.obs[kf.id] = idx
+
+    def erase_point(self, pid: int) -> None:
+        p = self.points.pop(pid, None)
+        if p is None:
+            return
+        self._alive[pid] = False
+        for kid, idx in p.obs.items():
+            kf = self.keyframes.get(kid)
+            if kf is not None and kf.mp[idx] == pid:
+                kf.mp[idx] = -1
+
+    def erase_keyframe(self, kid: int) -> None:
+        kf = self.keyframes.pop(kid, None)
+        if kf is None:
+            return
+        self.version += 1
+        for idx, pid in enumerate(kf.mp):
+            if pid >= 0 and pid in self.points:
+                p = self.points[pid]
+                p.obs.pop(kid, None)
+                if len(p.obs) == 0:
+                    self.points.pop(pid)
+                    self._alive[pid] = False
+
+    def fuse(self, keep: MapPoint, drop: MapPoint) -> None:
+        """Replace ``drop`` by ``keep`` in every keyframe that observes it."""
+        for kid, idx in list(drop.obs.items()):
+            kf = self.keyframes.get(kid)
+            if kf is None:
+                continue
+            if kid in keep.obs:
+                kf.mp[idx] = -1
+            else:
+                kf.mp[idx] = keep.id
+                keep.obs[kid] = idx
+        keep.n_visible += drop.n_visible
+        keep.n_found += drop.n_found
+        self.points.pop(drop.id, None)
+        self._alive[drop.id] = False
+
+    # -- queries --------------------------------------------------------------------------------------------
+    def covisible(self, kf: KeyFrame, n: int = 10, min_shared: int = 1) -> list[KeyFrame]:
+        counts: dict[int, int] = {}
+        for pid in kf.mp[kf.mp >= 0]:
+            p = self.points.get(int(pid))
+            if p is None:
+                continue
+            for kid in p.obs:
+                if kid != kf.id:
+                    counts[kid] = counts.get(kid, 0) + 1
+        best = sorted((c, k) for k, c in counts.items() if c >= min_shared)[::-1][:n]
+        return [self.keyframes[k] for _, k in best if k in self.keyframes]
+
+    def point_arrays(self, ids=None):
+        """(ids, positions, descriptors) of live points (all, or those of ``ids`` that still exist)."""
+        if ids is None:
+            ids = np.fromiter(self.points.keys(), np.int64, len(self.points))
+        else:
+            ids = np.asarray(ids, np.int64)
+            ids = ids[self.alive(ids)]
+        if len(ids) == 0:
+            return np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 32), np.uint8)
+        return ids, self._pos[ids], self._desc[ids]
+
+    def update_descriptor(self, p: MapPoint) -> None:
+        """Representative descriptor: the observation with the least median distance to the others."""
+        descs = [self.keyframes[k].feats.desc[i] for k, i in p.obs.items() if k in self.keyframes]
+        if len(descs) < 3:
+            if descs:
+                p.desc = descs[-1]
+            return
+        D = np.array(descs, dtype=np.uint8)
+        bits = np.unpackbits(D, axis=1).astype(np.int32)
+        dist = np.abs(bits[:, None, :] - bits[None, :, :]).sum(axis=2)
+        p.desc = D[int(np.argmin(np.median(dist, axis=1)))]
+
+    # -- persistence ----------------------------------------------------------------------------------------
+    def save(self, path: str | Path, camera=None, mode: str = "") -> None:
+        import h5py
+
+        path = Path(path)
+        ids, P, D = self.point_arrays()
+        with h5py.File(path, "w") as f:
+            f.attrs.update(format=MAP_FORMAT, format_version=MAP_VERSION, mode=mode, scale_known=self.scale_known)
+            if camera is not None:
+                f.attrs["camera_K"] = camera.K
+                f.attrs["camera_size"] = [camera.width, camera.height]
+            g = f.create_group("points")
+            g["id"], g["pos"], g["desc"] = ids, P, D
+            g["deformable"] = np.array([self.points[i].deformable for i in ids], bool)
+            obs = [(pid, kid, idx) for pid in ids for kid, idx in self.points[pid].obs.items()]
+            g["obs"] = np.array(obs, np.int64).reshape(-1, 3)
+            k = f.create_group("keyframes")
+            for kf in self.keyframes.values():
+                h = k.create_group(str(kf.id))
+                h.attrs["stamp"] = kf.stamp
+                h["T_wc"], h["uv"], h["und"] = kf.T_wc, kf.feats.uv, kf.feats.und
+                h["octave"], h["desc"], h["response"], h["mp"] = kf.feats.octave, kf.feats.desc, kf.feats.response, kf.mp
+                h.attrs["scale_factor"] = kf.feats.scale_factor
+                if kf.depth is not None:
+                    h["depth"] = kf.depth
+
+    @classmethod
+    def load(cls, path: str | Path) -> "Map":
+        import h5py
+
+        path = Path(path)
+        if not path.exists():
+            raise SimrealError(f"map file not found: {path}")
+        try:
+            f = h5py.File(path, "r")
+        except OSError as e:
+            raise SimrealError(f"{path} is not a readable HDF5 map (truncated or corrupt?): {e}") from None
+        with f:
+            if f.attrs.get("format") != MAP_FORMAT:
+                raise SimrealError(f"{path} is not a simreal SLAM map")
+            if int(f.attrs.get("format_version", -1)) != MAP_VERSION:
+                raise SimrealError(f"{path}: unsupported map version {f.attrs.get('format_version')}")
+            m = cls()
+            m.scale_known = bool(f.attrs.get("scale_known", False))
+            try:
+                for key, h in f["keyframes"].items():
+                    feats = Features(h["uv"][()], h["und"][()], h["octave"][()], h["desc"][()], h["response"][()],
+                                     float(h.attrs["scale_factor"]))
+                    kf = KeyFrame(int(key), int(h.attrs["stamp"]), h["T_wc"][()], feats, h["mp"][()],
+                                  h["depth"][()] if "depth" in h else None)
+                    m.keyframes[kf.id] = kf
+                g = f["points"]
+                ids = g["id"][()]
+                m._reserve(int(ids.max()) + 1 if len(ids) else 1)
+                for pid, pos, desc, dfm in zip(ids, g["pos"][()], g["desc"][()], g["deformable"][()]):
+                    p = MapPoint(int(pid), m, deformable=bool(dfm))
+                    p.pos, p.desc = pos, desc
+                    m._alive[int(pid)] = True
+                    m.points[int(pid)] = p
+                for pid, kid, idx in g["obs"][()]:
+                    if int(pid) in m.points and int(kid) in m.keyframes:
+                        m.points[int(pid)].obs[int(kid)] = int(idx)
+            except KeyError as e:
+                raise SimrealError(f"{path}: incomplete map ({e})") from None
+            m._next_pt = max(m.points, default=-1) + 1
+            m._next_kf = max(m.keyframes, default=-1) + 1
+            return m

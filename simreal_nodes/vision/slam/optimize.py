@@ -1,0 +1,175 @@
+"""Pose refinement (OpenCV) and local bundle adjustment (GTSAM factor graph)."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from simreal_nodes import geometry as G
+
+CHI2_2D = 5.991  # 95 % for 2 dof
+CHI2_3D = 7.815
+
+
+def project(T_cw: np.ndarray, P: np.ndarray, K: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Ideal pixels (N, 2) and depths (N,) of world points P under pose T_cw."""
+    Pc = P @ T_cw[:3, :3].T + T_cw[:3, 3]
+    z = Pc[:, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        uv = np.c_[K[0, 0] * Pc[:, 0] / z + K[0, 1] * Pc[:, 1] / z + K[0, 2], K[1, 1] * Pc[:, 1] / z + K[1, 2]]
+    return uv, z
+
+
+def refine_pose(T_cw: np.ndarray, P: np.ndarray, uv: np.ndarray, sigma2: np.ndarray, K: np.ndarray,
+                rounds: int = 4) -> tuple[np.ndarray, np.ndarray]:
+    """Motion-only optimization with outlier rejection (ORB-SLAM2's PoseOptimization, on OpenCV's LM):
+    refine on the current inliers, re-classify every match by its chi-square error, repeat."""
+    T = T_cw.copy()
+    if len(P) < 4:
+        return T, np.zeros(len(P), bool)
+    # start from the matches the initial pose already explains (a generous bound): least squares on
+    # gross outliers would drag a good initial pose away
+    proj, z = project(T, P, K)
+    e2 = np.sum((proj - uv) ** 2, axis=1) / sigma2
+    inl = (e2 < 16 * CHI2_2D) & (z > 0)
+    if inl.sum() < 6:
+        inl = np.ones(len(P), bool)
+    for r in range(rounds):
+        if inl.sum() < 4:
+            break
+        rvec, _ = cv2.Rodrigues(T[:3, :3])
+        tvec = T[:3, 3].reshape(3, 1).copy()  # (3, 1): OpenCV silently ignores a flat tvec here
+        try:
+            rvec, tvec = cv2.solvePnPRefineLM(P[inl].astype(np.float64), uv[inl].astype(np.float64), K, None, rvec, tvec,
+                                              (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 10, 1e-9))
+        except cv2.error:
+            break
+        T = G.make_T(cv2.Rodrigues(rvec)[0], tvec.ravel())
+        proj, z = project(T, P, K)
+        e2 = np.sum((proj - uv) ** 2, axis=1) / sigma2
+        inl = (e2 < CHI2_2D) & (z > 0) & np.isfinite(e2)
+    return T, inl
+
+
+def ba_request(kfs_opt, kfs_fixed, points) -> dict:
+    """Everything a bundle adjustment needs, as plain arrays (it can cross a process boundary)."""
+    kfs = list(kfs_opt) + list(kfs_fixed)
+    kid_index = {kf.id: i for i, kf in enumerate(kfs)}
+    obs_p, obs_k, uv, z, sig = [], [], [], [], []
+    for j, p in enumerate(points):
+        for kid, idx in p.obs.items():
+            i = kid_index.get(kid)
+            if i is None:
+                continue
+            kf = kfs[i]
+            obs_p.append(j)
+            obs_k.append(i)
+            uv.append(kf.feats.und[idx])
+            z.append(kf.depth[idx] if kf.depth is not None else np.nan)
+            sig.append(kf.feats.scale_factor ** float(kf.feats.octave[idx]))
+    return {"kf_ids": np.array([kf.id for kf in kfs], np.int64), "poses": np.array([kf.T_wc for kf in kfs]),
+            "fixed": np.array([False] * len(kfs_opt) + [True] * len(kfs_fixed)),
+            "pt_ids": np.array([p.id for p in points], np.int64), "pos": np.array([p.pos for p in points]).reshape(-1, 3),
+            "obs_p": np.array(obs_p, np.int64), "obs_k": np.array(obs_k, np.int64), "uv": np.array(uv).reshape(-1, 2),
+            "z": np.array(z, np.float64), "sigma": np.array(sig, np.float64)}
+
+
+def bundle_adjust(req: dict, K: np.ndarray, baseline: float | None = None, iterations: int = 10) -> dict:
+    """GTSAM Levenberg-Marquardt on a :func:`ba_request`: optimizes the non-fixed poses and all points.
+    Observations with a depth (RGB-D / stereo) are stereo factors (virtual right coordinate
+    u_r = u - fx b / z), the others projection factors, all with a Huber loss scaled by the pyramid level.
+    Returns new poses and positions and the outlier observations (point id, keyframe id)."""
+    import gtsam
+    from gtsam.symbol_shorthand import L, X
+
+    graph = gtsam.NonlinearFactorGraph()
+    vals = gtsam.Values()
+    cal = gtsam.Cal3_S2(K[0, 0], K[1, 1], K[0, 1], K[0, 2], K[1, 2])
+    stereo_cal = gtsam.Cal3_S2Stereo(K[0, 0], K[1, 1], K[0, 1], K[0, 2], K[1, 2], baseline) if baseline else None
+    huber2 = gtsam.noiseModel.mEstimator.Huber.Create(np.sqrt(CHI2_2D))
+    huber3 = gtsam.noiseModel.mEstimator.Huber.Create(np.sqrt(CHI2_3D))
+    for i, (kid, T, fx) in enumerate(zip(req["kf_ids"], req["poses"], req["fixed"])):
+        vals.insert(X(int(kid)), gtsam.Pose3(T))
+        if fx:
+            graph.add(gtsam.NonlinearEqualityPose3(X(int(kid)), gtsam.Pose3(T)))
+    n_obs = np.bincount(req["obs_p"], minlength=len(req["pt_ids"]))
+    for j, (pid, P) in enumerate(zip(req["pt_ids"], req["pos"])):
+        vals.insert(L(int(pid)), gtsam.Point3(*P))
+        if n_obs[j] < 2 and stereo_cal is None:
+            graph.add(gtsam.PriorFactorPoint3(L(int(pid)), gtsam.Point3(*P), gtsam.noiseModel.Isotropic.Sigma(3, 1.0)))
+    robust2 = {}
+    robust3 = {}
+    for j, i, (u, v), z, s in zip(req["obs_p"], req["obs_k"], req["uv"], req["z"], req["sigma"]):
+        kx, lx = X(int(req["kf_ids"][i])), L(int(req["pt_ids"][j]))
+        if stereo_cal is not None and np.isfinite(z) and z > 0:
+            nm = robust3.get(s) or robust3.setdefault(s, gtsam.noiseModel.Robust.Create(huber3, gtsam.noiseModel.Isotropic.Sigma(3, s)))
+            graph.add(gtsam.GenericStereoFactor3D(gtsam.StereoPoint2(u, u - K[0, 0] * baseline / z, v), nm, kx, lx, stereo_cal))
+        else:
+            nm = robust2.get(s) or robust2.setdefault(s, gtsam.noiseModel.Robust.Create(huber2, gtsam.noiseModel.Isotropic.Sigma(2, s)))
+            graph.add(gtsam.GenericProjectionFactorCal3_S2(gtsam.Point2(u, v), nm, kx, lx, cal))
+    params = gtsam.LevenbergMarquardtParams()
+    params.setMaxIterations(iterations)
+    params.setVerbosityLM("SILENT")
+    try:
+        result = gtsam.LevenbergMarquardtOptimizer(graph, vals, params).optimize()
+    except RuntimeError as e:
+        return {"ok": False, "error": str(e)}
+    poses = np.array([result.atPose3(X(int(k))).matrix() for k in req["kf_ids"]])
+    pos = np.array([np.asarray(result.atPoint3(L(int(p)))) for p in req["pt_ids"]]).reshape(-1, 3)
+    # outliers: chi-square on the reprojection after optimization
+    out = []
+    for j, i, uv, s in zip(req["obs_p"], req["obs_k"], req["uv"], req["sigma"]):
+        pr, zc = project(G.inv(poses[i]), pos[j][None], K)
+        e2 = np.sum((pr[0] - uv) ** 2) / (s * s)
+        if not np.isfinite(e2) or e2 > CHI2_2D or zc[0] <= 0:
+            out.append((int(req["pt_ids"][j]), int(req["kf_ids"][i])))
+    return {"ok": True, "kf_ids": req["kf_ids"], "fixed": req["fixed"], "poses": poses, "pt_ids": req["pt_ids"],
+            "pos": pos, "outliers": out}
+
+
+def _worker(conn, K, baseline, iterations):  # pragma: no cover - runs in the mapping process
+    while True:
+        try:
+            req = conn.recv()
+        except (EOFError, KeyboardInterrupt):
+            return
+        if req is None:
+            return
+        conn.send(bundle_adjust(req, K, baseline, iterations))
+
+
+class AsyncBundleAdjuster:
+    """Local BA in a worker process (GTSAM holds the GIL: a thread would stall tracking). One request at
+    a time; the tracker keeps going and applies the result when it arrives."""
+
+    def __init__(self, K, baseline, iterations):
+        import multiprocessing as mp
+
+        ctx = mp.get_context("spawn")
+        self.conn, child = ctx.Pipe()
+        self.proc = ctx.Process(target=_worker, args=(child, K, baseline, iterations), daemon=True,
+                                name="simreal-local-mapping")
+        self.proc.start()
+        self.busy = False
+
+    def submit(self, req: dict) -> bool:
+        if self.busy or not self.proc.is_alive():
+            return False
+        self.conn.send(req)
+        self.busy = True
+        return True
+
+    def poll(self) -> dict | None:
+        if self.busy and self.conn.poll():
+            self.busy = False
+            return self.conn.recv()
+        return None
+
+    def close(self) -> None:
+        try:
+            self.conn.send(None)
+        except (BrokenPipeError, OSError):
+            pass
+        self.proc.join(timeout=2)
+        if self.proc.is_alive():
+            self.proc.terminate()
