@@ -74,7 +74,8 @@ def ba_request(kfs_opt, kfs_fixed, points) -> dict:
             "z": np.array(z, np.float64), "sigma": np.array(sig, np.float64)}
 
 
-def bundle_adjust(req: dict, K: np.ndarray, baseline: float | None = None, iterations: int = 10) -> dict:
+def bundle_adjust(req: dict, K: np.ndarray, baseline: float | None = None, iterations: int = 10,
+                  optimizer: str = "levenberg_marquardt") -> dict:
     """GTSAM Levenberg-Marquardt on a :func:`ba_request`: optimizes the non-fixed poses and all points.
     Observations with a depth (RGB-D / stereo) are stereo factors (virtual right coordinate
     u_r = u - fx b / z), the others projection factors, all with a Huber loss scaled by the pyramid level.
@@ -107,22 +108,35 @@ def bundle_adjust(req: dict, K: np.ndarray, baseline: float | None = None, itera
         else:
             nm = robust2.get(s) or robust2.setdefault(s, gtsam.noiseModel.Robust.Create(huber2, gtsam.noiseModel.Isotropic.Sigma(2, s)))
             graph.add(gtsam.GenericProjectionFactorCal3_S2(gtsam.Point2(u, v), nm, kx, lx, cal))
-    params = gtsam.LevenbergMarquardtParams()
-    params.setMaxIterations(iterations)
-    params.setVerbosityLM("SILENT")
     try:
-        result = gtsam.LevenbergMarquardtOptimizer(graph, vals, params).optimize()
+        if optimizer == "gauss_newton":
+            params = gtsam.GaussNewtonParams()
+            params.setMaxIterations(iterations)
+            params.setRelativeErrorTol(1e-5)
+            result = gtsam.GaussNewtonOptimizer(graph, vals, params).optimize()
+        else:
+            params = gtsam.LevenbergMarquardtParams()
+            params.setMaxIterations(iterations)
+            params.setRelativeErrorTol(1e-5)
+            params.setVerbosityLM("SILENT")
+            result = gtsam.LevenbergMarquardtOptimizer(graph, vals, params).optimize()
     except RuntimeError as e:
         return {"ok": False, "error": str(e)}
     poses = np.array([result.atPose3(X(int(k))).matrix() for k in req["kf_ids"]])
     pos = np.array([np.asarray(result.atPoint3(L(int(p)))) for p in req["pt_ids"]]).reshape(-1, 3)
-    # outliers: chi-square on the reprojection after optimization
+    # outliers: chi-square on the reprojection after optimization (vectorized over observations)
     out = []
-    for j, i, uv, s in zip(req["obs_p"], req["obs_k"], req["uv"], req["sigma"]):
-        pr, zc = project(G.inv(poses[i]), pos[j][None], K)
-        e2 = np.sum((pr[0] - uv) ** 2) / (s * s)
-        if not np.isfinite(e2) or e2 > CHI2_2D or zc[0] <= 0:
-            out.append((int(req["pt_ids"][j]), int(req["kf_ids"][i])))
+    if len(req["obs_p"]):
+        R = poses[:, :3, :3]
+        t = poses[:, :3, 3]
+        Rk, tk = R[req["obs_k"]], t[req["obs_k"]]
+        Xc = np.einsum("nji,nj->ni", Rk, pos[req["obs_p"]] - tk)  # R^T (X - t)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            pr = np.c_[K[0, 0] * Xc[:, 0] / Xc[:, 2] + K[0, 1] * Xc[:, 1] / Xc[:, 2] + K[0, 2],
+                       K[1, 1] * Xc[:, 1] / Xc[:, 2] + K[1, 2]]
+            e2 = np.sum((pr - req["uv"]) ** 2, axis=1) / req["sigma"] ** 2
+        bad = ~np.isfinite(e2) | (e2 > CHI2_2D) | (Xc[:, 2] <= 0)
+        out = list(zip(req["pt_ids"][req["obs_p"][bad]].tolist(), req["kf_ids"][req["obs_k"][bad]].tolist()))
     return {"ok": True, "kf_ids": req["kf_ids"], "fixed": req["fixed"], "poses": poses, "pt_ids": req["pt_ids"],
             "pos": pos, "outliers": out}
 

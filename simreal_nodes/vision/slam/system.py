@@ -63,7 +63,7 @@ class Slam:
     def __init__(self, cam: CameraModel, mode: str = "mono", n_features: int = 1000, scale_factor: float = 1.2,
                  n_levels: int = 8, baseline: float | None = None, known_scale: float | None = None,
                  min_parallax_deg: float = 1.0, max_depth: float = 8.0, local_kfs: int = 10, ba_iterations: int = 10,
-                 min_features: int = 40, async_mapping: bool = False, max_ba_points: int = 2500):
+                 min_features: int = 40, async_mapping: bool = False, max_ba_points: int = 800):
         if mode not in ("mono", "rgbd", "stereo"):
             raise ValueError(f"SLAM mode must be mono, rgbd or stereo, not '{mode}'")
         if mode == "stereo" and not baseline:
@@ -653,9 +653,8 @@ class Slam:
         if self.mode != "mono" and len(self.map.keyframes) < 3:
             ref_n = len(ids)
         since = self.frame_id - self.last_kf_frame
-        mapping_idle = self._ba is None or not self._ba.busy
-        if since < 5 or (not mapping_idle and since < 30):
-            return False
+        if since < 5:
+            return False  # (new points are triangulated here at once; only their refinement is asynchronous)
         ratio = 0.9 if self.mode == "mono" else 0.6
         # fewer tracked points than the reference keyframe holds, or tracking clearly degrading since it
         few = n_inliers < ratio * ref_n or n_inliers < 0.6 * self._kf_inliers
