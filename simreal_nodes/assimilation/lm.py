@@ -34,14 +34,15 @@ def huber_weights(r_norm: np.ndarray, k: float) -> np.ndarray:
 
 def image_jacobian(Xc: np.ndarray, K: np.ndarray) -> np.ndarray:
     """(N, 2, 3): d(u, v)/d(X_c) of the pinhole projection (thesis's ^I J Pi_C)."""
-    X, Y, Z = Xc[:, 0], Xc[:, 1], Xc[:, 2]
+    X, Y = Xc[:, 0], Xc[:, 1]
+    iz = 1.0 / Xc[:, 2]
     fx, fy, s = K[0, 0], K[1, 1], K[0, 1]
     J = np.zeros((len(Xc), 2, 3))
-    J[:, 0, 0] = fx / Z
-    J[:, 0, 1] = s / Z
-    J[:, 0, 2] = -(fx * X + s * Y) / Z ** 2
-    J[:, 1, 1] = fy / Z
-    J[:, 1, 2] = -fy * Y / Z ** 2
+    J[:, 0, 0] = fx * iz
+    J[:, 0, 1] = s * iz
+    J[:, 0, 2] = -(fx * X + s * Y) * iz * iz
+    J[:, 1, 1] = fy * iz
+    J[:, 1, 2] = -fy * Y * iz * iz
     return J
 
 
@@ -84,26 +85,32 @@ def predict(p: Problem, x: np.ndarray, n_mu: int, with_jacobian: bool = True):
     dX, ddX = p.disp(mu)
     Rz = G.rot_axis("z", alpha)
     R_w = p.R_wo @ Rz
-    Xw = p.X + dX @ R_w.T
-    Xc = Xw @ p.T_cw[:3, :3].T + p.T_cw[:3, 3]
+    A = p.T_cw[:3, :3] @ R_w  # object frame -> camera frame (rotation only: derivatives are vectors)
+    Xc = p.X @ p.T_cw[:3, :3].T + p.T_cw[:3, 3] + dX @ A.T
+    K = p.K
     with np.errstate(divide="ignore", invalid="ignore"):
-        uv = np.c_[p.K[0, 0] * Xc[:, 0] / Xc[:, 2] + p.K[0, 1] * Xc[:, 1] / Xc[:, 2] + p.K[0, 2],
-                   p.K[1, 1] * Xc[:, 1] / Xc[:, 2] + p.K[1, 2]]
+        iz = 1.0 / Xc[:, 2]
+        uv = np.empty((len(Xc), 2))
+        uv[:, 0] = (K[0, 0] * Xc[:, 0] + K[0, 1] * Xc[:, 1]) * iz + K[0, 2]
+        uv[:, 1] = K[1, 1] * Xc[:, 1] * iz + K[1, 2]
     if not with_jacobian:
         return uv, Xc, None
-    JP = image_jacobian(Xc, p.K)  # (N, 2, 3)
-    A = p.T_cw[:3, :3] @ R_w  # object frame -> camera frame (rotation only: derivatives are vectors)
-    JA = JP @ A  # (N, 2, 3)
-    J = np.einsum("nij,njk->nik", JA, ddX) if n_mu else np.zeros((len(uv), 2, 0))
+    # Eq. 4.12 written out: d(u, v) = J_Pi(X_c) . A . dX, with the image Jacobian applied elementwise
     if p.rigid_z:
-        dRz = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 0.0]])  # R_z(a)^-1 dR_z/da = [e_z]x
-        Ja = np.einsum("nij,nj->ni", JA, dX @ dRz.T)
-        J = np.concatenate([J, Ja[:, :, None]], axis=2)
+        ez_dX = np.stack([-dX[:, 1], dX[:, 0], np.zeros(len(dX))], axis=1)  # [e_z]x dX (the SO(3) derivative)
+        dXo = np.concatenate([ddX, ez_dX[:, :, None]], axis=2)
+    else:
+        dXo = ddX
+    dXc = np.einsum("ij,njp->nip", A, dXo)  # (N, 3, n) displacement derivatives in the camera frame
+    izc = iz[:, None]
+    J = np.empty((len(uv), 2, dXo.shape[2]))
+    J[:, 0, :] = (K[0, 0] * dXc[:, 0] + K[0, 1] * dXc[:, 1]) * izc - ((K[0, 0] * Xc[:, 0] + K[0, 1] * Xc[:, 1]) * iz * iz)[:, None] * dXc[:, 2]
+    J[:, 1, :] = K[1, 1] * dXc[:, 1] * izc - (K[1, 1] * Xc[:, 1] * iz * iz)[:, None] * dXc[:, 2]
     return uv, Xc, J
 
 
 def solve(p: Problem, x0: np.ndarray, lo: np.ndarray, hi: np.ndarray, huber_px: float = 2.0, max_iter: int = 20,
-          lam0: float = 1e-3, tol: float = 1e-9) -> Result:
+          lam0: float = 1e-3, tol: float = 1e-7) -> Result:
     """Levenberg-Marquardt with Huber IRLS weights and box bounds (Eq. 4.8) on image residuals."""
     n = len(x0)
     n_mu = n - (1 if p.rigid_z else 0)
@@ -116,54 +123,61 @@ def solve(p: Problem, x0: np.ndarray, lo: np.ndarray, hi: np.ndarray, huber_px: 
 
 
 def solve_generic(model, obs: np.ndarray, x0, lo, hi, sigma=None, huber: float = 2.0, max_iter: int = 20,
-                  lam0: float = 1e-3, tol: float = 1e-9) -> Result:
+                  lam0: float = 1e-3, tol: float = 1e-7) -> Result:
     """LM for any measurement model: ``model(x) -> (prediction (N, 2), Jacobian (N, 2, n), valid (N,))``;
     residual r = (obs - prediction) / sigma; Huber threshold ``huber`` in units of r."""
     x = np.clip(np.asarray(x0, dtype=np.float64), lo, hi)
     n = len(x)
     sig = np.ones(len(obs)) if sigma is None else np.asarray(sigma, dtype=np.float64)
 
+    isig = 1.0 / sig
+
     def evaluate(x):
         pred, J, ok = model(x)
-        r = (obs - pred) / sig[:, None]
-        valid = ok & np.all(np.isfinite(r), axis=1)
-        rn = np.linalg.norm(np.where(valid[:, None], r, 0.0), axis=1)
-        w = huber_weights(rn, huber) * valid
-        c = np.where(rn <= huber, rn ** 2, 2 * huber * rn - huber ** 2)
-        cost = float(np.sum(np.where(valid, c, 0.0)))
-        return np.where(valid[:, None], r, 0.0), np.nan_to_num(J / sig[:, None, None]), w, valid, cost
+        r = (obs - pred) * isig[:, None]
+        valid = ok & np.isfinite(r).all(axis=1)
+        if not valid.all():
+            r = np.where(valid[:, None], r, 0.0)
+            J = np.where(valid[:, None, None], J, 0.0)
+        rn = np.sqrt(r[:, 0] ** 2 + r[:, 1] ** 2)
+        w = np.where(rn > huber, huber / np.maximum(rn, 1e-300), 1.0) * valid
+        c = np.where(rn <= huber, rn * rn, 2 * huber * rn - huber * huber)
+        return r, J * isig[:, None, None], w, valid, float(c[valid].sum())
 
     r, J, w, valid, cost = evaluate(x)
     lam = lam0
     it = 0
     converged = False
-    for it in range(1, max_iter + 1):
+    span = np.abs(hi - lo) + 1e-300
+    while it < max_iter and not converged:
+        it += 1
         Jf = J.reshape(-1, n)
         wf = np.repeat(w, 2)
         H = Jf.T @ (Jf * wf[:, None])
         g = Jf.T @ (wf * r.ravel())
-        improved = False
-        for _ in range(12):
-            A = H + lam * np.diag(np.maximum(np.diag(H), 1e-12 * max(np.trace(H), 1e-300)))
+        D = np.maximum(np.diag(H), 1e-12 * max(float(np.trace(H)), 1e-300))
+        accepted = False
+        for _ in range(8):
             try:
-                step = np.linalg.solve(A, g)
+                step = np.linalg.solve(H + lam * np.diag(D), g)
             except np.linalg.LinAlgError:
                 lam *= 10
                 continue
             xn = np.clip(x + step, lo, hi)
+            if np.all(np.abs(xn - x) <= tol * span):
+                converged = True  # the step is below resolution (or blocked by the bounds)
+                break
             rn_, Jn, wn, vn, cn = evaluate(xn)
-            if cn < cost or (cn <= cost and np.allclose(xn, x)):
-                dx = np.abs(xn - x)
+            if cn < cost:
+                if cost - cn <= 1e-10 * max(cost, 1e-300):
+                    converged = True
                 x, r, J, w, valid, cost = xn, rn_, Jn, wn, vn, cn
                 lam = max(lam / 10, 1e-12)
-                improved = True
-                if np.all(dx <= tol * (np.abs(hi - lo) + tol)):
-                    converged = True
+                accepted = True
                 break
             lam *= 10
-        if not improved or converged:
+        if not accepted:
             converged = True
-            break
     Jf = J.reshape(-1, n)
     wf = np.repeat(w, 2)
     H = Jf.T @ (Jf * wf[:, None])

@@ -34,7 +34,7 @@ def link(points_obj: np.ndarray, model_points: np.ndarray, candidate_nodes: np.n
     d, idx = tree.query(P, k=k)
     d = d.reshape(len(P), k)
     idx = idx.reshape(len(P), k)
-    w = 1.0 / np.maximum(d, 1e-6 * max(max_dist, 1e-12))
+    w = 1.0 / np.maximum(d, 1e-9)  # inverse distance (a point on a node takes that node)
     w /= w.sum(axis=1, keepdims=True)
     return Links(cand[idx], w, d[:, 0], d[:, 0] <= max_dist)
 

@@ -122,11 +122,12 @@ class DeformableTracker:
         view = self.field.view(uniq, self.cfg.n_modes or None)
         inv = inv.reshape(nodes.shape)
 
+        w3 = weights[:, :, None]
+        w4 = weights[:, :, None, None]
+
         def f(mu):
-            u, J = view.evaluate_with_jacobian(mu)
-            dX = np.einsum("nk,nkc->nc", weights, u[inv])
-            ddX = np.einsum("nk,nkcp->ncp", weights, J[inv])
-            return dX, ddX
+            u, J = view.evaluate_with_jacobian(mu, checked=True)  # LM keeps mu inside the bounds
+            return (u[inv] * w3).sum(axis=1), (J[inv] * w4).sum(axis=1)
 
         return f
 
@@ -248,20 +249,23 @@ class DeformableTracker:
             return est
         gain = rest_rms - res.rms_px
         est.deforming = bool(gain > self.cfg.min_deformation_px)
-        self.x = res.x.copy()
         if not est.deforming:
+            # nothing to see: hold the previous estimate (the images do not say where the load is) and
+            # report the large variance the normal equations give
+            est.values = self.x.copy()
             est.state = LOW_CONFIDENCE
             est.reason = (f"no measurable deformation (residual {res.rms_px:.2f} px vs {rest_rms:.2f} px undeformed): "
                           "the load may be absent or where the images cannot see its effect")
-        else:
-            self.deforming_frames += 1
-            est.state = OK
-            std = np.sqrt(np.clip(np.diag(est.cov), 0, None))
-            weak = [(nm, s, h - l) for nm, s, l, h, fr in zip(self.names, std, self.lo, self.hi, self.frozen)
-                    if not fr and s > 0.05 * (h - l)]
-            if weak:
-                est.state = LOW_CONFIDENCE
-                est.reason = "; ".join(f"{nm} barely observable (std {s:.3g}, {100 * s / r:.0f} % of its range)" for nm, s, r in weak)
+            return est
+        self.x = res.x.copy()
+        self.deforming_frames += 1
+        est.state = OK
+        std = np.sqrt(np.clip(np.diag(est.cov), 0, None))
+        weak = [(nm, s, h - l) for nm, s, l, h, fr in zip(self.names, std, self.lo, self.hi, self.frozen)
+                if not fr and s > 0.05 * (h - l)]
+        if weak:
+            est.state = LOW_CONFIDENCE
+            est.reason = "; ".join(f"{nm} barely observable (std {s:.3g}, {100 * s / r:.0f} % of its range)" for nm, s, r in weak)
         self._update_constants(est)
         est.frozen = self.frozen.copy()
         return est

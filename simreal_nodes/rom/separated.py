@@ -12,6 +12,7 @@ index of a precomputed contact point) takes integer values and has no sensitivit
 
 from __future__ import annotations
 
+import bisect
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -62,6 +63,7 @@ class AxisModes:
         self.axis = axis
         self.modes = np.asarray(modes, dtype=np.float64)  # (m, n)
         x = axis.values
+        self._xl = [float(v) for v in x]
         if axis.kind == "discrete" or len(x) == 1:
             self._pp = None
         elif axis.interpolation == "linear" or len(x) < 4:
@@ -69,11 +71,24 @@ class AxisModes:
             self._pp = ("linear", x, self.modes, slope)
         else:
             cs = CubicSpline(x, self.modes.T, axis=0, bc_type="not-a-knot")
-            self._pp = ("cubic", cs.x, cs.c)  # c: (4, n-1, m)
+            # per interval, the 4 polynomial coefficients of every mode, contiguous (Horner in one pass)
+            self._pp = ("cubic", cs.x, np.ascontiguousarray(cs.c.transpose(1, 0, 2)))  # (n-1, 4, m)
 
     def _interval(self, t: float) -> int:
-        x = self.axis.values
-        return int(np.clip(np.searchsorted(x, t, side="right") - 1, 0, len(x) - 2))
+        i = bisect.bisect_right(self._xl, t) - 1
+        return 0 if i < 0 else (len(self._xl) - 2 if i > len(self._xl) - 2 else i)
+
+    def value_and_derivative(self, t: float, m: int) -> tuple[np.ndarray, np.ndarray]:
+        """Both at once (the tracker's hot path)."""
+        if self._pp is None or self._pp[0] != "cubic":
+            return self.value(t, m), self.derivative(t, m)
+        _, x, c = self._pp
+        i = self._interval(t)
+        d = t - self._xl[i]
+        ci = c[i, :, :m]
+        v = ((ci[0] * d + ci[1]) * d + ci[2]) * d + ci[3]
+        dv = (3 * ci[0] * d + 2 * ci[1]) * d + ci[2]
+        return v, dv
 
     def value(self, t: float, m: int) -> np.ndarray:
         if self._pp is None:
@@ -84,8 +99,9 @@ class AxisModes:
             return y[:m, i] + slope[:m, i] * (t - x[i])
         _, x, c = self._pp
         i = self._interval(t)
-        d = t - x[i]
-        return ((c[0, i, :m] * d + c[1, i, :m]) * d + c[2, i, :m]) * d + c[3, i, :m]
+        d = t - self._xl[i]
+        ci = c[i, :, :m]
+        return ((ci[0] * d + ci[1]) * d + ci[2]) * d + ci[3]
 
     def derivative(self, t: float, m: int) -> np.ndarray:
         if self._pp is None:
@@ -95,8 +111,9 @@ class AxisModes:
             return slope[:m, self._interval(t)].copy()
         _, x, c = self._pp
         i = self._interval(t)
-        d = t - x[i]
-        return (3 * c[0, i, :m] * d + 2 * c[1, i, :m]) * d + c[2, i, :m]
+        d = t - self._xl[i]
+        ci = c[i, :, :m]
+        return (3 * ci[0] * d + 2 * ci[1]) * d + ci[2]
 
     def _index(self, t: float) -> int:
         i = int(round(t))
@@ -162,10 +179,19 @@ class SeparatedField:
                 raise ValueError(f"parameter '{ax.name}' = {v:g} is outside the model's range [{ax.range[0]:g}, {ax.range[1]:g}]")
         return mu
 
-    def coefficients(self, mu, n_modes: int | None = None, with_derivatives: bool = False):
-        """c_i = prod_k G_i^k(mu_k) and, optionally, dc_i/dmu_k (m, n_params; NaN columns for discrete axes)."""
+    def coefficients(self, mu, n_modes: int | None = None, with_derivatives: bool = False, checked: bool = False):
+        """c_i = prod_k G_i^k(mu_k) and, optionally, dc_i/dmu_k (m, n_params; NaN columns for discrete axes).
+        ``checked``: mu was validated by the caller (hot loops)."""
         m = self._m(n_modes)
-        mu = self.check_mu(mu)
+        mu = np.asarray(mu, dtype=np.float64).ravel() if checked else self.check_mu(mu)
+        if len(self._axis_modes) == 1:  # the common single-parameter case, without list building
+            am = self._axis_modes[0]
+            if not with_derivatives:
+                return am.value(float(mu[0]), m)
+            if am._pp is None:
+                return am.value(float(mu[0]), m), np.full((m, 1), np.nan)
+            c, d = am.value_and_derivative(float(mu[0]), m)
+            return c, d[:, None]
         vals = [am.value(t, m) for am, t in zip(self._axis_modes, mu)]
         c = np.prod(vals, axis=0) if vals else np.ones(m)
         if not with_derivatives:
@@ -217,10 +243,13 @@ class FieldView:
         c = self.field.coefficients(mu, self.n_modes)
         return (c @ self.S).reshape(self.n_sel, self.n_comp)
 
-    def evaluate_with_jacobian(self, mu) -> tuple[np.ndarray, np.ndarray]:
+    def evaluate_with_jacobian(self, mu, checked: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """u (n_sel, n_comp) and du/dmu (n_sel, n_comp, n_params) in one product."""
-        c, dc = self.field.coefficients(mu, self.n_modes, with_derivatives=True)
-        C = np.vstack([c, np.nan_to_num(dc).T])  # (1 + n_params, m)
+        c, dc = self.field.coefficients(mu, self.n_modes, with_derivatives=True, checked=checked)
+        C = np.empty((1 + dc.shape[1], len(c)))
+        C[0] = c
+        C[1:] = dc.T
+        C[~np.isfinite(C)] = 0.0
         out = C @ self.S  # (1 + n_params, n_sel * n_comp)
         u = out[0].reshape(self.n_sel, self.n_comp)
         J = out[1:].reshape(-1, self.n_sel, self.n_comp).transpose(1, 2, 0)

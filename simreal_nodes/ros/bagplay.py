@@ -150,6 +150,8 @@ class Player:
         self.stats = PlayStats()
         self.should_stop = lambda: False
         self.extra_ready = lambda: True
+        self.dead_nodes = lambda: []
+        self.node_inputs: dict[str, list[str]] = {}
         self.pubs = {t: node.create_publisher(message_class(ty), t, data_qos(lossless)) for t, ty in input_topics.items()}
         self._reports: dict[int, dict[str, str]] = defaultdict(dict)
         self._t_pub: dict[int, float] = {}
@@ -168,8 +170,13 @@ class Player:
         want = set(self.nodes)
         while time.monotonic() < t_end:
             self.executor.spin_once(timeout_sec=0.1)
+            dead = self.dead_nodes()
+            if dead:
+                self.echo(f"[replay] node(s) {', '.join(dead)} exited and will not restart")
+                return False
             names = set(self.node.get_node_names())
-            if want <= names and self.pubs[self.image_topic].get_subscription_count() > 0 and self.extra_ready():
+            if want <= names and self.pubs[self.image_topic].get_subscription_count() > 0 and self.extra_ready() \
+                    and self._inputs_matched():
                 # give discovery of the remaining endpoints a moment
                 t1 = time.monotonic() + 0.5
                 while time.monotonic() < t1:
@@ -179,6 +186,15 @@ class Player:
         self.echo(f"[replay] graph not ready after {timeout_s:.0f} s; missing nodes: {', '.join(sorted(missing)) or 'none'}"
                   f"; image subscribers: {self.pubs[self.image_topic].get_subscription_count()}")
         return False
+
+    def _inputs_matched(self) -> bool:
+        """Every node subscribes to each of its inputs (a frame published earlier would be lost)."""
+        for name, topics in self.node_inputs.items():
+            for t in topics:
+                subs = {i.node_name for i in self.node.get_subscriptions_info_by_topic(t)}
+                if name not in subs:
+                    return False
+        return True
 
     def _frame_done(self, s: int) -> str | None:
         rep = self._reports.get(s, {})

@@ -12,7 +12,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
-from simreal_nodes.errors import BagError
+from simreal_nodes.errors import BagError, SimrealError
 from simreal_nodes.io import bags
 from simreal_nodes.launch import Launcher, ros_environment
 from simreal_nodes.ros.bagplay import Player, Recorder
@@ -77,12 +77,16 @@ def replay(bag: str, scene_file: str, rate: float = 1.0, lossless: bool = False,
             player = Player(node, ex, inputs, img, [n.name for n in nodes], lossless, rate,
                             frame_timeout_s, echo=echo)
             player.should_stop = stop.event.is_set
+            player.node_inputs = {n.name: [t for t in n.inputs if t.startswith("/simreal/")] for n in nodes}
             if recorder:
                 player.extra_ready = recorder.ready
             if launcher:
                 launcher.start()
+            if launcher:
+                player.dead_nodes = lambda: [p.spec.name for p in launcher.procs
+                                             if p.popen is None and p.restarts >= launcher.respawn]
             if not player.wait_ready(ready_timeout_s):
-                raise RuntimeError("the graph did not come up; see the node output above")
+                raise SimrealError("the graph did not come up; see the node output above")
             stats = player.play(bags.read_bag(bag, report, topics=inputs.keys()), hold_for=hold_for)
     finally:
         if recorder:

@@ -123,10 +123,13 @@ MARKER_BLACK = MARKER_SIZE * 6 / 8  # the marker itself: 4x4 bits + 1-bit border
 DOT_X = np.arange(0.03, 0.481, 0.03)
 
 
+DOT_PROUD = 0.0004  # the dots are stickers: their surface stands 0.4 mm proud of the face
+
+
 def beam_dots(model: ReducedModel) -> np.ndarray:
     """Reference positions (object frame) of the blue dots glued on the beam's front face (y = 0)."""
     h = model.points[:, 2].max()
-    return np.c_[DOT_X, np.zeros(len(DOT_X)), np.full(len(DOT_X), h / 2)]
+    return np.c_[DOT_X, np.full(len(DOT_X), -DOT_PROUD), np.full(len(DOT_X), h / 2)]
 
 
 def _interp_disp(model: ReducedModel, mu, P: np.ndarray, k: int = 4) -> np.ndarray:
@@ -180,7 +183,7 @@ def aluminium_beam(width=640, height=480, duration=6.0, fps=30.0) -> SynthScene:
         dd = dots + _interp_disp(m, [s], dots)
         for k, p in enumerate(dd):
             # a disk on the front face (normal -y), slightly in front of it
-            r.update(f"dot{k}", pose=T_wo @ G.make_T(G.rot_axis("x", np.pi / 2), p + [0, -0.0004, 0]))
+            r.update(f"dot{k}", pose=T_wo @ G.make_T(G.rot_axis("x", np.pi / 2), p))
         top = np.array([[s, 0.02, m.points[:, 2].max()]])
         wt = top + _interp_disp(m, [s], top)
         r.update("weight", pose=T_wo @ G.make_T(t=wt[0]))

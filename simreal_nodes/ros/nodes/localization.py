@@ -21,7 +21,7 @@ from tf2_msgs.msg import TFMessage
 from simreal_nodes import geometry as G
 from simreal_nodes.errors import CameraInfoError, ImageFormatError
 from simreal_nodes.io import images
-from simreal_nodes.ros.common import (TF_QOS, SimrealNode, cloud_msg, data_qos, guarded, matrix_to_pose,
+from simreal_nodes.ros.common import (ns_to_stamp, TF_QOS, SimrealNode, cloud_msg, data_qos, guarded, matrix_to_pose,
                                       pose_stamped, reliable_qos, run_node, stamp_ns, transform_stamped)
 from simreal_nodes.scene import graph
 from simreal_nodes.scene.schema import load_scene
@@ -122,8 +122,8 @@ class LocalizationNode(SimrealNode):
     # -- frames --------------------------------------------------------------------------------------------
     def on_input(self, key: str, msg: Image) -> None:
         ready = self.sync.add(key, stamp_ns(msg.header.stamp), msg)
-        for _, why in self.sync.pop_dropped():
-            self.metrics.drop(why)
+        for stamp, why in self.sync.pop_dropped():
+            self.drop(ns_to_stamp(stamp), why)
         for _, frame in ready:
             self.process(frame)
 

@@ -1,0 +1,178 @@
+"""Deformable tracking node (thesis ch. 4): estimates each tracked object's physical parameters.
+
+Per frame it takes the localization node's FeatureObservations (camera pose + matched map points)
+and, for glued-dot measurements, the image of the same stamp, runs the ROS-free
+:class:`DeformableTracker` of every tracked object and publishes ``/simreal/objects/<id>/parameters``
+(ModelParameters: values, covariance, residual, inliers, state and reason). Once deformation appears
+it asks the localization node to stop mapping (``set_localization_only``) and names the map points
+that lie on the object (``/simreal/localization/deformable_points``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from sensor_msgs.msg import CameraInfo, Image
+from simreal_msgs.msg import FeatureObservations, ModelParameters, TrackingStatus
+from std_msgs.msg import UInt32MultiArray
+from std_srvs.srv import SetBool
+
+from simreal_nodes import geometry as G
+from simreal_nodes.assimilation.tracker import DeformableTracker, TrackerConfig
+from simreal_nodes.errors import CameraInfoError, ImageFormatError
+from simreal_nodes.io import images
+from simreal_nodes.ros.common import (ns_to_stamp, SimrealNode, data_qos, guarded, pose_to_matrix, reliable_qos, run_node,
+                                      stamp_ns)
+from simreal_nodes.rom.model_file import load_model
+from simreal_nodes.scene import graph
+from simreal_nodes.scene.schema import load_scene
+from simreal_nodes.sync import StampSync
+from simreal_nodes.vision.camera import CameraModel
+
+LOC_DEFORMABLE = "/simreal/localization/deformable_points"
+
+
+class TrackerNode(SimrealNode):
+    def __init__(self):
+        super().__init__("tracker")
+        self.scene = load_scene(self.scene_file)
+        self.objects = [o for o in self.scene["objects"] if o["tracking"]["enabled"]]
+        loc = self.scene["localization"]
+        self.static_pose = G.pose7_to_matrix(loc["static_pose"]) if loc["mode"] == "static" else None
+        self.huber_override = self.param("huber_px", 0.0, "override every object's Huber threshold (0 = scene)")
+        self.modes_override = self.param("modes", 0, "override the number of PGD modes (0 = scene)")
+        self.models = {}
+        for o in self.objects:
+            fields = ["displacement"]
+            self.models[o["id"]] = load_model(o["model"], fields=fields)
+            self.get_logger().info(f"object {o['id']}: {self.models[o['id']].summary().splitlines()[0]}")
+        self.trackers: dict[str, DeformableTracker] = {}
+        self.cam: CameraModel | None = None
+        need_image = any(o["tracking"]["measurements"] in ("dots", "homography") for o in self.objects)
+        self.need_image = need_image
+        keys = ("obs", "image") if (need_image and self.static_pose is None) else (("image",) if self.static_pose is not None else ("obs",))
+        self.sync = StampSync(keys, (), wait=2)
+        q = data_qos(self.lossless)
+        self.pubs = {o["id"]: self.create_publisher(ModelParameters, graph.params_topic(o["id"]), reliable_qos(50))
+                     for o in self.objects}
+        self.pub_status = self.create_publisher(TrackingStatus, graph.TRACKER_STATUS, reliable_qos(10))
+        self.pub_deformable = self.create_publisher(UInt32MultiArray, LOC_DEFORMABLE, reliable_qos(10))
+        self.create_subscription(CameraInfo, graph.CAM_INFO, self.on_info, q)
+        if "obs" in keys:
+            self.create_subscription(FeatureObservations, graph.LOC_OBS, lambda m: self.on_input("obs", m), q)
+        if "image" in keys:
+            self.create_subscription(Image, graph.CAM_IMAGE, lambda m: self.on_input("image", m), q)
+        self.loc_client = self.create_client(SetBool, "/localization/set_localization_only")
+        self._loc_only_requested = False
+        self._published_deformable = 0
+        self.set_status("ok", f"tracking {', '.join(o['id'] for o in self.objects)}")
+
+    @guarded
+    def on_info(self, msg: CameraInfo) -> None:
+        try:
+            cam = CameraModel.from_camera_info(msg)
+        except CameraInfoError as e:
+            self.set_status("error", f"unusable CameraInfo: {e}")
+            return
+        if self.cam is None or not np.allclose(cam.K, self.cam.K):
+            self.cam = cam
+            self.trackers = {}
+
+    def _tracker(self, o) -> DeformableTracker:
+        tr = self.trackers.get(o["id"])
+        if tr is None:
+            t = o["tracking"]
+            cfg = TrackerConfig(measurements=t["measurements"], huber_px=self.huber_override or t["huber_px"],
+                                n_modes=self.modes_override or t["modes"], max_iterations=t["max_iterations"],
+                                constant_frames=t["constant_frames"], min_measurements=t["min_measurements"],
+                                max_points=t["points"], dots=np.asarray(t["dots"]) if t["dots"] else None,
+                                dot_color=tuple(t["dot_color"]))
+            tr = DeformableTracker(self.models[o["id"]], G.pose7_to_matrix(o["anchor"]["pose"]), o["parameters"], self.cam, cfg)
+            self.trackers[o["id"]] = tr
+        return tr
+
+    def on_input(self, key, msg) -> None:
+        for _, frame in self.sync.add(key, stamp_ns(msg.header.stamp), msg):
+            self.process(frame)
+        for stamp, why in self.sync.pop_dropped():
+            self.drop(ns_to_stamp(stamp), why)
+
+    @guarded
+    def process(self, frame: dict) -> None:
+        head = (frame.get("obs") or frame.get("image")).header
+        t0 = self.metrics.arrived()
+        if self.cam is None:
+            self.drop(head.stamp, "waiting for a valid CameraInfo")
+            return
+        T_wc, ids, P, uv = None, None, None, None
+        if "obs" in frame:
+            o = frame["obs"]
+            q = o.camera_pose.orientation
+            if abs(q.x) + abs(q.y) + abs(q.z) + abs(q.w) > 0:
+                T_wc = pose_to_matrix(o.camera_pose)
+            ids = np.asarray(o.point_ids, dtype=np.int64)
+            P = np.asarray(o.points_xyz, dtype=np.float64).reshape(-1, 3)
+            uv = np.asarray(o.pixels_uv, dtype=np.float64).reshape(-1, 2)
+            if len(P) != len(ids) or len(uv) != len(ids):
+                self.drop(head.stamp, f"malformed observations ({len(ids)} ids, {len(P)} points, {len(uv)} pixels)")
+                return
+        else:
+            T_wc = self.static_pose
+        bgr = None
+        if "image" in frame and self.need_image:
+            try:
+                bgr = images.to_bgr8(images.image_to_array(frame["image"]), frame["image"].encoding)
+            except ImageFormatError as e:
+                self.drop(head.stamp, f"malformed image: {e}")
+                return
+        deforming = False
+        for o in self.objects:
+            tr = self._tracker(o)
+            est = tr.update(T_wc, ids, P, uv, bgr)
+            deforming |= est.deforming
+            self._publish(o, tr, est, head)
+        self._coordinate_localization(deforming)
+        self.metrics.done(t0, self.age_ms(head.stamp))
+        self.progress(head.stamp)
+
+    def _publish(self, o, tr, est, head) -> None:
+        m = ModelParameters()
+        m.header.stamp = head.stamp
+        m.header.frame_id = o["id"]
+        m.object_id = o["id"]
+        m.model_id = tr.model.model_id
+        m.names, m.units = list(est.names), list(est.units)
+        m.values = [float(v) for v in est.values]
+        m.frozen = [bool(f) for f in est.frozen]
+        m.covariance = [float(c) if np.isfinite(c) else float("inf") for c in np.asarray(est.cov).ravel()]
+        m.residual_rms_px = float(est.rms_px) if np.isfinite(est.rms_px) else -1.0
+        m.inliers, m.measurements, m.iterations = int(est.inliers), int(est.measurements), int(est.iterations)
+        m.state, m.reason = int(est.state), est.reason
+        self.pubs[o["id"]].publish(m)
+        st = TrackingStatus()
+        st.header.stamp = head.stamp
+        st.node, st.mode = self.get_name(), f"deformable:{o['id']}"
+        st.state = {0: TrackingStatus.STATE_OK, 1: TrackingStatus.STATE_LOW_CONFIDENCE, 2: TrackingStatus.STATE_LOST,
+                    3: TrackingStatus.STATE_INITIALIZING}[est.state]
+        st.reason, st.tracked_features = est.reason, int(est.inliers)
+        self.pub_status.publish(st)
+        self.metrics.extra[f"{o['id']}_solve_ms"] = f"{est.solve_ms:.2f}"
+        self.set_status("ok" if est.state == 0 else "warn", f"{o['id']}: " + (est.reason or "ok"))
+
+    def _coordinate_localization(self, deforming: bool) -> None:
+        """Deformable map points leave the pose estimate; mapping stops once deformation appears (§4.4.1)."""
+        ids = sorted({i for tr in self.trackers.values() for i in tr.deformable_ids})
+        if ids and len(ids) != self._published_deformable:
+            self.pub_deformable.publish(UInt32MultiArray(data=ids))
+            self._published_deformable = len(ids)
+        if deforming and not self._loc_only_requested and self.loc_client.service_is_ready():
+            self.loc_client.call_async(SetBool.Request(data=True))
+            self._loc_only_requested = True
+            self.get_logger().info("deformation appeared: localization-only mode requested")
+
+
+def main(args=None):
+    return run_node(TrackerNode, args)
+
+
+if __name__ == "__main__":
+    main()
