@@ -124,7 +124,14 @@ def cmd_eval_tracking(a) -> int:
     for oid in a.object:
         est = read_parameters(a.output_bag, f"/simreal/objects/{oid}/parameters")
         tru = read_parameters(truth_bag, f"/ground_truth/objects/{oid}/parameters")
-        reports = compare(est, tru)
+        ranges = None
+        if a.scene:
+            from simreal_nodes.demo import model_ranges
+            from simreal_nodes.scene.schema import load_scene
+
+            objs = {o["id"]: o for o in load_scene(a.scene)["objects"]}
+            ranges = model_ranges(objs[oid]["model"]) if oid in objs else None
+        reports = compare(est, tru, ranges)
         for r in reports:
             deg = r.unit == "rad"
             scale, unit = (180 / np.pi, "deg") if deg else ((1e3, "mm") if r.unit == "m" else (1.0, r.unit))
@@ -140,11 +147,30 @@ def cmd_eval_tracking(a) -> int:
     return 0
 
 
+def cmd_demo(a) -> int:
+    from simreal_nodes.demo import run_demo
+
+    m = run_demo(a.scene, a.output, regenerate=a.regenerate, resolution=a.resolution, duration=a.duration)
+    bad = [k for k, p in m["parameters"].items() if "error" in p]
+    return 1 if bad or m["frames"]["frames_completed"] == 0 else 0
+
+
 def add_commands(sub) -> None:
+    from simreal_nodes.demo import DEFAULT_SCENE
+
+    s = sub.add_parser("demo", help="end-to-end demo on an embedded sample scene (no camera needed)")
+    s.add_argument("--scene", default=DEFAULT_SCENE, help=f"synthetic seed scene (default {DEFAULT_SCENE})")
+    s.add_argument("-o", "--output", default="out/demo", help="folder for the MP4, plot and metrics")
+    s.add_argument("--resolution", default="640x480")
+    s.add_argument("--duration", type=float, help="seconds, when the sample bag has to be rendered")
+    s.add_argument("--regenerate", action="store_true", help="render the sample bag again")
+    s.set_defaults(fn=cmd_demo)
+
     s = sub.add_parser("eval-tracking", help="estimated vs true parameters of a replayed synthetic bag (Table 4.1)")
     s.add_argument("output_bag", help="bag recorded by `simreal replay --record`")
     s.add_argument("--truth", help="the synthetic input bag (ground truth)")
     s.add_argument("--object", action="append", required=True, help="object id (repeatable)")
+    s.add_argument("--scene", help="scene YAML: report errors as %% of the model's parameter ranges (default: of the true range)")
     s.add_argument("--json", help="write the numbers here")
     s.set_defaults(fn=cmd_eval_tracking)
 

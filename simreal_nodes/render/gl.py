@@ -101,6 +101,26 @@ void main() {
 """
 
 
+BG_VERT = """
+#version 330
+in vec2 in_xy;
+void main() { gl_Position = vec4(in_xy, 0.0, 1.0); }
+"""
+
+BG_FRAG = """
+#version 330
+uniform sampler2D u_bg;
+uniform vec2 u_viewport;
+layout(location = 0) out vec4 f_color;
+layout(location = 1) out float f_depth;
+void main() {
+    vec2 p = gl_FragCoord.xy / u_viewport;
+    f_color = vec4(texture(u_bg, vec2(p.x, 1.0 - p.y)).rgb, 1.0);  // image rows are top-down
+    f_depth = 0.0;
+}
+"""
+
+
 class RenderError(SimrealError):
     pass
 
@@ -308,6 +328,65 @@ class Renderer:
         self.fbo.use()
         self.ctx.viewport = (0, 0, rc.width, rc.height)
         self.fbo.clear(*self.background, 0.0, depth=1.0)
+        self._draw(T_world_cam, names, real_depth, occlusion_margin)
+        rgb = np.frombuffer(self.fbo.read(components=3, attachment=0), np.uint8).reshape(rc.height, rc.width, 3)[::-1]
+        depth = np.frombuffer(self.fbo.read(components=1, attachment=1, dtype="f4"), np.float32).reshape(rc.height, rc.width)[::-1]
+        return self._to_camera(rgb, depth, background, distort)
+
+    def composite(self, T_world_cam: np.ndarray, background_rgb: np.ndarray, names: list[str] | None = None,
+                  real_depth: np.ndarray | None = None, occlusion_margin: float = 0.0) -> np.ndarray:
+        """Meshes drawn over a camera image (RGB uint8, real-camera pixels), with optional occlusion by real
+        depth. Without lens distortion or supersampling the image is composited on the GPU (the camera image
+        is a background texture, one readback); otherwise through :meth:`render`'s remap."""
+        import moderngl
+
+        rc = self.render_cam
+        if self.ssaa > 1:
+            rgb, _ = self.render(T_world_cam, names, real_depth, occlusion_margin, background=background_rgb)
+            return rgb
+        if self._map is not None:
+            # lens distortion: draw the meshes alone in the ideal camera, remap colour + coverage, paste
+            self.fbo.use()
+            self.ctx.viewport = (0, 0, rc.width, rc.height)
+            self.fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+            self._draw(T_world_cam, names, real_depth, occlusion_margin)
+            rgba = np.frombuffer(self.fbo.read(components=4, attachment=0), np.uint8).reshape(rc.height, rc.width, 4)
+            rgba = cv2.remap(cv2.flip(rgba, 0), self._map[..., 0], self._map[..., 1], cv2.INTER_LINEAR)
+            out = np.array(background_rgb, dtype=np.uint8, copy=True)
+            x, y, w, h = cv2.boundingRect(rgba[..., 3])  # only where something was drawn
+            if w and h:
+                a = rgba[y:y + h, x:x + w, 3:4].astype(np.float32) * np.float32(1 / 255)
+                bg = out[y:y + h, x:x + w].astype(np.float32)
+                out[y:y + h, x:x + w] = (bg + (rgba[y:y + h, x:x + w, :3] - bg) * a + 0.5).astype(np.uint8)
+            return out
+        if not hasattr(self, "_bg_prog"):
+            self._bg_prog = self.ctx.program(vertex_shader=BG_VERT, fragment_shader=BG_FRAG)
+            tri = np.array([-1, -1, 3, -1, -1, 3], dtype="f4")
+            self._bg_vbo = self.ctx.buffer(tri.tobytes())
+            self._bg_vao = self.ctx.vertex_array(self._bg_prog, [(self._bg_vbo, "2f", "in_xy")])
+            self._bg_tex = self.ctx.texture((rc.width, rc.height), 3)
+            self._bg_tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+            self._bg_out = np.empty((rc.height, rc.width, 3), np.uint8)
+        bg = np.ascontiguousarray(background_rgb, dtype=np.uint8)
+        if bg.shape != (rc.height, rc.width, 3):
+            raise RenderError(f"background is {bg.shape}, expected {(rc.height, rc.width, 3)}")
+        self._bg_tex.write(bg.tobytes())
+        self.fbo.use()
+        self.ctx.viewport = (0, 0, rc.width, rc.height)
+        self.fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+        self.ctx.disable(moderngl.DEPTH_TEST)
+        self._bg_tex.use(location=2)
+        self._bg_prog["u_bg"].value = 2
+        self._bg_prog["u_viewport"].value = (float(rc.width), float(rc.height))
+        self._bg_vao.render(moderngl.TRIANGLES)
+        self._draw(T_world_cam, names, real_depth, occlusion_margin)
+        self.fbo.read_into(self._bg_out, components=3, attachment=0)
+        return cv2.flip(self._bg_out, 0)
+
+    def _draw(self, T_world_cam, names, real_depth, occlusion_margin) -> None:
+        import moderngl
+
+        rc = self.render_cam
         self.ctx.enable(moderngl.DEPTH_TEST)
         self.ctx.disable(moderngl.CULL_FACE)
         occlude = real_depth is not None
@@ -337,9 +416,6 @@ class Renderer:
                 m._tex.use(location=0)
                 self.prog["u_tex"].value = 0
             m._vao[occlude].render(moderngl.TRIANGLES)
-        rgb = np.frombuffer(self.fbo.read(components=3, attachment=0), np.uint8).reshape(rc.height, rc.width, 3)[::-1]
-        depth = np.frombuffer(self.fbo.read(components=1, attachment=1, dtype="f4"), np.float32).reshape(rc.height, rc.width)[::-1]
-        return self._to_camera(rgb, depth, background, distort)
 
     def _set_real_depth(self, real_depth: np.ndarray) -> None:
         """Upload real depth (real-camera pixels) in the render camera's pixel grid (inverse of _to_camera)."""

@@ -177,8 +177,9 @@ class Player:
             names = set(self.node.get_node_names())
             if want <= names and self.pubs[self.image_topic].get_subscription_count() > 0 and self.extra_ready() \
                     and self._inputs_matched():
-                # give discovery of the remaining endpoints a moment
-                t1 = time.monotonic() + 0.5
+                # the graph view can list a reader before every writer has matched it (discovery is per
+                # participant): give the remaining endpoints time to match, or a node misses frame one
+                t1 = time.monotonic() + 2.0
                 while time.monotonic() < t1:
                     self.executor.spin_once(timeout_sec=0.05)
                 return True

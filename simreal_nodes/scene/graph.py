@@ -97,11 +97,12 @@ def required_nodes(scene: dict, lossless: bool = False) -> list[NodeSpec]:
         for o in colliding:
             out[contact_topic(o["id"])] = "simreal_msgs/msg/ContactState"
             out[params_topic(o["id"])] = "simreal_msgs/msg/ModelParameters"
+        depth_in = [CAM_DEPTH] if depth else [CAM_IMAGE, CAM_RIGHT_IMAGE, CAM_RIGHT_INFO]  # stereo: SGBM in the node
         nodes.append(NodeSpec("collision", "simreal_nodes.ros.nodes.collision", dict(common),
-                              [CAM_DEPTH, CAM_INFO] + ([POSE] if loc["mode"] != "static" else []), out))
+                              depth_in + [CAM_INFO] + ([LOC_OBS] if loc["mode"] != "static" else []), out))
 
     if scene["overlay"]["enabled"]:
-        ins = [CAM_IMAGE, CAM_INFO] + ([CAM_DEPTH] if depth else []) + ([POSE] if loc["mode"] != "static" else [])
+        ins = [CAM_IMAGE, CAM_INFO] + ([CAM_DEPTH] if depth else []) + ([LOC_OBS] if loc["mode"] != "static" else [])
         ins += [params_topic(o["id"]) for o in objs if o["tracking"]["enabled"] or o["collision"]["enabled"]]
         nodes.append(NodeSpec("overlay", "simreal_nodes.ros.nodes.overlay", dict(common), ins,
                               {OVERLAY_IMAGE: "sensor_msgs/msg/Image",

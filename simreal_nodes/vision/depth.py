@@ -1,0 +1,60 @@
+"""Depth images to points (thesis §5.2.3-5.2.4), ROS-free.
+
+    depth (metres, NaN invalid)  --decimate N-->  pixels (u, v) with valid Z
+    X_c = Z K^-1 [u, v, 1]^T                     (ideal pixels: the caller undistorts if needed)
+    X_w = T_world_cam X_c
+
+Decimation keeps every N-th pixel in each direction (N = 1: all), which is the collision node's
+speed/accuracy knob: the distance to the nearest real point grows by at most ~N pixel footprints.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from simreal_nodes import geometry as G
+from simreal_nodes.vision.camera import CameraModel
+
+
+@dataclass
+class DepthPoints:
+    points: np.ndarray  # (n, 3) world frame (or camera frame when no pose is given)
+    pixels: np.ndarray  # (n, 2) their pixel coordinates
+    valid_fraction: float  # of the decimated pixels
+    total: int  # decimated pixels considered
+
+
+def depth_points(depth_m: np.ndarray, cam: CameraModel, step: int = 1, T_world_cam: np.ndarray | None = None,
+                 min_depth: float = 0.05, max_depth: float = 10.0) -> DepthPoints:
+    """Back-project a metric depth image (NaN / 0 / inf / negative invalid) decimated by ``step``."""
+    d = np.asarray(depth_m)
+    if d.ndim != 2:
+        raise ValueError(f"depth image must be 2-D, got shape {d.shape}")
+    if d.shape != (cam.height, cam.width):
+        raise ValueError(f"depth image is {d.shape[1]}x{d.shape[0]}, CameraInfo says {cam.width}x{cam.height}")
+    step = max(1, int(step))
+    sub = d[::step, ::step].astype(np.float64)
+    total = sub.size
+    with np.errstate(invalid="ignore"):
+        ok = np.isfinite(sub) & (sub >= min_depth) & (sub <= max_depth)
+    vv, uu = np.nonzero(ok)
+    z = sub[vv, uu]
+    uv = np.stack([uu * step, vv * step], axis=1).astype(np.float64)
+    P = cam.backproject(uv, z)
+    if T_world_cam is not None:
+        P = G.transform(np.asarray(T_world_cam, dtype=np.float64), P)
+    return DepthPoints(P, uv, float(len(z)) / max(total, 1), total)
+
+
+def bad_pixel_rate(disp: np.ndarray, truth: np.ndarray, threshold: float = 2.0) -> tuple[float, float]:
+    """Middlebury's bad-pixel rate: fraction of pixels with a valid truth whose estimated disparity is missing
+    or off by more than ``threshold`` pixels; also the fraction of those that have an estimate (density)."""
+    t = np.asarray(truth, dtype=np.float64)
+    e = np.asarray(disp, dtype=np.float64)
+    valid = np.isfinite(t) & (t > 0)
+    have = valid & np.isfinite(e)
+    bad = valid & (~np.isfinite(e) | (np.abs(np.nan_to_num(e) - t) > threshold))
+    n = max(int(valid.sum()), 1)
+    return float(bad.sum()) / n, float(have.sum()) / n

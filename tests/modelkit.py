@@ -1,0 +1,62 @@
+"""Tiny reduced models built in memory for unit tests (no FEM): a unit square plate of nodes whose
+displacement is known in closed form, so every expected value can be written down."""
+
+import numpy as np
+
+from simreal_nodes.rom.model import ReducedModel
+from simreal_nodes.rom.separated import Axis, SeparatedField
+
+
+def plate_points(n: int = 6, size: float = 0.1) -> tuple[np.ndarray, np.ndarray]:
+    """n x n nodes on the z = 0 plane (object frame) and its 2 (n-1)^2 triangles."""
+    xs = np.linspace(0, size, n)
+    X, Y = np.meshgrid(xs, xs, indexing="ij")
+    P = np.c_[X.ravel(), Y.ravel(), np.zeros(n * n)]
+    tris = []
+    for i in range(n - 1):
+        for j in range(n - 1):
+            a, b, c, d = i * n + j, (i + 1) * n + j, (i + 1) * n + j + 1, i * n + j + 1
+            tris += [[a, b, c], [a, c, d]]
+    return P, np.asarray(tris, np.int64)
+
+
+def probe_model(n: int = 6, size: float = 0.1, depth: float = 0.01, n_modes: int = 1) -> ReducedModel:
+    """Contact model: load points = every node, u(x; lp, tau) = -depth * tau * e_z at the loaded node's
+    neighbourhood (a bump). Axes (load_point, pseudo_time) as the probe NI-PGD models have."""
+    P, tris = plate_points(n, size)
+    k = len(P)
+    lp = np.arange(k, dtype=np.float64)
+    tau = np.linspace(0, 1, 11)
+    # separated form of a bump centred at each load point: one mode per load point (space) x indicator (lp)
+    space = np.zeros((k, k, 3))
+    for i in range(k):
+        r = np.linalg.norm(P - P[i], axis=1)
+        space[i, :, 2] = -depth * np.exp(-(r / (0.25 * size)) ** 2)
+    g_lp = np.eye(k)
+    g_tau = np.tile(tau, (k, 1))
+    axes = [Axis("load_point", lp, "", "discrete", "linear"), Axis("pseudo_time", tau, "")]
+    fld = SeparatedField("displacement", space, [g_lp, g_tau], axes, "m", ["x", "y", "z"])
+    return ReducedModel("plate", P, tris, "tri3", axes, {"displacement": fld}, tris, "test plate",
+                        {"law": "neo_hookean"}, load_points=np.arange(k), load_directions=np.tile([0, 0, -1.0], (k, 1)))
+
+
+def beam_model(n_modes: int = 6, length: float = 0.5) -> ReducedModel:
+    """Cantilever-like model u_z(x; s) = sum_i a_i(s) phi_i(x) with quickly decaying modes (for truncation)."""
+    n = 26
+    x = np.linspace(0, length, n)
+    P = np.c_[np.repeat(x, 2), np.tile([0.0, 0.02], n), np.zeros(2 * n)]
+    tris = []
+    for i in range(n - 1):
+        a, b, c, d = 2 * i, 2 * i + 1, 2 * i + 3, 2 * i + 2
+        tris += [[a, b, c], [a, c, d]]
+    s = np.linspace(0, length, 25)
+    space = np.zeros((n_modes, 2 * n, 3))
+    params = np.zeros((n_modes, len(s)))
+    for i in range(n_modes):
+        space[i, :, 2] = -0.01 * (P[:, 0] / length) ** (i + 2)
+        params[i] = (0.3 ** i) * (s / length) ** (i + 1)
+    axes = [Axis("s", s, "m")]
+    fld = SeparatedField("displacement", space, [params], axes, "m", ["x", "y", "z"])
+    tri = np.asarray(tris, np.int64)
+    return ReducedModel("beam", P, tri, "tri3", axes, {"displacement": fld}, tri, "test beam",
+                        {"law": "linear_elastic"})
