@@ -54,6 +54,7 @@ def beam_model(n_modes: int = 6, length: float = 0.5) -> ReducedModel:
     params = np.zeros((n_modes, len(s)))
     for i in range(n_modes):
         space[i, :, 2] = -0.01 * (P[:, 0] / length) ** (i + 2)
+        space[i, :, 1] = 0.006 * (P[:, 0] / length) ** (i + 2)  # a sideways part: a rotation about z is observable
         params[i] = (0.3 ** i) * (s / length) ** (i + 1)
     axes = [Axis("s", s, "m")]
     fld = SeparatedField("displacement", space, [params], axes, "m", ["x", "y", "z"])

@@ -115,3 +115,38 @@ def format_table41(r: ParameterReport, scale: float = 1.0, unit: str | None = No
         right = rows[i + half] if i + half < len(rows) else ""
         lines.append(f"{rows[i]}   {right}")
     return "\n".join(lines)
+
+
+@dataclass
+class ContactReport:
+    frames: int
+    contact_agreement: float  # fraction of frames where estimated and true in_contact agree
+    same_load_point: float  # among frames both in contact
+    pseudo_time_median_abs: float
+    pseudo_time_max_abs: float
+    true_contact_frames: int
+    est_contact_frames: int
+
+
+def read_contacts(path, topic: str) -> dict[int, tuple[bool, int, float]]:
+    out = {}
+    for m in bags.read_bag(path, topics=[topic]):
+        o = bags.decode(m)
+        out[bags.stamp_ns(o)] = (bool(o.in_contact) or float(o.pseudo_time) > 0, int(o.load_point), float(o.pseudo_time))
+    if not out:
+        raise SimrealError(f"{path} has no messages on {topic}")
+    return out
+
+
+def compare_contacts(est: dict, truth: dict) -> ContactReport:
+    """Contact state, contact node and pseudo-time of a run against the synthetic truth (same stamps)."""
+    common = sorted(set(est) & set(truth))
+    if not common:
+        raise SimrealError("no contact estimate has the stamp of a ground-truth message")
+    agree = sum(est[s][0] == truth[s][0] for s in common)
+    both = [s for s in common if est[s][0] and truth[s][0] and est[s][1] >= 0 and truth[s][1] >= 0]
+    same = sum(est[s][1] == truth[s][1] for s in both)
+    dt = np.array([abs(est[s][2] - truth[s][2]) for s in common])
+    return ContactReport(len(common), agree / len(common), same / len(both) if both else float("nan"),
+                         float(np.median(dt)), float(dt.max()), sum(truth[s][0] for s in common),
+                         sum(est[s][0] for s in common))

@@ -250,9 +250,10 @@ class DeformableTracker:
         gain = rest_rms - res.rms_px
         est.deforming = bool(gain > self.cfg.min_deformation_px)
         if not est.deforming:
-            # nothing to see: hold the previous estimate (the images do not say where the load is) and
-            # report the large variance the normal equations give
-            est.values = self.x.copy()
+            # barely anything to see (load absent, or near the clamp where the images hardly see its effect):
+            # report the bounded estimate with the large variance the normal equations give, flagged; the
+            # constants are not estimated from such frames
+            self.x = res.x.copy()
             est.state = LOW_CONFIDENCE
             est.reason = (f"no measurable deformation (residual {res.rms_px:.2f} px vs {rest_rms:.2f} px undeformed): "
                           "the load may be absent or where the images cannot see its effect")

@@ -54,7 +54,7 @@ class ContactTracker:
     """
 
     def __init__(self, model: ReducedModel, T_world_object: np.ndarray, threshold: float = 0.01, step: float = 0.05,
-                 tau_min: float = 0.0, tau_max: float = 1.0, n_modes: int | None = None):
+                 tau_min: float = 0.0, tau_max: float = 1.0, n_modes: int | None = None, min_fraction: float = 0.02):
         if model.load_points is None or len(model.load_points) == 0:
             raise ValueError(f"model '{model.name}' has no load points: it cannot take contacts")
         self.model = model
@@ -69,6 +69,18 @@ class ContactTracker:
         if self.kind == "linear" and model.material.get("law") != "linear_elastic":
             raise ValueError(f"model '{model.name}' has no pseudo_time axis and is not linear: cannot scale its load")
         self._lp_param = self._load_point_parameters()
+        self.active = self._active_load_points(min_fraction)
+
+    def _active_load_points(self, min_fraction: float) -> np.ndarray:
+        """Load points where a contact can deform the object: at supports (a clamp that touches the object is
+        real geometry too) the largest precomputed displacement is ~0, and they are left out of the search."""
+        full = np.zeros(len(self.lp_nodes))
+        for i in range(len(self.lp_nodes)):
+            mu = np.concatenate([self._lp_param[i], [self.tau_max]])
+            u = self.field.evaluate(mu if self.kind == "probe" else mu[:-1], nodes=[self.lp_nodes[i]])[0]
+            full[i] = np.linalg.norm(u) * (1.0 if self.kind == "probe" else self.tau_max)
+        act = full >= min_fraction * full.max() if full.max() > 0 else np.ones(len(full), bool)
+        return np.nonzero(act)[0]
 
     # -- parameters ----------------------------------------------------------------------------------
     def _load_point_parameters(self) -> np.ndarray:
@@ -127,11 +139,14 @@ class ContactTracker:
             st.points_used = 0
         else:
             tree = cKDTree(pts)
-            d, idx = tree.query(nodes, k=1)
-            nearest = int(np.argmin(d))
-            d_min = float(d[nearest])
+            d, idx = tree.query(nodes[self.active], k=1)
+            k = int(np.argmin(d))
+            nearest = int(self.active[k])
+            d, idx = d[[k]], idx[[k]]
+            nearest_row = 0
+            d_min = float(d[nearest_row])
             st.points_used = len(pts)
-            st.contact_point = tuple(float(x) for x in pts[idx[nearest]])
+            st.contact_point = tuple(float(x) for x in pts[idx[nearest_row]])
         st.min_distance, st.nearest_load_point = d_min, nearest
         if d_min < self.threshold and st.pseudo_time < self.tau_max - 1e-12:
             if st.pseudo_time <= 0 or st.load_point < 0:

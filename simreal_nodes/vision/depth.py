@@ -1,7 +1,7 @@
 """Depth images to points (thesis §5.2.3-5.2.4), ROS-free.
 
     depth (metres, NaN invalid)  --decimate N-->  pixels (u, v) with valid Z
-    X_c = Z K^-1 [u, v, 1]^T                     (ideal pixels: the caller undistorts if needed)
+    X_c = Z K^-1 undistort([u, v])               (rays per pixel grid cached; distortion from CameraInfo)
     X_w = T_world_cam X_c
 
 Decimation keeps every N-th pixel in each direction (N = 1: all), which is the collision node's
@@ -10,12 +10,25 @@ speed/accuracy knob: the distance to the nearest real point grows by at most ~N 
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
 
 from simreal_nodes import geometry as G
 from simreal_nodes.vision.camera import CameraModel
+
+
+@functools.lru_cache(maxsize=16)
+def _rays(width: int, height: int, K: tuple, D: tuple, step: int) -> np.ndarray:
+    """(h', w', 3) rays with z = 1 through the decimated pixel grid, lens distortion removed (the depth image is
+    registered to the distorted colour image)."""
+    cam = CameraModel(width, height, np.asarray(K).reshape(3, 3), np.asarray(D), "plumb_bob")
+    vs, us = np.mgrid[0:height:step, 0:width:step]
+    uv = np.c_[us.ravel(), vs.ravel()].astype(np.float64)
+    if cam.has_distortion:
+        uv = cam.undistort_points(uv)
+    return cam.backproject(uv, np.ones(len(uv))).reshape(vs.shape + (3,))
 
 
 @dataclass
@@ -42,7 +55,8 @@ def depth_points(depth_m: np.ndarray, cam: CameraModel, step: int = 1, T_world_c
     vv, uu = np.nonzero(ok)
     z = sub[vv, uu]
     uv = np.stack([uu * step, vv * step], axis=1).astype(np.float64)
-    P = cam.backproject(uv, z)
+    rays = _rays(cam.width, cam.height, tuple(cam.K.ravel()), tuple(np.ravel(cam.D)), step)  # distortion removed
+    P = rays[vv, uu] * z[:, None]
     if T_world_cam is not None:
         P = G.transform(np.asarray(T_world_cam, dtype=np.float64), P)
     return DepthPoints(P, uv, float(len(z)) / max(total, 1), total)

@@ -155,7 +155,7 @@ class CollisionNode(SimrealNode):
                 pts = pts_by_step[step]
                 why = "" if len(pts) else "no valid depth"
             pushers = [p for p in self.objects if o["id"] in p["collision"]["pushes"]]
-            extra = [self._surface_world(p["id"]) for p in pushers]
+            extra = [self._surface_world(p["id"], toward=o["id"]) for p in pushers]
             extra = [e for e in extra if e is not None and len(e)]
             if extra:
                 pts = np.vstack([pts] + extra) if pts is not None and len(pts) else np.vstack(extra)
@@ -169,14 +169,20 @@ class CollisionNode(SimrealNode):
         self.set_status("warn" if reasons else "ok", "; ".join(reasons) or "ok")
         self.progress(head.stamp)
 
-    def _surface_world(self, oid: str) -> np.ndarray | None:
-        """The pushing object's deformed bottom-facing surface in the map frame (virtual-virtual contact)."""
+    def _surface_world(self, oid: str, toward: str) -> np.ndarray | None:
+        """The pushing object's deformed surface that faces the pushed object, in the map frame (virtual-virtual
+        contact, §5.4.1): triangles whose outward normal points towards the pushed object's centre."""
         tr = self.trackers[oid]
         if tr.state.pseudo_time <= 0:
             return None
         m = self.models[oid]
         P = G.transform(tr.T, m.points + tr.displacement())
-        return surface_samples(P, m.surface, self.surface_spacing)
+        tri = np.asarray(m.surface)
+        a, b, c = P[tri[:, 0]], P[tri[:, 1]], P[tri[:, 2]]
+        n = np.cross(b - a, c - a)
+        target = G.transform(self.trackers[toward].T, self.models[toward].points.mean(axis=0)[None])[0]
+        facing = np.einsum("ij,ij->i", n, target - (a + b + c) / 3) > 0
+        return surface_samples(P, tri[facing], self.surface_spacing)
 
     def _publish(self, oid: str, st, stamp, source: str) -> None:
         tr = self.trackers[oid]

@@ -1,0 +1,75 @@
+"""Eq. 4.7-4.12: the analytic Jacobian (model sensitivities through object -> world -> camera and the image
+Jacobian, with the SO(3) derivative of alpha_z) against finite differences; LM recovers a known mu; robust
+to outliers with the Huber loss; bounded."""
+
+import numpy as np
+import pytest
+
+from simreal_nodes import geometry as G
+from simreal_nodes.assimilation import lm
+from tests.modelkit import beam_model
+
+K = np.array([[520.0, 0.5, 320.0], [0, 515.0, 240.0], [0, 0, 1]])
+
+
+def _problem(rigid_z=False, noise=0.0, outliers=0, seed=0):
+    m = beam_model(n_modes=6)
+    nodes = np.arange(0, m.n_nodes, 2)
+    view = m.field("displacement").view(nodes)
+    R_wo = G.rot_axis("z", 0.3)
+    T_wo = G.make_T(R_wo, [0.1, -0.2, 0.05])
+    T_wc = G.make_T(G.rot_axis("x", np.pi) @ G.rot_axis("y", 0.2), [0.3, 0.0, 0.6])
+    T_cw = np.linalg.inv(T_wc)
+    X = G.transform(T_wo, m.points[nodes])
+    disp = view.evaluate_with_jacobian
+    x_true = np.array([0.37] + ([0.08] if rigid_z else []))
+    p = lm.Problem(X, np.zeros((len(X), 2)), disp, T_cw, R_wo, K, rigid_z=rigid_z)
+    uv, _, _ = lm.predict(p, x_true, 1, with_jacobian=False)
+    rng = np.random.default_rng(seed)
+    uv = uv + rng.normal(0, noise, uv.shape)
+    if outliers:
+        idx = rng.choice(len(uv), outliers, replace=False)
+        uv[idx] += rng.uniform(20, 60, (outliers, 2))
+    p.uv = uv
+    return p, x_true, m
+
+
+@pytest.mark.parametrize("rigid_z", [False, True])
+def test_jacobian_matches_finite_differences(rigid_z):
+    p, x, _ = _problem(rigid_z)
+    x = x + np.r_[0.013, [0.02] * rigid_z]
+    uv, _, J = lm.predict(p, x, 1)
+    for k in range(len(x)):
+        h = 1e-6
+        e = np.zeros_like(x)
+        e[k] = h
+        fd = (lm.predict(p, x + e, 1, False)[0] - lm.predict(p, x - e, 1, False)[0]) / (2 * h)
+        np.testing.assert_allclose(J[:, :, k], fd, rtol=1e-5, atol=1e-6 * np.abs(fd).max())
+
+
+@pytest.mark.parametrize("rigid_z", [False, True])
+def test_lm_recovers_parameters_within_its_covariance(rigid_z):
+    p, x_true, m = _problem(rigid_z, noise=0.2)
+    lo, hi = np.r_[0.0, [-0.5] * rigid_z], np.r_[0.5, [0.5] * rigid_z]
+    res = lm.solve(p, np.r_[0.2, [0.0] * rigid_z], lo, hi, huber_px=1.0, max_iter=30)
+    assert res.converged
+    tol = 3 * np.sqrt(np.diag(res.cov))
+    assert np.all(np.abs(res.x - x_true) <= tol), (res.x, x_true, tol)
+    assert res.inliers == len(p.X) and 0.1 < res.rms_px < 0.35
+
+
+def test_huber_loss_limits_the_pull_of_outliers():
+    p, x_true, _ = _problem(noise=0.2, outliers=2)
+    robust = lm.solve(p, np.r_[0.2], np.r_[0.0], np.r_[0.5], huber_px=1.0, max_iter=30)
+    plain = lm.solve(p, np.r_[0.2], np.r_[0.0], np.r_[0.5], huber_px=1e6, max_iter=30)
+    assert abs(robust.x[0] - x_true[0]) < 0.03  # 6 % of the range with 2 of 26 points 20-60 px off
+    assert abs(robust.x[0] - x_true[0]) < 0.5 * abs(plain.x[0] - x_true[0])
+    assert robust.inliers == len(p.X) - 2
+
+
+def test_bounds_hold_when_the_data_pull_outside():
+    p, _, _ = _problem()
+    uv_far, _, _ = lm.predict(p, np.array([0.5]), 1, False)
+    p.uv = uv_far + (uv_far - lm.predict(p, np.array([0.3]), 1, False)[0])  # "beyond the tip"
+    res = lm.solve(p, np.array([0.25]), np.array([0.0]), np.array([0.5]), 2.0, 30)
+    assert 0.0 <= res.x[0] <= 0.5
