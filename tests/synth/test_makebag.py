@@ -31,7 +31,7 @@ def test_bag_is_readable_and_carries_truth(probe_bag):
     img = image_to_array(bags.decode(next(m for m in msgs if m.topic == "/camera/image_raw")))
     dep = image_to_array(bags.decode(next(m for m in msgs if m.topic == "/camera/depth/image_raw")))
     assert img.shape == (120, 160, 3) and dep.dtype == np.uint16
-    assert 0.05 < np.mean(dep == 0) < 0.6  # Kinect-like holes, but mostly valid
+    assert 0.01 < np.mean(dep == 0) < 0.6  # Kinect-like holes (projector shadows, speckle), mostly valid
     contact = [bags.decode(m) for m in msgs if m.topic == "/ground_truth/objects/beam_a/contact"]
     assert max(c.pseudo_time for c in contact) > 0.3 and contact[0].pseudo_time == 0.0
 

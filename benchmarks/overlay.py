@@ -1,0 +1,96 @@
+"""Overlay speed and the live mode choice: time per composed frame (deformed mesh from the PGD model,
+colour map, occlusion against real depth, colour bar, over a camera image) versus resolution and mesh
+size, and the number of modes the overlay picks to keep the on-screen truncation error below 0.5 px
+versus viewing distance.
+
+    ./run bench overlay
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from benchmarks.common import save
+from simreal_nodes import geometry as G
+from simreal_nodes.render.overlay import ObjectOverlay, OverlayCompositor
+from simreal_nodes.rom.build import cached_model
+from simreal_nodes.rom.model_file import load_model
+from simreal_nodes.synth.scenes import default_camera
+
+
+def _view(d):
+    return G.make_T(G.rot_axis("x", np.pi), [0.25, 0.0, 0.1 + d])
+
+
+def main():
+    rows = []
+    beam = load_model(cached_model("aluminium_beam"), fields=["displacement", "stress"])
+    models = [("aluminium beam", beam)]
+    try:
+        models.append(("crossed beam", load_model(cached_model("crossed_beams"), fields=["displacement", "stress"])))
+    except Exception as e:  # noqa: BLE001
+        print(f"crossed beams model unavailable: {e}")
+    gl = ""
+    for res in ((640, 480), (1280, 720)):
+        cam = default_camera(*res)
+        rng = np.random.default_rng(0)
+        img = rng.integers(0, 255, (cam.height, cam.width, 3), dtype=np.uint8)
+        depth = np.full((cam.height, cam.width), 0.55, np.float32)
+        depth[:, : cam.width // 3] = 0.4  # a closer real object hides a third of the view
+        for label, m in models:
+            for field in ("displacement", "von_mises"):
+                ob = ObjectOverlay(m, G.make_T(t=[0, 0, 0.1]), field, magnify=10.0)
+                comp = OverlayCompositor(cam, {"o": ob})
+                gl = comp.renderer.gl_renderer
+                mu_names = [a.name for a in m.axes]
+                ts, modes = [], []
+                for k in range(40):
+                    vals = [a.values[(k * 7) % len(a.values)] for a in m.axes]
+                    t0 = time.perf_counter()
+                    _, st = comp.compose(img, _view(0.45), {"o": (mu_names, vals)}, depth)
+                    ts.append((time.perf_counter() - t0) * 1e3)
+                    modes.append(st["o"].modes)
+                comp.release()
+                ts = np.asarray(ts[5:])
+                rows.append({"resolution": f"{res[0]}x{res[1]}", "object": label, "triangles": len(m.surface),
+                             "field": field, "p50_ms": float(np.median(ts)), "p95_ms": float(np.percentile(ts, 95)),
+                             "modes_median": float(np.median(modes)), "model_modes": m.field("displacement").n_modes})
+    # live mode choice versus distance (aluminium beam, 640x480)
+    cam = default_camera()
+    ob = ObjectOverlay(beam, G.make_T(t=[0, 0, 0.1]), "displacement", magnify=1.0)
+    dist_rows = []
+    for d in (0.2, 0.35, 0.5, 1.0, 2.0, 4.0):
+        ms = [ob.geometry(["s"], [s], _view(d), cam)[2].modes for s in np.linspace(0.05, 0.48, 12)]
+        dist_rows.append({"distance_m": d, "modes_mean": float(np.mean(ms)), "modes_max": int(np.max(ms))})
+
+    def plot(plt):
+        fig, axs = plt.subplots(1, 2, figsize=(11, 4))
+        for res in ("640x480", "1280x720"):
+            sel = [r for r in rows if r["resolution"] == res and r["field"] == "displacement"]
+            axs[0].plot([r["triangles"] for r in sel], [r["p50_ms"] for r in sel], "o-", label=res)
+        axs[0].axhline(5.0, color="k", ls="--", lw=0.8, label="target 5 ms")
+        axs[0].set_xlabel("surface triangles")
+        axs[0].set_ylabel("overlay p50 [ms/frame]")
+        axs[0].legend()
+        axs[0].set_title(gl[:40])
+        axs[1].plot([r["distance_m"] for r in dist_rows], [r["modes_mean"] for r in dist_rows], "o-")
+        axs[1].set_xscale("log")
+        axs[1].set_xlabel("camera distance [m]")
+        axs[1].set_ylabel("modes drawn (mean over s), 0.5 px bound")
+        return fig
+
+    notes = (f"OpenGL: {gl}. Each frame: PGD evaluation on the surface nodes with the live mode choice, colour map, "
+             "upload, draw with occlusion against a real depth image, GPU compositing over the camera image (lens "
+             "distortion: draw alone, remap, blend), colour bar. Modes drawn versus distance (aluminium beam, "
+             "magnification 1, 640x480): " +
+             ", ".join(f"{r['distance_m']} m: {r['modes_mean']:.1f} (max {r['modes_max']})" for r in dist_rows) + ".")
+    save("overlay", rows, [("resolution", "resolution", "{}"), ("object", "object", "{}"), ("triangles", "triangles", "{}"),
+                           ("field", "colour", "{}"), ("p50_ms", "p50 ms", "{:.2f}"), ("p95_ms", "p95 ms", "{:.2f}"),
+                           ("modes_median", "modes drawn", "{:.0f}"), ("model_modes", "model modes", "{}")],
+         "Overlay time per frame and modes drawn", notes, plot, extra={"distance": dist_rows})
+
+
+if __name__ == "__main__":
+    main()
