@@ -170,6 +170,17 @@ class SimrealNode(Node):
         if stamp is not None:
             self.progress(stamp, dropped=reason)
 
+    def camera_model(self, msg):
+        """CameraModel of a CameraInfo, or None (status set to error with the reason) when it is unusable."""
+        from simreal_nodes.errors import CameraInfoError
+        from simreal_nodes.vision.camera import CameraModel
+
+        try:
+            return CameraModel.from_camera_info(msg)
+        except CameraInfoError as e:
+            self.set_status("error", f"unusable CameraInfo: {e}")
+            return None
+
     def age_ms(self, stamp) -> float:
         """How old an input stamped ``stamp`` is now (meaningful for live sources only)."""
         return (self.get_clock().now().nanoseconds - stamp_ns(stamp)) * 1e-6

@@ -20,7 +20,7 @@ from simreal_msgs.msg import FeatureObservations, ModelParameters
 
 from simreal_nodes import geometry as G
 from simreal_nodes.collision.contact import ContactTracker, surface_samples
-from simreal_nodes.errors import CameraInfoError, ImageFormatError
+from simreal_nodes.errors import ImageFormatError
 from simreal_nodes.io import images
 from simreal_nodes.ros.common import (SimrealNode, data_qos, guarded, ns_to_stamp, pose_to_matrix, reliable_qos,
                                       run_node, stamp_ns)
@@ -95,10 +95,9 @@ class CollisionNode(SimrealNode):
 
     @guarded
     def on_info(self, msg: CameraInfo) -> None:
-        try:
-            self.cam = CameraModel.from_camera_info(msg)
-        except CameraInfoError as e:
-            self.set_status("error", f"unusable CameraInfo: {e}")
+        cam = self.camera_model(msg)
+        if cam is not None:
+            self.cam = cam
 
     @guarded
     def on_right_info(self, msg: CameraInfo) -> None:

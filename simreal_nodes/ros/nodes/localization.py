@@ -19,7 +19,7 @@ from std_srvs.srv import SetBool
 from tf2_msgs.msg import TFMessage
 
 from simreal_nodes import geometry as G
-from simreal_nodes.errors import CameraInfoError, ImageFormatError
+from simreal_nodes.errors import ImageFormatError
 from simreal_nodes.io import images
 from simreal_nodes.ros.common import (ns_to_stamp, TF_QOS, SimrealNode, cloud_msg, data_qos, guarded, matrix_to_pose,
                                       pose_stamped, reliable_qos, run_node, stamp_ns, transform_stamped)
@@ -80,10 +80,8 @@ class LocalizationNode(SimrealNode):
     # -- set-up --------------------------------------------------------------------------------------------
     @guarded
     def on_info(self, msg: CameraInfo) -> None:
-        try:
-            cam = CameraModel.from_camera_info(msg)
-        except CameraInfoError as e:
-            self.set_status("error", f"unusable CameraInfo: {e}")
+        cam = self.camera_model(msg)
+        if cam is None:
             return
         if self.cam is None or cam.width != self.cam.width or not np.allclose(cam.K, self.cam.K):
             self.cam = cam

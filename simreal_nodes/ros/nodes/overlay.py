@@ -21,7 +21,7 @@ from std_msgs.msg import ColorRGBA, Header
 from visualization_msgs.msg import Marker, MarkerArray
 
 from simreal_nodes import geometry as G
-from simreal_nodes.errors import CameraInfoError, ImageFormatError
+from simreal_nodes.errors import ImageFormatError
 from simreal_nodes.io import images
 from simreal_nodes.render.overlay import ObjectOverlay, OverlayCompositor
 from simreal_nodes.ros.common import (SimrealNode, data_qos, guarded, matrix_to_pose, ns_to_stamp, pose_to_matrix,
@@ -117,10 +117,8 @@ class OverlayNode(SimrealNode):
 
     @guarded
     def on_info(self, msg: CameraInfo) -> None:
-        try:
-            cam = CameraModel.from_camera_info(msg)
-        except CameraInfoError as e:
-            self.set_status("error", f"unusable CameraInfo: {e}")
+        cam = self.camera_model(msg)
+        if cam is None:
             return
         if self.cam is None or cam.width != self.cam.width or cam.height != self.cam.height or not np.allclose(cam.K, self.cam.K):
             if self.comp is not None:

@@ -18,7 +18,7 @@ from std_srvs.srv import SetBool
 
 from simreal_nodes import geometry as G
 from simreal_nodes.assimilation.tracker import DeformableTracker, TrackerConfig
-from simreal_nodes.errors import CameraInfoError, ImageFormatError
+from simreal_nodes.errors import ImageFormatError
 from simreal_nodes.io import images
 from simreal_nodes.ros.common import (ns_to_stamp, SimrealNode, data_qos, guarded, pose_to_matrix, reliable_qos, run_node,
                                       stamp_ns)
@@ -68,10 +68,8 @@ class TrackerNode(SimrealNode):
 
     @guarded
     def on_info(self, msg: CameraInfo) -> None:
-        try:
-            cam = CameraModel.from_camera_info(msg)
-        except CameraInfoError as e:
-            self.set_status("error", f"unusable CameraInfo: {e}")
+        cam = self.camera_model(msg)
+        if cam is None:
             return
         if self.cam is None or not np.allclose(cam.K, self.cam.K):
             self.cam = cam
