@@ -169,6 +169,16 @@ class ContactTracker:
         return st
 
 
+def facing_surface_samples(P: np.ndarray, tris: np.ndarray, target: np.ndarray, spacing: float) -> np.ndarray:
+    """Samples of the surface triangles (P, tris) whose outward normal points towards ``target``: the side of
+    a virtual object that can press another one (virtual-virtual contact, §5.4.1)."""
+    tris = np.asarray(tris)
+    a, b, c = P[tris[:, 0]], P[tris[:, 1]], P[tris[:, 2]]
+    n = np.cross(b - a, c - a)
+    facing = np.einsum("ij,ij->i", n, np.asarray(target) - (a + b + c) / 3) > 0
+    return surface_samples(P, tris[facing], spacing)
+
+
 def surface_samples(V: np.ndarray, F: np.ndarray, spacing: float) -> np.ndarray:
     """Points spread over triangles (V, F) about ``spacing`` apart: a virtual surface seen as a point set
     (virtual-virtual contact, §5.4.1), dense enough that point distances approximate surface distances."""

@@ -77,6 +77,14 @@ def pose_to_matrix(p: Pose) -> np.ndarray:
     return T
 
 
+def observation_pose(obs) -> np.ndarray | None:
+    """T_map_camera of a FeatureObservations, or None when localization had no pose (zero quaternion)."""
+    q = obs.camera_pose.orientation
+    if abs(q.x) + abs(q.y) + abs(q.z) + abs(q.w) == 0:
+        return None
+    return pose_to_matrix(obs.camera_pose)
+
+
 def matrix_to_pose(T: np.ndarray, p: Pose | None = None) -> Pose:
     p = p or Pose()
     q = geometry.matrix_to_quat(T[:3, :3])

@@ -19,10 +19,10 @@ from simreal_msgs.msg import ContactState as ContactMsg
 from simreal_msgs.msg import FeatureObservations, ModelParameters
 
 from simreal_nodes import geometry as G
-from simreal_nodes.collision.contact import ContactTracker, surface_samples
+from simreal_nodes.collision.contact import ContactTracker, facing_surface_samples
 from simreal_nodes.errors import ImageFormatError
 from simreal_nodes.io import images
-from simreal_nodes.ros.common import (SimrealNode, data_qos, guarded, ns_to_stamp, pose_to_matrix, reliable_qos,
+from simreal_nodes.ros.common import (SimrealNode, data_qos, guarded, ns_to_stamp, observation_pose, reliable_qos,
                                       run_node, stamp_ns)
 from simreal_nodes.rom.model_file import load_model
 from simreal_nodes.scene import graph
@@ -133,8 +133,7 @@ class CollisionNode(SimrealNode):
             return
         T_wc = self.static_pose
         if "obs" in frame:
-            qn = frame["obs"].camera_pose.orientation
-            T_wc = pose_to_matrix(frame["obs"].camera_pose) if abs(qn.x) + abs(qn.y) + abs(qn.z) + abs(qn.w) > 0 else None
+            T_wc = observation_pose(frame["obs"])
         try:
             depth = self._depth(frame)
         except (ImageFormatError, ValueError) as e:
@@ -176,12 +175,8 @@ class CollisionNode(SimrealNode):
             return None
         m = self.models[oid]
         P = G.transform(tr.T, m.points + tr.displacement())
-        tri = np.asarray(m.surface)
-        a, b, c = P[tri[:, 0]], P[tri[:, 1]], P[tri[:, 2]]
-        n = np.cross(b - a, c - a)
         target = G.transform(self.trackers[toward].T, self.models[toward].points.mean(axis=0)[None])[0]
-        facing = np.einsum("ij,ij->i", n, target - (a + b + c) / 3) > 0
-        return surface_samples(P, tri[facing], self.surface_spacing)
+        return facing_surface_samples(P, m.surface, target, self.surface_spacing)
 
     def _publish(self, oid: str, st, stamp, source: str) -> None:
         tr = self.trackers[oid]

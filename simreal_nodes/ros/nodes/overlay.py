@@ -24,7 +24,7 @@ from simreal_nodes import geometry as G
 from simreal_nodes.errors import ImageFormatError
 from simreal_nodes.io import images
 from simreal_nodes.render.overlay import ObjectOverlay, OverlayCompositor
-from simreal_nodes.ros.common import (SimrealNode, data_qos, guarded, matrix_to_pose, ns_to_stamp, pose_to_matrix,
+from simreal_nodes.ros.common import (SimrealNode, data_qos, guarded, matrix_to_pose, ns_to_stamp, observation_pose,
                                       reliable_qos, run_node, stamp_ns)
 from simreal_nodes.rom.model_file import load_model
 from simreal_nodes.scene import graph
@@ -172,8 +172,7 @@ class OverlayNode(SimrealNode):
             return
         T_wc = self.static_pose
         if frame.get("obs") is not None:
-            qn = frame["obs"].camera_pose.orientation
-            T_wc = pose_to_matrix(frame["obs"].camera_pose) if abs(qn.x) + abs(qn.y) + abs(qn.z) + abs(qn.w) > 0 else None
+            T_wc = observation_pose(frame["obs"])
         if T_wc is None:
             out, why = bgr, "no camera pose: image passed through without overlay"
             states = {}

@@ -20,7 +20,7 @@ from simreal_nodes import geometry as G
 from simreal_nodes.assimilation.tracker import DeformableTracker, TrackerConfig
 from simreal_nodes.errors import ImageFormatError
 from simreal_nodes.io import images
-from simreal_nodes.ros.common import (ns_to_stamp, SimrealNode, data_qos, guarded, pose_to_matrix, reliable_qos, run_node,
+from simreal_nodes.ros.common import (ns_to_stamp, SimrealNode, data_qos, guarded, observation_pose, reliable_qos, run_node,
                                       stamp_ns)
 from simreal_nodes.rom.model_file import load_model
 from simreal_nodes.scene import graph
@@ -104,9 +104,7 @@ class TrackerNode(SimrealNode):
         T_wc, ids, P, uv = None, None, None, None
         if "obs" in frame:
             o = frame["obs"]
-            q = o.camera_pose.orientation
-            if abs(q.x) + abs(q.y) + abs(q.z) + abs(q.w) > 0:
-                T_wc = pose_to_matrix(o.camera_pose)
+            T_wc = observation_pose(o)
             ids = np.asarray(o.point_ids, dtype=np.int64)
             P = np.asarray(o.points_xyz, dtype=np.float64).reshape(-1, 3)
             uv = np.asarray(o.pixels_uv, dtype=np.float64).reshape(-1, 2)
