@@ -95,6 +95,7 @@ class DeformableTracker:
                 self.x[i] = 0.0
         self.frozen = np.array([m == "fixed" for m in self.mode])
         self._const_samples: list[np.ndarray] = []
+        self._was_deforming = False  # constants move only once deformation makes them observable
         self.n_mu = len(axes)
         self.cand_nodes = surface_nodes(model)
         self.links: dict[int, tuple] = {}  # map point id -> (nodes (3,), weights (3,), X_map (3,))
@@ -230,6 +231,10 @@ class DeformableTracker:
         est.measurements = len(X)
         disp = self._disp_fn(nodes, w)
         free = ~self.frozen
+        if not self._was_deforming:
+            # an undeformed object says nothing about its constants (alpha_z of an axisymmetric boot, a stiffness):
+            # hold them until a deformation is seen, or they drift along the flat directions of the cost
+            free &= np.array([m != "constant" for m in self.mode])
         lo = np.where(free, self.lo, self.x)
         hi = np.where(free, self.hi, self.x)
         t0 = time.perf_counter()
@@ -249,6 +254,7 @@ class DeformableTracker:
             return est
         gain = rest_rms - res.rms_px
         est.deforming = bool(gain > self.cfg.min_deformation_px)
+        self._was_deforming = est.deforming
         if not est.deforming:
             # barely anything to see (load absent, or near the clamp where the images hardly see its effect):
             # report the bounded estimate with the large variance the normal equations give, flagged; the
@@ -282,6 +288,11 @@ class DeformableTracker:
         if not const.any() or est.state != OK:
             return
         self._const_samples.append(self.x.copy())
+        if self.rigid_z and const[self.n_mu]:
+            # the links were made with an earlier alpha: re-link the map points once it moved noticeably
+            if self._alpha_linked is None or abs(self._alpha() - self._alpha_linked) > np.deg2rad(0.25):
+                self.relink()
+                self._alpha_linked = self._alpha()
         if len(self._const_samples) >= self.cfg.constant_frames:
             vals = np.median(np.array(self._const_samples), axis=0)
             self.x[const] = vals[const]
