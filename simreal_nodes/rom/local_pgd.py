@@ -145,11 +145,12 @@ def pgd(ops: list[list[Op]], B: np.ndarray, tol: float = 1e-4, max_modes: int = 
             prev = [v.copy() for v in f]
         if not all(np.all(np.isfinite(v)) for v in f) or np.linalg.norm(f[-1]) == 0:
             break
+        # Gram of the terms for ‖U_n‖ (products of per-axis inner products)
+        g = np.prod([np.array([v @ f[d] for v in fac[d]] + [f[d] @ f[d]]) for d in range(D)], axis=0)
+        if g[-1] <= 1e-24 * max(gram.sum() + g[-1] + 2 * g[:-1].sum(), 1e-300):
+            break  # the residual is at round-off: a new term would be noise
         for d in range(D):
             fac[d].append(f[d])
-        # Gram of the terms for ‖U_n‖ (products of per-axis inner products)
-        n = len(fac[0])
-        g = np.prod([np.array([fac[d][i] @ f[d] for i in range(n)]) for d in range(D)], axis=0)
         gram = np.pad(gram, ((0, 1), (0, 1)))
         gram[-1, :] = gram[:, -1] = g
         ind = float(np.sqrt(max(g[-1], 0.0) / max(gram.sum(), 1e-300)))
