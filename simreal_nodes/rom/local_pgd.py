@@ -31,8 +31,10 @@ from functools import reduce
 from typing import Callable
 
 import numpy as np
+import scipy.linalg as sla
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
+from scipy.spatial.distance import pdist
 
 
 class PartitionWarning(UserWarning):
@@ -176,7 +178,6 @@ def _project_second(ops: list[list[Op]], Q: np.ndarray, B: np.ndarray) -> np.nda
     diag = [A.diagonal() for A in Ay]
     G = np.zeros((n, ny))
     lu_cache: dict[tuple, tuple] = {}
-    import scipy.linalg as sla
     for j in range(ny):
         rhs = C[:, j].copy()
         for A, R in zip(Ay, Ar):
@@ -517,10 +518,11 @@ def kpca_curves(U: np.ndarray, block: int, n_components: int = 3, sigma: float |
     flat = X.reshape(-1, block)
     rng = np.random.default_rng(seed)
     fit = flat[rng.choice(len(flat), min(fit_samples, len(flat)), replace=False)]
-    d = np.linalg.norm(fit[:, None] - fit[None], axis=-1)
+    d = pdist(fit)  # pairwise distances without the (n, n, block) difference array
+    d = d[d > 0]
     if sigma is None:  # median heuristic
-        sigma = float(np.median(d[d > 0])) if np.any(d > 0) else 1.0
-    kd = np.exp(-d[d > 0] ** 2 / (2 * sigma ** 2))
+        sigma = float(np.median(d)) if d.size else 1.0
+    kd = np.exp(-d ** 2 / (2 * sigma ** 2))
     kernel_median = float(np.median(kd)) if kd.size else 1.0  # kernel between distinct samples
     kp = KernelPCA(n_components=n_components, kernel="rbf", gamma=1.0 / (2 * sigma ** 2), eigen_solver="dense")
     kp.fit(fit)
