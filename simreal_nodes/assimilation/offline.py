@@ -7,24 +7,13 @@ RGB-D, + right grey image for stereo) with stamps. Returns one :class:`Estimate`
 
 from __future__ import annotations
 
-from dataclasses import replace
-
 import cv2
 import numpy as np
 
 from simreal_nodes import geometry as G
-from simreal_nodes.assimilation.tracker import DeformableTracker, Estimate, TrackerConfig
+from simreal_nodes.assimilation.tracker import DeformableTracker, Estimate, deformable_feedback, tracker_config
 from simreal_nodes.rom.model_file import load_model
 from simreal_nodes.vision.camera import CameraModel
-
-
-def tracker_config(obj: dict, **overrides) -> TrackerConfig:
-    t = obj["tracking"]
-    cfg = TrackerConfig(measurements=t["measurements"], huber_px=t["huber_px"], n_modes=t["modes"],
-                        max_iterations=t["max_iterations"], constant_frames=t["constant_frames"],
-                        min_measurements=t["min_measurements"], max_points=t["points"],
-                        dots=np.asarray(t["dots"]) if t["dots"] else None, dot_color=tuple(t["dot_color"]))
-    return replace(cfg, **overrides)
 
 
 class Pipeline:
@@ -34,6 +23,7 @@ class Pipeline:
                  **cfg_overrides):
         loc = scene["localization"]
         self.mode = loc["mode"]
+        self.freeze_map = bool(loc.get("freeze_map_on_deformation", False))
         self.cam = cam
         if self.mode == "markers":
             from simreal_nodes.vision.markers import MarkerLocalizer
@@ -74,11 +64,15 @@ class Pipeline:
         for oid, tr in self.trackers.items():
             out[oid] = tr.update(T_wc, ids, P, uv, bgr)
             deforming |= out[oid].deforming
-        if deforming and self.loc is not None and hasattr(self.loc, "set_localization_only"):
+        if deforming and self.freeze_map and self.loc is not None and hasattr(self.loc, "set_localization_only"):
             self.loc.set_localization_only(True)
-            ids_def = sorted({i for tr in self.trackers.values() for i in tr.deformable_ids})
-            if ids_def and hasattr(self.loc, "set_deformable"):
-                self.loc.set_deformable(ids_def)
+        if self.loc is not None and hasattr(self.loc, "set_deformable"):
+            # points on a tracked object leave the pose estimate as soon as they are linked (static/deformable
+            # split, §4.4.1); they are searched where the current estimate puts them
+            ids, P, drop = deformable_feedback(self.trackers.values())
+            if len(ids):
+                self.loc.set_deformable(ids, P)
+                self.loc.drop_tracks(ids[drop == 1])
         return T_wc, out
 
 

@@ -3,8 +3,12 @@
 - :func:`register`: support plane by RANSAC, then ICP (Open3D) of the model surface to the map points from
   several yaw hypotheses about the plane normal (objects rest on a plane; a symmetric object's yaw stays
   ambiguous, which is why alpha_z is estimated from the deformation), optionally with scale (monocular).
-- :func:`link`: each map point near the model surface gets its 3 nearest model nodes and inverse-distance
-  weights (Eq. 4.10); points farther than ``max_dist`` are static scene points.
+- :func:`link`: each map point near the model surface gets 3 model nodes and weights (Eq. 4.10): by default
+  the corners of the closest surface triangle with the barycentric weights of the point's foot on it (the
+  surface the camera sees, exactly as the mesh interpolates it), or, as the thesis writes it, the 3 nearest
+  nodes with inverse-distance weights (``method="idw"``; on the joint boot at theta = 0.86 rad this
+  interpolates the displacement 0.7 mm off at the median, 1.7 mm at p90). Points farther than ``max_dist``
+  are static scene points.
 """
 
 from __future__ import annotations
@@ -26,8 +30,10 @@ class Links:
 
 
 def link(points_obj: np.ndarray, model_points: np.ndarray, candidate_nodes: np.ndarray, max_dist: float,
-         k: int = 3) -> Links:
-    """Link points (object frame) to their k nearest candidate model nodes (Eq. 4.10)."""
+         k: int = 3, triangles: np.ndarray | None = None, method: str = "barycentric") -> Links:
+    """Link points (object frame) to 3 model nodes with weights (Eq. 4.10). ``triangles``: the model's
+    surface (M, 3); without it, or where a node that is on no triangle is nearer than every triangle (a
+    lever's embedded nodes), the k nearest candidate nodes with inverse-distance weights."""
     P = np.asarray(points_obj, dtype=np.float64).reshape(-1, 3)
     cand = np.asarray(candidate_nodes, dtype=np.int64)
     tree = cKDTree(model_points[cand])
@@ -36,7 +42,116 @@ def link(points_obj: np.ndarray, model_points: np.ndarray, candidate_nodes: np.n
     idx = idx.reshape(len(P), k)
     w = 1.0 / np.maximum(d, 1e-9)  # inverse distance (a point on a node takes that node)
     w /= w.sum(axis=1, keepdims=True)
-    return Links(cand[idx], w, d[:, 0], d[:, 0] <= max_dist)
+    nodes, dist = cand[idx], d[:, 0]
+    if method not in ("barycentric", "idw"):
+        raise ValueError(f"link method must be 'barycentric' or 'idw', not '{method}'")
+    if method == "barycentric" and k == 3 and len(P):
+        # nodes on no surface triangle (a lever's grid): the best triangle of near nodes
+        tn, tb, td = _near_node_triangles(P, model_points, cand)
+        use = np.isfinite(td)
+        nodes[use], w[use] = tn[use], tb[use]
+        if triangles is not None and len(triangles):
+            F = np.asarray(triangles, dtype=np.int64)
+            F = F[np.isin(F, cand).all(axis=1)]
+            if len(F):
+                tn, tb, td = closest_triangles(P, model_points, F)
+                better = td <= dist + 1e-9
+                nodes = np.where(better[:, None], tn, nodes)
+                w = np.where(better[:, None], tb, w)
+                dist = np.where(better, td, dist)
+    return Links(nodes, w, dist, dist <= max_dist)
+
+
+def _near_node_triangles(P: np.ndarray, V: np.ndarray, cand: np.ndarray, k: int = 6):
+    """Among the triangles of each point's k nearest candidate nodes that hold the point's foot, the one
+    nearest the point (ties: the smallest): its nodes and the foot's barycentric coordinates, which
+    reproduce any linear displacement field (a rigid motion) exactly at the foot; distance inf where no
+    triangle holds it."""
+    from itertools import combinations
+
+    tree = cKDTree(V[cand])
+    k = min(k, len(cand))
+    _, idx = tree.query(P, k=k)
+    idx = idx.reshape(len(P), k)
+    best_n = np.zeros((len(P), 3), np.int64)
+    best_b = np.zeros((len(P), 3))
+    best_key = np.full(len(P), np.inf)
+    best_d = np.full(len(P), np.inf)
+    for c in combinations(range(k), 3):
+        tri = cand[idx[:, list(c)]]  # (N, 3)
+        A, B, C = V[tri[:, 0]], V[tri[:, 1]], V[tri[:, 2]]
+        e0, e1, q = B - A, C - A, P - A
+        d00, d01, d11 = (e0 * e0).sum(1), (e0 * e1).sum(1), (e1 * e1).sum(1)
+        d20, d21 = (q * e0).sum(1), (q * e1).sum(1)
+        den = d00 * d11 - d01 * d01
+        ok = den > 1e-6 * np.maximum(d00 * d11, 1e-300)  # not collinear
+        den = np.where(ok, den, 1.0)
+        v = (d11 * d20 - d01 * d21) / den
+        ww = (d00 * d21 - d01 * d20) / den
+        u = 1 - v - ww
+        ok &= (u >= -1e-9) & (v >= -1e-9) & (ww >= -1e-9)
+        foot = u[:, None] * A + v[:, None] * B + ww[:, None] * C
+        dist = np.linalg.norm(foot - P, axis=1)
+        per = np.linalg.norm(e0, axis=1) + np.linalg.norm(e1, axis=1) + np.linalg.norm(C - B, axis=1)
+        key = dist + 1e-3 * per
+        take = ok & (key < best_key)
+        best_key[take] = key[take]
+        best_n[take] = tri[take]
+        best_b[take] = np.c_[u, v, ww][take]
+        best_d[take] = dist[take]
+    return best_n, best_b, best_d
+
+
+def closest_triangles(P: np.ndarray, V: np.ndarray, F: np.ndarray, n_candidates: int = 12):
+    """For each point, the closest of the triangles F (among the ``n_candidates`` with the nearest
+    centroids): its corner nodes (N, 3), the barycentric coordinates of the closest point (N, 3) and the
+    distance (N,)."""
+    tree = cKDTree(V[F].mean(axis=1))
+    m = min(n_candidates, len(F))
+    _, ti = tree.query(P, k=m)
+    ti = ti.reshape(len(P), m)
+    A, B, C = (V[F[ti, j]] for j in range(3))  # (N, m, 3) each
+    Q = P[:, None, :]
+    bary = _closest_point_barycentric(Q, A, B, C)
+    foot = bary[..., :1] * A + bary[..., 1:2] * B + bary[..., 2:] * C
+    dist = np.linalg.norm(foot - Q, axis=2)
+    j = np.argmin(dist, axis=1)
+    r = np.arange(len(P))
+    return F[ti[r, j]], bary[r, j], dist[r, j]
+
+
+def _closest_point_barycentric(Q, A, B, C):
+    """Barycentric coordinates of the point of triangle ABC closest to Q (broadcast over leading axes):
+    the foot of the perpendicular when it falls inside, else the closest point of the nearest edge."""
+    def seg(Pa, Pb):  # closest point of segment Pa-Pb to Q as the parameter t in [0, 1]
+        e = Pb - Pa
+        return np.clip(np.einsum("...i,...i", Q - Pa, e) / np.maximum(np.einsum("...i,...i", e, e), 1e-300), 0.0, 1.0)
+
+    e0, e1, q = B - A, C - A, Q - A
+    d00, d01, d11 = (np.einsum("...i,...i", a, b) for a, b in ((e0, e0), (e0, e1), (e1, e1)))
+    d20, d21 = np.einsum("...i,...i", q, e0), np.einsum("...i,...i", q, e1)
+    den = np.maximum(d00 * d11 - d01 * d01, 1e-300)
+    v = (d11 * d20 - d01 * d21) / den
+    w = (d00 * d21 - d01 * d20) / den
+    inside = np.stack([1 - v - w, v, w], axis=-1)
+    t_ab, t_bc, t_ca = seg(A, B), seg(B, C), seg(C, A)
+    cands = [inside,
+             np.stack([1 - t_ab, t_ab, np.zeros_like(t_ab)], axis=-1),
+             np.stack([np.zeros_like(t_bc), 1 - t_bc, t_bc], axis=-1),
+             np.stack([t_ca, np.zeros_like(t_ca), 1 - t_ca], axis=-1)]
+    ok_inside = (v >= 0) & (w >= 0) & (v + w <= 1)
+    best, best_d = None, None
+    for i, bc in enumerate(cands):
+        foot = bc[..., :1] * A + bc[..., 1:2] * B + bc[..., 2:] * C
+        dd = np.linalg.norm(foot - Q, axis=-1)
+        if i == 0:
+            dd = np.where(ok_inside, dd, np.inf)
+            best, best_d = bc, dd
+        else:
+            pick = dd < best_d
+            best = np.where(pick[..., None], bc, best)
+            best_d = np.where(pick, dd, best_d)
+    return best
 
 
 def surface_nodes(model) -> np.ndarray:

@@ -10,7 +10,7 @@ alpha_z of §4.5.4) are estimated jointly over the first frames with deformation
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import cv2
 import numpy as np
@@ -32,13 +32,16 @@ class TrackerConfig:
     n_modes: int = 0  # 0: all
     max_iterations: int = 20
     constant_frames: int = 15
+    constant_std_frac: float = 0.0025  # a frame informs a constant only if its std is below this fraction of its range
     min_measurements: int = 6
     link_dist: float = 0.01  # metres from the model surface for a map point to belong to the object
+    snap_to_surface: bool = True  # measure a linked point at its foot on the model surface, not at its mapped position
     max_points: int = 0  # 0: all
     dots: np.ndarray | None = None  # (N, 3) object frame
     dot_color: tuple = (0.1, 0.25, 0.95)
     dot_radius_px: float = 12.0  # association radius
     min_deformation_px: float = 0.3  # below this improvement over "no deformation": nothing measurable
+    global_samples: int = 32  # coarse search over the tracked parameters when the warm start fits badly (0: off)
 
 
 @dataclass
@@ -98,15 +101,18 @@ class DeformableTracker:
         self._was_deforming = False  # constants move only once deformation makes them observable
         self.n_mu = len(axes)
         self.cand_nodes = surface_nodes(model)
-        self.links: dict[int, tuple] = {}  # map point id -> (nodes (3,), weights (3,), X_map (3,))
+        # map point id -> (nodes (3,), weights (3,), X_map (3,) rest position measured, P_map (3,) as mapped,
+        #                  mu it was mapped in or None for the rest shape)
+        self.links: dict[int, tuple] = {}
         self.static: set[int] = set()
         self._alpha_linked = None
         self.deforming_frames = 0
         self._dot_links = None
+        self.outlier_ids = np.zeros(0, np.int64)  # map points the last fit rejected (their image tracks slid)
         if self.cfg.measurements in ("dots", "homography"):
             if self.cfg.dots is None or len(self.cfg.dots) == 0:
                 raise ValueError("measurements 'dots' need the dots' reference positions (tracking.dots)")
-            L = link(self.cfg.dots, model.points, self.cand_nodes, max_dist=np.inf)
+            L = link(self.cfg.dots, model.points, self.cand_nodes, max_dist=np.inf, triangles=model.surface)
             self._dot_links = (L.nodes, L.weights)
 
     # -- geometry ----------------------------------------------------------------------------------------
@@ -132,34 +138,77 @@ class DeformableTracker:
 
         return f
 
-    def link_points(self, ids: np.ndarray, P_map: np.ndarray) -> None:
-        """Link newly seen map points to model nodes (object frame, undoing the current alpha)."""
+    def link_points(self, ids: np.ndarray, P_map: np.ndarray, mu="current") -> None:
+        """Link newly seen map points to model nodes (object frame, undoing the current alpha). ``mu``: the
+        deformation the points were mapped in, None for the rest shape; "current": the current estimate once
+        deformation was seen, else the rest shape.
+
+        With ``snap_to_surface`` the rest position used from then on is the point's foot on the registered
+        model surface (Sum w_i x_i of its link): a depth or triangulation error across the surface, a few mm
+        on a thin lever seen at its edges, would otherwise turn into an image error that grows with the
+        rotation (radius error x angle); the link then describes the material point exactly."""
         new = [i for i, pid in enumerate(ids) if int(pid) not in self.links and int(pid) not in self.static]
         if not new:
             return
         P = P_map[new]
         T_om = G.inv(self.T_map_obj)
         X = G.transform(T_om, P) @ G.rot_axis("z", self._alpha())  # R_z(-a) applied: row vectors
-        L = link(X, self.model.points, self.cand_nodes, self.cfg.link_dist)
+        V = self.model.points
+        if isinstance(mu, str):
+            mu = self.x[: self.n_mu].copy() if (self._was_deforming and self.cfg.snap_to_surface) else None
+        if mu is not None:
+            # a point first mapped while the object is deformed sits on the deformed surface: link it there
+            # and carry its weights back to the rest configuration (the inverse of Eq. 4.10's interpolation)
+            u = self.field.view(self.cand_nodes, self.cfg.n_modes or None).evaluate_with_jacobian(mu, checked=True)[0]
+            V = V.copy()
+            V[self.cand_nodes] += u
+        L = link(X, V, self.cand_nodes, self.cfg.link_dist, triangles=self.model.surface)
+        if self.cfg.snap_to_surface:
+            foot = np.einsum("nk,nkd->nd", L.weights, self.model.points[L.nodes])  # rest configuration
+            X_rest = G.transform(self.T_map_obj, foot @ G.rot_axis("z", self._alpha()).T)
+        else:
+            X_rest = P
         for k, i in enumerate(new):
             pid = int(ids[i])
             if L.on_object[k]:
-                self.links[pid] = (L.nodes[k], L.weights[k], P_map[i].copy())
+                self.links[pid] = (L.nodes[k], L.weights[k], X_rest[k].copy(), P_map[i].copy(), mu)
             else:
                 self.static.add(pid)
 
     def relink(self) -> None:
-        """alpha changed: the same map points now sit at other material points."""
+        """alpha changed: the same map points now sit at other material points (each relinked in the
+        deformation it was mapped in)."""
         if not self.links:
             return
-        ids = np.array(list(self.links))
-        P = np.array([self.links[i][2] for i in ids])
+        groups: dict = {}
+        for pid, lk in self.links.items():
+            key = None if lk[4] is None else tuple(np.round(lk[4], 12))
+            groups.setdefault(key, []).append(pid)
+        old = dict(self.links)
         self.links.clear()
-        self.link_points(ids, P)
+        for pids in groups.values():
+            self.link_points(np.array(pids), np.array([old[i][3] for i in pids]), old[pids[0]][4])
 
     @property
     def deformable_ids(self) -> list[int]:
         return sorted(self.links)
+
+    def predicted_points(self) -> tuple[np.ndarray, np.ndarray]:
+        """(ids, (N, 3) map-frame positions) of the linked map points moved by the current estimate: where the
+        localization should look for them in the next image (deformable ORB tracking, §4.4.2). Before any
+        deformation has been seen the rest positions are the prediction (the estimate is then meaningless)."""
+        ids = np.array(self.deformable_ids, dtype=np.int64)
+        if len(ids) == 0:
+            return ids, np.zeros((0, 3))
+        X = np.array([self.links[int(i)][2] for i in ids])
+        if not self._was_deforming:
+            return ids, X
+        nodes = np.array([self.links[int(i)][0] for i in ids])
+        w = np.array([self.links[int(i)][1] for i in ids])
+        uniq, inv = np.unique(nodes, return_inverse=True)
+        u = self.field.view(uniq, self.cfg.n_modes or None).evaluate_with_jacobian(self.x[: self.n_mu], checked=True)[0]
+        dX = (u[inv.reshape(nodes.shape)] * w[:, :, None]).sum(axis=1)
+        return ids, X + dX @ (self.R_wo @ G.rot_axis("z", self._alpha())).T
 
     # -- measurements ------------------------------------------------------------------------------------------
     def _map_point_measurements(self, ids, P_map, uv):
@@ -171,7 +220,7 @@ class DeformableTracker:
         nodes = np.array([self.links[int(ids[k])][0] for k in sel])
         w = np.array([self.links[int(ids[k])][1] for k in sel])
         X = np.array([self.links[int(ids[k])][2] for k in sel])
-        return X, self.cam.undistort_points(uv[sel]), nodes, w
+        return X, self.cam.undistort_points(uv[sel]), nodes, w, np.asarray(ids)[sel]
 
     def _dot_measurements(self, image_bgr, T_cw):
         from simreal_nodes.vision.blobs import detect_color_blobs
@@ -227,7 +276,7 @@ class DeformableTracker:
             est.reason = f"too few measurements on the object ({n}, need {self.cfg.min_measurements}; {found} candidates seen)"
             est.measurements = n
             return est
-        X, uvm, nodes, w = meas
+        X, uvm, nodes, w = meas[:4]
         est.measurements = len(X)
         disp = self._disp_fn(nodes, w)
         free = ~self.frozen
@@ -243,11 +292,16 @@ class DeformableTracker:
         else:
             p = lm.Problem(X, uvm, disp, T_cw, self.R_wo, self.K, rigid_z=self.rigid_z)
             res = lm.solve(p, self.x, lo, hi, self.cfg.huber_px, self.cfg.max_iterations)
+            if self.cfg.global_samples and (res.rms_px > 0.75 * self.cfg.huber_px or res.inliers < 0.85 * len(X)):
+                res = self._global_restart(p, res, lo, hi)
             rest_rms = self._rest_rms(X, uvm, T_cw)
         est.solve_ms = (time.perf_counter() - t0) * 1e3
         est.values, est.cov = res.x.copy(), res.cov
         est.rms_px, est.inliers, est.iterations = res.rms_px, res.inliers, res.iterations
         est.debug = {"rest_rms_px": rest_rms}
+        self.outlier_ids = np.zeros(0, np.int64)
+        if len(meas) > 4 and res.inliers >= 0.6 * len(X):  # a fit the majority agrees with judges the rest
+            self.outlier_ids = meas[4][np.linalg.norm(res.residuals, axis=1) > 2 * self.cfg.huber_px]
         if res.inliers < self.cfg.min_measurements or not np.isfinite(res.rms_px):
             est.state = LOST
             est.reason = f"only {res.inliers} of {len(X)} measurements agree with the model (all outliers?)"
@@ -277,6 +331,34 @@ class DeformableTracker:
         est.frozen = self.frozen.copy()
         return est
 
+    def _global_restart(self, p: lm.Problem, res: lm.Result, lo: np.ndarray, hi: np.ndarray) -> lm.Result:
+        """The warm start fitted badly: the load may have jumped into another basin of the cost (a load moved
+        across mid-span passes a larger deflection). Evaluate the Huber cost on a coarse grid of the free
+        parameters (about ``global_samples`` points; the others at the current estimate) and run LM again
+        from the best sample if it beats the warm start's result; keep the lower cost."""
+        free = np.flatnonzero(hi > lo)
+        if len(free) == 0:
+            return res
+        per_axis = max(2, int(round(self.cfg.global_samples ** (1.0 / len(free)))))
+        axes = [np.linspace(lo[i], hi[i], per_axis) for i in free]
+        grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, len(free))
+        n_mu = len(self.x) - (1 if p.rigid_z else 0)
+        k = self.cfg.huber_px
+        best, best_cost = None, res.cost
+        for g in grid:
+            x = res.x.copy()
+            x[free] = g
+            uv, Xc, _ = lm.predict(p, x, n_mu, with_jacobian=False)
+            rn = np.linalg.norm(p.uv - uv, axis=1)
+            rn = rn[np.isfinite(rn) & (Xc[:, 2] > 0)]
+            c = float(np.sum(np.where(rn <= k, rn * rn, 2 * k * rn - k * k)))
+            if c < best_cost:
+                best, best_cost = x, c
+        if best is None:
+            return res
+        res2 = lm.solve(p, best, lo, hi, k, self.cfg.max_iterations)
+        return res2 if res2.cost < res.cost else res
+
     def _rest_rms(self, X, uvm, T_cw) -> float:
         pred, z = _project(T_cw, X, self.K)
         r = np.linalg.norm(uvm - pred, axis=1)
@@ -284,8 +366,15 @@ class DeformableTracker:
         return float(np.sqrt(np.mean(np.minimum(r, 3 * self.cfg.huber_px) ** 2))) if len(r) else float("nan")
 
     def _update_constants(self, est: Estimate) -> None:
+        """Fig. 4.19: the constants (alpha_z, a stiffness) are estimated with the tracked parameters in the
+        first frames that show them well (their standard deviation below ``constant_std_frac`` of their
+        range: a barely bent boot says little about how it is turned) and frozen at the median of
+        ``constant_frames`` such frames."""
         const = np.array([m == "constant" for m in self.mode]) & ~self.frozen
-        if not const.any() or est.state != OK:
+        if not const.any() or est.state == LOST or not est.deforming:
+            return
+        std = np.sqrt(np.clip(np.diag(est.cov), 0, None))
+        if not np.all(std[const] < self.cfg.constant_std_frac * (self.hi - self.lo)[const]):
             return
         self._const_samples.append(self.x.copy())
         if self.rigid_z and const[self.n_mu]:
@@ -324,6 +413,31 @@ class DeformableTracker:
         res = lm.solve_generic(model, obs, self.x, lo, hi, np.full(len(obs), px), self.cfg.huber_px, self.cfg.max_iterations)
         rest = np.linalg.norm(obs - np.c_[Xo[:, 0], Xo[:, 2]], axis=1) / px
         return res, float(np.sqrt(np.mean(np.minimum(rest, 3 * self.cfg.huber_px) ** 2)))
+
+
+def tracker_config(obj: dict, **overrides) -> TrackerConfig:
+    """The tracker settings of a validated scene object (its ``tracking`` block), with overrides."""
+    t = obj["tracking"]
+    cfg = TrackerConfig(measurements=t["measurements"], huber_px=t["huber_px"], n_modes=t["modes"],
+                        max_iterations=t["max_iterations"], constant_frames=t["constant_frames"], constant_std_frac=t["constant_std_frac"],
+                        min_measurements=t["min_measurements"], max_points=t["points"],
+                        dots=np.asarray(t["dots"]) if t["dots"] else None, dot_color=tuple(t["dot_color"]))
+    return replace(cfg, **overrides)
+
+
+def deformable_feedback(trackers) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """What the trackers tell the localization after a frame: (ids (N,) uint32, predicted map-frame positions
+    (N, 3), drop (N,) uint8: 1 = the last fit rejected this point, forget its image track)."""
+    ids, P, drop = [], [], []
+    for tr in trackers:
+        i, p = tr.predicted_points()
+        ids.append(i)
+        P.append(p)
+        drop.append(np.isin(i, tr.outlier_ids))
+    if not ids:
+        return np.zeros(0, np.uint32), np.zeros((0, 3)), np.zeros(0, np.uint8)
+    return (np.concatenate(ids).astype(np.uint32), np.concatenate(P).reshape(-1, 3),
+            np.concatenate(drop).astype(np.uint8))
 
 
 def _project(T_cw, X, K):

@@ -261,29 +261,57 @@ def env_summary() -> str:
     return f"ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID', '0')}"
 
 
-def cloud_msg(points: np.ndarray, header: Header, frame_id: str):
-    """sensor_msgs/PointCloud2 with float32 x, y, z (no sensor_msgs_py on PyPI)."""
+_PF_TYPES = {np.dtype(np.int8): 1, np.dtype(np.uint8): 2, np.dtype(np.int16): 3, np.dtype(np.uint16): 4,
+             np.dtype(np.int32): 5, np.dtype(np.uint32): 6, np.dtype(np.float32): 7, np.dtype(np.float64): 8}
+
+
+def cloud_msg(points: np.ndarray, header: Header, frame_id: str, extra: dict | None = None):
+    """sensor_msgs/PointCloud2 with float32 x, y, z and optional per-point ``extra`` fields
+    (name -> (N,) array of a PointField type, e.g. uint32 ids); no sensor_msgs_py on PyPI."""
     import array
 
     from sensor_msgs.msg import PointCloud2, PointField
 
-    P = np.ascontiguousarray(np.asarray(points, dtype=np.float32).reshape(-1, 3))
+    P = np.asarray(points, dtype=np.float32).reshape(-1, 3)
+    cols = [("x", P[:, 0]), ("y", P[:, 1]), ("z", P[:, 2])]
+    for name, v in (extra or {}).items():
+        v = np.asarray(v).reshape(-1)
+        if len(v) != len(P) or v.dtype not in _PF_TYPES:
+            raise ValueError(f"cloud field '{name}': {len(v)} values of {v.dtype} for {len(P)} points")
+        cols.append((name, v))
+    rec = np.zeros(len(P), dtype=[(n, v.dtype.newbyteorder("<")) for n, v in cols])  # packed, little-endian
+    for n, v in cols:
+        rec[n] = v
     m = PointCloud2()
     m.header.stamp = header.stamp
     m.header.frame_id = frame_id
     m.height, m.width = 1, len(P)
-    m.fields = [PointField(name=n, offset=4 * i, datatype=PointField.FLOAT32, count=1) for i, n in enumerate("xyz")]
+    m.fields = [PointField(name=n, offset=rec.dtype.fields[n][1], datatype=_PF_TYPES[np.dtype(v.dtype)], count=1)
+                for n, v in cols]
     m.is_bigendian = False
-    m.point_step, m.row_step = 12, 12 * len(P)
+    m.point_step, m.row_step = rec.dtype.itemsize, rec.dtype.itemsize * len(P)
     m.is_dense = True
-    m.data = array.array("B", P.tobytes())
+    m.data = array.array("B", rec.tobytes())
     return m
 
 
+def cloud_field(msg, name: str) -> np.ndarray:
+    """One named field of a PointCloud2 as an (N,) array (ValueError if absent or malformed)."""
+    f = next((f for f in msg.fields if f.name == name), None)
+    if f is None:
+        raise ValueError(f"PointCloud2 without a '{name}' field")
+    dt = next((d for d, t in _PF_TYPES.items() if t == f.datatype), None)
+    if dt is None:
+        raise ValueError(f"PointCloud2 field '{name}' has unknown datatype {f.datatype}")
+    n = msg.width * msg.height
+    data = bytes(msg.data)
+    if msg.point_step < f.offset + dt.itemsize or len(data) < n * msg.point_step:
+        raise ValueError(f"PointCloud2 of {n} points with step {msg.point_step} has only {len(data)} bytes")
+    raw = np.frombuffer(data, np.uint8, count=n * msg.point_step).reshape(n, msg.point_step)
+    field = raw[:, f.offset:f.offset + dt.itemsize].copy().view(dt.newbyteorder(">" if msg.is_bigendian else "<"))
+    return field.ravel().astype(dt)
+
+
 def cloud_to_array(msg) -> np.ndarray:
-    """x, y, z (float32) of a PointCloud2 into (N, 3)."""
-    offs = {f.name: f.offset for f in msg.fields}
-    if not all(k in offs for k in "xyz"):
-        raise ValueError("PointCloud2 without x, y, z fields")
-    raw = np.frombuffer(bytes(msg.data), np.uint8).reshape(-1, msg.point_step)
-    return np.stack([raw[:, offs[k]:offs[k] + 4].copy().view(np.float32).ravel() for k in "xyz"], axis=1)
+    """x, y, z of a PointCloud2 into (N, 3)."""
+    return np.stack([cloud_field(msg, k).astype(np.float64) for k in "xyz"], axis=1)

@@ -20,6 +20,7 @@ POSE = "/simreal/localization/pose"
 LOC_STATUS = "/simreal/localization/status"
 LOC_MAP = "/simreal/localization/map"
 LOC_OBS = "/simreal/localization/observations"
+LOC_DEFORMABLE = "/simreal/localization/deformable_points"  # tracker -> localization: PointCloud2 x, y, z, id, drop
 TRACKER_STATUS = "/simreal/tracker/status"
 OVERLAY_IMAGE = "/simreal/overlay/image_raw"
 OVERLAY_MARKERS = "/simreal/overlay/markers"
@@ -78,7 +79,8 @@ def required_nodes(scene: dict, lossless: bool = False) -> list[NodeSpec]:
     if loc["mode"] != "static":
         nodes.append(NodeSpec(
             "localization", "simreal_nodes.ros.nodes.localization", dict(common),
-            [CAM_IMAGE, CAM_INFO] + ([CAM_DEPTH] if depth else []) + ([CAM_RIGHT_IMAGE, CAM_RIGHT_INFO] if stereo else []),
+            [CAM_IMAGE, CAM_INFO] + ([CAM_DEPTH] if depth else []) + ([CAM_RIGHT_IMAGE, CAM_RIGHT_INFO] if stereo else [])
+            + ([LOC_DEFORMABLE] if any(o["tracking"]["enabled"] for o in objs) else []),
             {POSE: "geometry_msgs/msg/PoseStamped", TF: "tf2_msgs/msg/TFMessage",
              LOC_STATUS: "simreal_msgs/msg/TrackingStatus", LOC_MAP: "sensor_msgs/msg/PointCloud2",
              LOC_OBS: "simreal_msgs/msg/FeatureObservations"}))
@@ -89,7 +91,8 @@ def required_nodes(scene: dict, lossless: bool = False) -> list[NodeSpec]:
             "tracker", "simreal_nodes.ros.nodes.tracker", dict(common),
             [LOC_OBS if loc["mode"] != "static" else CAM_IMAGE, CAM_INFO, CAM_IMAGE],
             {**{params_topic(o["id"]): "simreal_msgs/msg/ModelParameters" for o in tracked},
-             TRACKER_STATUS: "simreal_msgs/msg/TrackingStatus"}))
+             TRACKER_STATUS: "simreal_msgs/msg/TrackingStatus",
+             **({LOC_DEFORMABLE: "sensor_msgs/msg/PointCloud2"} if loc["mode"] != "static" else {})}))
 
     colliding = [o for o in objs if o["collision"]["enabled"]]
     if colliding:

@@ -66,6 +66,9 @@ LOCALIZATION = Record({
     "static_pose": Vector(7, what=POSE7, doc="camera pose in the map for mode 'static'", nullable=True),
     "map_file": FilePath("load a saved map (HDF5) at start", nullable=True),
     "localization_only": Bool("start with mapping frozen", default=False),
+    "freeze_map_on_deformation": Bool("stop mapping once a tracked object deforms (thesis §4.4.1). Off: mapping goes on, "
+                                      "points on the object never vote for the pose and new ones are linked in the "
+                                      "estimated deformed shape (measured more accurate: docs/tracking.md)", default=False),
     "known_scale_m": Number("monocular: distance between the first two keyframes, metres", lo=0, lo_open=True, nullable=True),
 })
 
@@ -89,6 +92,8 @@ TRACKING = Record({
     "modes": Number("number of PGD modes used (0 = all)", integer=True, lo=0, default=0),
     "max_iterations": Number("Levenberg-Marquardt iterations per frame", integer=True, lo=1, hi=500, default=20),
     "constant_frames": Number("deformed frames used to estimate 'constant' parameters before freezing", integer=True, lo=1, default=15),
+    "constant_std_frac": Number("a frame informs a 'constant' parameter only if its standard deviation is below this "
+                                "fraction of its range", lo=0, lo_open=True, hi=1, default=0.0025),
     "min_measurements": Number("fewer inlier measurements than this -> lost", integer=True, lo=1, default=6),
     "points": Number("most model-linked points used per frame (0 = all)", integer=True, lo=0, default=0),
     "dots": ListOf(Vector(3, what="[x, y, z] in the object frame"), "measurements 'dots': reference positions of glued dots",

@@ -356,7 +356,7 @@ def _joint_boot_scene(real_boot: bool, width, height, duration, fps, alpha_z: fl
                 "id": "boot", "model": "spec:joint_boot",
                 "anchor": {"kind": "pose", "pose": _pose7(T_map_obj)},
                 "parameters": params,
-                "tracking": {"enabled": True, "measurements": "map_points", "huber_px": 2.0, "constant_frames": 20},
+                "tracking": {"enabled": True, "measurements": "map_points", "huber_px": 2.0, "constant_frames": 40},
                 "overlay": {"field": "von_mises"},
             }],
             "overlay": {"enabled": True},

@@ -114,3 +114,45 @@ def test_model_an_order_of_magnitude_off_in_scale_is_reported(beam):
         states.append(e.state)
         assert e.state == OK or e.reason
     assert OK not in states, f"a model 10x too large must not look fine: {states}"
+
+
+# -- deformable ORB tracking through the RGB-D map (thesis §4.4, §4.5.2-4.5.4) ----------------------------------
+
+def _track_map_points(name, oid):
+    seq = sequence(name, 640, 480)
+    scene = validate_scene(seq["scene"].scene_yaml(seq["scene"]), name, ".")
+    r = track_sequence(seq, scene)[oid]
+    est = np.array([e.values for e in r["est"]])
+    states = np.array([e.state for e in r["est"]])
+    return r["truth"], est, states
+
+
+def test_joint_boot_lever_angle_and_unknown_rotation_from_map_points():
+    """Real boot turned by an unknown 20 degrees about its axis, lever 0 -> 50 -> 0 degrees: theta within
+    0.5 degree (median), alpha_z estimated over the first well-deformed frames and frozen within 1 degree."""
+    truth, est, states = _track_map_points("joint_boot", "boot")
+    loaded = truth[:, 0] > 0.02  # the lever is moving
+    err_theta = np.abs(est[loaded, 0] - truth[loaded, 0])
+    err_alpha = abs(est[-1, 1] - truth[-1, 1])
+    print(f"joint boot: theta median error {np.degrees(np.median(err_theta)):.2f} deg (p90 "
+          f"{np.degrees(np.percentile(err_theta, 90)):.2f}), alpha_z error {np.degrees(err_alpha):.2f} deg, "
+          f"states {np.bincount(states, minlength=4)}")
+    assert np.degrees(np.median(err_theta)) < 0.5
+    assert np.degrees(np.percentile(err_theta, 90)) < 1.5
+    assert np.degrees(err_alpha) < 1.0
+    assert np.mean(states[loaded] == OK) > 0.9
+
+
+def test_foam_beam_load_position_from_its_own_texture():
+    """Textured foam beam, a 15 N disk moved to five places (§4.5.2). Measured at 640 x 480: median error
+    1.5 % of the load range, short of the issue's 0.5 % (0.76 % at 1280 x 720, docs/tracking.md); this guards
+    that level and that tracking holds after every jump of the load."""
+    truth, est, states = _track_map_points("foam_beam", "beam")
+    loaded = np.isfinite(truth[:, 0])
+    err = np.abs(est[loaded, 0] - truth[loaded, 0])
+    span = 0.6975 - 0.1
+    print(f"foam beam: median |s error| {1e3 * np.median(err):.1f} mm = {100 * np.median(err) / span:.2f} % of the "
+          f"load range, p90 {100 * np.percentile(err, 90) / span:.1f} %; states {np.bincount(states, minlength=4)}")
+    assert np.median(err) < 0.025 * span
+    assert np.percentile(err, 90) < 0.08 * span
+    assert np.mean(states[loaded] != LOST) > 0.95

@@ -4,8 +4,10 @@ Subscribes the ingest node's image (+ depth for RGB-D, + right image for stereo)
 every frame: the camera pose (PoseStamped and TF map -> camera optical frame), the tracking status
 with a reason, and the map points matched in the image (FeatureObservations, what the deformable
 tracker measures); the map as PointCloud2 once a second. Service ``~/set_localization_only``
-(std_srvs/SetBool) freezes mapping; topic ``/simreal/localization/deformable_points``
-(std_msgs/UInt32MultiArray) names map points that lie on a deforming object.
+(std_srvs/SetBool) freezes mapping; topic ``/simreal/localization/deformable_points`` (PointCloud2 in the
+map frame with fields x, y, z, id (uint32), drop (uint8), from the tracker after each frame) names the map
+points that lie on a deforming object, where the current estimate predicts them, and which of them the
+last fit rejected (their image tracks are dropped and re-acquired).
 """
 
 from __future__ import annotations
@@ -14,21 +16,19 @@ import numpy as np
 from geometry_msgs.msg import PoseStamped
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 from simreal_msgs.msg import FeatureObservations, TrackingStatus
-from std_msgs.msg import UInt32MultiArray
 from std_srvs.srv import SetBool
 from tf2_msgs.msg import TFMessage
 
 from simreal_nodes import geometry as G
 from simreal_nodes.errors import ImageFormatError
 from simreal_nodes.io import images
-from simreal_nodes.ros.common import (ns_to_stamp, TF_QOS, SimrealNode, cloud_msg, data_qos, guarded, matrix_to_pose,
+from simreal_nodes.ros.common import (ns_to_stamp, TF_QOS, SimrealNode, cloud_field, cloud_msg, cloud_to_array, data_qos, guarded, matrix_to_pose,
                                       pose_stamped, reliable_qos, run_node, stamp_ns, transform_stamped)
 from simreal_nodes.scene import graph
 from simreal_nodes.scene.schema import load_scene
 from simreal_nodes.sync import StampSync
 from simreal_nodes.vision.camera import CameraModel
 
-LOC_DEFORMABLE = "/simreal/localization/deformable_points"
 
 
 class LocalizationNode(SimrealNode):
@@ -70,7 +70,7 @@ class LocalizationNode(SimrealNode):
         if self.mode == "stereo":
             self.create_subscription(Image, graph.CAM_RIGHT_IMAGE, lambda m: self.on_input("right", m), q)
             self.create_subscription(CameraInfo, graph.CAM_RIGHT_INFO, self.on_right_info, q)
-        self.create_subscription(UInt32MultiArray, LOC_DEFORMABLE, self.on_deformable, reliable_qos(10))
+        self.create_subscription(PointCloud2, graph.LOC_DEFORMABLE, self.on_deformable, reliable_qos(10))
         self.create_service(SetBool, "~/set_localization_only", self.on_set_localization_only)
         self.create_timer(1.0, self.publish_map)
         self._last_status = None
@@ -207,9 +207,18 @@ class LocalizationNode(SimrealNode):
         return resp
 
     @guarded
-    def on_deformable(self, msg: UInt32MultiArray) -> None:
-        if self.core is not None and hasattr(self.core, "set_deformable"):
-            self.core.set_deformable(list(msg.data))
+    def on_deformable(self, msg: PointCloud2) -> None:
+        if self.core is None or not hasattr(self.core, "set_deformable"):
+            return
+        try:
+            ids = cloud_field(msg, "id").astype(np.int64)
+            P = cloud_to_array(msg)
+            drop = cloud_field(msg, "drop") if any(f.name == "drop" for f in msg.fields) else np.zeros(len(ids), np.uint8)
+        except ValueError as e:
+            self.get_logger().warning(f"ignored malformed deformable points: {e}")
+            return
+        self.core.set_deformable(ids, P)
+        self.core.drop_tracks(ids[drop == 1])
 
     def publish_map(self) -> None:
         if self.core is None or not hasattr(self.core, "map") or not self.core.map.points:

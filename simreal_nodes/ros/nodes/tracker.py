@@ -4,23 +4,24 @@ Per frame it takes the localization node's FeatureObservations (camera pose + ma
 and, for glued-dot measurements, the image of the same stamp, runs the ROS-free
 :class:`DeformableTracker` of every tracked object and publishes ``/simreal/objects/<id>/parameters``
 (ModelParameters: values, covariance, residual, inliers, state and reason). Once deformation appears
-it asks the localization node to stop mapping (``set_localization_only``) and names the map points
-that lie on the object (``/simreal/localization/deformable_points``).
+(if the scene's ``localization.freeze_map_on_deformation``) it asks the localization node to stop mapping
+(``set_localization_only``). After every frame it tells the localization which map points lie on the
+object, where the current estimate predicts them and which the fit rejected
+(``/simreal/localization/deformable_points``, PointCloud2 x, y, z, id, drop in the map frame).
 """
 
 from __future__ import annotations
 
 import numpy as np
-from sensor_msgs.msg import CameraInfo, Image
+from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 from simreal_msgs.msg import FeatureObservations, ModelParameters, TrackingStatus
-from std_msgs.msg import UInt32MultiArray
 from std_srvs.srv import SetBool
 
 from simreal_nodes import geometry as G
-from simreal_nodes.assimilation.tracker import DeformableTracker, TrackerConfig
+from simreal_nodes.assimilation.tracker import DeformableTracker, deformable_feedback, tracker_config
 from simreal_nodes.errors import ImageFormatError
 from simreal_nodes.io import images
-from simreal_nodes.ros.common import (ns_to_stamp, SimrealNode, data_qos, guarded, observation_pose, reliable_qos, run_node,
+from simreal_nodes.ros.common import (ns_to_stamp, SimrealNode, cloud_msg, data_qos, guarded, observation_pose, reliable_qos, run_node,
                                       stamp_ns)
 from simreal_nodes.rom.model_file import load_model
 from simreal_nodes.scene import graph
@@ -28,7 +29,6 @@ from simreal_nodes.scene.schema import load_scene
 from simreal_nodes.sync import StampSync
 from simreal_nodes.vision.camera import CameraModel
 
-LOC_DEFORMABLE = "/simreal/localization/deformable_points"
 
 
 class TrackerNode(SimrealNode):
@@ -55,7 +55,8 @@ class TrackerNode(SimrealNode):
         self.pubs = {o["id"]: self.create_publisher(ModelParameters, graph.params_topic(o["id"]), reliable_qos(50))
                      for o in self.objects}
         self.pub_status = self.create_publisher(TrackingStatus, graph.TRACKER_STATUS, reliable_qos(10))
-        self.pub_deformable = self.create_publisher(UInt32MultiArray, LOC_DEFORMABLE, reliable_qos(10))
+        self.pub_deformable = self.create_publisher(PointCloud2, graph.LOC_DEFORMABLE, reliable_qos(10))
+        self.freeze_map = bool(loc.get("freeze_map_on_deformation", False))
         self.create_subscription(CameraInfo, graph.CAM_INFO, self.on_info, q)
         if "obs" in keys:
             self.create_subscription(FeatureObservations, graph.LOC_OBS, lambda m: self.on_input("obs", m), q)
@@ -63,7 +64,6 @@ class TrackerNode(SimrealNode):
             self.create_subscription(Image, graph.CAM_IMAGE, lambda m: self.on_input("image", m), q)
         self.loc_client = self.create_client(SetBool, "/localization/set_localization_only")
         self._loc_only_requested = False
-        self._published_deformable = 0
         self.set_status("ok", f"tracking {', '.join(o['id'] for o in self.objects)}")
 
     @guarded
@@ -79,11 +79,7 @@ class TrackerNode(SimrealNode):
         tr = self.trackers.get(o["id"])
         if tr is None:
             t = o["tracking"]
-            cfg = TrackerConfig(measurements=t["measurements"], huber_px=self.huber_override or t["huber_px"],
-                                n_modes=self.modes_override or t["modes"], max_iterations=t["max_iterations"],
-                                constant_frames=t["constant_frames"], min_measurements=t["min_measurements"],
-                                max_points=t["points"], dots=np.asarray(t["dots"]) if t["dots"] else None,
-                                dot_color=tuple(t["dot_color"]))
+            cfg = tracker_config(o, huber_px=self.huber_override or t["huber_px"], n_modes=self.modes_override or t["modes"])
             tr = DeformableTracker(self.models[o["id"]], G.pose7_to_matrix(o["anchor"]["pose"]), o["parameters"], self.cam, cfg)
             self.trackers[o["id"]] = tr
         return tr
@@ -126,7 +122,7 @@ class TrackerNode(SimrealNode):
             est = tr.update(T_wc, ids, P, uv, bgr)
             deforming |= est.deforming
             self._publish(o, tr, est, head)
-        self._coordinate_localization(deforming)
+        self._coordinate_localization(deforming, head)
         self.metrics.done(t0, self.age_ms(head.stamp))
         self.progress(head.stamp)
 
@@ -154,13 +150,14 @@ class TrackerNode(SimrealNode):
         self.metrics.extra[f"{o['id']}_solve_ms"] = f"{est.solve_ms:.2f}"
         self.set_status("ok" if est.state == 0 else "warn", f"{o['id']}: " + (est.reason or "ok"))
 
-    def _coordinate_localization(self, deforming: bool) -> None:
-        """Deformable map points leave the pose estimate; mapping stops once deformation appears (§4.4.1)."""
-        ids = sorted({i for tr in self.trackers.values() for i in tr.deformable_ids})
-        if ids and len(ids) != self._published_deformable:
-            self.pub_deformable.publish(UInt32MultiArray(data=ids))
-            self._published_deformable = len(ids)
-        if deforming and not self._loc_only_requested and self.loc_client.service_is_ready():
+    def _coordinate_localization(self, deforming: bool, head) -> None:
+        """Points on the object leave the pose estimate and are searched where the estimate predicts them;
+        mapping stops once deformation appears if the scene asks for it (§4.4.1)."""
+        if self.static_pose is None:
+            ids, P, drop = deformable_feedback(self.trackers.values())
+            if len(ids):
+                self.pub_deformable.publish(cloud_msg(P, head, self.map_frame, {"id": ids, "drop": drop}))
+        if deforming and self.freeze_map and not self._loc_only_requested and self.loc_client.service_is_ready():
             self.loc_client.call_async(SetBool.Request(data=True))
             self._loc_only_requested = True
             self.get_logger().info("deformation appeared: localization-only mode requested")

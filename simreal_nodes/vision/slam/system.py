@@ -10,8 +10,10 @@ A lost frame triggers relocalization (descriptor matching against the whole map 
 localization-only mode the map is frozen: no keyframes, no new points.
 
 Map points on a deforming object can be flagged ``deformable``: they never vote for the camera pose,
-and they are searched in image space around where they were last seen (the deformable tracker's
-measurements).
+and they are followed from frame to frame with pyramidal Lucas-Kanade flow (started from where the
+deformable tracker predicts them: their rest position moved by the current PGD estimate, §4.4.2), and
+re-acquired by ORB descriptor near the prediction when the flow loses them. They are the deformable
+tracker's measurements.
 """
 
 from __future__ import annotations
@@ -90,6 +92,14 @@ class Slam:
         self.init_frame = None  # (feats, stamp) for monocular initialization
         self.deformable: set[int] = set()
         self._last_seen: dict[int, np.ndarray] = {}  # deformable point id -> last observed ideal pixel
+        self._predicted: dict[int, np.ndarray] = {}  # deformable point id -> predicted deformed position (map frame)
+        self._last_desc: dict[int, np.ndarray] = {}  # deformable point id -> descriptor of its last match
+        self._flow: dict[int, np.ndarray] = {}  # deformable point id -> raw pixel in the frame ``_flow_frame``
+        self._flow_frame, self._flow_gray = -1, None
+        self._gray: np.ndarray | None = None
+        self.deformable_radius = 20.0  # ORB re-acquisition radius (pixels) around each predicted / last-seen pixel
+        self.flow_fb_px = 0.5  # forward-backward flow agreement to keep a deformable point's track
+        self.flow_win = 11  # Lucas-Kanade window (pixels); larger windows straddle the object's silhouette and drift
         self._recent_points: list[tuple[int, int]] = []  # (point id, keyframe id at creation)
         self.lost_since: int | None = None
         self.max_ba_points = max_ba_points
@@ -110,11 +120,29 @@ class Slam:
     def set_localization_only(self, on: bool) -> None:
         self.localization_only = bool(on)
 
-    def set_deformable(self, ids) -> None:
-        self.deformable = {int(i) for i in ids}
+    def set_deformable(self, ids, predicted=None) -> None:
+        """Flag map points as lying on a deforming object. ``predicted``: (N, 3) map-frame positions of those
+        points under the current deformation estimate (non-finite rows: no prediction), the centre of their
+        image search in the next frames."""
+        ids = [int(i) for i in ids]
+        self.deformable = set(ids)
         for i in self.deformable:
             if i in self.map.points:
                 self.map.points[i].deformable = True
+        if predicted is None:
+            return
+        P = np.asarray(predicted, dtype=np.float64).reshape(-1, 3)
+        if len(P) != len(ids):
+            raise ValueError(f"{len(ids)} deformable point ids but {len(P)} predicted positions")
+        good = np.all(np.isfinite(P), axis=1)
+        self._predicted = {i: P[k].copy() for k, i in enumerate(ids) if good[k]}
+
+    def drop_tracks(self, ids) -> None:
+        """Forget the frame-to-frame tracks of these deformable points (the deformable tracker found them far
+        from the model's fit: a flow track that slid); they are re-acquired by descriptor."""
+        for i in ids:
+            self._flow.pop(int(i), None)
+            self._last_seen.pop(int(i), None)
 
     def reset(self) -> None:
         self.close()
@@ -133,6 +161,7 @@ class Slam:
         ``right``: the right image of a rectified stereo pair."""
         t0 = time.perf_counter()
         self.frame_id += 1
+        self._gray = gray
         tim = {}
         if self._ba is not None:
             res = self._ba.poll()
@@ -589,47 +618,94 @@ class Slam:
         return np.c_[cols[first], ids[rows[first]]].astype(np.int64)
 
     def _deformable_observations(self, f: Features, T_cw, res: TrackResult, exclude) -> None:
-        """Map points flagged deformable, searched in image space around their last observation (or their
-        undeformed projection), never used for the pose; appended to the observations as outliers."""
+        """Measurements of the map points flagged deformable (never used for the pose), appended to the
+        observations as pose outliers, with their rest positions (the tracker links those to the model).
+
+        1. Flow: a point measured in the previous frame is followed with pyramidal Lucas-Kanade, started at
+           its predicted pixel, and kept if the backward flow returns within ``flow_fb_px``. A deforming,
+           obliquely seen surface soon looks unlike the keyframe that created the point, so descriptors alone
+           lose it; the flow follows the appearance from frame to frame, to sub-pixel.
+        2. Re-acquisition: any other point is searched among the ORB features within ``deformable_radius``
+           pixels of its predicted projection and of its last observation, and matched to the closest
+           descriptor (the map's, or that of its last ORB match) within 50 bits.
+        The tracker's robust loss catches a flow track that slides onto a neighbour."""
         if not self.deformable:
             return
         ids = [i for i in self.deformable if i in self.map.points]
         if not ids:
             return
         ids_a, P, D = self.map.point_arrays(ids)
-        uv, zc = project(T_cw, P, self.K)
-        for k, pid in enumerate(ids_a):
-            if int(pid) in self._last_seen:
-                uv[k] = self._last_seen[int(pid)]
+        P = P.copy()
+        has_pred = np.array([int(i) in self._predicted for i in ids_a])
+        if has_pred.any():
+            P[has_pred] = np.array([self._predicted[int(i)] for i in ids_a[has_pred]])
+        uv, zc = project(T_cw, P, self.K)  # ideal pixels of the predictions (rest positions without one)
+        raw_pred = self.cam.project(P @ T_cw[:3, :3].T + T_cw[:3, 3])
+        found: dict[int, np.ndarray] = {}  # point id -> raw pixel
+        new_desc: dict[int, np.ndarray] = {}
+        # 1. flow from the previous frame
+        if self._flow and self._flow_frame == self.frame_id - 1 and self._flow_gray is not None and self._gray is not None:
+            sel = np.array([k for k, pid in enumerate(ids_a) if int(pid) in self._flow and zc[k] > 0], np.int64)
+            if len(sel):
+                p0 = np.array([self._flow[int(ids_a[k])] for k in sel], np.float32).reshape(-1, 1, 2)
+                guess = np.where(np.isfinite(raw_pred[sel]), raw_pred[sel], p0.reshape(-1, 2)).astype(np.float32)
+                lk = dict(winSize=(self.flow_win, self.flow_win), maxLevel=3, criteria=(cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 0.01))
+                p1, st, _ = cv2.calcOpticalFlowPyrLK(self._flow_gray, self._gray, p0, guess.reshape(-1, 1, 2).copy(),
+                                                     flags=cv2.OPTFLOW_USE_INITIAL_FLOW, **lk)
+                pb, st2, _ = cv2.calcOpticalFlowPyrLK(self._gray, self._flow_gray, p1, p0.copy(),
+                                                      flags=cv2.OPTFLOW_USE_INITIAL_FLOW, **lk)
+                p1, pb = p1.reshape(-1, 2), pb.reshape(-1, 2)
+                H, W = self._gray.shape[:2]
+                ok = (st.ravel() == 1) & (st2.ravel() == 1) & (np.linalg.norm(pb - p0.reshape(-1, 2), axis=1) < self.flow_fb_px)
+                ok &= (p1[:, 0] >= 0) & (p1[:, 0] < W) & (p1[:, 1] >= 0) & (p1[:, 1] < H)
+                for k, good, q in zip(sel, ok, p1):
+                    if good:
+                        found[int(ids_a[k])] = q.astype(np.float64)
+        # 2. ORB re-acquisition of the others
         avail = np.ones(len(f), bool)
         avail[np.asarray(exclude, np.int64)] = False
         kp_idx = np.flatnonzero(avail)
-        if len(kp_idx) == 0:
+        if len(kp_idx):
+            tree = cKDTree(f.und[kp_idx])
+            for k, pid in enumerate(ids_a):
+                pid = int(pid)
+                if pid in found or zc[k] <= 0:
+                    continue
+                centres = [uv[k]] if (has_pred[k] or pid not in self._last_seen) else []
+                if pid in self._last_seen:
+                    centres.append(self._last_seen[pid])
+                c = set()
+                for q in centres:
+                    if np.all(np.isfinite(q)):
+                        c.update(tree.query_ball_point(q, self.deformable_radius))
+                if not c:
+                    continue
+                c = kp_idx[np.fromiter(c, np.int64)]
+                d = hamming(np.repeat(D[k][None], len(c), axis=0), f.desc[c])
+                last = self._last_desc.get(pid)
+                if last is not None:
+                    d = np.minimum(d, hamming(np.repeat(last[None], len(c), axis=0), f.desc[c]))
+                j = int(np.argmin(d))
+                if d[j] <= 50:
+                    found[pid] = f.uv[c[j]].astype(np.float64)
+                    new_desc[pid] = f.desc[c[j]].copy()
+        # the measurements and the state for the next frame
+        self._flow, self._flow_frame, self._flow_gray = found, self.frame_id, self._gray
+        self._last_desc.update(new_desc)
+        for pid in list(self._last_seen):
+            if pid not in found:
+                self._last_seen.pop(pid)
+        if not found:
             return
-        tree = cKDTree(f.und[kp_idx])
-        cand = tree.query_ball_point(uv, 30.0)
-        new_ids, new_kp = [], []
-        for k, c in enumerate(cand):
-            if not c or zc[k] <= 0:
-                self._last_seen.pop(int(ids_a[k]), None)
-                continue
-            c = kp_idx[np.asarray(c)]
-            d = hamming(np.repeat(D[k][None], len(c), axis=0), f.desc[c])
-            j = int(np.argmin(d))
-            if d[j] <= 50:
-                new_ids.append(int(ids_a[k]))
-                new_kp.append(int(c[j]))
-                self._last_seen[int(ids_a[k])] = f.und[c[j]].copy()
-            else:
-                self._last_seen.pop(int(ids_a[k]), None)
-        if new_ids:
-            _, first = np.unique(new_kp, return_index=True)
-            new_ids = np.asarray(new_ids)[first]
-            new_kp = np.asarray(new_kp)[first]
-            res.obs_ids = np.concatenate([res.obs_ids, new_ids])
-            res.obs_uv = np.concatenate([res.obs_uv, f.uv[new_kp]])
-            res.obs_inlier = np.concatenate([res.obs_inlier, np.zeros(len(new_ids), bool)])
-            res.obs_pos = np.concatenate([res.obs_pos, np.array([self.map.points[int(i)].pos for i in new_ids])])
+        new_ids = np.fromiter(found, np.int64)
+        raw = np.array([found[int(i)] for i in new_ids])
+        und = self.cam.undistort_points(raw)
+        for pid, q in zip(new_ids, und):
+            self._last_seen[int(pid)] = q
+        res.obs_ids = np.concatenate([res.obs_ids, new_ids])
+        res.obs_uv = np.concatenate([res.obs_uv, raw])
+        res.obs_inlier = np.concatenate([res.obs_inlier, np.zeros(len(new_ids), bool)])
+        res.obs_pos = np.concatenate([res.obs_pos, self.map._pos[new_ids]])
 
     def _update_visibility(self, match) -> None:
         pass
