@@ -53,6 +53,7 @@ class Problem:
     ``X``: (N, 3) undeformed positions of the measured points, map frame; ``uv``: (N, 2) observed ideal
     pixels; ``disp``: callable mu -> (dX (N, 3) object frame, ddX (N, 3, n_mu)); ``T_cw``: camera pose;
     ``R_wo``: object orientation in the map; ``sigma``: (N,) pixel noise scale of each measurement.
+    X, T_cw and K are read once (``q0``, K times the undeformed points in the camera frame).
     """
 
     X: np.ndarray
@@ -63,6 +64,9 @@ class Problem:
     K: np.ndarray
     sigma: np.ndarray | None = None
     rigid_z: bool = False  # estimate alpha_z (the last parameter) as a rotation about the object's z axis
+
+    def __post_init__(self):
+        self.q0 = (np.asarray(self.X, dtype=np.float64) @ self.T_cw[:3, :3].T + self.T_cw[:3, 3]) @ self.K.T
 
 
 @dataclass
@@ -79,53 +83,54 @@ class Result:
 
 
 def predict(p: Problem, x: np.ndarray, n_mu: int, with_jacobian: bool = True):
-    """Projected pixels (N, 2) for parameters x and, optionally, their Jacobian (N, 2, n)."""
+    """Projected pixels (N, 2), the points' depths (N,) and, optionally, the Jacobian (N, 2, n) for x.
+
+    Written with q = K X_c (K's last row is (0, 0, 1), so q_z = Z): u = q_xy / Z and, for any derivative
+    dX_c = A dX of the displaced point, du = (K dX_c)_xy / Z - u (K dX_c)_z / Z — Eq. 4.12's image Jacobian
+    J_Pi applied without forming it."""
     mu = x[:n_mu]
     alpha = x[n_mu] if p.rigid_z else 0.0
     dX, ddX = p.disp(mu)
-    Rz = G.rot_axis("z", alpha)
-    R_w = p.R_wo @ Rz
-    A = p.T_cw[:3, :3] @ R_w  # object frame -> camera frame (rotation only: derivatives are vectors)
-    Xc = p.X @ p.T_cw[:3, :3].T + p.T_cw[:3, 3] + dX @ A.T
-    K = p.K
+    A = p.T_cw[:3, :3] @ p.R_wo @ G.rot_axis("z", alpha)  # object frame -> camera frame (rotation only)
+    KA = p.K @ A
+    q = p.q0 + dX @ KA.T
     with np.errstate(divide="ignore", invalid="ignore"):
-        iz = 1.0 / Xc[:, 2]
-        uv = np.empty((len(Xc), 2))
-        uv[:, 0] = (K[0, 0] * Xc[:, 0] + K[0, 1] * Xc[:, 1]) * iz + K[0, 2]
-        uv[:, 1] = K[1, 1] * Xc[:, 1] * iz + K[1, 2]
+        iz = 1.0 / q[:, 2]
+        uv = q[:, :2] * iz[:, None]
     if not with_jacobian:
-        return uv, Xc, None
-    # Eq. 4.12 written out: d(u, v) = J_Pi(X_c) . A . dX, with the image Jacobian applied elementwise
+        return uv, q[:, 2], None
     if p.rigid_z:
         ez_dX = np.stack([-dX[:, 1], dX[:, 0], np.zeros(len(dX))], axis=1)  # [e_z]x dX (the SO(3) derivative)
         dXo = np.concatenate([ddX, ez_dX[:, :, None]], axis=2)
     else:
         dXo = ddX
-    dXc = np.einsum("ij,njp->nip", A, dXo)  # (N, 3, n) displacement derivatives in the camera frame
-    izc = iz[:, None]
-    J = np.empty((len(uv), 2, dXo.shape[2]))
-    J[:, 0, :] = (K[0, 0] * dXc[:, 0] + K[0, 1] * dXc[:, 1]) * izc - ((K[0, 0] * Xc[:, 0] + K[0, 1] * Xc[:, 1]) * iz * iz)[:, None] * dXc[:, 2]
-    J[:, 1, :] = K[1, 1] * dXc[:, 1] * izc - (K[1, 1] * Xc[:, 1] * iz * iz)[:, None] * dXc[:, 2]
-    return uv, Xc, J
+    dq = np.matmul(KA, dXo)  # (N, 3, n)
+    J = (dq[:, :2, :] - uv[:, :, None] * dq[:, 2:3, :]) * iz[:, None, None]
+    return uv, q[:, 2], J
 
 
 def solve(p: Problem, x0: np.ndarray, lo: np.ndarray, hi: np.ndarray, huber_px: float = 2.0, max_iter: int = 20,
-          lam0: float = 1e-3, tol: float = 1e-7) -> Result:
+          lam0: float = 1e-3, tol: float = 1e-7, cost_tol: float = 1e-6) -> Result:
     """Levenberg-Marquardt with Huber IRLS weights and box bounds (Eq. 4.8) on image residuals."""
     n = len(x0)
     n_mu = n - (1 if p.rigid_z else 0)
 
     def model(x):
-        uv, Xc, J = predict(p, x, n_mu)
-        return uv, J, Xc[:, 2] > 0
+        uv, z, J = predict(p, x, n_mu)
+        return uv, J, z > 0
 
-    return solve_generic(model, p.uv, x0, lo, hi, p.sigma, huber_px, max_iter, lam0, tol)
+    return solve_generic(model, p.uv, x0, lo, hi, p.sigma, huber_px, max_iter, lam0, tol, cost_tol)
 
 
 def solve_generic(model, obs: np.ndarray, x0, lo, hi, sigma=None, huber: float = 2.0, max_iter: int = 20,
-                  lam0: float = 1e-3, tol: float = 1e-7) -> Result:
+                  lam0: float = 1e-3, tol: float = 1e-7, cost_tol: float = 1e-6) -> Result:
     """LM for any measurement model: ``model(x) -> (prediction (N, 2), Jacobian (N, 2, n), valid (N,))``;
-    residual r = (obs - prediction) / sigma; Huber threshold ``huber`` in units of r."""
+    residual r = (obs - prediction) / sigma; Huber threshold ``huber`` in units of r.
+
+    Converged when a step is below ``tol`` x the parameter range or below 5 % of the parameter's standard
+    deviation (the steps IRLS takes around Huber's kink then only trade measurements between its two
+    branches), or when the decrease of the cost the linearisation promises (gᵀδ) or achieves is below
+    ``cost_tol`` x the cost."""
     x = np.clip(np.asarray(x0, dtype=np.float64), lo, hi)
     n = len(x)
     sig = np.ones(len(obs)) if sigma is None else np.asarray(sigma, dtype=np.float64)
@@ -156,6 +161,11 @@ def solve_generic(model, obs: np.ndarray, x0, lo, hi, sigma=None, huber: float =
         H = Jf.T @ (Jf * wf[:, None])
         g = Jf.T @ (wf * r.ravel())
         D = np.maximum(np.diag(H), 1e-12 * max(float(np.trace(H)), 1e-300))
+        try:  # the parameters' standard deviations at this iterate
+            s2 = cost / max(2 * int(valid.sum()) - n, 1)
+            sd = np.sqrt(np.clip(s2 * np.diag(np.linalg.inv(H + 1e-12 * np.diag(D))), 0.0, None))
+        except np.linalg.LinAlgError:
+            sd = np.zeros(n)
         accepted = False
         for _ in range(8):
             try:
@@ -164,12 +174,14 @@ def solve_generic(model, obs: np.ndarray, x0, lo, hi, sigma=None, huber: float =
                 lam *= 10
                 continue
             xn = np.clip(x + step, lo, hi)
-            if np.all(np.abs(xn - x) <= tol * span):
-                converged = True  # the step is below resolution (or blocked by the bounds)
+            dx = np.abs(xn - x)
+            if (np.all(dx <= tol * span) or np.all(dx <= 0.05 * sd)
+                    or float(g @ (xn - x)) <= cost_tol * max(cost, 1e-300)):
+                converged = True  # the step is below resolution, blocked by the bounds, or promises nothing
                 break
             rn_, Jn, wn, vn, cn = evaluate(xn)
             if cn < cost:
-                if cost - cn <= 1e-10 * max(cost, 1e-300):
+                if cost - cn <= cost_tol * max(cost, 1e-300):
                     converged = True
                 x, r, J, w, valid, cost = xn, rn_, Jn, wn, vn, cn
                 lam = max(lam / 10, 1e-12)

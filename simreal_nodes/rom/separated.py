@@ -218,8 +218,10 @@ class SeparatedField:
         S = self.space[: len(c)] if nodes is None else self.space[: len(c), nodes]
         return np.tensordot(dc[:, k], S, axes=(0, 0))
 
-    def view(self, nodes=None, n_modes: int | None = None) -> "FieldView":
-        return FieldView(self, nodes, self._m(n_modes))
+    def view(self, nodes=None, n_modes: int | None = None, weights=None) -> "FieldView":
+        """The field at ``nodes`` (None: all), or, with ``weights`` (N, k) and ``nodes`` (N, k), at N points
+        each interpolated from k nodes (Eq. 4.10's links, folded into the modes once)."""
+        return FieldView(self, nodes, self._m(n_modes), weights)
 
     def truncated(self, n_modes: int) -> "SeparatedField":
         m = self._m(n_modes)
@@ -231,10 +233,16 @@ class FieldView:
     """A field restricted to some nodes and modes, laid out for fast repeated evaluation
     (one small matrix product per call: what the tracker and the overlay call every frame)."""
 
-    def __init__(self, f: SeparatedField, nodes, n_modes: int):
+    def __init__(self, f: SeparatedField, nodes, n_modes: int, weights=None):
         self.field = f
         self.n_modes = n_modes
-        sel = f.space[:n_modes] if nodes is None else f.space[:n_modes, nodes]
+        if weights is not None:
+            nodes, weights = np.asarray(nodes), np.asarray(weights, dtype=np.float64)
+            if nodes.shape != weights.shape or nodes.ndim != 2:
+                raise ValueError(f"interpolated view: nodes {nodes.shape} and weights {weights.shape} must both be (N, k)")
+            sel = np.einsum("mnkc,nk->mnc", f.space[:n_modes][:, nodes], weights)
+        else:
+            sel = f.space[:n_modes] if nodes is None else f.space[:n_modes, nodes]
         self.n_sel, self.n_comp = sel.shape[1], sel.shape[2]
         # modes as rows (m, n_sel * n_comp): one streaming pass over memory per evaluation
         self.S = np.ascontiguousarray(sel.reshape(n_modes, -1), dtype=np.float64)
