@@ -11,14 +11,18 @@ pytest.importorskip("simreal_msgs.msg", reason="simreal_msgs is built by ./run s
 from simreal_nodes.assimilation.evaluate import compare_contacts, read_contacts  # noqa: E402
 from simreal_nodes.io import bags  # noqa: E402
 from simreal_nodes.ros.commands import replay  # noqa: E402
-from simreal_nodes.synth.makebag import make_bag  # noqa: E402
+from simreal_nodes.synth.samples import render_sample, sample  # noqa: E402
 
 pytestmark = pytest.mark.ros
 
 
 def test_probe_pushes_crossed_beams_through_the_graph(tmp_path):
-    bag, scene = tmp_path / "probe", tmp_path / "probe.yaml"
-    info = make_bag("crossed_beams_probe", bag, 320, 240, duration=3.2, scene_out=scene, image_format="jpeg")
+    name = "crossed_beams_probe_320x240"  # the committed sample (bags/samples/), rendered here if absent
+    bag, scene = sample(name)
+    if not bag.is_dir():
+        render_sample(name, tmp_path)
+        bag, scene = tmp_path / name, tmp_path / f"{name}.yaml"
+    info = {"frames": sum(1 for _ in bags.read_bag(bag, topics=["/camera/camera_info"]))}
     out = tmp_path / "run"
     # synchronous local BA: the localization (and so the contacts) is the same on every run
     stats, report, counts = replay(str(bag), str(scene), lossless=True, record=str(out),

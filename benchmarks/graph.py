@@ -1,0 +1,70 @@
+"""Whole graph on the demo scene (issue 7): frames per second and latency of ingest -> markers localization ->
+deformable tracker -> overlay, each its own process over DDS, at 640 x 480 and 1280 x 720.
+
+    ./run bench graph
+
+Two replays of the same 4 s sample bag per resolution: *lossless* (the player waits for every frame to leave
+the graph: the sustainable throughput) and *real time* at the bag's 30 fps (frames the graph cannot keep up
+with are dropped: delivered fraction and the latency from publication to each node's output, p50 / p95).
+"""
+
+from __future__ import annotations
+
+import tempfile
+import time
+from pathlib import Path
+
+from benchmarks.common import save
+from simreal_nodes.demo import node_metrics, sample_bag
+from simreal_nodes.ros.commands import replay
+
+RESOLUTIONS = ("640x480", "1280x720")
+
+
+def main():
+    rows = []
+    for res in RESOLUTIONS:
+        bag, scene_yaml = sample_bag("aluminium_beam", duration=4.0, resolution=res, echo=lambda *a: None)
+        for lossless in (True, False):
+            with tempfile.TemporaryDirectory() as tmp:
+                t0 = time.monotonic()
+                stats, _, _ = replay(str(bag), str(scene_yaml), lossless=lossless, record=str(Path(tmp) / "run"),
+                                     echo=lambda *a: None)
+                wall = time.monotonic() - t0
+                nodes = node_metrics(Path(tmp) / "run")
+            d = stats.as_dict()
+            lat = d["latency_ms"]
+            last = lat.get("overlay") or next(iter(lat.values()), {"p50": float("nan"), "p95": float("nan")})
+            row = dict(resolution=res, mode="lossless" if lossless else "real time (30 fps)",
+                       fps=d["fps"], delivered_pct=100 * d["frames_completed"] / max(d["frames_published"], 1),
+                       latency_p50=last["p50"], latency_p95=last["p95"], wall_s=wall,
+                       **{f"{n}_p50_ms": v.get("processing_ms_p50") for n, v in nodes.items()})
+            rows.append(row)
+            print(row, flush=True)
+
+    def plot(plt):
+        fig, ax = plt.subplots(1, 2, figsize=(11, 3.6))
+        labels = [f"{r['resolution']}\n{r['mode']}" for r in rows]
+        ax[0].bar(labels, [r["fps"] for r in rows], color="tab:blue")
+        ax[0].axhline(60, color="k", ls=":", lw=0.8)
+        ax[0].axhline(30, color="k", ls="--", lw=0.8)
+        ax[0].set_ylabel("frames per second (goal 60 / 30)")
+        ax[1].bar(labels, [r["latency_p95"] for r in rows], color="tab:red")
+        ax[1].set_ylabel("latency to overlay output, p95 (ms)")
+        for a in ax:
+            a.tick_params(axis="x", labelsize=7)
+        fig.tight_layout()
+        return fig
+
+    cols = [("resolution", "resolution", "{}"), ("mode", "replay", "{}"), ("fps", "fps", "{:.1f}"),
+            ("delivered_pct", "frames through (%)", "{:.0f}"), ("latency_p50", "latency p50 (ms)", "{:.0f}"),
+            ("latency_p95", "p95 (ms)", "{:.0f}")]
+    node_cols = sorted({k for r in rows for k in r if k.endswith("_p50_ms")})
+    cols += [(k, k.replace("_p50_ms", " p50 (ms)"), "{}") for k in node_cols]
+    save("graph", rows, cols, "Whole graph on the demo scene (aluminium beam, markers + dots)",
+         "Goal (issue 7): >= 60 fps at 640x480 and >= 30 fps at 1280x720. Node columns: processing time per frame "
+         "inside each node (its /diagnostics). 2-core CPU, Mesa llvmpipe for the overlay.", plot)
+
+
+if __name__ == "__main__":
+    main()
