@@ -85,7 +85,12 @@ def main():
                              ("tau_err", "pseudo-time err (median)", "{:.3f}"), ("tau_err_max", "max", "{:.2f}"),
                              ("ms", "time (ms)", "{:.2f}"), ("p95_ms", "p95 (ms)", "{:.2f}")],
          "Collision from depth: contact error and time versus decimation (crossed beams + probe)",
-         "Contact against the exact Alg. 5.1 truth; true camera pose. The scene's default decimation is 2.", plot)
+         "Contact against the exact Alg. 5.1 truth; true camera pose. Finer sampling finds the contact on more frames "
+         "and tracks the pseudo-time better, but with more than ~20 000 points per frame the first depth point under "
+         "delta is a noise point one frame early, at the neighbouring load point (22 mm away), which is then held for "
+         "the whole press (one contact at a time, §5.2.4): 'same load point' falls to 0. Every 4th pixel at 640x480 "
+         "(8th at 1280x720) gets both right. Time: back-projection of the decimated depth + the KD-tree on the points "
+         "inside the object's box grown by delta.", plot)
 
 
 if __name__ == "__main__":
