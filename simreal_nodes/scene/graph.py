@@ -89,7 +89,10 @@ def required_nodes(scene: dict, lossless: bool = False) -> list[NodeSpec]:
     if tracked:
         nodes.append(NodeSpec(
             "tracker", "simreal_nodes.ros.nodes.tracker", dict(common),
-            [LOC_OBS if loc["mode"] != "static" else CAM_IMAGE, CAM_INFO, CAM_IMAGE],
+            # the image only where it is measured (glued dots, homography) or a static camera paces the tracker
+            [t for t in (LOC_OBS if loc["mode"] != "static" else None, CAM_INFO,
+                         CAM_IMAGE if (loc["mode"] == "static" or any(o["tracking"]["measurements"] in ("dots", "homography")
+                                                                      for o in tracked)) else None) if t],
             {**{params_topic(o["id"]): "simreal_msgs/msg/ModelParameters" for o in tracked},
              TRACKER_STATUS: "simreal_msgs/msg/TrackingStatus",
              **({LOC_DEFORMABLE: "sensor_msgs/msg/PointCloud2"} if loc["mode"] != "static" else {})}))
