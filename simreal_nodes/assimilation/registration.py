@@ -46,19 +46,19 @@ def link(points_obj: np.ndarray, model_points: np.ndarray, candidate_nodes: np.n
     if method not in ("barycentric", "idw"):
         raise ValueError(f"link method must be 'barycentric' or 'idw', not '{method}'")
     if method == "barycentric" and k == 3 and len(P):
-        # nodes on no surface triangle (a lever's grid): the best triangle of near nodes
-        tn, tb, td = _near_node_triangles(P, model_points, cand)
-        use = np.isfinite(td)
-        nodes[use], w[use] = tn[use], tb[use]
+        on_surface = np.zeros(len(P), bool)
         if triangles is not None and len(triangles):
             F = np.asarray(triangles, dtype=np.int64)
             F = F[np.isin(F, cand).all(axis=1)]
             if len(F):
                 tn, tb, td = closest_triangles(P, model_points, F)
-                better = td <= dist + 1e-9
-                nodes = np.where(better[:, None], tn, nodes)
-                w = np.where(better[:, None], tb, w)
-                dist = np.where(better, td, dist)
+                on_surface = td <= dist + 1e-9
+                nodes[on_surface], w[on_surface], dist[on_surface] = tn[on_surface], tb[on_surface], td[on_surface]
+        rest = np.flatnonzero(~on_surface)
+        if len(rest):  # nodes on no surface triangle (a lever's grid): the best triangle of near nodes
+            tn, tb, td = _near_node_triangles(P[rest], model_points, cand)
+            use = np.isfinite(td)
+            nodes[rest[use]], w[rest[use]] = tn[use], tb[use]
     return Links(nodes, w, dist, dist <= max_dist)
 
 

@@ -110,7 +110,7 @@ class DeformableTracker:
         self._dot_links = None
         self.outlier_ids = np.zeros(0, np.int64)  # map points the last fit rejected (their image tracks slid)
         self._rms_ref: float | None = None  # running residual RMS of good fits: what "fits badly" is measured against
-        self._frames = 0
+        self._frames = 0  # frames solved (a periodic global restart every 30th)
         if self.cfg.measurements in ("dots", "homography"):
             if self.cfg.dots is None or len(self.cfg.dots) == 0:
                 raise ValueError("measurements 'dots' need the dots' reference positions (tracking.dots)")
@@ -287,6 +287,7 @@ class DeformableTracker:
         else:
             p = lm.Problem(X, uvm, disp, T_cw, self.R_wo, self.K, rigid_z=self.rigid_z)
             res = lm.solve(p, self.x, lo, hi, self.cfg.huber_px, self.cfg.max_iterations)
+            self._frames += 1
             if self.cfg.global_samples and self._fits_badly(res, len(X)):
                 res = self._global_restart(p, res, lo, hi)
                 est.debug["restarted"] = True
@@ -333,7 +334,6 @@ class DeformableTracker:
         """The warm-started fit may sit in the wrong basin: its residual jumped above the running level of good
         fits (x 1.3, at least 0.75 x Huber), under 85 % of the measurements agree, or, every 30th frame, to
         catch a slow slide into a neighbouring basin."""
-        self._frames += 1
         if res.inliers < 0.85 * n or not np.isfinite(res.rms_px) or self._frames % 30 == 0:
             return True
         ref = self._rms_ref if self._rms_ref is not None else 0.0

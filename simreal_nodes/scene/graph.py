@@ -57,6 +57,18 @@ class NodeSpec:
     outputs: dict[str, str] = field(default_factory=dict)  # topic -> message type
 
 
+def tracker_inputs(scene: dict) -> tuple[str, ...]:
+    """What the tracker node synchronises per frame: the localization's observations, and the image only where it
+    is measured (glued dots, homography) or where a static camera paces the tracker."""
+    tracked = [o for o in scene["objects"] if o["tracking"]["enabled"]]
+    static = scene["localization"]["mode"] == "static"
+    if static:
+        return ("image",)
+    if any(o["tracking"]["measurements"] in ("dots", "homography") for o in tracked):
+        return ("obs", "image")
+    return ("obs",)
+
+
 def required_nodes(scene: dict, lossless: bool = False) -> list[NodeSpec]:
     """The nodes the scene requires, in pipeline order. Only those are started."""
     common = {"scene_file": scene["_source"], "lossless": lossless,
@@ -89,10 +101,7 @@ def required_nodes(scene: dict, lossless: bool = False) -> list[NodeSpec]:
     if tracked:
         nodes.append(NodeSpec(
             "tracker", "simreal_nodes.ros.nodes.tracker", dict(common),
-            # the image only where it is measured (glued dots, homography) or a static camera paces the tracker
-            [t for t in (LOC_OBS if loc["mode"] != "static" else None, CAM_INFO,
-                         CAM_IMAGE if (loc["mode"] == "static" or any(o["tracking"]["measurements"] in ("dots", "homography")
-                                                                      for o in tracked)) else None) if t],
+            [LOC_OBS if k == "obs" else CAM_IMAGE for k in tracker_inputs(scene)] + [CAM_INFO],
             {**{params_topic(o["id"]): "simreal_msgs/msg/ModelParameters" for o in tracked},
              TRACKER_STATUS: "simreal_msgs/msg/TrackingStatus",
              **({LOC_DEFORMABLE: "sensor_msgs/msg/PointCloud2"} if loc["mode"] != "static" else {})}))

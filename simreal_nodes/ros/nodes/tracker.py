@@ -47,9 +47,8 @@ class TrackerNode(SimrealNode):
             self.get_logger().info(f"object {o['id']}: {self.models[o['id']].summary().splitlines()[0]}")
         self.trackers: dict[str, DeformableTracker] = {}
         self.cam: CameraModel | None = None
-        need_image = any(o["tracking"]["measurements"] in ("dots", "homography") for o in self.objects)
-        self.need_image = need_image
-        keys = ("obs", "image") if (need_image and self.static_pose is None) else (("image",) if self.static_pose is not None else ("obs",))
+        keys = graph.tracker_inputs(self.scene)
+        self.need_image = any(o["tracking"]["measurements"] in ("dots", "homography") for o in self.objects)
         self.sync = StampSync(keys, (), wait=2)
         q = data_qos(self.lossless)
         self.pubs = {o["id"]: self.create_publisher(ModelParameters, graph.params_topic(o["id"]), reliable_qos(50))
