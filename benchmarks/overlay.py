@@ -82,8 +82,11 @@ def main():
         return fig
 
     notes = (f"OpenGL: {gl}. Each frame: PGD evaluation on the surface nodes with the live mode choice, colour map, "
-             "upload, draw with occlusion against a real depth image, GPU compositing over the camera image (lens "
-             "distortion: draw alone, remap, blend), colour bar. Modes drawn versus distance (aluminium beam, "
+             "upload, draw with occlusion against a real depth image (uploaded as it comes; the shader finds each "
+             "fragment's real pixel in a lookup texture), GPU compositing over the camera image (lens distortion: "
+             "draw alone, then a second GPU pass looks each camera pixel up through the distortion map and blends; "
+             "one RGB readback), colour bar. Before both moved to the GPU (CPU remaps of depth and colour): "
+             "17.2 / 41.2 ms p50 for the aluminium beam at 640x480 / 1280x720. Modes drawn versus distance (aluminium beam, "
              "magnification 1, 640x480): " +
              ", ".join(f"{r['distance_m']} m: {r['modes_mean']:.1f} (max {r['modes_max']})" for r in dist_rows) + ".")
     save("overlay", rows, [("resolution", "resolution", "{}"), ("object", "object", "{}"), ("triangles", "triangles", "{}"),

@@ -62,6 +62,30 @@ def link(points_obj: np.ndarray, model_points: np.ndarray, candidate_nodes: np.n
     return Links(nodes, w, dist, dist <= max_dist)
 
 
+def ray_weights(origin: np.ndarray, directions: np.ndarray, corners: np.ndarray, weights: np.ndarray,
+                tol: float = 0.02) -> np.ndarray:
+    """Barycentric weights of where each viewing ray (``origin`` (3,) or (N, 3) + t ``directions[n]``, t > 0) meets the plane
+    of its triangle ``corners[n]`` (3, 3); rows whose ray misses the triangle (beyond ``tol`` outside an edge)
+    or runs along its plane keep ``weights``. Solves o + t d = w0 A + w1 B + (1 - w0 - w1) C."""
+    C = np.asarray(corners, dtype=np.float64)
+    D = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
+    out = np.array(weights, dtype=np.float64, copy=True)
+    if len(D) == 0:
+        return out
+    M = np.stack([C[:, 0] - C[:, 2], C[:, 1] - C[:, 2], -D], axis=2)  # (N, 3, 3), columns
+    rhs = np.asarray(origin, dtype=np.float64).reshape(-1, 3) - C[:, 2]
+    det = np.linalg.det(M)
+    scale = np.linalg.norm(D, axis=1) * np.linalg.norm(np.cross(C[:, 0] - C[:, 2], C[:, 1] - C[:, 2]), axis=1)
+    ok = np.abs(det) > 1e-3 * np.maximum(scale, 1e-300)  # NaN rays: not solved  # not grazing: > 0.06 deg off the plane
+    sol = np.full((len(D), 3), np.nan)
+    if ok.any():
+        sol[ok] = np.linalg.solve(M[ok], rhs[ok][..., None])[..., 0]
+    w = np.c_[sol[:, 0], sol[:, 1], 1.0 - sol[:, 0] - sol[:, 1]]
+    ok &= np.all(w >= -tol, axis=1) & (sol[:, 2] > 0)
+    out[ok] = w[ok]
+    return out
+
+
 def _near_node_triangles(P: np.ndarray, V: np.ndarray, cand: np.ndarray, k: int = 6):
     """Among the triangles of each point's k nearest candidate nodes that hold the point's foot, the one
     nearest the point (ties: the smallest): its nodes and the foot's barycentric coordinates, which

@@ -18,7 +18,7 @@ from scipy.spatial import cKDTree
 
 from simreal_nodes import geometry as G
 from simreal_nodes.assimilation import lm
-from simreal_nodes.assimilation.registration import link, surface_nodes
+from simreal_nodes.assimilation.registration import link, ray_weights, surface_nodes
 from simreal_nodes.rom.model import ReducedModel
 from simreal_nodes.vision.camera import CameraModel
 
@@ -36,6 +36,7 @@ class TrackerConfig:
     min_measurements: int = 6
     link_dist: float = 0.01  # metres from the model surface for a map point to belong to the object
     snap_to_surface: bool = True  # measure a linked point at its foot on the model surface, not at its mapped position
+    anchor: str = "ray"  # where on its triangle a linked point sits: "ray" (the observed pixel's viewing ray) | "foot"
     max_points: int = 0  # 0: all
     dots: np.ndarray | None = None  # (N, 3) object frame
     dot_color: tuple = (0.1, 0.25, 0.95)
@@ -135,7 +136,14 @@ class DeformableTracker:
 
         return f
 
-    def link_points(self, ids: np.ndarray, P_map: np.ndarray, mu="current") -> None:
+    def viewing_rays(self, T_wc: np.ndarray, uv: np.ndarray) -> np.ndarray:
+        """(N, 2, 3) map-frame viewing rays (camera centre, unit direction) of raw pixels ``uv`` (N, 2)."""
+        und = self.cam.undistort_points(np.asarray(uv, np.float64).reshape(-1, 2))
+        d = np.c_[und, np.ones(len(und))] @ np.linalg.inv(self.K).T @ T_wc[:3, :3].T
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        return np.stack([np.broadcast_to(T_wc[:3, 3], d.shape), d], axis=1)
+
+    def link_points(self, ids: np.ndarray, P_map: np.ndarray, mu="current", rays: np.ndarray | None = None) -> None:
         """Link newly seen map points to model nodes (object frame, undoing the current alpha). ``mu``: the
         deformation the points were mapped in, None for the rest shape; "current": the current estimate once
         deformation was seen, else the rest shape.
@@ -160,6 +168,14 @@ class DeformableTracker:
             V = V.copy()
             V[self.cand_nodes] += u
         L = link(X, V, self.cand_nodes, self.cfg.link_dist, triangles=self.model.surface)
+        R = None if rays is None else np.asarray(rays, np.float64)[new]
+        if self.cfg.snap_to_surface and self.cfg.anchor == "ray" and R is not None:
+            # the material point a track follows is the one under its pixel: where that pixel's viewing ray
+            # crosses the link's triangle (a depth error along the ray then moves nothing)
+            Rz = G.rot_axis("z", self._alpha())
+            O = G.transform(T_om, R[:, 0]) @ Rz
+            D = R[:, 1] @ T_om[:3, :3].T @ Rz
+            L.weights = ray_weights(O, D, V[L.nodes], L.weights)
         if self.cfg.snap_to_surface:
             foot = np.einsum("nk,nkd->nd", L.weights, self.model.points[L.nodes])  # rest configuration
             X_rest = G.transform(self.T_map_obj, foot @ G.rot_axis("z", self._alpha()).T)
@@ -168,7 +184,8 @@ class DeformableTracker:
         for k, i in enumerate(new):
             pid = int(ids[i])
             if L.on_object[k]:
-                self.links[pid] = (L.nodes[k], L.weights[k], X_rest[k].copy(), P_map[i].copy(), mu)
+                self.links[pid] = (L.nodes[k], L.weights[k], X_rest[k].copy(), P_map[i].copy(), mu,
+                                   None if R is None else R[k].copy())
             else:
                 self.static.add(pid)
 
@@ -184,7 +201,8 @@ class DeformableTracker:
         old = dict(self.links)
         self.links.clear()
         for pids in groups.values():
-            self.link_points(np.array(pids), np.array([old[i][3] for i in pids]), old[pids[0]][4])
+            rays = np.array([np.full((2, 3), np.nan) if old[i][5] is None else old[i][5] for i in pids])
+            self.link_points(np.array(pids), np.array([old[i][3] for i in pids]), old[pids[0]][4], rays)
 
     @property
     def deformable_ids(self) -> list[int]:
@@ -257,7 +275,7 @@ class DeformableTracker:
             uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
             good = np.all(np.isfinite(P_map), axis=1) & np.all(np.isfinite(uv), axis=1)
             ids, P_map, uv = ids[good], P_map[good], uv[good]
-            self.link_points(ids, P_map)
+            self.link_points(ids, P_map, rays=self.viewing_rays(T_wc, uv))
             meas = self._map_point_measurements(ids, P_map, uv)
             found = len(ids)
         else:
@@ -428,7 +446,7 @@ def tracker_config(obj: dict, **overrides) -> TrackerConfig:
     t = obj["tracking"]
     cfg = TrackerConfig(measurements=t["measurements"], huber_px=t["huber_px"], n_modes=t["modes"],
                         max_iterations=t["max_iterations"], constant_frames=t["constant_frames"], constant_std_frac=t["constant_std_frac"],
-                        min_measurements=t["min_measurements"], max_points=t["points"],
+                        min_measurements=t["min_measurements"], max_points=t["points"], anchor=t["anchor"],
                         dots=np.asarray(t["dots"]) if t["dots"] else None, dot_color=tuple(t["dot_color"]))
     return replace(cfg, **overrides)
 

@@ -54,9 +54,10 @@ FRAG = """
 //DEFINES
 uniform sampler2D u_tex;
 uniform sampler2D u_real_depth;
+uniform sampler2D u_depth_map;
+uniform vec2 u_real_size;
 uniform int u_mode;            // 0 vertex colour, 1 triplanar texture, 2 flat colour, 3 UV texture
 uniform float u_occlusion_margin;
-uniform vec2 u_viewport;
 uniform vec3 u_tint;
 uniform float u_tex_scale;
 uniform vec3 u_light;          // direction the light travels, camera frame
@@ -71,9 +72,11 @@ layout(location = 0) out vec4 f_color;
 layout(location = 1) out float f_depth;
 void main() {
 #ifdef OCCLUSION
-    // a program of its own: 'discard' disables early depth testing, which the plain renders need
-    vec2 uv = gl_FragCoord.xy / u_viewport;
-    float real = texture(u_real_depth, uv).r;
+    // a program of its own: 'discard' disables early depth testing, which the plain renders need.
+    // u_depth_map: this render pixel's real-camera pixel (lens distortion, supersampling), negative outside
+    vec2 m = texelFetch(u_depth_map, ivec2(gl_FragCoord.xy), 0).xy;
+    float real = 0.0;
+    if (m.x >= 0.0) real = texture(u_real_depth, vec2((m.x + 0.5) / u_real_size.x, 1.0 - (m.y + 0.5) / u_real_size.y)).r;
     if (real > 0.0 && real < v_pos.z - u_occlusion_margin) discard;
 #endif
     vec3 base;
@@ -117,6 +120,24 @@ void main() {
     vec2 p = gl_FragCoord.xy / u_viewport;
     f_color = vec4(texture(u_bg, vec2(p.x, 1.0 - p.y)).rgb, 1.0);  // image rows are top-down
     f_depth = 0.0;
+}
+"""
+
+
+DISTORT_FRAG = """
+#version 330
+uniform sampler2D u_drawn;     // the meshes alone in the ideal render camera (RGBA, alpha = coverage)
+uniform sampler2D u_bg;        // the camera image, rows top-down
+uniform sampler2D u_map;       // camera pixel -> ideal render pixel, rows bottom-up like this framebuffer
+uniform vec2 u_drawn_size;
+uniform vec2 u_viewport;
+layout(location = 0) out vec4 f_color;
+void main() {
+    vec2 m = texelFetch(u_map, ivec2(gl_FragCoord.xy), 0).xy;
+    vec4 d = texture(u_drawn, vec2((m.x + 0.5) / u_drawn_size.x, 1.0 - (m.y + 0.5) / u_drawn_size.y));
+    vec2 p = gl_FragCoord.xy / u_viewport;
+    vec3 bg = texture(u_bg, vec2(p.x, 1.0 - p.y)).rgb;
+    f_color = vec4(bg + (d.rgb - bg) * d.a, 1.0);
 }
 """
 
@@ -345,25 +366,15 @@ class Renderer:
             rgb, _ = self.render(T_world_cam, names, real_depth, occlusion_margin, background=background_rgb)
             return rgb
         if self._map is not None:
-            # lens distortion: draw the meshes alone in the ideal camera, remap colour + coverage, paste
+            # lens distortion: draw the meshes alone in the ideal camera, then a second pass at the camera's
+            # pixels looks each one up through the distortion map and blends it over the camera image
             self.fbo.use()
             self.ctx.viewport = (0, 0, rc.width, rc.height)
             self.fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
             self._draw(T_world_cam, names, real_depth, occlusion_margin)
-            rgba = np.frombuffer(self.fbo.read(components=4, attachment=0), np.uint8).reshape(rc.height, rc.width, 4)
-            rgba = cv2.remap(cv2.flip(rgba, 0), self._map[..., 0], self._map[..., 1], cv2.INTER_LINEAR)
-            out = np.array(background_rgb, dtype=np.uint8, copy=True)
-            x, y, w, h = cv2.boundingRect(rgba[..., 3])  # only where something was drawn
-            if w and h:
-                a = rgba[y:y + h, x:x + w, 3:4].astype(np.float32) * np.float32(1 / 255)
-                bg = out[y:y + h, x:x + w].astype(np.float32)
-                out[y:y + h, x:x + w] = (bg + (rgba[y:y + h, x:x + w, :3] - bg) * a + 0.5).astype(np.uint8)
-            return out
+            return self._distort_composite(background_rgb)
         if not hasattr(self, "_bg_prog"):
-            self._bg_prog = self.ctx.program(vertex_shader=BG_VERT, fragment_shader=BG_FRAG)
-            tri = np.array([-1, -1, 3, -1, -1, 3], dtype="f4")
-            self._bg_vbo = self.ctx.buffer(tri.tobytes())
-            self._bg_vao = self.ctx.vertex_array(self._bg_prog, [(self._bg_vbo, "2f", "in_xy")])
+            self._bg_prog, self._bg_vao = self._fullscreen_pass(BG_FRAG)
             self._bg_tex = self.ctx.texture((rc.width, rc.height), 3)
             self._bg_tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
             self._bg_out = np.empty((rc.height, rc.width, 3), np.uint8)
@@ -400,9 +411,11 @@ class Renderer:
         if occlude:
             self._set_real_depth(real_depth)
             self._real_depth_tex.use(location=1)
+            self._depth_map_tex.use(location=6)
             self.prog["u_real_depth"].value = 1
+            self.prog["u_depth_map"].value = 6
+            self.prog["u_real_size"].value = (float(self.cam.width), float(self.cam.height))
             self.prog["u_occlusion_margin"].value = float(occlusion_margin)
-            self.prog["u_viewport"].value = (float(rc.width), float(rc.height))
         for name in (names if names is not None else list(self.meshes)):
             m = self.meshes[name]
             if not m.visible:
@@ -418,25 +431,69 @@ class Renderer:
             m._vao[occlude].render(moderngl.TRIANGLES)
 
     def _set_real_depth(self, real_depth: np.ndarray) -> None:
-        """Upload real depth (real-camera pixels) in the render camera's pixel grid (inverse of _to_camera)."""
-        rc = self.render_cam
+        """Upload real depth as it comes (real-camera pixels); the occlusion shader finds each render pixel's
+        real pixel in a lookup texture (lens distortion, supersampling, margins), made once per camera."""
+        import moderngl
+
+        rc, cam = self.render_cam, self.cam
         d = np.nan_to_num(np.asarray(real_depth, dtype=np.float32), nan=0.0, posinf=0.0, neginf=0.0)
+        if d.shape != (cam.height, cam.width):
+            raise RenderError(f"real depth is {d.shape[1]}x{d.shape[0]}, the camera {cam.width}x{cam.height}")
         d[d < 0] = 0
-        if self._map is not None or self.ssaa > 1 or (rc.width, rc.height) != (self.cam.width, self.cam.height):
-            # render pixel -> real camera pixel (distort the ideal ray)
-            if not hasattr(self, "_inv_map"):
-                xs, ys = np.meshgrid(np.arange(rc.width, dtype=np.float64), np.arange(rc.height, dtype=np.float64))
-                rays = np.stack([(xs - rc.cx) / rc.fx, (ys - rc.cy) / rc.fy, np.ones_like(xs)], -1).reshape(-1, 3)
-                uv = self.cam.project(rays).reshape(rc.height, rc.width, 2)
-                self._inv_map = np.nan_to_num(uv, nan=-1).astype(np.float32)
-            d = cv2.remap(d, self._inv_map[..., 0], self._inv_map[..., 1], cv2.INTER_NEAREST,
-                          borderMode=cv2.BORDER_CONSTANT, borderValue=0)
-        flipped = np.ascontiguousarray(d[::-1])
-        if self._real_depth_tex is None or self._real_depth_tex.size != (rc.width, rc.height):
-            self._real_depth_tex = self.ctx.texture((rc.width, rc.height), 1, dtype="f4")
-            import moderngl
+        if self._real_depth_tex is None:
+            self._real_depth_tex = self.ctx.texture((cam.width, cam.height), 1, dtype="f4")
             self._real_depth_tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
-        self._real_depth_tex.write(flipped.tobytes())
+            # render pixel -> real camera pixel (distort the ideal ray); rows bottom-up like the framebuffer
+            xs, ys = np.meshgrid(np.arange(rc.width, dtype=np.float64), np.arange(rc.height, dtype=np.float64))
+            rays = np.stack([(xs - rc.cx) / rc.fx, (ys - rc.cy) / rc.fy, np.ones_like(xs)], -1).reshape(-1, 3)
+            uv = cam.project(rays).reshape(rc.height, rc.width, 2)
+            inside = np.all(np.isfinite(uv), axis=-1) & (uv[..., 0] > -0.5) & (uv[..., 0] < cam.width - 0.5) \
+                & (uv[..., 1] > -0.5) & (uv[..., 1] < cam.height - 0.5)
+            m = np.where(inside[..., None], uv, -1.0).astype(np.float32)
+            self._depth_map_tex = self.ctx.texture((rc.width, rc.height), 2, np.ascontiguousarray(m[::-1]).tobytes(), dtype="f4")
+            self._depth_map_tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        self._real_depth_tex.write(np.ascontiguousarray(d[::-1]).tobytes())
+
+    def _fullscreen_pass(self, fragment_shader: str):
+        """(program, vertex array) drawing ``fragment_shader`` over the whole viewport (one big triangle)."""
+        prog = self.ctx.program(vertex_shader=BG_VERT, fragment_shader=fragment_shader)
+        vbo = self.ctx.buffer(np.array([-1, -1, 3, -1, -1, 3], dtype="f4").tobytes())
+        self.__dict__.setdefault("_pass_buffers", []).append(vbo)  # held as long as the renderer
+        return prog, self.ctx.vertex_array(prog, [(vbo, "2f", "in_xy")])
+
+    def _distort_composite(self, background_rgb: np.ndarray) -> np.ndarray:
+        import moderngl
+
+        cam, rc = self.cam, self.render_cam
+        bg = np.ascontiguousarray(background_rgb, dtype=np.uint8)
+        if bg.shape != (cam.height, cam.width, 3):
+            raise RenderError(f"background is {bg.shape}, expected {(cam.height, cam.width, 3)}")
+        if getattr(self, "_dist_for", None) is not self.fbo:  # first use, or a new camera
+            self._dist_for = self.fbo
+            self._dist_prog, self._dist_vao = self._fullscreen_pass(DISTORT_FRAG)
+            self._dist_bg = self.ctx.texture((cam.width, cam.height), 3)
+            self._dist_bg.filter = (moderngl.NEAREST, moderngl.NEAREST)
+            self._dist_map = self.ctx.texture((cam.width, cam.height), 2, np.ascontiguousarray(self._map[::-1]).tobytes(), dtype="f4")
+            self._dist_map.filter = (moderngl.NEAREST, moderngl.NEAREST)
+            self._dist_fbo = self.ctx.framebuffer(color_attachments=[self.ctx.texture((cam.width, cam.height), 3)])
+            self._dist_out = np.empty((cam.height, cam.width, 3), np.uint8)
+            drawn = self.fbo.color_attachments[0]
+            drawn.filter = (moderngl.LINEAR, moderngl.LINEAR)
+            drawn.repeat_x = drawn.repeat_y = False
+        self._dist_bg.write(bg.tobytes())
+        self._dist_fbo.use()
+        self.ctx.viewport = (0, 0, cam.width, cam.height)
+        self.ctx.disable(moderngl.DEPTH_TEST)
+        self.fbo.color_attachments[0].use(location=3)
+        self._dist_bg.use(location=4)
+        self._dist_map.use(location=5)
+        pr = self._dist_prog
+        pr["u_drawn"].value, pr["u_bg"].value, pr["u_map"].value = 3, 4, 5
+        pr["u_drawn_size"].value = (float(rc.width), float(rc.height))
+        pr["u_viewport"].value = (float(cam.width), float(cam.height))
+        self._dist_vao.render(moderngl.TRIANGLES)
+        self._dist_fbo.read_into(self._dist_out, components=3, attachment=0)
+        return cv2.flip(self._dist_out, 0)
 
     def _to_camera(self, rgb, depth, background, distort):
         """Supersampled ideal render -> real camera pixels. Colour is area-averaged then remapped; depth

@@ -96,6 +96,9 @@ TRACKING = Record({
                                 "fraction of its range", lo=0, lo_open=True, hi=1, default=0.0025),
     "min_measurements": Number("fewer inlier measurements than this -> lost", integer=True, lo=1, default=6),
     "points": Number("most model-linked points used per frame (0 = all)", integer=True, lo=0, default=0),
+    "anchor": Enum(("ray", "foot"), "where a map point sits on its model triangle: where its pixel's viewing ray "
+                   "crosses it (ray) or the mapped point's foot on it (foot; keeps the depth error's tangential part)",
+                   default="ray"),
     "dots": ListOf(Vector(3, what="[x, y, z] in the object frame"), "measurements 'dots': reference positions of glued dots",
                    default=[]),
     "dot_color": Vector(3, what="[r, g, b] in 0..1", default=[0.1, 0.25, 0.95]),

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from simreal_nodes import geometry as G
-from simreal_nodes.assimilation.registration import link, surface_nodes
+from simreal_nodes.assimilation.registration import link, ray_weights, surface_nodes
 from simreal_nodes.rom.build import cached_model
 from simreal_nodes.rom.model_file import load_model
 
@@ -77,3 +77,37 @@ def test_lever_grid_points_follow_the_rigid_rotation_exactly(boot):
 def test_unknown_method_is_refused(boot):
     with pytest.raises(ValueError, match="barycentric"):
         link(np.zeros((1, 3)), boot.points, surface_nodes(boot), 0.01, method="nearest")
+
+
+def test_ray_anchor_finds_the_material_point_under_the_pixel_despite_depth_error(boot):
+    """A mapped point with a depth error along its viewing ray: its foot on the surface is a neighbouring
+    material point (the error's tangential part), the ray's crossing with the triangle is the point itself."""
+    rng = np.random.default_rng(3)
+    P, f, b = _surface_samples(boot, 300, seed=1)
+    cam = np.array([0.25, -0.3, 0.35])  # an oblique view
+    D = P - cam
+    D /= np.linalg.norm(D, axis=1, keepdims=True)
+    mapped = P + D * rng.normal(0.0, 0.001, (len(P), 1))  # 1 mm depth noise, along the ray
+    L = link(mapped, boot.points, surface_nodes(boot), 0.02, triangles=boot.surface)
+    foot = np.einsum("nk,nkd->nd", L.weights, boot.points[L.nodes])
+    w = ray_weights(cam, D, boot.points[L.nodes], L.weights)
+    on_ray = np.einsum("nk,nkd->nd", w, boot.points[L.nodes])
+    same = np.all(np.sort(L.nodes, axis=1) == np.sort(f, axis=1), axis=1)  # the link found the true triangle
+    assert same.mean() > 0.3  # the rest moved onto a neighbouring (few-mm) triangle
+    e_foot = np.linalg.norm(foot - P, axis=1)[same]
+    e_ray = np.linalg.norm(on_ray - P, axis=1)[same]
+    assert np.median(e_ray) < 1e-9 and np.median(e_foot) > 2e-4
+    assert np.allclose(w.sum(axis=1), 1.0)
+
+
+def test_ray_weights_keep_the_old_weights_for_rays_that_miss_or_graze():
+    tri = np.array([[[0.0, 0, 0], [1, 0, 0], [0, 1, 0]]] * 3)
+    old = np.full((3, 3), 1 / 3)
+    o = np.array([0.2, 0.2, 1.0])
+    D = np.array([[0, 0, -1.0],  # hits (0.2, 0.2, 0): weights (0.6, 0.2, 0.2)
+                  [2.0, 2.0, -1.0],  # hits far outside the triangle
+                  [1.0, 0.0, 0.0]])  # parallel to its plane
+    w = ray_weights(o, D, tri, old)
+    assert np.allclose(w[0], [0.6, 0.2, 0.2])
+    assert np.allclose(w[1:], old[1:])
+    assert np.allclose(ray_weights(o, -D[:1], tri[:1], old[:1]), old[:1])  # behind the camera

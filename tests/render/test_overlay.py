@@ -51,6 +51,27 @@ def test_composite_occlusion_is_exact(name):
     r.release()
 
 
+def test_gpu_distortion_composite_matches_the_cpu_remap():
+    """The lens-distortion composite runs as a second GPU pass (map lookup + blend); it must give the same
+    picture as drawing, reading back and remapping on the CPU (``render(background=...)``), edges included."""
+    cam = CAMS["distorted"]
+    r = Renderer(cam)
+    V = np.array([[-0.6, -0.45, 0], [0.6, -0.45, 0], [0.6, 0.45, 0], [-0.6, 0.45, 0]], float)
+    col = np.array([[1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 0]], float)
+    pose = G.make_T(G.rot_axis("y", 0.4), [0.1, 0.05, 1.6])
+    r.add(Mesh("v", V, np.array([[0, 1, 2], [0, 2, 3]]), mode="vertex", colors=col, pose=pose))
+    rng = np.random.default_rng(0)
+    bg = rng.integers(0, 256, (cam.height, cam.width, 3), dtype=np.uint8)
+    real = np.full((cam.height, cam.width), 1.55, np.float32)
+    real[:, : cam.width // 3] = np.nan
+    gpu = r.composite(np.eye(4), bg, real_depth=real).astype(int)
+    cpu = r.render(np.eye(4), real_depth=real, background=bg)[0].astype(int)
+    diff = np.abs(gpu - cpu).max(axis=2)
+    assert (gpu != bg).any(axis=2).mean() > 0.1  # something was drawn (part hidden by the real depth)
+    assert diff.mean() < 0.5 and np.mean(diff > 2) < 0.005
+    r.release()
+
+
 def _view(distance):
     """Camera above the beam (object frame: x along, z up), looking down, ``distance`` metres away."""
     return G.make_T(G.rot_axis("x", np.pi), [0.25, 0.01, distance])

@@ -21,7 +21,7 @@ from std_msgs.msg import ColorRGBA, Header
 from visualization_msgs.msg import Marker, MarkerArray
 
 from simreal_nodes import geometry as G
-from simreal_nodes.errors import ImageFormatError
+from simreal_nodes.errors import ImageFormatError, SimrealError
 from simreal_nodes.io import images
 from simreal_nodes.render.overlay import ObjectOverlay, OverlayCompositor
 from simreal_nodes.ros.common import (SimrealNode, data_qos, guarded, matrix_to_pose, ns_to_stamp, observation_pose,
@@ -181,8 +181,18 @@ class OverlayNode(SimrealNode):
             for oid in self.param_objects:
                 m = frame.get(f"p:{oid}")
                 est[oid] = (list(m.names), list(m.values)) if m is not None else self.latest.get(oid, ([], []))
-            out, states = self.comp.compose(bgr, T_wc, est, depth)
-            why = "; ".join(f"{k}: behind the camera" for k, s in states.items() if s.behind_camera)
+            notes = []
+            if depth is not None and depth.shape != bgr.shape[:2]:
+                notes.append(f"depth {depth.shape[1]}x{depth.shape[0]} is not registered to the "
+                             f"{bgr.shape[1]}x{bgr.shape[0]} image: drawn without occlusion")
+                depth = None
+            try:
+                out, states = self.comp.compose(bgr, T_wc, est, depth)
+            except (ValueError, SimrealError) as e:  # an image of another size than CameraInfo says
+                self.drop(head.stamp, f"cannot draw: {e}")
+                return
+            notes += [f"{k}: behind the camera" for k, s in states.items() if s.behind_camera]
+            why = "; ".join(notes)
         self._publish(out, head, states)
         for k, s in states.items():
             self.metrics.extra[f"{k}_modes"] = str(s.modes)
