@@ -25,6 +25,8 @@ from simreal_nodes.synth.sequence import sequence
 
 # scene, object, width, height, freeze map on deformation, knob (label, tracker overrides, localization attributes)
 DEFAULT = ("default", {}, {})
+SHIFT = {"foam_beam": ("no object shift", {"object_shift_m": 0.0}, {}),  # the foam scene fits it by default
+         "joint_boot": ("object shift 10 mm", {"object_shift_m": 0.01}, {})}
 KNOBS = [("anchor foot", {"anchor": "foot"}, {}),  # rest position at the mapped point's foot, not on its pixel's ray
          ("flow anchor 1 px", {}, {"flow_anchor_px": 1.0}),  # tracks re-measured against their first image
          ("flow window 21", {}, {"flow_win": 21})]
@@ -32,10 +34,10 @@ CASES = [
     ("foam_beam", "beam", 640, 480, False, DEFAULT),
     ("foam_beam", "beam", 640, 480, True, DEFAULT),
     ("foam_beam", "beam", 1280, 720, False, DEFAULT),
-    *[("foam_beam", "beam", 1280, 720, False, k) for k in KNOBS],
+    *[("foam_beam", "beam", 1280, 720, False, k) for k in [SHIFT["foam_beam"]] + KNOBS],
     ("joint_boot", "boot", 640, 480, False, DEFAULT),
     ("joint_boot", "boot", 640, 480, True, DEFAULT),
-    *[("joint_boot", "boot", 640, 480, False, k) for k in KNOBS],
+    *[("joint_boot", "boot", 640, 480, False, k) for k in [SHIFT["joint_boot"]] + KNOBS],
 ]
 SPAN = {"s": 0.7575}  # foam beam: between the support centres (the issue's target is 0.5 % of the span)
 
@@ -163,11 +165,18 @@ beam lost on 16 % of the frames). The thesis's behaviour stays available:
 
 The foam beam's load position (target: median under 0.5 % of the span, at the thesis's 1280 x 720) is weakly
 observable where it matters: the beam rests on two supports, a load near mid-span gives the largest deflection
-and the deflected shape changes slowly with s there, and most tracked points lie near the supports. What limits
-it now is the camera pose, not the image measurements: fed the true camera pose (a development diagnostic,
-not a mode of the system), the same measurements give 1.7 mm median and 7.8 mm p90 instead of 3.1 / 18 mm. The
-RGB-D map drifts by 3-4 mm while the camera sweeps past the beam, and the object's registration does not follow.
-At 640 x 480 a pixel covers twice the beam, and the median error is about 1 % of the span.
+and the deflected shape changes slowly with s there, and most tracked points lie near the supports. With the
+measurements above, what limits it is the camera pose: the RGB-D map drifts 3-4 mm while the camera sweeps past
+the beam, and the object's registration does not follow (fed the true camera pose, a development diagnostic and
+not a mode of the system, the same measurements give 1.7 mm median, 7.8 mm p90). So the foam scene also fits a
+bounded translation of the whole object each frame (`tracking.object_shift_m: 0.01`, a nuisance parameter
+marginalised out of the reported covariance): its supports and unloaded parts fix where the beam is relative to
+the camera, and the median falls from 3.0 to about 1.5 mm. It is not for an object whose visible part turns (the
+joint boot's lever: the shift absorbs the rotation, the 'object shift' row). The load at mid-span (s = 0.4 m)
+remains the weak position (about 1-2 cm). At 640 x 480 a pixel covers twice the beam, and there the shift trades
+median for tail (8.2 -> 11.1 mm median, 39.7 -> 32.5 mm p90). The foam's knob rows run with the shift on; with it,
+re-measuring tracks against their first image (`flow anchor`) gives the best foam numbers (1.0 mm median, 6.9 mm
+p90) but biases the boot's alpha_z, so the flow anchor stays off by default.
 """
 
 

@@ -63,7 +63,12 @@ class Problem:
     R_wo: np.ndarray
     K: np.ndarray
     sigma: np.ndarray | None = None
-    rigid_z: bool = False  # estimate alpha_z (the last parameter) as a rotation about the object's z axis
+    rigid_z: bool = False  # estimate alpha_z (after mu) as a rotation about the object's z axis
+    shift: bool = False  # 3 more parameters (last): a translation of the whole object in the map frame, metres
+
+    def n_mu(self, n: int) -> int:
+        """How many of ``n`` parameters are the model's (mu): the rest are alpha_z and the shift."""
+        return n - (1 if self.rigid_z else 0) - (3 if self.shift else 0)
 
     def __post_init__(self):
         self.q0 = (np.asarray(self.X, dtype=np.float64) @ self.T_cw[:3, :3].T + self.T_cw[:3, 3]) @ self.K.T
@@ -94,6 +99,9 @@ def predict(p: Problem, x: np.ndarray, n_mu: int, with_jacobian: bool = True):
     A = p.T_cw[:3, :3] @ p.R_wo @ G.rot_axis("z", alpha)  # object frame -> camera frame (rotation only)
     KA = p.K @ A
     q = p.q0 + dX @ KA.T
+    if p.shift:
+        KR = p.K @ p.T_cw[:3, :3]  # a map-frame translation of every point
+        q = q + KR @ x[-3:]
     with np.errstate(divide="ignore", invalid="ignore"):
         iz = 1.0 / q[:, 2]
         uv = q[:, :2] * iz[:, None]
@@ -105,6 +113,8 @@ def predict(p: Problem, x: np.ndarray, n_mu: int, with_jacobian: bool = True):
     else:
         dXo = ddX
     dq = np.matmul(KA, dXo)  # (N, 3, n)
+    if p.shift:
+        dq = np.concatenate([dq, np.broadcast_to(KR, (len(dq), 3, 3))], axis=2)
     J = (dq[:, :2, :] - uv[:, :, None] * dq[:, 2:3, :]) * iz[:, None, None]
     return uv, q[:, 2], J
 
@@ -112,8 +122,7 @@ def predict(p: Problem, x: np.ndarray, n_mu: int, with_jacobian: bool = True):
 def solve(p: Problem, x0: np.ndarray, lo: np.ndarray, hi: np.ndarray, huber_px: float = 2.0, max_iter: int = 20,
           lam0: float = 1e-3, tol: float = 1e-7, cost_tol: float = 1e-6) -> Result:
     """Levenberg-Marquardt with Huber IRLS weights and box bounds (Eq. 4.8) on image residuals."""
-    n = len(x0)
-    n_mu = n - (1 if p.rigid_z else 0)
+    n_mu = p.n_mu(len(x0))
 
     def model(x):
         uv, z, J = predict(p, x, n_mu)

@@ -42,6 +42,7 @@ class TrackerConfig:
     dot_color: tuple = (0.1, 0.25, 0.95)
     dot_radius_px: float = 12.0  # association radius
     min_deformation_px: float = 0.3  # below this improvement over "no deformation": nothing measurable
+    object_shift_m: float = 0.0  # > 0: also fit a translation of the whole object (bounded), absorbing camera-pose drift
     global_samples: int = 32  # coarse search over the tracked parameters when the warm start fits badly (0: off)
 
 
@@ -86,6 +87,7 @@ class DeformableTracker:
         self.lo, self.hi = np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64)
         n = len(self.names)
         self.x = 0.5 * (self.lo + self.hi)
+        self.shift = np.zeros(3)  # object translation (map frame) fitted with cfg.object_shift_m
         self.mode = ["tracked"] * n
         for i, name in enumerate(self.names):
             cfgp = params.get(name, {})
@@ -303,12 +305,21 @@ class DeformableTracker:
         if self.cfg.measurements == "homography":
             res, rest_rms = self._solve_planar(X, uvm, disp, T_cw, lo, hi)
         else:
-            p = lm.Problem(X, uvm, disp, T_cw, self.R_wo, self.K, rigid_z=self.rigid_z)
-            res = lm.solve(p, self.x, lo, hi, self.cfg.huber_px, self.cfg.max_iterations)
+            sh = self.cfg.object_shift_m
+            p = lm.Problem(X, uvm, disp, T_cw, self.R_wo, self.K, rigid_z=self.rigid_z, shift=sh > 0)
+            x0, lo_p, hi_p = self.x, lo, hi
+            if sh > 0:
+                x0, lo_p, hi_p = np.r_[self.x, self.shift], np.r_[lo, -sh, -sh, -sh], np.r_[hi, sh, sh, sh]
+            res = lm.solve(p, x0, lo_p, hi_p, self.cfg.huber_px, self.cfg.max_iterations)
             self._frames += 1
             if self.cfg.global_samples and self._fits_badly(res, len(X)):
-                res = self._global_restart(p, res, lo, hi)
+                res = self._global_restart(p, res, lo_p, hi_p)
                 est.debug["restarted"] = True
+            if sh > 0:  # the shift is a nuisance: kept for the next frame, reported in debug, marginalised out
+                n = len(self.x)
+                self.shift = res.x[n:].copy()
+                est.debug["object_shift_m"] = self.shift.copy()
+                res.x, res.cov = res.x[:n], res.cov[:n, :n]
             if res.inliers >= 0.85 * len(X) and np.isfinite(res.rms_px):
                 self._rms_ref = res.rms_px if self._rms_ref is None else 0.9 * self._rms_ref + 0.1 * res.rms_px
             rest_rms = self._rest_rms(X, uvm, T_cw)
@@ -363,12 +374,13 @@ class DeformableTracker:
         parameters (about ``global_samples`` points; the others at the current estimate) and run LM again
         from the best sample if it beats the warm start's result; keep the lower cost."""
         free = np.flatnonzero(hi > lo)
+        free = free[free < len(self.x)]  # not the object shift: it stays at the warm start's value
         if len(free) == 0:
             return res
         per_axis = max(2, int(round(self.cfg.global_samples ** (1.0 / len(free)))))
         axes = [np.linspace(lo[i], hi[i], per_axis) for i in free]
         grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, len(free))
-        n_mu = len(self.x) - (1 if p.rigid_z else 0)
+        n_mu = p.n_mu(len(res.x))
         k = self.cfg.huber_px
         best, best_cost = None, res.cost
         for g in grid:
@@ -386,6 +398,13 @@ class DeformableTracker:
         return res2 if res2.cost < res.cost else res
 
     def _rest_rms(self, X, uvm, T_cw) -> float:
+        """Residual of the undeformed object (moved by the best object shift when that is estimated)."""
+        sh = self.cfg.object_shift_m
+        if sh > 0:
+            still = lambda mu: (np.zeros_like(X), np.zeros((len(X), 3, 0)))  # noqa: E731
+            p0 = lm.Problem(X, uvm, still, T_cw, self.R_wo, self.K, shift=True)
+            r0 = lm.solve(p0, self.shift, np.full(3, -sh), np.full(3, sh), self.cfg.huber_px, 10)
+            X = X + r0.x
         pred, z = _project(T_cw, X, self.K)
         r = np.linalg.norm(uvm - pred, axis=1)
         r = r[np.isfinite(r)]
@@ -447,6 +466,7 @@ def tracker_config(obj: dict, **overrides) -> TrackerConfig:
     cfg = TrackerConfig(measurements=t["measurements"], huber_px=t["huber_px"], n_modes=t["modes"],
                         max_iterations=t["max_iterations"], constant_frames=t["constant_frames"], constant_std_frac=t["constant_std_frac"],
                         min_measurements=t["min_measurements"], max_points=t["points"], anchor=t["anchor"],
+                        object_shift_m=t["object_shift_m"],
                         dots=np.asarray(t["dots"]) if t["dots"] else None, dot_color=tuple(t["dot_color"]))
     return replace(cfg, **overrides)
 

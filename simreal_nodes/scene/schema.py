@@ -96,6 +96,10 @@ TRACKING = Record({
                                 "fraction of its range", lo=0, lo_open=True, hi=1, default=0.0025),
     "min_measurements": Number("fewer inlier measurements than this -> lost", integer=True, lo=1, default=6),
     "points": Number("most model-linked points used per frame (0 = all)", integer=True, lo=0, default=0),
+    "object_shift_m": Number("> 0: also fit a translation of the whole object, bounded by this (metres), each frame: "
+                             "absorbs camera-pose drift against the map; for objects whose unmoving parts stay in "
+                             "view (a beam's supports), not for a turning part (it absorbs the rotation)",
+                             lo=0, hi=0.1, default=0.0),
     "anchor": Enum(("ray", "foot"), "where a map point sits on its model triangle: where its pixel's viewing ray "
                    "crosses it (ray) or the mapped point's foot on it (foot; keeps the depth error's tangential part)",
                    default="ray"),

@@ -270,7 +270,9 @@ def foam_beam(width=640, height=480, duration=8.0, fps=30.0) -> SynthScene:
                 "id": "beam", "model": "spec:foam_beam",
                 "anchor": {"kind": "pose", "pose": _pose7(T_map_obj)},
                 "parameters": {"s": {"mode": "tracked", "initial": 0.4}},
-                "tracking": {"enabled": True, "measurements": "map_points", "huber_px": 2.0, "modes": 19},
+                # a long beam whose supports stay in view: its shift against the drifting map is observable
+                "tracking": {"enabled": True, "measurements": "map_points", "huber_px": 2.0, "modes": 19,
+                             "object_shift_m": 0.01},
                 "overlay": {"field": "displacement"},
             }],
             "overlay": {"enabled": True},

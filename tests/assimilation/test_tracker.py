@@ -146,8 +146,8 @@ def test_joint_boot_lever_angle_and_unknown_rotation_from_map_points():
 def test_foam_beam_load_position_from_its_own_texture():
     """Textured foam beam, a 15 N disk moved to five places (§4.5.2), filmed at the thesis's 1280 x 720: median
     load-position error under 0.5 % of the span (the issue's target; the span is the 757.5 mm between the support
-    centres). Measured 2.6-3.1 mm (0.34-0.41 %); p90 about 18 mm, set by the camera pose (with the true pose the
-    same measurements give 1.7 / 7.8 mm, docs/tracking.md). Tracking holds after every jump of the load."""
+    centres). Measured 1.5 mm (0.19 %), p90 12 mm, with the scene's object shift absorbing the map's drift (3.1 mm
+    without it; 1.7 mm with the true camera pose, docs/tracking.md). Tracking holds after every jump of the load."""
     truth, est, states = _track_map_points("foam_beam", "beam", 1280, 720)
     loaded = np.isfinite(truth[:, 0])
     err = np.abs(est[loaded, 0] - truth[loaded, 0])
