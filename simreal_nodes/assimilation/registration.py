@@ -76,7 +76,7 @@ def ray_weights(origin: np.ndarray, directions: np.ndarray, corners: np.ndarray,
     rhs = np.asarray(origin, dtype=np.float64).reshape(-1, 3) - C[:, 2]
     det = np.linalg.det(M)
     scale = np.linalg.norm(D, axis=1) * np.linalg.norm(np.cross(C[:, 0] - C[:, 2], C[:, 1] - C[:, 2]), axis=1)
-    ok = np.abs(det) > 1e-3 * np.maximum(scale, 1e-300)  # NaN rays: not solved  # not grazing: > 0.06 deg off the plane
+    ok = np.abs(det) > 1e-3 * np.maximum(scale, 1e-300)  # not grazing (> 0.06 deg off the plane); NaN rays: False
     sol = np.full((len(D), 3), np.nan)
     if ok.any():
         sol[ok] = np.linalg.solve(M[ok], rhs[ok][..., None])[..., 0]

@@ -11,6 +11,7 @@ alpha_z of §4.5.4) are estimated jointly over the first frames with deformation
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from typing import NamedTuple
 
 import cv2
 import numpy as np
@@ -23,6 +24,17 @@ from simreal_nodes.rom.model import ReducedModel
 from simreal_nodes.vision.camera import CameraModel
 
 OK, LOW_CONFIDENCE, LOST, INITIALIZING = 0, 1, 2, 3  # ModelParameters.STATE_*
+
+
+class Link(NamedTuple):
+    """A map point linked to the model (Eq. 4.10)."""
+
+    nodes: np.ndarray  # (3,) model nodes
+    weights: np.ndarray  # (3,) barycentric weights on them
+    X_rest: np.ndarray  # (3,) map-frame rest position (the linked material point)
+    P_map: np.ndarray  # (3,) the map point's position when linked
+    mu: np.ndarray | None  # the deformation it was linked in (None: rest shape)
+    ray: np.ndarray | None  # (2, 3) map-frame viewing ray (centre, direction) it was linked from, or None
 
 
 @dataclass
@@ -186,8 +198,8 @@ class DeformableTracker:
         for k, i in enumerate(new):
             pid = int(ids[i])
             if L.on_object[k]:
-                self.links[pid] = (L.nodes[k], L.weights[k], X_rest[k].copy(), P_map[i].copy(), mu,
-                                   None if R is None else R[k].copy())
+                self.links[pid] = Link(L.nodes[k], L.weights[k], X_rest[k].copy(), P_map[i].copy(), mu,
+                                       None if R is None else R[k].copy())
             else:
                 self.static.add(pid)
 
@@ -198,13 +210,13 @@ class DeformableTracker:
             return
         groups: dict = {}
         for pid, lk in self.links.items():
-            key = None if lk[4] is None else tuple(np.round(lk[4], 12))
+            key = None if lk.mu is None else tuple(np.round(lk.mu, 12))
             groups.setdefault(key, []).append(pid)
         old = dict(self.links)
         self.links.clear()
         for pids in groups.values():
-            rays = np.array([np.full((2, 3), np.nan) if old[i][5] is None else old[i][5] for i in pids])
-            self.link_points(np.array(pids), np.array([old[i][3] for i in pids]), old[pids[0]][4], rays)
+            rays = np.array([np.full((2, 3), np.nan) if old[i].ray is None else old[i].ray for i in pids])
+            self.link_points(np.array(pids), np.array([old[i].P_map for i in pids]), old[pids[0]].mu, rays)
 
     @property
     def deformable_ids(self) -> list[int]:
@@ -217,11 +229,11 @@ class DeformableTracker:
         ids = np.array(self.deformable_ids, dtype=np.int64)
         if len(ids) == 0:
             return ids, np.zeros((0, 3))
-        X = np.array([self.links[int(i)][2] for i in ids])
+        X = np.array([self.links[int(i)].X_rest for i in ids])
         if not self._was_deforming:
             return ids, X
-        nodes = np.array([self.links[int(i)][0] for i in ids])
-        w = np.array([self.links[int(i)][1] for i in ids])
+        nodes = np.array([self.links[int(i)].nodes for i in ids])
+        w = np.array([self.links[int(i)].weights for i in ids])
         dX = self._disp_fn(nodes, w)(self.x[: self.n_mu])[0]
         return ids, X + dX @ (self.R_wo @ G.rot_axis("z", self._alpha())).T
 
@@ -232,9 +244,10 @@ class DeformableTracker:
             sel = sel[:: max(1, len(sel) // self.cfg.max_points)][: self.cfg.max_points]
         if not sel:
             return None
-        nodes = np.array([self.links[int(ids[k])][0] for k in sel])
-        w = np.array([self.links[int(ids[k])][1] for k in sel])
-        X = np.array([self.links[int(ids[k])][2] for k in sel])
+        lks = [self.links[int(ids[k])] for k in sel]
+        nodes = np.array([lk.nodes for lk in lks])
+        w = np.array([lk.weights for lk in lks])
+        X = np.array([lk.X_rest for lk in lks])
         return X, self.cam.undistort_points(uv[sel]), nodes, w, np.asarray(ids)[sel]
 
     def _dot_measurements(self, image_bgr, T_cw):

@@ -220,6 +220,7 @@ class Renderer:
             "//DEFINES", "#define OCCLUSION" if occ else "")) for occ in (False, True)}
         self.prog = self.progs[False]
         self.meshes: dict[str, Mesh] = {}
+        self._pass_buffers: list = []
         self._setup_camera(cam)
 
     @property
@@ -458,7 +459,7 @@ class Renderer:
         """(program, vertex array) drawing ``fragment_shader`` over the whole viewport (one big triangle)."""
         prog = self.ctx.program(vertex_shader=BG_VERT, fragment_shader=fragment_shader)
         vbo = self.ctx.buffer(np.array([-1, -1, 3, -1, -1, 3], dtype="f4").tobytes())
-        self.__dict__.setdefault("_pass_buffers", []).append(vbo)  # held as long as the renderer
+        self._pass_buffers.append(vbo)  # held as long as the renderer
         return prog, self.ctx.vertex_array(prog, [(vbo, "2f", "in_xy")])
 
     def _distort_composite(self, background_rgb: np.ndarray) -> np.ndarray:

@@ -478,9 +478,6 @@ class Slam:
         res = self._result(state, "", G.inv(T), f, match[:, 0], match[:, 1], inl)
         res.n_matches, res.n_inliers = len(match), int(inl.sum())
         self._deformable_observations(f, T, res, exclude=match[:, 0])
-        self._frame_obs = {int(i): q for i, q in zip(res.obs_ids, res.obs_uv)}
-        if self._flow_frame != self.frame_id:  # no deformable points yet: this frame is where new tracks start
-            self._flow, self._flow_frame, self._flow_gray = {}, self.frame_id, self._gray
         # keyframe decision and local mapping
         if not self.localization_only and self._need_keyframe(int(inl.sum()), z):
             t3 = time.perf_counter()
@@ -588,9 +585,6 @@ class Slam:
         res = self._result(RELOCALIZED, f"relocalized after {lost_for} frames", G.inv(T), f, match[:, 0], match[:, 1], inl)
         res.n_matches, res.n_inliers = len(match), int(inl.sum())
         self._deformable_observations(f, T, res, exclude=match[:, 0])
-        self._frame_obs = {int(i): q for i, q in zip(res.obs_ids, res.obs_uv)}
-        if self._flow_frame != self.frame_id:  # no deformable points yet: this frame is where new tracks start
-            self._flow, self._flow_frame, self._flow_gray = {}, self.frame_id, self._gray
         return res
 
     def _local_points(self, seed_ids=None) -> np.ndarray:
@@ -685,6 +679,14 @@ class Slam:
         return np.c_[cols[first], ids[rows[first]]].astype(np.int64)
 
     def _deformable_observations(self, f: Features, T_cw, res: TrackResult, exclude) -> None:
+        """:meth:`_measure_deformable`, then this frame's observations are kept: a point flagged deformable after it
+        starts its track at the pixel it was seen at here (:meth:`set_deformable`)."""
+        self._measure_deformable(f, T_cw, res, exclude)
+        self._frame_obs = {int(i): q for i, q in zip(res.obs_ids, res.obs_uv)}
+        if self._flow_frame != self.frame_id:  # no deformable points yet: this frame is where new tracks start
+            self._flow, self._flow_frame, self._flow_gray = {}, self.frame_id, self._gray
+
+    def _measure_deformable(self, f: Features, T_cw, res: TrackResult, exclude) -> None:
         """Measurements of the map points flagged deformable (never used for the pose), appended to the
         observations as pose outliers, with their rest positions (the tracker links those to the model).
 
@@ -728,7 +730,6 @@ class Slam:
                 for k, good, q in zip(sel, ok, p1):
                     if good:
                         found[int(ids_a[k])] = q.astype(np.float64)
-        self._from_flow = set(found)  # diagnostics: which measurements the flow made this frame
         # 2. ORB re-acquisition of the others
         avail = np.ones(len(f), bool)
         avail[np.asarray(exclude, np.int64)] = False
