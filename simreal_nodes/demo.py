@@ -158,7 +158,7 @@ def run_demo(scene: str = DEFAULT_SCENE, out: str | Path = "out/demo", regenerat
 def summary_markdown(m: dict) -> str:
     f = m["frames"]
     lines = [f"# simreal demo: {m['scene']}", "",
-             f"{f['frames_published']} frames replayed in {f['wall_s']:.1f} s ({f['fps']:.1f} fps, lossless); "
+             f"{f['frames_published']} frames replayed in {f['play_s']:.1f} s ({f['fps']:.1f} fps, lossless); "
              f"{f['frames_completed']} completed, {f['frames_dropped']} dropped, {f['frames_timed_out']} timed out.", "",
              "| parameter | frames | median abs error | % of range | max abs error | outside range |",
              "|---|---|---|---|---|---|"]

@@ -134,3 +134,15 @@ def look_at(eye, target, up=(0, 0, 1)) -> np.ndarray:
     x /= np.linalg.norm(x)
     y = np.cross(z, x)
     return make_T(np.stack([x, y, z], axis=1), eye)
+
+
+def vertex_normals(V: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """Unit vertex normals of a triangle mesh: the area-weighted sum of the incident faces' normals
+    (zero for a vertex on no face)."""
+    V = np.asarray(V, dtype=np.float64)
+    F = np.asarray(F, dtype=np.int64)
+    fn = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    idx = F.ravel()
+    n = np.stack([np.bincount(idx, weights=np.repeat(fn[:, c], 3), minlength=len(V)) for c in range(3)], axis=1)
+    ln = np.linalg.norm(n, axis=1, keepdims=True)
+    return n / np.where(ln > 0, ln, 1.0)

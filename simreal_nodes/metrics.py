@@ -41,9 +41,11 @@ class StageMetrics:
         self.age_ms = WindowStats(window)
         self.processed = 0
         self.dropped = 0
+        self.skipped = 0
         self.errors = 0
         self.last_error = ""
         self.last_drop_reason = ""
+        self.last_skip_reason = ""
         self.extra: dict[str, str] = {}
 
     def arrived(self) -> float:
@@ -62,6 +64,11 @@ class StageMetrics:
     def drop(self, reason: str) -> None:
         self.dropped += 1
         self.last_drop_reason = reason
+
+    def skip(self, reason: str) -> None:
+        """A frame left out on purpose (live load shedding), not a fault."""
+        self.skipped += 1
+        self.last_skip_reason = reason
 
     def error(self, what: str) -> None:
         self.errors += 1
@@ -84,8 +91,11 @@ class StageMetrics:
             "age_ms_p50": f"{self.age_ms.percentile(50):.2f}",
             "processed": str(self.processed),
             "dropped": str(self.dropped),
+            "skipped": str(self.skipped),
             "errors": str(self.errors),
         }
+        if self.last_skip_reason:
+            d["last_skip_reason"] = self.last_skip_reason
         if self.last_drop_reason:
             d["last_drop_reason"] = self.last_drop_reason
         if self.last_error:

@@ -21,6 +21,7 @@ import cv2
 import numpy as np
 
 from simreal_nodes.errors import SimrealError
+from simreal_nodes.geometry import vertex_normals
 from simreal_nodes.vision.camera import CameraModel
 
 VERT = """
@@ -104,42 +105,7 @@ void main() {
 """
 
 
-BG_VERT = """
-#version 330
-in vec2 in_xy;
-void main() { gl_Position = vec4(in_xy, 0.0, 1.0); }
-"""
-
-BG_FRAG = """
-#version 330
-uniform sampler2D u_bg;
-uniform vec2 u_viewport;
-layout(location = 0) out vec4 f_color;
-layout(location = 1) out float f_depth;
-void main() {
-    vec2 p = gl_FragCoord.xy / u_viewport;
-    f_color = vec4(texture(u_bg, vec2(p.x, 1.0 - p.y)).rgb, 1.0);  // image rows are top-down
-    f_depth = 0.0;
-}
-"""
-
-
-DISTORT_FRAG = """
-#version 330
-uniform sampler2D u_drawn;     // the meshes alone in the ideal render camera (RGBA, alpha = coverage)
-uniform sampler2D u_bg;        // the camera image, rows top-down
-uniform sampler2D u_map;       // camera pixel -> ideal render pixel, rows bottom-up like this framebuffer
-uniform vec2 u_drawn_size;
-uniform vec2 u_viewport;
-layout(location = 0) out vec4 f_color;
-void main() {
-    vec2 m = texelFetch(u_map, ivec2(gl_FragCoord.xy), 0).xy;
-    vec4 d = texture(u_drawn, vec2((m.x + 0.5) / u_drawn_size.x, 1.0 - (m.y + 0.5) / u_drawn_size.y));
-    vec2 p = gl_FragCoord.xy / u_viewport;
-    vec3 bg = texture(u_bg, vec2(p.x, 1.0 - p.y)).rgb;
-    f_color = vec4(bg + (d.rgb - bg) * d.a, 1.0);
-}
-"""
+_MAP_STEP = 8  # pixel step of the coarse distortion-map search for a patch's camera pixels
 
 
 class RenderError(SimrealError):
@@ -188,15 +154,6 @@ class Mesh:
     _tex: object = None
 
 
-def vertex_normals(V: np.ndarray, F: np.ndarray) -> np.ndarray:
-    fn = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
-    n = np.zeros_like(V)
-    for k in range(3):
-        np.add.at(n, F[:, k], fn)
-    ln = np.linalg.norm(n, axis=1, keepdims=True)
-    return n / np.where(ln > 0, ln, 1.0)
-
-
 class Renderer:
     """Offscreen renderer for one camera model (resolution, K, distortion)."""
 
@@ -220,7 +177,6 @@ class Renderer:
             "//DEFINES", "#define OCCLUSION" if occ else "")) for occ in (False, True)}
         self.prog = self.progs[False]
         self.meshes: dict[str, Mesh] = {}
-        self._pass_buffers: list = []
         self._setup_camera(cam)
 
     @property
@@ -257,6 +213,9 @@ class Renderer:
         self.fbo = self.ctx.framebuffer(
             color_attachments=[self.ctx.texture((rc.width, rc.height), 4), self.ctx.texture((rc.width, rc.height), 1, dtype="f4")],
             depth_attachment=self.ctx.depth_renderbuffer((rc.width, rc.height)))
+        # compositing needs colour and coverage only: a framebuffer without the metric-depth attachment
+        self.patch_fbo = self.ctx.framebuffer(color_attachments=[self.fbo.color_attachments[0]],
+                                              depth_attachment=self.fbo.depth_attachment)
         self.proj = projection_matrix(rc, self.near, self.far)
         self._real_depth_tex = None
 
@@ -286,7 +245,9 @@ class Renderer:
         if vertices is not None or colors is not None:
             self._upload(m, first=False)
 
-    def _attributes(self, m: Mesh) -> dict[str, np.ndarray]:
+    def _attributes(self, m: Mesh) -> tuple[dict[str, np.ndarray], np.ndarray | None]:
+        """Vertex attributes and the index buffer's triangles: smooth meshes are drawn indexed (one entry
+        per vertex); flat ones repeat each vertex per triangle to carry the face normal (no indices)."""
         V = np.asarray(m.vertices, dtype=np.float64)
         F = np.asarray(m.triangles, dtype=np.int64)
         ref = V if m.ref is None else np.asarray(m.ref, dtype=np.float64)
@@ -296,8 +257,7 @@ class Renderer:
         if m.smooth:
             n = vertex_normals(V, F)
             nref = vertex_normals(ref, F) if m.mode == "texture" else n
-            idx = F.ravel()
-            return {"in_pos": V[idx], "in_normal": n[idx], "in_ref": ref[idx], "in_nref": nref[idx], "in_color": col[idx]}
+            return {"in_pos": V, "in_normal": n, "in_ref": ref, "in_nref": nref, "in_color": col}, F
         fn = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
         fn /= np.maximum(np.linalg.norm(fn, axis=1, keepdims=True), 1e-300)
         frn = np.cross(ref[F[:, 1]] - ref[F[:, 0]], ref[F[:, 2]] - ref[F[:, 0]])
@@ -305,13 +265,17 @@ class Renderer:
         idx = F.ravel()
         return {"in_pos": V[idx], "in_normal": np.repeat(fn, 3, axis=0), "in_ref": ref[idx],
                 "in_nref": np.repeat(frn, 3, axis=0) if m.mode == "texture" else np.repeat(fn, 3, axis=0),
-                "in_color": col[idx]}
+                "in_color": col[idx]}, None
 
     def _upload(self, m: Mesh, first: bool) -> None:
-        attrs = self._attributes(m)
+        attrs, tris = self._attributes(m)
         if first or not m._bufs:
             m._bufs = {k: self.ctx.buffer(v.astype("f4").tobytes(), dynamic=True) for k, v in attrs.items()}
-            m._vao = {occ: self.ctx.vertex_array(p, [(b, "3f", k) for k, b in m._bufs.items() if k in p])
+            ibo = None
+            if tris is not None:
+                ibo = m._bufs["_index"] = self.ctx.buffer(np.ascontiguousarray(tris, dtype="i4").tobytes())
+            m._vao = {occ: self.ctx.vertex_array(p, [(b, "3f", k) for k, b in m._bufs.items() if k in p],
+                                                 index_buffer=ibo, index_element_size=4)
                       for occ, p in self.progs.items()}
             if m.texture is not None:
                 tex = np.asarray(m.texture)
@@ -355,47 +319,102 @@ class Renderer:
         depth = np.frombuffer(self.fbo.read(components=1, attachment=1, dtype="f4"), np.float32).reshape(rc.height, rc.width)[::-1]
         return self._to_camera(rgb, depth, background, distort)
 
-    def composite(self, T_world_cam: np.ndarray, background_rgb: np.ndarray, names: list[str] | None = None,
-                  real_depth: np.ndarray | None = None, occlusion_margin: float = 0.0) -> np.ndarray:
-        """Meshes drawn over a camera image (RGB uint8, real-camera pixels), with optional occlusion by real
-        depth. Without lens distortion or supersampling the image is composited on the GPU (the camera image
-        is a background texture, one readback); otherwise through :meth:`render`'s remap."""
-        import moderngl
+    def composite(self, T_world_cam: np.ndarray, background: np.ndarray, names: list[str] | None = None,
+                  real_depth: np.ndarray | None = None, occlusion_margin: float = 0.0, bgr: bool = False) -> np.ndarray:
+        """Meshes drawn over a camera image (uint8 HxWx3 in real-camera pixels, RGB or ``bgr``), with optional
+        occlusion by real depth; returns a new image in the same channel order.
 
-        rc = self.render_cam
+        Only the meshes' screen box is drawn, read back and blended: the box is the projection of their
+        vertices in the ideal render camera (the whole view if one lies behind the near plane). With lens
+        distortion the box's camera pixels look their colour and coverage up in the drawn patch through the
+        distortion map (bilinear, so edges are antialiased by coverage). With supersampling: :meth:`render`."""
+        cam = self.cam
+        bg = np.asarray(background)
+        if bg.dtype != np.uint8 or bg.shape != (cam.height, cam.width, 3):
+            raise RenderError(f"background is {bg.shape} {bg.dtype}, expected {(cam.height, cam.width, 3)} uint8")
         if self.ssaa > 1:
-            rgb, _ = self.render(T_world_cam, names, real_depth, occlusion_margin, background=background_rgb)
-            return rgb
+            rgb, _ = self.render(T_world_cam, names, real_depth, occlusion_margin,
+                                 background=bg[..., ::-1] if bgr else bg)
+            return np.ascontiguousarray(rgb[..., ::-1]) if bgr else rgb
+        out = bg.copy()
+        box = self.screen_box(T_world_cam, names)
+        if box is None:
+            return out
+        x0, y0, x1, y1 = box
+        # the camera pixels of the box (where it lands, and the real depth its fragments look up)
+        cbox = box if self._map is None else self._camera_box(box)
+        if cbox is None:
+            return out
+        cx0, cy0, cx1, cy1 = cbox
+        patch = self._draw_patch(T_world_cam, names, real_depth, occlusion_margin, box, cbox)
         if self._map is not None:
-            # lens distortion: draw the meshes alone in the ideal camera, then a second pass at the camera's
-            # pixels looks each one up through the distortion map and blends it over the camera image
-            self.fbo.use()
-            self.ctx.viewport = (0, 0, rc.width, rc.height)
-            self.fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
-            self._draw(T_world_cam, names, real_depth, occlusion_margin)
-            return self._distort_composite(background_rgb)
-        if not hasattr(self, "_bg_prog"):
-            self._bg_prog, self._bg_vao = self._fullscreen_pass(BG_FRAG)
-            self._bg_tex = self.ctx.texture((rc.width, rc.height), 3)
-            self._bg_tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
-            self._bg_out = np.empty((rc.height, rc.width, 3), np.uint8)
-        bg = np.ascontiguousarray(background_rgb, dtype=np.uint8)
-        if bg.shape != (rc.height, rc.width, 3):
-            raise RenderError(f"background is {bg.shape}, expected {(rc.height, rc.width, 3)}")
-        self._bg_tex.write(bg.tobytes())
-        self.fbo.use()
-        self.ctx.viewport = (0, 0, rc.width, rc.height)
-        self.fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
-        self.ctx.disable(moderngl.DEPTH_TEST)
-        self._bg_tex.use(location=2)
-        self._bg_prog["u_bg"].value = 2
-        self._bg_prog["u_viewport"].value = (float(rc.width), float(rc.height))
-        self._bg_vao.render(moderngl.TRIANGLES)
-        self._draw(T_world_cam, names, real_depth, occlusion_margin)
-        self.fbo.read_into(self._bg_out, components=3, attachment=0)
-        return cv2.flip(self._bg_out, 0)
+            mm = self._map[cy0:cy1, cx0:cx1] - np.array([x0, y0], np.float32)
+            patch = cv2.remap(patch, mm[..., 0], mm[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
+                              borderValue=0)
+        rgb = np.ascontiguousarray(patch[..., 2::-1] if bgr else patch[..., :3])
+        a = patch[..., 3].astype(np.float32) * (1.0 / 255.0)
+        out[cy0:cy1, cx0:cx1] = cv2.blendLinear(rgb, out[cy0:cy1, cx0:cx1], a, 1.0 - a)
+        return out
 
-    def _draw(self, T_world_cam, names, real_depth, occlusion_margin) -> None:
+    def screen_box(self, T_world_cam: np.ndarray, names: list[str] | None = None) -> tuple[int, int, int, int] | None:
+        """(x0, y0, x1, y1), top-down pixel box of the render camera that holds every drawn vertex (2 px
+        margin), the whole view if a vertex is behind the near plane, None if nothing is in view."""
+        rc = self.render_cam
+        view = np.linalg.inv(T_world_cam)
+        lo, hi = np.full(2, np.inf), np.full(2, -np.inf)
+        for name in (names if names is not None else list(self.meshes)):
+            m = self.meshes[name]
+            if not m.visible or not len(m.vertices):
+                continue
+            T = view @ m.pose
+            X = np.asarray(m.vertices, dtype=np.float64) @ T[:3, :3].T + T[:3, 3]
+            if not np.all(np.isfinite(X)) or X[:, 2].min() <= self.near:
+                if np.all(X[:, 2] <= self.near):
+                    continue  # wholly behind the camera
+                return 0, 0, rc.width, rc.height
+            uv = np.c_[rc.fx * X[:, 0] / X[:, 2] + rc.K[0, 1] * X[:, 1] / X[:, 2] + rc.cx, rc.fy * X[:, 1] / X[:, 2] + rc.cy]
+            lo, hi = np.minimum(lo, uv.min(axis=0)), np.maximum(hi, uv.max(axis=0))
+        if not np.all(np.isfinite(lo)):
+            return None
+        x0, y0 = (max(0, int(np.floor(v)) - 2) for v in lo)
+        x1, y1 = min(rc.width, int(np.ceil(hi[0])) + 3), min(rc.height, int(np.ceil(hi[1])) + 3)
+        return (x0, y0, x1, y1) if x1 > x0 and y1 > y0 else None
+
+    def _draw_patch(self, T_world_cam, names, real_depth, occlusion_margin, box, depth_box) -> np.ndarray:
+        """Draw the meshes inside ``box`` only (scissor) and read back that patch, RGBA top-down, alpha =
+        coverage (0 where nothing was drawn)."""
+        rc = self.render_cam
+        x0, y0, x1, y1 = box
+        gl_box = (x0, rc.height - y1, x1 - x0, y1 - y0)  # the framebuffer's rows run bottom-up
+        self.patch_fbo.use()
+        self.ctx.viewport = (0, 0, rc.width, rc.height)
+        self.ctx.scissor = gl_box
+        try:
+            self.patch_fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0, viewport=gl_box)
+            self._draw(T_world_cam, names, real_depth, occlusion_margin, depth_box)
+            patch = np.empty((y1 - y0, x1 - x0, 4), np.uint8)
+            self.patch_fbo.read_into(patch, viewport=gl_box, components=4, attachment=0)
+        finally:
+            self.ctx.scissor = None
+        return patch[::-1]
+
+    def _camera_box(self, box) -> tuple[int, int, int, int] | None:
+        """(x0, y0, x1, y1) of the camera pixels whose ideal-render coordinates fall inside ``box``: tested on
+        every ``_MAP_STEP``-th pixel, grown by that step (a few extra pixels map outside the patch: alpha 0)."""
+        k = _MAP_STEP
+        if getattr(self, "_map_coarse_of", None) is not self._map:
+            self._map_coarse_of, self._map_coarse = self._map, self._map[::k, ::k]
+        x0, y0, x1, y1 = box
+        mx, my = self._map_coarse[..., 0], self._map_coarse[..., 1]
+        inside = (mx >= x0 - 1) & (mx <= x1) & (my >= y0 - 1) & (my <= y1)
+        rows, cols = np.nonzero(inside.any(axis=1))[0], np.nonzero(inside.any(axis=0))[0]
+        if not len(rows):
+            return None
+        cam = self.cam
+        return (max(0, (cols[0] - 1) * k), max(0, (rows[0] - 1) * k),
+                min(cam.width, (cols[-1] + 1) * k + 1), min(cam.height, (rows[-1] + 1) * k + 1))
+
+    def _draw(self, T_world_cam, names, real_depth, occlusion_margin, depth_box=None) -> None:
         import moderngl
 
         rc = self.render_cam
@@ -410,7 +429,7 @@ class Renderer:
         self.prog["u_light"].value = tuple(float(x) for x in light_cam)
         self.prog["u_ambient"].value = float(self.ambient)
         if occlude:
-            self._set_real_depth(real_depth)
+            self._set_real_depth(real_depth, depth_box)
             self._real_depth_tex.use(location=1)
             self._depth_map_tex.use(location=6)
             self.prog["u_real_depth"].value = 1
@@ -431,16 +450,20 @@ class Renderer:
                 self.prog["u_tex"].value = 0
             m._vao[occlude].render(moderngl.TRIANGLES)
 
-    def _set_real_depth(self, real_depth: np.ndarray) -> None:
-        """Upload real depth as it comes (real-camera pixels); the occlusion shader finds each render pixel's
-        real pixel in a lookup texture (lens distortion, supersampling, margins), made once per camera."""
+    def _set_real_depth(self, real_depth: np.ndarray, box=None) -> None:
+        """Upload real depth as it comes (real-camera pixels; only ``box`` (x0, y0, x1, y1) of it when given:
+        the pixels this draw can look up); the occlusion shader finds each render pixel's real pixel in a
+        lookup texture (lens distortion, supersampling, margins), made once per camera."""
         import moderngl
 
         rc, cam = self.render_cam, self.cam
-        d = np.nan_to_num(np.asarray(real_depth, dtype=np.float32), nan=0.0, posinf=0.0, neginf=0.0)
-        if d.shape != (cam.height, cam.width):
-            raise RenderError(f"real depth is {d.shape[1]}x{d.shape[0]}, the camera {cam.width}x{cam.height}")
-        d[d < 0] = 0
+        real_depth = np.asarray(real_depth)
+        if real_depth.shape != (cam.height, cam.width):
+            raise RenderError(f"real depth is {real_depth.shape[1]}x{real_depth.shape[0]}, the camera "
+                              f"{cam.width}x{cam.height}")
+        x0, y0, x1, y1 = box if box is not None else (0, 0, cam.width, cam.height)
+        d = np.array(real_depth[y0:y1, x0:x1], dtype=np.float32)  # a copy: invalid values are zeroed in place
+        d[~((d > 0) & (d < np.inf))] = 0  # NaN, +-inf, negative: invalid
         if self._real_depth_tex is None:
             self._real_depth_tex = self.ctx.texture((cam.width, cam.height), 1, dtype="f4")
             self._real_depth_tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
@@ -453,48 +476,8 @@ class Renderer:
             m = np.where(inside[..., None], uv, -1.0).astype(np.float32)
             self._depth_map_tex = self.ctx.texture((rc.width, rc.height), 2, np.ascontiguousarray(m[::-1]).tobytes(), dtype="f4")
             self._depth_map_tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
-        self._real_depth_tex.write(np.ascontiguousarray(d[::-1]).tobytes())
-
-    def _fullscreen_pass(self, fragment_shader: str):
-        """(program, vertex array) drawing ``fragment_shader`` over the whole viewport (one big triangle)."""
-        prog = self.ctx.program(vertex_shader=BG_VERT, fragment_shader=fragment_shader)
-        vbo = self.ctx.buffer(np.array([-1, -1, 3, -1, -1, 3], dtype="f4").tobytes())
-        self._pass_buffers.append(vbo)  # held as long as the renderer
-        return prog, self.ctx.vertex_array(prog, [(vbo, "2f", "in_xy")])
-
-    def _distort_composite(self, background_rgb: np.ndarray) -> np.ndarray:
-        import moderngl
-
-        cam, rc = self.cam, self.render_cam
-        bg = np.ascontiguousarray(background_rgb, dtype=np.uint8)
-        if bg.shape != (cam.height, cam.width, 3):
-            raise RenderError(f"background is {bg.shape}, expected {(cam.height, cam.width, 3)}")
-        if getattr(self, "_dist_for", None) is not self.fbo:  # first use, or a new camera
-            self._dist_for = self.fbo
-            self._dist_prog, self._dist_vao = self._fullscreen_pass(DISTORT_FRAG)
-            self._dist_bg = self.ctx.texture((cam.width, cam.height), 3)
-            self._dist_bg.filter = (moderngl.NEAREST, moderngl.NEAREST)
-            self._dist_map = self.ctx.texture((cam.width, cam.height), 2, np.ascontiguousarray(self._map[::-1]).tobytes(), dtype="f4")
-            self._dist_map.filter = (moderngl.NEAREST, moderngl.NEAREST)
-            self._dist_fbo = self.ctx.framebuffer(color_attachments=[self.ctx.texture((cam.width, cam.height), 3)])
-            self._dist_out = np.empty((cam.height, cam.width, 3), np.uint8)
-            drawn = self.fbo.color_attachments[0]
-            drawn.filter = (moderngl.LINEAR, moderngl.LINEAR)
-            drawn.repeat_x = drawn.repeat_y = False
-        self._dist_bg.write(bg.tobytes())
-        self._dist_fbo.use()
-        self.ctx.viewport = (0, 0, cam.width, cam.height)
-        self.ctx.disable(moderngl.DEPTH_TEST)
-        self.fbo.color_attachments[0].use(location=3)
-        self._dist_bg.use(location=4)
-        self._dist_map.use(location=5)
-        pr = self._dist_prog
-        pr["u_drawn"].value, pr["u_bg"].value, pr["u_map"].value = 3, 4, 5
-        pr["u_drawn_size"].value = (float(rc.width), float(rc.height))
-        pr["u_viewport"].value = (float(cam.width), float(cam.height))
-        self._dist_vao.render(moderngl.TRIANGLES)
-        self._dist_fbo.read_into(self._dist_out, components=3, attachment=0)
-        return cv2.flip(self._dist_out, 0)
+        self._real_depth_tex.write(np.ascontiguousarray(d[::-1]).tobytes(),
+                                   viewport=(x0, cam.height - y1, x1 - x0, y1 - y0))
 
     def _to_camera(self, rgb, depth, background, distort):
         """Supersampled ideal render -> real camera pixels. Colour is area-averaged then remapped; depth
@@ -529,5 +512,6 @@ class Renderer:
     def release(self) -> None:
         for n in list(self.meshes):
             self.remove(n)
+        self.patch_fbo.release()
         self.fbo.release()
         self.ctx.release()

@@ -196,10 +196,11 @@ class ObjectOverlay:
         if not np.any(vis):
             return 1, 0.0
         scale = abs(getattr(self, "_scale", 1.0)) * self.magnify * max(cam.fx, cam.fy) / Xc[vis, 2]  # px per metre at each visible node
-        contrib = c[:, None, None] * self.S_u[:, vis]  # (M, n_vis, 3)
-        tail = np.cumsum(contrib[::-1], axis=0)[::-1]  # tail[m] = sum_{i>=m} (omitted when using m modes)
-        err = np.linalg.norm(tail, axis=2) * scale[None, :]
-        err_m = np.r_[err.max(axis=1)[1:], 0.0]  # error with m = 1..M modes
+        S = self.S_u if vis.all() else self.S_u[:, vis]
+        contrib = c[1:, None, None] * S[1:]  # (M - 1, n_vis, 3): modes 2..M
+        tail = np.cumsum(contrib[::-1], axis=0)[::-1]  # tail[m - 1] = sum_{i>=m} (omitted when using m modes)
+        err2 = np.einsum("mni,mni->mn", tail, tail) * (scale * scale)[None, :]
+        err_m = np.r_[np.sqrt(err2.max(axis=1)), 0.0]  # error with m = 1..M modes
         ok = np.nonzero(err_m <= self.max_error_px)[0]
         m = int(ok[0]) + 1 if len(ok) else self.M
         return m, float(err_m[m - 1])
@@ -261,9 +262,7 @@ class OverlayCompositor:
             self.last[oid] = (V, col)
             states[oid] = st
         depth = real_depth if (self.occlusion and real_depth is not None) else None
-        rgb = self.renderer.composite(T_world_cam, cv2.cvtColor(image_bgr, cv2.COLOR_BGR2RGB), real_depth=depth,
-                                      occlusion_margin=self.margin)
-        out = cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR)
+        out = self.renderer.composite(T_world_cam, image_bgr, real_depth=depth, occlusion_margin=self.margin, bgr=True)
         if self.colorbar:
             for k, (oid, ob) in enumerate(self.objects.items()):
                 if ob.field_name != "none":

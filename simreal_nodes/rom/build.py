@@ -31,7 +31,7 @@ import yaml
 
 from simreal_nodes import __version__
 from simreal_nodes.errors import FemError, SceneError
-from simreal_nodes.geometry import rot_axis
+from simreal_nodes.geometry import rot_axis, vertex_normals
 from simreal_nodes.physics import fem, materials, meshes
 from simreal_nodes.rom import nipgd as nip
 from simreal_nodes.rom import pgd
@@ -463,7 +463,7 @@ def build_probe_nipgd(spec, progress=None) -> ReducedModel:
     lp = _farthest_points(mesh.p[:, cand].T, spec["contact"]["points"])
     load_nodes = cand[lp]
     # vertex normals of the boundary, graph rings for the patches
-    normals = _vertex_normals(mesh.p.T, btri)
+    normals = vertex_normals(mesh.p.T, btri)
     adj = _adjacency(btri, nv)
     centroid = mesh.p.mean(axis=1)
     cc = spec["contact"]
@@ -535,15 +535,6 @@ def _farthest_points(P: np.ndarray, k: int) -> np.ndarray:
         chosen.append(i)
         d = np.minimum(d, np.linalg.norm(P - P[i], axis=1))
     return np.asarray(chosen)
-
-
-def _vertex_normals(P, tris):
-    n = np.zeros_like(P)
-    fn = np.cross(P[tris[:, 1]] - P[tris[:, 0]], P[tris[:, 2]] - P[tris[:, 0]])
-    for k in range(3):
-        np.add.at(n, tris[:, k], fn)
-    ln = np.linalg.norm(n, axis=1, keepdims=True)
-    return n / np.where(ln > 0, ln, 1)
 
 
 def _adjacency(tris, n):

@@ -108,14 +108,16 @@ class PlayStats:
     frames_completed: int = 0
     frames_dropped: int = 0
     frames_timed_out: int = 0
+    conflicting_reports: int = 0
     drop_reasons: dict[str, int] = field(default_factory=lambda: defaultdict(int))
     latency_ms: dict[str, list[float]] = field(default_factory=lambda: defaultdict(list))
     wall_s: float = 0.0
+    play_s: float = 0.0  # first publication to the last one (real time) or the last frame's end (lossless)
     published_stamps: list[int] = field(default_factory=list)
 
     def summary(self) -> str:
-        fps = self.frames_published / self.wall_s if self.wall_s > 0 else 0.0
-        lines = [f"published {self.frames_published} frames in {self.wall_s:.2f} s ({fps:.1f} fps); "
+        fps = self.frames_published / self.play_s if self.play_s > 0 else 0.0
+        lines = [f"published {self.frames_published} frames in {self.play_s:.2f} s ({fps:.1f} fps); "
                  f"completed {self.frames_completed}, dropped {self.frames_dropped}, timed out {self.frames_timed_out}"]
         for why, n in sorted(self.drop_reasons.items(), key=lambda kv: -kv[1])[:10]:
             lines.append(f"  dropped x{n}: {why}")
@@ -128,8 +130,9 @@ class PlayStats:
 
     def as_dict(self) -> dict:
         out = {k: getattr(self, k) for k in ("frames_published", "frames_completed", "frames_dropped",
-                                             "frames_timed_out", "wall_s")}
-        out["fps"] = self.frames_published / self.wall_s if self.wall_s > 0 else 0.0
+                                             "frames_timed_out", "conflicting_reports", "wall_s", "play_s")}
+        out["fps"] = self.frames_published / self.play_s if self.play_s > 0 else 0.0
+        out["fps_through"] = self.frames_completed / self.play_s if self.play_s > 0 else 0.0
         out["drop_reasons"] = dict(self.drop_reasons)
         out["latency_ms"] = {n: {"p50": float(np.percentile(v, 50)), "p95": float(np.percentile(v, 95)),
                                  "n": len(v)} for n, v in self.latency_ms.items() if v}
@@ -155,13 +158,16 @@ class Player:
         self.pubs = {t: node.create_publisher(message_class(ty), t, data_qos(lossless)) for t, ty in input_topics.items()}
         self._reports: dict[int, dict[str, str]] = defaultdict(dict)
         self._t_pub: dict[int, float] = {}
+        self._t_first: float | None = None
         node.create_subscription(Header, graph.PROGRESS, self._on_progress, reliable_qos(1000))
 
     def _on_progress(self, h: Header) -> None:
         s = stamp_ns(h.stamp)
         name, _, why = h.frame_id.partition(":dropped:")
+        if name in self._reports[s] and bool(self._reports[s][name]) != bool(why):
+            self.stats.conflicting_reports += 1  # a node both finished and dropped this frame: a bug
         self._reports[s][name] = why
-        if s in self._t_pub:
+        if s in self._t_pub and not why:  # latency of the frames a node finished, not of those it left out
             self.stats.latency_ms[name].append((time.monotonic() - self._t_pub[s]) * 1e3)
 
     def wait_ready(self, timeout_s: float = 60.0) -> bool:
@@ -208,6 +214,8 @@ class Player:
 
     def _publish_image(self, raw: bytes, s: int) -> None:
         self._t_pub[s] = time.monotonic()
+        if self._t_first is None:
+            self._t_first = self._t_pub[s]
         self.pubs[self.image_topic].publish(raw)
         self.stats.frames_published += 1
         self.stats.published_stamps.append(s)
@@ -293,6 +301,8 @@ class Player:
         while held:
             seen_since.pop(0)
             release(0)
+        if self._t_pub:
+            self.stats.play_s = time.monotonic() - self._t_first
         # let the graph drain what is in flight (outputs travel on other topics than progress)
         t_end = time.monotonic() + (2.0 if not self.lossless else 0.5)
         while time.monotonic() < t_end:
@@ -305,5 +315,10 @@ class Player:
                 elif st:
                     self.stats.frames_dropped += 1
                     self.stats.drop_reasons[st[8:]] += 1
+                else:  # live queues keep the newest frame: an older one may never reach a busy node
+                    missing = [n for n in self.nodes if n not in self._reports.get(s, {})]
+                    self.stats.frames_dropped += 1
+                    self.stats.drop_reasons[f"never reached {', '.join(missing)} (a newer frame replaced it "
+                                            f"in the queue)"] += 1
         self.stats.wall_s = time.monotonic() - t0_wall
         return self.stats

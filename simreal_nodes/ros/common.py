@@ -33,7 +33,11 @@ from simreal_nodes.scene import graph
 
 
 def data_qos(lossless: bool, depth: int = 5) -> QoSProfile:
-    """Sensor-data QoS (best effort, keep last) live; reliable with a deep queue when lossless."""
+    """Sensor-data QoS (best effort, keep last ``depth``) live; reliable with a deep queue when lossless.
+
+    Live, the input that triggers a node's work (its newest frame) is subscribed with depth 1, so a node
+    that was busy takes the newest frame next, not the oldest one still queued; the inputs it pairs with
+    that frame by stamp keep a few frames (the default 5), as they arrive earlier than the trigger."""
     if lossless:
         return QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST,
                           depth=1000, durability=DurabilityPolicy.VOLATILE)
@@ -171,6 +175,28 @@ class SimrealNode(Node):
         h.frame_id = self.get_name() + (f":dropped:{dropped}" if dropped else "")
         self._progress_pub.publish(h)
 
+    def feed(self, sync, key: str, stamp: int, msg, process) -> None:
+        """Add one input to a :class:`~simreal_nodes.sync.StampSync` (``msg`` None: its producer dropped
+        this frame, stop waiting for it), process the frames that became ready and report those dropped.
+
+        Live, only the newest ready frame is processed: older ones are skipped (a node that fell behind
+        catches up instead of working through a backlog). Lossless replay processes every frame."""
+        ready = sync.give_up(key, stamp) if msg is None else sync.add(key, stamp, msg)
+        for s, why in sync.pop_dropped():
+            (self.drop if self.lossless else self.skip)(ns_to_stamp(s), why)
+        if not self.lossless and len(ready) > 1:
+            for s, _ in ready[:-1]:
+                self.skip(ns_to_stamp(s), "a newer frame was ready")
+            ready = ready[-1:]
+        for _, frame in ready:
+            process(frame)
+
+    def skip(self, stamp, reason: str) -> None:
+        """Live: a frame left out because the graph is busy or an upstream node left it out (normal
+        load shedding: counted, reported in progress, no warning)."""
+        self.metrics.skip(reason)
+        self.progress(stamp, dropped=f"skipped: {reason}")
+
     def drop(self, stamp, reason: str) -> None:
         self.metrics.drop(reason)
         self.get_logger().warning(f"dropped frame: {reason}", throttle_duration_sec=2.0)
@@ -227,14 +253,25 @@ def run_node(node_cls, args=None) -> int:
     """main() body for every node: one process, one SingleThreadedExecutor, clean shutdown."""
     rclpy.init(args=args)
     node = None
+    profile_dir = os.environ.get("SIMREAL_PROFILE_DIR")  # development: a cProfile of each node's spin
+    prof = None
     try:
         node = node_cls()
         ex = SingleThreadedExecutor()
         ex.add_node(node)
+        if profile_dir:
+            import cProfile
+
+            prof = cProfile.Profile()
+            prof.enable()
         ex.spin()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
+        if prof is not None:
+            prof.disable()
+            os.makedirs(profile_dir, exist_ok=True)
+            prof.dump_stats(os.path.join(profile_dir, f"{node.get_name()}.prof"))
         if node is not None:
             close = getattr(node, "close", None)
             if close:

@@ -79,14 +79,18 @@ class CollisionNode(SimrealNode):
         keys = (("depth",) if not self.stereo else ("image", "right")) + (("obs",) if need_pose else ())
         self.sync = StampSync(keys, (), wait=2)
         self.create_subscription(CameraInfo, graph.CAM_INFO, self.on_info, q)
+        # live, the input that completes a frame last (the pose if needed, else the images) is the trigger:
+        # depth 1, so the newest frame is taken first
+        trigger = data_qos(self.lossless, depth=1)
+        qi = q if need_pose else trigger
         if self.stereo:
-            self.create_subscription(Image, graph.CAM_IMAGE, lambda m: self.on_input("image", m), q)
+            self.create_subscription(Image, graph.CAM_IMAGE, lambda m: self.on_input("image", m), qi)
             self.create_subscription(Image, graph.CAM_RIGHT_IMAGE, lambda m: self.on_input("right", m), q)
             self.create_subscription(CameraInfo, graph.CAM_RIGHT_INFO, self.on_right_info, q)
         else:
-            self.create_subscription(Image, graph.CAM_DEPTH, lambda m: self.on_input("depth", m), q)
+            self.create_subscription(Image, graph.CAM_DEPTH, lambda m: self.on_input("depth", m), qi)
         if need_pose:
-            self.create_subscription(FeatureObservations, graph.LOC_OBS, lambda m: self.on_input("obs", m), q)
+            self.create_subscription(FeatureObservations, graph.LOC_OBS, lambda m: self.on_input("obs", m), trigger)
         self.pub_contact = {o["id"]: self.create_publisher(ContactMsg, graph.contact_topic(o["id"]), reliable_qos(50))
                             for o in self.objects}
         self.pub_params = {o["id"]: self.create_publisher(ModelParameters, graph.params_topic(o["id"]), reliable_qos(50))
@@ -109,10 +113,7 @@ class CollisionNode(SimrealNode):
             self.set_status("error", str(e))
 
     def on_input(self, key, msg) -> None:
-        for _, frame in self.sync.add(key, stamp_ns(msg.header.stamp), msg):
-            self.process(frame)
-        for stamp, why in self.sync.pop_dropped():
-            self.drop(ns_to_stamp(stamp), why)
+        self.feed(self.sync, key, stamp_ns(msg.header.stamp), msg, self.process)
 
     def _depth(self, frame) -> np.ndarray:
         if not self.stereo:

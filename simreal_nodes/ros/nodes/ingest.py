@@ -55,11 +55,12 @@ class IngestNode(SimrealNode):
 
         if self.source == "topic":
             sq = data_qos(self.lossless)
+            trigger = data_qos(self.lossless, depth=1)  # live: a busy ingest takes the newest image next
             self.create_subscription(CameraInfo, self.info_topic, self.on_info, sq)
             if self.compressed:
-                self.create_subscription(CompressedImage, self.image_topic + "/compressed", self.on_compressed, sq)
+                self.create_subscription(CompressedImage, self.image_topic + "/compressed", self.on_compressed, trigger)
             else:
-                self.create_subscription(Image, self.image_topic, self.on_image, sq)
+                self.create_subscription(Image, self.image_topic, self.on_image, trigger)
             if self.depth_topic:
                 self.create_subscription(Image, self.depth_topic, self.on_depth, sq)
             if self.right_topic:

@@ -64,7 +64,8 @@ class LocalizationNode(SimrealNode):
             keys_opt = ("right",)
         self.sync = StampSync(("image",), keys_opt, wait=2)
         self.create_subscription(CameraInfo, graph.CAM_INFO, self.on_info, q)
-        self.create_subscription(Image, graph.CAM_IMAGE, lambda m: self.on_input("image", m), q)
+        self.create_subscription(Image, graph.CAM_IMAGE, lambda m: self.on_input("image", m),
+                                 data_qos(self.lossless, depth=1))  # the trigger: newest frame first
         if self.mode == "rgbd":
             self.create_subscription(Image, graph.CAM_DEPTH, lambda m: self.on_input("depth", m), q)
         if self.mode == "stereo":
@@ -119,11 +120,7 @@ class LocalizationNode(SimrealNode):
 
     # -- frames --------------------------------------------------------------------------------------------
     def on_input(self, key: str, msg: Image) -> None:
-        ready = self.sync.add(key, stamp_ns(msg.header.stamp), msg)
-        for stamp, why in self.sync.pop_dropped():
-            self.drop(ns_to_stamp(stamp), why)
-        for _, frame in ready:
-            self.process(frame)
+        self.feed(self.sync, key, stamp_ns(msg.header.stamp), msg, self.process)
 
     @guarded
     def process(self, frame: dict) -> None:

@@ -89,10 +89,9 @@ class OverlayNode(SimrealNode):
         q = data_qos(self.lossless)
         req = ["image"] + (["obs"] if self.static_pose is None else [])
         opt = (["depth"] if self.has_depth else []) + [f"p:{i}" for i in self.param_objects]
-        if self.lossless:  # every frame's inputs are coming: wait for them all (a dropping producer says so)
-            self.sync = StampSync(tuple(req + opt), (), wait=0)
-        else:  # live: draw with what has arrived, one frame late at most
-            self.sync = StampSync(tuple(req), tuple(opt), wait=1)
+        # optional inputs are waited for until they come or their producer says it dropped the frame;
+        # live, also no longer than until one newer frame is complete (then drawn with the latest parameters)
+        self.sync = StampSync(tuple(req), tuple(opt), wait=10**9 if self.lossless else 1)
         self._producers = {}
         for o in self.objects:
             if o["tracking"]["enabled"]:
@@ -102,16 +101,17 @@ class OverlayNode(SimrealNode):
         self.pub_image = self.create_publisher(Image, graph.OVERLAY_IMAGE, q if self.lossless else data_qos(False))
         self.pub_markers = self.create_publisher(MarkerArray, graph.OVERLAY_MARKERS, reliable_qos(2))
         self.create_subscription(CameraInfo, graph.CAM_INFO, self.on_info, q)
-        self.create_subscription(Image, graph.CAM_IMAGE, lambda m: self.on_input("image", m), q)
+        trigger = data_qos(self.lossless, depth=1)  # live: the newest frame first
+        self.create_subscription(Image, graph.CAM_IMAGE, lambda m: self.on_input("image", m),
+                                 trigger if self.static_pose is not None else q)
         if self.has_depth:
             self.create_subscription(Image, graph.CAM_DEPTH, lambda m: self.on_input("depth", m), q)
         if self.static_pose is None:
-            self.create_subscription(FeatureObservations, graph.LOC_OBS, lambda m: self.on_input("obs", m), q)
+            self.create_subscription(FeatureObservations, graph.LOC_OBS, lambda m: self.on_input("obs", m), trigger)
         for oid in self.param_objects:
             self.create_subscription(ModelParameters, graph.params_topic(oid),
                                      lambda m, oid=oid: self.on_input(f"p:{oid}", m), reliable_qos(50))
-        if self.lossless:
-            self.create_subscription(Header, graph.PROGRESS, self.on_progress, reliable_qos(1000))
+        self.create_subscription(Header, graph.PROGRESS, self.on_progress, reliable_qos(1000))
         self.frames = 0
         self.set_status("ok", "waiting for images")
 
@@ -137,7 +137,7 @@ class OverlayNode(SimrealNode):
         return comp
 
     def on_progress(self, h: Header) -> None:
-        """Lossless: a producer that dropped a frame will not send its parameters; stop waiting for them."""
+        """A producer that dropped (or, live, skipped) a frame will not send its parameters: stop waiting."""
         name, _, why = h.frame_id.partition(":dropped:")
         if why and name in self._producers:
             for oid in self._producers[name]:
@@ -147,10 +147,7 @@ class OverlayNode(SimrealNode):
         s = stamp if stamp is not None else stamp_ns(msg.header.stamp)
         if key.startswith("p:") and msg is not None:
             self.latest[key[2:]] = (list(msg.names), list(msg.values))
-        for _, frame in self.sync.add(key, s, msg):
-            self.process(frame)
-        for st, why in self.sync.pop_dropped():
-            self.drop(ns_to_stamp(st), why)
+        self.feed(self.sync, key, s, msg, self.process)
 
     @guarded
     def process(self, frame: dict) -> None:

@@ -57,10 +57,12 @@ class TrackerNode(SimrealNode):
         self.pub_deformable = self.create_publisher(PointCloud2, graph.LOC_DEFORMABLE, reliable_qos(10))
         self.freeze_map = bool(loc.get("freeze_map_on_deformation", False))
         self.create_subscription(CameraInfo, graph.CAM_INFO, self.on_info, q)
+        trigger = data_qos(self.lossless, depth=1)  # the newest frame first (live)
         if "obs" in keys:
-            self.create_subscription(FeatureObservations, graph.LOC_OBS, lambda m: self.on_input("obs", m), q)
+            self.create_subscription(FeatureObservations, graph.LOC_OBS, lambda m: self.on_input("obs", m), trigger)
         if "image" in keys:
-            self.create_subscription(Image, graph.CAM_IMAGE, lambda m: self.on_input("image", m), q)
+            self.create_subscription(Image, graph.CAM_IMAGE, lambda m: self.on_input("image", m),
+                                     q if "obs" in keys else trigger)
         self.loc_client = self.create_client(SetBool, "/localization/set_localization_only")
         self._loc_only_requested = False
         self.set_status("ok", f"tracking {', '.join(o['id'] for o in self.objects)}")
@@ -84,10 +86,7 @@ class TrackerNode(SimrealNode):
         return tr
 
     def on_input(self, key, msg) -> None:
-        for _, frame in self.sync.add(key, stamp_ns(msg.header.stamp), msg):
-            self.process(frame)
-        for stamp, why in self.sync.pop_dropped():
-            self.drop(ns_to_stamp(stamp), why)
+        self.feed(self.sync, key, stamp_ns(msg.header.stamp), msg, self.process)
 
     @guarded
     def process(self, frame: dict) -> None:
