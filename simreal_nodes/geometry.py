@@ -146,3 +146,24 @@ def vertex_normals(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     n = np.stack([np.bincount(idx, weights=np.repeat(fn[:, c], 3), minlength=len(V)) for c in range(3)], axis=1)
     ln = np.linalg.norm(n, axis=1, keepdims=True)
     return n / np.where(ln > 0, ln, 1.0)
+
+
+def outward_triangles(V: np.ndarray, F: np.ndarray) -> np.ndarray | None:
+    """The triangles of a closed, consistently wound surface, wound counter-clockwise seen from outside
+    (flipped if they were the other way); None if the surface is open or its winding is inconsistent
+    (every directed edge must appear once and its reverse once). Back faces of such a surface are never
+    visible from outside it, so a renderer may cull them."""
+    F = np.asarray(F, dtype=np.int64)
+    if F.ndim != 2 or F.shape[1] != 3 or not len(F):
+        return None
+    e = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
+    n = int(F.max()) + 1
+    key = e[:, 0] * n + e[:, 1]
+    rkey = e[:, 1] * n + e[:, 0]
+    if len(np.unique(key)) != len(key) or not np.all(np.isin(rkey, key)):
+        return None
+    V = np.asarray(V, dtype=np.float64)
+    vol = np.einsum("ij,ij->", V[F[:, 0]], np.cross(V[F[:, 1]], V[F[:, 2]])) / 6.0
+    if vol == 0 or not np.isfinite(vol):
+        return None
+    return F if vol > 0 else F[:, ::-1].copy()

@@ -149,6 +149,7 @@ class Mesh:
     unlit: bool = False
     pose: np.ndarray = field(default_factory=lambda: np.eye(4))  # T_world_object
     visible: bool = True
+    cull_back: bool = False  # closed surface wound counter-clockwise seen from outside: skip back faces
     _vao: object = None
     _bufs: dict = field(default_factory=dict)
     _tex: object = None
@@ -419,7 +420,7 @@ class Renderer:
 
         rc = self.render_cam
         self.ctx.enable(moderngl.DEPTH_TEST)
-        self.ctx.disable(moderngl.CULL_FACE)
+        self.ctx.front_face = "ccw"  # the projection keeps a counter-clockwise triangle counter-clockwise
         occlude = real_depth is not None
         self.prog = self.progs[occlude]
         view = np.linalg.inv(T_world_cam)
@@ -440,6 +441,7 @@ class Renderer:
             m = self.meshes[name]
             if not m.visible:
                 continue
+            (self.ctx.enable if m.cull_back else self.ctx.disable)(moderngl.CULL_FACE)
             self.prog["u_model"].write(_gl(m.pose))
             self.prog["u_mode"].value = {"vertex": 0, "texture": 1, "flat": 2, "uv": 3}[m.mode]
             self.prog["u_tint"].value = tuple(float(x) for x in m.tint)

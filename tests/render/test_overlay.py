@@ -139,3 +139,31 @@ def test_colormap_and_von_mises():
     s[1, 3] = 2.0  # pure shear
     s[2, :3] = 7.0  # hydrostatic
     np.testing.assert_allclose(von_mises(s), [5.0, 2.0 * np.sqrt(3), 0.0], atol=1e-12)
+
+
+def test_a_closed_surface_drawn_without_back_faces_looks_the_same():
+    """Closed model surfaces are drawn without back faces (half the fragments): from outside, the picture
+    must equal drawing every face, occlusion by real depth and lens distortion included. An open surface
+    keeps both faces."""
+    from tests.test_geometry import CUBE_F, CUBE_V
+
+    cam = CAMS["distorted"]
+    V = (CUBE_V - 0.5) * [0.4, 0.1, 0.05]
+    col = np.random.default_rng(0).random((len(V), 3))
+    F = G.outward_triangles(V, CUBE_F)
+    img = np.random.default_rng(1).integers(0, 255, (cam.height, cam.width, 3), dtype=np.uint8)
+    real = np.full((cam.height, cam.width), 2.0, np.float32)
+    real[:, : cam.width // 2] = 0.3  # a real surface in front of the left half
+    out = {}
+    for cull in (True, False):
+        r = Renderer(cam)
+        r.add(Mesh("box", V, F, mode="vertex", colors=col, cull_back=cull))
+        out[cull] = [r.composite(T, img, real_depth=real) for T in
+                     (G.make_T(G.rot_axis("x", np.pi), [0.0, 0.0, 0.5]), G.look_at([0.15, -0.35, 0.25], [0, 0, 0]))]
+        r.release()
+    for a, b in zip(out[True], out[False]):
+        assert (a != img).any(axis=2).mean() > 0.05
+        np.testing.assert_array_equal(a, b)
+    strip = OverlayCompositor(cam, {"beam": ObjectOverlay(beam_model(), np.eye(4))}, colorbar=False)
+    assert not strip.renderer.meshes["beam"].cull_back  # an open strip: both faces drawn
+    strip.release()
