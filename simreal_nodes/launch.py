@@ -115,6 +115,36 @@ class Launcher:
                         self.echo(f"[launch] {p.spec.name} exited with code {rc}; not restarting")
                         p.popen = None
 
+    def cpu_seconds(self) -> dict[str, float]:
+        """CPU time (user + system) used so far by each running node and the processes it started (Linux
+        /proc; empty where that is unavailable)."""
+        try:
+            tick = os.sysconf("SC_CLK_TCK")
+            stats = {}
+            for d in os.listdir("/proc"):
+                if d.isdigit():
+                    try:
+                        f = open(f"/proc/{d}/stat").read().rsplit(")", 1)[1].split()
+                    except OSError:
+                        continue
+                    stats[int(d)] = (int(f[1]), (int(f[11]) + int(f[12])) / tick)  # ppid, utime + stime
+        except (OSError, ValueError, AttributeError):
+            return {}
+        kids: dict[int, list[int]] = {}
+        for pid, (ppid, _) in stats.items():
+            kids.setdefault(ppid, []).append(pid)
+        out = {}
+        for p in self.procs:
+            if p.popen is None or p.popen.poll() is not None:
+                continue
+            total, todo = 0.0, [p.popen.pid]
+            while todo:
+                pid = todo.pop()
+                total += stats.get(pid, (0, 0.0))[1]
+                todo += kids.get(pid, [])
+            out[p.spec.name] = total
+        return out
+
     def alive(self) -> dict[str, bool]:
         return {p.spec.name: p.popen is not None and p.popen.poll() is None for p in self.procs}
 

@@ -114,6 +114,7 @@ class PlayStats:
     wall_s: float = 0.0
     play_s: float = 0.0  # first publication to the last one (real time) or the last frame's end (lossless)
     published_stamps: list[int] = field(default_factory=list)
+    cpu_s: dict[str, float] = field(default_factory=dict)  # CPU seconds per process while playing
 
     def summary(self) -> str:
         fps = self.frames_published / self.play_s if self.play_s > 0 else 0.0
@@ -133,6 +134,7 @@ class PlayStats:
                                              "frames_timed_out", "conflicting_reports", "wall_s", "play_s")}
         out["fps"] = self.frames_published / self.play_s if self.play_s > 0 else 0.0
         out["fps_through"] = self.frames_completed / self.play_s if self.play_s > 0 else 0.0
+        out["cpu_ms_per_frame"] = {n: 1e3 * v / max(self.frames_published, 1) for n, v in self.cpu_s.items()}
         out["drop_reasons"] = dict(self.drop_reasons)
         out["latency_ms"] = {n: {"p50": float(np.percentile(v, 50)), "p95": float(np.percentile(v, 95)),
                                  "n": len(v)} for n, v in self.latency_ms.items() if v}

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import signal
 import threading
+import time
 from pathlib import Path
 
 import rclpy
@@ -87,7 +88,11 @@ def replay(bag: str, scene_file: str, rate: float = 1.0, lossless: bool = False,
                                              if p.popen is None and p.restarts >= launcher.respawn]
             if not player.wait_ready(ready_timeout_s):
                 raise SimrealError("the graph did not come up; see the node output above")
+            cpu0, own0 = (launcher.cpu_seconds() if launcher else {}), time.process_time()
             stats = player.play(bags.read_bag(bag, report, topics=inputs.keys()), hold_for=hold_for)
+            cpu1 = launcher.cpu_seconds() if launcher else {}
+            stats.cpu_s = {n: cpu1[n] - cpu0[n] for n in cpu1 if n in cpu0}
+            stats.cpu_s["player" + (" + recorder" if recorder else "")] = time.process_time() - own0
     finally:
         if recorder:
             recorder.close()

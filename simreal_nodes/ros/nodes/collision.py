@@ -22,7 +22,7 @@ from simreal_nodes import geometry as G
 from simreal_nodes.collision.contact import ContactTracker, facing_surface_samples
 from simreal_nodes.errors import ImageFormatError
 from simreal_nodes.io import images
-from simreal_nodes.ros.common import (SimrealNode, data_qos, guarded, ns_to_stamp, observation_pose, reliable_qos,
+from simreal_nodes.ros.common import (SimrealNode, data_qos, guarded, observation_pose, reliable_qos,
                                       run_node, stamp_ns)
 from simreal_nodes.rom.model_file import load_model
 from simreal_nodes.scene import graph

@@ -22,7 +22,7 @@ from tf2_msgs.msg import TFMessage
 from simreal_nodes import geometry as G
 from simreal_nodes.errors import ImageFormatError
 from simreal_nodes.io import images
-from simreal_nodes.ros.common import (ns_to_stamp, TF_QOS, SimrealNode, cloud_field, cloud_msg, cloud_to_array, data_qos, guarded, matrix_to_pose,
+from simreal_nodes.ros.common import (TF_QOS, SimrealNode, cloud_field, cloud_msg, cloud_to_array, data_qos, guarded, matrix_to_pose,
                                       pose_stamped, reliable_qos, run_node, stamp_ns, transform_stamped)
 from simreal_nodes.scene import graph
 from simreal_nodes.scene.schema import load_scene

@@ -14,18 +14,18 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from geometry_msgs.msg import Point
 from sensor_msgs.msg import CameraInfo, Image
 from simreal_msgs.msg import FeatureObservations, ModelParameters
-from std_msgs.msg import ColorRGBA, Header
-from visualization_msgs.msg import Marker, MarkerArray
+from std_msgs.msg import Header
+from visualization_msgs.msg import MarkerArray
 
 from simreal_nodes import geometry as G
 from simreal_nodes.errors import ImageFormatError, SimrealError
 from simreal_nodes.io import images
+from simreal_nodes.io.cdr import TriangleListMarker, marker_array_cdr
 from simreal_nodes.render.overlay import ObjectOverlay, OverlayCompositor
-from simreal_nodes.ros.common import (SimrealNode, data_qos, guarded, matrix_to_pose, ns_to_stamp, observation_pose,
-                                      reliable_qos, run_node, stamp_ns)
+from simreal_nodes.ros.common import (SimrealNode, data_qos, guarded, observation_pose, reliable_qos, run_node,
+                                      stamp_ns)
 from simreal_nodes.rom.model_file import load_model
 from simreal_nodes.scene import graph
 from simreal_nodes.scene.schema import load_scene
@@ -213,24 +213,17 @@ class OverlayNode(SimrealNode):
         if self.marker_every and states and self.frames % self.marker_every == 1 % self.marker_every:
             self.pub_markers.publish(self._markers(head.stamp))
 
-    def _markers(self, stamp) -> MarkerArray:
-        arr = MarkerArray()
+    def _markers(self, stamp) -> bytes:
+        """The deformed surfaces as a serialized MarkerArray (TRIANGLE_LIST, vertex colours), written from
+        the arrays directly: as rclpy message objects a 3 700-vertex mesh took ~110 ms to build."""
+        arr = []
         for k, (oid, ob) in enumerate(self.comp.objects.items()):
             V, col = self.comp.last.get(oid, (None, None))
             if V is None:
                 continue
-            m = Marker()
-            m.header.stamp = stamp
-            m.header.frame_id = self.map_frame
-            m.ns, m.id, m.type, m.action = f"simreal/{oid}", k, Marker.TRIANGLE_LIST, Marker.ADD
-            matrix_to_pose(ob.T, m.pose)
-            m.scale.x = m.scale.y = m.scale.z = 1.0
-            m.color.a = 1.0
             idx = ob.triangles.ravel()
-            m.points = [Point(x=float(x), y=float(y), z=float(z)) for x, y, z in V[idx]]
-            m.colors = [ColorRGBA(r=float(r), g=float(g), b=float(b), a=1.0) for r, g, b in col[idx]]
-            arr.markers.append(m)
-        return arr
+            arr.append(TriangleListMarker(f"simreal/{oid}", k, ob.T, V[idx], col[idx]))
+        return marker_array_cdr(arr, stamp_ns(stamp), self.map_frame)
 
     def close(self) -> None:
         if self.video is not None:
