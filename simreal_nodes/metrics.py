@@ -40,6 +40,7 @@ class StageMetrics:
         self.processing_ms = WindowStats(window)
         self.age_ms = WindowStats(window)
         self.processed = 0
+        self._last_done = clock()
         self.dropped = 0
         self.skipped = 0
         self.errors = 0
@@ -59,7 +60,12 @@ class StageMetrics:
         if age_ms is not None:
             self.age_ms.add(age_ms)
         self.processed += 1
+        self._last_done = self.clock()
         return ms
+
+    def seconds_since_done(self) -> float:
+        """Seconds since the last finished frame (since the start if none was)."""
+        return self.clock() - self._last_done
 
     def drop(self, reason: str) -> None:
         self.dropped += 1

@@ -21,7 +21,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Header
 
 from simreal_nodes.io import bags
-from simreal_nodes.ros.common import data_qos, reliable_qos, stamp_ns
+from simreal_nodes.ros.common import data_qos, parse_progress, reliable_qos, stamp_ns
 from simreal_nodes.scene import graph
 
 
@@ -165,12 +165,13 @@ class Player:
 
     def _on_progress(self, h: Header) -> None:
         s = stamp_ns(h.stamp)
-        name, _, why = h.frame_id.partition(":dropped:")
+        name, t_done, why = parse_progress(h.frame_id)
         if name in self._reports[s] and bool(self._reports[s][name]) != bool(why):
             self.stats.conflicting_reports += 1  # a node both finished and dropped this frame: a bug
         self._reports[s][name] = why
         if s in self._t_pub and not why:  # latency of the frames a node finished, not of those it left out
-            self.stats.latency_ms[name].append((time.monotonic() - self._t_pub[s]) * 1e3)
+            # from publication to the node's report (its own clock when it sent one: not this process's backlog)
+            self.stats.latency_ms[name].append(((t_done or time.monotonic()) - self._t_pub[s]) * 1e3)
 
     def wait_ready(self, timeout_s: float = 60.0) -> bool:
         """Wait until every node is up and the ingest subscribes to the image topic."""

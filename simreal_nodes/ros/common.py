@@ -55,6 +55,8 @@ def latched_qos() -> QoSProfile:
                       durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
+STALL_S = 3.0  # live: a node that skips every frame for this long says so in its status
+
 TF_QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST, depth=100)
 
 # ------------------------------------------------------------------------------------------
@@ -118,6 +120,26 @@ def transform_stamped(T: np.ndarray, stamp, parent: str, child: str) -> Transfor
 
 
 # ------------------------------------------------------------------------------------------
+# Progress reports (/simreal/progress, std_msgs/Header: the frame's stamp, and in frame_id who, when, what)
+
+
+def progress_id(node: str, t_monotonic: float, dropped: str = "") -> str:
+    """``node@t[:dropped:why]``; t is the reporting process's CLOCK_MONOTONIC, which every process of one
+    machine shares, so a player on the same machine measures latency without its own queueing delay."""
+    return f"{node}@{t_monotonic:.6f}" + (f":dropped:{dropped}" if dropped else "")
+
+
+def parse_progress(frame_id: str) -> tuple[str, float | None, str]:
+    """(node, time or None, why dropped or '') of a progress report."""
+    head, _, why = frame_id.partition(":dropped:")
+    name, _, t = head.partition("@")
+    try:
+        return name, float(t), why
+    except ValueError:
+        return name, None, why
+
+
+# ------------------------------------------------------------------------------------------
 # Node base
 
 
@@ -172,7 +194,7 @@ class SimrealNode(Node):
         """Report that the frame with this stamp is finished here (or dropped, with why)."""
         h = Header()
         h.stamp = stamp
-        h.frame_id = self.get_name() + (f":dropped:{dropped}" if dropped else "")
+        h.frame_id = progress_id(self.get_name(), time.monotonic(), dropped)
         self._progress_pub.publish(h)
 
     def feed(self, sync, key: str, stamp: int, msg, process) -> None:
@@ -193,9 +215,13 @@ class SimrealNode(Node):
 
     def skip(self, stamp, reason: str) -> None:
         """Live: a frame left out because the graph is busy or an upstream node left it out (normal
-        load shedding: counted, reported in progress, no warning)."""
+        load shedding: counted, reported in progress, no warning) -- unless no frame at all has been
+        finished for ``STALL_S`` seconds (an upstream node that stopped): then the status says so."""
         self.metrics.skip(reason)
         self.progress(stamp, dropped=f"skipped: {reason}")
+        idle = self.metrics.seconds_since_done()
+        if idle > STALL_S:
+            self.set_status("warn", f"no frame finished for {idle:.0f} s, skipping: {reason}")
 
     def drop(self, stamp, reason: str) -> None:
         self.metrics.drop(reason)

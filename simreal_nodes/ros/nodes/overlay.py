@@ -24,8 +24,8 @@ from simreal_nodes.errors import ImageFormatError, SimrealError
 from simreal_nodes.io import images
 from simreal_nodes.io.cdr import TriangleListMarker, marker_array_cdr
 from simreal_nodes.render.overlay import ObjectOverlay, OverlayCompositor
-from simreal_nodes.ros.common import (SimrealNode, data_qos, guarded, observation_pose, reliable_qos, run_node,
-                                      stamp_ns)
+from simreal_nodes.ros.common import (SimrealNode, data_qos, guarded, observation_pose, parse_progress, reliable_qos,
+                                      run_node, stamp_ns)
 from simreal_nodes.rom.model_file import load_model
 from simreal_nodes.scene import graph
 from simreal_nodes.scene.schema import load_scene
@@ -89,8 +89,8 @@ class OverlayNode(SimrealNode):
         q = data_qos(self.lossless)
         req = ["image"] + (["obs"] if self.static_pose is None else [])
         opt = (["depth"] if self.has_depth else []) + [f"p:{i}" for i in self.param_objects]
-        # optional inputs are waited for until they come or their producer says it dropped the frame;
-        # live, also no longer than until one newer frame is complete (then drawn with the latest parameters)
+        # optional inputs are waited for until they come; lossless, or until their producer says it dropped
+        # the frame; live, or until one newer frame is complete (then drawn with the latest parameters)
         self.sync = StampSync(tuple(req), tuple(opt), wait=10**9 if self.lossless else 1)
         self._producers = {}
         for o in self.objects:
@@ -111,7 +111,9 @@ class OverlayNode(SimrealNode):
         for oid in self.param_objects:
             self.create_subscription(ModelParameters, graph.params_topic(oid),
                                      lambda m, oid=oid: self.on_input(f"p:{oid}", m), reliable_qos(50))
-        self.create_subscription(Header, graph.PROGRESS, self.on_progress, reliable_qos(1000))
+        if self.lossless:  # live, a frame waits for its parameters until a newer one is complete: no need to
+            # hear every node's per-frame report (an executor wake-up each, several per frame)
+            self.create_subscription(Header, graph.PROGRESS, self.on_progress, reliable_qos(1000))
         self.frames = 0
         self.set_status("ok", "waiting for images")
 
@@ -124,6 +126,7 @@ class OverlayNode(SimrealNode):
             if self.comp is not None:
                 self.comp.release()
             self.cam, self.comp = cam, None
+            self.comp = self._build()  # now, not on the first frame: that frame would wait for it
 
     def _build(self) -> OverlayCompositor:
         obs = {}
@@ -137,8 +140,8 @@ class OverlayNode(SimrealNode):
         return comp
 
     def on_progress(self, h: Header) -> None:
-        """A producer that dropped (or, live, skipped) a frame will not send its parameters: stop waiting."""
-        name, _, why = h.frame_id.partition(":dropped:")
+        """Lossless: a producer that dropped a frame will not send its parameters: stop waiting for them."""
+        name, _, why = parse_progress(h.frame_id)
         if why and name in self._producers:
             for oid in self._producers[name]:
                 self.on_input(f"p:{oid}", None, stamp=stamp_ns(h.stamp))

@@ -75,6 +75,8 @@ class TrackerNode(SimrealNode):
         if self.cam is None or not np.allclose(cam.K, self.cam.K):
             self.cam = cam
             self.trackers = {}
+            for o in self.objects:  # now, not on the first frame: that frame would wait for them
+                self._tracker(o)
 
     def _tracker(self, o) -> DeformableTracker:
         tr = self.trackers.get(o["id"])

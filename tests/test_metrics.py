@@ -1,0 +1,30 @@
+"""Per-node counters published on /diagnostics: processing time, drops versus skips, time since the last
+finished frame (what a live node uses to say that it only skips)."""
+
+from simreal_nodes.metrics import StageMetrics
+
+
+class Clock:
+    def __init__(self):
+        self.t = 100.0
+
+    def __call__(self):
+        return self.t
+
+
+def test_skips_are_counted_apart_from_drops_and_stalls_are_measured():
+    c = Clock()
+    m = StageMetrics(clock=c)
+    c.t += 5.0
+    assert m.seconds_since_done() == 5.0  # nothing finished since the start
+    t0 = m.arrived()
+    c.t += 0.02
+    assert abs(m.done(t0) - 20.0) < 1e-9
+    assert m.seconds_since_done() == 0.0
+    m.skip("a newer frame was ready")
+    m.drop("malformed image")
+    c.t += 4.0
+    d = m.as_dict()
+    assert (d["processed"], d["skipped"], d["dropped"]) == ("1", "1", "1")
+    assert d["last_skip_reason"] == "a newer frame was ready" and d["last_drop_reason"] == "malformed image"
+    assert m.seconds_since_done() == 4.0
