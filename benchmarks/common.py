@@ -24,7 +24,31 @@ def machine() -> dict:
                     break
     except OSError:
         pass
+    info["cpu_probe_ms"] = speed_probe()
     return info
+
+
+def speed_probe() -> float:
+    """Milliseconds for a fixed single-threaded numpy + OpenCV workload, best of three: the same machine
+    can run slower when its host is busy, and results taken at different times compare through this."""
+    import cv2
+    import numpy as np
+
+    a = np.random.default_rng(0).random((200, 200))
+    img = np.random.default_rng(0).integers(0, 255, (480, 640, 3), np.uint8)
+    threads = cv2.getNumThreads()
+    cv2.setNumThreads(1)
+    best = float("inf")
+    try:
+        for _ in range(3):
+            t0 = time.perf_counter()
+            for _ in range(10):
+                np.sin(a @ a)
+                cv2.GaussianBlur(img, (9, 9), 2)
+            best = min(best, (time.perf_counter() - t0) * 1e3)
+    finally:
+        cv2.setNumThreads(threads)
+    return best
 
 
 def markdown_table(rows: list[dict], columns: list[tuple[str, str, str]]) -> str:
@@ -55,7 +79,9 @@ def save(name: str, rows: list[dict], columns, title: str, notes: str = "", plot
     if notes:
         md += [notes, ""]
     m = doc["machine"]
-    md.append(f"Machine: {m.get('cpu', '?')}, {m['cpus']} CPUs, Python {m['python']}, {m['date']}.")
+    md.append(f"Machine: {m.get('cpu', '?')}, {m['cpus']} CPUs, Python {m['python']}, {m['date']}; CPU probe "
+              f"{m['cpu_probe_ms']:.0f} ms (`benchmarks/common.py:speed_probe`, lower is faster: the host's load "
+              "changes this machine's speed).")
     if plot is not None:
         import matplotlib
 

@@ -227,7 +227,9 @@ class Player:
         t_end = time.monotonic() + self.frame_timeout_s
         grace_end = None
         while True:
-            self.executor.spin_once(timeout_sec=0.005)
+            # returns as soon as a report (or anything) arrives: a long timeout only saves idle wake-ups,
+            # which cost the graph CPU (each builds the executor's wait set)
+            self.executor.spin_once(timeout_sec=0.05)
             st = self._frame_done(s)
             if st == "done":
                 self.stats.frames_completed += 1
@@ -273,7 +275,7 @@ class Player:
                     now = time.monotonic()
                     if now >= due:
                         break
-                    self.executor.spin_once(timeout_sec=min(0.005, due - now))
+                    self.executor.spin_once(timeout_sec=due - now)  # returns early when a message arrives
                 if m.topic == self.image_topic:
                     s = bags.stamp_ns(ts.deserialize_cdr(m.raw, m.msgtype))
                     self._publish_image(m.raw, s)
