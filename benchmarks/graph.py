@@ -3,9 +3,11 @@ deformable tracker -> overlay, each its own process over DDS, at 640 x 480 and 1
 
     ./run bench graph
 
-Two replays of the demo's sample bag per resolution (6 s at 640 x 480, 4 s at 1280 x 720): *lossless* (the player waits for every frame to leave
-the graph: the sustainable throughput) and *real time* at the bag's 30 fps (frames the graph cannot keep up
-with are dropped: delivered fraction and the latency from publication to each node's output, p50 / p95).
+Two replays of the demo's sample bag per resolution (6 s at 640 x 480, 4 s at 1280 x 720): *lossless* (the player
+waits for every frame to leave the graph before the next: lock-step throughput) and *real time* at the bag's 30
+fps (live QoS: a busy node takes the newest frame and skips the others). Reported: frames that went through every
+node per second of play and as a fraction, latency from publication to the overlay's report (its own clock),
+each node's processing time, and the CPU each process used per published frame (from /proc).
 """
 
 from __future__ import annotations

@@ -64,8 +64,14 @@ class LocalizationNode(SimrealNode):
             keys_opt = ("right",)
         self.sync = StampSync(("image",), keys_opt, wait=2)
         self.create_subscription(CameraInfo, graph.CAM_INFO, self.on_info, q)
+        # live, which frames a busy node takes: 1 = always the newest (least latency); more = the oldest of that
+        # many newest (a few frames of lag, but after a slow frame the next one is not far away: frame-to-frame
+        # SLAM tracking keeps its features). Markers need no continuity.
+        depth = self.param("live_queue", 1 if self.mode in ("markers", "static") else 5,
+                           "live: images kept while busy (1 = newest first; SLAM modes default to 5: smaller gaps "
+                           "between the frames tracked, a few frames of lag)", read_only=True)
         self.create_subscription(Image, graph.CAM_IMAGE, lambda m: self.on_input("image", m),
-                                 data_qos(self.lossless, depth=1))  # the trigger: newest frame first
+                                 data_qos(self.lossless, depth=max(1, int(depth))))
         if self.mode == "rgbd":
             self.create_subscription(Image, graph.CAM_DEPTH, lambda m: self.on_input("depth", m), q)
         if self.mode == "stereo":
@@ -85,8 +91,12 @@ class LocalizationNode(SimrealNode):
         if cam is None:
             return
         if self.cam is None or cam.width != self.cam.width or not np.allclose(cam.K, self.cam.K):
+            if self.core is not None and hasattr(self.core, "close"):
+                self.core.close()
             self.cam = cam
-            self.core = None  # (re)built with the right intrinsics on the next frame
+            # (re)built now with the right intrinsics (stereo: once the baseline is known), not on the first
+            # frame: live, the frames that arrive while it builds (a mapping worker starts) would be skipped
+            self.core = self._build_core()
 
     @guarded
     def on_right_info(self, msg: CameraInfo) -> None:
