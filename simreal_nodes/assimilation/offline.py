@@ -17,10 +17,15 @@ from simreal_nodes.vision.camera import CameraModel
 
 
 class Pipeline:
-    """Localization (markers / SLAM) + one deformable tracker per tracked object."""
+    """Localization (markers / SLAM) + one deformable tracker per tracked object.
+
+    ``feedback_delay``: the trackers' word on which map points lie on the object reaches the localization this
+    many frames late (0: at once; in the live graph the localization is already on the next frame, 1)."""
 
     def __init__(self, scene: dict, cam: CameraModel, baseline: float | None = None, models: dict | None = None,
-                 **cfg_overrides):
+                 feedback_delay: int = 0, **cfg_overrides):
+        self.feedback_delay = int(feedback_delay)
+        self._feedback: list = []
         loc = scene["localization"]
         self.mode = loc["mode"]
         self.freeze_map = bool(loc.get("freeze_map_on_deformation", False))
@@ -69,17 +74,20 @@ class Pipeline:
         if self.loc is not None and hasattr(self.loc, "set_deformable"):
             # points on a tracked object leave the pose estimate as soon as they are linked (static/deformable
             # split, §4.4.1); they are searched where the current estimate puts them
-            ids, P, drop = deformable_feedback(self.trackers.values())
-            if len(ids):
-                self.loc.set_deformable(ids, P)
-                self.loc.drop_tracks(ids[drop == 1])
+            self._feedback.append(deformable_feedback(self.trackers.values()))
+            while len(self._feedback) > self.feedback_delay:
+                ids, P, drop = self._feedback.pop(0)
+                if len(ids):
+                    self.loc.set_deformable(ids, P)
+                    self.loc.drop_tracks(ids[drop == 1])
         return T_wc, out
 
 
-def track_sequence(seq: dict, scene: dict, every: int = 1, **cfg_overrides) -> dict:
-    """Run the pipeline over a rendered :func:`~simreal_nodes.synth.sequence.sequence`; returns per object
-    (truth (T, n), estimates list, names)."""
-    pipe = Pipeline(scene, seq["cam"], baseline=seq["scene"].stereo_baseline, **cfg_overrides)
+def track_sequence(seq: dict, scene: dict, every: int = 1, feedback_delay: int = 0, **cfg_overrides) -> dict:
+    """Run the pipeline over a rendered :func:`~simreal_nodes.synth.sequence.sequence` (every ``every``-th frame);
+    returns per object (truth (T, n), estimates list, names)."""
+    pipe = Pipeline(scene, seq["cam"], baseline=seq["scene"].stereo_baseline, feedback_delay=feedback_delay,
+                    **cfg_overrides)
     res = {oid: {"truth": [], "est": [], "names": tr.names} for oid, tr in pipe.trackers.items()}
     for i in range(0, len(seq["rgb"]), every):
         bgr = np.ascontiguousarray(seq["rgb"][i][:, :, ::-1])

@@ -118,10 +118,10 @@ def test_model_an_order_of_magnitude_off_in_scale_is_reported(beam):
 
 # -- deformable ORB tracking through the RGB-D map (thesis §4.4, §4.5.2-4.5.4) ----------------------------------
 
-def _track_map_points(name, oid, width=640, height=480):
-    seq = sequence(name, width, height)
+def _track_map_points(name, oid, width=640, height=480, seq=None, **kw):
+    seq = seq or sequence(name, width, height)
     scene = validate_scene(seq["scene"].scene_yaml(seq["scene"]), name, ".")
-    r = track_sequence(seq, scene)[oid]
+    r = track_sequence(seq, scene, **kw)[oid]
     est = np.array([e.values for e in r["est"]])
     states = np.array([e.state for e in r["est"]])
     return r["truth"], est, states
@@ -129,8 +129,19 @@ def _track_map_points(name, oid, width=640, height=480):
 
 def test_joint_boot_lever_angle_and_unknown_rotation_from_map_points():
     """Real boot turned by an unknown 20 degrees about its axis, lever 0 -> 50 -> 0 degrees: theta within
-    0.5 degree (median), alpha_z estimated over the first well-deformed frames and frozen within 1 degree."""
-    truth, est, states = _track_map_points("joint_boot", "boot")
+    0.5 degree (median), alpha_z estimated over the first well-deformed frames and frozen within 1 degree.
+    And as a starved live graph sees it: every 10th frame, the tracker's feedback one frame late. Measured:
+    theta median 0.85 deg (p90 4.5) over the loaded frames, nothing lost; before lost object tracks were
+    re-acquired in a wider window: 12.4 deg (p90 33), 11 of 24 frames lost."""
+    seq = sequence("joint_boot", 640, 480)
+    truth, est, states = _track_map_points("joint_boot", "boot", seq=seq, every=10, feedback_delay=1)
+    loaded = truth[:, 0] > 0.02
+    err_theta = np.degrees(np.abs(est[loaded, 0] - truth[loaded, 0]))
+    print(f"joint boot, every 10th frame, feedback 1 frame late: theta median {np.median(err_theta):.2f} deg, "
+          f"p90 {np.percentile(err_theta, 90):.2f}, states {np.bincount(states, minlength=4)}")
+    assert np.median(err_theta) < 1.5 and np.percentile(err_theta, 90) < 8.0
+    assert not np.any(states == LOST)
+    truth, est, states = _track_map_points("joint_boot", "boot", seq=seq)
     loaded = truth[:, 0] > 0.02  # the lever is moving
     err_theta = np.abs(est[loaded, 0] - truth[loaded, 0])
     err_alpha = abs(est[-1, 1] - truth[-1, 1])

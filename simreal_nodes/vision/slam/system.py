@@ -107,6 +107,12 @@ class Slam:
         self.max_anchor_images = 40
         self._gray: np.ndarray | None = None
         self.deformable_radius = 20.0  # ORB re-acquisition radius (pixels) around each predicted / last-seen pixel
+        # once the object's points were followed (at least this many at a time), a frame in which the flow keeps
+        # fewer (tracks lost over a long gap between frames, the prediction stale) re-acquires them within
+        # reacquire_wide_px: without it a live run that skips ~10 frames at once never gets them back
+        self.reacquire_below = 8
+        self.reacquire_wide_px = 80.0
+        self._deformable_peak = 0  # most object points followed in one frame so far
         self.flow_fb_px = 0.5  # forward-backward flow agreement to keep a deformable point's track
         self.flow_win = 11  # Lucas-Kanade window (pixels); larger windows straddle the object's silhouette and drift
         self._recent_points: list[tuple[int, int]] = []  # (point id, keyframe id at creation)
@@ -731,6 +737,8 @@ class Slam:
                     if good:
                         found[int(ids_a[k])] = q.astype(np.float64)
         # 2. ORB re-acquisition of the others
+        lost_tracks = len(found) < self.reacquire_below <= self._deformable_peak
+        radius = max(self.deformable_radius, self.reacquire_wide_px) if lost_tracks else self.deformable_radius
         avail = np.ones(len(f), bool)
         avail[np.asarray(exclude, np.int64)] = False
         kp_idx = np.flatnonzero(avail)
@@ -746,7 +754,7 @@ class Slam:
                 c = set()
                 for q in centres:
                     if np.all(np.isfinite(q)):
-                        c.update(tree.query_ball_point(q, self.deformable_radius))
+                        c.update(tree.query_ball_point(q, radius))
                 if not c:
                     continue
                 c = kp_idx[np.fromiter(c, np.int64)]
@@ -768,6 +776,7 @@ class Slam:
                     self._start_anchor(pid, found[pid])
         self._prune_anchors()
         # the measurements and the state for the next frame
+        self._deformable_peak = max(self._deformable_peak, len(found))
         self._flow, self._flow_frame, self._flow_gray = found, self.frame_id, self._gray
         self._last_desc.update(new_desc)
         for pid in list(self._last_seen):
