@@ -160,6 +160,13 @@ class SimrealNode(Node):
         self._last_immediate = 0.0
         self.create_timer(1.0, self._publish_diagnostics)
 
+    def say(self, message: str) -> None:
+        """Log at info level; on shutdown (the context is gone, /rosout cannot take it) print instead."""
+        if self.context.ok():
+            self.get_logger().info(message)
+        else:
+            print(message, flush=True)
+
     # parameters -----------------------------------------------------------------------------
     def param(self, name: str, default, description: str, read_only: bool = False):
         d = ParameterDescriptor(description=description, read_only=read_only)

@@ -240,7 +240,7 @@ class LocalizationNode(SimrealNode):
     def close(self) -> None:
         if self.core is not None and hasattr(self.core, "map") and self.save_map:
             self.core.map.save(self.save_map, self.cam, self.mode)
-            self.get_logger().info(f"saved map to {self.save_map}")
+            self.say(f"saved map to {self.save_map}")
         if self.core is not None and hasattr(self.core, "close"):
             self.core.close()
 

@@ -231,7 +231,7 @@ class OverlayNode(SimrealNode):
     def close(self) -> None:
         if self.video is not None:
             self.video.close()
-            self.get_logger().info(f"wrote {self.video.frames} frames to {self.video.path}")
+            self.say(f"wrote {self.video.frames} frames to {self.video.path}")
         if self.comp is not None:
             self.comp.release()
 
