@@ -352,7 +352,7 @@ class Renderer:
             mm = self._map[cy0:cy1, cx0:cx1] - np.array([x0, y0], np.float32)
             patch = cv2.remap(patch, mm[..., 0], mm[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
                               borderValue=0)
-        rgb = np.ascontiguousarray(patch[..., 2::-1] if bgr else patch[..., :3])
+        rgb = cv2.cvtColor(patch, cv2.COLOR_RGBA2BGR if bgr else cv2.COLOR_RGBA2RGB)
         a = patch[..., 3].astype(np.float32) * (1.0 / 255.0)
         out[cy0:cy1, cx0:cx1] = cv2.blendLinear(rgb, out[cy0:cy1, cx0:cx1], a, 1.0 - a)
         return out
@@ -397,7 +397,7 @@ class Renderer:
             self.patch_fbo.read_into(patch, viewport=gl_box, components=4, attachment=0)
         finally:
             self.ctx.scissor = None
-        return patch[::-1]
+        return cv2.flip(patch, 0)
 
     def _camera_box(self, box) -> tuple[int, int, int, int] | None:
         """(x0, y0, x1, y1) of the camera pixels whose ideal-render coordinates fall inside ``box``: tested on
