@@ -30,3 +30,10 @@ def test_triangle_list_marker_array_reads_back():
         np.testing.assert_array_equal(col, want.astype(np.float32))
         assert r.scale.x == 1.0 and r.texture_resource == "" and len(r.uv_coordinates) == 0
         assert r.mesh_file.filename == "" and not r.mesh_use_embedded_materials and r.text == ""
+
+
+def test_mismatched_colours_are_refused():
+    import pytest
+
+    with pytest.raises(ValueError, match="colours"):
+        marker_array_cdr([TriangleListMarker("m", 0, np.eye(4), np.zeros((6, 3)), np.zeros((5, 3)))], 0, "map")
