@@ -36,8 +36,9 @@ def data_qos(lossless: bool, depth: int = 5) -> QoSProfile:
     """Sensor-data QoS (best effort, keep last ``depth``) live; reliable with a deep queue when lossless.
 
     Live, the input that triggers a node's work (its newest frame) is subscribed with depth 1, so a node
-    that was busy takes the newest frame next, not the oldest one still queued; the inputs it pairs with
-    that frame by stamp keep a few frames (the default 5), as they arrive earlier than the trigger."""
+    that was busy takes the newest frame next, not the oldest one still queued (the SLAM localization keeps
+    a few, for even gaps between the frames it tracks); the inputs it pairs with that frame by stamp keep a
+    few frames (the default 5), as they arrive earlier than the trigger."""
     if lossless:
         return QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST,
                           depth=1000, durability=DurabilityPolicy.VOLATILE)
