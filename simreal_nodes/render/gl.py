@@ -208,6 +208,7 @@ class Renderer:
             # distorted pixel -> coordinates in the (supersampled) ideal render
             m = (self._ideal + np.array([margin_l, margin_t]) + 0.5) * self.ssaa - 0.5
             self._map = m.astype(np.float32)
+            self._map_coarse = self._map[::_MAP_STEP, ::_MAP_STEP]  # for finding a patch's camera pixels
         else:
             self._map = None
         rc = self.render_cam
@@ -403,8 +404,6 @@ class Renderer:
         """(x0, y0, x1, y1) of the camera pixels whose ideal-render coordinates fall inside ``box``: tested on
         every ``_MAP_STEP``-th pixel, grown by that step (a few extra pixels map outside the patch: alpha 0)."""
         k = _MAP_STEP
-        if getattr(self, "_map_coarse_of", None) is not self._map:
-            self._map_coarse_of, self._map_coarse = self._map, self._map[::k, ::k]
         x0, y0, x1, y1 = box
         mx, my = self._map_coarse[..., 0], self._map_coarse[..., 1]
         inside = (mx >= x0 - 1) & (mx <= x1) & (my >= y0 - 1) & (my <= y1)

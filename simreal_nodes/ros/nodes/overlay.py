@@ -125,7 +125,7 @@ class OverlayNode(SimrealNode):
         if self.cam is None or cam.width != self.cam.width or cam.height != self.cam.height or not np.allclose(cam.K, self.cam.K):
             if self.comp is not None:
                 self.comp.release()
-            self.cam, self.comp = cam, None
+            self.cam, self.comp = cam, None  # (None first: a failing build leaves no stale compositor)
             self.comp = self._build()  # now, not on the first frame: that frame would wait for it
 
     def _build(self) -> OverlayCompositor:
