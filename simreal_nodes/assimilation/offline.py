@@ -12,8 +12,8 @@ import numpy as np
 
 from simreal_nodes import geometry as G
 from simreal_nodes.assimilation.tracker import DeformableTracker, Estimate, deformable_feedback, tracker_config
+from simreal_nodes.camera import CameraModel
 from simreal_nodes.rom.model_file import load_model
-from simreal_nodes.vision.camera import CameraModel
 
 
 class Pipeline:

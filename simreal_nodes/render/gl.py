@@ -20,9 +20,9 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
+from simreal_nodes.camera import CameraModel
 from simreal_nodes.errors import SimrealError
 from simreal_nodes.geometry import vertex_normals
-from simreal_nodes.vision.camera import CameraModel
 
 VERT = """
 #version 330

@@ -37,7 +37,7 @@ from simreal_nodes.rom import nipgd as nip
 from simreal_nodes.rom import pgd
 from simreal_nodes.rom.model import ReducedModel
 from simreal_nodes.rom.separated import Axis, SeparatedField
-from simreal_nodes.scene.validate import Context, Enum, ListOf, Number, Record, Str, Vector
+from simreal_nodes.spec import Context, Enum, ListOf, Number, Record, Str, Vector
 
 REPO = Path(__file__).resolve().parents[2]
 SPEC_DIR = Path(__file__).resolve().parents[1] / "specs"

@@ -12,7 +12,7 @@ from pathlib import Path
 import yaml
 
 from simreal_nodes.errors import SceneError
-from simreal_nodes.scene.validate import (Bool, Context, Enum, FilePath, ListOf, MapOf, Number,
+from simreal_nodes.spec import (Bool, Context, Enum, FilePath, ListOf, MapOf, Number,
                                           Record, Str, Topic, Vector)
 
 class ModelRef(FilePath):

@@ -8,8 +8,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from simreal_nodes.camera import CameraModel
 from simreal_nodes.errors import SimrealError
-from simreal_nodes.vision.camera import CameraModel
 
 
 @dataclass
