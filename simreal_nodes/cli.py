@@ -36,9 +36,9 @@ def _remaps(items):
 def cmd_launch(a) -> int:
     from simreal_nodes.launch import Launcher, run_until_signal
     from simreal_nodes.scene.graph import required_nodes
-    from simreal_nodes.scene.schema import load_scene
+    from simreal_nodes.scene.schema import build_spec_models, load_scene
 
-    scene = load_scene(a.scene)
+    scene = build_spec_models(load_scene(a.scene))  # before the nodes start: they load the built models
     nodes = required_nodes(scene, lossless=a.lossless)
     print(f"[launch] scene '{scene['name']}': starting {', '.join(n.name for n in nodes)}")
     return run_until_signal(Launcher(nodes, remaps=_remaps(a.remap), respawn=a.respawn))

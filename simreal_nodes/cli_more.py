@@ -127,9 +127,9 @@ def cmd_eval_tracking(a) -> int:
         ranges = None
         if a.scene:
             from simreal_nodes.demo import model_ranges
-            from simreal_nodes.scene.schema import load_scene
+            from simreal_nodes.scene.schema import build_spec_models, load_scene
 
-            objs = {o["id"]: o for o in load_scene(a.scene)["objects"]}
+            objs = {o["id"]: o for o in build_spec_models(load_scene(a.scene))["objects"]}
             ranges = model_ranges(objs[oid]["model"]) if oid in objs else None
         reports = compare(est, tru, ranges)
         for r in reports:

@@ -1,7 +1,8 @@
 """The ROS-free tracking pipeline on frames in memory: localization core + deformable tracker, as the nodes
 chain them (used by tests and benchmarks; the nodes add only message conversion and timing).
 
-``scene``: a validated scene dict (``load_scene`` / ``validate_scene``); frames: BGR images (+ depth for
+``scene``: a validated scene dict (``load_scene`` / ``validate_scene``) whose ``spec:NAME`` models are built
+(``build_spec_models``: validation only names their cache files), unless ``models`` gives them; frames: BGR images (+ depth for
 RGB-D, + right grey image for stereo) with stamps. Returns one :class:`Estimate` per frame.
 """
 
