@@ -195,8 +195,8 @@ def _cross_checks(scene: dict, ctx: Context) -> None:
             raise SceneError(f"{src}: objects[{i}].anchor.kind: 'registration' needs a SLAM map "
                              f"(localization.mode mono, rgbd or stereo); found mode '{loc['mode']}'")
         _resolve_model_ref(o, i, src)
-        if o["_model_spec"] is None:  # a spec's model is checked once built (build_spec_models)
-            _check_model_parameters(o, i, src)
+        # a spec's model is not built yet: its parameter names are checked by build_spec_models
+        _check_parameters(o, i, src, None if o["_model_spec"] else _model_header(o, i, src))
 
 
 def _resolve_model_ref(obj: dict, i: int, source: str) -> None:
@@ -215,22 +215,27 @@ def _resolve_model_ref(obj: dict, i: int, source: str) -> None:
     obj["_model_spec"] = ref[len(SPEC_PREFIX):]
 
 
-def _check_model_parameters(obj: dict, i: int, source: str) -> None:
-    """Parameter names in the scene must exist in the model file (read lazily from its header)."""
+def _model_header(obj: dict, i: int, source: str) -> dict:
+    """The model file's header (read lazily: no fields), kept in ``_model_header``."""
     from simreal_nodes.rom.model_file import read_header
 
     try:
-        header = read_header(obj["model"])
+        obj["_model_header"] = read_header(obj["model"])
     except Exception as e:  # noqa: BLE001 - report any failure to read as a scene error
         raise SceneError(f"{source}: objects[{i}].model: {e}") from None
-    names = [a["name"] for a in header["axes"]]
+    return obj["_model_header"]
+
+
+def _check_parameters(obj: dict, i: int, source: str, header: dict | None) -> None:
+    """Parameter names in the scene must exist in the model (``header``; None: not known yet, names unchecked) and
+    a fixed parameter needs its value."""
+    names = [a["name"] for a in header["axes"]] if header is not None else []
     for p, cfg in obj["parameters"].items():
-        if p not in names and p not in header.get("rigid_parameters", []):
+        if header is not None and p not in names and p not in header.get("rigid_parameters", []):
             raise SceneError(f"{source}: objects[{i}].parameters.{p}: the model {Path(obj['model']).name} has no "
                              f"parameter '{p}' (it has: {', '.join(names + header.get('rigid_parameters', []))})")
         if cfg["mode"] == "fixed" and cfg["value"] is None:
             raise SceneError(f"{source}: objects[{i}].parameters.{p}.value: required for mode 'fixed'; found nothing")
-    obj["_model_header"] = header
 
 
 def build_spec_models(scene: dict, progress=None) -> dict:
@@ -251,7 +256,7 @@ def build_spec_models(scene: dict, progress=None) -> dict:
             raise SceneError(f"{scene['_source']}: objects[{i}].model: {e}") from None
         except Exception as e:  # noqa: BLE001 - a failed build is a scene error with its reason
             raise SceneError(f"{scene['_source']}: objects[{i}].model: building {SPEC_PREFIX}{name} failed: {e}") from None
-        _check_model_parameters(o, i, scene["_source"])
+        _check_parameters(o, i, scene["_source"], _model_header(o, i, scene["_source"]))
     return scene
 
 

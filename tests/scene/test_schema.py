@@ -97,6 +97,11 @@ def test_spec_model_is_named_not_built(tmp_path, monkeypatch):
     assert not (tmp_path / "cache").exists()
 
 
+def test_spec_model_fixed_parameter_needs_a_value_before_any_build(tmp_path):
+    with pytest.raises(SceneError, match=r"objects\[0\].parameters.s.value: required for mode 'fixed'"):
+        load_scene(write(tmp_path, SPEC_SCENE.replace("PARAM: {mode: tracked}", "s: {mode: fixed}")))
+
+
 def test_unknown_spec_is_a_scene_error(tmp_path):
     with pytest.raises(SceneError, match=r"objects\[0\].model: model spec not found: .*built-in specs: .*aluminium_beam"):
         load_scene(write(tmp_path, SPEC_SCENE.replace("spec:aluminium_beam", "spec:no_such_spec")))
