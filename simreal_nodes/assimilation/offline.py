@@ -2,8 +2,8 @@
 chain them (used by tests and benchmarks; the nodes add only message conversion and timing).
 
 ``scene``: a validated scene dict (``load_scene`` / ``validate_scene``) whose ``spec:NAME`` models are built
-(``build_spec_models``: validation only names their cache files), unless ``models`` gives them; frames: BGR images (+ depth for
-RGB-D, + right grey image for stereo) with stamps. Returns one :class:`Estimate` per frame.
+(``build_spec_models``: validation only names their cache files), unless ``models`` gives them; frames: BGR
+images (+ depth for RGB-D, + right grey image for stereo) with stamps. Returns one :class:`Estimate` per frame.
 """
 
 from __future__ import annotations

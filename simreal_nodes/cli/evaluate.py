@@ -33,12 +33,16 @@ def cmd_eval_trajectory(a: argparse.Namespace) -> int:
     R = np.array([Tr[i][:3, 3] for i in ir])
     res = ate(E, R, with_scale=a.scale)
     rp = rpe([Te[i] for i in ie], [Tr[i] for i in ir], delta=a.delta, scale=res["scale"])
-    print(f"poses: {len(ie)} associated of {len(te)} estimated / {len(tr)} reference; trajectory length {res['length']:.3f} m")
-    print(f"ATE  rmse {res['rmse'] * 1e3:.2f} mm ({res['rmse_pct_length']:.3f} % of length), mean {res['mean'] * 1e3:.2f}, "
-          f"median {res['median'] * 1e3:.2f}, max {res['max'] * 1e3:.2f} mm" + (f"; scale {res['scale']:.5f}" if a.scale else ""))
-    print(f"RPE  ({a.delta} frames) translation rmse {rp['trans_rmse'] * 1e3:.2f} mm, rotation rmse {rp['rot_rmse_deg']:.3f} deg")
+    print(f"poses: {len(ie)} associated of {len(te)} estimated / {len(tr)} reference; "
+          f"trajectory length {res['length']:.3f} m")
+    print(f"ATE  rmse {res['rmse'] * 1e3:.2f} mm ({res['rmse_pct_length']:.3f} % of length), "
+          f"mean {res['mean'] * 1e3:.2f}, median {res['median'] * 1e3:.2f}, max {res['max'] * 1e3:.2f} mm"
+          + (f"; scale {res['scale']:.5f}" if a.scale else ""))
+    print(f"RPE  ({a.delta} frames) translation rmse {rp['trans_rmse'] * 1e3:.2f} mm, "
+          f"rotation rmse {rp['rot_rmse_deg']:.3f} deg")
     if a.json:
-        Path(a.json).write_text(json.dumps({k: v for k, v in res.items() if k not in ("R", "t", "errors")} | {"rpe": rp}, indent=2))
+        numbers = {k: v for k, v in res.items() if k not in ("R", "t", "errors")} | {"rpe": rp}
+        Path(a.json).write_text(json.dumps(numbers, indent=2))
     if a.save_tum:
         write_tum(a.save_tum, te, Te)
     return 0
@@ -65,8 +69,9 @@ def cmd_eval_tracking(a: argparse.Namespace) -> int:
             scale, unit = (180 / np.pi, "deg") if deg else ((1e3, "mm") if r.unit == "m" else (1.0, r.unit))
             print(format_table41(r, scale, unit))
             print(f"{oid}/{r.name}: {r.n} frames; median |error| {r.median_abs * scale:.3f} {unit} "
-                  f"({100 * r.median_abs / r.span if r.span else float('nan'):.2f} % of the range), mean {r.mean_abs * scale:.3f}, "
-                  f"max {r.max_abs * scale:.3f} {unit}; {r.outside_range} estimates outside the range; states {r.states}\n")
+                  f"({100 * r.median_abs / r.span if r.span else float('nan'):.2f} % of the range), "
+                  f"mean {r.mean_abs * scale:.3f}, max {r.max_abs * scale:.3f} {unit}; "
+                  f"{r.outside_range} estimates outside the range; states {r.states}\n")
             out[f"{oid}/{r.name}"] = {"median_abs": r.median_abs, "mean_abs": r.mean_abs, "max_abs": r.max_abs,
                                       "span": r.span, "outside_range": r.outside_range, "n": r.n, "states": r.states,
                                       "table": r.table, "unit": r.unit}
@@ -80,7 +85,8 @@ def add_eval_tracking(sub: argparse._SubParsersAction) -> None:
     s.add_argument("output_bag", help="bag recorded by `simreal replay --record`")
     s.add_argument("--truth", help="the synthetic input bag (ground truth)")
     s.add_argument("--object", action="append", required=True, help="object id (repeatable)")
-    s.add_argument("--scene", help="scene YAML: report errors as %% of the model's parameter ranges (default: of the true range)")
+    s.add_argument("--scene", help="scene YAML: report errors as %% of the model's parameter ranges "
+                   "(default: of the true range)")
     s.add_argument("--json", help="write the numbers here")
     s.set_defaults(fn=cmd_eval_tracking)
 

@@ -255,7 +255,8 @@ def build_spec_models(scene: dict, progress=None) -> dict:
         except SceneError as e:
             raise SceneError(f"{scene['_source']}: objects[{i}].model: {e}") from None
         except Exception as e:  # noqa: BLE001 - a failed build is a scene error with its reason
-            raise SceneError(f"{scene['_source']}: objects[{i}].model: building {SPEC_PREFIX}{name} failed: {e}") from None
+            raise SceneError(f"{scene['_source']}: objects[{i}].model: building {SPEC_PREFIX}{name} failed: "
+                             f"{e}") from None
         _check_parameters(o, i, scene["_source"], _model_header(o, i, scene["_source"]))
     return scene
 

@@ -103,7 +103,8 @@ def test_spec_model_fixed_parameter_needs_a_value_before_any_build(tmp_path):
 
 
 def test_unknown_spec_is_a_scene_error(tmp_path):
-    with pytest.raises(SceneError, match=r"objects\[0\].model: model spec not found: .*built-in specs: .*aluminium_beam"):
+    with pytest.raises(SceneError, match=r"objects\[0\].model: model spec not found: .*built-in specs: "
+                                         r".*aluminium_beam"):
         load_scene(write(tmp_path, SPEC_SCENE.replace("spec:aluminium_beam", "spec:no_such_spec")))
 
 
