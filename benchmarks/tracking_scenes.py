@@ -22,8 +22,9 @@ from simreal_nodes.assimilation.offline import Pipeline
 from simreal_nodes.assimilation.tracker import LOST, OK
 from simreal_nodes.scene.schema import build_spec_models, validate_scene
 from simreal_nodes.synth.sequence import sequence
+from simreal_nodes.vision.slam.config import SlamConfig
 
-# scene, object, width, height, freeze map on deformation, knob (label, tracker overrides, localization attributes)
+# scene, object, width, height, freeze map on deformation, knob (label, tracker overrides, SlamConfig overrides)
 DEFAULT = ("default", {}, {})
 SHIFT = {"foam_beam": ("no object shift", {"object_shift_m": 0.0}, {}),  # the foam scene fits it by default
          "joint_boot": ("object shift 10 mm", {"object_shift_m": 0.01}, {})}
@@ -46,9 +47,7 @@ def run_case(seq, name, oid, freeze, knob=DEFAULT):
     scene = build_spec_models(validate_scene(seq["scene"].scene_yaml(seq["scene"]), name, "."))
     scene = copy.deepcopy(scene)
     scene["localization"]["freeze_map_on_deformation"] = freeze
-    pipe = Pipeline(scene, seq["cam"], **knob[1])
-    for k, v in knob[2].items():
-        setattr(pipe.loc, k, v)
+    pipe = Pipeline(scene, seq["cam"], slam_config=SlamConfig(**knob[2]), **knob[1])
     names = pipe.trackers[oid].names
     truth, est, states, step_ms, solve_ms = [], [], [], [], []
     for i in range(len(seq["rgb"])):
@@ -127,7 +126,7 @@ INTRO = """# Deformable tracking: how the measurements are made, and what it ach
 
 Made by `./run bench tracking_scenes`; the table below is its output.
 
-How a frame is measured (thesis ch. 4, `vision/slam/system.py`, `assimilation/tracker.py`):
+How a frame is measured (thesis ch. 4, `vision/slam/deformable.py`, `assimilation/tracker.py`):
 
 1. **Static / deformable split** (§4.4.1). Map points within `link_dist` of the registered model surface are
    linked to it and never vote for the camera pose; the rest localizes the camera.
@@ -148,7 +147,7 @@ How a frame is measured (thesis ch. 4, `vision/slam/system.py`, `assimilation/tr
    the foam's points to their keyframe descriptors reaches ~60 bits by frame 30, the match limit is 50); the
    first version, which searched by descriptor near the last observation, lost the foam beam from frame 80
    (median error 0.12 m) and the boot at large theta. Frame-to-frame flow drifts (0.4 px after 5 frames, 1 px
-   after 30 on the foam beam); re-measuring each track against its first image (`flow_anchor_px`, off by
+   after 30 on the foam beam); re-measuring each track against its first image (`SlamConfig.flow_anchor_px`, off by
    default) holds it at 0.3 px there, but its translation-only window biases the boot's turning lever (the
    'flow anchor' rows).
 4. **Assimilation** (Eq. 4.7-4.12). LM with Huber weights from the previous frame's estimate; if that fit is poor

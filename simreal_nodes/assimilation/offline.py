@@ -15,16 +15,18 @@ from simreal_nodes import geometry as G
 from simreal_nodes.assimilation.tracker import DeformableTracker, Estimate, deformable_feedback, tracker_config
 from simreal_nodes.camera import CameraModel
 from simreal_nodes.rom.model_file import load_model
+from simreal_nodes.vision.slam.config import SlamConfig
 
 
 class Pipeline:
     """Localization (markers / SLAM) + one deformable tracker per tracked object.
 
     ``feedback_delay``: the trackers' word on which map points lie on the object reaches the localization this
-    many frames late (0: at once; in the live graph the localization is already on the next frame, 1)."""
+    many frames late (0: at once; in the live graph the localization is already on the next frame, 1).
+    ``slam_config``: the SLAM's tuning (SLAM modes; default :class:`SlamConfig`)."""
 
     def __init__(self, scene: dict, cam: CameraModel, baseline: float | None = None, models: dict | None = None,
-                 feedback_delay: int = 0, **cfg_overrides):
+                 feedback_delay: int = 0, slam_config: SlamConfig | None = None, **cfg_overrides):
         self.feedback_delay = int(feedback_delay)
         self._feedback: list = []
         loc = scene["localization"]
@@ -43,8 +45,9 @@ class Pipeline:
         else:
             from simreal_nodes.vision.slam.system import Slam
 
-            self.loc = Slam(cam, self.mode, loc["features"], loc["scale_factor"], loc["pyramid_levels"], baseline=baseline,
-                            known_scale=loc.get("known_scale_m"), async_mapping=False)
+            self.loc = Slam(cam, self.mode, loc["features"], loc["scale_factor"], loc["pyramid_levels"],
+                            baseline=baseline, known_scale=loc.get("known_scale_m"), async_mapping=False,
+                            config=slam_config)
         self.trackers = {}
         for o in scene["objects"]:
             if not o["tracking"]["enabled"]:

@@ -15,6 +15,8 @@ import numpy as np
 
 from simreal_nodes.camera import CameraModel
 
+POPCOUNT = np.array([bin(i).count("1") for i in range(256)], np.uint8)  # set bits of every byte value
+
 
 @dataclass
 class Features:
@@ -109,6 +111,12 @@ def _grid_select(pts: np.ndarray, resp: np.ndarray, cell: int, n: int, w: int, h
     key = rank * 1e9 - resp[order] / (resp.max() + 1e-9)
     chosen = order[np.argsort(key, kind="stable")[:n]]
     return chosen
+
+
+def hamming(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise Hamming distance between two (n, 32) uint8 descriptor arrays (vectorized over candidate pairs,
+    where a brute-force matcher would compare every row with every row)."""
+    return POPCOUNT[np.bitwise_xor(a, b)].sum(axis=1, dtype=np.int32)
 
 
 def match_descriptors(d1: np.ndarray, d2: np.ndarray, mask: np.ndarray | None = None, max_dist: int = 64,

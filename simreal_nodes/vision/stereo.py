@@ -7,6 +7,7 @@ import cv2
 import numpy as np
 
 from simreal_nodes.camera import CameraModel
+from simreal_nodes.vision.orb import hamming
 
 
 def baseline_from_projection(P_right) -> float:
@@ -23,8 +24,6 @@ def sparse_stereo_depth(f, right: np.ndarray, extractor, cam: CameraModel, basel
     """Depth of left features by matching right-image ORB features on the same row of a rectified pair
     (row band of 2 pixels x the pyramid scale, disparity within the depth range, same-ish octave,
     best Hamming distance), vectorized over all candidate pairs."""
-    from simreal_nodes.vision.slam.system import hamming
-
     z = np.full(len(f), np.nan)
     if len(f) == 0:
         return z

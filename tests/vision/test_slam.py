@@ -5,7 +5,8 @@ import pytest
 
 from simreal_nodes import geometry as G
 from simreal_nodes.vision.slam.map import Map
-from simreal_nodes.vision.slam.system import INITIALIZING, LOST, NOT_STARTED, OK, RELOCALIZED, Slam
+from simreal_nodes.vision.slam.config import INITIALIZING, LOST, NOT_STARTED, OK, RELOCALIZED, SlamConfig
+from simreal_nodes.vision.slam.system import Slam
 from simreal_nodes.vision.trajectory import ate
 from tests.synthdata import sequence
 
@@ -43,7 +44,7 @@ def test_metric_modes_reach_one_centimetre(room, mode):
 
 
 def test_monocular_within_one_percent_of_length(room):
-    slam, out = run(room, "mono", ba_iterations=5)
+    slam, out = run(room, "mono", config=SlamConfig(ba_iterations=5))
     states = [r.state for _, r in out]
     assert states[0] == INITIALIZING and OK in states
     res, n = trajectory_error(room, out, with_scale=True)

@@ -1,0 +1,50 @@
+"""The SLAM's tuning constants, in one frozen record, and its tracking states.
+
+Every part of the SLAM (:mod:`two_view`, :mod:`tracking`, :mod:`relocalization`, :mod:`local_mapping`,
+:mod:`deformable`) reads its constants from one :class:`SlamConfig`, so that a benchmark varies a knob by building
+a config, never by setting attributes on a running system. The tracking states are defined here once and imported
+by every part from here.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import numpy as np
+
+# tracking states (the TrackingStatus message's ``state`` field)
+NOT_STARTED, INITIALIZING, OK, LOST, RELOCALIZED = 0, 1, 2, 3, 4
+STATE_NAMES = {NOT_STARTED: "not started", INITIALIZING: "initializing", OK: "ok", LOST: "lost",
+               RELOCALIZED: "relocalized"}
+
+
+@dataclass(frozen=True)
+class SlamConfig:
+    """Tuning of the SLAM; the defaults are the values the tests and benchmarks were measured with."""
+
+    min_parallax_deg: float = 1.0  # monocular initialization: less parallax is refused (weak depth vs. waiting)
+    max_depth: float = 8.0  # metres; farther depth readings are dropped (noisy far points vs. coverage)
+    local_kfs: int = 10  # covisible keyframes in the local map and local BA (accuracy vs. time per keyframe)
+    ba_iterations: int = 10  # Levenberg-Marquardt iterations of a local BA (accuracy vs. mapping time)
+    min_features: int = 40  # fewer ORB features: the frame is reported textureless (false loss vs. wild poses)
+    max_ba_points: int = 800  # most-observed points a local BA optimizes (BA time vs. map accuracy)
+    deformable_radius: float = 20.0  # pixels; ORB re-acquisition radius around a deformable point's prediction
+    reacquire_below: int = 8  # fewer flow tracks than this (once more were followed): wide re-acquisition
+    reacquire_wide_px: float = 80.0  # pixels; the wide re-acquisition radius (recovers after gaps vs. wrong matches)
+    flow_fb_px: float = 0.5  # pixels; forward-backward flow agreement to keep a track (drift vs. lost tracks)
+    flow_win: int = 11  # Lucas-Kanade window (pixels); larger straddles the object's silhouette and drifts
+    flow_anchor_px: float = 0.0  # > 0: re-measure tracks on their first image if within this (drift vs. bias)
+    max_anchor_images: int = 40  # images kept for the anchored re-measurement (memory vs. track restarts)
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            if getattr(self, f.name) < 0:
+                raise ValueError(f"SlamConfig.{f.name} must not be negative, not {getattr(self, f.name)}")
+        if self.flow_win < 3 or self.local_kfs < 1 or self.ba_iterations < 1:
+            raise ValueError(f"SlamConfig: flow_win >= 3, local_kfs >= 1 and ba_iterations >= 1 needed, not "
+                             f"{self.flow_win}, {self.local_kfs}, {self.ba_iterations}")
+
+    @property
+    def min_parallax(self) -> float:
+        """The minimum parallax of a two-view initialization in radians."""
+        return float(np.deg2rad(self.min_parallax_deg))

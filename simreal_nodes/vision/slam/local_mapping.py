@@ -1,0 +1,257 @@
+"""Local mapping (ORB-SLAM2's LocalMapping, run in the tracking thread): the keyframe decision, keyframe insertion,
+new points (triangulated with covisible keyframes, or from depth), local bundle adjustment in GTSAM (synchronous,
+or in a mapping process whose result is applied at a later frame) and map-point and keyframe culling."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from simreal_nodes import geometry as G
+from simreal_nodes.vision.orb import Features, match_descriptors
+from simreal_nodes.vision.slam.context import SlamContext
+from simreal_nodes.vision.slam.map import KeyFrame, MapPoint
+from simreal_nodes.vision.slam.optimize import CHI2_2D, AsyncBundleAdjuster, ba_request, bundle_adjust, project
+
+
+class LocalMapper:
+    def __init__(self, ctx: SlamContext, async_mapping: bool) -> None:
+        self.ctx = ctx
+        cfg = ctx.config
+        self._ba = AsyncBundleAdjuster(ctx.K, ctx.baseline, cfg.ba_iterations) if async_mapping else None
+        self.ba_stats = {"submitted": 0, "applied": 0, "deferred": 0}
+        self._pending_ba: KeyFrame | None = None  # newest keyframe of a BA deferred while the worker was busy
+        self._recent_points: list[tuple[int, int]] = []  # (point id, keyframe id at creation)
+
+    def close(self) -> None:
+        if self._ba is not None:
+            self._ba.close()
+            self._ba = None
+
+    def poll(self) -> None:
+        """Apply a finished asynchronous BA; then run the one deferred while the mapping process was busy."""
+        if self._ba is None:
+            return
+        res = self._ba.poll()
+        if res is not None:
+            self._apply_ba(res)
+            if self._pending_ba is not None and self._pending_ba.id in self.ctx.map.keyframes:
+                kf, self._pending_ba = self._pending_ba, None
+                self.bundle_adjust([kf] + self.ctx.map.covisible(kf, self.ctx.config.local_kfs), None)
+
+    def need_keyframe(self, n_inliers: int) -> bool:
+        """ORB-SLAM2's rule, simplified: the current frame tracks clearly fewer points than the reference
+        keyframe holds (seen by >= 2 keyframes), or too long since the last keyframe."""
+        ctx = self.ctx
+        if ctx.ref_kf is None:
+            return True
+        ids = ctx.ref_kf.mp[ctx.ref_kf.mp >= 0]
+        ref_n = sum(1 for i in ids if int(i) in ctx.map.points and len(ctx.map.points[int(i)].obs) >= 2)
+        if ctx.mode != "mono" and len(ctx.map.keyframes) < 3:
+            ref_n = len(ids)
+        since = ctx.frame_id - ctx.last_kf_frame
+        if since < 5:
+            return False  # (new points are triangulated here at once; only their refinement is asynchronous)
+        ratio = 0.9 if ctx.mode == "mono" else 0.6
+        # fewer tracked points than the reference keyframe holds, or tracking clearly degrading since it
+        few = n_inliers < ratio * ref_n or n_inliers < 0.6 * ctx.kf_inliers
+        if ctx.mode != "mono":
+            few = few or n_inliers < 100
+        return (few or since > 30) and n_inliers > 15
+
+    def insert_keyframe(self, stamp: int, T_cw: np.ndarray, f: Features, z: np.ndarray | None, match: np.ndarray,
+                        inl: np.ndarray) -> KeyFrame:
+        """A keyframe from the tracked frame (linked to its inlier points), mapped at once; it becomes the
+        reference keyframe."""
+        ctx = self.ctx
+        kf = ctx.map.new_keyframe(stamp, G.inv(T_cw), f, z)
+        for (kp, pid), ok in zip(match, inl):
+            if ok and int(pid) in ctx.map.points:
+                ctx.map.link(ctx.map.points[int(pid)], kf, int(kp))
+        self._local_mapping(kf)
+        ctx.ref_kf = kf
+        ctx.last_kf_frame = ctx.frame_id
+        ctx.kf_inliers = int(inl.sum())
+        return kf
+
+    def _local_mapping(self, kf: KeyFrame) -> None:
+        new = self._create_points(kf)
+        for pid in new:
+            self._recent_points.append((pid, kf.id))
+        neighbours = self.ctx.map.covisible(kf, self.ctx.config.local_kfs)
+        self.bundle_adjust([kf] + neighbours, None)
+        self._cull_points(kf)
+        self._cull_keyframes(neighbours)
+
+    def _create_points(self, kf: KeyFrame) -> list[int]:
+        ctx, m, K = self.ctx, self.ctx.map, self.ctx.K
+        created = []
+        f = kf.feats
+        free = kf.mp < 0
+        if ctx.mode != "mono" and kf.depth is not None:
+            ok = free & np.isfinite(kf.depth)
+            idx = np.flatnonzero(ok)
+            idx = idx[np.argsort(kf.depth[idx])][:250]
+            P = ctx.cam.backproject(f.und[idx], kf.depth[idx])
+            T = kf.T_wc
+            for i, p in zip(idx, P @ T[:3, :3].T + T[:3, 3]):
+                created.append(m.new_point(p, f.desc[i], kf, int(i)).id)
+            return created
+        # monocular: triangulate unmatched features with the covisible keyframes
+        for other in m.covisible(kf, 6):
+            base = np.linalg.norm(kf.center - other.center)
+            med = self._median_depth(other)
+            if med <= 0 or base / med < 0.01:
+                continue
+            fa = np.flatnonzero(kf.mp < 0)
+            fb = np.flatnonzero(other.mp < 0)
+            if len(fa) == 0 or len(fb) == 0:
+                continue
+            mt = match_descriptors(f.desc[fa], other.feats.desc[fb], max_dist=50, ratio=0.7)
+            if len(mt) == 0:
+                continue
+            ia, ib = fa[mt[:, 0]], fb[mt[:, 1]]
+            T_a, T_b = kf.T_cw, other.T_cw
+            F = _fundamental(T_a, T_b, K)
+            xa = np.c_[f.und[ia], np.ones(len(ia))]
+            xb = np.c_[other.feats.und[ib], np.ones(len(ib))]
+            lines = xa @ F.T  # epipolar lines in b
+            dist2 = (np.sum(lines * xb, axis=1) ** 2) / np.maximum(lines[:, 0] ** 2 + lines[:, 1] ** 2, 1e-12)
+            ok = dist2 < 3.84 * other.feats.sigma2()[ib]
+            ia, ib = ia[ok], ib[ok]
+            if len(ia) == 0:
+                continue
+            X = cv2.triangulatePoints(K @ T_a[:3], K @ T_b[:3], f.und[ia].T, other.feats.und[ib].T)
+            X = (X[:3] / X[3]).T
+            ua, za = project(T_a, X, K)
+            ub, zb = project(T_b, X, K)
+            ea = np.sum((ua - f.und[ia]) ** 2, axis=1) / f.sigma2()[ia]
+            eb = np.sum((ub - other.feats.und[ib]) ** 2, axis=1) / other.feats.sigma2()[ib]
+            ra = X - kf.center
+            rb = X - other.center
+            norms = np.linalg.norm(ra, axis=1) * np.linalg.norm(rb, axis=1)
+            cospar = np.sum(ra * rb, axis=1) / np.maximum(norms, 1e-12)
+            good = ((za > 0) & (zb > 0) & (ea < CHI2_2D) & (eb < CHI2_2D) & (cospar < 0.9998)
+                    & np.all(np.isfinite(X), axis=1))
+            for a, b, p in zip(ia[good], ib[good], X[good]):
+                if kf.mp[a] >= 0 or other.mp[b] >= 0:
+                    continue
+                mp = m.new_point(p, f.desc[a], kf, int(a))
+                m.link(mp, other, int(b))
+                created.append(mp.id)
+        return created
+
+    def _median_depth(self, kf: KeyFrame) -> float:
+        ids = kf.mp[kf.mp >= 0]
+        if len(ids) == 0:
+            return 0.0
+        P = np.array([self.ctx.map.points[int(i)].pos for i in ids if int(i) in self.ctx.map.points])
+        if len(P) == 0:
+            return 0.0
+        _, z = project(kf.T_cw, P, self.ctx.K)
+        return float(np.median(z))
+
+    def bundle_adjust(self, kfs_opt: list[KeyFrame], kfs_fixed: list[KeyFrame] | None, sync: bool = False) -> None:
+        """Local BA over ``kfs_opt`` and the points they see (the best observed ones, at most
+        ``max_ba_points``); keyframes outside that also see the points are held fixed (or, without any,
+        the oldest optimized one). Synchronous, or handed to the mapping process."""
+        ctx, m, cfg = self.ctx, self.ctx.map, self.ctx.config
+        kfs_opt = [k for k in kfs_opt if k.id in m.keyframes]
+        opt_ids = {k.id for k in kfs_opt}
+        pts: dict[int, MapPoint] = {}
+        for kf in kfs_opt:
+            for pid in kf.mp[kf.mp >= 0]:
+                p = m.points.get(int(pid))
+                if p is not None and not p.deformable:
+                    pts[p.id] = p
+        if len(pts) > cfg.max_ba_points:
+            best = sorted(pts.values(), key=lambda p: len(p.obs), reverse=True)[: cfg.max_ba_points]
+            pts = {p.id: p for p in best}
+        if kfs_fixed is None:
+            fixed: dict[int, int] = {}
+            for p in pts.values():
+                for kid in p.obs:
+                    if kid not in opt_ids and kid in m.keyframes:
+                        fixed[kid] = fixed.get(kid, 0) + 1
+            kfs_fixed = [m.keyframes[k] for k in sorted(fixed, key=fixed.get, reverse=True)[:10]]
+            # gauge: 6 dof need one fixed keyframe; a monocular map's scale needs a second one
+            need = 2 if ctx.mode == "mono" else 1
+            for oldest in sorted(kfs_opt, key=lambda k: k.id):
+                if len(kfs_fixed) >= need or len(kfs_opt) <= 1:
+                    break
+                kfs_fixed.append(oldest)
+                kfs_opt = [k for k in kfs_opt if k.id != oldest.id]
+        if not kfs_opt or not pts:
+            return
+        req = ba_request(kfs_opt, kfs_fixed, list(pts.values()))
+        if self._ba is not None and not sync:
+            if self._ba.submit(req):
+                self.ba_stats["submitted"] += 1
+            else:  # the mapping process is busy: optimize around the newest keyframe when it is free
+                self.ba_stats["deferred"] += 1
+                self._pending_ba = max(kfs_opt, key=lambda k: k.id)
+            return
+        self._apply_ba(bundle_adjust(req, ctx.K, ctx.baseline, cfg.ba_iterations))
+
+    def _apply_ba(self, res: dict) -> None:
+        if not res.get("ok"):
+            return
+        m = self.ctx.map
+        self.ba_stats["applied"] += 1
+        for kid, T, fx in zip(res["kf_ids"], res["poses"], res["fixed"]):
+            kf = m.keyframes.get(int(kid))
+            if kf is not None and not fx:
+                kf.T_wc = T
+        for pid, P in zip(res["pt_ids"], res["pos"]):
+            if int(pid) in m.points:
+                m._pos[int(pid)] = P
+        for pid, kid in res["outliers"]:
+            p = m.points.get(pid)
+            kf = m.keyframes.get(kid)
+            if p is None or kf is None:
+                continue
+            idx = p.obs.pop(kid, None)
+            if idx is not None and kf.mp[idx] == pid:
+                kf.mp[idx] = -1
+            if len(p.obs) < (1 if self.ctx.mode != "mono" else 2):
+                m.erase_point(pid)
+
+    def _cull_points(self, kf: KeyFrame) -> None:
+        """Recent points found in too few of the frames that should see them, or (after two keyframes) seen
+        by too few keyframes, are erased; after three keyframes a point is no longer recent."""
+        m = self.ctx.map
+        keep = []
+        for pid, kid in self._recent_points:
+            p = m.points.get(pid)
+            if p is None:
+                continue
+            age = kf.id - kid
+            if p.found_ratio < 0.25 and p.n_visible > 4:
+                m.erase_point(pid)
+            elif age >= 2 and len(p.obs) <= (2 if self.ctx.mode == "mono" else 1):
+                m.erase_point(pid)
+            elif age < 3:
+                keep.append((pid, kid))
+        self._recent_points = keep
+
+    def _cull_keyframes(self, kfs: list[KeyFrame]) -> None:
+        """A keyframe whose points are (90 %) seen by more than three others is redundant."""
+        m = self.ctx.map
+        first = min(m.keyframes) if m.keyframes else -1
+        for kf in kfs:
+            if kf.id == first or kf.id not in m.keyframes or kf is self.ctx.ref_kf:
+                continue
+            ids = kf.mp[kf.mp >= 0]
+            if len(ids) == 0:
+                continue
+            redundant = sum(1 for pid in ids if int(pid) in m.points and len(m.points[int(pid)].obs) > 3)
+            if redundant > 0.9 * len(ids):
+                m.erase_keyframe(kf.id)
+
+
+def _fundamental(T_a: np.ndarray, T_b: np.ndarray, K: np.ndarray) -> np.ndarray:
+    """F with x_b^T F x_a = 0 for ideal pixels, from world->camera poses."""
+    T_ba = T_b @ G.inv(T_a)
+    R, t = T_ba[:3, :3], T_ba[:3, 3]
+    Ki = np.linalg.inv(K)
+    return Ki.T @ G.hat(t) @ R @ Ki

@@ -1,0 +1,211 @@
+"""Map initialization: from the first frame's depth (RGB-D / stereo), or two-view for a monocular camera.
+
+The two-view reconstruction follows ORB-SLAM2: a homography and a fundamental matrix are fitted to the matches
+with a reference frame, scored by their symmetric transfer errors, and the better explained model (homography for
+a planar or low-parallax scene) is decomposed into a relative pose; the pose whose triangulated points lie in
+front of both cameras and reproject well wins, and it is refused without enough parallax (a pure rotation has no
+depth) or too ambiguous a homography decomposition.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from simreal_nodes import geometry as G
+from simreal_nodes.vision.orb import Features, match_descriptors
+from simreal_nodes.vision.slam.config import INITIALIZING, OK
+from simreal_nodes.vision.slam.context import SlamContext
+from simreal_nodes.vision.slam.local_mapping import LocalMapper
+from simreal_nodes.vision.slam.map import KeyFrame
+from simreal_nodes.vision.slam.optimize import CHI2_2D, project
+from simreal_nodes.vision.slam.result import TrackResult, frame_result
+
+
+@dataclass
+class TwoViewSolution:
+    """Relative pose of view 1 (``x1 = R x0 + t``, ``|t| = 1``), the well-triangulated points (view 0's frame) and
+    the feature indices in each view they come from."""
+
+    R: np.ndarray
+    t: np.ndarray
+    points: np.ndarray
+    idx0: np.ndarray
+    idx1: np.ndarray
+    kind: str  # homography or fundamental
+
+
+def two_view(f0: Features, f1: Features, K: np.ndarray, min_parallax: float) -> tuple[str, TwoViewSolution | None]:
+    """Reconstruct two views of a static scene; returns (why not, None) or ("<kind> model", solution).
+    ``min_parallax``: radians, the least median parallax of the triangulated points accepted."""
+    d = np.linalg.norm(f0.und[:, None, :] - f1.und[None, :, :], axis=2) if len(f0) * len(f1) < 4e6 else None
+    mask = (d < 150) if d is not None else None
+    m = match_descriptors(f0.desc, f1.desc, mask, max_dist=50, ratio=0.9)
+    if len(m) < 100:
+        return f"only {len(m)} matches with the reference frame (need 100): too little overlap or texture", None
+    x0, x1 = f0.und[m[:, 0]], f1.und[m[:, 1]]
+    H, mh = cv2.findHomography(x0, x1, cv2.RANSAC, 2.0)
+    F, mf = cv2.findFundamentalMat(x0, x1, cv2.FM_RANSAC, 1.5, 0.999)
+    if F is None or F.shape != (3, 3) or H is None:
+        return "cannot estimate two-view geometry", None
+    sh = _score_h(H, x0, x1)
+    sf = _score_f(F, x0, x1)
+    rh = sh / max(sh + sf, 1e-9)
+    if rh > 0.45:
+        sol = _from_h(H, x0, x1, K)
+        kind = "homography"
+    else:
+        sol = _from_f(F, x0, x1, mf.ravel().astype(bool), K)
+        kind = "fundamental"
+    if sol is None:
+        return f"{kind} model gives no valid reconstruction", None
+    R, t, P, good, parallax = sol
+    if parallax < min_parallax:
+        return (f"not enough parallax ({np.rad2deg(parallax):.2f} deg, need {np.rad2deg(min_parallax):.1f}): "
+                "a pure rotation cannot initialize a monocular map, translate the camera"), None
+    if good.sum() < 50:
+        return f"only {int(good.sum())} points triangulate well (need 50)", None
+    return f"{kind} model", TwoViewSolution(R, t, P[good], m[good, 0], m[good, 1], kind)
+
+
+_Reconstruction = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]  # R, t, points, good, parallax
+
+
+def _triangulate_check(R: np.ndarray, t: np.ndarray, x0: np.ndarray, x1: np.ndarray,
+                       K: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """Points triangulated under (R, t), which of them are in front of both cameras, reproject within 4 x the
+    chi-square bound and are not at infinity, and their median parallax (radians)."""
+    P0 = K @ np.c_[np.eye(3), np.zeros(3)]
+    P1 = K @ np.c_[R, t]
+    X = cv2.triangulatePoints(P0, P1, x0.T.astype(np.float64), x1.T.astype(np.float64))
+    X = (X[:3] / X[3]).T
+    z0 = X[:, 2]
+    X1 = X @ R.T + t
+    z1 = X1[:, 2]
+    uv0, _ = project(np.eye(4), X, K)
+    uv1, _ = project(G.make_T(R, t), X, K)
+    e0 = np.sum((uv0 - x0) ** 2, axis=1)
+    e1 = np.sum((uv1 - x1) ** 2, axis=1)
+    c0 = -R.T @ t
+    r0 = X / np.maximum(np.linalg.norm(X, axis=1, keepdims=True), 1e-12)
+    r1 = (X - c0) / np.maximum(np.linalg.norm(X - c0, axis=1, keepdims=True), 1e-12)
+    cospar = np.sum(r0 * r1, axis=1)
+    good = (z0 > 0) & (z1 > 0) & (e0 < 4 * CHI2_2D) & (e1 < 4 * CHI2_2D) & np.all(np.isfinite(X), axis=1)
+    good &= cospar < 0.99998
+    par = float(np.arccos(np.clip(np.median(cospar[good]), -1, 1))) if good.sum() else 0.0
+    return X, good, par
+
+
+def _from_f(F: np.ndarray, x0: np.ndarray, x1: np.ndarray, inl: np.ndarray, K: np.ndarray) -> _Reconstruction | None:
+    E = K.T @ F @ K
+    _, R, t, _ = cv2.recoverPose(E, x0[inl].astype(np.float64), x1[inl].astype(np.float64), K)
+    t = t.ravel()
+    X, good, par = _triangulate_check(R, t, x0, x1, K)
+    good &= inl
+    return (R, t, X, good, par) if good.sum() >= 50 else None
+
+
+def _from_h(H: np.ndarray, x0: np.ndarray, x1: np.ndarray, K: np.ndarray) -> _Reconstruction | None:
+    """The decomposition that triangulates most points, refused when the second best comes close (ambiguous)."""
+    n, Rs, ts, _ = cv2.decomposeHomographyMat(H, K)
+    best, second = None, 0
+    for R, t in zip(Rs, ts):
+        t = t.ravel()
+        if np.linalg.norm(t) < 1e-9:
+            continue
+        X, good, par = _triangulate_check(R, t / np.linalg.norm(t), x0, x1, K)
+        c = int(good.sum())
+        if best is None or c > best[3].sum():
+            second = best[3].sum() if best is not None else second
+            best = (R, t / np.linalg.norm(t), X, good, par)
+        elif c > second:
+            second = c
+    if best is None or best[3].sum() < 50 or second > 0.75 * best[3].sum():
+        return None
+    return best
+
+
+def _score_h(H: np.ndarray, x0: np.ndarray, x1: np.ndarray, th: float = 5.991) -> float:
+    Hi = np.linalg.inv(H)
+    a = np.c_[x0, np.ones(len(x0))] @ H.T
+    b = np.c_[x1, np.ones(len(x1))] @ Hi.T
+    e1 = np.sum((a[:, :2] / a[:, 2:] - x1) ** 2, axis=1)
+    e2 = np.sum((b[:, :2] / b[:, 2:] - x0) ** 2, axis=1)
+    return float(np.sum(np.where(e1 < th, th - e1, 0) + np.where(e2 < th, th - e2, 0)))
+
+
+def _score_f(F: np.ndarray, x0: np.ndarray, x1: np.ndarray, th: float = 3.841, th_score: float = 5.991) -> float:
+    a = np.c_[x0, np.ones(len(x0))]
+    b = np.c_[x1, np.ones(len(x1))]
+    l2 = a @ F.T
+    l1 = b @ F
+    d2 = np.sum(l2 * b, axis=1) ** 2 / np.maximum(l2[:, 0] ** 2 + l2[:, 1] ** 2, 1e-12)
+    d1 = np.sum(l1 * a, axis=1) ** 2 / np.maximum(l1[:, 0] ** 2 + l1[:, 1] ** 2, 1e-12)
+    return float(np.sum(np.where(d2 < th, th_score - d2, 0) + np.where(d1 < th, th_score - d1, 0)))
+
+
+class Initializer:
+    """Builds the first map: from depth at once, or (monocular) from a reference frame and a later one that
+    reconstructs with :func:`two_view`; then bundle-adjusts it and fixes its scale."""
+
+    def __init__(self, ctx: SlamContext, mapper: LocalMapper, known_scale: float | None) -> None:
+        self.ctx = ctx
+        self.mapper = mapper
+        self.known_scale = known_scale  # metres between the two initial views (monocular), when known
+        self.ref: tuple[Features, int, int] | None = None  # monocular reference frame: features, stamp, frame id
+
+    def initialize(self, f: Features, z: np.ndarray | None, stamp: int) -> TrackResult:
+        ctx, m = self.ctx, self.ctx.map
+        if ctx.mode in ("rgbd", "stereo"):
+            ok = np.isfinite(z)
+            if ok.sum() < 100:
+                ctx.state = INITIALIZING
+                return TrackResult(INITIALIZING,
+                                   f"waiting for depth: {int(ok.sum())} features with valid depth (need 100)")
+            kf = m.new_keyframe(stamp, np.eye(4), f, z)
+            P = ctx.cam.backproject(f.und[ok], z[ok])
+            for i, p in zip(np.flatnonzero(ok), P):
+                m.new_point(p, f.desc[i], kf, int(i))
+            m.scale_known = True
+            return self._initialized(kf, f)
+        if self.ref is None or len(self.ref[0]) < 100 or ctx.frame_id - self.ref[2] > 60:
+            self.ref = (f, stamp, ctx.frame_id)
+            ctx.state = INITIALIZING
+            return TrackResult(INITIALIZING, "initializing: reference frame set, move the camera sideways")
+        f0, s0, _ = self.ref
+        reason, sol = two_view(f0, f, ctx.K, ctx.config.min_parallax)
+        if sol is None:
+            ctx.state = INITIALIZING
+            return TrackResult(INITIALIZING, f"initializing: {reason}")
+        kf0 = m.new_keyframe(s0, np.eye(4), f0)
+        T_cw1 = G.make_T(sol.R, sol.t)
+        kf1 = m.new_keyframe(stamp, G.inv(T_cw1), f)
+        for p, a, b in zip(sol.points, sol.idx0, sol.idx1):
+            mp = m.new_point(p, f.desc[b], kf0, int(a))
+            m.link(mp, kf1, int(b))
+        self.mapper.bundle_adjust([kf1], [kf0], sync=True)  # before the scale is fixed: never asynchronous
+        # scale: median scene depth 1 (ORB-SLAM2) or the known baseline between the two views
+        Pc = np.array([p.pos for p in m.points.values()])
+        s = self.known_scale / np.linalg.norm(kf1.center) if self.known_scale else 1.0 / np.median(Pc[:, 2])
+        for p in m.points.values():
+            p.pos = p.pos * s
+        kf1.T_wc[:3, 3] *= s
+        m.scale_known = bool(self.known_scale)
+        self.ref = None
+        return self._initialized(kf1, f, f"initialized from {len(sol.points)} points ({sol.kind})")
+
+    def _initialized(self, kf: KeyFrame, f: Features, msg: str = "") -> TrackResult:
+        ctx = self.ctx
+        ctx.ref_kf = kf
+        ctx.T_cw_last = kf.T_cw
+        ctx.velocity = None
+        ctx.last_kf_frame = ctx.frame_id
+        ctx.kf_inliers = int(np.sum(kf.mp >= 0))
+        ctx.state = OK
+        ids = kf.mp[kf.mp >= 0]
+        res = frame_result(ctx.map, OK, msg or f"initialized with {len(ids)} points from depth", kf.T_wc, f,
+                           np.flatnonzero(kf.mp >= 0), ids, np.ones(len(ids), bool))
+        res.keyframe = True
+        return res

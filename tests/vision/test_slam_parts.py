@@ -1,0 +1,235 @@
+"""The SLAM's parts on synthetic features with exact geometry (no rendering): two-view initialization, depth
+initialization + tracking + keyframe insertion, relocalization against a small map, the deformable tracks'
+re-acquisition, and the config."""
+
+from __future__ import annotations
+
+import dataclasses
+import inspect
+
+import numpy as np
+import pytest
+
+from simreal_nodes import geometry as G
+from simreal_nodes.camera import CameraModel
+from simreal_nodes.vision.orb import Features
+from simreal_nodes.vision.slam.config import INITIALIZING, LOST, NOT_STARTED, OK, RELOCALIZED, SlamConfig
+from simreal_nodes.vision.slam.context import SlamContext
+from simreal_nodes.vision.slam.deformable import DeformableTracks
+from simreal_nodes.vision.slam.local_mapping import LocalMapper
+from simreal_nodes.vision.slam.relocalization import Relocalizer
+from simreal_nodes.vision.slam.result import TrackResult
+from simreal_nodes.vision.slam.tracking import Tracker
+from simreal_nodes.vision.slam.two_view import Initializer, two_view
+
+CAM = CameraModel.from_intrinsics(640, 480, 500.0, 500.0, 320.0, 240.0)
+
+
+def scene(n: int = 400, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """World points 3-6 m in front of the origin camera, all in its image (so a map made there numbers its points
+    as these), with a distinct random ORB descriptor each."""
+    rng = np.random.default_rng(seed)
+    uv = np.c_[rng.uniform(40.0, 600.0, n), rng.uniform(40.0, 440.0, n)]
+    X = CAM.backproject(uv, rng.uniform(3.0, 6.0, n))
+    return X, rng.integers(0, 256, (n, 32), dtype=np.uint8)
+
+
+def view(X: np.ndarray, desc: np.ndarray, T_cw: np.ndarray, sel: np.ndarray | None = None,
+         shift_px: float = 0.0) -> tuple[Features, np.ndarray, np.ndarray]:
+    """The features a camera at T_cw sees of the points (those in the image; ``sel``: only these), at their exact
+    projection (moved ``shift_px`` to the right); also the point indices and their depths."""
+    Pc = X @ T_cw[:3, :3].T + T_cw[:3, 3]
+    uv = CAM.project(Pc) + np.array([shift_px, 0.0])
+    inside = (Pc[:, 2] > 0) & (uv[:, 0] >= 20) & (uv[:, 0] < 620) & (uv[:, 1] >= 20) & (uv[:, 1] < 460)
+    idx = np.flatnonzero(inside if sel is None else inside & np.isin(np.arange(len(X)), sel))
+    n = len(idx)
+    f = Features(uv[idx].astype(np.float32), uv[idx].astype(np.float64), np.zeros(n, np.int32), desc[idx],
+                 np.ones(n, np.float32))
+    return f, idx, Pc[idx, 2]
+
+
+def context(mode: str = "rgbd", **cfg: float) -> SlamContext:
+    return SlamContext(CAM, CAM.K.copy(), mode, 0.08 if mode == "rgbd" else None, SlamConfig(**cfg))
+
+
+def depth_map(ctx: SlamContext, X: np.ndarray, desc: np.ndarray) -> Initializer:
+    """A map initialized from one RGB-D frame at the origin."""
+    init = Initializer(ctx, LocalMapper(ctx, async_mapping=False), None)
+    f, _, z = view(X, desc, np.eye(4))
+    ctx.frame_id += 1
+    res = init.initialize(f, z, 0)
+    assert res.state == OK and res.keyframe and len(ctx.map.points) == len(X)
+    return init
+
+
+def test_two_view_recovers_the_relative_pose_up_to_scale():
+    X, desc = scene()
+    T_cw1 = G.make_T(G.rot_axis("y", np.deg2rad(2.0)), np.array([-0.3, 0.02, 0.05]))
+    f0, i0, _ = view(X, desc, np.eye(4))
+    f1, i1, _ = view(X, desc, T_cw1)
+    reason, sol = two_view(f0, f1, CAM.K, np.deg2rad(1.0))
+    assert sol is not None, reason
+    assert reason == "fundamental model" and sol.kind == "fundamental"
+    t_true = T_cw1[:3, 3] / np.linalg.norm(T_cw1[:3, 3])
+    assert np.linalg.norm(sol.t - t_true) < 1e-3
+    assert np.linalg.norm(sol.R - T_cw1[:3, :3]) < 1e-4
+    assert len(sol.points) > 200
+    # the points are the scene's, in view 0's frame, scaled by the unknown baseline
+    truth = X[i0[sol.idx0]] / np.linalg.norm(T_cw1[:3, 3])
+    assert np.array_equal(i0[sol.idx0], i1[sol.idx1])
+    assert np.max(np.abs(sol.points - truth)) < 1e-3
+
+
+def test_two_view_refuses_a_pure_rotation():
+    X, desc = scene()
+    f0, _, _ = view(X, desc, np.eye(4))
+    f1, _, _ = view(X, desc, G.make_T(G.rot_axis("y", np.deg2rad(3.0))))
+    reason, sol = two_view(f0, f1, CAM.K, np.deg2rad(1.0))
+    assert sol is None
+    assert "parallax" in reason or "no valid reconstruction" in reason
+
+
+def test_monocular_initializer_sets_a_reference_then_builds_a_unit_depth_map():
+    X, desc = scene()
+    ctx = context("mono")
+    init = Initializer(ctx, LocalMapper(ctx, async_mapping=False), None)
+    ctx.frame_id = 1
+    res = init.initialize(view(X, desc, np.eye(4))[0], None, 0)
+    assert res.state == INITIALIZING and "reference frame set" in res.reason
+    ctx.frame_id = 2
+    res = init.initialize(view(X, desc, G.make_T(t=np.array([-0.3, 0.0, 0.0])))[0], None, 1)
+    assert res.state == OK == ctx.state and res.keyframe and "fundamental" in res.reason
+    P = np.array([p.pos for p in ctx.map.points.values()])
+    assert abs(np.median(P[:, 2]) - 1.0) < 1e-9  # ORB-SLAM2's scale: median scene depth 1
+    assert len(ctx.map.keyframes) == 2 and ctx.ref_kf is ctx.map.keyframes[1]
+
+
+def test_tracking_from_a_depth_map_and_a_keyframe():
+    X, desc = scene()
+    ctx = context()
+    init = depth_map(ctx, X, desc)
+    tracker = Tracker(ctx)
+    T_cw1 = G.make_T(G.rot_axis("x", np.deg2rad(0.5)), np.array([0.02, -0.01, 0.01]))
+    f1, _, z1 = view(X, desc, T_cw1)
+    ctx.frame_id += 1
+    res, fix = tracker.track(f1, {})
+    assert res.state == OK and fix is not None
+    assert np.max(np.abs(fix.T_cw - T_cw1)) < 1e-6
+    assert res.n_inliers > 0.9 * len(f1)
+    assert np.allclose(ctx.velocity, T_cw1, atol=1e-6)  # constant-velocity model: the motion from the origin
+    kf = init.mapper.insert_keyframe(5, fix.T_cw, f1, z1, fix.match, fix.inl)
+    assert ctx.ref_kf is kf and ctx.last_kf_frame == ctx.frame_id and ctx.kf_inliers == res.n_inliers
+    assert np.max(np.abs(kf.T_cw - T_cw1)) < 1e-5  # the BA keeps the exact pose
+
+
+def test_keyframe_decision():
+    """ORB-SLAM2's rule: not within 5 frames of the last keyframe; then when tracking clearly fewer points than the
+    reference keyframe (RGB-D: also under 100), or after 30 frames; never on 15 inliers or fewer."""
+    X, desc = scene()
+    ctx = context()
+    init = depth_map(ctx, X, desc)
+    n_ref = len(ctx.map.points)
+    ctx.frame_id = ctx.last_kf_frame + 4
+    assert not init.mapper.need_keyframe(10)
+    ctx.frame_id = ctx.last_kf_frame + 6
+    assert not init.mapper.need_keyframe(n_ref)
+    assert init.mapper.need_keyframe(int(0.5 * n_ref)) and init.mapper.need_keyframe(99)
+    assert not init.mapper.need_keyframe(15)
+    ctx.frame_id = ctx.last_kf_frame + 31
+    assert init.mapper.need_keyframe(n_ref)
+
+
+def test_tracking_loses_a_frame_of_unknown_points():
+    X, desc = scene()
+    ctx = context()
+    depth_map(ctx, X, desc)
+    other, desc2 = scene(seed=1)
+    ctx.frame_id += 1
+    res, fix = Tracker(ctx).track(view(other, desc2, np.eye(4))[0], {})
+    assert res.state == LOST == ctx.state and fix is None and "pose inliers" in res.reason
+    assert ctx.lost_since == ctx.frame_id and ctx.velocity is None
+
+
+def test_relocalization_against_a_small_map():
+    X, desc = scene()
+    ctx = context()
+    depth_map(ctx, X, desc)
+    ctx.state, ctx.lost_since = LOST, ctx.frame_id
+    reloc = Relocalizer(ctx, Tracker(ctx))
+    T_cw1 = G.make_T(G.rot_axis("y", np.deg2rad(-4.0)), np.array([0.15, 0.05, -0.1]))
+    f1, _, _ = view(X, desc, T_cw1)
+    ctx.frame_id += 3
+    res, fix = reloc.relocalize(f1, {})
+    assert res.state == RELOCALIZED and res.reason == "relocalized after 3 frames"
+    assert ctx.state == OK and ctx.velocity is None
+    assert np.max(np.abs(fix.T_cw - T_cw1)) < 1e-6 and np.array_equal(ctx.T_cw_last, fix.T_cw)
+    # a frame of unknown points stays lost; without a map, nothing to relocalize in
+    other, desc2 = scene(seed=1)
+    res, fix = reloc.relocalize(view(other, desc2, T_cw1)[0], {})
+    assert res.state == LOST and fix is None and "relocalization found 0 inliers" in res.reason
+    empty = context()
+    res, _ = Relocalizer(empty, Tracker(empty)).relocalize(f1, {})
+    assert res.state == NOT_STARTED == empty.state
+
+
+def test_deformable_points_never_vote_for_the_pose():
+    X, desc = scene()
+    ctx = context()
+    depth_map(ctx, X, desc)
+    tracks = DeformableTracks(ctx)
+    flagged = np.arange(0, 40)
+    tracks.set_deformable(flagged)
+    assert ctx.deformable == set(flagged.tolist()) and all(ctx.map.points[int(i)].deformable for i in flagged)
+    local = Tracker(ctx).local_points()
+    assert not np.isin(local, flagged).any() and len(local) == len(ctx.map.points) - len(flagged)
+
+
+def test_deformable_tracks_reacquire_by_descriptor_and_widely_after_a_gap():
+    X, desc = scene()
+    ctx = context(reacquire_below=8, reacquire_wide_px=80.0, deformable_radius=20.0)
+    depth_map(ctx, X, desc)
+    tracks = DeformableTracks(ctx)
+    ids = np.arange(0, 30)
+    moved = X[ids] + np.array([0.02, 0.0, 0.0])  # the object deformed 2 cm sideways: predicted there
+    tracks.set_deformable(ids, moved)
+    gray = np.zeros((480, 640), np.uint8)
+
+    def frame(frame_id: int, shift_px: float) -> tuple[TrackResult, list[int]]:
+        """The object's features where the prediction puts them (moved ``shift_px``), nothing else matched; the
+        result and the points in the image."""
+        ctx.frame_id = frame_id
+        tracks.new_frame(gray)
+        pts = X.copy()
+        pts[ids] = moved
+        f, idx, _ = view(pts, desc, np.eye(4), sel=ids, shift_px=shift_px)
+        res = TrackResult(OK)
+        tracks.observe(f, np.eye(4), res, exclude=np.zeros(0, np.int64))
+        return res, idx.tolist()
+
+    res, seen = frame(10, 0.0)  # first frame: no flow yet, every point is re-acquired at its predicted pixel
+    assert seen == ids.tolist() and sorted(res.obs_ids.tolist()) == seen and not res.obs_inlier.any()
+    expect = CAM.project(moved)[np.argsort(ids)]
+    assert np.allclose(res.obs_uv[np.argsort(res.obs_ids)], expect, atol=1e-4)
+    assert np.allclose(res.obs_pos, X[res.obs_ids])  # with their rest positions
+    # a long gap (no flow) and 50 px away: only the wide radius finds them, the points having been followed
+    res, seen = frame(20, 50.0)
+    assert len(seen) > 20 and sorted(res.obs_ids.tolist()) == seen
+    ctx.config = SlamConfig(reacquire_below=8, reacquire_wide_px=20.0, deformable_radius=20.0)
+    tracks.drop_tracks(ids)
+    res, seen = frame(30, 50.0)
+    assert len(seen) > 20 and len(res.obs_ids) == 0  # the same gap without the wide radius loses them
+
+
+def test_config_defaults_are_documented_and_checked():
+    src = inspect.getsource(SlamConfig)
+    for f in dataclasses.fields(SlamConfig):
+        line = next(ln for ln in src.splitlines() if ln.strip().startswith(f"{f.name}:"))
+        assert "#" in line and len(line.split("#", 1)[1].strip()) > 10, f"{f.name} has no comment"
+    c = SlamConfig()
+    assert c.min_parallax == pytest.approx(np.deg2rad(1.0)) and c.flow_anchor_px == 0.0
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        c.flow_win = 21  # type: ignore[misc]
+    with pytest.raises(ValueError, match="reacquire_wide_px"):
+        SlamConfig(reacquire_wide_px=-1.0)
+    with pytest.raises(ValueError, match="flow_win"):
+        SlamConfig(flow_win=1)
