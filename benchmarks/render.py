@@ -48,7 +48,7 @@ def main():
                         r.render(np.eye(4))
                     ms = (time.perf_counter() - t) / n * 1e3
                     t = time.perf_counter()
-                    for k in range(n):
+                    for _ in range(n):
                         r.render(np.eye(4))
                     ms_static = (time.perf_counter() - t) / n * 1e3
                     rows.append({"resolution": f"{w}x{h}", "triangles": len(F), "mode": mode, "ssaa": ssaa,

@@ -80,7 +80,7 @@ def main():
         rows.append(dict(sweep="resolution", **run_case(m, width=w)))
     for h in (0.5, 1.0, 2.0, 4.0, 8.0, 1e9):
         rows.append(dict(sweep="huber", **run_case(m, huber=h)))
-    at19 = [r for r in rows if r["sweep"] == "modes" and r["modes"] == 19][0]
+    at19 = next(r for r in rows if r["sweep"] == "modes" and r["modes"] == 19)
     notes = (f"At 19 modes and {at19['points']} points: median LM solve {at19['solve_ms']:.2f} ms "
              f"(target ≤ 1 ms: {'met' if at19['solve_ms'] <= 1 else 'not met'}). Huber 1e9 = plain least squares: the 5 % "
              "outliers then bias the estimate. Resolution scales the focal length (same field of view), noise stays 0.5 px.")

@@ -141,7 +141,7 @@ def run_demo(scene: str = DEFAULT_SCENE, out: str | Path = "out/demo", regenerat
     video = out / "overlay.mp4"
     echo("[demo] replaying through the graph: " + " -> ".join(n.name for n in __import__(
         "simreal_nodes.scene.graph", fromlist=["required_nodes"]).required_nodes(sc)))
-    stats, report, counts = replay(str(bag), str(scene_yaml), lossless=True, record=str(run_bag),
+    stats, _report, counts = replay(str(bag), str(scene_yaml), lossless=True, record=str(run_bag),
                                    extra_params={"overlay": {"video": str(video.resolve())}}, echo=echo)
     if stats is None:
         raise SimrealError("the replay did not run")

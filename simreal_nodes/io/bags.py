@@ -10,12 +10,13 @@
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import os
 from collections import defaultdict
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Iterable, Iterator
 
 import numpy as np
 
@@ -48,7 +49,7 @@ def message_definitions(package: str = "simreal_msgs") -> dict[str, str]:
 @functools.lru_cache(maxsize=1)
 def typestore():
     """The ROS 2 Jazzy type store with simreal's messages registered."""
-    from rosbags.typesys import Stores, get_typestore, get_types_from_msg
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
     ts = get_typestore(Stores.ROS2_JAZZY)
     types = {}
@@ -87,12 +88,12 @@ class BagWriter:
         self.count = 0
         self._open = False
 
-    def open(self) -> "BagWriter":
+    def open(self) -> BagWriter:
         self._writer.open()
         self._open = True
         return self
 
-    def __enter__(self) -> "BagWriter":
+    def __enter__(self) -> BagWriter:
         return self.open()
 
     def __exit__(self, *exc) -> None:
@@ -267,7 +268,7 @@ def read_bag(path: str | Path, report: BagReport | None = None, topics: Iterable
             if med <= 0:
                 continue
             acc = 0
-            for k, dt in enumerate(dts):
+            for _k, dt in enumerate(dts):
                 acc += dt
                 if dt > 3.0 * med and dt > 5e7:
                     report.gaps.append((topic, acc * 1e-9, dt * 1e-9))
@@ -301,10 +302,8 @@ def _iter_rosbags(path: Path, wanted, only_headers):
                 raise _Unreadable(f"{type(e).__name__}: {e}") from None
             yield con.topic, con.msgtype, int(t), bytes(raw)
     finally:
-        try:
+        with contextlib.suppress(Exception):
             reader.close()
-        except Exception:  # noqa: BLE001
-            pass
 
 
 def _salvage_mcap(files, wanted, report: BagReport, only_headers: bool):

@@ -83,7 +83,7 @@ class Region:
         return m
 
     @classmethod
-    def from_spec(cls, d) -> "Region":
+    def from_spec(cls, d) -> Region:
         if isinstance(d, Region):
             return d
         if isinstance(d, str):
@@ -109,7 +109,7 @@ class Support:
         raise FemError(f"support kind must be clamped, pinned or sliding, got '{self.kind}'")
 
     @classmethod
-    def from_spec(cls, d) -> "Support":
+    def from_spec(cls, d) -> Support:
         comp = d.get("component")
         if isinstance(comp, str):
             comp = "xyz".index(comp)

@@ -310,8 +310,6 @@ class Renderer:
         ``real_depth`` (metres, real camera pixels, 0/NaN invalid): fragments farther than it are discarded
         (occlusion by real geometry). ``background`` (HxWx3 uint8): composited under the drawn pixels.
         """
-        import moderngl
-
         rc = self.render_cam
         self.fbo.use()
         self.ctx.viewport = (0, 0, rc.width, rc.height)
@@ -342,7 +340,7 @@ class Renderer:
         box = self.screen_box(T_world_cam, names)
         if box is None:
             return out
-        x0, y0, x1, y1 = box
+        x0, y0, _x1, _y1 = box
         # the camera pixels of the box (where it lands, and the real depth its fragments look up)
         cbox = box if self._map is None else self._camera_box(box)
         if cbox is None:
@@ -417,7 +415,6 @@ class Renderer:
     def _draw(self, T_world_cam, names, real_depth, occlusion_margin, depth_box=None) -> None:
         import moderngl
 
-        rc = self.render_cam
         self.ctx.enable(moderngl.DEPTH_TEST)
         self.ctx.front_face = "ccw"  # the projection keeps a counter-clockwise triangle counter-clockwise
         occlude = real_depth is not None

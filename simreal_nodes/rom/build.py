@@ -410,7 +410,7 @@ def build_joint_boot(spec, progress=None) -> ReducedModel:
 
     states = [(np.zeros(solid.N), ufix(t)) for t in thetas]
     path = []
-    u, info = solid.solve_states(states, path=path,
+    _u, info = solid.solve_states(states, path=path,
                                  progress=(lambda k: progress("snapshots", k, len(thetas), f"theta = {np.rad2deg(thetas[k - 1]):.1f} deg")) if progress else None)
     nv = mesh.p.shape[1]
     U = np.stack([solid.vertex_displacement(v) for v in path], axis=-1)
@@ -431,7 +431,7 @@ def build_joint_boot(spec, progress=None) -> ReducedModel:
                          [{"region": "zmin", "kind": "clamped"}, {"region": "zmax", "kind": "prescribed lever rotation"}],
                          {"lever": lv}, rigid_parameters=rigid)
     model.provenance = _provenance(spec, t0, {"method": "Newton along theta + NI-PGD", "newton_iterations": info.newton_iterations,
-                                              "lever_nodes": [int(nv), int(len(lever_pts))],
+                                              "lever_nodes": [int(nv), len(lever_pts)],
                                               "note": "self-contact of the folds is not modelled; nodes from lever_nodes[0] "
                                                       "are points of the rigid lever bar"})
     model.snapshots = snaps
@@ -508,7 +508,7 @@ def build_probe_nipgd(spec, progress=None) -> ReducedModel:
                          {"force_N": cc["force"], "direction": cc["direction"], "rings": cc["rings"]},
                          load_points=load_nodes, load_directions=np.asarray(dirs))
     model.provenance = _provenance(spec, t0, {"method": "Newton increments + NI-PGD (Eq. 5.4-5.5)", "newton_iterations": newton,
-                                              "volume_nodes": int(nv), "surface_vertices": int(len(V)),
+                                              "volume_nodes": int(nv), "surface_vertices": len(V),
                                               "note": "nodes >= volume_nodes are the scan surface, embedded in the tetrahedra"})
     model.snapshots = snaps
     return model

@@ -69,7 +69,7 @@ def nipgd(A: np.ndarray, max_terms: int = 50, tol: float = 1e-4, max_als: int = 
             vecs.append(v / np.linalg.norm(v))
         prev = None
         it = 0
-        for it in range(1, max_als + 1):
+        for it in range(1, max_als + 1):  # noqa: B007 - the sweeps run are read after the loop
             for k in range(A.ndim):
                 denom = np.prod([vecs[l] @ vecs[l] for l in range(A.ndim) if l != k])
                 vecs[k] = _contract_except(R, vecs, k) / denom

@@ -114,7 +114,7 @@ def pgd_solve(op: SeparatedOperator, load: SeparatedLoad, axes: list[ParameterAx
         R = np.zeros(len(free))
         prev = None
         it = 0
-        for it in range(1, max_fp_iter + 1):
+        for it in range(1, max_fp_iter + 1):  # noqa: B007 - the iterations run are read after the loop
             # --- R from the S^k ---
             alpha = np.array([np.prod([np.sum(w[k] * da[a][k] * S[k] ** 2) for k in range(D)]) for a in range(len(Ka))])
             beta = np.prod([Gl[k] @ (w[k] * S[k]) for k in range(D)], axis=0)  # (m,)

@@ -82,7 +82,7 @@ class AxisModes:
         """Both at once (the tracker's hot path)."""
         if self._pp is None or self._pp[0] != "cubic":
             return self.value(t, m), self.derivative(t, m)
-        _, x, c = self._pp
+        _, _x, c = self._pp
         i = self._interval(t)
         d = t - self._xl[i]
         ci = c[i, :, :m]
@@ -107,16 +107,16 @@ class AxisModes:
         if self._pp is None:
             raise ValueError(f"axis '{self.axis.name}' is discrete: it has no sensitivity")
         if self._pp[0] == "linear":
-            _, x, y, slope = self._pp
+            _, _x, _y, slope = self._pp
             return slope[:m, self._interval(t)].copy()
-        _, x, c = self._pp
+        _, _x, c = self._pp
         i = self._interval(t)
         d = t - self._xl[i]
         ci = c[i, :, :m]
         return (3 * ci[0] * d + 2 * ci[1]) * d + ci[2]
 
     def _index(self, t: float) -> int:
-        i = int(round(t))
+        i = round(t)
         if abs(t - i) > 1e-9 or not 0 <= i < self.modes.shape[1]:
             if len(self.axis.values) == 1:
                 return 0
@@ -218,12 +218,12 @@ class SeparatedField:
         S = self.space[: len(c)] if nodes is None else self.space[: len(c), nodes]
         return np.tensordot(dc[:, k], S, axes=(0, 0))
 
-    def view(self, nodes=None, n_modes: int | None = None, weights=None) -> "FieldView":
+    def view(self, nodes=None, n_modes: int | None = None, weights=None) -> FieldView:
         """The field at ``nodes`` (None: all), or, with ``weights`` (N, k) and ``nodes`` (N, k), at N points
         each interpolated from k nodes (Eq. 4.10's links, folded into the modes once)."""
         return FieldView(self, nodes, self._m(n_modes), weights)
 
-    def truncated(self, n_modes: int) -> "SeparatedField":
+    def truncated(self, n_modes: int) -> SeparatedField:
         m = self._m(n_modes)
         return SeparatedField(self.name, self.space[:m], [p[:m] for p in self.params], self.axes, self.unit,
                               self.components, None if self.error_vs_modes is None else self.error_vs_modes[:m])

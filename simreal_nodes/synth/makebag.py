@@ -46,9 +46,9 @@ class MsgFactory:
 
         bgr = cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR)
         if fmt == "jpeg":
-            ok, buf = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
+            _ok, buf = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
         else:
-            ok, buf = cv2.imencode(".png", bgr, [cv2.IMWRITE_PNG_COMPRESSION, 6])
+            _ok, buf = cv2.imencode(".png", bgr, [cv2.IMWRITE_PNG_COMPRESSION, 6])
         return self.Compressed(header=self.header(ns, frame), format=f"rgb8; {fmt} compressed bgr8",
                                data=np.frombuffer(buf.tobytes(), np.uint8))
 
@@ -120,7 +120,6 @@ def make_bag(name: str, out: str | Path, width: int = 640, height: int = 480, du
     cam = scene.camera
     r = Renderer(cam, ssaa=ssaa)
     scene.build(scene, r, models)
-    right_r = None
     if scene.stereo_baseline:
         # rectified stereo: the right camera shares K, no distortion on either after rectification
         from simreal_nodes.vision.camera import CameraModel
@@ -132,7 +131,7 @@ def make_bag(name: str, out: str | Path, width: int = 640, height: int = 480, du
     rng = np.random.default_rng(seed)
     fac = MsgFactory()
     frame = "camera_optical_frame"
-    n = int(round(scene.duration * scene.fps))
+    n = round(scene.duration * scene.fps)
     t0 = time.perf_counter()
     out = Path(out)
     T_map_world = scene.T_map_world()
@@ -144,7 +143,7 @@ def make_bag(name: str, out: str | Path, width: int = 640, height: int = 480, du
     with writer as w:
         for i in range(n):
             t = i / scene.fps
-            ns = EPOCH_S * 10**9 + int(round(t * 1e9))
+            ns = EPOCH_S * 10**9 + round(t * 1e9)
             truth = scene.update(scene, r, t)
             T = scene.camera_pose(t)
             rgb, depth = r.render(T)

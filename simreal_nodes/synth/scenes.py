@@ -9,8 +9,8 @@ user would know (camera topics, marker layout, where a virtual object is placed)
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 
@@ -419,7 +419,6 @@ def _probe_scene(kind: str, width, height, duration, fps, stereo: bool) -> Synth
     radius = 0.012
     contacts = {"bunny": [3, 9], "dragon": [2, 7], "crossed_beams": [None]}[kind]
     origin = np.array([0.35, 0.15, 0.0])
-    beam_b_origin = None
 
     def build(sc, r, models):
         add_environment(r, center=(0.35, 0.15), seed=4)

@@ -14,7 +14,7 @@ from simreal_nodes import geometry as G
 # Textures (real photographs shipped with scikit-image)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def texture(name: str) -> np.ndarray:
     """RGB uint8 texture: brick, gravel, grass (photographs), tinted variants for materials."""
     import skimage.data as d
@@ -134,10 +134,7 @@ def arc_trajectory(t: np.ndarray, target, radius: float, height: float, az0: flo
     """Hand-held-like arc around ``target``: azimuth sweeps az0 -> az1 (-> back if ``period``), height fixed."""
     target = np.asarray(target, dtype=np.float64)
     T = t[-1] if len(t) > 1 and t[-1] > 0 else 1.0
-    if period:
-        ph = 0.5 - 0.5 * np.cos(2 * np.pi * t / period)
-    else:
-        ph = 0.5 - 0.5 * np.cos(np.pi * t / T)
+    ph = 0.5 - 0.5 * np.cos(2 * np.pi * t / period) if period else 0.5 - 0.5 * np.cos(np.pi * t / T)
     az = az0 + (az1 - az0) * ph
     eyes = np.c_[target[0] + radius * np.cos(az), target[1] + radius * np.sin(az), np.full(len(t), target[2] + height)]
     eyes = eyes + smooth_noise(t, jitter, seed)

@@ -32,11 +32,11 @@ class Features:
         """Measurement variance per feature (pixels^2), growing with the pyramid level."""
         return (self.scale_factor ** (2 * self.octave)).astype(np.float64)
 
-    def subset(self, idx) -> "Features":
+    def subset(self, idx) -> Features:
         return Features(self.uv[idx], self.und[idx], self.octave[idx], self.desc[idx], self.response[idx], self.scale_factor)
 
     @classmethod
-    def empty(cls, scale_factor: float = 1.2) -> "Features":
+    def empty(cls, scale_factor: float = 1.2) -> Features:
         return cls(np.zeros((0, 2), np.float32), np.zeros((0, 2)), np.zeros(0, np.int32), np.zeros((0, 32), np.uint8),
                    np.zeros(0, np.float32), scale_factor)
 
@@ -58,7 +58,7 @@ class OrbExtractor:
                                            edgeThreshold=19, patchSize=31, fastThreshold=max(5, fast_threshold // 3))
         f = 1.0 / self.sf
         per = self.n * (1 - f) / (1 - f ** self.levels)
-        self.per_level = [int(round(per * f ** k)) for k in range(self.levels)]
+        self.per_level = [round(per * f ** k) for k in range(self.levels)]
         self.per_level[0] += self.n - sum(self.per_level)
 
     def extract(self, gray: np.ndarray, cam: CameraModel | None = None, mask: np.ndarray | None = None) -> Features:

@@ -1,7 +1,5 @@
 """Bags written by rosbags: self-describing custom types, damage reports, salvage of truncated files."""
 
-import os
-import shutil
 
 import numpy as np
 import pytest
@@ -27,7 +25,7 @@ def test_custom_message_round_trip_is_self_describing(tmp_path, storage):
     from rosbags.highlevel import AnyReader
     from rosbags.typesys import Stores, get_typestore
     with AnyReader([path], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as r:
-        (con, t, raw), = list(r.messages())
+        (con, _t, raw), = list(r.messages())
         back = r.deserialize(raw, con.msgtype)
     assert con.msgtype == "simreal_msgs/msg/ModelParameters"
     assert back.names == ["s"] and back.values[0] == 0.25 and back.inliers == 37 and back.model_id == "alu.h5#abc"
