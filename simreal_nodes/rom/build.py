@@ -23,11 +23,14 @@ import os
 import platform
 import subprocess
 import time
+from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 import scipy.sparse as sp
 import yaml
+from numpy.typing import NDArray
 
 from simreal_nodes import __version__
 from simreal_nodes.errors import FemError, SceneError
@@ -39,10 +42,18 @@ from simreal_nodes.rom.model import ReducedModel
 from simreal_nodes.rom.separated import Axis, SeparatedField
 from simreal_nodes.scene.validate import Context, Enum, ListOf, Number, Record, Str, Vector
 
+if TYPE_CHECKING:
+    import skfem
+
 REPO = Path(__file__).resolve().parents[2]
 SPEC_DIR = Path(__file__).resolve().parents[1] / "specs"
 STRESS_COMPONENTS = ["xx", "yy", "zz", "xy", "yz", "xz"]
 KEEP_SNAPSHOTS = False  # benchmarks set this to compare NI-PGD with HOSVD on the same tensors
+
+# A validated model spec: the YAML document after SPECS[kind].validate (the schema below gives its keys).
+ModelSpec = dict[str, Any]
+# progress(stage, done, total, message): what `simreal build-model` prints.
+Progress = Callable[[str, int, int, str], object]
 
 # ------------------------------------------------------------------------------------------------
 # Spec schema
@@ -57,7 +68,7 @@ MATERIAL = Record({
 class _Region(Str):
     """A face name (xmin ...) or {face, box}."""
 
-    def validate(self, v, path, ctx):
+    def validate(self, v: Any, path: str, ctx: Context) -> Any:
         if isinstance(v, str):
             if v not in fem.FACES:
                 self.fail(path, "a face name " + ", ".join(fem.FACES) + " or {face, box}", v, ctx)
@@ -148,7 +159,7 @@ def data_path(p: str) -> Path:
     return Path(p)
 
 
-def load_spec(path: str | Path) -> dict:
+def load_spec(path: str | Path) -> ModelSpec:
     path = Path(path)
     if not path.exists() and (SPEC_DIR / path).exists():
         path = SPEC_DIR / path
@@ -161,7 +172,7 @@ def load_spec(path: str | Path) -> dict:
         raise SceneError(f"{path}: not valid YAML: {e}") from None
     if not isinstance(doc, dict) or doc.get("kind") not in SPECS:
         raise SceneError(f"{path}: kind: expected one of {', '.join(SPECS)}; found {doc.get('kind') if isinstance(doc, dict) else doc!r}")
-    spec = SPECS[doc["kind"]].validate(doc, "", Context(str(path), path.parent))
+    spec: ModelSpec = SPECS[doc["kind"]].validate(doc, "", Context(str(path), path.parent))
     if spec["simreal_model_spec"] != 1:
         raise SceneError(f"{path}: simreal_model_spec: expected 1; found {spec['simreal_model_spec']}")
     spec["_text"] = path.read_text()
@@ -169,17 +180,17 @@ def load_spec(path: str | Path) -> dict:
     return spec
 
 
-def _material(spec) -> materials.Material:
+def _material(spec: ModelSpec) -> materials.Material:
     m = spec["material"]
     return materials.make_material(m["law"], m["E"], m["nu"], spec["name"])
 
 
-def _supports(spec):
+def _supports(spec: ModelSpec) -> list[fem.Support]:
     return [fem.Support(fem.Region.from_spec(s["region"]), s["kind"], None if s["component"] is None else "xyz".index(s["component"]))
             for s in spec["supports"]]
 
 
-def _provenance(spec, t0: float, extra: dict | None = None) -> dict:
+def _provenance(spec: ModelSpec, t0: float, extra: dict[str, Any] | None = None) -> dict[str, Any]:
     import h5py
     import scipy
     import skfem
@@ -197,13 +208,13 @@ def _provenance(spec, t0: float, extra: dict | None = None) -> dict:
     return d
 
 
-def _cell_type(mesh) -> str:
+def _cell_type(mesh: skfem.Mesh) -> str:
     import skfem
 
     return {skfem.MeshTet1: "tet4", skfem.MeshHex1: "hex8"}[type(mesh)]
 
 
-def _stress_modes(solid: fem.Solid, dof_modes: np.ndarray) -> np.ndarray:
+def _stress_modes(solid: fem.Solid, dof_modes: NDArray[np.float64]) -> NDArray[np.float64]:
     """Stress of each (linear) displacement mode at the vertices: (m, n_vert, 6)."""
     return np.stack([solid.stress(u)["cauchy"] for u in dof_modes])
 
@@ -212,7 +223,7 @@ def _stress_modes(solid: fem.Solid, dof_modes: np.ndarray) -> np.ndarray:
 # beam_pgd: intrusive PGD, Algorithm 2.1
 
 
-def build_beam_pgd(spec, progress=None) -> ReducedModel:
+def build_beam_pgd(spec: ModelSpec, progress: Progress | None = None) -> ReducedModel:
     t0 = time.time()
     g, ms = spec["geometry"], spec["mesh"]
     L, W, H = g["length"], g["width"], g["height"]
@@ -248,11 +259,11 @@ def build_beam_pgd(spec, progress=None) -> ReducedModel:
         axes_vals = [xs, ysx]
         loads_G = [np.eye(len(xs))[ix], np.eye(len(ysx))[iy]]
         names = [("s_x", "load position on the top face, x"), ("s_y", "load position on the top face, y")]
-    Hm = sp.lil_matrix((solid.N, len(top)))
+    Hl = sp.lil_matrix((solid.N, len(top)))
     for j, v in enumerate(top):
         for c in range(3):
-            Hm[solid.vertex_dofs(v)[c], j] = force[c]
-    Hm = Hm.tocsr()
+            Hl[solid.vertex_dofs(v)[c], j] = force[c]
+    Hm = Hl.tocsr()
     K1 = solid.stiffness()  # E units: K = E * K1
     E0 = mat.E
     op_d = [np.ones(len(v)) for v in axes_vals]
@@ -264,7 +275,8 @@ def build_beam_pgd(spec, progress=None) -> ReducedModel:
         op_d.append(Ev / E0)
         loads_G.append(np.ones((loads_G[0].shape[0], len(Ev))))
     op = pgd.SeparatedOperator([(K1 * 1.0, op_d)])
-    load = pgd.SeparatedLoad(Hm / E0, loads_G)
+    # scipy-stubs type csr / scalar as any sparse format; it is a csr_matrix
+    load = pgd.SeparatedLoad(cast(sp.csr_matrix, Hm / E0), loads_G)
     cfg = spec["pgd"]
     res = pgd.pgd_solve(op, load, pgd_axes, solid.free, max_modes=cfg["max_modes"], tol=cfg["tol"],
                         max_fp_iter=cfg["fixed_point_iterations"],
@@ -292,12 +304,12 @@ def build_beam_pgd(spec, progress=None) -> ReducedModel:
         rhs = Hm[:, idx].toarray()[solid.free] / E
         U = np.zeros((solid.N, len(idx)))
         U[solid.free] = lu.solve(rhs)
-        for k, j in enumerate(idx):
+        for k, jv in enumerate(idx):
             Us.append(U[:, k][solid.basis.nodal_dofs.T])
             if ld["where"] == "centreline":
-                mu = [axes_vals[0][j]]
+                mu = [axes_vals[0][jv]]
             else:
-                mu = [xs[np.argmax(loads_G[0][j])], ysx[np.argmax(loads_G[1][j])]]
+                mu = [xs[np.argmax(loads_G[0][jv])], ysx[np.argmax(loads_G[1][jv])]]
             if E_axis:
                 mu.append(E)
             mus.append(mu)
@@ -316,14 +328,14 @@ def build_beam_pgd(spec, progress=None) -> ReducedModel:
     return model
 
 
-def _error_vs_modes(fld: SeparatedField, mus, truths) -> np.ndarray:
+def _error_vs_modes(fld: SeparatedField, mus: list[list[float]], truths: list[NDArray[np.float64]]) -> NDArray[np.float64]:
     """Relative error ||u_rom - u_fem|| / ||u_fem|| over the validation set, for 1..n modes."""
     T = np.stack(truths)
     nt = np.linalg.norm(T)
     out = []
     for n in range(1, fld.n_modes + 1):
         R = np.stack([fld.evaluate(mu, n_modes=n) for mu in mus])
-        out.append(np.linalg.norm(R - T) / max(nt, 1e-300))
+        out.append(np.linalg.norm(R - T) / max(float(nt), 1e-300))
     return np.asarray(out)
 
 
@@ -331,23 +343,27 @@ def _error_vs_modes(fld: SeparatedField, mus, truths) -> np.ndarray:
 # Snapshot-based builders + NI-PGD
 
 
-def _nipgd_fields(name_axes, U: np.ndarray, S: np.ndarray, axes, cfg, progress) -> dict:
+def _nipgd_fields(name_axes: list[str], U: NDArray[np.float64], S: NDArray[np.float64], axes: list[Axis], cfg: dict[str, Any],
+                  progress: Progress | None) -> dict[str, Any]:
     """Displacement (n_vert, 3, *axes) and stress (n_vert, 6, *axes) tensors -> separated fields."""
-    out = {}
+    out: dict[str, Any] = {}  # the fields, and "_snapshots" when KEEP_SNAPSHOTS
     if KEEP_SNAPSHOTS:
         out["_snapshots"] = {"displacement": U, "stress": S}
     for fname, T, unit, comps in (("displacement", U, "m", ["x", "y", "z"]), ("stress", S, "Pa", STRESS_COMPONENTS)):
         nv, nc = T.shape[:2]
         A = T.reshape((nv * nc,) + T.shape[2:])
         scale = np.abs(A).max() or 1.0
-        res = nip.nipgd(A / scale, max_terms=cfg["max_terms"], tol=cfg["tol"],
-                        progress=(lambda n, e, f=fname: progress(f"nipgd {f}", n, cfg["max_terms"], f"term {n}: error {e:.2e}")) if progress else None)
+        on_term: Callable[[int, float], object] | None = None
+        if progress:
+            def on_term(n: int, e: float, f: str = fname, p: Progress = progress) -> object:
+                return p(f"nipgd {f}", n, cfg["max_terms"], f"term {n}: error {e:.2e}")
+        res = nip.nipgd(A / scale, max_terms=cfg["max_terms"], tol=cfg["tol"], progress=on_term)
         space = (res.factors[0] * scale).reshape(res.n_terms, nv, nc)
         out[fname] = SeparatedField(fname, space, [f.copy() for f in res.factors[1:]], axes, unit, comps, res.errors)
     return out
 
 
-def build_beam_snapshots(spec, progress=None) -> ReducedModel:
+def build_beam_snapshots(spec: ModelSpec, progress: Progress | None = None) -> ReducedModel:
     t0 = time.time()
     g, ms, ld = spec["geometry"], spec["mesh"], spec["load"]
     L, W, H = g["length"], g["width"], g["height"]
@@ -388,7 +404,7 @@ def build_beam_snapshots(spec, progress=None) -> ReducedModel:
     return model
 
 
-def build_joint_boot(spec, progress=None) -> ReducedModel:
+def build_joint_boot(spec: ModelSpec, progress: Progress | None = None) -> ReducedModel:
     t0 = time.time()
     g, ms, lv = spec["geometry"], spec["mesh"], spec["lever"]
     mesh = meshes.joint_boot(ms["n_profile"], ms["n_around"], ms["n_thick"], g["height"], g["r_bottom"], g["r_top"],
@@ -401,7 +417,7 @@ def build_joint_boot(spec, progress=None) -> ReducedModel:
     pivot = np.asarray(lv["pivot"], dtype=np.float64)
     thetas = np.deg2rad(np.linspace(lv["theta_deg"][0], lv["theta_deg"][1], lv["n"]))
 
-    def ufix(theta):
+    def ufix(theta: float) -> NDArray[np.float64]:
         u = np.zeros(solid.N)
         Xt = X[:, top].T - pivot
         new = Xt @ rot_axis(lv["axis"], theta).T + pivot
@@ -409,7 +425,7 @@ def build_joint_boot(spec, progress=None) -> ReducedModel:
         return u
 
     states = [(np.zeros(solid.N), ufix(t)) for t in thetas]
-    path = []
+    path: list[NDArray[np.float64]] = []
     _u, info = solid.solve_states(states, path=path,
                                  progress=(lambda k: progress("snapshots", k, len(thetas), f"theta = {np.rad2deg(thetas[k - 1]):.1f} deg")) if progress else None)
     nv = mesh.p.shape[1]
@@ -438,7 +454,7 @@ def build_joint_boot(spec, progress=None) -> ReducedModel:
     return model
 
 
-def build_probe_nipgd(spec, progress=None) -> ReducedModel:
+def build_probe_nipgd(spec: ModelSpec, progress: Progress | None = None) -> ReducedModel:
     t0 = time.time()
     src = data_path(spec["surface"])
     V, F = meshes.read_surface(src)
@@ -481,7 +497,7 @@ def build_probe_nipgd(spec, progress=None) -> ReducedModel:
         f = np.zeros(solid.N)
         for v in patch:
             f[solid.vertex_dofs(v)] += cc["force"] * d / len(patch)
-        path = []
+        path: list[NDArray[np.float64]] = []
         try:
             _, info = solid.solve(f, steps=n_inc, path=path)
             newton.append(info.newton_iterations)
@@ -514,7 +530,7 @@ def build_probe_nipgd(spec, progress=None) -> ReducedModel:
     return model
 
 
-def lever_points(width: float, depth: float, z0: float, z1: float, step: float = 0.008) -> np.ndarray:
+def lever_points(width: float, depth: float, z0: float, z1: float, step: float = 0.008) -> NDArray[np.float64]:
     """Points on the four long faces of the lever bar (centred on the z axis), every ``step`` metres."""
     zs = np.arange(z0, z1 + 1e-9, step)
     a = np.arange(-width / 2, width / 2 + 1e-9, step / 2)
@@ -526,7 +542,7 @@ def lever_points(width: float, depth: float, z0: float, z1: float, step: float =
     return np.asarray(pts, dtype=np.float64)
 
 
-def _farthest_points(P: np.ndarray, k: int) -> np.ndarray:
+def _farthest_points(P: NDArray[np.float64], k: int) -> NDArray[np.int64]:
     k = min(k, len(P))
     chosen = [int(np.argmax(P[:, 2]))]
     d = np.linalg.norm(P - P[chosen[0]], axis=1)
@@ -537,13 +553,13 @@ def _farthest_points(P: np.ndarray, k: int) -> np.ndarray:
     return np.asarray(chosen)
 
 
-def _adjacency(tris, n):
+def _adjacency(tris: NDArray[np.int64], n: int) -> sp.csr_matrix:
     e = np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]])
     A = sp.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
     return (A + A.T).tocsr()
 
 
-def _rings(adj, node, rings):
+def _rings(adj: sp.csr_matrix, node: int, rings: int) -> list[int]:
     cur = {int(node)}
     for _ in range(rings):
         nxt = set(cur)
@@ -557,7 +573,7 @@ BUILDERS = {"beam_pgd": build_beam_pgd, "beam_snapshots": build_beam_snapshots, 
             "probe_nipgd": build_probe_nipgd}
 
 
-def build_model(spec: dict, progress=None) -> ReducedModel:
+def build_model(spec: ModelSpec, progress: Progress | None = None) -> ReducedModel:
     return BUILDERS[spec["kind"]](spec, progress)
 
 
@@ -565,7 +581,7 @@ def cache_dir() -> Path:
     return Path(os.environ.get("SIMREAL_CACHE", REPO / "cache")) / "models"
 
 
-def cached_model(spec_name: str, progress=None, rebuild: bool = False) -> Path:
+def cached_model(spec_name: str, progress: Progress | None = None, rebuild: bool = False) -> Path:
     """Path of the model built from a built-in (or given) spec, building it once into the cache.
 
     The cached file is rebuilt when the spec text changed since it was built.
