@@ -14,6 +14,7 @@ from __future__ import annotations
 import json
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -96,7 +97,8 @@ def evaluate_run(run_bag: Path, truth_bag: Path, scene: dict, out: Path) -> dict
     from simreal_nodes.assimilation.evaluate import compare, read_parameters
     from simreal_nodes.scene.graph import params_topic
 
-    results, series = {}, {}
+    results: dict[str, dict[str, Any]] = {}  # per object (or "object/parameter"): its comparison
+    series: dict[str, tuple[Any, ...]] = {}
     for o in scene["objects"]:
         if not (o["tracking"]["enabled"] or o["collision"]["enabled"]):
             continue

@@ -17,10 +17,14 @@ from collections import defaultdict
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from simreal_nodes.errors import BagError
+
+if TYPE_CHECKING:
+    from rosbags.interfaces import Connection
 
 MSG_PACKAGES = ("simreal_msgs",)
 
@@ -83,7 +87,7 @@ class BagWriter:
             raise BagError(f"output bag {self.path} already exists; choose a new name")
         self._ts = typestore()
         self._writer = Writer(self.path, version=9, storage_plugin=storage_plugin(storage))
-        self._connections: dict[str, object] = {}
+        self._connections: dict[str, Connection] = {}
         self._types: dict[str, str] = {}
         self.count = 0
         self._open = False

@@ -588,7 +588,7 @@ def slam_room(width=640, height=480, duration=10.0, fps=30.0) -> SynthScene:
                       duration, {}, build, update, cam_pose, yaml, depth=True, stereo_baseline=0.12)
 
 
-SCENES = {
+SCENES: dict[str, Callable[..., SynthScene]] = {
     "slam_room": slam_room,
     "aluminium_beam": aluminium_beam,
     # the load close to the clamp, where the images barely see it (low sensitivity, large variance)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import functools
+from typing import Any
 
 import numpy as np
 
@@ -29,7 +30,7 @@ def sequence(name: str, width=640, height=480, duration=None, fps=30.0, stereo=F
     r = Renderer(cam, ssaa=ssaa)
     sc.build(sc, r, models)
     rng = np.random.default_rng(seed)
-    out = {"cam": cam, "gray": [], "rgb": [], "depth": [], "right": [], "T": [], "truth": [], "scene": sc}
+    out: dict[str, Any] = {"cam": cam, "gray": [], "rgb": [], "depth": [], "right": [], "T": [], "truth": [], "scene": sc}
     T_mw = sc.T_map_world()
     for i in range(round(sc.duration * sc.fps)):
         t = i / sc.fps
