@@ -173,14 +173,16 @@ class BagReport:
     def summary(self) -> str:
         lines = [f"bag {self.path}: " + ", ".join(f"{t} {n}" for t, n in sorted(self.counts.items()))]
         if self.damage:
-            lines.append(f"  damaged: {self.damage}" + (" (salvaged the messages before the damage)" if self.salvaged else ""))
+            lines.append(f"  damaged: {self.damage}"
+                         + (" (salvaged the messages before the damage)" if self.salvaged else ""))
         for t, at, gap in self.gaps[:20]:
             lines.append(f"  gap on {t}: {gap * 1e3:.1f} ms without messages at t={at:.3f} s")
         for t, i, s in self.out_of_order[:20]:
             lines.append(f"  out-of-order stamp on {t}: message {i} has stamp {s:.6f} s, earlier than the one before")
         for t, i, e in self.undecodable[:20]:
             lines.append(f"  undecodable message {i} on {t}: {e}")
-        extra = self.problems - min(20, len(self.gaps)) - min(20, len(self.out_of_order)) - min(20, len(self.undecodable)) - int(bool(self.damage))
+        extra = (self.problems - min(20, len(self.gaps)) - min(20, len(self.out_of_order))
+                 - min(20, len(self.undecodable)) - int(bool(self.damage)))
         if extra > 0:
             lines.append(f"  ... and {extra} more problems")
         return "\n".join(lines)

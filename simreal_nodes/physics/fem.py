@@ -132,7 +132,8 @@ class SolveInfo:
     message: str = ""
 
 
-RIGID_NAMES_3D = ["translation x", "translation y", "translation z", "rotation about x", "rotation about y", "rotation about z"]
+RIGID_NAMES_3D = ["translation x", "translation y", "translation z",
+                  "rotation about x", "rotation about y", "rotation about z"]
 RIGID_NAMES_2D = ["translation x", "translation y", "rotation about z"]
 
 
@@ -246,7 +247,8 @@ class Solid:
 
     def _scalar_grads(self):
         if self._grads is None:
-            self._grads = np.stack([self.sbasis.basis[a][0].grad for a in range(self.sbasis.Nbfun)])  # (nb, dim, ne, nq)
+            # (nb, dim, ne, nq)
+            self._grads = np.stack([self.sbasis.basis[a][0].grad for a in range(self.sbasis.Nbfun)])
         return self._grads
 
     # -- assembly -----------------------------------------------------------------------------
@@ -351,7 +353,8 @@ class Solid:
 
         return float(one.assemble(sb)) * self.thickness
 
-    def patch_load(self, region: RegionSpec, center: ArrayLike, radius: float, total_force: ArrayLike) -> NDArray[np.float64]:
+    def patch_load(self, region: RegionSpec, center: ArrayLike, radius: float,
+                   total_force: ArrayLike) -> NDArray[np.float64]:
         """A disk of uniform pressure (the foam beam's lead disks): total force exactly ``total_force``."""
         c = np.asarray(center, dtype=np.float64).reshape(-1, 1)
         F = np.asarray(total_force, dtype=np.float64)
@@ -389,7 +392,8 @@ class Solid:
         return self._solve_free(self.stiffness(), np.asarray(f) * self._scale)
 
     def solve(self, f: NDArray[np.float64], steps: int = 10, tol: float = 1e-9, max_iter: int = 25,
-              u0: NDArray[np.float64] | None = None, path: list[NDArray[np.float64]] | None = None, min_step: float = 1e-4,
+              u0: NDArray[np.float64] | None = None, path: list[NDArray[np.float64]] | None = None,
+              min_step: float = 1e-4,
               progress: Callable[[int], object] | None = None,
               u_fixed: NDArray[np.float64] | None = None) -> tuple[NDArray[np.float64], SolveInfo]:
         """Newton with load stepping: loads (and prescribed displacements ``u_fixed`` on the fixed dofs)
@@ -400,8 +404,9 @@ class Solid:
         states = [((k + 1) / steps * f, (k + 1) / steps * uf) for k in range(steps)]
         return self.solve_states(states, tol, max_iter, u0, path, min_step, progress)
 
-    def solve_states(self, states: Sequence[tuple[NDArray[np.float64], NDArray[np.float64]]], tol: float = 1e-9, max_iter: int = 25,
-                     u0: NDArray[np.float64] | None = None, path: list[NDArray[np.float64]] | None = None, min_step: float = 1e-3,
+    def solve_states(self, states: Sequence[tuple[NDArray[np.float64], NDArray[np.float64]]], tol: float = 1e-9,
+                     max_iter: int = 25, u0: NDArray[np.float64] | None = None,
+                     path: list[NDArray[np.float64]] | None = None, min_step: float = 1e-3,
                      progress: Callable[[int], object] | None = None) -> tuple[NDArray[np.float64], SolveInfo]:
         """Follow a sequence of load states [(f, u_fixed), ...] (newtons; metres on the fixed dofs),
         interpolating linearly between consecutive states and halving the sub-step when Newton fails."""
@@ -457,7 +462,8 @@ class Solid:
             res = np.linalg.norm(r[self.free]) / ref
             if not np.isfinite(res):
                 return u, False, it, res
-            if not pending_bc and (res < tol or (step <= 1e-12 * max(np.linalg.norm(u), 1e-300) and res < np.sqrt(tol))):
+            if not pending_bc and (res < tol
+                                   or (step <= 1e-12 * max(np.linalg.norm(u), 1e-300) and res < np.sqrt(tol))):
                 return u, True, it, res
             if it == max_iter:
                 break

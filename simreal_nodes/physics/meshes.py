@@ -81,7 +81,8 @@ def joint_boot(n_profile: int = 48, n_around: int = 24, n_thick: int = 2, height
                 # skfem MeshHex vertex order: (0,0,0),(1,0,0),(0,1,0),(0,0,1),(1,1,0),(1,0,1),(0,1,1),(1,1,1)
                 # local axes: a = profile, b = thickness, c = around
                 v = lambda a, b, c: idx[i + a, j + b, k1 if c else k]  # noqa: E731, B023 - called in the iteration that defines it
-                cells.append([v(0, 0, 0), v(1, 0, 0), v(0, 1, 0), v(0, 0, 1), v(1, 1, 0), v(1, 0, 1), v(0, 1, 1), v(1, 1, 1)])
+                cells.append([v(0, 0, 0), v(1, 0, 0), v(0, 1, 0), v(0, 0, 1),
+                              v(1, 1, 0), v(1, 0, 1), v(0, 1, 1), v(1, 1, 1)])
     t_cells = np.asarray(cells, dtype=np.int64).T
     p = P.reshape(-1, 3).T
     m = skfem.MeshHex(np.ascontiguousarray(p), np.ascontiguousarray(t_cells))

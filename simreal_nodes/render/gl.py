@@ -81,7 +81,8 @@ void main() {
     // u_depth_map: this render pixel's real-camera pixel (lens distortion, supersampling), negative outside
     vec2 m = texelFetch(u_depth_map, ivec2(gl_FragCoord.xy), 0).xy;
     float real = 0.0;
-    if (m.x >= 0.0) real = texture(u_real_depth, vec2((m.x + 0.5) / u_real_size.x, 1.0 - (m.y + 0.5) / u_real_size.y)).r;
+    if (m.x >= 0.0)
+        real = texture(u_real_depth, vec2((m.x + 0.5) / u_real_size.x, 1.0 - (m.y + 0.5) / u_real_size.y)).r;
     if (real > 0.0 && real < v_pos.z - u_occlusion_margin) discard;
 #endif
     vec3 base;
@@ -219,7 +220,8 @@ class Renderer:
             self._map = None
         rc = self.render_cam
         self.fbo = self.ctx.framebuffer(
-            color_attachments=[self.ctx.texture((rc.width, rc.height), 4), self.ctx.texture((rc.width, rc.height), 1, dtype="f4")],
+            color_attachments=[self.ctx.texture((rc.width, rc.height), 4),
+                               self.ctx.texture((rc.width, rc.height), 1, dtype="f4")],
             depth_attachment=self.ctx.depth_renderbuffer((rc.width, rc.height)))
         # compositing needs colour and coverage only: a framebuffer without the metric-depth attachment
         self.patch_fbo = self.ctx.framebuffer(color_attachments=[self.fbo.color_attachments[0]],
@@ -324,7 +326,8 @@ class Renderer:
         self.fbo.clear(*self.background, 0.0, depth=1.0)  # type: ignore[call-arg, misc]
         self._draw(T_world_cam, names, real_depth, occlusion_margin)
         rgb = np.frombuffer(self.fbo.read(components=3, attachment=0), np.uint8).reshape(rc.height, rc.width, 3)[::-1]
-        depth = np.frombuffer(self.fbo.read(components=1, attachment=1, dtype="f4"), np.float32).reshape(rc.height, rc.width)[::-1]
+        depth = np.frombuffer(self.fbo.read(components=1, attachment=1, dtype="f4"),
+                              np.float32).reshape(rc.height, rc.width)[::-1]
         return self._to_camera(rgb, depth, background, distort)
 
     def composite(self, T_world_cam: np.ndarray, background: np.ndarray, names: list[str] | None = None,
@@ -380,7 +383,8 @@ class Renderer:
                 if np.all(X[:, 2] <= self.near):
                     continue  # wholly behind the camera
                 return 0, 0, rc.width, rc.height
-            uv = np.c_[rc.fx * X[:, 0] / X[:, 2] + rc.K[0, 1] * X[:, 1] / X[:, 2] + rc.cx, rc.fy * X[:, 1] / X[:, 2] + rc.cy]
+            uv = np.c_[rc.fx * X[:, 0] / X[:, 2] + rc.K[0, 1] * X[:, 1] / X[:, 2] + rc.cx,
+                       rc.fy * X[:, 1] / X[:, 2] + rc.cy]
             lo, hi = np.minimum(lo, uv.min(axis=0)), np.maximum(hi, uv.max(axis=0))
         if not np.all(np.isfinite(lo)):
             return None
@@ -486,7 +490,8 @@ class Renderer:
             inside = np.all(np.isfinite(uv), axis=-1) & (uv[..., 0] > -0.5) & (uv[..., 0] < cam.width - 0.5) \
                 & (uv[..., 1] > -0.5) & (uv[..., 1] < cam.height - 0.5)
             m = np.where(inside[..., None], uv, -1.0).astype(np.float32)
-            self._depth_map_tex = self.ctx.texture((rc.width, rc.height), 2, np.ascontiguousarray(m[::-1]).tobytes(), dtype="f4")
+            self._depth_map_tex = self.ctx.texture((rc.width, rc.height), 2, np.ascontiguousarray(m[::-1]).tobytes(),
+                                                   dtype="f4")
             self._depth_map_tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
         self._real_depth_tex.write(np.ascontiguousarray(d[::-1]).tobytes(),
                                    viewport=(x0, cam.height - y1, x1 - x0, y1 - y0))
@@ -510,7 +515,8 @@ class Renderer:
             cov = cv2.remap(val_i, mm[..., 0], mm[..., 1], cv2.INTER_LINEAR)
             near = cv2.remap(depth, self._map[..., 0], self._map[..., 1], cv2.INTER_NEAREST)
         else:
-            rgb_o, inv_o, cov = rgb_i[: cam.height, : cam.width], inv_i[: cam.height, : cam.width], val_i[: cam.height, : cam.width]
+            rgb_o, inv_o, cov = (rgb_i[: cam.height, : cam.width], inv_i[: cam.height, : cam.width],
+                                 val_i[: cam.height, : cam.width])
             c = s // 2
             near = depth[c::s, c::s][: cam.height, : cam.width]
         full = cov > 0.9999

@@ -95,22 +95,27 @@ NIPGD = Record({"max_terms": Number(integer=True, lo=1, default=30), "tol": Numb
 
 SPECS = {
     "beam_pgd": Record({**COMMON,
-        "geometry": Record({"length": Number(lo=0, lo_open=True, required=True), "width": Number(lo=0, lo_open=True, required=True),
+        "geometry": Record({"length": Number(lo=0, lo_open=True, required=True),
+                            "width": Number(lo=0, lo_open=True, required=True),
                             "height": Number(lo=0, lo_open=True, required=True)}),
-        "mesh": Record({"cells": Vector(3, what="[nx, ny, nz]", required=True), "element": Enum(("hex", "tet"), default="hex"),
+        "mesh": Record({"cells": Vector(3, what="[nx, ny, nz]", required=True),
+                        "element": Enum(("hex", "tet"), default="hex"),
                         "order": Number(integer=True, lo=1, hi=2, default=2)}),
         "supports": ListOf(SUPPORT, min_len=1, required=True),
         "load": Record({"force": Number(lo=0, lo_open=True, required=True), "direction": Vector(3, default=[0, 0, -1]),
                         "where": Enum(("centreline", "top_face"), default="centreline"),
                         "x_range": Vector(2, nullable=True), "y_range": Vector(2, nullable=True)}),
-        "young_modulus_axis": Record({"range": Vector(2, required=True), "n": Number(integer=True, lo=2, default=9)}, nullable=True),
-        "pgd": Record({"max_modes": Number(integer=True, lo=1, default=30), "tol": Number(lo=0, lo_open=True, default=1e-5),
+        "young_modulus_axis": Record({"range": Vector(2, required=True), "n": Number(integer=True, lo=2, default=9)},
+                                     nullable=True),
+        "pgd": Record({"max_modes": Number(integer=True, lo=1, default=30),
+                       "tol": Number(lo=0, lo_open=True, default=1e-5),
                        "fixed_point_iterations": Number(integer=True, lo=1, default=40)}),
         "validation_every": Number("FEM truth at every k-th load position", integer=True, lo=1, default=4),
         "interpolation": Enum(("cubic", "linear"), default="cubic"),
     }),
     "beam_snapshots": Record({**COMMON,
-        "geometry": Record({"length": Number(lo=0, lo_open=True, required=True), "width": Number(lo=0, lo_open=True, required=True),
+        "geometry": Record({"length": Number(lo=0, lo_open=True, required=True),
+                            "width": Number(lo=0, lo_open=True, required=True),
                             "height": Number(lo=0, lo_open=True, required=True)}),
         "mesh": Record({"cells": Vector(3, required=True), "element": Enum(("hex", "tet"), default="hex"),
                         "order": Number(integer=True, lo=1, hi=2, default=1)}),
@@ -124,10 +129,13 @@ SPECS = {
     }),
     "joint_boot": Record({**COMMON,
         "geometry": Record({k: Number(lo=0, lo_open=True, default=d) for k, d in
-                            (("height", 0.12), ("r_bottom", 0.05), ("r_top", 0.018), ("wall", 0.004), ("fold_depth", 0.008))}
+                            (("height", 0.12), ("r_bottom", 0.05), ("r_top", 0.018), ("wall", 0.004),
+                             ("fold_depth", 0.008))}
                            | {"folds": Number(integer=True, lo=0, default=3)}),
-        "mesh": Record({"n_profile": Number(integer=True, lo=4, default=36), "n_around": Number(integer=True, lo=8, default=24),
-                        "n_thick": Number(integer=True, lo=1, default=1), "order": Number(integer=True, lo=1, hi=2, default=1)}),
+        "mesh": Record({"n_profile": Number(integer=True, lo=4, default=36),
+                        "n_around": Number(integer=True, lo=8, default=24),
+                        "n_thick": Number(integer=True, lo=1, default=1),
+                        "order": Number(integer=True, lo=1, hi=2, default=1)}),
         "lever": Record({"pivot": Vector(3, default=[0, 0, 0]), "axis": Enum(("x", "y"), default="y"),
                          "theta_deg": Vector(2, default=[0, 52]), "n": Number(integer=True, lo=3, default=27),
                          "bar": Vector(4, what="[width, depth, z_from, z_to] of the rigid lever bar (metres)",
@@ -136,13 +144,16 @@ SPECS = {
     }),
     "probe_nipgd": Record({**COMMON,
         "surface": Str("surface mesh; 'data:' prefix = the shared data folder", required=True),
-        "transform": Record({"rotate_deg": Vector(3, default=[0, 0, 0]), "scale": Number(lo=0, lo_open=True, default=1.0),
+        "transform": Record({"rotate_deg": Vector(3, default=[0, 0, 0]),
+                             "scale": Number(lo=0, lo_open=True, default=1.0),
                              "height_m": Number(lo=0, lo_open=True, nullable=True)}),
-        "mesh": Record({"cell_size": Number("grid spacing as a fraction of the height", lo=0, lo_open=True, default=0.06)}),
+        "mesh": Record({"cell_size": Number("grid spacing as a fraction of the height", lo=0, lo_open=True,
+                                            default=0.06)}),
         "base_fraction": Number("nodes below this fraction of the height are clamped", lo=0, hi=0.5, default=0.05),
         "contact": Record({"points": Number(integer=True, lo=1, default=16),
                            "min_height_fraction": Number(lo=0, hi=1, default=0.3),
-                           "rings": Number("patch = contact node + this many graph rings", integer=True, lo=0, default=2),
+                           "rings": Number("patch = contact node + this many graph rings", integer=True, lo=0,
+                                           default=2),
                            "direction": Enum(("centroid", "normal"), default="centroid"),
                            "force": Number("largest total force, N", lo=0, lo_open=True, required=True),
                            "increments": Number(integer=True, lo=2, default=10)}),
@@ -171,7 +182,8 @@ def load_spec(path: str | Path) -> ModelSpec:
     except yaml.YAMLError as e:
         raise SceneError(f"{path}: not valid YAML: {e}") from None
     if not isinstance(doc, dict) or doc.get("kind") not in SPECS:
-        raise SceneError(f"{path}: kind: expected one of {', '.join(SPECS)}; found {doc.get('kind') if isinstance(doc, dict) else doc!r}")
+        found = doc.get("kind") if isinstance(doc, dict) else doc
+        raise SceneError(f"{path}: kind: expected one of {', '.join(SPECS)}; found {found!r}")
     spec: ModelSpec = SPECS[doc["kind"]].validate(doc, "", Context(str(path), path.parent))
     if spec["simreal_model_spec"] != 1:
         raise SceneError(f"{path}: simreal_model_spec: expected 1; found {spec['simreal_model_spec']}")
@@ -186,7 +198,8 @@ def _material(spec: ModelSpec) -> materials.Material:
 
 
 def _supports(spec: ModelSpec) -> list[fem.Support]:
-    return [fem.Support(fem.Region.from_spec(s["region"]), s["kind"], None if s["component"] is None else "xyz".index(s["component"]))
+    return [fem.Support(fem.Region.from_spec(s["region"]), s["kind"],
+                        None if s["component"] is None else "xyz".index(s["component"]))
             for s in spec["supports"]]
 
 
@@ -280,7 +293,8 @@ def build_beam_pgd(spec: ModelSpec, progress: Progress | None = None) -> Reduced
     cfg = spec["pgd"]
     res = pgd.pgd_solve(op, load, pgd_axes, solid.free, max_modes=cfg["max_modes"], tol=cfg["tol"],
                         max_fp_iter=cfg["fixed_point_iterations"],
-                        progress=(lambda n, a: progress("pgd", n, cfg["max_modes"], f"mode {n}: amplitude ratio {a:.2e}")) if progress else None)
+                        progress=(lambda n, a: progress("pgd", n, cfg["max_modes"],
+                                                        f"mode {n}: amplitude ratio {a:.2e}")) if progress else None)
     m = res.n_modes
     space_u = res.F[:, solid.basis.nodal_dofs.T]  # (m, n_vert, 3)
     if progress:
@@ -319,16 +333,18 @@ def build_beam_pgd(spec: ModelSpec, progress: Progress | None = None) -> Reduced
     fld_s = SeparatedField("stress", space_s, params_s, axes, "Pa", STRESS_COMPONENTS, None)
     model = ReducedModel(spec["name"], mesh.p.T.copy(), mesh.t.T.copy(), _cell_type(mesh), axes,
                          {"displacement": fld_u, "stress": fld_s}, meshes.boundary_triangles(mesh), spec["description"],
-                         mat.as_dict(), spec["supports"], {"force_N": ld["force"], "direction": list(force / ld["force"]),
-                                                           "where": ld["where"]},
+                         mat.as_dict(), spec["supports"],
+                         {"force_N": ld["force"], "direction": list(force / ld["force"]), "where": ld["where"]},
                          load_points=top, load_directions=np.tile(force / ld["force"], (len(top), 1)))
-    model.provenance = _provenance(spec, t0, {"method": "intrusive PGD (Algorithm 2.1)", "pgd_amplitudes": res.amplitudes.tolist(),
+    model.provenance = _provenance(spec, t0, {"method": "intrusive PGD (Algorithm 2.1)",
+                                              "pgd_amplitudes": res.amplitudes.tolist(),
                                               "fixed_point_iterations": res.fixed_point_iterations,
                                               "pgd_converged": res.converged, "dofs": int(solid.N)})
     return model
 
 
-def _error_vs_modes(fld: SeparatedField, mus: list[list[float]], truths: list[NDArray[np.float64]]) -> NDArray[np.float64]:
+def _error_vs_modes(fld: SeparatedField, mus: list[list[float]], truths: list[NDArray[np.float64]]
+                    ) -> NDArray[np.float64]:
     """Relative error ||u_rom - u_fem|| / ||u_fem|| over the validation set, for 1..n modes."""
     T = np.stack(truths)
     nt = np.linalg.norm(T)
@@ -343,8 +359,8 @@ def _error_vs_modes(fld: SeparatedField, mus: list[list[float]], truths: list[ND
 # Snapshot-based builders + NI-PGD
 
 
-def _nipgd_fields(name_axes: list[str], U: NDArray[np.float64], S: NDArray[np.float64], axes: list[Axis], cfg: dict[str, Any],
-                  progress: Progress | None) -> dict[str, Any]:
+def _nipgd_fields(name_axes: list[str], U: NDArray[np.float64], S: NDArray[np.float64], axes: list[Axis],
+                  cfg: dict[str, Any], progress: Progress | None) -> dict[str, Any]:
     """Displacement (n_vert, 3, *axes) and stress (n_vert, 6, *axes) tensors -> separated fields."""
     out: dict[str, Any] = {}  # the fields, and "_snapshots" when KEEP_SNAPSHOTS
     if KEEP_SNAPSHOTS:
@@ -397,9 +413,12 @@ def build_beam_snapshots(spec: ModelSpec, progress: Progress | None = None) -> R
         mid_err.append(float(np.linalg.norm(fields["displacement"].evaluate([s]) - ref) / np.linalg.norm(ref)))
     model = ReducedModel(spec["name"], mesh.p.T.copy(), mesh.t.T.copy(), _cell_type(mesh), axes, fields,
                          meshes.boundary_triangles(mesh), spec["description"], mat.as_dict(), spec["supports"],
-                         {"force_N": ld["force"], "patch_radius_m": ld["patch_radius"], "direction": list(force / ld["force"])})
-    model.provenance = _provenance(spec, t0, {"method": "Newton snapshots + NI-PGD (Eq. 5.4-5.5)", "newton_iterations": newton,
-                                              "midpoint_interpolation_error": dict(zip([float(x) for x in mids], mid_err))})
+                         {"force_N": ld["force"], "patch_radius_m": ld["patch_radius"],
+                          "direction": list(force / ld["force"])})
+    model.provenance = _provenance(spec, t0, {"method": "Newton snapshots + NI-PGD (Eq. 5.4-5.5)",
+                                              "newton_iterations": newton,
+                                              "midpoint_interpolation_error": dict(zip([float(x) for x in mids],
+                                                                                       mid_err))})
     model.snapshots = snaps
     return model
 
@@ -427,7 +446,9 @@ def build_joint_boot(spec: ModelSpec, progress: Progress | None = None) -> Reduc
     states = [(np.zeros(solid.N), ufix(t)) for t in thetas]
     path: list[NDArray[np.float64]] = []
     _u, info = solid.solve_states(states, path=path,
-                                 progress=(lambda k: progress("snapshots", k, len(thetas), f"theta = {np.rad2deg(thetas[k - 1]):.1f} deg")) if progress else None)
+                                 progress=(lambda k: progress("snapshots", k, len(thetas),
+                                                              f"theta = {np.rad2deg(thetas[k - 1]):.1f} deg"))
+                                 if progress else None)
     nv = mesh.p.shape[1]
     U = np.stack([solid.vertex_displacement(v) for v in path], axis=-1)
     S = np.stack([solid.stress(v)["cauchy"] for v in path], axis=-1)
@@ -444,12 +465,14 @@ def build_joint_boot(spec: ModelSpec, progress: Progress | None = None) -> Reduc
                              "orientation of thesis §4.5.4, a rigid parameter estimated by the tracker"}]
     model = ReducedModel(spec["name"], np.concatenate([mesh.p.T, lever_pts]), mesh.t.T.copy(), _cell_type(mesh), axes,
                          fields, meshes.boundary_triangles(mesh), spec["description"], mat.as_dict(),
-                         [{"region": "zmin", "kind": "clamped"}, {"region": "zmax", "kind": "prescribed lever rotation"}],
+                         [{"region": "zmin", "kind": "clamped"},
+                          {"region": "zmax", "kind": "prescribed lever rotation"}],
                          {"lever": lv}, rigid_parameters=rigid)
-    model.provenance = _provenance(spec, t0, {"method": "Newton along theta + NI-PGD", "newton_iterations": info.newton_iterations,
+    model.provenance = _provenance(spec, t0, {"method": "Newton along theta + NI-PGD",
+                                              "newton_iterations": info.newton_iterations,
                                               "lever_nodes": [int(nv), len(lever_pts)],
-                                              "note": "self-contact of the folds is not modelled; nodes from lever_nodes[0] "
-                                                      "are points of the rigid lever bar"})
+                                              "note": "self-contact of the folds is not modelled; nodes from "
+                                                      "lever_nodes[0] are points of the rigid lever bar"})
     model.snapshots = snaps
     return model
 
@@ -507,9 +530,12 @@ def build_probe_nipgd(spec: ModelSpec, progress: Progress | None = None) -> Redu
             U[:, :, i, k + 1] = solid.vertex_displacement(u)
             S[:, :, i, k + 1] = solid.stress(u)["cauchy"]
         if progress:
-            progress("snapshots", i + 1, len(load_nodes), f"contact point {i}: {info.newton_iterations} Newton iterations")
-    axes = [Axis("load_point", np.arange(len(load_nodes), dtype=float), "", "discrete", description="index of the contact point"),
-            Axis("pseudo_time", tau, "", description="deformation pseudo-time: 0 undeformed, 1 full contact force (Alg. 5.1)")]
+            progress("snapshots", i + 1, len(load_nodes),
+                     f"contact point {i}: {info.newton_iterations} Newton iterations")
+    axes = [Axis("load_point", np.arange(len(load_nodes), dtype=float), "", "discrete",
+                 description="index of the contact point"),
+            Axis("pseudo_time", tau, "",
+                 description="deformation pseudo-time: 0 undeformed, 1 full contact force (Alg. 5.1)")]
     fields = _nipgd_fields(["load_point", "pseudo_time"], U, S, axes, spec["nipgd"], progress)
     snaps = fields.pop("_snapshots", None)
     # the scan surface rides on the volume mesh: append its vertices as extra nodes (embedded)
@@ -523,9 +549,11 @@ def build_probe_nipgd(spec: ModelSpec, progress: Progress | None = None) -> Redu
                          mat.as_dict(), [{"region": f"z < {spec['base_fraction']} height", "kind": "clamped"}],
                          {"force_N": cc["force"], "direction": cc["direction"], "rings": cc["rings"]},
                          load_points=load_nodes, load_directions=np.asarray(dirs))
-    model.provenance = _provenance(spec, t0, {"method": "Newton increments + NI-PGD (Eq. 5.4-5.5)", "newton_iterations": newton,
+    model.provenance = _provenance(spec, t0, {"method": "Newton increments + NI-PGD (Eq. 5.4-5.5)",
+                                              "newton_iterations": newton,
                                               "volume_nodes": int(nv), "surface_vertices": len(V),
-                                              "note": "nodes >= volume_nodes are the scan surface, embedded in the tetrahedra"})
+                                              "note": "nodes >= volume_nodes are the scan surface, embedded in "
+                                                      "the tetrahedra"})
     model.snapshots = snaps
     return model
 

@@ -134,7 +134,8 @@ class AxisModes:
         if abs(t - i) > 1e-9 or not 0 <= i < self.modes.shape[1]:
             if len(self.axis.values) == 1:
                 return 0
-            raise ValueError(f"axis '{self.axis.name}' is discrete: value {t} is not an index 0..{self.modes.shape[1] - 1}")
+            raise ValueError(f"axis '{self.axis.name}' is discrete: value {t} is not an index "
+                             f"0..{self.modes.shape[1] - 1}")
         return i
 
 
@@ -185,12 +186,14 @@ class SeparatedField:
     def check_mu(self, mu: ArrayLike) -> NDArray[np.float64]:
         mu = np.asarray(mu, dtype=np.float64).ravel()
         if mu.size != len(self.axes):
-            raise ValueError(f"expected {len(self.axes)} parameters ({', '.join(a.name for a in self.axes)}), got {mu.size}")
+            raise ValueError(f"expected {len(self.axes)} parameters ({', '.join(a.name for a in self.axes)}), "
+                             f"got {mu.size}")
         for v, ax in zip(mu, self.axes):
             if not np.isfinite(v):
                 raise ValueError(f"parameter '{ax.name}' is not finite: {v}")
             if not ax.contains(v):
-                raise ValueError(f"parameter '{ax.name}' = {v:g} is outside the model's range [{ax.range[0]:g}, {ax.range[1]:g}]")
+                raise ValueError(f"parameter '{ax.name}' = {v:g} is outside the model's range "
+                                 f"[{ax.range[0]:g}, {ax.range[1]:g}]")
         return mu
 
     @overload
@@ -237,7 +240,8 @@ class SeparatedField:
         S = self.space[: len(c)] if nodes is None else self.space[: len(c), nodes]
         return np.tensordot(c, S, axes=(0, 0))
 
-    def sensitivity(self, mu: ArrayLike, k: int, nodes: Nodes | None = None, n_modes: int | None = None) -> NDArray[np.float64]:
+    def sensitivity(self, mu: ArrayLike, k: int, nodes: Nodes | None = None,
+                    n_modes: int | None = None) -> NDArray[np.float64]:
         """du/dmu_k: (n_sel, n_comp)."""
         c, dc = self.coefficients(mu, n_modes, with_derivatives=True)
         if np.isnan(dc[0, k]):
@@ -267,7 +271,8 @@ class FieldView:
         if weights is not None:
             nodes, weights = np.asarray(nodes), np.asarray(weights, dtype=np.float64)
             if nodes.shape != weights.shape or nodes.ndim != 2:
-                raise ValueError(f"interpolated view: nodes {nodes.shape} and weights {weights.shape} must both be (N, k)")
+                raise ValueError(f"interpolated view: nodes {nodes.shape} and weights {weights.shape} "
+                                 "must both be (N, k)")
             sel = np.einsum("mnkc,nk->mnc", f.space[:n_modes][:, nodes], weights)
         else:
             sel = f.space[:n_modes] if nodes is None else f.space[:n_modes, nodes]
@@ -279,7 +284,8 @@ class FieldView:
         c = self.field.coefficients(mu, self.n_modes)
         return (c @ self.S).reshape(self.n_sel, self.n_comp)
 
-    def evaluate_with_jacobian(self, mu: ArrayLike, checked: bool = False) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    def evaluate_with_jacobian(self, mu: ArrayLike, checked: bool = False
+                               ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """u (n_sel, n_comp) and du/dmu (n_sel, n_comp, n_params) in one product."""
         c, dc = self.field.coefficients(mu, self.n_modes, with_derivatives=True, checked=checked)
         C = np.empty((1 + dc.shape[1], len(c)))
