@@ -30,7 +30,8 @@ def sequence(name: str, width=640, height=480, duration=None, fps=30.0, stereo=F
     r = Renderer(cam, ssaa=ssaa)
     sc.build(sc, r, models)
     rng = np.random.default_rng(seed)
-    out: dict[str, Any] = {"cam": cam, "gray": [], "rgb": [], "depth": [], "right": [], "T": [], "truth": [], "scene": sc}
+    out: dict[str, Any] = {"cam": cam, "gray": [], "rgb": [], "depth": [], "right": [], "T": [], "truth": [],
+                           "scene": sc}
     T_mw = sc.T_map_world()
     for i in range(round(sc.duration * sc.fps)):
         t = i / sc.fps

@@ -83,7 +83,8 @@ def load_images(paths: list[str]) -> list[tuple[str, np.ndarray | None]]:
     for p in paths:
         q = Path(p)
         if q.is_dir():
-            files += sorted(x for x in q.iterdir() if x.suffix.lower() in (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff"))
+            files += sorted(x for x in q.iterdir()
+                            if x.suffix.lower() in (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff"))
         else:
             files.append(q)
     return [(str(f), cv2.imread(str(f), cv2.IMREAD_GRAYSCALE)) for f in files]

@@ -33,7 +33,8 @@ class Features:
         return (self.scale_factor ** (2 * self.octave)).astype(np.float64)
 
     def subset(self, idx) -> Features:
-        return Features(self.uv[idx], self.und[idx], self.octave[idx], self.desc[idx], self.response[idx], self.scale_factor)
+        return Features(self.uv[idx], self.und[idx], self.octave[idx], self.desc[idx], self.response[idx],
+                        self.scale_factor)
 
     @classmethod
     def empty(cls, scale_factor: float = 1.2) -> Features:
@@ -54,11 +55,11 @@ class OrbExtractor:
         self.cell = int(grid_cell)
         # opencv's stubs list only cv2.ORB.create; ORB_create and KeyPoint_convert are its run-time aliases
         self.detector = cv2.ORB_create(  # type: ignore[attr-defined]
-            nfeatures=int(self.n * oversample), scaleFactor=self.sf, nlevels=self.levels, edgeThreshold=19, patchSize=31,
-            fastThreshold=fast_threshold)
+            nfeatures=int(self.n * oversample), scaleFactor=self.sf, nlevels=self.levels, edgeThreshold=19,
+            patchSize=31, fastThreshold=fast_threshold)
         self.detector_low = cv2.ORB_create(  # type: ignore[attr-defined]
-            nfeatures=int(self.n * oversample), scaleFactor=self.sf, nlevels=self.levels, edgeThreshold=19, patchSize=31,
-            fastThreshold=max(5, fast_threshold // 3))
+            nfeatures=int(self.n * oversample), scaleFactor=self.sf, nlevels=self.levels, edgeThreshold=19,
+            patchSize=31, fastThreshold=max(5, fast_threshold // 3))
         f = 1.0 / self.sf
         per = self.n * (1 - f) / (1 - f ** self.levels)
         self.per_level = [round(per * f ** k) for k in range(self.levels)]
