@@ -94,8 +94,10 @@ def main():
              "(FieldView). Offline: intrusive PGD with one sparse LU reused for every fixed-point step.\n\n"
              "Build time versus mesh size:\n\n"
              + "\n".join(["| nodes | dofs | modes | build (s) | error at 19 modes |", "|---|---|---|---|---|"]
-                         + [f"| {r['nodes']} | {r['dofs']} | {r['modes']} | {r['build_s']:.1f} | {r['err_19']:.2e} |" for r in build_rows])
-             + (f"\n\nTarget check: 19 modes on {target[0]['nodes']} nodes: u + du/dmu in {target[0]['u_du_ms']:.3f} ms." if target else ""))
+                         + [f"| {r['nodes']} | {r['dofs']} | {r['modes']} | {r['build_s']:.1f} | {r['err_19']:.2e} |"
+                            for r in build_rows])
+             + (f"\n\nTarget check: 19 modes on {target[0]['nodes']} nodes: "
+                f"u + du/dmu in {target[0]['u_du_ms']:.3f} ms." if target else ""))
     save("rom_eval", rows, cols, "Reduced model: online evaluation time and offline build time", notes, plot,
          extra={"build": build_rows})
 

@@ -40,7 +40,8 @@ def test_read_reports_gaps_and_out_of_order(tmp_path):
         for k, s in enumerate(stamps):
             t = 10**9 + s * 33_333_333
             w.write("/camera/image_raw", 10**9 + k * 33_333_333 + (500_000_000 if k >= 4 else 0),
-                    image_obj(ts, np.zeros((2, 2, 3), np.uint8), "rgb8", (t // 10**9, t % 10**9)), "sensor_msgs/msg/Image")
+                    image_obj(ts, np.zeros((2, 2, 3), np.uint8), "rgb8", (t // 10**9, t % 10**9)),
+                    "sensor_msgs/msg/Image")
     rep = bags.BagReport()
     n = sum(1 for _ in bags.read_bag(path, rep))
     assert n == 8

@@ -68,7 +68,8 @@ def test_stress_output_uniaxial_bar():
     s = fem.Solid(meshes.box(1.0, 0.1, 0.1, (4, 1, 1), "hex"), mat.LinearElastic(E, 0.3), order=1,
                   supports=[{"region": "xmin", "kind": "sliding", "component": 0},
                             {"region": {"face": "xmin", "box": [None, [0, 0], [0, 0]]}, "kind": "pinned"},
-                            {"region": {"face": "xmin", "box": [None, [0.1, 0.1], [0, 0]]}, "kind": "sliding", "component": 2}])
+                            {"region": {"face": "xmin", "box": [None, [0.1, 0.1], [0, 0]]}, "kind": "sliding",
+                             "component": 2}])
     u = s.solve_linear(s.traction("xmax", [sigma, 0, 0]))
     out = s.stress(u)
     np.testing.assert_allclose(out["cauchy"][:, 0], sigma, rtol=1e-6)

@@ -10,7 +10,8 @@ from tests.synthdata import sequence
 def test_markers_mode_within_two_millimetres():
     seq = sequence("aluminium_beam", 640, 480, duration=2.0, fps=15.0)
     doc = seq["scene"].scene_yaml(seq["scene"])["localization"]["markers"]
-    loc = MarkerLocalizer(seq["cam"], doc["dictionary"], doc["size_m"], {k: G.pose7_to_matrix(v) for k, v in doc["poses"].items()})
+    loc = MarkerLocalizer(seq["cam"], doc["dictionary"], doc["size_m"],
+                          {k: G.pose7_to_matrix(v) for k, v in doc["poses"].items()})
     err = []
     for g, T in zip(seq["gray"], seq["T"]):
         r = loc.locate(g)
