@@ -21,7 +21,7 @@ from benchmarks.common import save
 from simreal_nodes import geometry as G
 from simreal_nodes.collision.contact import ContactTracker
 from simreal_nodes.rom.model_file import load_model
-from simreal_nodes.scene.schema import validate_scene
+from simreal_nodes.scene.schema import build_spec_models, validate_scene
 from simreal_nodes.synth.sequence import sequence
 from simreal_nodes.vision.depth import depth_points
 
@@ -57,7 +57,7 @@ def main():
     rows = []
     for w, h in ((640, 480), (1280, 720)):
         seq = sequence("crossed_beams_probe", w, h)
-        scene = validate_scene(seq["scene"].scene_yaml(seq["scene"]), "crossed_beams_probe", ".")
+        scene = build_spec_models(validate_scene(seq["scene"].scene_yaml(seq["scene"]), "crossed_beams_probe", "."))
         for s in STEPS:
             r = dict(resolution=f"{w}x{h}", **run(seq, scene, s))
             rows.append(r)

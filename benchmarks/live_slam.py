@@ -17,14 +17,14 @@ from benchmarks.common import save
 from simreal_nodes.assimilation.evaluate import compare, read_parameters
 from simreal_nodes.demo import model_ranges, sample_bag
 from simreal_nodes.ros.commands import replay
-from simreal_nodes.scene.schema import load_scene
+from simreal_nodes.scene.schema import build_spec_models, load_scene
 
 RUNS = 4
 
 
 def main():
     bag, scene_yaml = sample_bag("joint_boot", echo=print)
-    obj = next(o for o in load_scene(scene_yaml)["objects"] if o["tracking"]["enabled"])
+    obj = next(o for o in build_spec_models(load_scene(scene_yaml))["objects"] if o["tracking"]["enabled"])
     ranges = model_ranges(obj["model"])
     truth = read_parameters(bag, f"/ground_truth/objects/{obj['id']}/parameters")
     rows = []

@@ -13,9 +13,9 @@ import numpy as np
 
 from benchmarks.common import save
 from simreal_nodes import geometry as G
+from simreal_nodes.camera import CameraModel
 from simreal_nodes.render.gl import Mesh, Renderer
 from simreal_nodes.synth import world as W
-from simreal_nodes.vision.camera import CameraModel
 
 
 def sphere_with(n_tri_target):

@@ -20,7 +20,7 @@ import numpy as np
 from benchmarks.common import RESULTS, save
 from simreal_nodes.assimilation.offline import Pipeline
 from simreal_nodes.assimilation.tracker import LOST, OK
-from simreal_nodes.scene.schema import validate_scene
+from simreal_nodes.scene.schema import build_spec_models, validate_scene
 from simreal_nodes.synth.sequence import sequence
 
 # scene, object, width, height, freeze map on deformation, knob (label, tracker overrides, localization attributes)
@@ -43,7 +43,7 @@ SPAN = {"s": 0.7575}  # foam beam: between the support centres (the issue's targ
 
 
 def run_case(seq, name, oid, freeze, knob=DEFAULT):
-    scene = validate_scene(seq["scene"].scene_yaml(seq["scene"]), name, ".")
+    scene = build_spec_models(validate_scene(seq["scene"].scene_yaml(seq["scene"]), name, "."))
     scene = copy.deepcopy(scene)
     scene["localization"]["freeze_map_on_deformation"] = freeze
     pipe = Pipeline(scene, seq["cam"], **knob[1])

@@ -128,14 +128,14 @@ def evaluate_run(run_bag: Path, truth_bag: Path, scene: dict, out: Path) -> dict
 def run_demo(scene: str = DEFAULT_SCENE, out: str | Path = "out/demo", regenerate: bool = False,
              resolution: str = "640x480", duration: float | None = None, echo=print) -> dict:
     from simreal_nodes.ros.commands import replay
-    from simreal_nodes.scene.schema import load_scene
+    from simreal_nodes.scene.schema import build_spec_models, load_scene
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.monotonic()
     bag, scene_yaml = sample_bag(scene, regenerate, echo, duration, resolution)
     echo(f"[demo] scene {scene_yaml}; loading / building its model(s) ...")
-    sc = load_scene(scene_yaml)  # resolves spec:NAME models (built once into cache/models)
+    sc = build_spec_models(load_scene(scene_yaml))  # spec:NAME models built once into cache/models
     run_bag = out / "run"
     if run_bag.exists():
         import shutil

@@ -1,13 +1,15 @@
 """`simreal launch SCENE.yaml`: start only the nodes a scene requires, one OS process each.
 
 There is no ros2 launch on PyPI, so this is a small process supervisor: each node runs as
-``python -m <module> --ros-args --params-file <generated.yaml> [-r from:=to ...]``, its output is
+``python -m <module> --ros-args --params-file <generated.yaml> [-r from:=to ...]`` (the module of its
+``simreal-NAME`` entry in pyproject.toml's ``[project.scripts]``, :func:`node_modules`), its output is
 prefixed with its name, a node that exits unexpectedly is reported and restarted (up to
 ``respawn`` times), and SIGINT / SIGTERM stop every node cleanly (SIGINT, then SIGTERM, then SIGKILL).
 """
 
 from __future__ import annotations
 
+import functools
 import os
 import signal
 import subprocess
@@ -15,14 +17,33 @@ import sys
 import tempfile
 import threading
 import time
+import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import yaml
 
+from simreal_nodes.errors import SimrealError
 from simreal_nodes.scene.graph import NodeSpec
 
 FASTDDS_PROFILE = Path(__file__).resolve().parent / "ros" / "fastdds_shm.xml"
+PYPROJECT = Path(__file__).resolve().parents[1] / "pyproject.toml"
+NODE_SCRIPT_PREFIX = "simreal-"
+
+
+@functools.cache
+def node_modules(pyproject: Path = PYPROJECT) -> dict[str, str]:
+    """Node name -> Python module, from the ``simreal-NAME = "module:main"`` entries of ``[project.scripts]``.
+
+    The executables are declared once, in pyproject.toml; the launcher runs the module with ``python -m`` (every
+    node module calls its ``main`` under ``__main__``) rather than the installed script, so a checkout works
+    without re-installing after the table changes. Read from the file rather than the installed metadata for the
+    same reason (every supported install, ``./run setup`` and the Dockerfile, is an editable one of the checkout).
+    """
+    with open(pyproject, "rb") as f:
+        scripts: dict[str, str] = tomllib.load(f)["project"]["scripts"]
+    return {name[len(NODE_SCRIPT_PREFIX):]: target.partition(":")[0] for name, target in scripts.items()
+            if name.startswith(NODE_SCRIPT_PREFIX)}
 
 
 def ros_environment(base: dict | None = None) -> dict:
@@ -65,10 +86,14 @@ class Launcher:
         self.procs: list[_Proc] = []
         self._stopping = False
         self._lock = threading.Lock()
+        modules = node_modules()
         for spec in nodes:
+            if spec.name not in modules:
+                raise SimrealError(f"node '{spec.name}' has no entry {NODE_SCRIPT_PREFIX}{spec.name} in the "
+                                   f"[project.scripts] of {PYPROJECT}")
             pfile = Path(self._tmp.name) / f"{spec.name}.params.yaml"
             pfile.write_text(yaml.safe_dump({spec.name: {"ros__parameters": spec.parameters}}))
-            cmd = [sys.executable, "-m", spec.module, "--ros-args", "-r", f"__node:={spec.name}",
+            cmd = [sys.executable, "-m", modules[spec.name], "--ros-args", "-r", f"__node:={spec.name}",
                    "--params-file", str(pfile)]
             for a, b in self.remaps.items():
                 cmd += ["-r", f"{a}:={b}"]

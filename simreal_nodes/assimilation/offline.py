@@ -1,8 +1,9 @@
 """The ROS-free tracking pipeline on frames in memory: localization core + deformable tracker, as the nodes
 chain them (used by tests and benchmarks; the nodes add only message conversion and timing).
 
-``scene``: a validated scene dict (``load_scene`` / ``validate_scene``); frames: BGR images (+ depth for
-RGB-D, + right grey image for stereo) with stamps. Returns one :class:`Estimate` per frame.
+``scene``: a validated scene dict (``load_scene`` / ``validate_scene``) whose ``spec:NAME`` models are built
+(``build_spec_models``: validation only names their cache files), unless ``models`` gives them; frames: BGR
+images (+ depth for RGB-D, + right grey image for stereo) with stamps. Returns one :class:`Estimate` per frame.
 """
 
 from __future__ import annotations
@@ -12,8 +13,8 @@ import numpy as np
 
 from simreal_nodes import geometry as G
 from simreal_nodes.assimilation.tracker import DeformableTracker, Estimate, deformable_feedback, tracker_config
+from simreal_nodes.camera import CameraModel
 from simreal_nodes.rom.model_file import load_model
-from simreal_nodes.vision.camera import CameraModel
 
 
 class Pipeline:

@@ -20,8 +20,8 @@ from scipy.spatial import cKDTree
 from simreal_nodes import geometry as G
 from simreal_nodes.assimilation import lm
 from simreal_nodes.assimilation.registration import link, ray_weights, surface_nodes
+from simreal_nodes.camera import CameraModel
 from simreal_nodes.rom.model import ReducedModel
-from simreal_nodes.vision.camera import CameraModel
 
 OK, LOW_CONFIDENCE, LOST, INITIALIZING = 0, 1, 2, 3  # ModelParameters.STATE_*
 

@@ -21,9 +21,9 @@ from typing import TYPE_CHECKING, cast
 import cv2
 import numpy as np
 
+from simreal_nodes.camera import CameraModel
 from simreal_nodes.errors import SimrealError
 from simreal_nodes.geometry import vertex_normals
-from simreal_nodes.vision.camera import CameraModel
 
 if TYPE_CHECKING:
     import moderngl

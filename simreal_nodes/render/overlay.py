@@ -24,8 +24,8 @@ import cv2
 import numpy as np
 
 from simreal_nodes import geometry as G
+from simreal_nodes.camera import CameraModel
 from simreal_nodes.rom.model import ReducedModel
-from simreal_nodes.vision.camera import CameraModel
 
 COLORMAPS = {"turbo": cv2.COLORMAP_TURBO, "viridis": cv2.COLORMAP_VIRIDIS, "jet": cv2.COLORMAP_JET,
              "inferno": cv2.COLORMAP_INFERNO}

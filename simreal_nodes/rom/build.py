@@ -40,7 +40,7 @@ from simreal_nodes.rom import nipgd as nip
 from simreal_nodes.rom import pgd
 from simreal_nodes.rom.model import ReducedModel
 from simreal_nodes.rom.separated import Axis, SeparatedField
-from simreal_nodes.scene.validate import Context, Enum, ListOf, Number, Record, Str, Vector
+from simreal_nodes.spec import Context, Enum, ListOf, Number, Record, Str, Vector
 
 if TYPE_CHECKING:
     import skfem
@@ -609,6 +609,22 @@ def cache_dir() -> Path:
     return Path(os.environ.get("SIMREAL_CACHE", REPO / "cache")) / "models"
 
 
+def _spec_file(spec_name: str) -> str:
+    return spec_name if spec_name.endswith(".yaml") else spec_name + ".yaml"
+
+
+def _cache_file(spec: ModelSpec) -> Path:
+    return cache_dir() / f"{spec['name']}.h5"
+
+
+def cached_model_path(spec_name: str) -> Path:
+    """Where the model of a built-in (or given) spec lives in the cache, built or not.
+
+    Reads and validates the spec (an unknown name raises SceneError listing the built-in specs) but builds
+    nothing: scene validation maps ``spec:NAME`` with it, :func:`cached_model` builds the file there."""
+    return _cache_file(load_spec(_spec_file(spec_name)))
+
+
 def cached_model(spec_name: str, progress: Progress | None = None, rebuild: bool = False) -> Path:
     """Path of the model built from a built-in (or given) spec, building it once into the cache.
 
@@ -616,8 +632,8 @@ def cached_model(spec_name: str, progress: Progress | None = None, rebuild: bool
     """
     from simreal_nodes.rom.model_file import load_model, save_model
 
-    spec = load_spec(spec_name if spec_name.endswith(".yaml") else spec_name + ".yaml")
-    out = cache_dir() / f"{spec['name']}.h5"
+    spec = load_spec(_spec_file(spec_name))
+    out = _cache_file(spec)
     if out.exists() and not rebuild:
         try:
             prov = load_model(out, fields=[], mesh=False).provenance

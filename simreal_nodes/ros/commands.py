@@ -18,7 +18,7 @@ from simreal_nodes.io import bags
 from simreal_nodes.launch import Launcher, ros_environment
 from simreal_nodes.ros.bagplay import Player, Recorder
 from simreal_nodes.scene.graph import image_topic, output_topics, required_nodes
-from simreal_nodes.scene.schema import load_scene
+from simreal_nodes.scene.schema import build_spec_models, load_scene
 
 
 class _StopFlag:
@@ -41,6 +41,8 @@ def replay(bag: str, scene_file: str, rate: float = 1.0, lossless: bool = False,
            metrics_json: str | None = None, echo=print, extra_params: dict | None = None):
     """Replay ``bag`` into the graph of ``scene_file``; returns (PlayStats, BagReport, recorder counts)."""
     scene = load_scene(scene_file)
+    if launch:
+        build_spec_models(scene)  # before the nodes start: they find the built spec:NAME models in the cache
     cam = scene["camera"]
     nodes = required_nodes(scene, lossless=lossless)
     for n in nodes:

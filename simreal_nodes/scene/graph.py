@@ -48,10 +48,10 @@ def contact_topic(object_id: str) -> str:
 
 @dataclass
 class NodeSpec:
-    """One node process: ROS name, Python module (``python -m``), parameters, topics."""
+    """One node process: ROS name (its executable is ``simreal-<name>`` in pyproject.toml's ``[project.scripts]``,
+    which the launcher reads), parameters, topics."""
 
     name: str
-    module: str
     parameters: dict = field(default_factory=dict)
     inputs: list[str] = field(default_factory=list)
     outputs: dict[str, str] = field(default_factory=dict)  # topic -> message type
@@ -86,11 +86,11 @@ def required_nodes(scene: dict, lossless: bool = False) -> list[NodeSpec]:
         ingest_out[CAM_RIGHT_INFO] = "sensor_msgs/msg/CameraInfo"
     ingest_in = [t for t in (image_topic(cam), cam["camera_info"], cam["depth"], image_topic(cam, right=True),
                              cam["right_camera_info"]) if t] if cam["source"] == "topic" else []
-    nodes.append(NodeSpec("ingest", "simreal_nodes.ros.nodes.ingest", dict(common), ingest_in, ingest_out))
+    nodes.append(NodeSpec("ingest", dict(common), ingest_in, ingest_out))
 
     if loc["mode"] != "static":
         nodes.append(NodeSpec(
-            "localization", "simreal_nodes.ros.nodes.localization", dict(common),
+            "localization", dict(common),
             [CAM_IMAGE, CAM_INFO] + ([CAM_DEPTH] if depth else []) + ([CAM_RIGHT_IMAGE, CAM_RIGHT_INFO] if stereo else [])
             + ([LOC_DEFORMABLE] if any(o["tracking"]["enabled"] for o in objs) else []),
             {POSE: "geometry_msgs/msg/PoseStamped", TF: "tf2_msgs/msg/TFMessage",
@@ -100,7 +100,7 @@ def required_nodes(scene: dict, lossless: bool = False) -> list[NodeSpec]:
     tracked = [o for o in objs if o["tracking"]["enabled"]]
     if tracked:
         nodes.append(NodeSpec(
-            "tracker", "simreal_nodes.ros.nodes.tracker", dict(common),
+            "tracker", dict(common),
             [LOC_OBS if k == "obs" else CAM_IMAGE for k in tracker_inputs(scene)] + [CAM_INFO],
             {**{params_topic(o["id"]): "simreal_msgs/msg/ModelParameters" for o in tracked},
              TRACKER_STATUS: "simreal_msgs/msg/TrackingStatus",
@@ -113,13 +113,13 @@ def required_nodes(scene: dict, lossless: bool = False) -> list[NodeSpec]:
             out[contact_topic(o["id"])] = "simreal_msgs/msg/ContactState"
             out[params_topic(o["id"])] = "simreal_msgs/msg/ModelParameters"
         depth_in = [CAM_DEPTH] if depth else [CAM_IMAGE, CAM_RIGHT_IMAGE, CAM_RIGHT_INFO]  # stereo: SGBM in the node
-        nodes.append(NodeSpec("collision", "simreal_nodes.ros.nodes.collision", dict(common),
+        nodes.append(NodeSpec("collision", dict(common),
                               depth_in + [CAM_INFO] + ([LOC_OBS] if loc["mode"] != "static" else []), out))
 
     if scene["overlay"]["enabled"]:
         ins = [CAM_IMAGE, CAM_INFO] + ([CAM_DEPTH] if depth else []) + ([LOC_OBS] if loc["mode"] != "static" else [])
         ins += [params_topic(o["id"]) for o in objs if o["tracking"]["enabled"] or o["collision"]["enabled"]]
-        nodes.append(NodeSpec("overlay", "simreal_nodes.ros.nodes.overlay", dict(common), ins,
+        nodes.append(NodeSpec("overlay", dict(common), ins,
                               {OVERLAY_IMAGE: "sensor_msgs/msg/Image",
                                OVERLAY_MARKERS: "visualization_msgs/msg/MarkerArray"}))
     return nodes

@@ -3,6 +3,10 @@ modelled and what each of them does (tracked parameters, collision, overlay).
 
 ``load_scene(path)`` validates the YAML and returns a plain dict with every default filled in.
 docs/scene-format.md is the reference for users; this module is the executable version of it.
+
+A model given as ``spec:NAME`` is not built by validation (checking a scene stays cheap): the spec is read and
+``objects[].model`` becomes the path its model has in the cache. Whatever starts nodes or runs a pipeline on the
+scene calls :func:`build_spec_models` first; the nodes, which validate the same file again, then find the file.
 """
 
 from __future__ import annotations
@@ -12,22 +16,18 @@ from pathlib import Path
 import yaml
 
 from simreal_nodes.errors import SceneError
-from simreal_nodes.scene.validate import (Bool, Context, Enum, FilePath, ListOf, MapOf, Number,
-                                          Record, Str, Topic, Vector)
+from simreal_nodes.spec import Bool, Context, Enum, FilePath, ListOf, MapOf, Number, Record, Str, Topic, Vector
+
+SPEC_PREFIX = "spec:"
+
 
 class ModelRef(FilePath):
-    """A model file path, or ``spec:NAME``: the model built from a built-in spec (cached; built on first use)."""
+    """A model file path, or ``spec:NAME`` (a built-in spec, or a spec file), kept as written here:
+    :func:`_resolve_model_ref` turns it into the model's cache path once the object record is complete."""
 
     def check(self, v, path, ctx):
-        if isinstance(v, str) and v.startswith("spec:"):
-            from simreal_nodes.rom.build import cached_model
-
-            try:
-                return str(cached_model(v[5:]))
-            except SceneError as e:
-                raise SceneError(f"{ctx.source}: {path}: {e}") from None
-            except Exception as e:  # noqa: BLE001 - a failed build is a scene error with its reason
-                raise SceneError(f"{ctx.source}: {path}: building {v} failed: {e}") from None
+        if isinstance(v, str) and v.startswith(SPEC_PREFIX):
+            return v
         return super().check(v, path, ctx)
 
 
@@ -194,25 +194,71 @@ def _cross_checks(scene: dict, ctx: Context) -> None:
         if o["anchor"]["kind"] == "registration" and loc["mode"] in ("static", "markers"):
             raise SceneError(f"{src}: objects[{i}].anchor.kind: 'registration' needs a SLAM map "
                              f"(localization.mode mono, rgbd or stereo); found mode '{loc['mode']}'")
-        _check_model_parameters(o, i, ctx)
+        _resolve_model_ref(o, i, src)
+        # a spec's model is not built yet: its parameter names are checked by build_spec_models
+        _check_parameters(o, i, src, None if o["_model_spec"] else _model_header(o, i, src))
 
 
-def _check_model_parameters(obj: dict, i: int, ctx: Context) -> None:
-    """Parameter names in the scene must exist in the model file (read lazily from its header)."""
+def _resolve_model_ref(obj: dict, i: int, source: str) -> None:
+    """``spec:NAME`` -> the model's cache path (the spec is read and validated, nothing is built); the spec name is
+    kept in ``_model_spec`` (None for a model file) for :func:`build_spec_models`."""
+    ref = obj["model"]
+    obj["_model_spec"] = None
+    if not ref.startswith(SPEC_PREFIX):
+        return
+    from simreal_nodes.rom.build import cached_model_path
+
+    try:
+        obj["model"] = str(cached_model_path(ref[len(SPEC_PREFIX):]))
+    except SceneError as e:
+        raise SceneError(f"{source}: objects[{i}].model: {e}") from None
+    obj["_model_spec"] = ref[len(SPEC_PREFIX):]
+
+
+def _model_header(obj: dict, i: int, source: str) -> dict:
+    """The model file's header (read lazily: no fields), kept in ``_model_header``."""
     from simreal_nodes.rom.model_file import read_header
 
     try:
-        header = read_header(obj["model"])
+        obj["_model_header"] = read_header(obj["model"])
     except Exception as e:  # noqa: BLE001 - report any failure to read as a scene error
-        raise SceneError(f"{ctx.source}: objects[{i}].model: {e}") from None
-    names = [a["name"] for a in header["axes"]]
+        raise SceneError(f"{source}: objects[{i}].model: {e}") from None
+    return obj["_model_header"]
+
+
+def _check_parameters(obj: dict, i: int, source: str, header: dict | None) -> None:
+    """Parameter names in the scene must exist in the model (``header``; None: not known yet, names unchecked) and
+    a fixed parameter needs its value."""
+    names = [a["name"] for a in header["axes"]] if header is not None else []
     for p, cfg in obj["parameters"].items():
-        if p not in names and p not in header.get("rigid_parameters", []):
-            raise SceneError(f"{ctx.source}: objects[{i}].parameters.{p}: the model {Path(obj['model']).name} has no "
+        if header is not None and p not in names and p not in header.get("rigid_parameters", []):
+            raise SceneError(f"{source}: objects[{i}].parameters.{p}: the model {Path(obj['model']).name} has no "
                              f"parameter '{p}' (it has: {', '.join(names + header.get('rigid_parameters', []))})")
         if cfg["mode"] == "fixed" and cfg["value"] is None:
-            raise SceneError(f"{ctx.source}: objects[{i}].parameters.{p}.value: required for mode 'fixed'; found nothing")
-    obj["_model_header"] = header
+            raise SceneError(f"{source}: objects[{i}].parameters.{p}.value: required for mode 'fixed'; found nothing")
+
+
+def build_spec_models(scene: dict, progress=None) -> dict:
+    """Build the model of every ``spec:NAME`` object into the cache (once; again when its spec changed) and check
+    the object's parameter names against it; returns ``scene`` (its ``objects[].model`` already name these files).
+
+    Called by what starts nodes (launch, replay, the demo) or uses the models in-process (evaluation, offline
+    pipelines, benchmarks) before anything reads a model file; never by validation."""
+    from simreal_nodes.rom.build import cached_model
+
+    for i, o in enumerate(scene["objects"]):
+        name = o["_model_spec"]
+        if name is None:
+            continue
+        try:
+            o["model"] = str(cached_model(name, progress))
+        except SceneError as e:
+            raise SceneError(f"{scene['_source']}: objects[{i}].model: {e}") from None
+        except Exception as e:  # noqa: BLE001 - a failed build is a scene error with its reason
+            raise SceneError(f"{scene['_source']}: objects[{i}].model: building {SPEC_PREFIX}{name} failed: "
+                             f"{e}") from None
+        _check_parameters(o, i, scene["_source"], _model_header(o, i, scene["_source"]))
+    return scene
 
 
 def validate_scene(doc, source: str = "<scene>", base_dir: str | Path = ".") -> dict:

@@ -127,7 +127,7 @@ def make_bag(name: str, out: str | Path, width: int = 640, height: int = 480, du
     scene.build(scene, r, models)
     if scene.stereo_baseline:
         # rectified stereo: the right camera shares K, no distortion on either after rectification
-        from simreal_nodes.vision.camera import CameraModel
+        from simreal_nodes.camera import CameraModel
         rect = CameraModel(cam.width, cam.height, cam.K.copy(), np.zeros(5), "plumb_bob")
         scene.camera = cam = rect
         r.release()

@@ -15,11 +15,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from simreal_nodes import geometry as G
+from simreal_nodes.camera import CameraModel
 from simreal_nodes.collision.contact import ContactTracker, surface_samples
 from simreal_nodes.render.gl import Mesh, Renderer
 from simreal_nodes.rom.model import ReducedModel
 from simreal_nodes.synth import world as W
-from simreal_nodes.vision.camera import CameraModel
 
 
 @dataclass

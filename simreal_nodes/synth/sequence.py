@@ -25,7 +25,7 @@ def sequence(name: str, width=640, height=480, duration=None, fps=30.0, stereo=F
         sc.state["prepare"](sc, models)
     cam = sc.camera
     if sc.stereo_baseline:
-        from simreal_nodes.vision.camera import CameraModel
+        from simreal_nodes.camera import CameraModel
         cam = sc.camera = CameraModel(cam.width, cam.height, cam.K.copy(), np.zeros(5))
     r = Renderer(cam, ssaa=ssaa)
     sc.build(sc, r, models)

@@ -9,8 +9,8 @@ from typing import cast
 import cv2
 import numpy as np
 
+from simreal_nodes.camera import CameraModel
 from simreal_nodes.errors import SimrealError
-from simreal_nodes.vision.camera import CameraModel
 
 
 @dataclass

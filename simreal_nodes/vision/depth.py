@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from simreal_nodes import geometry as G
-from simreal_nodes.vision.camera import CameraModel
+from simreal_nodes.camera import CameraModel
 
 
 @functools.lru_cache(maxsize=16)

@@ -12,8 +12,8 @@ import cv2
 import numpy as np
 
 from simreal_nodes import geometry as G
+from simreal_nodes.camera import CameraModel
 from simreal_nodes.errors import SimrealError
-from simreal_nodes.vision.camera import CameraModel
 
 
 @dataclass

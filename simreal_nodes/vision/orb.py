@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from simreal_nodes.vision.camera import CameraModel
+from simreal_nodes.camera import CameraModel
 
 
 @dataclass

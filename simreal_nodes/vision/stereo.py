@@ -6,7 +6,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from simreal_nodes.vision.camera import CameraModel
+from simreal_nodes.camera import CameraModel
 
 
 def baseline_from_projection(P_right) -> float:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from simreal_nodes.vision.camera import CameraModel
+from simreal_nodes.camera import CameraModel
 
 
 class Undistorter:

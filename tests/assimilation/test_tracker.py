@@ -10,7 +10,7 @@ from simreal_nodes.assimilation.offline import Pipeline, track_sequence
 from simreal_nodes.assimilation.tracker import LOST, LOW_CONFIDENCE, OK, DeformableTracker, TrackerConfig
 from simreal_nodes.rom.build import cached_model
 from simreal_nodes.rom.model_file import load_model
-from simreal_nodes.scene.schema import validate_scene
+from simreal_nodes.scene.schema import build_spec_models, validate_scene
 from tests.synthdata import sequence
 
 SPAN = 0.48  # the load range of the model, metres
@@ -18,7 +18,7 @@ SPAN = 0.48  # the load range of the model, metres
 
 def _run(name, **kw):
     seq = sequence(name, 640, 480)
-    scene = validate_scene(seq["scene"].scene_yaml(seq["scene"]), name, ".")
+    scene = build_spec_models(validate_scene(seq["scene"].scene_yaml(seq["scene"]), name, "."))
     r = track_sequence(seq, scene, **kw)["beam"]
     est = np.array([e.values[0] for e in r["est"]])
     std = np.array([np.sqrt(max(e.cov[0, 0], 0)) if np.isfinite(e.cov[0, 0]) else np.nan for e in r["est"]])
@@ -55,7 +55,7 @@ def test_near_the_clamp_variance_grows_instead_of_wild_values():
 @pytest.fixture(scope="module")
 def beam():
     seq = sequence("aluminium_beam", 640, 480)
-    scene = validate_scene(seq["scene"].scene_yaml(seq["scene"]), "aluminium_beam", ".")
+    scene = build_spec_models(validate_scene(seq["scene"].scene_yaml(seq["scene"]), "aluminium_beam", "."))
     return seq, scene
 
 
@@ -120,7 +120,7 @@ def test_model_an_order_of_magnitude_off_in_scale_is_reported(beam):
 
 def _track_map_points(name, oid, width=640, height=480, seq=None, **kw):
     seq = seq or sequence(name, width, height)
-    scene = validate_scene(seq["scene"].scene_yaml(seq["scene"]), name, ".")
+    scene = build_spec_models(validate_scene(seq["scene"].scene_yaml(seq["scene"]), name, "."))
     r = track_sequence(seq, scene, **kw)[oid]
     est = np.array([e.values for e in r["est"]])
     states = np.array([e.state for e in r["est"]])

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from simreal_nodes import geometry as G
+from simreal_nodes.camera import CameraModel
 from simreal_nodes.render.gl import Mesh, Renderer
-from simreal_nodes.vision.camera import CameraModel
 
 CAMS = {
     "pinhole": CameraModel.from_intrinsics(640, 480, 525.0, 520.0, 318.7, 241.2),

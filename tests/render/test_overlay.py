@@ -5,9 +5,9 @@ import numpy as np
 import pytest
 
 from simreal_nodes import geometry as G
+from simreal_nodes.camera import CameraModel
 from simreal_nodes.render.gl import Mesh, Renderer
 from simreal_nodes.render.overlay import ObjectOverlay, OverlayCompositor, apply_colormap, colormap_lut, von_mises
-from simreal_nodes.vision.camera import CameraModel
 from tests.modelkit import beam_model
 
 CAMS = {

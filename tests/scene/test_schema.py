@@ -1,4 +1,5 @@
 import textwrap
+from pathlib import Path
 
 import pytest
 
@@ -77,3 +78,57 @@ def test_tracker_inputs_are_what_it_subscribes(name, needs_image):
     assert (graph.CAM_IMAGE in nodes["tracker"].inputs) == needs_image
     assert graph.LOC_DEFORMABLE in nodes["localization"].inputs
     assert graph.LOC_DEFORMABLE in nodes["tracker"].outputs
+
+
+SPEC_SCENE = BASE + "objects:\n  - {id: beam, model: 'spec:aluminium_beam', parameters: {PARAM: {mode: tracked}}}\n"
+
+
+def test_spec_model_is_named_not_built(tmp_path, monkeypatch):
+    """Validation (what `simreal check-scene` and every node runs) reads the spec and names the model's cache file;
+    building it is left to build_spec_models, so checking a scene never starts an FEM build."""
+    import simreal_nodes.rom.build as build
+
+    monkeypatch.setenv("SIMREAL_CACHE", str(tmp_path / "cache"))
+    monkeypatch.setattr(build, "build_model", lambda *a, **k: pytest.fail("validation built a model"))
+    s = load_scene(write(tmp_path, SPEC_SCENE.replace("PARAM", "not_checked_until_built")))
+    o = s["objects"][0]
+    assert o["model"] == str(tmp_path / "cache" / "models" / "aluminium_beam.h5")
+    assert o["_model_spec"] == "aluminium_beam"
+    assert not (tmp_path / "cache").exists()
+
+
+def test_spec_model_fixed_parameter_needs_a_value_before_any_build(tmp_path):
+    with pytest.raises(SceneError, match=r"objects\[0\].parameters.s.value: required for mode 'fixed'"):
+        load_scene(write(tmp_path, SPEC_SCENE.replace("PARAM: {mode: tracked}", "s: {mode: fixed}")))
+
+
+def test_unknown_spec_is_a_scene_error(tmp_path):
+    with pytest.raises(SceneError, match=r"objects\[0\].model: model spec not found: .*built-in specs: "
+                                         r".*aluminium_beam"):
+        load_scene(write(tmp_path, SPEC_SCENE.replace("spec:aluminium_beam", "spec:no_such_spec")))
+
+
+@pytest.mark.parametrize("param,match", [("s", None), ("nope", r"objects\[0\].parameters.nope: the model .* has no "
+                                                                  r"parameter 'nope' \(it has: s\)")])
+def test_build_spec_models_builds_then_checks_parameters(tmp_path, monkeypatch, param, match):
+    """build_spec_models (run by launch / replay / demo before nodes start) builds each spec model once and checks
+    the scene's parameter names against the built file, as validation does for a model file."""
+    import simreal_nodes.rom.build as build
+    from simreal_nodes.rom.model_file import save_model
+    from simreal_nodes.scene.schema import build_spec_models
+    from tests.modelkit import beam_model
+
+    def fake_cached_model(name: str, progress=None):
+        out = build.cached_model_path(name)
+        save_model(beam_model(), out)
+        return out
+
+    monkeypatch.setenv("SIMREAL_CACHE", str(tmp_path / "cache"))
+    monkeypatch.setattr(build, "cached_model", fake_cached_model)
+    s = load_scene(write(tmp_path, SPEC_SCENE.replace("PARAM", param)))
+    if match:
+        with pytest.raises(SceneError, match=match):
+            build_spec_models(s)
+        return
+    o = build_spec_models(s)["objects"][0]
+    assert Path(o["model"]).exists() and o["_model_header"]["axes"][0]["name"] == "s"

@@ -5,7 +5,7 @@ import pytest
 
 from simreal_nodes.io import bags
 from simreal_nodes.io.images import decode_compressed
-from simreal_nodes.scene.schema import load_scene
+from simreal_nodes.scene.schema import build_spec_models, load_scene
 from simreal_nodes.synth.samples import SAMPLES, render_sample, sample
 
 
@@ -26,7 +26,7 @@ def test_committed_sample_is_readable_complete_and_small(name):
     assert any(t.startswith("/ground_truth/objects/") for t in counts)
     size = sum(f.stat().st_size for f in bag.rglob("*") if f.is_file())
     assert size < 12e6, f"{name}: {size / 1e6:.1f} MB"
-    sc = load_scene(scene_yaml)  # the scene file that runs the graph on it is valid
+    sc = build_spec_models(load_scene(scene_yaml))  # the scene file that runs the graph on it is valid
     assert sc["camera"]["compressed"]
 
 

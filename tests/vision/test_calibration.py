@@ -3,8 +3,8 @@
 import cv2
 import numpy as np
 
+from simreal_nodes.camera import CameraModel
 from simreal_nodes.vision.calibration import board_points, calibrate
-from simreal_nodes.vision.camera import CameraModel
 
 
 def _render_views(cam: CameraModel, cols, rows, square, n, rng):

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from simreal_nodes import geometry as G
+from simreal_nodes.camera import CameraModel
 from simreal_nodes.io.images import depth_to_metres
-from simreal_nodes.vision.camera import CameraModel
 from simreal_nodes.vision.depth import bad_pixel_rate, depth_points
 from simreal_nodes.vision.stereo import sgbm_disparity
 from tests.conftest import shared

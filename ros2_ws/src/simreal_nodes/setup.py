@@ -5,18 +5,24 @@ The Python package is the repository's simreal_nodes (symlinked here); `ros2 run
 Install the pinned Python dependencies first: pip install -r ../../../requirements.txt
 """
 
+import tomllib
 from glob import glob
+from pathlib import Path
 
 from setuptools import find_packages, setup
 
 package_name = "simreal_nodes"
-NODES = ["ingest", "localization", "tracker", "collision", "overlay"]
+# The executables are declared once, in the repository's pyproject.toml: `simreal` and `simreal-NAME` per node.
+# ROS executables are named after the node (`ros2 run simreal_nodes ingest`, as simreal.launch.py starts them).
+with open(Path(__file__).resolve().parents[3] / "pyproject.toml", "rb") as f:
+    SCRIPTS = tomllib.load(f)["project"]["scripts"]
+NODE_PREFIX = "simreal-"
 
 setup(
     name=package_name,
     version="0.1.0",
     packages=find_packages(include=["simreal_nodes", "simreal_nodes.*"]),
-    package_data={"simreal_nodes": ["ros/*.xml", "specs/*.yaml", "render/shaders/*"]},
+    package_data={"simreal_nodes": ["ros/*.xml", "specs/*.yaml"]},
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),
@@ -29,7 +35,6 @@ setup(
     description="simreal nodes",
     license="Apache-2.0",
     entry_points={
-        "console_scripts": [f"{n} = simreal_nodes.ros.nodes.{n}:main" for n in NODES]
-        + ["simreal = simreal_nodes.cli:main"],
+        "console_scripts": [f"{name.removeprefix(NODE_PREFIX)} = {target}" for name, target in SCRIPTS.items()],
     },
 )

@@ -19,16 +19,16 @@ from simreal_msgs.msg import ContactState as ContactMsg
 from simreal_msgs.msg import FeatureObservations, ModelParameters
 
 from simreal_nodes import geometry as G
+from simreal_nodes.camera import CameraModel
 from simreal_nodes.collision.contact import ContactTracker, facing_surface_samples
 from simreal_nodes.errors import ImageFormatError
 from simreal_nodes.io import images
+from simreal_nodes.rom.model_file import load_model
 from simreal_nodes.ros.common import (SimrealNode, data_qos, guarded, observation_pose, reliable_qos,
                                       run_node, stamp_ns)
-from simreal_nodes.rom.model_file import load_model
 from simreal_nodes.scene import graph
 from simreal_nodes.scene.schema import load_scene
 from simreal_nodes.sync import StampSync
-from simreal_nodes.vision.camera import CameraModel
 from simreal_nodes.vision.depth import depth_points
 
 

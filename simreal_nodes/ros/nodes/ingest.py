@@ -12,12 +12,12 @@ from __future__ import annotations
 import numpy as np
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image
 
+from simreal_nodes.camera import CameraModel
 from simreal_nodes.errors import CameraInfoError, ImageFormatError, SimrealError
 from simreal_nodes.io import images, sources
 from simreal_nodes.ros.common import SimrealNode, data_qos, guarded, ns_to_stamp, run_node
 from simreal_nodes.scene import graph
 from simreal_nodes.scene.schema import load_scene
-from simreal_nodes.vision.camera import CameraModel
 from simreal_nodes.vision.undistort import Undistorter
 
 

@@ -20,6 +20,7 @@ from std_srvs.srv import SetBool
 from tf2_msgs.msg import TFMessage
 
 from simreal_nodes import geometry as G
+from simreal_nodes.camera import CameraModel
 from simreal_nodes.errors import ImageFormatError
 from simreal_nodes.io import images
 from simreal_nodes.ros.common import (TF_QOS, SimrealNode, cloud_field, cloud_msg, cloud_to_array, data_qos, guarded, matrix_to_pose,
@@ -27,7 +28,6 @@ from simreal_nodes.ros.common import (TF_QOS, SimrealNode, cloud_field, cloud_ms
 from simreal_nodes.scene import graph
 from simreal_nodes.scene.schema import load_scene
 from simreal_nodes.sync import StampSync
-from simreal_nodes.vision.camera import CameraModel
 
 
 

@@ -20,17 +20,17 @@ from std_msgs.msg import Header
 from visualization_msgs.msg import MarkerArray
 
 from simreal_nodes import geometry as G
+from simreal_nodes.camera import CameraModel
 from simreal_nodes.errors import ImageFormatError, SimrealError
 from simreal_nodes.io import images
 from simreal_nodes.io.cdr import TriangleListMarker, marker_array_cdr
 from simreal_nodes.render.overlay import ObjectOverlay, OverlayCompositor
+from simreal_nodes.rom.model_file import load_model
 from simreal_nodes.ros.common import (SimrealNode, data_qos, guarded, observation_pose, parse_progress, reliable_qos,
                                       run_node, stamp_ns)
-from simreal_nodes.rom.model_file import load_model
 from simreal_nodes.scene import graph
 from simreal_nodes.scene.schema import load_scene
 from simreal_nodes.sync import StampSync
-from simreal_nodes.vision.camera import CameraModel
 
 
 class VideoSink:

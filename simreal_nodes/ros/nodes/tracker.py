@@ -19,15 +19,15 @@ from std_srvs.srv import SetBool
 
 from simreal_nodes import geometry as G
 from simreal_nodes.assimilation.tracker import DeformableTracker, deformable_feedback, tracker_config
+from simreal_nodes.camera import CameraModel
 from simreal_nodes.errors import ImageFormatError
 from simreal_nodes.io import images
+from simreal_nodes.rom.model_file import load_model
 from simreal_nodes.ros.common import (SimrealNode, cloud_msg, data_qos, guarded, observation_pose, reliable_qos, run_node,
                                       stamp_ns)
-from simreal_nodes.rom.model_file import load_model
 from simreal_nodes.scene import graph
 from simreal_nodes.scene.schema import load_scene
 from simreal_nodes.sync import StampSync
-from simreal_nodes.vision.camera import CameraModel
 
 
 

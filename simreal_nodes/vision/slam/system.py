@@ -26,7 +26,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from simreal_nodes import geometry as G
-from simreal_nodes.vision.camera import CameraModel
+from simreal_nodes.camera import CameraModel
 from simreal_nodes.vision.orb import Features, OrbExtractor, match_descriptors
 from simreal_nodes.vision.slam.map import KeyFrame, Map
 from simreal_nodes.vision.slam.optimize import CHI2_2D, AsyncBundleAdjuster, ba_request, bundle_adjust, project, refine_pose

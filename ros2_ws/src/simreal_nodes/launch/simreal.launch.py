@@ -12,9 +12,10 @@ from launch_ros.actions import Node
 
 def _nodes(context):
     from simreal_nodes.scene.graph import required_nodes
-    from simreal_nodes.scene.schema import load_scene
+    from simreal_nodes.scene.schema import build_spec_models, load_scene
 
-    scene = load_scene(LaunchConfiguration("scene").perform(context))
+    # spec:NAME models are built here, before the nodes start (they only find them in the cache)
+    scene = build_spec_models(load_scene(LaunchConfiguration("scene").perform(context)))
     lossless = LaunchConfiguration("lossless").perform(context).lower() == "true"
     return [Node(package="simreal_nodes", executable=spec.name, name=spec.name, parameters=[spec.parameters],
                  output="screen", respawn=True) for spec in required_nodes(scene, lossless)]

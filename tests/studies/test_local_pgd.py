@@ -7,8 +7,8 @@ import warnings
 import numpy as np
 import pytest
 
-from simreal_nodes.rom import local_pgd as LP
-from simreal_nodes.rom.ch3_problems import cantilever, euler_bernoulli_tip, heat, heat_series
+from simreal_nodes.studies.ch3 import local_pgd as LP
+from simreal_nodes.studies.ch3.problems import cantilever, euler_bernoulli_tip, heat, heat_series
 
 
 @pytest.fixture(scope="module")
@@ -33,7 +33,7 @@ def test_series_solution_satisfies_the_pde():
     h = heat(401, 801)
     x, t = h.x, h.t
     u = heat_series(h.p, x, t)
-    from simreal_nodes.rom.ch3_problems import source
+    from simreal_nodes.studies.ch3.problems import source
 
     dt, dx = t[1] - t[0], x[1] - x[0]
     ut = (u[1:-1, 2:] - u[1:-1, :-2]) / (2 * dt)

@@ -1,8 +1,8 @@
 import numpy as np
 import pytest
 
+from simreal_nodes.camera import CameraModel
 from simreal_nodes.errors import CameraInfoError
-from simreal_nodes.vision.camera import CameraModel
 
 
 class Info:
