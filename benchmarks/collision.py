@@ -49,7 +49,8 @@ def run(seq, scene, step: int) -> dict:
     n = len(seq["depth"])
     return dict(step=step, points=int(np.median(npts)), agree_pct=100 * agree / n,
                 same_load_point_pct=100 * same / both if both else float("nan"), tau_err=float(np.median(dtau)),
-                tau_err_max=float(np.max(dtau)), ms=1e3 * float(np.median(times)), p95_ms=1e3 * float(np.percentile(times, 95)))
+                tau_err_max=float(np.max(dtau)), ms=1e3 * float(np.median(times)),
+                p95_ms=1e3 * float(np.percentile(times, 95)))
 
 
 def main():
@@ -68,7 +69,8 @@ def main():
         for res, mk in (("640x480", "o-"), ("1280x720", "s--")):
             rr = [r for r in rows if r["resolution"] == res]
             ax[0].plot([r["step"] for r in rr], [r["agree_pct"] for r in rr], mk, label=f"{res} contact agreement")
-            ax[0].plot([r["step"] for r in rr], [r["same_load_point_pct"] for r in rr], mk, alpha=0.5, label=f"{res} same load point")
+            ax[0].plot([r["step"] for r in rr], [r["same_load_point_pct"] for r in rr], mk, alpha=0.5,
+                       label=f"{res} same load point")
             ax[1].plot([r["step"] for r in rr], [r["ms"] for r in rr], mk, label=res)
         for a in ax:
             a.set_xscale("log", base=2)
@@ -80,8 +82,9 @@ def main():
         fig.tight_layout()
         return fig
 
-    save("collision", rows, [("resolution", "resolution", "{}"), ("step", "decimation", "{}"), ("points", "depth points", "{}"),
-                             ("agree_pct", "contact agrees (%)", "{:.0f}"), ("same_load_point_pct", "same load point (%)", "{:.0f}"),
+    save("collision", rows, [("resolution", "resolution", "{}"), ("step", "decimation", "{}"),
+                             ("points", "depth points", "{}"), ("agree_pct", "contact agrees (%)", "{:.0f}"),
+                             ("same_load_point_pct", "same load point (%)", "{:.0f}"),
                              ("tau_err", "pseudo-time err (median)", "{:.3f}"), ("tau_err_max", "max", "{:.2f}"),
                              ("ms", "time (ms)", "{:.2f}"), ("p95_ms", "p95 (ms)", "{:.2f}")],
          "Collision from depth: contact error and time versus decimation (crossed beams + probe)",

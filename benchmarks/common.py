@@ -68,7 +68,8 @@ def markdown_table(rows: list[dict], columns: list[tuple[str, str, str]]) -> str
     return "\n".join([head, sep, *body])
 
 
-def save(name: str, rows: list[dict], columns, title: str, notes: str = "", plot=None, extra: dict | None = None) -> Path:
+def save(name: str, rows: list[dict], columns, title: str, notes: str = "", plot=None,
+         extra: dict | None = None) -> Path:
     """Write the JSON (rows + machine), the markdown table and, if ``plot(ax_or_fig)`` is given, a PNG."""
     RESULTS.mkdir(parents=True, exist_ok=True)
     doc = {"benchmark": name, "title": title, "machine": machine(), "rows": rows}

@@ -37,7 +37,8 @@ def main():
                     r = Renderer(cam, ssaa=ssaa)
                     gl_name = r.gl_renderer
                     cols = (V - V.min(0)) / np.ptp(V, axis=0)
-                    r.add(Mesh("s", V, F, mode=mode, colors=cols, texture=W.texture("gravel") if mode == "texture" else None,
+                    r.add(Mesh("s", V, F, mode=mode, colors=cols,
+                               texture=W.texture("gravel") if mode == "texture" else None,
                                tex_scale=4.0, pose=G.make_T(t=[0, 0, 0.8])))
                     for _ in range(3):
                         r.render(np.eye(4))
@@ -48,7 +49,7 @@ def main():
                         r.render(np.eye(4))
                     ms = (time.perf_counter() - t) / n * 1e3
                     t = time.perf_counter()
-                    for k in range(n):
+                    for _ in range(n):
                         r.render(np.eye(4))
                     ms_static = (time.perf_counter() - t) / n * 1e3
                     rows.append({"resolution": f"{w}x{h}", "triangles": len(F), "mode": mode, "ssaa": ssaa,

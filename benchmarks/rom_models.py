@@ -38,7 +38,8 @@ def main():
             curves[f"{name}/{fname}"] = e.tolist()
             rows.append({"object": name, "field": fname, "method": model.provenance.get("method", "").split(" (")[0],
                          "nodes": model.n_nodes, "params": ", ".join(a.name for a in model.axes), "modes": f.n_modes,
-                         "err_1": e[0], "err_5": e[min(4, len(e) - 1)], "err_10": e[min(9, len(e) - 1)], "err_last": e[-1],
+                         "err_1": e[0], "err_5": e[min(4, len(e) - 1)], "err_10": e[min(9, len(e) - 1)],
+                         "err_last": e[-1],
                          "build_s": tb})
         snaps = getattr(model, "snapshots", None)
         if name == "bunny" and snaps is not None:
@@ -48,7 +49,8 @@ def main():
             for n in (5, 10, 20, 40):
                 if n <= cp.n_terms:
                     storage = n * sum(A.shape)
-                    hosvd_rows.append({"method": f"NI-PGD {n} terms", "storage": storage, "error": float(cp.errors[n - 1])})
+                    hosvd_rows.append({"method": f"NI-PGD {n} terms", "storage": storage,
+                                       "error": float(cp.errors[n - 1])})
             for r in ((10, 8, 6), (20, 12, 8), (40, 16, 11)):
                 t = nipgd.hosvd(A, ranks=list(r))
                 hosvd_rows.append({"method": f"HOSVD ranks {r}", "storage": t.storage,
@@ -70,7 +72,8 @@ def main():
             a.legend(fontsize=8)
         return fig
 
-    notes = "Errors are relative Frobenius norms over the full-order snapshots (PGD: FEM solves at every k-th load position)."
+    notes = ("Errors are relative Frobenius norms over the full-order snapshots "
+             "(PGD: FEM solves at every k-th load position).")
     if hosvd_rows:
         notes += ("\n\nNI-PGD vs HOSVD on the bunny displacement tensor (space x contact point x pseudo-time), "
                   "storage in floats:\n\n| method | storage | error |\n|---|---|---|\n"

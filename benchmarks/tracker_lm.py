@@ -80,15 +80,17 @@ def main():
         rows.append(dict(sweep="resolution", **run_case(m, width=w)))
     for h in (0.5, 1.0, 2.0, 4.0, 8.0, 1e9):
         rows.append(dict(sweep="huber", **run_case(m, huber=h)))
-    at19 = [r for r in rows if r["sweep"] == "modes" and r["modes"] == 19][0]
+    at19 = next(r for r in rows if r["sweep"] == "modes" and r["modes"] == 19)
     notes = (f"At 19 modes and {at19['points']} points: median LM solve {at19['solve_ms']:.2f} ms "
-             f"(target ≤ 1 ms: {'met' if at19['solve_ms'] <= 1 else 'not met'}). Huber 1e9 = plain least squares: the 5 % "
-             "outliers then bias the estimate. Resolution scales the focal length (same field of view), noise stays 0.5 px.")
+             f"(target ≤ 1 ms: {'met' if at19['solve_ms'] <= 1 else 'not met'}). "
+             "Huber 1e9 = plain least squares: the 5 % outliers then bias the estimate. "
+             "Resolution scales the focal length (same field of view), noise stays 0.5 px.")
 
     def plot(plt):
         fig, ax = plt.subplots(1, 4, figsize=(18, 3.8))
         for a, (sw, key, xl) in zip(ax, (("modes", "modes", "modes"), ("points", "points", "tracked points"),
-                                         ("resolution", "width", "image width (px)"), ("huber", "huber", "Huber threshold (px)"))):
+                                         ("resolution", "width", "image width (px)"),
+                                         ("huber", "huber", "Huber threshold (px)"))):
             rr = [r for r in rows if r["sweep"] == sw]
             xs = [min(r[key], 50) for r in rr]
             a.plot(xs, [r["median_err_pct"] for r in rr], "o-", color="tab:blue")
@@ -104,7 +106,8 @@ def main():
 
     save("tracker_lm", rows, [("sweep", "sweep", "{}"), ("modes", "modes", "{}"), ("points", "points", "{}"),
                               ("width", "width", "{}"), ("huber", "Huber (px)", "{:g}"),
-                              ("median_err_pct", "median err (% span)", "{:.3f}"), ("p90_err_pct", "p90 (% span)", "{:.3f}"),
+                              ("median_err_pct", "median err (% span)", "{:.3f}"),
+                              ("p90_err_pct", "p90 (% span)", "{:.3f}"),
                               ("solve_ms", "LM solve (ms)", "{:.2f}"), ("solve_p95_ms", "p95 (ms)", "{:.2f}")],
          "Deformable tracking: accuracy and time per LM solve (aluminium beam model)", notes, plot)
 

@@ -83,7 +83,8 @@ def main():
             err = np.abs(est[loaded, j] - truth[loaded, j])
             if n == "s":
                 row["median_err"] = f"{1e3 * np.median(err):.1f} mm ({100 * np.median(err) / SPAN['s']:.2f} % span)"
-                row["p90_err"] = f"{1e3 * np.percentile(err, 90):.1f} mm ({100 * np.percentile(err, 90) / SPAN['s']:.1f} %)"
+                p90 = np.percentile(err, 90)
+                row["p90_err"] = f"{1e3 * p90:.1f} mm ({100 * p90 / SPAN['s']:.1f} %)"
             else:
                 row["median_err"] = f"{np.degrees(np.median(err)):.2f} deg"
                 row["p90_err"] = f"{np.degrees(np.percentile(err, 90)):.2f} deg"
@@ -97,8 +98,8 @@ def main():
              "stops at the first deformation (thesis §4.4.1); 'mapping': it goes on. knob: one setting changed from "
              "the default (anchor foot: a linked point's rest position is its mapped point's foot on the surface "
              "instead of its pixel's viewing ray; flow anchor: tracks re-measured against their first image; flow "
-             "window: Lucas-Kanade window in pixels, 11 by default). step: localization + tracking per frame (Python, 2-core CPU); solve: the LM "
-             "(with its global restarts) alone.")
+             "window: Lucas-Kanade window in pixels, 11 by default). step: localization + tracking per frame "
+             "(Python, 2-core CPU); solve: the LM (with its global restarts) alone.")
 
     def plot(plt):
         fig, ax = plt.subplots(1, len(curves), figsize=(4 * len(curves), 3.4), sharey=False)
@@ -113,12 +114,15 @@ def main():
         return fig
 
     cols = [("scene", "scene", "{}"), ("resolution", "resolution", "{}"), ("map", "map", "{}"), ("knob", "knob", "{}"),
-            ("median_err", "median error", "{}"), ("p90_err", "p90 error", "{}"), ("alpha_err_deg", "alpha_z error (deg)", "{:.2f}"),
+            ("median_err", "median error", "{}"), ("p90_err", "p90 error", "{}"),
+            ("alpha_err_deg", "alpha_z error (deg)", "{:.2f}"),
             ("ok_pct", "OK (%)", "{:.0f}"), ("lost_pct", "lost (%)", "{:.0f}"), ("step_ms", "step (ms)", "{:.0f}"),
             ("solve_ms", "solve (ms)", "{:.2f}")]
-    save("tracking_scenes", rows, cols, "Deformable tracking on rendered scenes (RGB-D SLAM + PGD tracker)", notes, plot)
+    save("tracking_scenes", rows, cols, "Deformable tracking on rendered scenes (RGB-D SLAM + PGD tracker)", notes,
+         plot)
     doc = Path(__file__).resolve().parents[1] / "docs" / "tracking.md"
-    body = (RESULTS / "tracking_scenes.md").read_text().replace("](tracking_scenes.png)", "](../benchmarks/results/tracking_scenes.png)")
+    body = (RESULTS / "tracking_scenes.md").read_text().replace("](tracking_scenes.png)",
+                                                                "](../benchmarks/results/tracking_scenes.png)")
     doc.write_text(INTRO + "\n" + body.split("\n", 1)[1])
 
 

@@ -14,6 +14,7 @@ from __future__ import annotations
 import json
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -52,7 +53,8 @@ def node_metrics(run_bag: Path) -> dict:
     for m in bags.read_bag(run_bag, topics=["/diagnostics"]):
         for st in bags.decode(m).status:
             if st.name.startswith("simreal/"):
-                last[st.name[8:]] = {kv.key: kv.value for kv in st.values} | {"message": st.message, "level": int(st.level)}
+                last[st.name[8:]] = ({kv.key: kv.value for kv in st.values}
+                                     | {"message": st.message, "level": int(st.level)})
     return last
 
 
@@ -96,7 +98,8 @@ def evaluate_run(run_bag: Path, truth_bag: Path, scene: dict, out: Path) -> dict
     from simreal_nodes.assimilation.evaluate import compare, read_parameters
     from simreal_nodes.scene.graph import params_topic
 
-    results, series = {}, {}
+    results: dict[str, dict[str, Any]] = {}  # per object (or "object/parameter"): its comparison
+    series: dict[str, tuple[Any, ...]] = {}
     for o in scene["objects"]:
         if not (o["tracking"]["enabled"] or o["collision"]["enabled"]):
             continue
@@ -141,7 +144,7 @@ def run_demo(scene: str = DEFAULT_SCENE, out: str | Path = "out/demo", regenerat
     video = out / "overlay.mp4"
     echo("[demo] replaying through the graph: " + " -> ".join(n.name for n in __import__(
         "simreal_nodes.scene.graph", fromlist=["required_nodes"]).required_nodes(sc)))
-    stats, report, counts = replay(str(bag), str(scene_yaml), lossless=True, record=str(run_bag),
+    stats, _report, counts = replay(str(bag), str(scene_yaml), lossless=True, record=str(run_bag),
                                    extra_params={"overlay": {"video": str(video.resolve())}}, echo=echo)
     if stats is None:
         raise SimrealError("the replay did not run")
@@ -159,7 +162,8 @@ def summary_markdown(m: dict) -> str:
     f = m["frames"]
     lines = [f"# simreal demo: {m['scene']}", "",
              f"{f['frames_published']} frames replayed in {f['play_s']:.1f} s ({f['fps']:.1f} fps, lossless); "
-             f"{f['frames_completed']} completed, {f['frames_dropped']} dropped, {f['frames_timed_out']} timed out.", "",
+             f"{f['frames_completed']} completed, {f['frames_dropped']} dropped, "
+             f"{f['frames_timed_out']} timed out.", "",
              "| parameter | frames | median abs error | % of range | max abs error | outside range |",
              "|---|---|---|---|---|---|"]
     for k, p in m["parameters"].items():
@@ -168,14 +172,17 @@ def summary_markdown(m: dict) -> str:
             continue
         sc, u = (1e3, "mm") if p["unit"] == "m" else ((180 / np.pi, "deg") if p["unit"] == "rad" else (1.0, p["unit"]))
         pct = p["median_pct_of_range"]
-        lines.append(f"| {k} | {p['frames']} | {p['median_abs'] * sc:.3f} {u} | {pct:.2f} | {p['max_abs'] * sc:.3f} {u} | "
-                     f"{p['outside_range']} |" if pct is not None else f"| {k} | {p['frames']} | {p['median_abs'] * sc:.3f} {u} | - | - | - |")
-    lines += ["", "| node | processing p50 ms | p95 ms | processed | dropped | errors | latency from publish p50 / p95 ms |",
+        lines.append(f"| {k} | {p['frames']} | {p['median_abs'] * sc:.3f} {u} | {pct:.2f} | "
+                     f"{p['max_abs'] * sc:.3f} {u} | {p['outside_range']} |" if pct is not None
+                     else f"| {k} | {p['frames']} | {p['median_abs'] * sc:.3f} {u} | - | - | - |")
+    lines += ["", "| node | processing p50 ms | p95 ms | processed | dropped | errors "
+                  "| latency from publish p50 / p95 ms |",
               "|---|---|---|---|---|---|---|"]
     lat = f.get("latency_ms", {})
     for n, d in sorted(m["nodes"].items()):
         l = lat.get(n, {})
-        lines.append(f"| {n} | {d.get('processing_ms_p50', '-')} | {d.get('processing_ms_p95', '-')} | {d.get('processed', '-')} | "
+        lines.append(f"| {n} | {d.get('processing_ms_p50', '-')} | {d.get('processing_ms_p95', '-')} | "
+                     f"{d.get('processed', '-')} | "
                      f"{d.get('dropped', '-')} | {d.get('errors', '-')} | "
                      f"{l.get('p50', float('nan')):.1f} / {l.get('p95', float('nan')):.1f} |")
     o = m["outputs"]

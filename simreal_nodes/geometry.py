@@ -6,10 +6,13 @@ the camera pose in the map, the transform that TF publishes as parent ``map``, c
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 
-def quat_to_matrix(q) -> np.ndarray:
+def quat_to_matrix(q: NDArray[np.float64] | Sequence[float]) -> NDArray[np.float64]:
     """(x, y, z, w) -> 3x3 rotation; normalizes; a zero quaternion is an error."""
     x, y, z, w = (float(v) for v in q)
     n = x * x + y * y + z * z + w * w
@@ -23,7 +26,7 @@ def quat_to_matrix(q) -> np.ndarray:
     ])
 
 
-def matrix_to_quat(R) -> np.ndarray:
+def matrix_to_quat(R: ArrayLike) -> NDArray[np.float64]:
     """3x3 rotation -> (x, y, z, w) with w >= 0 (Shepperd's method)."""
     R = np.asarray(R, dtype=np.float64)
     t = np.trace(R)
@@ -43,7 +46,7 @@ def matrix_to_quat(R) -> np.ndarray:
     return q if q[3] >= 0 else -q
 
 
-def pose7_to_matrix(p) -> np.ndarray:
+def pose7_to_matrix(p: NDArray[np.float64] | Sequence[float]) -> NDArray[np.float64]:
     """[x, y, z, qx, qy, qz, qw] -> 4x4."""
     T = np.eye(4)
     T[:3, :3] = quat_to_matrix(p[3:7])
@@ -51,12 +54,12 @@ def pose7_to_matrix(p) -> np.ndarray:
     return T
 
 
-def matrix_to_pose7(T) -> np.ndarray:
+def matrix_to_pose7(T: ArrayLike) -> NDArray[np.float64]:
     T = np.asarray(T)
     return np.concatenate([T[:3, 3], matrix_to_quat(T[:3, :3])])
 
 
-def make_T(R=None, t=None) -> np.ndarray:
+def make_T(R: ArrayLike | None = None, t: ArrayLike | None = None) -> NDArray[np.float64]:
     T = np.eye(4)
     if R is not None:
         T[:3, :3] = R
@@ -65,7 +68,7 @@ def make_T(R=None, t=None) -> np.ndarray:
     return T
 
 
-def inv(T) -> np.ndarray:
+def inv(T: ArrayLike) -> NDArray[np.float64]:
     """Inverse of a rigid 4x4 transform."""
     T = np.asarray(T)
     Ti = np.eye(4)
@@ -74,28 +77,29 @@ def inv(T) -> np.ndarray:
     return Ti
 
 
-def transform(T, P) -> np.ndarray:
+def transform(T: NDArray[np.float64], P: ArrayLike) -> NDArray[np.float64]:
     """Apply a 4x4 transform to (N, 3) points."""
     P = np.asarray(P, dtype=np.float64)
     return P @ T[:3, :3].T + T[:3, 3]
 
 
-def hat(w) -> np.ndarray:
+def hat(w: NDArray[np.float64] | Sequence[float]) -> NDArray[np.float64]:
     """so(3) hat: w -> [w]x."""
     return np.array([[0, -w[2], w[1]], [w[2], 0, -w[0]], [-w[1], w[0], 0]], dtype=np.float64)
 
 
-def exp_so3(w) -> np.ndarray:
+def exp_so3(w: ArrayLike) -> NDArray[np.float64]:
     """Rodrigues: rotation vector -> rotation matrix."""
     w = np.asarray(w, dtype=np.float64)
     th = np.linalg.norm(w)
     K = hat(w)
     if th < 1e-10:
         return np.eye(3) + K + 0.5 * K @ K
-    return np.eye(3) + np.sin(th) / th * K + (1 - np.cos(th)) / th**2 * K @ K
+    R: NDArray[np.float64] = np.eye(3) + np.sin(th) / th * K + (1 - np.cos(th)) / th**2 * K @ K
+    return R
 
 
-def log_so3(R) -> np.ndarray:
+def log_so3(R: ArrayLike) -> NDArray[np.float64]:
     """Rotation matrix -> rotation vector (angle in [0, pi])."""
     R = np.asarray(R, dtype=np.float64)
     c = np.clip((np.trace(R) - 1) / 2, -1.0, 1.0)
@@ -107,11 +111,13 @@ def log_so3(R) -> np.ndarray:
         A = (R + np.eye(3)) / 2
         k = int(np.argmax(np.diag(A)))
         axis = A[:, k] / np.sqrt(max(A[k, k], 1e-15))
-        return axis / np.linalg.norm(axis) * th
-    return th / (2 * np.sin(th)) * np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+        w_pi: NDArray[np.float64] = axis / np.linalg.norm(axis) * th
+        return w_pi
+    w: NDArray[np.float64] = th / (2 * np.sin(th)) * np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+    return w
 
 
-def rot_axis(axis: str, angle: float) -> np.ndarray:
+def rot_axis(axis: str, angle: float) -> NDArray[np.float64]:
     """Rotation about a principal axis 'x', 'y' or 'z' by ``angle`` radians."""
     c, s = np.cos(angle), np.sin(angle)
     if axis == "x":
@@ -123,7 +129,7 @@ def rot_axis(axis: str, angle: float) -> np.ndarray:
     raise ValueError(f"axis must be 'x', 'y' or 'z', not {axis!r}")
 
 
-def look_at(eye, target, up=(0, 0, 1)) -> np.ndarray:
+def look_at(eye: ArrayLike, target: ArrayLike, up: ArrayLike = (0, 0, 1)) -> NDArray[np.float64]:
     """Camera pose T_world_cam (optical frame: z forward, x right, y down) looking at target."""
     eye, target, up = (np.asarray(v, dtype=np.float64) for v in (eye, target, up))
     z = target - eye
@@ -136,7 +142,7 @@ def look_at(eye, target, up=(0, 0, 1)) -> np.ndarray:
     return make_T(np.stack([x, y, z], axis=1), eye)
 
 
-def vertex_normals(V: np.ndarray, F: np.ndarray) -> np.ndarray:
+def vertex_normals(V: ArrayLike, F: ArrayLike) -> NDArray[np.float64]:
     """Unit vertex normals of a triangle mesh: the area-weighted sum of the incident faces' normals
     (zero for a vertex on no face)."""
     V = np.asarray(V, dtype=np.float64)
@@ -148,7 +154,7 @@ def vertex_normals(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     return n / np.where(ln > 0, ln, 1.0)
 
 
-def outward_triangles(V: np.ndarray, F: np.ndarray) -> np.ndarray | None:
+def outward_triangles(V: ArrayLike, F: ArrayLike) -> NDArray[np.int64] | None:
     """The triangles of a closed, consistently wound surface, wound counter-clockwise seen from outside
     (flipped if they were the other way); None if the surface is open or its winding is inconsistent
     (every directed edge must appear once and its reverse once). Back faces of such a surface are never

@@ -49,14 +49,13 @@ def write_camera_bag(path: Path, n: int = 30, w: int = 160, h: int = 120, fps: f
     stamps = []
     with bags.BagWriter(path, storage) as wr:
         for i in range(n):
-            t = start_s * 10**9 + int(round(i * 1e9 / fps))
+            t = start_s * 10**9 + round(i * 1e9 / fps)
             st = (t // 10**9, t % 10**9)
-            wr.write("/camera/camera_info", t, camera_info_obj(ts, w, h, stamp=st, zeros=zero_info), "sensor_msgs/msg/CameraInfo")
+            wr.write("/camera/camera_info", t, camera_info_obj(ts, w, h, stamp=st, zeros=zero_info),
+                     "sensor_msgs/msg/CameraInfo")
             img = frame_pixels(i, w, h)
-            if i in bad_step:
-                msg = image_obj(ts, img, "rgb8", st, step=w * 3 - 7)  # step disagrees with width
-            else:
-                msg = image_obj(ts, img, "rgb8", st)
+            # on the frames in bad_step the row step disagrees with the width
+            msg = image_obj(ts, img, "rgb8", st, step=w * 3 - 7) if i in bad_step else image_obj(ts, img, "rgb8", st)
             wr.write("/camera/image_raw", t + 1000, msg, "sensor_msgs/msg/Image")
             if depth:
                 d = np.full((h, w), 1000 + i, np.uint16)

@@ -25,8 +25,8 @@ def test_outward_triangles_keeps_flips_or_refuses():
     out = G.outward_triangles(CUBE_V, flipped)
     np.testing.assert_array_equal(G.outward_triangles(CUBE_V, out), out)  # now outward: kept
     np.testing.assert_array_equal(np.sort(out, axis=1), np.sort(CUBE_F, axis=1))
-    assert np.all(np.einsum("ij,ij->i", np.cross(CUBE_V[out[:, 1]] - CUBE_V[out[:, 0]], CUBE_V[out[:, 2]] - CUBE_V[out[:, 0]]),
-                            CUBE_V[out].mean(axis=1) - 0.5) > 0)
+    normals = np.cross(CUBE_V[out[:, 1]] - CUBE_V[out[:, 0]], CUBE_V[out[:, 2]] - CUBE_V[out[:, 0]])
+    assert np.all(np.einsum("ij,ij->i", normals, CUBE_V[out].mean(axis=1) - 0.5) > 0)
     assert G.outward_triangles(CUBE_V, CUBE_F[:-1]) is None  # open: a missing face
     mixed = CUBE_F.copy()
     mixed[0] = mixed[0, ::-1]

@@ -10,16 +10,21 @@
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import os
 from collections import defaultdict
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Iterable, Iterator
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from simreal_nodes.errors import BagError
+
+if TYPE_CHECKING:
+    from rosbags.interfaces import Connection
 
 MSG_PACKAGES = ("simreal_msgs",)
 
@@ -48,7 +53,7 @@ def message_definitions(package: str = "simreal_msgs") -> dict[str, str]:
 @functools.lru_cache(maxsize=1)
 def typestore():
     """The ROS 2 Jazzy type store with simreal's messages registered."""
-    from rosbags.typesys import Stores, get_typestore, get_types_from_msg
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
     ts = get_typestore(Stores.ROS2_JAZZY)
     types = {}
@@ -82,17 +87,17 @@ class BagWriter:
             raise BagError(f"output bag {self.path} already exists; choose a new name")
         self._ts = typestore()
         self._writer = Writer(self.path, version=9, storage_plugin=storage_plugin(storage))
-        self._connections: dict[str, object] = {}
+        self._connections: dict[str, Connection] = {}
         self._types: dict[str, str] = {}
         self.count = 0
         self._open = False
 
-    def open(self) -> "BagWriter":
+    def open(self) -> BagWriter:
         self._writer.open()
         self._open = True
         return self
 
-    def __enter__(self) -> "BagWriter":
+    def __enter__(self) -> BagWriter:
         return self.open()
 
     def __exit__(self, *exc) -> None:
@@ -168,14 +173,16 @@ class BagReport:
     def summary(self) -> str:
         lines = [f"bag {self.path}: " + ", ".join(f"{t} {n}" for t, n in sorted(self.counts.items()))]
         if self.damage:
-            lines.append(f"  damaged: {self.damage}" + (" (salvaged the messages before the damage)" if self.salvaged else ""))
+            lines.append(f"  damaged: {self.damage}"
+                         + (" (salvaged the messages before the damage)" if self.salvaged else ""))
         for t, at, gap in self.gaps[:20]:
             lines.append(f"  gap on {t}: {gap * 1e3:.1f} ms without messages at t={at:.3f} s")
         for t, i, s in self.out_of_order[:20]:
             lines.append(f"  out-of-order stamp on {t}: message {i} has stamp {s:.6f} s, earlier than the one before")
         for t, i, e in self.undecodable[:20]:
             lines.append(f"  undecodable message {i} on {t}: {e}")
-        extra = self.problems - min(20, len(self.gaps)) - min(20, len(self.out_of_order)) - min(20, len(self.undecodable)) - int(bool(self.damage))
+        extra = (self.problems - min(20, len(self.gaps)) - min(20, len(self.out_of_order))
+                 - min(20, len(self.undecodable)) - int(bool(self.damage)))
         if extra > 0:
             lines.append(f"  ... and {extra} more problems")
         return "\n".join(lines)
@@ -267,7 +274,7 @@ def read_bag(path: str | Path, report: BagReport | None = None, topics: Iterable
             if med <= 0:
                 continue
             acc = 0
-            for k, dt in enumerate(dts):
+            for _k, dt in enumerate(dts):
                 acc += dt
                 if dt > 3.0 * med and dt > 5e7:
                     report.gaps.append((topic, acc * 1e-9, dt * 1e-9))
@@ -301,10 +308,8 @@ def _iter_rosbags(path: Path, wanted, only_headers):
                 raise _Unreadable(f"{type(e).__name__}: {e}") from None
             yield con.topic, con.msgtype, int(t), bytes(raw)
     finally:
-        try:
+        with contextlib.suppress(Exception):
             reader.close()
-        except Exception:  # noqa: BLE001
-            pass
 
 
 def _salvage_mcap(files, wanted, report: BagReport, only_headers: bool):

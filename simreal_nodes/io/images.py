@@ -77,10 +77,8 @@ def image_to_array(msg, copy: bool = False) -> np.ndarray:
         raise ImageFormatError(
             f"image data has {raw.size} bytes, more than height*step = {h}*{step} = {step * h}")
     rows = np.lib.stride_tricks.as_strided(raw, shape=(h, row_bytes), strides=(step, 1))
-    if step == row_bytes and raw.size == step * h:
-        pix = raw.view(dtype) if dtype.itemsize == 1 else raw.view(dtype)
-    else:
-        pix = np.ascontiguousarray(rows).view(dtype)
+    dense = step == row_bytes and raw.size == step * h  # rows back to back: view the buffer as it is
+    pix = raw.view(dtype) if dense else np.ascontiguousarray(rows).view(dtype)
     pix = pix.reshape(h, w, channels) if channels > 1 else pix.reshape(h, w)
     if dtype.itemsize > 1 and bool(msg.is_bigendian) != (np.little_endian is False):
         pix = pix.byteswap()

@@ -6,9 +6,10 @@ Each yields :class:`Frame` objects; a frame that cannot be decoded is yielded wi
 
 from __future__ import annotations
 
+import contextlib
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterator
 
 import numpy as np
 
@@ -47,7 +48,7 @@ def video_frames(path: str | Path, rate_hz: float | None = None) -> Iterator[Fra
             ok, img = cap.read()
             if not ok:
                 return
-            yield Frame(i, int(round(i * period * 1e9)), img, "bgr8")
+            yield Frame(i, round(i * period * 1e9), img, "bgr8")
             i += 1
     finally:
         cap.release()
@@ -63,7 +64,7 @@ def folder_frames(path: str | Path, rate_hz: float = 30.0) -> Iterator[Frame]:
     if not files:
         raise SimrealError(f"image folder {path} has no images ({', '.join(IMAGE_SUFFIXES)})")
     for i, f in enumerate(files):
-        stamp = int(round(i / rate_hz * 1e9))
+        stamp = round(i / rate_hz * 1e9)
         img = cv2.imread(str(f), cv2.IMREAD_UNCHANGED)
         if img is None:
             yield Frame(i, stamp, error=f"cannot decode image {f.name}")
@@ -115,10 +116,8 @@ def bag_frames(path: str | Path, image_topic: str, info_topic: str, depth_topic:
         if m.topic == info_topic:
             info = obj
         elif m.topic == depth_topic:
-            try:
+            with contextlib.suppress(images.ImageFormatError):
                 pending_depth[bags.stamp_ns(obj)] = (images.image_to_array(obj, copy=True), obj.encoding)
-            except images.ImageFormatError:
-                pass
         elif m.topic in (image_topic, image_topic + "/compressed"):
             pending_img.append((bags.stamp_ns(obj), m.log_time_ns, obj))
         # images wait (briefly) for their depth of the same stamp

@@ -19,12 +19,15 @@ does not depend on the magnitude of E (1e3 ... 1e11 Pa give the same u*E/F).
 from __future__ import annotations
 
 import warnings
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 import skfem
+from numpy.typing import ArrayLike, NDArray
 
 from simreal_nodes.errors import FemError
 from simreal_nodes.physics import materials as mat
@@ -83,12 +86,16 @@ class Region:
         return m
 
     @classmethod
-    def from_spec(cls, d) -> "Region":
+    def from_spec(cls, d: RegionSpec) -> Region:
         if isinstance(d, Region):
             return d
         if isinstance(d, str):
             return cls(face=d)
         return cls(face=d.get("face"), box=d.get("box"), tol=d.get("tol", 1e-6))
+
+
+# What Region.from_spec takes: a Region, a face name, or {face, box, tol} from a spec.
+RegionSpec = Region | str | dict[str, Any]
 
 
 @dataclass
@@ -109,7 +116,7 @@ class Support:
         raise FemError(f"support kind must be clamped, pinned or sliding, got '{self.kind}'")
 
     @classmethod
-    def from_spec(cls, d) -> "Support":
+    def from_spec(cls, d: dict[str, Any]) -> Support:
         comp = d.get("component")
         if isinstance(comp, str):
             comp = "xyz".index(comp)
@@ -125,7 +132,8 @@ class SolveInfo:
     message: str = ""
 
 
-RIGID_NAMES_3D = ["translation x", "translation y", "translation z", "rotation about x", "rotation about y", "rotation about z"]
+RIGID_NAMES_3D = ["translation x", "translation y", "translation z",
+                  "rotation about x", "rotation about y", "rotation about z"]
 RIGID_NAMES_2D = ["translation x", "translation y", "rotation about z"]
 
 
@@ -136,8 +144,9 @@ class Solid:
     elasticity, ``plane='stress'``) with ``thickness``.
     """
 
-    def __init__(self, mesh, material: mat.Material, order: int = 1, supports=(), plane: str = "strain",
-                 thickness: float = 1.0, intorder: int | None = None):
+    def __init__(self, mesh: skfem.Mesh, material: mat.Material, order: int = 1,
+                 supports: Sequence[Support | dict[str, Any]] = (), plane: str = "strain",
+                 thickness: float = 1.0, intorder: int | None = None) -> None:
         self.mesh = mesh
         self.dim = mesh.dim()
         self.material = material
@@ -167,7 +176,7 @@ class Solid:
         self.fixed = self._fixed_dofs()
         self.free = np.setdiff1d(np.arange(self.N), self.fixed)
         self._check_rigid_modes()
-        self._K_lin = None
+        self._K_lin: sp.csr_matrix | None = None
         self._grads = None
 
     # -- supports -----------------------------------------------------------------------------
@@ -238,7 +247,8 @@ class Solid:
 
     def _scalar_grads(self):
         if self._grads is None:
-            self._grads = np.stack([self.sbasis.basis[a][0].grad for a in range(self.sbasis.Nbfun)])  # (nb, dim, ne, nq)
+            # (nb, dim, ne, nq)
+            self._grads = np.stack([self.sbasis.basis[a][0].grad for a in range(self.sbasis.Nbfun)])
         return self._grads
 
     # -- assembly -----------------------------------------------------------------------------
@@ -285,7 +295,7 @@ class Solid:
         return self._K_lin
 
     # -- loads ----------------------------------------------------------------------------------
-    def vertex_dofs(self, vertex: int | np.ndarray) -> np.ndarray:
+    def vertex_dofs(self, vertex: int | NDArray[np.integer]) -> NDArray[np.int64]:
         """(dim,) or (n, dim) global dofs of mesh vertices."""
         return self.basis.nodal_dofs[:, vertex].T
 
@@ -299,7 +309,7 @@ class Solid:
         f[self.vertex_dofs(self.nearest_vertex(point))] += np.asarray(force, dtype=np.float64)
         return f
 
-    def vertices_in(self, region: Region) -> np.ndarray:
+    def vertices_in(self, region: RegionSpec) -> NDArray[np.int64]:
         return np.flatnonzero(Region.from_spec(region).mask(self.mesh.p, self.bounds))
 
     def traction(self, region, vector, within=None) -> np.ndarray:
@@ -343,11 +353,13 @@ class Solid:
 
         return float(one.assemble(sb)) * self.thickness
 
-    def patch_load(self, region, center, radius: float, total_force) -> np.ndarray:
+    def patch_load(self, region: RegionSpec, center: ArrayLike, radius: float,
+                   total_force: ArrayLike) -> NDArray[np.float64]:
         """A disk of uniform pressure (the foam beam's lead disks): total force exactly ``total_force``."""
         c = np.asarray(center, dtype=np.float64).reshape(-1, 1)
         F = np.asarray(total_force, dtype=np.float64)
-        normal_axis = FACES[Region.from_spec(region).face][0] if Region.from_spec(region).face else None
+        face = Region.from_spec(region).face
+        normal_axis = FACES[face][0] if face else None
 
         def within(x):
             d = x - c
@@ -379,9 +391,11 @@ class Solid:
         """Linear elastic displacement for loads ``f`` (newtons)."""
         return self._solve_free(self.stiffness(), np.asarray(f) * self._scale)
 
-    def solve(self, f: np.ndarray, steps: int = 10, tol: float = 1e-9, max_iter: int = 25,
-              u0: np.ndarray | None = None, path: list | None = None, min_step: float = 1e-4,
-              progress=None, u_fixed: np.ndarray | None = None) -> tuple[np.ndarray, SolveInfo]:
+    def solve(self, f: NDArray[np.float64], steps: int = 10, tol: float = 1e-9, max_iter: int = 25,
+              u0: NDArray[np.float64] | None = None, path: list[NDArray[np.float64]] | None = None,
+              min_step: float = 1e-4,
+              progress: Callable[[int], object] | None = None,
+              u_fixed: NDArray[np.float64] | None = None) -> tuple[NDArray[np.float64], SolveInfo]:
         """Newton with load stepping: loads (and prescribed displacements ``u_fixed`` on the fixed dofs)
         grow linearly over ``steps`` increments; ``path`` collects u after each increment (the
         pseudo-time snapshots)."""
@@ -390,8 +404,10 @@ class Solid:
         states = [((k + 1) / steps * f, (k + 1) / steps * uf) for k in range(steps)]
         return self.solve_states(states, tol, max_iter, u0, path, min_step, progress)
 
-    def solve_states(self, states, tol: float = 1e-9, max_iter: int = 25, u0: np.ndarray | None = None,
-                     path: list | None = None, min_step: float = 1e-3, progress=None) -> tuple[np.ndarray, SolveInfo]:
+    def solve_states(self, states: Sequence[tuple[NDArray[np.float64], NDArray[np.float64]]], tol: float = 1e-9,
+                     max_iter: int = 25, u0: NDArray[np.float64] | None = None,
+                     path: list[NDArray[np.float64]] | None = None, min_step: float = 1e-3,
+                     progress: Callable[[int], object] | None = None) -> tuple[NDArray[np.float64], SolveInfo]:
         """Follow a sequence of load states [(f, u_fixed), ...] (newtons; metres on the fixed dofs),
         interpolating linearly between consecutive states and halving the sub-step when Newton fails."""
         u = np.zeros(self.N) if u0 is None else np.array(u0, dtype=np.float64)
@@ -401,9 +417,9 @@ class Solid:
         for k, (f_t, uf_t) in enumerate(states):
             f_t = np.asarray(f_t, dtype=np.float64) * self._scale
             uf_t = np.asarray(uf_t, dtype=np.float64)[self.fixed]
-            fnorm = max(np.linalg.norm(f_t[self.free]), np.linalg.norm(f_prev[self.free]), 1e-300)
-            if fnorm <= 1e-300:
-                fnorm = None  # displacement-driven: use a stiffness-scaled norm below
+            fmax = max(float(np.linalg.norm(f_t[self.free])), float(np.linalg.norm(f_prev[self.free])), 1e-300)
+            # displacement-driven (no load): None, _newton then uses a stiffness-scaled norm
+            fnorm = None if fmax <= 1e-300 else fmax
             a, da = 0.0, 1.0
             while a < 1.0 - 1e-12:
                 b = min(1.0, a + da)
@@ -446,7 +462,8 @@ class Solid:
             res = np.linalg.norm(r[self.free]) / ref
             if not np.isfinite(res):
                 return u, False, it, res
-            if not pending_bc and (res < tol or (step <= 1e-12 * max(np.linalg.norm(u), 1e-300) and res < np.sqrt(tol))):
+            if not pending_bc and (res < tol
+                                   or (step <= 1e-12 * max(np.linalg.norm(u), 1e-300) and res < np.sqrt(tol))):
                 return u, True, it, res
             if it == max_iter:
                 break
@@ -481,11 +498,11 @@ class Solid:
         return float(mat.det3(self._F3(self._grad_u(u))).min())
 
     # -- outputs ------------------------------------------------------------------------------------
-    def vertex_displacement(self, u: np.ndarray) -> np.ndarray:
+    def vertex_displacement(self, u: NDArray[np.float64]) -> NDArray[np.float64]:
         """(n_vertices, dim) displacement at the mesh vertices."""
         return u[self.basis.nodal_dofs].T.copy()
 
-    def stress(self, u: np.ndarray) -> dict[str, np.ndarray]:
+    def stress(self, u: NDArray[np.float64]) -> dict[str, NDArray[np.float64]]:
         """Cauchy stress (Voigt xx, yy, zz, xy, yz, xz; pascals) and von Mises at the vertices.
 
         Quadrature-point values are L2-projected on the linear scalar space with a lumped mass.

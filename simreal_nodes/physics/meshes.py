@@ -8,15 +8,18 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 import skfem
+from numpy.typing import NDArray
 
 from simreal_nodes.errors import FemError
 
 
-def box(L: float, W: float, H: float, n: tuple[int, int, int], kind: str = "hex", origin=(0.0, 0.0, 0.0)):
+def box(L: float, W: float, H: float, n: Sequence[int], kind: str = "hex",
+        origin: Sequence[float] = (0.0, 0.0, 0.0)) -> skfem.Mesh:
     """Box [0, L] x [0, W] x [0, H] (+ origin) with n = (nx, ny, nz) cells."""
     xs = [np.linspace(o, o + s, k + 1) for o, s, k in zip(origin, (L, W, H), n)]
     if kind == "hex":
@@ -47,7 +50,7 @@ def cook_membrane(n: int, kind: str = "quad"):
 
 def joint_boot(n_profile: int = 48, n_around: int = 24, n_thick: int = 2, height: float = 0.12,
                r_bottom: float = 0.05, r_top: float = 0.018, wall: float = 0.004, folds: int = 3,
-               fold_depth: float = 0.008):
+               fold_depth: float = 0.008) -> skfem.MeshHex:
     """A bellows-like rubber boot: a corrugated cone revolved about z, hexahedral wall.
 
     Bottom ring at z = 0 (clamped to the housing), top ring at z = ``height`` (gripping the lever).
@@ -77,8 +80,9 @@ def joint_boot(n_profile: int = 48, n_around: int = 24, n_thick: int = 2, height
                 k1 = (k + 1) % n_around
                 # skfem MeshHex vertex order: (0,0,0),(1,0,0),(0,1,0),(0,0,1),(1,1,0),(1,0,1),(0,1,1),(1,1,1)
                 # local axes: a = profile, b = thickness, c = around
-                v = lambda a, b, c: idx[i + a, j + b, k1 if c else k]  # noqa: E731
-                cells.append([v(0, 0, 0), v(1, 0, 0), v(0, 1, 0), v(0, 0, 1), v(1, 1, 0), v(1, 0, 1), v(0, 1, 1), v(1, 1, 1)])
+                v = lambda a, b, c: idx[i + a, j + b, k1 if c else k]  # noqa: E731, B023 - called in the iteration that defines it
+                cells.append([v(0, 0, 0), v(1, 0, 0), v(0, 1, 0), v(0, 0, 1),
+                              v(1, 1, 0), v(1, 0, 1), v(0, 1, 1), v(1, 1, 1)])
     t_cells = np.asarray(cells, dtype=np.int64).T
     p = P.reshape(-1, 3).T
     m = skfem.MeshHex(np.ascontiguousarray(p), np.ascontiguousarray(t_cells))
@@ -104,7 +108,7 @@ def _fix_hex_orientation(m):
 # Surfaces
 
 
-def boundary_triangles(mesh) -> np.ndarray:
+def boundary_triangles(mesh: skfem.Mesh) -> NDArray[np.int64]:
     """Outward-oriented boundary triangles (n, 3) of a 3D mesh (quads are split in two)."""
     if mesh.dim() != 3:
         raise FemError("boundary triangles need a 3D mesh")
@@ -146,7 +150,7 @@ def _cyclic_quads(P, fac):
 # Closed-surface tetrahedral meshing (bunny, dragon)
 
 
-def read_surface(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
+def read_surface(path: str | Path) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
     """(vertices (n, 3), triangles (m, 3)) from an OBJ / PLY / STL file (meshio)."""
     import meshio
 
@@ -218,7 +222,7 @@ def boundary_loops(F: np.ndarray) -> list[list[int]]:
 
 def close_holes(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
     """Close every hole by a fan around the loop's centroid (bunny base holes). Returns (V, F, n_holes)."""
-    V = list(V)
+    verts = list(V)
     total = 0
     for _ in range(5):
         loops = boundary_loops(F)
@@ -226,15 +230,15 @@ def close_holes(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray, i
             break
         newF = [F]
         for loop in loops:
-            c = np.mean([V[i] for i in loop], axis=0)
-            ci = len(V)
-            V.append(c)
+            c = np.mean([verts[i] for i in loop], axis=0)
+            ci = len(verts)
+            verts.append(c)
             # boundary edges run a->b in the existing triangles; the cap must use b->a
             fan = [[loop[(k + 1) % len(loop)], loop[k], ci] for k in range(len(loop))]
             newF.append(np.asarray(fan, np.int64))
         F = np.concatenate(newF)
         total += len(loops)
-    return np.asarray(V), F, total
+    return np.asarray(verts), F, total
 
 
 def tet_mesh_from_surface(V: np.ndarray, F: np.ndarray, size: float, optimize: bool = True):
@@ -325,8 +329,10 @@ def inside_field(V: np.ndarray, F: np.ndarray, P: np.ndarray, near: float) -> np
     import open3d as o3d
 
     scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(o3d.core.Tensor(V.astype(np.float32)), o3d.core.Tensor(F.astype(np.uint32)))
-    q = o3d.core.Tensor(P.astype(np.float32))
+    # open3d's generated stubs make dtype and device required; at run time they default to the array's / CPU
+    scene.add_triangles(o3d.core.Tensor(V.astype(np.float32)),  # type: ignore[call-overload]
+                        o3d.core.Tensor(F.astype(np.uint32)))  # type: ignore[call-overload]
+    q = o3d.core.Tensor(P.astype(np.float32))  # type: ignore[call-overload]
     out = scene.compute_occupancy(q, nsamples=7).numpy().astype(np.float64)
     close = scene.compute_distance(q).numpy() < near
     if np.any(close):
@@ -334,7 +340,7 @@ def inside_field(V: np.ndarray, F: np.ndarray, P: np.ndarray, near: float) -> np
     return out
 
 
-def voxel_tet_mesh(V: np.ndarray, F: np.ndarray, h: float):
+def voxel_tet_mesh(V: NDArray[np.float64], F: NDArray[np.int64], h: float) -> skfem.MeshTet:
     """Tetrahedra of a regular grid of spacing ``h`` whose centroids lie inside the surface (winding
     number > 1/2), largest connected piece only. Works on scans that gmsh rejects."""
     lo, hi = V.min(axis=0) - h, V.max(axis=0) + h
@@ -368,7 +374,7 @@ def voxel_tet_mesh(V: np.ndarray, F: np.ndarray, h: float):
     return _fix_tet_orientation(m)
 
 
-def embed_points(mesh, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def embed_points(mesh: skfem.MeshTet, P: NDArray[np.float64]) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
     """For points P (n, 3), the tetrahedron of ``mesh`` that contains them (or the nearest one) and
     barycentric weights (clipped to the simplex outside), so that u(P) = sum_k w_k u(node_k)."""
     from scipy.spatial import cKDTree

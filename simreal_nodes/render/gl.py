@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, cast
 
 import cv2
 import numpy as np
@@ -23,6 +24,9 @@ import numpy as np
 from simreal_nodes.camera import CameraModel
 from simreal_nodes.errors import SimrealError
 from simreal_nodes.geometry import vertex_normals
+
+if TYPE_CHECKING:
+    import moderngl
 
 VERT = """
 #version 330
@@ -77,7 +81,8 @@ void main() {
     // u_depth_map: this render pixel's real-camera pixel (lens distortion, supersampling), negative outside
     vec2 m = texelFetch(u_depth_map, ivec2(gl_FragCoord.xy), 0).xy;
     float real = 0.0;
-    if (m.x >= 0.0) real = texture(u_real_depth, vec2((m.x + 0.5) / u_real_size.x, 1.0 - (m.y + 0.5) / u_real_size.y)).r;
+    if (m.x >= 0.0)
+        real = texture(u_real_depth, vec2((m.x + 0.5) / u_real_size.x, 1.0 - (m.y + 0.5) / u_real_size.y)).r;
     if (real > 0.0 && real < v_pos.z - u_occlusion_margin) discard;
 #endif
     vec3 base;
@@ -150,9 +155,9 @@ class Mesh:
     pose: np.ndarray = field(default_factory=lambda: np.eye(4))  # T_world_object
     visible: bool = True
     cull_back: bool = False  # closed surface wound counter-clockwise seen from outside: skip back faces
-    _vao: object = None
-    _bufs: dict = field(default_factory=dict)
-    _tex: object = None
+    _vao: dict[bool, moderngl.VertexArray] | None = None  # per occlusion mode: the program it binds
+    _bufs: dict[str, moderngl.Buffer] = field(default_factory=dict)
+    _tex: moderngl.Texture | None = None
 
 
 class Renderer:
@@ -170,7 +175,9 @@ class Renderer:
         self.background = tuple(c / 255.0 for c in background)
         backend = os.environ.get("SIMREAL_GL_BACKEND", "egl")
         try:
-            self.ctx = moderngl.create_standalone_context(backend=backend) if backend else moderngl.create_standalone_context()
+            # moderngl's stubs type each **settings value as a dict; backend is a string at run time
+            self.ctx = (moderngl.create_standalone_context(backend=backend)  # type: ignore[arg-type]
+                        if backend else moderngl.create_standalone_context())
         except Exception as e:  # noqa: BLE001
             raise RenderError(f"cannot create an OpenGL context over {backend or 'the default backend'} ({e}); "
                               "install libegl1 and libgl1-mesa-dri (./run setup does)") from None
@@ -213,13 +220,15 @@ class Renderer:
             self._map = None
         rc = self.render_cam
         self.fbo = self.ctx.framebuffer(
-            color_attachments=[self.ctx.texture((rc.width, rc.height), 4), self.ctx.texture((rc.width, rc.height), 1, dtype="f4")],
+            color_attachments=[self.ctx.texture((rc.width, rc.height), 4),
+                               self.ctx.texture((rc.width, rc.height), 1, dtype="f4")],
             depth_attachment=self.ctx.depth_renderbuffer((rc.width, rc.height)))
         # compositing needs colour and coverage only: a framebuffer without the metric-depth attachment
         self.patch_fbo = self.ctx.framebuffer(color_attachments=[self.fbo.color_attachments[0]],
                                               depth_attachment=self.fbo.depth_attachment)
         self.proj = projection_matrix(rc, self.near, self.far)
-        self._real_depth_tex = None
+        self._real_depth_tex: moderngl.Texture | None = None
+        self._depth_map_tex: moderngl.Texture | None = None
 
     # -- scene ---------------------------------------------------------------------------------------------
     def add(self, mesh: Mesh) -> Mesh:
@@ -310,15 +319,15 @@ class Renderer:
         ``real_depth`` (metres, real camera pixels, 0/NaN invalid): fragments farther than it are discarded
         (occlusion by real geometry). ``background`` (HxWx3 uint8): composited under the drawn pixels.
         """
-        import moderngl
-
         rc = self.render_cam
         self.fbo.use()
         self.ctx.viewport = (0, 0, rc.width, rc.height)
-        self.fbo.clear(*self.background, 0.0, depth=1.0)
+        # background is (r, g, b); mypy cannot count a tuple built from a generator
+        self.fbo.clear(*self.background, 0.0, depth=1.0)  # type: ignore[call-arg, misc]
         self._draw(T_world_cam, names, real_depth, occlusion_margin)
         rgb = np.frombuffer(self.fbo.read(components=3, attachment=0), np.uint8).reshape(rc.height, rc.width, 3)[::-1]
-        depth = np.frombuffer(self.fbo.read(components=1, attachment=1, dtype="f4"), np.float32).reshape(rc.height, rc.width)[::-1]
+        depth = np.frombuffer(self.fbo.read(components=1, attachment=1, dtype="f4"),
+                              np.float32).reshape(rc.height, rc.width)[::-1]
         return self._to_camera(rgb, depth, background, distort)
 
     def composite(self, T_world_cam: np.ndarray, background: np.ndarray, names: list[str] | None = None,
@@ -342,7 +351,7 @@ class Renderer:
         box = self.screen_box(T_world_cam, names)
         if box is None:
             return out
-        x0, y0, x1, y1 = box
+        x0, y0, _x1, _y1 = box
         # the camera pixels of the box (where it lands, and the real depth its fragments look up)
         cbox = box if self._map is None else self._camera_box(box)
         if cbox is None:
@@ -374,7 +383,8 @@ class Renderer:
                 if np.all(X[:, 2] <= self.near):
                     continue  # wholly behind the camera
                 return 0, 0, rc.width, rc.height
-            uv = np.c_[rc.fx * X[:, 0] / X[:, 2] + rc.K[0, 1] * X[:, 1] / X[:, 2] + rc.cx, rc.fy * X[:, 1] / X[:, 2] + rc.cy]
+            uv = np.c_[rc.fx * X[:, 0] / X[:, 2] + rc.K[0, 1] * X[:, 1] / X[:, 2] + rc.cx,
+                       rc.fy * X[:, 1] / X[:, 2] + rc.cy]
             lo, hi = np.minimum(lo, uv.min(axis=0)), np.maximum(hi, uv.max(axis=0))
         if not np.all(np.isfinite(lo)):
             return None
@@ -414,41 +424,46 @@ class Renderer:
         return (max(0, (cols[0] - 1) * k), max(0, (rows[0] - 1) * k),
                 min(cam.width, (cols[-1] + 1) * k + 1), min(cam.height, (rows[-1] + 1) * k + 1))
 
+    def _uniform(self, name: str) -> moderngl.Uniform:
+        """A uniform of the current program (moderngl types ``prog[name]`` as any kind of program member)."""
+        return cast("moderngl.Uniform", self.prog[name])
+
     def _draw(self, T_world_cam, names, real_depth, occlusion_margin, depth_box=None) -> None:
         import moderngl
 
-        rc = self.render_cam
         self.ctx.enable(moderngl.DEPTH_TEST)
         self.ctx.front_face = "ccw"  # the projection keeps a counter-clockwise triangle counter-clockwise
         occlude = real_depth is not None
         self.prog = self.progs[occlude]
         view = np.linalg.inv(T_world_cam)
-        self.prog["u_view"].write(_gl(view))
-        self.prog["u_proj"].write(_gl(self.proj))
+        self._uniform("u_view").write(_gl(view))
+        self._uniform("u_proj").write(_gl(self.proj))
         light_cam = view[:3, :3] @ (self.light / np.linalg.norm(self.light))
-        self.prog["u_light"].value = tuple(float(x) for x in light_cam)
-        self.prog["u_ambient"].value = float(self.ambient)
+        self._uniform("u_light").value = tuple(float(x) for x in light_cam)
+        self._uniform("u_ambient").value = float(self.ambient)
         if occlude:
             self._set_real_depth(real_depth, depth_box)
+            assert self._real_depth_tex is not None and self._depth_map_tex is not None  # _set_real_depth made them
             self._real_depth_tex.use(location=1)
             self._depth_map_tex.use(location=6)
-            self.prog["u_real_depth"].value = 1
-            self.prog["u_depth_map"].value = 6
-            self.prog["u_real_size"].value = (float(self.cam.width), float(self.cam.height))
-            self.prog["u_occlusion_margin"].value = float(occlusion_margin)
+            self._uniform("u_real_depth").value = 1
+            self._uniform("u_depth_map").value = 6
+            self._uniform("u_real_size").value = (float(self.cam.width), float(self.cam.height))
+            self._uniform("u_occlusion_margin").value = float(occlusion_margin)
         for name in (names if names is not None else list(self.meshes)):
             m = self.meshes[name]
             if not m.visible:
                 continue
             (self.ctx.enable if m.cull_back else self.ctx.disable)(moderngl.CULL_FACE)
-            self.prog["u_model"].write(_gl(m.pose))
-            self.prog["u_mode"].value = {"vertex": 0, "texture": 1, "flat": 2, "uv": 3}[m.mode]
-            self.prog["u_tint"].value = tuple(float(x) for x in m.tint)
-            self.prog["u_tex_scale"].value = float(m.tex_scale)
-            self.prog["u_unlit"].value = 1.0 if m.unlit else 0.0
+            self._uniform("u_model").write(_gl(m.pose))
+            self._uniform("u_mode").value = {"vertex": 0, "texture": 1, "flat": 2, "uv": 3}[m.mode]
+            self._uniform("u_tint").value = tuple(float(x) for x in m.tint)
+            self._uniform("u_tex_scale").value = float(m.tex_scale)
+            self._uniform("u_unlit").value = 1.0 if m.unlit else 0.0
             if m._tex is not None:
                 m._tex.use(location=0)
-                self.prog["u_tex"].value = 0
+                self._uniform("u_tex").value = 0
+            assert m._vao is not None  # add() uploaded the mesh
             m._vao[occlude].render(moderngl.TRIANGLES)
 
     def _set_real_depth(self, real_depth: np.ndarray, box=None) -> None:
@@ -475,7 +490,8 @@ class Renderer:
             inside = np.all(np.isfinite(uv), axis=-1) & (uv[..., 0] > -0.5) & (uv[..., 0] < cam.width - 0.5) \
                 & (uv[..., 1] > -0.5) & (uv[..., 1] < cam.height - 0.5)
             m = np.where(inside[..., None], uv, -1.0).astype(np.float32)
-            self._depth_map_tex = self.ctx.texture((rc.width, rc.height), 2, np.ascontiguousarray(m[::-1]).tobytes(), dtype="f4")
+            self._depth_map_tex = self.ctx.texture((rc.width, rc.height), 2, np.ascontiguousarray(m[::-1]).tobytes(),
+                                                   dtype="f4")
             self._depth_map_tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
         self._real_depth_tex.write(np.ascontiguousarray(d[::-1]).tobytes(),
                                    viewport=(x0, cam.height - y1, x1 - x0, y1 - y0))
@@ -499,7 +515,8 @@ class Renderer:
             cov = cv2.remap(val_i, mm[..., 0], mm[..., 1], cv2.INTER_LINEAR)
             near = cv2.remap(depth, self._map[..., 0], self._map[..., 1], cv2.INTER_NEAREST)
         else:
-            rgb_o, inv_o, cov = rgb_i[: cam.height, : cam.width], inv_i[: cam.height, : cam.width], val_i[: cam.height, : cam.width]
+            rgb_o, inv_o, cov = (rgb_i[: cam.height, : cam.width], inv_i[: cam.height, : cam.width],
+                                 val_i[: cam.height, : cam.width])
             c = s // 2
             near = depth[c::s, c::s][: cam.height, : cam.width]
         full = cov > 0.9999

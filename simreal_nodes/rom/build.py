@@ -23,11 +23,14 @@ import os
 import platform
 import subprocess
 import time
+from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 import scipy.sparse as sp
 import yaml
+from numpy.typing import NDArray
 
 from simreal_nodes import __version__
 from simreal_nodes.errors import FemError, SceneError
@@ -39,10 +42,18 @@ from simreal_nodes.rom.model import ReducedModel
 from simreal_nodes.rom.separated import Axis, SeparatedField
 from simreal_nodes.spec import Context, Enum, ListOf, Number, Record, Str, Vector
 
+if TYPE_CHECKING:
+    import skfem
+
 REPO = Path(__file__).resolve().parents[2]
 SPEC_DIR = Path(__file__).resolve().parents[1] / "specs"
 STRESS_COMPONENTS = ["xx", "yy", "zz", "xy", "yz", "xz"]
 KEEP_SNAPSHOTS = False  # benchmarks set this to compare NI-PGD with HOSVD on the same tensors
+
+# A validated model spec: the YAML document after SPECS[kind].validate (the schema below gives its keys).
+ModelSpec = dict[str, Any]
+# progress(stage, done, total, message): what `simreal build-model` prints.
+Progress = Callable[[str, int, int, str], object]
 
 # ------------------------------------------------------------------------------------------------
 # Spec schema
@@ -57,7 +68,7 @@ MATERIAL = Record({
 class _Region(Str):
     """A face name (xmin ...) or {face, box}."""
 
-    def validate(self, v, path, ctx):
+    def validate(self, v: Any, path: str, ctx: Context) -> Any:
         if isinstance(v, str):
             if v not in fem.FACES:
                 self.fail(path, "a face name " + ", ".join(fem.FACES) + " or {face, box}", v, ctx)
@@ -84,22 +95,27 @@ NIPGD = Record({"max_terms": Number(integer=True, lo=1, default=30), "tol": Numb
 
 SPECS = {
     "beam_pgd": Record({**COMMON,
-        "geometry": Record({"length": Number(lo=0, lo_open=True, required=True), "width": Number(lo=0, lo_open=True, required=True),
+        "geometry": Record({"length": Number(lo=0, lo_open=True, required=True),
+                            "width": Number(lo=0, lo_open=True, required=True),
                             "height": Number(lo=0, lo_open=True, required=True)}),
-        "mesh": Record({"cells": Vector(3, what="[nx, ny, nz]", required=True), "element": Enum(("hex", "tet"), default="hex"),
+        "mesh": Record({"cells": Vector(3, what="[nx, ny, nz]", required=True),
+                        "element": Enum(("hex", "tet"), default="hex"),
                         "order": Number(integer=True, lo=1, hi=2, default=2)}),
         "supports": ListOf(SUPPORT, min_len=1, required=True),
         "load": Record({"force": Number(lo=0, lo_open=True, required=True), "direction": Vector(3, default=[0, 0, -1]),
                         "where": Enum(("centreline", "top_face"), default="centreline"),
                         "x_range": Vector(2, nullable=True), "y_range": Vector(2, nullable=True)}),
-        "young_modulus_axis": Record({"range": Vector(2, required=True), "n": Number(integer=True, lo=2, default=9)}, nullable=True),
-        "pgd": Record({"max_modes": Number(integer=True, lo=1, default=30), "tol": Number(lo=0, lo_open=True, default=1e-5),
+        "young_modulus_axis": Record({"range": Vector(2, required=True), "n": Number(integer=True, lo=2, default=9)},
+                                     nullable=True),
+        "pgd": Record({"max_modes": Number(integer=True, lo=1, default=30),
+                       "tol": Number(lo=0, lo_open=True, default=1e-5),
                        "fixed_point_iterations": Number(integer=True, lo=1, default=40)}),
         "validation_every": Number("FEM truth at every k-th load position", integer=True, lo=1, default=4),
         "interpolation": Enum(("cubic", "linear"), default="cubic"),
     }),
     "beam_snapshots": Record({**COMMON,
-        "geometry": Record({"length": Number(lo=0, lo_open=True, required=True), "width": Number(lo=0, lo_open=True, required=True),
+        "geometry": Record({"length": Number(lo=0, lo_open=True, required=True),
+                            "width": Number(lo=0, lo_open=True, required=True),
                             "height": Number(lo=0, lo_open=True, required=True)}),
         "mesh": Record({"cells": Vector(3, required=True), "element": Enum(("hex", "tet"), default="hex"),
                         "order": Number(integer=True, lo=1, hi=2, default=1)}),
@@ -113,10 +129,13 @@ SPECS = {
     }),
     "joint_boot": Record({**COMMON,
         "geometry": Record({k: Number(lo=0, lo_open=True, default=d) for k, d in
-                            (("height", 0.12), ("r_bottom", 0.05), ("r_top", 0.018), ("wall", 0.004), ("fold_depth", 0.008))}
+                            (("height", 0.12), ("r_bottom", 0.05), ("r_top", 0.018), ("wall", 0.004),
+                             ("fold_depth", 0.008))}
                            | {"folds": Number(integer=True, lo=0, default=3)}),
-        "mesh": Record({"n_profile": Number(integer=True, lo=4, default=36), "n_around": Number(integer=True, lo=8, default=24),
-                        "n_thick": Number(integer=True, lo=1, default=1), "order": Number(integer=True, lo=1, hi=2, default=1)}),
+        "mesh": Record({"n_profile": Number(integer=True, lo=4, default=36),
+                        "n_around": Number(integer=True, lo=8, default=24),
+                        "n_thick": Number(integer=True, lo=1, default=1),
+                        "order": Number(integer=True, lo=1, hi=2, default=1)}),
         "lever": Record({"pivot": Vector(3, default=[0, 0, 0]), "axis": Enum(("x", "y"), default="y"),
                          "theta_deg": Vector(2, default=[0, 52]), "n": Number(integer=True, lo=3, default=27),
                          "bar": Vector(4, what="[width, depth, z_from, z_to] of the rigid lever bar (metres)",
@@ -125,13 +144,16 @@ SPECS = {
     }),
     "probe_nipgd": Record({**COMMON,
         "surface": Str("surface mesh; 'data:' prefix = the shared data folder", required=True),
-        "transform": Record({"rotate_deg": Vector(3, default=[0, 0, 0]), "scale": Number(lo=0, lo_open=True, default=1.0),
+        "transform": Record({"rotate_deg": Vector(3, default=[0, 0, 0]),
+                             "scale": Number(lo=0, lo_open=True, default=1.0),
                              "height_m": Number(lo=0, lo_open=True, nullable=True)}),
-        "mesh": Record({"cell_size": Number("grid spacing as a fraction of the height", lo=0, lo_open=True, default=0.06)}),
+        "mesh": Record({"cell_size": Number("grid spacing as a fraction of the height", lo=0, lo_open=True,
+                                            default=0.06)}),
         "base_fraction": Number("nodes below this fraction of the height are clamped", lo=0, hi=0.5, default=0.05),
         "contact": Record({"points": Number(integer=True, lo=1, default=16),
                            "min_height_fraction": Number(lo=0, hi=1, default=0.3),
-                           "rings": Number("patch = contact node + this many graph rings", integer=True, lo=0, default=2),
+                           "rings": Number("patch = contact node + this many graph rings", integer=True, lo=0,
+                                           default=2),
                            "direction": Enum(("centroid", "normal"), default="centroid"),
                            "force": Number("largest total force, N", lo=0, lo_open=True, required=True),
                            "increments": Number(integer=True, lo=2, default=10)}),
@@ -148,7 +170,7 @@ def data_path(p: str) -> Path:
     return Path(p)
 
 
-def load_spec(path: str | Path) -> dict:
+def load_spec(path: str | Path) -> ModelSpec:
     path = Path(path)
     if not path.exists() and (SPEC_DIR / path).exists():
         path = SPEC_DIR / path
@@ -160,8 +182,9 @@ def load_spec(path: str | Path) -> dict:
     except yaml.YAMLError as e:
         raise SceneError(f"{path}: not valid YAML: {e}") from None
     if not isinstance(doc, dict) or doc.get("kind") not in SPECS:
-        raise SceneError(f"{path}: kind: expected one of {', '.join(SPECS)}; found {doc.get('kind') if isinstance(doc, dict) else doc!r}")
-    spec = SPECS[doc["kind"]].validate(doc, "", Context(str(path), path.parent))
+        found = doc.get("kind") if isinstance(doc, dict) else doc
+        raise SceneError(f"{path}: kind: expected one of {', '.join(SPECS)}; found {found!r}")
+    spec: ModelSpec = SPECS[doc["kind"]].validate(doc, "", Context(str(path), path.parent))
     if spec["simreal_model_spec"] != 1:
         raise SceneError(f"{path}: simreal_model_spec: expected 1; found {spec['simreal_model_spec']}")
     spec["_text"] = path.read_text()
@@ -169,17 +192,18 @@ def load_spec(path: str | Path) -> dict:
     return spec
 
 
-def _material(spec) -> materials.Material:
+def _material(spec: ModelSpec) -> materials.Material:
     m = spec["material"]
     return materials.make_material(m["law"], m["E"], m["nu"], spec["name"])
 
 
-def _supports(spec):
-    return [fem.Support(fem.Region.from_spec(s["region"]), s["kind"], None if s["component"] is None else "xyz".index(s["component"]))
+def _supports(spec: ModelSpec) -> list[fem.Support]:
+    return [fem.Support(fem.Region.from_spec(s["region"]), s["kind"],
+                        None if s["component"] is None else "xyz".index(s["component"]))
             for s in spec["supports"]]
 
 
-def _provenance(spec, t0: float, extra: dict | None = None) -> dict:
+def _provenance(spec: ModelSpec, t0: float, extra: dict[str, Any] | None = None) -> dict[str, Any]:
     import h5py
     import scipy
     import skfem
@@ -197,13 +221,13 @@ def _provenance(spec, t0: float, extra: dict | None = None) -> dict:
     return d
 
 
-def _cell_type(mesh) -> str:
+def _cell_type(mesh: skfem.Mesh) -> str:
     import skfem
 
     return {skfem.MeshTet1: "tet4", skfem.MeshHex1: "hex8"}[type(mesh)]
 
 
-def _stress_modes(solid: fem.Solid, dof_modes: np.ndarray) -> np.ndarray:
+def _stress_modes(solid: fem.Solid, dof_modes: NDArray[np.float64]) -> NDArray[np.float64]:
     """Stress of each (linear) displacement mode at the vertices: (m, n_vert, 6)."""
     return np.stack([solid.stress(u)["cauchy"] for u in dof_modes])
 
@@ -212,7 +236,7 @@ def _stress_modes(solid: fem.Solid, dof_modes: np.ndarray) -> np.ndarray:
 # beam_pgd: intrusive PGD, Algorithm 2.1
 
 
-def build_beam_pgd(spec, progress=None) -> ReducedModel:
+def build_beam_pgd(spec: ModelSpec, progress: Progress | None = None) -> ReducedModel:
     t0 = time.time()
     g, ms = spec["geometry"], spec["mesh"]
     L, W, H = g["length"], g["width"], g["height"]
@@ -248,11 +272,11 @@ def build_beam_pgd(spec, progress=None) -> ReducedModel:
         axes_vals = [xs, ysx]
         loads_G = [np.eye(len(xs))[ix], np.eye(len(ysx))[iy]]
         names = [("s_x", "load position on the top face, x"), ("s_y", "load position on the top face, y")]
-    Hm = sp.lil_matrix((solid.N, len(top)))
+    Hl = sp.lil_matrix((solid.N, len(top)))
     for j, v in enumerate(top):
         for c in range(3):
-            Hm[solid.vertex_dofs(v)[c], j] = force[c]
-    Hm = Hm.tocsr()
+            Hl[solid.vertex_dofs(v)[c], j] = force[c]
+    Hm = Hl.tocsr()
     K1 = solid.stiffness()  # E units: K = E * K1
     E0 = mat.E
     op_d = [np.ones(len(v)) for v in axes_vals]
@@ -264,11 +288,13 @@ def build_beam_pgd(spec, progress=None) -> ReducedModel:
         op_d.append(Ev / E0)
         loads_G.append(np.ones((loads_G[0].shape[0], len(Ev))))
     op = pgd.SeparatedOperator([(K1 * 1.0, op_d)])
-    load = pgd.SeparatedLoad(Hm / E0, loads_G)
+    # scipy-stubs type csr / scalar as any sparse format; it is a csr_matrix
+    load = pgd.SeparatedLoad(cast(sp.csr_matrix, Hm / E0), loads_G)
     cfg = spec["pgd"]
     res = pgd.pgd_solve(op, load, pgd_axes, solid.free, max_modes=cfg["max_modes"], tol=cfg["tol"],
                         max_fp_iter=cfg["fixed_point_iterations"],
-                        progress=(lambda n, a: progress("pgd", n, cfg["max_modes"], f"mode {n}: amplitude ratio {a:.2e}")) if progress else None)
+                        progress=(lambda n, a: progress("pgd", n, cfg["max_modes"],
+                                                        f"mode {n}: amplitude ratio {a:.2e}")) if progress else None)
     m = res.n_modes
     space_u = res.F[:, solid.basis.nodal_dofs.T]  # (m, n_vert, 3)
     if progress:
@@ -292,12 +318,12 @@ def build_beam_pgd(spec, progress=None) -> ReducedModel:
         rhs = Hm[:, idx].toarray()[solid.free] / E
         U = np.zeros((solid.N, len(idx)))
         U[solid.free] = lu.solve(rhs)
-        for k, j in enumerate(idx):
+        for k, jv in enumerate(idx):
             Us.append(U[:, k][solid.basis.nodal_dofs.T])
             if ld["where"] == "centreline":
-                mu = [axes_vals[0][j]]
+                mu = [axes_vals[0][jv]]
             else:
-                mu = [xs[np.argmax(loads_G[0][j])], ysx[np.argmax(loads_G[1][j])]]
+                mu = [xs[np.argmax(loads_G[0][jv])], ysx[np.argmax(loads_G[1][jv])]]
             if E_axis:
                 mu.append(E)
             mus.append(mu)
@@ -307,23 +333,25 @@ def build_beam_pgd(spec, progress=None) -> ReducedModel:
     fld_s = SeparatedField("stress", space_s, params_s, axes, "Pa", STRESS_COMPONENTS, None)
     model = ReducedModel(spec["name"], mesh.p.T.copy(), mesh.t.T.copy(), _cell_type(mesh), axes,
                          {"displacement": fld_u, "stress": fld_s}, meshes.boundary_triangles(mesh), spec["description"],
-                         mat.as_dict(), spec["supports"], {"force_N": ld["force"], "direction": list(force / ld["force"]),
-                                                           "where": ld["where"]},
+                         mat.as_dict(), spec["supports"],
+                         {"force_N": ld["force"], "direction": list(force / ld["force"]), "where": ld["where"]},
                          load_points=top, load_directions=np.tile(force / ld["force"], (len(top), 1)))
-    model.provenance = _provenance(spec, t0, {"method": "intrusive PGD (Algorithm 2.1)", "pgd_amplitudes": res.amplitudes.tolist(),
+    model.provenance = _provenance(spec, t0, {"method": "intrusive PGD (Algorithm 2.1)",
+                                              "pgd_amplitudes": res.amplitudes.tolist(),
                                               "fixed_point_iterations": res.fixed_point_iterations,
                                               "pgd_converged": res.converged, "dofs": int(solid.N)})
     return model
 
 
-def _error_vs_modes(fld: SeparatedField, mus, truths) -> np.ndarray:
+def _error_vs_modes(fld: SeparatedField, mus: list[list[float]], truths: list[NDArray[np.float64]]
+                    ) -> NDArray[np.float64]:
     """Relative error ||u_rom - u_fem|| / ||u_fem|| over the validation set, for 1..n modes."""
     T = np.stack(truths)
     nt = np.linalg.norm(T)
     out = []
     for n in range(1, fld.n_modes + 1):
         R = np.stack([fld.evaluate(mu, n_modes=n) for mu in mus])
-        out.append(np.linalg.norm(R - T) / max(nt, 1e-300))
+        out.append(np.linalg.norm(R - T) / max(float(nt), 1e-300))
     return np.asarray(out)
 
 
@@ -331,23 +359,27 @@ def _error_vs_modes(fld: SeparatedField, mus, truths) -> np.ndarray:
 # Snapshot-based builders + NI-PGD
 
 
-def _nipgd_fields(name_axes, U: np.ndarray, S: np.ndarray, axes, cfg, progress) -> dict:
+def _nipgd_fields(name_axes: list[str], U: NDArray[np.float64], S: NDArray[np.float64], axes: list[Axis],
+                  cfg: dict[str, Any], progress: Progress | None) -> dict[str, Any]:
     """Displacement (n_vert, 3, *axes) and stress (n_vert, 6, *axes) tensors -> separated fields."""
-    out = {}
+    out: dict[str, Any] = {}  # the fields, and "_snapshots" when KEEP_SNAPSHOTS
     if KEEP_SNAPSHOTS:
         out["_snapshots"] = {"displacement": U, "stress": S}
     for fname, T, unit, comps in (("displacement", U, "m", ["x", "y", "z"]), ("stress", S, "Pa", STRESS_COMPONENTS)):
         nv, nc = T.shape[:2]
         A = T.reshape((nv * nc,) + T.shape[2:])
         scale = np.abs(A).max() or 1.0
-        res = nip.nipgd(A / scale, max_terms=cfg["max_terms"], tol=cfg["tol"],
-                        progress=(lambda n, e, f=fname: progress(f"nipgd {f}", n, cfg["max_terms"], f"term {n}: error {e:.2e}")) if progress else None)
+        on_term: Callable[[int, float], object] | None = None
+        if progress:
+            def on_term(n: int, e: float, f: str = fname, p: Progress = progress) -> object:
+                return p(f"nipgd {f}", n, cfg["max_terms"], f"term {n}: error {e:.2e}")
+        res = nip.nipgd(A / scale, max_terms=cfg["max_terms"], tol=cfg["tol"], progress=on_term)
         space = (res.factors[0] * scale).reshape(res.n_terms, nv, nc)
         out[fname] = SeparatedField(fname, space, [f.copy() for f in res.factors[1:]], axes, unit, comps, res.errors)
     return out
 
 
-def build_beam_snapshots(spec, progress=None) -> ReducedModel:
+def build_beam_snapshots(spec: ModelSpec, progress: Progress | None = None) -> ReducedModel:
     t0 = time.time()
     g, ms, ld = spec["geometry"], spec["mesh"], spec["load"]
     L, W, H = g["length"], g["width"], g["height"]
@@ -381,14 +413,17 @@ def build_beam_snapshots(spec, progress=None) -> ReducedModel:
         mid_err.append(float(np.linalg.norm(fields["displacement"].evaluate([s]) - ref) / np.linalg.norm(ref)))
     model = ReducedModel(spec["name"], mesh.p.T.copy(), mesh.t.T.copy(), _cell_type(mesh), axes, fields,
                          meshes.boundary_triangles(mesh), spec["description"], mat.as_dict(), spec["supports"],
-                         {"force_N": ld["force"], "patch_radius_m": ld["patch_radius"], "direction": list(force / ld["force"])})
-    model.provenance = _provenance(spec, t0, {"method": "Newton snapshots + NI-PGD (Eq. 5.4-5.5)", "newton_iterations": newton,
-                                              "midpoint_interpolation_error": dict(zip([float(x) for x in mids], mid_err))})
+                         {"force_N": ld["force"], "patch_radius_m": ld["patch_radius"],
+                          "direction": list(force / ld["force"])})
+    model.provenance = _provenance(spec, t0, {"method": "Newton snapshots + NI-PGD (Eq. 5.4-5.5)",
+                                              "newton_iterations": newton,
+                                              "midpoint_interpolation_error": dict(zip([float(x) for x in mids],
+                                                                                       mid_err))})
     model.snapshots = snaps
     return model
 
 
-def build_joint_boot(spec, progress=None) -> ReducedModel:
+def build_joint_boot(spec: ModelSpec, progress: Progress | None = None) -> ReducedModel:
     t0 = time.time()
     g, ms, lv = spec["geometry"], spec["mesh"], spec["lever"]
     mesh = meshes.joint_boot(ms["n_profile"], ms["n_around"], ms["n_thick"], g["height"], g["r_bottom"], g["r_top"],
@@ -401,7 +436,7 @@ def build_joint_boot(spec, progress=None) -> ReducedModel:
     pivot = np.asarray(lv["pivot"], dtype=np.float64)
     thetas = np.deg2rad(np.linspace(lv["theta_deg"][0], lv["theta_deg"][1], lv["n"]))
 
-    def ufix(theta):
+    def ufix(theta: float) -> NDArray[np.float64]:
         u = np.zeros(solid.N)
         Xt = X[:, top].T - pivot
         new = Xt @ rot_axis(lv["axis"], theta).T + pivot
@@ -409,9 +444,11 @@ def build_joint_boot(spec, progress=None) -> ReducedModel:
         return u
 
     states = [(np.zeros(solid.N), ufix(t)) for t in thetas]
-    path = []
-    u, info = solid.solve_states(states, path=path,
-                                 progress=(lambda k: progress("snapshots", k, len(thetas), f"theta = {np.rad2deg(thetas[k - 1]):.1f} deg")) if progress else None)
+    path: list[NDArray[np.float64]] = []
+    _u, info = solid.solve_states(states, path=path,
+                                 progress=(lambda k: progress("snapshots", k, len(thetas),
+                                                              f"theta = {np.rad2deg(thetas[k - 1]):.1f} deg"))
+                                 if progress else None)
     nv = mesh.p.shape[1]
     U = np.stack([solid.vertex_displacement(v) for v in path], axis=-1)
     S = np.stack([solid.stress(v)["cauchy"] for v in path], axis=-1)
@@ -428,17 +465,19 @@ def build_joint_boot(spec, progress=None) -> ReducedModel:
                              "orientation of thesis §4.5.4, a rigid parameter estimated by the tracker"}]
     model = ReducedModel(spec["name"], np.concatenate([mesh.p.T, lever_pts]), mesh.t.T.copy(), _cell_type(mesh), axes,
                          fields, meshes.boundary_triangles(mesh), spec["description"], mat.as_dict(),
-                         [{"region": "zmin", "kind": "clamped"}, {"region": "zmax", "kind": "prescribed lever rotation"}],
+                         [{"region": "zmin", "kind": "clamped"},
+                          {"region": "zmax", "kind": "prescribed lever rotation"}],
                          {"lever": lv}, rigid_parameters=rigid)
-    model.provenance = _provenance(spec, t0, {"method": "Newton along theta + NI-PGD", "newton_iterations": info.newton_iterations,
-                                              "lever_nodes": [int(nv), int(len(lever_pts))],
-                                              "note": "self-contact of the folds is not modelled; nodes from lever_nodes[0] "
-                                                      "are points of the rigid lever bar"})
+    model.provenance = _provenance(spec, t0, {"method": "Newton along theta + NI-PGD",
+                                              "newton_iterations": info.newton_iterations,
+                                              "lever_nodes": [int(nv), len(lever_pts)],
+                                              "note": "self-contact of the folds is not modelled; nodes from "
+                                                      "lever_nodes[0] are points of the rigid lever bar"})
     model.snapshots = snaps
     return model
 
 
-def build_probe_nipgd(spec, progress=None) -> ReducedModel:
+def build_probe_nipgd(spec: ModelSpec, progress: Progress | None = None) -> ReducedModel:
     t0 = time.time()
     src = data_path(spec["surface"])
     V, F = meshes.read_surface(src)
@@ -481,7 +520,7 @@ def build_probe_nipgd(spec, progress=None) -> ReducedModel:
         f = np.zeros(solid.N)
         for v in patch:
             f[solid.vertex_dofs(v)] += cc["force"] * d / len(patch)
-        path = []
+        path: list[NDArray[np.float64]] = []
         try:
             _, info = solid.solve(f, steps=n_inc, path=path)
             newton.append(info.newton_iterations)
@@ -491,9 +530,12 @@ def build_probe_nipgd(spec, progress=None) -> ReducedModel:
             U[:, :, i, k + 1] = solid.vertex_displacement(u)
             S[:, :, i, k + 1] = solid.stress(u)["cauchy"]
         if progress:
-            progress("snapshots", i + 1, len(load_nodes), f"contact point {i}: {info.newton_iterations} Newton iterations")
-    axes = [Axis("load_point", np.arange(len(load_nodes), dtype=float), "", "discrete", description="index of the contact point"),
-            Axis("pseudo_time", tau, "", description="deformation pseudo-time: 0 undeformed, 1 full contact force (Alg. 5.1)")]
+            progress("snapshots", i + 1, len(load_nodes),
+                     f"contact point {i}: {info.newton_iterations} Newton iterations")
+    axes = [Axis("load_point", np.arange(len(load_nodes), dtype=float), "", "discrete",
+                 description="index of the contact point"),
+            Axis("pseudo_time", tau, "",
+                 description="deformation pseudo-time: 0 undeformed, 1 full contact force (Alg. 5.1)")]
     fields = _nipgd_fields(["load_point", "pseudo_time"], U, S, axes, spec["nipgd"], progress)
     snaps = fields.pop("_snapshots", None)
     # the scan surface rides on the volume mesh: append its vertices as extra nodes (embedded)
@@ -507,14 +549,16 @@ def build_probe_nipgd(spec, progress=None) -> ReducedModel:
                          mat.as_dict(), [{"region": f"z < {spec['base_fraction']} height", "kind": "clamped"}],
                          {"force_N": cc["force"], "direction": cc["direction"], "rings": cc["rings"]},
                          load_points=load_nodes, load_directions=np.asarray(dirs))
-    model.provenance = _provenance(spec, t0, {"method": "Newton increments + NI-PGD (Eq. 5.4-5.5)", "newton_iterations": newton,
-                                              "volume_nodes": int(nv), "surface_vertices": int(len(V)),
-                                              "note": "nodes >= volume_nodes are the scan surface, embedded in the tetrahedra"})
+    model.provenance = _provenance(spec, t0, {"method": "Newton increments + NI-PGD (Eq. 5.4-5.5)",
+                                              "newton_iterations": newton,
+                                              "volume_nodes": int(nv), "surface_vertices": len(V),
+                                              "note": "nodes >= volume_nodes are the scan surface, embedded in "
+                                                      "the tetrahedra"})
     model.snapshots = snaps
     return model
 
 
-def lever_points(width: float, depth: float, z0: float, z1: float, step: float = 0.008) -> np.ndarray:
+def lever_points(width: float, depth: float, z0: float, z1: float, step: float = 0.008) -> NDArray[np.float64]:
     """Points on the four long faces of the lever bar (centred on the z axis), every ``step`` metres."""
     zs = np.arange(z0, z1 + 1e-9, step)
     a = np.arange(-width / 2, width / 2 + 1e-9, step / 2)
@@ -526,7 +570,7 @@ def lever_points(width: float, depth: float, z0: float, z1: float, step: float =
     return np.asarray(pts, dtype=np.float64)
 
 
-def _farthest_points(P: np.ndarray, k: int) -> np.ndarray:
+def _farthest_points(P: NDArray[np.float64], k: int) -> NDArray[np.int64]:
     k = min(k, len(P))
     chosen = [int(np.argmax(P[:, 2]))]
     d = np.linalg.norm(P - P[chosen[0]], axis=1)
@@ -537,13 +581,13 @@ def _farthest_points(P: np.ndarray, k: int) -> np.ndarray:
     return np.asarray(chosen)
 
 
-def _adjacency(tris, n):
+def _adjacency(tris: NDArray[np.int64], n: int) -> sp.csr_matrix:
     e = np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]])
     A = sp.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
     return (A + A.T).tocsr()
 
 
-def _rings(adj, node, rings):
+def _rings(adj: sp.csr_matrix, node: int, rings: int) -> list[int]:
     cur = {int(node)}
     for _ in range(rings):
         nxt = set(cur)
@@ -557,7 +601,7 @@ BUILDERS = {"beam_pgd": build_beam_pgd, "beam_snapshots": build_beam_snapshots, 
             "probe_nipgd": build_probe_nipgd}
 
 
-def build_model(spec: dict, progress=None) -> ReducedModel:
+def build_model(spec: ModelSpec, progress: Progress | None = None) -> ReducedModel:
     return BUILDERS[spec["kind"]](spec, progress)
 
 
@@ -569,7 +613,7 @@ def _spec_file(spec_name: str) -> str:
     return spec_name if spec_name.endswith(".yaml") else spec_name + ".yaml"
 
 
-def _cache_file(spec: dict) -> Path:
+def _cache_file(spec: ModelSpec) -> Path:
     return cache_dir() / f"{spec['name']}.h5"
 
 
@@ -581,7 +625,7 @@ def cached_model_path(spec_name: str) -> Path:
     return _cache_file(load_spec(_spec_file(spec_name)))
 
 
-def cached_model(spec_name: str, progress=None, rebuild: bool = False) -> Path:
+def cached_model(spec_name: str, progress: Progress | None = None, rebuild: bool = False) -> Path:
     """Path of the model built from a built-in (or given) spec, building it once into the cache.
 
     The cached file is rebuilt when the spec text changed since it was built.

@@ -23,6 +23,7 @@ import hashlib
 import json
 import time
 from pathlib import Path
+from typing import Any
 
 import h5py
 import numpy as np
@@ -78,7 +79,7 @@ def save_model(model: ReducedModel, path: str | Path) -> str:
     return model.model_id
 
 
-def _json_default(o):
+def _json_default(o: object) -> object:
     if isinstance(o, np.ndarray):
         return o.tolist()
     if isinstance(o, (np.floating, np.integer)):
@@ -113,20 +114,21 @@ def _open(path: Path) -> h5py.File:
     return f
 
 
-def _get(f, key: str, path: Path):
+def _get(f: h5py.Group, key: str, path: Path) -> h5py.Group | h5py.Dataset:
     if key not in f:
         raise ModelFileError(f"{path}: missing '{key}' (the file is incomplete or of another schema)")
     return f[key]
 
 
-def _read(ds, path: Path, sel=()):
+def _read(ds: h5py.Dataset, path: Path, sel: Any = ()) -> Any:
+    """The dataset's value (array or scalar, as stored; h5py ships no types), ``sel`` an h5py selection."""
     try:
         return ds[sel] if sel != () else ds[()]
     except Exception as e:  # noqa: BLE001 - h5py raises OSError/KeyError/RuntimeError on corrupt data
         raise ModelFileError(f"{path}: cannot read '{ds.name}' (corrupt file?): {e}") from None
 
 
-def _axes(f, path: Path) -> list[Axis]:
+def _axes(f: h5py.File, path: Path) -> list[Axis]:
     axes = []
     g = _get(f, "axes", path)
     items = sorted(g.items(), key=lambda kv: int(kv[1].attrs.get("order", 0)))
@@ -139,7 +141,7 @@ def _axes(f, path: Path) -> list[Axis]:
     return axes
 
 
-def read_header(path: str | Path) -> dict:
+def read_header(path: str | Path) -> dict[str, Any]:
     """Name, parameters, fields and rigid parameters, without reading modes (cheap; for scene checks)."""
     path = Path(path)
     with _open(path) as f:

@@ -12,29 +12,32 @@ falls below ``tol``. HOSVD (truncated Tucker, Kolda & Bader 2009) is the compari
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
+from numpy.typing import NDArray
 
 
 @dataclass
 class CPResult:
-    factors: list[np.ndarray]  # per dimension: (n_terms, n_k)
-    errors: np.ndarray  # relative residual after 1..n terms
+    factors: list[NDArray[np.float64]]  # per dimension: (n_terms, n_k)
+    errors: NDArray[np.float64]  # relative residual after 1..n terms
     als_iterations: list[int] = field(default_factory=list)
 
     @property
     def n_terms(self) -> int:
-        return self.factors[0].shape[0]
+        return int(self.factors[0].shape[0])
 
-    def full(self, n_terms: int | None = None) -> np.ndarray:
+    def full(self, n_terms: int | None = None) -> NDArray[np.float64]:
         n = self.n_terms if n_terms is None else n_terms
         letters = "abcdefghij"[: len(self.factors)]
         expr = ",".join(f"m{c}" for c in letters) + "->" + letters
-        return np.einsum(expr, *[f[:n] for f in self.factors])
+        A: NDArray[np.float64] = np.einsum(expr, *[f[:n] for f in self.factors])
+        return A
 
 
-def _contract_except(R: np.ndarray, vecs: list[np.ndarray], k: int) -> np.ndarray:
+def _contract_except(R: NDArray[np.float64], vecs: list[NDArray[np.float64]], k: int) -> NDArray[np.float64]:
     """R contracted with vecs[l] along every axis l != k."""
     out = R
     # contract from the last axis down so indices stay valid
@@ -45,8 +48,8 @@ def _contract_except(R: np.ndarray, vecs: list[np.ndarray], k: int) -> np.ndarra
     return out
 
 
-def nipgd(A: np.ndarray, max_terms: int = 50, tol: float = 1e-4, max_als: int = 100, als_tol: float = 1e-9,
-          seed: int = 0, progress=None) -> CPResult:
+def nipgd(A: NDArray[np.float64], max_terms: int = 50, tol: float = 1e-4, max_als: int = 100, als_tol: float = 1e-9,
+          seed: int = 0, progress: Callable[[int, float], object] | None = None) -> CPResult:
     """Greedy rank-one decomposition of ``A`` (any order >= 2)."""
     A = np.asarray(A, dtype=np.float64)
     if A.ndim < 2:
@@ -58,18 +61,19 @@ def nipgd(A: np.ndarray, max_terms: int = 50, tol: float = 1e-4, max_als: int = 
         raise ValueError("the snapshot tensor is zero")
     R = A.copy()
     rng = np.random.default_rng(seed)
-    factors = [[] for _ in range(A.ndim)]
-    errors, iters = [], []
+    factors: list[list[NDArray[np.float64]]] = [[] for _ in range(A.ndim)]
+    errors: list[float] = []
+    iters: list[int] = []
     for n in range(max_terms):
         # start from the dominant fibre: a deterministic, well-aligned initial guess
-        vecs = []
+        vecs: list[NDArray[np.float64]] = []
         for k in range(A.ndim):
             v = np.sqrt(np.sum(np.moveaxis(R, k, 0).reshape(R.shape[k], -1) ** 2, axis=1))
             v = v + 1e-3 * rng.standard_normal(v.shape) * (v.max() if v.max() > 0 else 1.0)
             vecs.append(v / np.linalg.norm(v))
-        prev = None
+        prev: list[NDArray[np.float64]] | None = None
         it = 0
-        for it in range(1, max_als + 1):
+        for it in range(1, max_als + 1):  # noqa: B007 - the sweeps run are read after the loop
             for k in range(A.ndim):
                 denom = np.prod([vecs[l] @ vecs[l] for l in range(A.ndim) if l != k])
                 vecs[k] = _contract_except(R, vecs, k) / denom
@@ -79,7 +83,7 @@ def nipgd(A: np.ndarray, max_terms: int = 50, tol: float = 1e-4, max_als: int = 
                         vecs[k] = vecs[k] / nk
             if prev is not None:
                 num = sum(np.linalg.norm(a - b) for a, b in zip(vecs, prev))
-                if num <= als_tol * max(np.linalg.norm(vecs[-1]), 1e-300):
+                if num <= als_tol * max(float(np.linalg.norm(vecs[-1])), 1e-300):
                     break
             prev = [v.copy() for v in vecs]
         term = vecs[0]
@@ -88,7 +92,7 @@ def nipgd(A: np.ndarray, max_terms: int = 50, tol: float = 1e-4, max_als: int = 
         R -= term
         for k in range(A.ndim):
             factors[k].append(vecs[k])
-        err = np.linalg.norm(R) / norm_A
+        err = float(np.linalg.norm(R) / norm_A)
         errors.append(err)
         iters.append(it)
         if progress:
@@ -100,10 +104,10 @@ def nipgd(A: np.ndarray, max_terms: int = 50, tol: float = 1e-4, max_als: int = 
 
 @dataclass
 class TuckerResult:
-    core: np.ndarray
-    U: list[np.ndarray]  # per dimension (n_k, r_k)
+    core: NDArray[np.float64]
+    U: list[NDArray[np.float64]]  # per dimension (n_k, r_k)
 
-    def full(self) -> np.ndarray:
+    def full(self) -> NDArray[np.float64]:
         out = self.core
         for k, U in enumerate(self.U):
             out = np.moveaxis(np.tensordot(U, out, axes=([1], [k])), 0, k)
@@ -114,7 +118,7 @@ class TuckerResult:
         return int(self.core.size + sum(U.size for U in self.U))
 
 
-def hosvd(A: np.ndarray, ranks: list[int] | None = None, tol: float | None = None) -> TuckerResult:
+def hosvd(A: NDArray[np.float64], ranks: list[int] | None = None, tol: float | None = None) -> TuckerResult:
     """Truncated higher-order SVD: factor k = leading left singular vectors of the mode-k unfolding."""
     A = np.asarray(A, dtype=np.float64)
     Us = []

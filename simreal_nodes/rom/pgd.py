@@ -17,26 +17,32 @@ then each S^k from R and the other S^l (pointwise in mu_k: the parameter operato
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import cast
 
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
+from numpy.typing import NDArray
+
+# One rank-one term R (x) S^1 (x) ... (x) S^D: the space factor and the per-axis factors.
+_Product = tuple[NDArray[np.float64], list[NDArray[np.float64]]]
 
 
 @dataclass
 class ParameterAxis:
-    values: np.ndarray  # grid nodes
-    weights: np.ndarray | None = None  # quadrature weights (trapezoid if None)
+    values: NDArray[np.float64]  # grid nodes
+    weights: NDArray[np.float64] | None = None  # quadrature weights (trapezoid if None)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         self.values = np.asarray(self.values, dtype=np.float64)
         if self.weights is None:
             self.weights = trapezoid_weights(self.values)
         self.weights = np.asarray(self.weights, dtype=np.float64)
 
 
-def trapezoid_weights(x: np.ndarray) -> np.ndarray:
+def trapezoid_weights(x: NDArray[np.float64]) -> NDArray[np.float64]:
     x = np.asarray(x, dtype=np.float64)
     if len(x) == 1:
         return np.ones(1)
@@ -51,40 +57,41 @@ def trapezoid_weights(x: np.ndarray) -> np.ndarray:
 class SeparatedOperator:
     """K(mu) = sum_a K_a prod_k diag(d_a^k): ``terms`` = [(K_a, [d_a^1, ..., d_a^D])]."""
 
-    terms: list[tuple[sp.spmatrix, list[np.ndarray]]]
+    terms: list[tuple[sp.csr_matrix, list[NDArray[np.float64]]]]
 
 
 @dataclass
 class SeparatedLoad:
     """f(mu) = H @ prod_k G^k: columns h_j of H (N x m) and per-axis factors G^k (m x n_k)."""
 
-    H: sp.spmatrix | np.ndarray
-    G: list[np.ndarray]
+    H: sp.csr_matrix | NDArray[np.float64]
+    G: list[NDArray[np.float64]]
 
 
 @dataclass
 class PGDResult:
-    F: np.ndarray  # (n_modes, N) space modes (over all dofs, zeros on Dirichlet dofs)
-    G: list[np.ndarray]  # per axis (n_modes, n_k)
-    amplitudes: np.ndarray  # amplitude of each mode (product of weighted norms)
+    F: NDArray[np.float64]  # (n_modes, N) space modes (over all dofs, zeros on Dirichlet dofs)
+    G: list[NDArray[np.float64]]  # per axis (n_modes, n_k)
+    amplitudes: NDArray[np.float64]  # amplitude of each mode (product of weighted norms)
     fixed_point_iterations: list[int] = field(default_factory=list)
     converged: bool = False
 
     @property
     def n_modes(self) -> int:
-        return self.F.shape[0]
+        return int(self.F.shape[0])
 
-    def evaluate_grid(self, n_modes: int | None = None) -> np.ndarray:
+    def evaluate_grid(self, n_modes: int | None = None) -> NDArray[np.float64]:
         """Full tensor u(x, mu_1, ..., mu_D) on the grids (for checks on small problems)."""
         n = self.n_modes if n_modes is None else n_modes
         letters = "abcdefgh"[: len(self.G)]
         expr = "mx," + ",".join(f"m{c}" for c in letters) + "->x" + letters
-        return np.einsum(expr, self.F[:n], *[g[:n] for g in self.G])
+        U: NDArray[np.float64] = np.einsum(expr, self.F[:n], *[g[:n] for g in self.G])
+        return U
 
 
-def pgd_solve(op: SeparatedOperator, load: SeparatedLoad, axes: list[ParameterAxis], free: np.ndarray,
+def pgd_solve(op: SeparatedOperator, load: SeparatedLoad, axes: list[ParameterAxis], free: NDArray[np.int64],
               max_modes: int = 30, tol: float = 1e-4, max_fp_iter: int = 30, fp_tol: float = 1e-8,
-              progress=None, seed: int = 0) -> PGDResult:
+              progress: Callable[[int, float], object] | None = None, seed: int = 0) -> PGDResult:
     """Greedy PGD (Algorithm 2.1). ``free``: indices of the unconstrained dofs (homogeneous Dirichlet
     elsewhere). Stops when a new mode's amplitude falls below ``tol`` times the first one's."""
     N = op.terms[0][0].shape[0]
@@ -93,18 +100,20 @@ def pgd_solve(op: SeparatedOperator, load: SeparatedLoad, axes: list[ParameterAx
     da = [[np.asarray(d, dtype=np.float64) for d in ds] for _, ds in op.terms]
     H = load.H.tocsr()[free] if sp.issparse(load.H) else np.asarray(load.H)[free]
     Gl = [np.asarray(g, dtype=np.float64) for g in load.G]  # (m, n_k)
-    w = [ax.weights for ax in axes]
+    w = [cast(NDArray[np.float64], ax.weights) for ax in axes]  # never None: __post_init__ fills them
     rng = np.random.default_rng(seed)
-    Fs: list[np.ndarray] = []  # on free dofs
-    Gs: list[list[np.ndarray]] = [[] for _ in range(D)]
-    amps, iters = [], []
+    Fs: list[NDArray[np.float64]] = []  # on free dofs
+    Gs: list[list[NDArray[np.float64]]] = [[] for _ in range(D)]
+    amps: list[float] = []
+    iters: list[int] = []
     single = len(Ka) == 1
     lu = spla.splu(Ka[0].tocsc()) if single else None
-    KF = [[] for _ in Ka]  # K_a F_i cache
+    KF: list[list[NDArray[np.float64]]] = [[] for _ in Ka]  # K_a F_i cache
 
-    def solve_space(alpha_a: np.ndarray, rhs: np.ndarray) -> np.ndarray:
-        if single:
-            return lu.solve(rhs) / alpha_a[0]
+    def solve_space(alpha_a: NDArray[np.float64], rhs: NDArray[np.float64]) -> NDArray[np.float64]:
+        if lu is not None:  # the single-term operator: its factorization
+            R: NDArray[np.float64] = lu.solve(rhs) / alpha_a[0]
+            return R
         K = sum(a * K_ for a, K_ in zip(alpha_a, Ka))
         return spla.spsolve(K.tocsc(), rhs)
 
@@ -112,9 +121,9 @@ def pgd_solve(op: SeparatedOperator, load: SeparatedLoad, axes: list[ParameterAx
     for n in range(max_modes):
         S = [np.ones(len(ax.values)) + 0.1 * rng.standard_normal(len(ax.values)) for ax in axes]
         R = np.zeros(len(free))
-        prev = None
+        prev: _Product | None = None
         it = 0
-        for it in range(1, max_fp_iter + 1):
+        for it in range(1, max_fp_iter + 1):  # noqa: B007 - the iterations run are read after the loop
             # --- R from the S^k ---
             alpha = np.array([np.prod([np.sum(w[k] * da[a][k] * S[k] ** 2) for k in range(D)]) for a in range(len(Ka))])
             beta = np.prod([Gl[k] @ (w[k] * S[k]) for k in range(D)], axis=0)  # (m,)
@@ -176,7 +185,7 @@ def pgd_solve(op: SeparatedOperator, load: SeparatedLoad, axes: list[ParameterAx
     return PGDResult(Ffull, [np.asarray(g) for g in Gs], np.asarray(amps), iters, converged)
 
 
-def _product_distance(a, b, w) -> float:
+def _product_distance(a: _Product, b: _Product, w: list[NDArray[np.float64]]) -> float:
     """Relative distance between two rank-one tensors R (x) S^1 (x) ... (weighted Frobenius)."""
     (Ra, Sa), (Rb, Sb) = a, b
     aa = (Ra @ Ra) * np.prod([np.sum(wk * s * s) for wk, s in zip(w, Sa)])

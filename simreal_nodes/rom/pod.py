@@ -9,26 +9,30 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse as sp
+from numpy.typing import NDArray
 
 
 @dataclass
 class PODBasis:
-    B: np.ndarray  # (D, N) orthonormal columns
-    singular_values: np.ndarray  # all of them, descending
-    energy: np.ndarray  # cumulative energy fraction after 1..M modes
+    B: NDArray[np.float64]  # (D, N) orthonormal columns
+    singular_values: NDArray[np.float64]  # all of them, descending
+    energy: NDArray[np.float64]  # cumulative energy fraction after 1..M modes
 
     @property
     def n_modes(self) -> int:
-        return self.B.shape[1]
+        return int(self.B.shape[1])
 
-    def project(self, U: np.ndarray) -> np.ndarray:
-        return self.B.T @ U
+    def project(self, U: NDArray[np.float64]) -> NDArray[np.float64]:
+        xi: NDArray[np.float64] = self.B.T @ U
+        return xi
 
-    def reconstruct(self, xi: np.ndarray) -> np.ndarray:
-        return self.B @ xi
+    def reconstruct(self, xi: NDArray[np.float64]) -> NDArray[np.float64]:
+        U: NDArray[np.float64] = self.B @ xi
+        return U
 
 
-def pod(snapshots: np.ndarray, energy: float = 0.999999, max_modes: int | None = None) -> PODBasis:
+def pod(snapshots: NDArray[np.float64], energy: float = 0.999999, max_modes: int | None = None) -> PODBasis:
     """POD basis of the columns of ``snapshots`` keeping ``energy`` of sum(sigma^2)."""
     P = np.asarray(snapshots, dtype=np.float64)
     if P.ndim != 2 or min(P.shape) == 0:
@@ -45,9 +49,10 @@ def pod(snapshots: np.ndarray, energy: float = 0.999999, max_modes: int | None =
     return PODBasis(U[:, :n], s, cum)
 
 
-def galerkin_solve(K, F: np.ndarray, B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def galerkin_solve(K: NDArray[np.float64] | sp.csr_matrix, F: NDArray[np.float64],
+                   B: NDArray[np.float64]) -> tuple[NDArray[np.floating], NDArray[np.floating]]:
     """Reduced solve (Eq. 2.5): returns (xi, B xi). K may be sparse; F may have several columns."""
-    KB = K @ B
+    KB: NDArray[np.float64] = K @ B
     Kr = B.T @ KB
     Fr = B.T @ F
     xi = np.linalg.solve(Kr, Fr)

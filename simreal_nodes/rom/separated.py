@@ -13,25 +13,34 @@ index of a precomputed contact point) takes integer values and has no sensitivit
 from __future__ import annotations
 
 import bisect
+from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Any, Literal, overload
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 from scipy.interpolate import CubicSpline
 
 AXIS_KINDS = ("continuous", "discrete")
 INTERPOLATIONS = ("cubic", "linear")
 
+# Node selections: indices into the space modes' node axis (an (N, k) array for interpolated views).
+Nodes = NDArray[np.integer] | Sequence[int]
+# An axis's interpolant: ("linear", x, y, slope) or ("cubic", breakpoints, coefficients (n-1, 4, m)).
+_Linear = tuple[Literal["linear"], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]
+_Cubic = tuple[Literal["cubic"], NDArray[np.float64], NDArray[np.float64]]
+
 
 @dataclass
 class Axis:
     name: str
-    values: np.ndarray
+    values: NDArray[np.float64]
     unit: str = ""
     kind: str = "continuous"
     interpolation: str = "cubic"
     description: str = ""
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         self.values = np.asarray(self.values, dtype=np.float64)
         if self.values.ndim != 1 or len(self.values) < 1:
             raise ValueError(f"axis '{self.name}' needs a 1-D grid of values")
@@ -51,7 +60,7 @@ class Axis:
         span = max(hi - lo, 1e-300)
         return lo - tol * span <= x <= hi + tol * span
 
-    def as_dict(self) -> dict:
+    def as_dict(self) -> dict[str, Any]:
         return {"name": self.name, "unit": self.unit, "kind": self.kind, "interpolation": self.interpolation,
                 "range": list(self.range), "n": len(self.values), "description": self.description}
 
@@ -59,11 +68,12 @@ class Axis:
 class AxisModes:
     """All parameter modes of one axis, interpolated together: values and derivatives, shape (m,)."""
 
-    def __init__(self, axis: Axis, modes: np.ndarray):
+    def __init__(self, axis: Axis, modes: NDArray[np.float64]) -> None:
         self.axis = axis
         self.modes = np.asarray(modes, dtype=np.float64)  # (m, n)
         x = axis.values
         self._xl = [float(v) for v in x]
+        self._pp: _Linear | _Cubic | None
         if axis.kind == "discrete" or len(x) == 1:
             self._pp = None
         elif axis.interpolation == "linear" or len(x) < 4:
@@ -78,11 +88,11 @@ class AxisModes:
         i = bisect.bisect_right(self._xl, t) - 1
         return 0 if i < 0 else (len(self._xl) - 2 if i > len(self._xl) - 2 else i)
 
-    def value_and_derivative(self, t: float, m: int) -> tuple[np.ndarray, np.ndarray]:
+    def value_and_derivative(self, t: float, m: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Both at once (the tracker's hot path)."""
         if self._pp is None or self._pp[0] != "cubic":
             return self.value(t, m), self.derivative(t, m)
-        _, x, c = self._pp
+        _, _x, c = self._pp
         i = self._interval(t)
         d = t - self._xl[i]
         ci = c[i, :, :m]
@@ -90,37 +100,42 @@ class AxisModes:
         dv = (3 * ci[0] * d + 2 * ci[1]) * d + ci[2]
         return v, dv
 
-    def value(self, t: float, m: int) -> np.ndarray:
+    def value(self, t: float, m: int) -> NDArray[np.float64]:
         if self._pp is None:
-            return self.modes[:m, self._index(t)]
+            at_index: NDArray[np.float64] = self.modes[:m, self._index(t)]
+            return at_index
         if self._pp[0] == "linear":
             _, x, y, slope = self._pp
             i = self._interval(t)
-            return y[:m, i] + slope[:m, i] * (t - x[i])
+            v: NDArray[np.float64] = y[:m, i] + slope[:m, i] * (t - x[i])
+            return v
         _, x, c = self._pp
         i = self._interval(t)
         d = t - self._xl[i]
         ci = c[i, :, :m]
-        return ((ci[0] * d + ci[1]) * d + ci[2]) * d + ci[3]
+        val: NDArray[np.float64] = ((ci[0] * d + ci[1]) * d + ci[2]) * d + ci[3]
+        return val
 
-    def derivative(self, t: float, m: int) -> np.ndarray:
+    def derivative(self, t: float, m: int) -> NDArray[np.float64]:
         if self._pp is None:
             raise ValueError(f"axis '{self.axis.name}' is discrete: it has no sensitivity")
         if self._pp[0] == "linear":
-            _, x, y, slope = self._pp
+            _, _x, _y, slope = self._pp
             return slope[:m, self._interval(t)].copy()
-        _, x, c = self._pp
+        _, _x, c = self._pp
         i = self._interval(t)
         d = t - self._xl[i]
         ci = c[i, :, :m]
-        return (3 * ci[0] * d + 2 * ci[1]) * d + ci[2]
+        der: NDArray[np.float64] = (3 * ci[0] * d + 2 * ci[1]) * d + ci[2]
+        return der
 
     def _index(self, t: float) -> int:
-        i = int(round(t))
+        i = round(t)
         if abs(t - i) > 1e-9 or not 0 <= i < self.modes.shape[1]:
             if len(self.axis.values) == 1:
                 return 0
-            raise ValueError(f"axis '{self.axis.name}' is discrete: value {t} is not an index 0..{self.modes.shape[1] - 1}")
+            raise ValueError(f"axis '{self.axis.name}' is discrete: value {t} is not an index "
+                             f"0..{self.modes.shape[1] - 1}")
         return i
 
 
@@ -129,14 +144,14 @@ class SeparatedField:
     """One field (displacement, stress, ...) of a reduced model."""
 
     name: str
-    space: np.ndarray  # (n_modes, n_nodes, n_comp)
-    params: list[np.ndarray]  # per axis: (n_modes, n_axis)
+    space: NDArray[np.float64]  # (n_modes, n_nodes, n_comp)
+    params: list[NDArray[np.float64]]  # per axis: (n_modes, n_axis)
     axes: list[Axis]
     unit: str = ""
     components: list[str] = field(default_factory=list)
-    error_vs_modes: np.ndarray | None = None  # relative error after 1..n modes (against the full-order truth)
+    error_vs_modes: NDArray[np.float64] | None = None  # relative error after 1..n modes (against the full-order truth)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         self.space = np.asarray(self.space)
         if self.space.ndim == 2:
             self.space = self.space[:, :, None]
@@ -151,15 +166,15 @@ class SeparatedField:
 
     @property
     def n_modes(self) -> int:
-        return self.space.shape[0]
+        return int(self.space.shape[0])
 
     @property
     def n_nodes(self) -> int:
-        return self.space.shape[1]
+        return int(self.space.shape[1])
 
     @property
     def n_comp(self) -> int:
-        return self.space.shape[2]
+        return int(self.space.shape[2])
 
     def _m(self, n_modes: int | None) -> int:
         if n_modes is None or n_modes == 0:
@@ -168,18 +183,33 @@ class SeparatedField:
             raise ValueError(f"field '{self.name}' has {self.n_modes} modes; {n_modes} were requested")
         return int(n_modes)
 
-    def check_mu(self, mu) -> np.ndarray:
+    def check_mu(self, mu: ArrayLike) -> NDArray[np.float64]:
         mu = np.asarray(mu, dtype=np.float64).ravel()
         if mu.size != len(self.axes):
-            raise ValueError(f"expected {len(self.axes)} parameters ({', '.join(a.name for a in self.axes)}), got {mu.size}")
+            raise ValueError(f"expected {len(self.axes)} parameters ({', '.join(a.name for a in self.axes)}), "
+                             f"got {mu.size}")
         for v, ax in zip(mu, self.axes):
             if not np.isfinite(v):
                 raise ValueError(f"parameter '{ax.name}' is not finite: {v}")
             if not ax.contains(v):
-                raise ValueError(f"parameter '{ax.name}' = {v:g} is outside the model's range [{ax.range[0]:g}, {ax.range[1]:g}]")
+                raise ValueError(f"parameter '{ax.name}' = {v:g} is outside the model's range "
+                                 f"[{ax.range[0]:g}, {ax.range[1]:g}]")
         return mu
 
-    def coefficients(self, mu, n_modes: int | None = None, with_derivatives: bool = False, checked: bool = False):
+    @overload
+    def coefficients(self, mu: ArrayLike, n_modes: int | None = None, with_derivatives: Literal[False] = False,
+                     checked: bool = False) -> NDArray[np.float64]: ...
+
+    @overload
+    def coefficients(self, mu: ArrayLike, n_modes: int | None, with_derivatives: Literal[True],
+                     checked: bool = False) -> tuple[NDArray[np.float64], NDArray[np.float64]]: ...
+
+    @overload
+    def coefficients(self, mu: ArrayLike, n_modes: int | None = None, *, with_derivatives: Literal[True],
+                     checked: bool = False) -> tuple[NDArray[np.float64], NDArray[np.float64]]: ...
+
+    def coefficients(self, mu: ArrayLike, n_modes: int | None = None, with_derivatives: bool = False,
+                     checked: bool = False) -> NDArray[np.float64] | tuple[NDArray[np.float64], NDArray[np.float64]]:
         """c_i = prod_k G_i^k(mu_k) and, optionally, dc_i/dmu_k (m, n_params; NaN columns for discrete axes).
         ``checked``: mu was validated by the caller (hot loops)."""
         m = self._m(n_modes)
@@ -204,13 +234,14 @@ class SeparatedField:
             dc[:, k] = am.derivative(t, m) * others
         return c, dc
 
-    def evaluate(self, mu, nodes=None, n_modes: int | None = None) -> np.ndarray:
+    def evaluate(self, mu: ArrayLike, nodes: Nodes | None = None, n_modes: int | None = None) -> NDArray[np.float64]:
         """u(x, mu): (n_nodes or len(nodes), n_comp)."""
         c = self.coefficients(mu, n_modes)
         S = self.space[: len(c)] if nodes is None else self.space[: len(c), nodes]
         return np.tensordot(c, S, axes=(0, 0))
 
-    def sensitivity(self, mu, k: int, nodes=None, n_modes: int | None = None) -> np.ndarray:
+    def sensitivity(self, mu: ArrayLike, k: int, nodes: Nodes | None = None,
+                    n_modes: int | None = None) -> NDArray[np.float64]:
         """du/dmu_k: (n_sel, n_comp)."""
         c, dc = self.coefficients(mu, n_modes, with_derivatives=True)
         if np.isnan(dc[0, k]):
@@ -218,12 +249,13 @@ class SeparatedField:
         S = self.space[: len(c)] if nodes is None else self.space[: len(c), nodes]
         return np.tensordot(dc[:, k], S, axes=(0, 0))
 
-    def view(self, nodes=None, n_modes: int | None = None, weights=None) -> "FieldView":
+    def view(self, nodes: Nodes | None = None, n_modes: int | None = None,
+             weights: ArrayLike | None = None) -> FieldView:
         """The field at ``nodes`` (None: all), or, with ``weights`` (N, k) and ``nodes`` (N, k), at N points
         each interpolated from k nodes (Eq. 4.10's links, folded into the modes once)."""
         return FieldView(self, nodes, self._m(n_modes), weights)
 
-    def truncated(self, n_modes: int) -> "SeparatedField":
+    def truncated(self, n_modes: int) -> SeparatedField:
         m = self._m(n_modes)
         return SeparatedField(self.name, self.space[:m], [p[:m] for p in self.params], self.axes, self.unit,
                               self.components, None if self.error_vs_modes is None else self.error_vs_modes[:m])
@@ -233,13 +265,14 @@ class FieldView:
     """A field restricted to some nodes and modes, laid out for fast repeated evaluation
     (one small matrix product per call: what the tracker and the overlay call every frame)."""
 
-    def __init__(self, f: SeparatedField, nodes, n_modes: int, weights=None):
+    def __init__(self, f: SeparatedField, nodes: Nodes | None, n_modes: int, weights: ArrayLike | None = None) -> None:
         self.field = f
         self.n_modes = n_modes
         if weights is not None:
             nodes, weights = np.asarray(nodes), np.asarray(weights, dtype=np.float64)
             if nodes.shape != weights.shape or nodes.ndim != 2:
-                raise ValueError(f"interpolated view: nodes {nodes.shape} and weights {weights.shape} must both be (N, k)")
+                raise ValueError(f"interpolated view: nodes {nodes.shape} and weights {weights.shape} "
+                                 "must both be (N, k)")
             sel = np.einsum("mnkc,nk->mnc", f.space[:n_modes][:, nodes], weights)
         else:
             sel = f.space[:n_modes] if nodes is None else f.space[:n_modes, nodes]
@@ -247,11 +280,12 @@ class FieldView:
         # modes as rows (m, n_sel * n_comp): one streaming pass over memory per evaluation
         self.S = np.ascontiguousarray(sel.reshape(n_modes, -1), dtype=np.float64)
 
-    def evaluate(self, mu) -> np.ndarray:
+    def evaluate(self, mu: ArrayLike) -> NDArray[np.float64]:
         c = self.field.coefficients(mu, self.n_modes)
         return (c @ self.S).reshape(self.n_sel, self.n_comp)
 
-    def evaluate_with_jacobian(self, mu, checked: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    def evaluate_with_jacobian(self, mu: ArrayLike, checked: bool = False
+                               ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """u (n_sel, n_comp) and du/dmu (n_sel, n_comp, n_params) in one product."""
         c, dc = self.field.coefficients(mu, self.n_modes, with_derivatives=True, checked=checked)
         C = np.empty((1 + dc.shape[1], len(c)))

@@ -34,7 +34,8 @@ class MsgFactory:
         self.ts = bags.typestore()
         t = self.ts.types
         self.Time, self.Header = t["builtin_interfaces/msg/Time"], t["std_msgs/msg/Header"]
-        self.Image, self.Info, self.RoI = t["sensor_msgs/msg/Image"], t["sensor_msgs/msg/CameraInfo"], t["sensor_msgs/msg/RegionOfInterest"]
+        self.Image, self.Info = t["sensor_msgs/msg/Image"], t["sensor_msgs/msg/CameraInfo"]
+        self.RoI = t["sensor_msgs/msg/RegionOfInterest"]
         self.PoseStamped, self.Pose = t["geometry_msgs/msg/PoseStamped"], t["geometry_msgs/msg/Pose"]
         self.Point, self.Quat = t["geometry_msgs/msg/Point"], t["geometry_msgs/msg/Quaternion"]
         self.Params, self.Contact = t["simreal_msgs/msg/ModelParameters"], t["simreal_msgs/msg/ContactState"]
@@ -46,9 +47,9 @@ class MsgFactory:
 
         bgr = cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR)
         if fmt == "jpeg":
-            ok, buf = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
+            _ok, buf = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
         else:
-            ok, buf = cv2.imencode(".png", bgr, [cv2.IMWRITE_PNG_COMPRESSION, 6])
+            _ok, buf = cv2.imencode(".png", bgr, [cv2.IMWRITE_PNG_COMPRESSION, 6])
         return self.Compressed(header=self.header(ns, frame), format=f"rgb8; {fmt} compressed bgr8",
                                data=np.frombuffer(buf.tobytes(), np.uint8))
 
@@ -67,7 +68,8 @@ class MsgFactory:
         p = np.asarray(P if P is not None else f["p"], dtype=np.float64)
         return self.Info(header=self.header(ns, frame), height=cam.height, width=cam.width,
                          distortion_model=f["distortion_model"], d=np.asarray(f["d"], np.float64),
-                         k=np.asarray(f["k"], np.float64), r=np.asarray(f["r"], np.float64), p=p, binning_x=0, binning_y=0,
+                         k=np.asarray(f["k"], np.float64), r=np.asarray(f["r"], np.float64), p=p,
+                         binning_x=0, binning_y=0,
                          roi=self.RoI(x_offset=0, y_offset=0, height=0, width=0, do_rectify=False))
 
     def pose(self, T):
@@ -87,14 +89,16 @@ class MsgFactory:
 
     def contact(self, ns, oid, st, frame="map"):
         cp = st.contact_point
-        return self.Contact(header=self.header(ns, frame), object_id=oid, state=int(st.state), in_contact=bool(st.in_contact),
+        return self.Contact(header=self.header(ns, frame), object_id=oid, state=int(st.state),
+                            in_contact=bool(st.in_contact),
                             contact_node=int(st.node), load_point=int(st.load_point), pseudo_time=float(st.pseudo_time),
                             min_distance=float(st.min_distance),
                             contact_point=self.Point(x=float(cp[0]), y=float(cp[1]), z=float(cp[2])),
                             source="ground_truth", points_used=int(st.points_used), reason=st.reason)
 
 
-def make_scene(name: str, width: int = 640, height: int = 480, duration: float | None = None, fps: float = 30.0) -> SynthScene:
+def make_scene(name: str, width: int = 640, height: int = 480, duration: float | None = None,
+               fps: float = 30.0) -> SynthScene:
     if name not in SCENES:
         from simreal_nodes.errors import SimrealError
         raise SimrealError(f"unknown scene '{name}' (known: {', '.join(SCENES)})")
@@ -110,7 +114,8 @@ def load_models(scene: SynthScene, progress=None) -> dict:
 
 def make_bag(name: str, out: str | Path, width: int = 640, height: int = 480, duration: float | None = None,
              fps: float = 30.0, storage: str = "mcap", seed: int = 0, scene_out: str | Path | None = None,
-             ssaa: int = 2, progress=None, compress: bool = True, image_format: str = "raw", jpeg_quality: int = 90) -> dict:
+             ssaa: int = 2, progress=None, compress: bool = True, image_format: str = "raw",
+             jpeg_quality: int = 90) -> dict:
     """Render the scene into a bag; returns a summary (frames, seconds, bytes)."""
     scene = make_scene(name, width, height, duration, fps)
     models = load_models(scene, progress)
@@ -120,7 +125,6 @@ def make_bag(name: str, out: str | Path, width: int = 640, height: int = 480, du
     cam = scene.camera
     r = Renderer(cam, ssaa=ssaa)
     scene.build(scene, r, models)
-    right_r = None
     if scene.stereo_baseline:
         # rectified stereo: the right camera shares K, no distortion on either after rectification
         from simreal_nodes.camera import CameraModel
@@ -132,7 +136,7 @@ def make_bag(name: str, out: str | Path, width: int = 640, height: int = 480, du
     rng = np.random.default_rng(seed)
     fac = MsgFactory()
     frame = "camera_optical_frame"
-    n = int(round(scene.duration * scene.fps))
+    n = round(scene.duration * scene.fps)
     t0 = time.perf_counter()
     out = Path(out)
     T_map_world = scene.T_map_world()
@@ -144,7 +148,7 @@ def make_bag(name: str, out: str | Path, width: int = 640, height: int = 480, du
     with writer as w:
         for i in range(n):
             t = i / scene.fps
-            ns = EPOCH_S * 10**9 + int(round(t * 1e9))
+            ns = EPOCH_S * 10**9 + round(t * 1e9)
             truth = scene.update(scene, r, t)
             T = scene.camera_pose(t)
             rgb, depth = r.render(T)
@@ -167,8 +171,8 @@ def make_bag(name: str, out: str | Path, width: int = 640, height: int = 480, du
                 P = np.zeros((3, 4))
                 P[:, :3] = cam.K
                 P[0, 3] = -cam.fx * b
-                w.write("/camera/right/camera_info", ns, fac.camera_info(ns, "camera_right_optical_frame", cam, P.ravel()),
-                        "sensor_msgs/msg/CameraInfo")
+                w.write("/camera/right/camera_info", ns,
+                        fac.camera_info(ns, "camera_right_optical_frame", cam, P.ravel()), "sensor_msgs/msg/CameraInfo")
                 if image_format == "raw":
                     w.write("/camera/right/image_raw", ns, fac.image(ns, "camera_right_optical_frame", rgb_r, "rgb8"),
                             "sensor_msgs/msg/Image")
@@ -176,14 +180,16 @@ def make_bag(name: str, out: str | Path, width: int = 640, height: int = 480, du
                     w.write("/camera/right/image_raw/compressed", ns,
                             fac.compressed(ns, "camera_right_optical_frame", rgb_r, image_format, jpeg_quality),
                             "sensor_msgs/msg/CompressedImage")
-            w.write(f"{GT}/camera_pose", ns, fac.pose_stamped(ns, "map", T_map_world @ T), "geometry_msgs/msg/PoseStamped")
+            w.write(f"{GT}/camera_pose", ns, fac.pose_stamped(ns, "map", T_map_world @ T),
+                    "geometry_msgs/msg/PoseStamped")
             for oid, (names, units, vals) in truth.params.items():
                 w.write(f"{GT}/objects/{oid}/parameters", ns, fac.params(ns, oid, names, units, vals),
                         "simreal_msgs/msg/ModelParameters")
             for oid, st in truth.contacts.items():
                 w.write(f"{GT}/objects/{oid}/contact", ns, fac.contact(ns, oid, st), "simreal_msgs/msg/ContactState")
             for oid, Tp in truth.object_poses.items():
-                w.write(f"{GT}/objects/{oid}/pose", ns, fac.pose_stamped(ns, "map", Tp), "geometry_msgs/msg/PoseStamped")
+                w.write(f"{GT}/objects/{oid}/pose", ns, fac.pose_stamped(ns, "map", Tp),
+                        "geometry_msgs/msg/PoseStamped")
             if progress:
                 progress("render", i + 1, n, f"t = {t:.2f} s")
     r.release()

@@ -5,12 +5,13 @@ it, so a test can re-render one and compare pixels, and a user can regenerate th
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 from simreal_nodes.rom.build import REPO
 
 SAMPLES_DIR = REPO / "bags" / "samples"
 
-SAMPLES = {
+SAMPLES: dict[str, dict[str, Any]] = {
     # markers + glued dots on the aluminium beam (thesis §4.5.1): the demo's scene, short and small
     "aluminium_beam_320x240": dict(scene="aluminium_beam", width=320, height=240, duration=2.0, image_format="jpeg",
                                    jpeg_quality=90),

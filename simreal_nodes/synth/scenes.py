@@ -9,8 +9,8 @@ user would know (camera topics, marker layout, where a virtual object is placed)
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 
@@ -91,8 +91,8 @@ def add_environment(r: Renderer, center=(0.3, 0.0), seed: int = 0) -> None:
 
 
 def deformable_mesh(model: ReducedModel, name: str, texture: str, tex_scale: float, pose, smooth=False) -> Mesh:
-    return Mesh(name, model.points.copy(), model.surface, mode="texture", texture=W.texture(texture), tex_scale=tex_scale,
-                ref=model.points.copy(), smooth=smooth, pose=np.asarray(pose, dtype=np.float64))
+    return Mesh(name, model.points.copy(), model.surface, mode="texture", texture=W.texture(texture),
+                tex_scale=tex_scale, ref=model.points.copy(), smooth=smooth, pose=np.asarray(pose, dtype=np.float64))
 
 
 def _truth_params(model: ReducedModel, values) -> tuple:
@@ -198,7 +198,8 @@ def aluminium_beam(width=640, height=480, duration=6.0, fps=30.0, positions=(0.1
         m_dots = sc.state["dots_ref"]
         return {
             "simreal_scene": 1, "name": sc.name,
-            "description": "Aluminium cantilever with a moving point load, fiducial markers and glued blue dots (thesis §4.5.1).",
+            "description": "Aluminium cantilever with a moving point load, fiducial markers and glued blue dots "
+                           "(thesis §4.5.1).",
             "camera": _camera_yaml(sc),
             "localization": {"mode": "markers", "markers": {
                 "dictionary": "DICT_4X4_50", "size_m": MARKER_BLACK,
@@ -215,8 +216,8 @@ def aluminium_beam(width=640, height=480, duration=6.0, fps=30.0, positions=(0.1
         }
 
     return SynthScene(name, "Aluminium beam, moving 50 N point load, ArUco markers, blue dots",
-                      default_camera(width, height), fps, duration, {"beam": "aluminium_beam"}, build, update, cam_pose, yaml,
-                      map_is_world=True)
+                      default_camera(width, height), fps, duration, {"beam": "aluminium_beam"}, build, update,
+                      cam_pose, yaml, map_is_world=True)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -279,8 +280,8 @@ def foam_beam(width=640, height=480, duration=8.0, fps=30.0) -> SynthScene:
         }
 
     return SynthScene("foam_beam", "Foam beam (SVK) under a lead disk at s, textured, hand-held arc",
-                      default_camera(width, height), fps, duration, {"beam": "foam_beam"}, build, update, cam_pose, yaml,
-                      depth=True)
+                      default_camera(width, height), fps, duration, {"beam": "foam_beam"}, build, update, cam_pose,
+                      yaml, depth=True)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -350,8 +351,10 @@ def _joint_boot_scene(real_boot: bool, width, height, duration, fps, alpha_z: fl
             params["alpha_z"] = {"mode": "constant", "initial": 0.0}
         return {
             "simreal_scene": 1, "name": name,
-            "description": ("Real rubber joint boot on a plate, lever angle theta and unknown rotation alpha_z (thesis §4.5.4)."
-                            if real_boot else "Virtual joint boot driven by a real lever: theta from the lever's features (thesis §4.5.3)."),
+            "description": ("Real rubber joint boot on a plate, lever angle theta and unknown rotation alpha_z "
+                            "(thesis §4.5.4)." if real_boot else
+                            "Virtual joint boot driven by a real lever: theta from the lever's features "
+                            "(thesis §4.5.3)."),
             "camera": _camera_yaml(sc),
             "localization": {"mode": "rgbd" if sc.depth else "mono", "features": 1500},
             "objects": [{
@@ -364,9 +367,10 @@ def _joint_boot_scene(real_boot: bool, width, height, duration, fps, alpha_z: fl
             "overlay": {"enabled": True},
         }
 
-    return SynthScene(name, "Joint boot and lever" + (" (real boot, alpha_z unknown)" if real_boot else " (virtual boot)"),
-                      default_camera(width, height), fps, duration, {"boot": "joint_boot"}, build, update, cam_pose, yaml,
-                      depth=True)
+    title = "Joint boot and lever" + (" (real boot, alpha_z unknown)" if real_boot else " (virtual boot)")
+    return SynthScene(name, title,
+                      default_camera(width, height), fps, duration, {"boot": "joint_boot"}, build, update, cam_pose,
+                      yaml, depth=True)
 
 
 def joint_boot(width=640, height=480, duration=8.0, fps=30.0) -> SynthScene:
@@ -419,7 +423,6 @@ def _probe_scene(kind: str, width, height, duration, fps, stereo: bool) -> Synth
     radius = 0.012
     contacts = {"bunny": [3, 9], "dragon": [2, 7], "crossed_beams": [None]}[kind]
     origin = np.array([0.35, 0.15, 0.0])
-    beam_b_origin = None
 
     def build(sc, r, models):
         add_environment(r, center=(0.35, 0.15), seed=4)
@@ -439,7 +442,8 @@ def _probe_scene(kind: str, width, height, duration, fps, stereo: bool) -> Synth
             # beam B along y, under beam A's free end, its top 3 mm below A's bottom
             L = m.points[:, 0].max()
             Hh = m.points[:, 2].max()
-            sc.state["T_wo_b"] = G.make_T(G.rot_axis("z", np.pi / 2), origin + [L - 0.02 + m.points[:, 1].max() / 2, -0.12, 0.20 - Hh - 0.003])
+            sc.state["T_wo_b"] = G.make_T(G.rot_axis("z", np.pi / 2),
+                                          origin + [L - 0.02 + m.points[:, 1].max() / 2, -0.12, 0.20 - Hh - 0.003])
             # contact point on A: the top-face load point nearest (L - 0.02, W/2)
             P = m.points[m.load_points]
             target = np.array([L - 0.015, m.points[:, 1].max() / 2, Hh])
@@ -570,8 +574,9 @@ def slam_room(width=640, height=480, duration=10.0, fps=30.0) -> SynthScene:
             pos = center + [rng.uniform(-0.3, 0.3), rng.uniform(-0.15, 0.25), 0]
             pos[2] = size[2] / 2
             V, F = W.box(size, (0, 0, 0))
-            r.add(Mesh(f"obj{k}", V, F, mode="texture", texture=W.texture(["brick", "gravel", "grass", "foam", "plate", "probe"][k]),
-                       tex_scale=6.0, smooth=False, pose=G.make_T(G.rot_axis("z", rng.uniform(0, np.pi)), pos)))
+            tex = ["brick", "gravel", "grass", "foam", "plate", "probe"][k]
+            r.add(Mesh(f"obj{k}", V, F, mode="texture", texture=W.texture(tex), tex_scale=6.0, smooth=False,
+                       pose=G.make_T(G.rot_axis("z", rng.uniform(0, np.pi)), pos)))
 
     def update(sc, r, t):
         return Truth()
@@ -585,16 +590,16 @@ def slam_room(width=640, height=480, duration=10.0, fps=30.0) -> SynthScene:
                 "camera": _camera_yaml(sc), "localization": {"mode": "rgbd", "features": 1000},
                 "overlay": {"enabled": False}}
 
-    return SynthScene("slam_room", "Static room, hand-held arc, RGB + depth + stereo", default_camera(width, height), fps,
-                      duration, {}, build, update, cam_pose, yaml, depth=True, stereo_baseline=0.12)
+    return SynthScene("slam_room", "Static room, hand-held arc, RGB + depth + stereo", default_camera(width, height),
+                      fps, duration, {}, build, update, cam_pose, yaml, depth=True, stereo_baseline=0.12)
 
 
-SCENES = {
+SCENES: dict[str, Callable[..., SynthScene]] = {
     "slam_room": slam_room,
     "aluminium_beam": aluminium_beam,
     # the load close to the clamp, where the images barely see it (low sensitivity, large variance)
-    "aluminium_beam_clamp": lambda **kw: aluminium_beam(positions=(0.0, 0.02, 0.05, 0.08, 0.12), name="aluminium_beam_clamp",
-                                                        **{"duration": 5.0, **kw}),
+    "aluminium_beam_clamp": lambda **kw: aluminium_beam(positions=(0.0, 0.02, 0.05, 0.08, 0.12),
+                                                        name="aluminium_beam_clamp", **{"duration": 5.0, **kw}),
     "foam_beam": foam_beam,
     "virtual_boot_lever": virtual_boot_lever,
     "joint_boot": joint_boot,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import functools
+from typing import Any
 
 import numpy as np
 
@@ -12,7 +13,7 @@ from simreal_nodes.synth import world as W
 from simreal_nodes.synth.makebag import load_models, make_scene
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def sequence(name: str, width=640, height=480, duration=None, fps=30.0, stereo=False, seed=0, ssaa=2):
     """dict(cam, gray[], rgb[], depth[] (noisy metres, NaN invalid), right[], T_map_cam[], truth[], scene)."""
     import cv2
@@ -29,9 +30,10 @@ def sequence(name: str, width=640, height=480, duration=None, fps=30.0, stereo=F
     r = Renderer(cam, ssaa=ssaa)
     sc.build(sc, r, models)
     rng = np.random.default_rng(seed)
-    out = {"cam": cam, "gray": [], "rgb": [], "depth": [], "right": [], "T": [], "truth": [], "scene": sc}
+    out: dict[str, Any] = {"cam": cam, "gray": [], "rgb": [], "depth": [], "right": [], "T": [], "truth": [],
+                           "scene": sc}
     T_mw = sc.T_map_world()
-    for i in range(int(round(sc.duration * sc.fps))):
+    for i in range(round(sc.duration * sc.fps)):
         t = i / sc.fps
         truth = sc.update(sc, r, t)
         T = sc.camera_pose(t)

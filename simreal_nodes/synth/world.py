@@ -14,7 +14,7 @@ from simreal_nodes import geometry as G
 # Textures (real photographs shipped with scikit-image)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def texture(name: str) -> np.ndarray:
     """RGB uint8 texture: brick, gravel, grass (photographs), tinted variants for materials."""
     import skimage.data as d
@@ -36,7 +36,8 @@ def texture(name: str) -> np.ndarray:
     return (rgb * 255).astype(np.uint8)
 
 
-def aruco_image(marker_id: int, dictionary: str = "DICT_4X4_50", module_px: int = 40, border_bits: int = 1) -> np.ndarray:
+def aruco_image(marker_id: int, dictionary: str = "DICT_4X4_50", module_px: int = 40,
+                border_bits: int = 1) -> np.ndarray:
     """RGB image of an ArUco marker with a white quiet zone of one module; every module is exactly
     ``module_px`` pixels, so the black square is exactly (bits + 2 border) / (bits + 4) of the print."""
     d = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, dictionary))
@@ -134,10 +135,7 @@ def arc_trajectory(t: np.ndarray, target, radius: float, height: float, az0: flo
     """Hand-held-like arc around ``target``: azimuth sweeps az0 -> az1 (-> back if ``period``), height fixed."""
     target = np.asarray(target, dtype=np.float64)
     T = t[-1] if len(t) > 1 and t[-1] > 0 else 1.0
-    if period:
-        ph = 0.5 - 0.5 * np.cos(2 * np.pi * t / period)
-    else:
-        ph = 0.5 - 0.5 * np.cos(np.pi * t / T)
+    ph = 0.5 - 0.5 * np.cos(2 * np.pi * t / period) if period else 0.5 - 0.5 * np.cos(np.pi * t / T)
     az = az0 + (az1 - az0) * ph
     eyes = np.c_[target[0] + radius * np.cos(az), target[1] + radius * np.sin(az), np.full(len(t), target[2] + height)]
     eyes = eyes + smooth_noise(t, jitter, seed)
@@ -167,7 +165,8 @@ def pixel_noise(img: np.ndarray, sigma: float, rng: np.random.Generator) -> np.n
 
 
 def kinect_depth(depth: np.ndarray, rng: np.random.Generator, sigma0: float = 0.0012, sigma2: float = 0.0019,
-                 dropout: float = 0.01, edge_holes: bool = True, max_range: float = 6.0, min_range: float = 0.3) -> np.ndarray:
+                 dropout: float = 0.01, edge_holes: bool = True, max_range: float = 6.0,
+                 min_range: float = 0.3) -> np.ndarray:
     """Structured-light-like depth: sigma(z) = sigma0 + sigma2 (z - 0.4)^2 (Nguyen et al. 2012), invalid (0)
     out of range, in the projector's shadow beside depth discontinuities and at random speckles."""
     d = depth.astype(np.float32).copy()

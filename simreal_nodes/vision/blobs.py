@@ -20,8 +20,8 @@ def detect_color_blobs(bgr: np.ndarray, rgb_color, hue_tol: float = 14.0, min_sa
     if bgr.ndim != 3:
         return np.zeros((0, 2))
     hsv = cv2.cvtColor(bgr, cv2.COLOR_BGR2HSV)
-    ref = cv2.cvtColor(np.uint8([[[int(255 * rgb_color[2]), int(255 * rgb_color[1]), int(255 * rgb_color[0])]]]),
-                       cv2.COLOR_BGR2HSV)[0, 0].astype(np.int64)
+    bgr_ref = np.array([[[int(255 * rgb_color[2]), int(255 * rgb_color[1]), int(255 * rgb_color[0])]]], dtype=np.uint8)
+    ref = cv2.cvtColor(bgr_ref, cv2.COLOR_BGR2HSV)[0, 0].astype(np.int64)
     s_min, v_min = math.ceil(min_sat * 255 - 1e-9), math.ceil(min_val * 255 - 1e-9)
     reach = math.ceil(hue_tol) - 1  # integer hues at a distance < hue_tol
     mask = np.zeros(hsv.shape[:2], np.uint8)

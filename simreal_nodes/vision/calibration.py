@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import cast
 
 import cv2
 import numpy as np
@@ -39,11 +40,11 @@ def find_corners(gray: np.ndarray, cols: int, rows: int) -> np.ndarray | None:
     return corners.reshape(-1, 2)
 
 
-def calibrate(images: list[tuple[str, np.ndarray]], cols: int, rows: int, square: float,
+def calibrate(images: list[tuple[str, np.ndarray | None]], cols: int, rows: int, square: float,
               distortion: str = "plumb_bob", min_views: int = 5) -> CalibrationResult:
     """Estimate K and distortion from chessboard views. ``cols`` x ``rows`` counts inner corners."""
     obj, img_pts, used, rejected = [], [], [], {}
-    size = None
+    size: tuple[int, ...] | None = None
     grid = board_points(cols, rows, square)
     for name, img in images:
         if img is None:
@@ -66,21 +67,24 @@ def calibrate(images: list[tuple[str, np.ndarray]], cols: int, rows: int, square
         raise SimrealError(f"calibration needs at least {min_views} views with the board; found {len(used)} "
                            f"of {len(images)} ({'; '.join(f'{k}: {v}' for k, v in list(rejected.items())[:5])})")
     flags = cv2.CALIB_RATIONAL_MODEL if distortion == "rational_polynomial" else 0
-    rms, K, D, rvecs, tvecs = cv2.calibrateCamera(obj, img_pts, size, None, None, flags=flags)
+    wh = cast(tuple[int, ...], size)  # (width, height) of the first view used: min_views of them were
+    rms, K, D, rvecs, tvecs = cv2.calibrateCamera(obj, img_pts, wh, None, None, flags=flags)
     per_view = []
     for o, p, r, t in zip(obj, img_pts, rvecs, tvecs):
         proj, _ = cv2.projectPoints(o, r, t, K, D)
         per_view.append(float(np.sqrt(np.mean(np.sum((proj.reshape(-1, 2) - p) ** 2, axis=1)))))
-    cam = CameraModel(size[0], size[1], K, D.ravel(), distortion)
+    cam = CameraModel(wh[0], wh[1], K, D.ravel(), distortion)
     return CalibrationResult(cam, float(rms), per_view, used, rejected)
 
 
-def load_images(paths: list[str]) -> list[tuple[str, np.ndarray]]:
+def load_images(paths: list[str]) -> list[tuple[str, np.ndarray | None]]:
+    """Grayscale images of the files and folders (their image files) in ``paths``; None where unreadable."""
     files: list[Path] = []
     for p in paths:
         q = Path(p)
         if q.is_dir():
-            files += sorted(x for x in q.iterdir() if x.suffix.lower() in (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff"))
+            files += sorted(x for x in q.iterdir()
+                            if x.suffix.lower() in (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff"))
         else:
             files.append(q)
     return [(str(f), cv2.imread(str(f), cv2.IMREAD_GRAYSCALE)) for f in files]

@@ -44,7 +44,8 @@ class MarkerLocalizer:
         params.cornerRefinementWinSize = 4
         params.cornerRefinementMaxIterations = 50
         params.cornerRefinementMinAccuracy = 0.01
-        self.detector = cv2.aruco.ArucoDetector(cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, dictionary)), params)
+        self.detector = cv2.aruco.ArucoDetector(cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, dictionary)),
+                                                params)
         self._local = marker_corners(self.size)
         self._world = {k: G.transform(T, self._local) for k, T in self.poses.items()}
 
@@ -59,7 +60,8 @@ class MarkerLocalizer:
         known = {k: v for k, v in det.items() if k in self._world}
         res = MarkerResult(None, sorted(known), sorted(set(det) - set(known)), corners=det)
         if not known:
-            res.reason = "no marker of the layout in view" + (f" (saw unknown ids {res.unknown_ids})" if res.unknown_ids else "")
+            res.reason = ("no marker of the layout in view"
+                          + (f" (saw unknown ids {res.unknown_ids})" if res.unknown_ids else ""))
             return res
         obj = np.concatenate([self._world[k] for k in known])
         img = np.concatenate([known[k] for k in known])
@@ -67,7 +69,8 @@ class MarkerLocalizer:
         K = self.cam.K
         # initial guess: IPPE on the marker that looks largest
         best = max(known, key=lambda k: cv2.contourArea(known[k].astype(np.float32)))
-        ok, rvec, tvec = cv2.solvePnP(self._local, self.cam.undistort_points(known[best]), K, None, flags=cv2.SOLVEPNP_IPPE_SQUARE)
+        ok, rvec, tvec = cv2.solvePnP(self._local, self.cam.undistort_points(known[best]), K, None,
+                                      flags=cv2.SOLVEPNP_IPPE_SQUARE)
         if not ok:
             res.reason = "marker pose estimation failed"
             return res
@@ -91,7 +94,8 @@ class MarkerLocalizer:
         T_cw = G.make_T(cv2.Rodrigues(rvec)[0], tvec.ravel())
         res.rms_px = float(np.sqrt(np.mean(err ** 2)))
         if res.rms_px > 3.0:
-            res.reason = f"markers inconsistent with the layout (reprojection {res.rms_px:.1f} px): moved marker or wrong size?"
+            res.reason = (f"markers inconsistent with the layout (reprojection {res.rms_px:.1f} px): "
+                          "moved marker or wrong size?")
             return res
         res.T_wc = G.inv(T_cw)
         return res

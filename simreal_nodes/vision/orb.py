@@ -34,11 +34,12 @@ class Features:
         """Measurement variance per feature (pixels^2), growing with the pyramid level."""
         return (self.scale_factor ** (2 * self.octave)).astype(np.float64)
 
-    def subset(self, idx) -> "Features":
-        return Features(self.uv[idx], self.und[idx], self.octave[idx], self.desc[idx], self.response[idx], self.scale_factor)
+    def subset(self, idx) -> Features:
+        return Features(self.uv[idx], self.und[idx], self.octave[idx], self.desc[idx], self.response[idx],
+                        self.scale_factor)
 
     @classmethod
-    def empty(cls, scale_factor: float = 1.2) -> "Features":
+    def empty(cls, scale_factor: float = 1.2) -> Features:
         return cls(np.zeros((0, 2), np.float32), np.zeros((0, 2)), np.zeros(0, np.int32), np.zeros((0, 32), np.uint8),
                    np.zeros(0, np.float32), scale_factor)
 
@@ -54,13 +55,16 @@ class OrbExtractor:
         self.sf = float(scale_factor)
         self.levels = int(n_levels)
         self.cell = int(grid_cell)
-        self.detector = cv2.ORB_create(nfeatures=int(self.n * oversample), scaleFactor=self.sf, nlevels=self.levels,
-                                       edgeThreshold=19, patchSize=31, fastThreshold=fast_threshold)
-        self.detector_low = cv2.ORB_create(nfeatures=int(self.n * oversample), scaleFactor=self.sf, nlevels=self.levels,
-                                           edgeThreshold=19, patchSize=31, fastThreshold=max(5, fast_threshold // 3))
+        # opencv's stubs list only cv2.ORB.create; ORB_create and KeyPoint_convert are its run-time aliases
+        self.detector = cv2.ORB_create(  # type: ignore[attr-defined]
+            nfeatures=int(self.n * oversample), scaleFactor=self.sf, nlevels=self.levels, edgeThreshold=19,
+            patchSize=31, fastThreshold=fast_threshold)
+        self.detector_low = cv2.ORB_create(  # type: ignore[attr-defined]
+            nfeatures=int(self.n * oversample), scaleFactor=self.sf, nlevels=self.levels, edgeThreshold=19,
+            patchSize=31, fastThreshold=max(5, fast_threshold // 3))
         f = 1.0 / self.sf
         per = self.n * (1 - f) / (1 - f ** self.levels)
-        self.per_level = [int(round(per * f ** k)) for k in range(self.levels)]
+        self.per_level = [round(per * f ** k) for k in range(self.levels)]
         self.per_level[0] += self.n - sum(self.per_level)
 
     def extract(self, gray: np.ndarray, cam: CameraModel | None = None, mask: np.ndarray | None = None) -> Features:
@@ -74,7 +78,7 @@ class OrbExtractor:
             kps = self.detector_low.detect(gray, mask)
         if not kps:
             return Features.empty(self.sf)
-        pts = cv2.KeyPoint_convert(kps)
+        pts = cv2.KeyPoint_convert(kps)  # type: ignore[attr-defined]
         resp = np.fromiter((k.response for k in kps), np.float32, len(kps))
         octv = np.fromiter((k.octave for k in kps), np.int32, len(kps))
         sel = []
@@ -85,11 +89,11 @@ class OrbExtractor:
             s = self.sf ** lvl
             keep = _grid_select(pts[idx] / s, resp[idx], self.cell, self.per_level[lvl], int(w / s), int(h / s))
             sel.append(idx[keep])
-        sel = np.concatenate(sel) if sel else np.zeros(0, np.int64)
-        kps, desc = self.detector.compute(gray, [kps[i] for i in sel])
+        chosen = np.concatenate(sel) if sel else np.zeros(0, np.int64)
+        kps, desc = self.detector.compute(gray, [kps[i] for i in chosen])
         if desc is None or not kps:
             return Features.empty(self.sf)
-        uv = cv2.KeyPoint_convert(kps).astype(np.float32)
+        uv = cv2.KeyPoint_convert(kps).astype(np.float32)  # type: ignore[attr-defined]
         octave = np.fromiter((k.octave for k in kps), np.int32, len(kps))
         resp = np.fromiter((k.response for k in kps), np.float32, len(kps))
         und = cam.undistort_points(uv) if cam is not None and cam.has_distortion else uv.astype(np.float64)

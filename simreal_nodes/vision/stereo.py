@@ -67,7 +67,9 @@ def sgbm_disparity(left: np.ndarray, right: np.ndarray, num_disparities: int = 1
     if right.ndim == 3:
         right = cv2.cvtColor(right, cv2.COLOR_BGR2GRAY)
     nd = int(np.ceil(num_disparities / 16) * 16)
-    sgbm = cv2.StereoSGBM_create(minDisparity=0, numDisparities=nd, blockSize=block, P1=8 * block * block,
+    # opencv's stubs list only cv2.StereoSGBM.create; StereoSGBM_create is its run-time alias
+    sgbm = cv2.StereoSGBM_create(  # type: ignore[attr-defined]
+        minDisparity=0, numDisparities=nd, blockSize=block, P1=8 * block * block,
                                  P2=32 * block * block, disp12MaxDiff=1, uniquenessRatio=10, speckleWindowSize=100,
                                  speckleRange=2, preFilterCap=31, mode=cv2.STEREO_SGBM_MODE_SGBM_3WAY)
     d = sgbm.compute(left, right).astype(np.float32) / 16.0

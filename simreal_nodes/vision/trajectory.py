@@ -44,16 +44,17 @@ def ate(est: np.ndarray, ref: np.ndarray, with_scale: bool = False) -> dict:
 
 def rpe(est_T: list[np.ndarray], ref_T: list[np.ndarray], delta: int = 1, scale: float = 1.0) -> dict:
     """Relative pose error over ``delta`` frames: translation (m) and rotation (deg) RMSE."""
-    et, er = [], []
+    et_list: list[np.floating] = []
+    er_list: list[np.floating] = []
     for i in range(len(est_T) - delta):
         dE = G.inv(est_T[i]) @ est_T[i + delta]
         dR = G.inv(ref_T[i]) @ ref_T[i + delta]
         dE = dE.copy()
         dE[:3, 3] *= scale
         err = G.inv(dR) @ dE
-        et.append(np.linalg.norm(err[:3, 3]))
-        er.append(np.rad2deg(np.linalg.norm(G.log_so3(err[:3, :3]))))
-    et, er = np.asarray(et), np.asarray(er)
+        et_list.append(np.linalg.norm(err[:3, 3]))
+        er_list.append(np.rad2deg(np.linalg.norm(G.log_so3(err[:3, :3]))))
+    et, er = np.asarray(et_list), np.asarray(er_list)
     return {"trans_rmse": float(np.sqrt(np.mean(et ** 2))) if len(et) else float("nan"),
             "rot_rmse_deg": float(np.sqrt(np.mean(er ** 2))) if len(er) else float("nan"), "n": len(et), "delta": delta}
 

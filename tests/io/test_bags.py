@@ -1,7 +1,5 @@
 """Bags written by rosbags: self-describing custom types, damage reports, salvage of truncated files."""
 
-import os
-import shutil
 
 import numpy as np
 import pytest
@@ -27,7 +25,7 @@ def test_custom_message_round_trip_is_self_describing(tmp_path, storage):
     from rosbags.highlevel import AnyReader
     from rosbags.typesys import Stores, get_typestore
     with AnyReader([path], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as r:
-        (con, t, raw), = list(r.messages())
+        (con, _t, raw), = list(r.messages())
         back = r.deserialize(raw, con.msgtype)
     assert con.msgtype == "simreal_msgs/msg/ModelParameters"
     assert back.names == ["s"] and back.values[0] == 0.25 and back.inliers == 37 and back.model_id == "alu.h5#abc"
@@ -42,7 +40,8 @@ def test_read_reports_gaps_and_out_of_order(tmp_path):
         for k, s in enumerate(stamps):
             t = 10**9 + s * 33_333_333
             w.write("/camera/image_raw", 10**9 + k * 33_333_333 + (500_000_000 if k >= 4 else 0),
-                    image_obj(ts, np.zeros((2, 2, 3), np.uint8), "rgb8", (t // 10**9, t % 10**9)), "sensor_msgs/msg/Image")
+                    image_obj(ts, np.zeros((2, 2, 3), np.uint8), "rgb8", (t // 10**9, t % 10**9)),
+                    "sensor_msgs/msg/Image")
     rep = bags.BagReport()
     n = sum(1 for _ in bags.read_bag(path, rep))
     assert n == 8

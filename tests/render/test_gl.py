@@ -11,7 +11,8 @@ from simreal_nodes.render.gl import Mesh, Renderer
 
 CAMS = {
     "pinhole": CameraModel.from_intrinsics(640, 480, 525.0, 520.0, 318.7, 241.2),
-    "distorted": CameraModel.from_intrinsics(640, 480, 525.0, 520.0, 318.7, 241.2, D=[-0.28, 0.09, 0.0012, -0.0007, -0.01]),
+    "distorted": CameraModel.from_intrinsics(640, 480, 525.0, 520.0, 318.7, 241.2,
+                                             D=[-0.28, 0.09, 0.0012, -0.0007, -0.01]),
 }
 
 
@@ -82,7 +83,8 @@ def test_occlusion_by_real_depth_is_exact():
     cam = CAMS["pinhole"]
     r = Renderer(cam, ssaa=1)
     V = np.array([[-9, -9, 0], [9, -9, 0], [9, 9, 0], [-9, 9, 0]], float)
-    r.add(Mesh("virtual", V, np.array([[0, 1, 2], [0, 2, 3]]), tint=(1, 0, 0), unlit=True, pose=G.make_T(t=[0, 0, 2.0])))
+    r.add(Mesh("virtual", V, np.array([[0, 1, 2], [0, 2, 3]]), tint=(1, 0, 0), unlit=True,
+               pose=G.make_T(t=[0, 0, 2.0])))
     real = np.zeros((cam.height, cam.width), np.float32)
     real[:, :320] = 1.5  # closer real surface on the left
     real[:100, 400:] = 2.5  # farther real surface: the virtual one is in front

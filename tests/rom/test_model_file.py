@@ -42,7 +42,8 @@ def test_round_trip_evaluates_identically(built):
     assert back.model_id == model.model_id and back.model_id.startswith("tiny_beam@")
     for mu in ([0.0], [0.1234], [0.3]):
         np.testing.assert_allclose(back.displacement(mu), model.displacement(mu), rtol=1e-12, atol=1e-18)
-        np.testing.assert_allclose(back.field("stress").evaluate(mu), model.field("stress").evaluate(mu), rtol=1e-12, atol=1e-6)
+        np.testing.assert_allclose(back.field("stress").evaluate(mu), model.field("stress").evaluate(mu),
+                                   rtol=1e-12, atol=1e-6)
     assert back.surface.shape == model.surface.shape and back.cell_type == "hex8"
     assert back.material["E"] == 69e9 and "spec" in back.provenance
     err = back.field("displacement").error_vs_modes

@@ -1,11 +1,14 @@
 """POD and intrusive PGD (Algorithm 2.1) against the full-order FEM on the moving-load cantilever."""
 
+import itertools
+
 import numpy as np
 import pytest
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from simreal_nodes.physics import fem, materials as mat, meshes
+from simreal_nodes.physics import fem, meshes
+from simreal_nodes.physics import materials as mat
 from simreal_nodes.rom import pgd, pod
 
 
@@ -28,20 +31,20 @@ def truth(s, H, E_scale=1.0):
 
 
 def test_pgd_error_falls_as_modes_are_added():
-    s, top, xs, H = cantilever_2d()
+    s, _top, xs, H = cantilever_2d()
     K = s.stiffness() * s.material.E
     res = pgd.pgd_solve(pgd.SeparatedOperator([(K, [np.ones(len(xs))])]), pgd.SeparatedLoad(H, [np.eye(len(xs))]),
                         [pgd.ParameterAxis(xs)], s.free, max_modes=15, tol=1e-8)
     U = truth(s, H)
     errs = [np.linalg.norm(res.evaluate_grid(n) - U) / np.linalg.norm(U) for n in (1, 2, 4, 8, 15)]
     assert errs[0] < 0.05 and errs[-1] < 5e-4
-    assert all(b < a for a, b in zip(errs, errs[1:]))
+    assert all(b < a for a, b in itertools.pairwise(errs))
     assert res.amplitudes[4] < 1e-2 * res.amplitudes[0]
 
 
 def test_three_field_pgd_with_young_modulus():
     """u(x, s, E) (thesis §2.1.4): K(E) = E K1, the E modes carry 1/E."""
-    s, top, xs, H = cantilever_2d(30, 4)
+    s, _top, xs, H = cantilever_2d(30, 4)
     K1 = s.stiffness()  # E units
     Ev = np.linspace(0.5, 2.0, 7)
     res = pgd.pgd_solve(pgd.SeparatedOperator([(K1, [np.ones(len(xs)), Ev])]),
@@ -71,7 +74,7 @@ def test_pgd_in_3d():
 
 
 def test_pod_energy_criterion_and_galerkin_solve():
-    s, top, xs, H = cantilever_2d()
+    s, _top, xs, H = cantilever_2d()
     U = truth(s, H)
     basis = pod.pod(U[s.free], energy=1 - 1e-8)
     assert basis.energy[basis.n_modes - 1] >= 1 - 1e-8
@@ -81,6 +84,6 @@ def test_pod_energy_criterion_and_galerkin_solve():
     for n in (1, 3, 6, basis.n_modes):
         _, Ur = pod.galerkin_solve(K, H[s.free].toarray(), basis.B[:, :n])
         errs.append(np.linalg.norm(Ur - U[s.free]) / np.linalg.norm(U[s.free]))
-    assert all(b <= a * 1.0000001 for a, b in zip(errs, errs[1:])) and errs[-1] < 1e-3
+    assert all(b <= a * 1.0000001 for a, b in itertools.pairwise(errs)) and errs[-1] < 1e-3
     with pytest.raises(ValueError, match="NaN"):
         pod.pod(np.full((3, 3), np.nan))

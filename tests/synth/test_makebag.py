@@ -68,5 +68,6 @@ def test_synthetic_bag_replays_through_the_graph(probe_bag, tmp_path):
         localization: {mode: static, static_pose: [0, 0, 0, 0, 0, 0, 1]}
         overlay: {enabled: false}
     """))
-    stats, rep, counts = replay(str(path), str(scene), lossless=True, record=str(tmp_path / "out"), echo=lambda *_: None)
+    stats, _rep, counts = replay(str(path), str(scene), lossless=True, record=str(tmp_path / "out"),
+                                 echo=lambda *_: None)
     assert stats.frames_completed == info["frames"] and counts["/simreal/camera/image"] == info["frames"]

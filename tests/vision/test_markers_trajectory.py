@@ -10,7 +10,8 @@ from tests.synthdata import sequence
 def test_markers_mode_within_two_millimetres():
     seq = sequence("aluminium_beam", 640, 480, duration=2.0, fps=15.0)
     doc = seq["scene"].scene_yaml(seq["scene"])["localization"]["markers"]
-    loc = MarkerLocalizer(seq["cam"], doc["dictionary"], doc["size_m"], {k: G.pose7_to_matrix(v) for k, v in doc["poses"].items()})
+    loc = MarkerLocalizer(seq["cam"], doc["dictionary"], doc["size_m"],
+                          {k: G.pose7_to_matrix(v) for k, v in doc["poses"].items()})
     err = []
     for g, T in zip(seq["gray"], seq["T"]):
         r = loc.locate(g)
@@ -26,7 +27,7 @@ def test_umeyama_recovers_a_similarity_and_ate_rpe(tmp_path):
     P = rng.uniform(-1, 1, (50, 3))
     R = G.exp_so3([0.3, -0.2, 0.5])
     Q = 2.5 * P @ R.T + [1, 2, 3]
-    R2, t2, s2 = umeyama(P, Q, with_scale=True)
+    R2, _t2, s2 = umeyama(P, Q, with_scale=True)
     np.testing.assert_allclose(R2, R, atol=1e-9)
     assert s2 == pytest.approx(2.5)
     assert ate(P, Q, with_scale=True)["rmse"] < 1e-9
@@ -34,5 +35,5 @@ def test_umeyama_recovers_a_similarity_and_ate_rpe(tmp_path):
     Ts = [G.make_T(G.exp_so3(rng.normal(0, 0.1, 3)), rng.normal(0, 1, 3)) for _ in range(10)]
     assert rpe(Ts, Ts)["trans_rmse"] < 1e-12
     write_tum(tmp_path / "t.txt", np.arange(10) * 0.1, Ts)
-    t, back = read_tum(tmp_path / "t.txt")
+    _t, back = read_tum(tmp_path / "t.txt")
     np.testing.assert_allclose(back[3], Ts[3], atol=1e-8)
