@@ -48,7 +48,7 @@ def run_case(seq, name, oid, freeze, knob=DEFAULT):
     scene["localization"]["freeze_map_on_deformation"] = freeze
     pipe = Pipeline(scene, seq["cam"], **knob[1])
     for k, v in knob[2].items():
-        setattr(pipe.loc, k, v)
+        setattr(pipe.loc.slam, k, v)
     names = pipe.trackers[oid].names
     truth, est, states, step_ms, solve_ms = [], [], [], [], []
     for i in range(len(seq["rgb"])):

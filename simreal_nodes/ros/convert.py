@@ -2,15 +2,20 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 from geometry_msgs.msg import Pose, PoseStamped, TransformStamped
 from simreal_msgs.msg import ContactState as ContactMsg
-from simreal_msgs.msg import FeatureObservations, ModelParameters
+from simreal_msgs.msg import FeatureObservations, ModelParameters, TrackingStatus
 from std_msgs.msg import Header
 
 from simreal_nodes import geometry
-from simreal_nodes.assimilation.tracker import Estimate
-from simreal_nodes.collision.contact import ContactState, ContactTracker
+
+if TYPE_CHECKING:  # (annotations only: the player imports this module and needs none of the cores)
+    from simreal_nodes.assimilation.localizer import Localization
+    from simreal_nodes.assimilation.tracker import Estimate
+    from simreal_nodes.collision.contact import ContactState, ContactTracker
 
 
 def stamp_ns(stamp) -> int:
@@ -125,6 +130,15 @@ def cloud_to_array(msg) -> np.ndarray:
     return np.stack([cloud_field(msg, k).astype(np.float64) for k in "xyz"], axis=1)
 
 
+def deformable_points(msg) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(ids (N,) int64, (N, 3) points, drop (N,) uint8) of the tracker's deformable-points cloud (fields x, y, z,
+    id and optionally drop; absent: nothing dropped); ValueError when malformed."""
+    ids = cloud_field(msg, "id").astype(np.int64)
+    P = cloud_to_array(msg)
+    drop = cloud_field(msg, "drop") if any(f.name == "drop" for f in msg.fields) else np.zeros(len(ids), np.uint8)
+    return ids, P, drop
+
+
 # simreal_msgs ------------------------------------------------------------------------------------------------
 
 
@@ -137,6 +151,34 @@ def observation_arrays(obs: FeatureObservations) -> tuple[np.ndarray | None, np.
     if len(P) != len(ids) or len(uv) != len(ids):
         raise ValueError(f"malformed observations ({len(ids)} ids, {len(P)} points, {len(uv)} pixels)")
     return observation_pose(obs), ids, P, uv
+
+
+def observations_msg(r: Localization, stamp, frame_id: str) -> FeatureObservations:
+    """FeatureObservations of one localized frame: the camera pose (zero quaternion: none this frame) and the map
+    points matched in the image, with their pixels and whether they voted for the pose."""
+    obs = FeatureObservations()
+    obs.header.stamp = stamp
+    obs.header.frame_id = frame_id
+    if r.T_wc is not None:
+        matrix_to_pose(r.T_wc, obs.camera_pose)
+    else:
+        obs.camera_pose.orientation.w = 0.0  # no pose this frame (quaternion zero = invalid)
+    if r.T_wc is not None and len(r.obs_ids):
+        obs.point_ids = [int(i) for i in r.obs_ids]
+        obs.points_xyz = r.obs_pos.astype(np.float32).ravel().tolist()
+        obs.pixels_uv = np.asarray(r.obs_uv, np.float32).ravel().tolist()
+        obs.flags = [FeatureObservations.FLAG_POSE_INLIER if x else 0 for x in r.obs_inlier]
+    return obs
+
+
+def localization_status_msg(r: Localization, stamp, node: str, mode: str) -> TrackingStatus:
+    """TrackingStatus of one localized frame: state, reason, features tracked and the map's size."""
+    st = TrackingStatus()
+    st.header.stamp = stamp
+    st.node, st.mode, st.state, st.reason = node, mode, int(r.state), r.reason
+    st.tracked_features, st.map_points, st.keyframes = r.features, r.map_points, r.keyframes
+    st.localization_only = r.localization_only
+    return st
 
 
 def contact_msg(oid: str, st: ContactState, source: str, stamp, frame_id: str) -> ContactMsg:

@@ -122,6 +122,11 @@ class SimrealNode(Node):
         for _, frame in ready:
             process(frame)
 
+    def on_input(self, key: str, msg) -> None:
+        """Subscription callback of an input synchronised by stamp: :meth:`feed` into the node's ``sync``, the
+        frames it completes to the node's ``process``."""
+        self.feed(self.sync, key, stamp_ns(msg.header.stamp), msg, self.process)
+
     def skip(self, stamp, reason: str) -> None:
         """Live: a frame left out because the graph is busy or an upstream node left it out (normal
         load shedding: counted, reported in progress, no warning) -- unless no frame at all has been
@@ -149,6 +154,17 @@ class SimrealNode(Node):
         except CameraInfoError as e:
             self.set_status("error", f"unusable CameraInfo: {e}")
             return None
+
+    def stereo_baseline(self, msg, current: float | None) -> float | None:
+        """Stereo baseline (metres) of the right camera's CameraInfo, or ``current`` (status set to error with the
+        reason) when its projection matrix holds none."""
+        from simreal_nodes.vision.stereo import baseline_from_projection
+
+        try:
+            return baseline_from_projection(msg.p)
+        except ValueError as e:
+            self.set_status("error", str(e))
+            return current
 
     def age_ms(self, stamp) -> float:
         """How old an input stamped ``stamp`` is now (meaningful for live sources only)."""

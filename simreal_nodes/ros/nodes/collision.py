@@ -1,10 +1,10 @@
 """Collision node (thesis ch. 5, Alg. 5.1): real points seen in depth push virtual deformable objects.
 
-Per frame: the depth image (RGB-D, or SGBM on the rectified stereo pair) is decimated and back-projected
-into the map frame with the camera pose from the localization node; the ROS-free :class:`ContactScene` does
-the rest: for every colliding object its :class:`ContactTracker` finds the nearest real point to its contact nodes (KD-tree) and advances or relaxes
-the pseudo-time. Objects listed in another object's ``collision.pushes`` also receive that object's deformed
-surface as points (virtual-virtual contact, §5.4.1), so the pushing object is updated first.
+Per frame: the depth image (RGB-D, or SGBM on the rectified stereo pair) and the camera pose from the localization
+node go to the ROS-free :class:`ContactScene`: it back-projects the decimated depth into the map frame, and for
+every colliding object a :class:`ContactTracker` finds the nearest real point to its contact nodes (KD-tree) and
+advances or relaxes the pseudo-time. Objects listed in another object's ``collision.pushes`` also receive that
+object's deformed surface as points (virtual-virtual contact, §5.4.1), so the pushing object is updated first.
 
 Publishes per object ``/simreal/objects/<id>/contact`` (simreal_msgs/ContactState) and
 ``/simreal/objects/<id>/parameters`` (ModelParameters: the load point / position and pseudo-time or load
@@ -23,7 +23,7 @@ from simreal_nodes.collision.scene import ContactScene, ObjectContact
 from simreal_nodes.errors import ImageFormatError
 from simreal_nodes.io import images
 from simreal_nodes.rom.model_file import load_model
-from simreal_nodes.ros.convert import contact_msg, contact_parameters_msg, observation_pose, stamp_ns
+from simreal_nodes.ros.convert import contact_msg, contact_parameters_msg, observation_pose
 from simreal_nodes.ros.node import SimrealNode, guarded, run_node
 from simreal_nodes.ros.qos import data_qos, reliable_qos
 from simreal_nodes.scene import graph
@@ -83,24 +83,15 @@ class CollisionNode(SimrealNode):
 
     @guarded
     def on_right_info(self, msg: CameraInfo) -> None:
-        from simreal_nodes.vision.stereo import baseline_from_projection
-
-        try:
-            self.baseline = baseline_from_projection(msg.p)
-        except ValueError as e:
-            self.set_status("error", str(e))
-
-    def on_input(self, key, msg) -> None:
-        self.feed(self.sync, key, stamp_ns(msg.header.stamp), msg, self.process)
+        self.baseline = self.stereo_baseline(msg, self.baseline)
 
     def _depth(self, frame) -> np.ndarray:
         if not self.stereo:
-            m = frame["depth"]
-            return images.depth_to_metres(images.image_to_array(m), m.encoding)
+            return images.depth_metres_of(frame["depth"])
         from simreal_nodes.vision.stereo import disparity_to_depth, sgbm_disparity
 
-        left = images.to_bgr8(images.image_to_array(frame["image"]), frame["image"].encoding)
-        right = images.to_bgr8(images.image_to_array(frame["right"]), frame["right"].encoding)
+        left = images.bgr8_of(frame["image"])
+        right = images.bgr8_of(frame["right"])
         return disparity_to_depth(sgbm_disparity(left, right), self.cam.fx, self.baseline)
 
     @guarded

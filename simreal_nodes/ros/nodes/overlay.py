@@ -163,10 +163,10 @@ class OverlayNode(SimrealNode):
         if self.comp is None:
             self.comp = self._build()
         try:
-            bgr = images.to_bgr8(images.image_to_array(img_msg), img_msg.encoding)
+            bgr = images.bgr8_of(img_msg)
             depth = None
             if frame.get("depth") is not None:
-                depth = images.depth_to_metres(images.image_to_array(frame["depth"]), frame["depth"].encoding)
+                depth = images.depth_metres_of(frame["depth"])
         except ImageFormatError as e:
             self.drop(head.stamp, f"malformed input: {e}")
             return
