@@ -1,12 +1,11 @@
 """Camera localization node: fiducial markers, monocular ORB SLAM, RGB-D or stereo (thesis §2.3, §4.4.1, §5.2.3).
 
-Subscribes the ingest node's image (+ depth for RGB-D, + right image for stereo) and publishes for every frame the
-camera pose (PoseStamped and TF map -> camera optical frame), the tracking status with a reason and the map points
-matched in the image (FeatureObservations, what the deformable tracker measures); the map as PointCloud2 once a
-second. Service ``~/set_localization_only`` (std_srvs/SetBool) freezes mapping. ``/simreal/localization/
-deformable_points`` (PointCloud2, map frame, fields x, y, z, id (uint32), drop (uint8); from the tracker after each
-frame) names the map points on a deforming object, where the estimate predicts them and which the last fit rejected
-(their image tracks are dropped and re-acquired). The localizer is the ROS-free :class:`LiveLocalizer`.
+Takes the ingest node's image (+ depth for RGB-D, + right image for stereo) and publishes per frame the camera pose
+(PoseStamped and TF map -> camera optical frame), the tracking status with a reason, the map points matched in the
+image (FeatureObservations, what the deformable tracker measures); the map as PointCloud2 once a second. Service
+``~/set_localization_only`` (std_srvs/SetBool) freezes mapping. ``/simreal/localization/deformable_points``
+(PointCloud2 in the map frame: x, y, z, id (uint32), drop (uint8); from the tracker after each frame) names the map
+points on a deforming object, where the estimate predicts them and which the last fit rejected (tracks to restart).
 """
 
 from __future__ import annotations
