@@ -6,6 +6,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 from geometry_msgs.msg import Pose, PoseStamped, TransformStamped
+from sensor_msgs.msg import CameraInfo
 from simreal_msgs.msg import ContactState as ContactMsg
 from simreal_msgs.msg import FeatureObservations, ModelParameters, TrackingStatus
 from std_msgs.msg import Header
@@ -16,6 +17,7 @@ if TYPE_CHECKING:  # (annotations only: the player imports this module and needs
     from simreal_nodes.assimilation.localizer import Localization
     from simreal_nodes.assimilation.tracker import Estimate
     from simreal_nodes.collision.contact import ContactState, ContactTracker
+    from simreal_nodes.vision.camera import CameraModel
 
 
 def stamp_ns(stamp) -> int:
@@ -28,6 +30,15 @@ def ns_to_stamp(ns: int, msg=None):
     t = msg or Time()
     t.sec, t.nanosec = int(ns // 1_000_000_000), int(ns % 1_000_000_000)
     return t
+
+
+def camera_info_msg(cam: CameraModel, stamp, frame_id: str) -> CameraInfo:
+    """sensor_msgs/CameraInfo of a camera model."""
+    m = CameraInfo()
+    m.header.stamp, m.header.frame_id = stamp, frame_id
+    for k, v in cam.camera_info_fields().items():
+        setattr(m, k, v)
+    return m
 
 
 def pose_to_matrix(p: Pose) -> np.ndarray:
