@@ -52,13 +52,13 @@ class IngestNode(SimrealNode):
         if self.source == "topic":
             trigger = data_qos(self.lossless, depth=1)  # live: a busy ingest takes the newest image next
             self.create_subscription(CameraInfo, self.info_topic, self.on_info, q)
-            image_type, suffix = (CompressedImage, "/compressed") if compressed else (Image, "")
-            self.create_subscription(image_type, self.image_topic + suffix, lambda m: self.on_image("image", m), trigger)
+            msg_t, suffix = (CompressedImage, "/compressed") if compressed else (Image, "")
+            self.create_subscription(msg_t, self.image_topic + suffix, lambda m: self.on_image("image", m), trigger)
             if self.depth_topic:
                 self.create_subscription(Image, self.depth_topic, lambda m: self.on_image("depth", m), q)
             if right_topic:
                 self.create_subscription(CameraInfo, right_info_topic, self.on_right_info, q)
-                self.create_subscription(image_type, right_topic + suffix, lambda m: self.on_image("right", m), q)
+                self.create_subscription(msg_t, right_topic + suffix, lambda m: self.on_image("right", m), q)
         else:
             self._open = functools.partial(sources.open_source, self.source, self.path, self.rate_hz, self.image_topic,
                                            self.info_topic, self.depth_topic or None)
@@ -136,8 +136,8 @@ class IngestNode(SimrealNode):
         self.pub_info["image"].publish(camera_info_msg(self.core.out_camera, stamp, self.camera_frame))
         self.pubs["image"].publish(msg)
         if f.depth is not None and "depth" in self.pubs:
-            d = images.fill_image_msg(Image(header=msg.header), self.core.undistorted("depth", f.depth), f.depth_encoding)
-            self.pubs["depth"].publish(d)
+            d = self.core.undistorted("depth", f.depth)
+            self.pubs["depth"].publish(images.fill_image_msg(Image(header=msg.header), d, f.depth_encoding))
         self.metrics.done(t0)
         self.progress(stamp)
 
