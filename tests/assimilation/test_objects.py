@@ -16,8 +16,8 @@ def test_object_trackers_on_the_aluminium_beam():
     scene = validate_scene(seq["scene"].scene_yaml(seq["scene"]), "aluminium_beam", ".")
     o = scene["objects"][0]
     untracked = dict(o, id="other", tracking=dict(o["tracking"], enabled=False))
-    trackers = ObjectTrackers(scene["objects"] + [untracked], {o["id"]: load_model(o["model"], fields=["displacement"])},
-                              huber_px=3.5)
+    models = {o["id"]: load_model(o["model"], fields=["displacement"])}
+    trackers = ObjectTrackers(scene["objects"] + [untracked], models, huber_px=3.5)
     assert [x["id"] for x in trackers.objects] == [o["id"]] and trackers.cam is None
     same = trackers.trackers
     trackers.set_camera(seq["cam"])
