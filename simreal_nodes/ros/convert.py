@@ -1,4 +1,5 @@
-"""Messages <-> numpy for the nodes: stamps, poses, transforms and point clouds (no cv_bridge, no sensor_msgs_py)."""
+"""Messages <-> numpy for the nodes: stamps, poses, transforms, point clouds, CameraInfo and the simreal_msgs they
+publish (no cv_bridge, no sensor_msgs_py)."""
 
 from __future__ import annotations
 
