@@ -26,7 +26,7 @@ def _publisher(topic: str, w: int, h: int, n: int, hz: float, reliable: bool):
     from sensor_msgs.msg import Image
 
     from simreal_nodes.io.images import fill_image_msg
-    from simreal_nodes.ros.common import data_qos
+    from simreal_nodes.ros.qos import data_qos
 
     rclpy.init()
     node = Node("bench_pub")
@@ -60,7 +60,7 @@ def run_case(mode: str, w: int, h: int, hz: float, reliable: bool, n: int = N_FR
     from sensor_msgs.msg import Image
 
     from simreal_nodes.launch import ros_environment
-    from simreal_nodes.ros.common import data_qos
+    from simreal_nodes.ros.qos import data_qos
 
     topic = f"/bench/{mode}/res_{w}x{h}"
     lat, got = [], set()

@@ -11,15 +11,15 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from simreal_nodes import geometry as G
-from simreal_nodes.assimilation.tracker import DeformableTracker, Estimate, deformable_feedback, tracker_config
-from simreal_nodes.camera import CameraModel
+from simreal_nodes.assimilation.localizer import make_localizer
+from simreal_nodes.assimilation.objects import ObjectTrackers
+from simreal_nodes.assimilation.tracker import Estimate
 from simreal_nodes.rom.model_file import load_model
 from simreal_nodes.vision.slam.config import SlamConfig
 
 
 class Pipeline:
-    """Localization (markers / SLAM) + one deformable tracker per tracked object.
+    """Localization (markers / SLAM / static) + one deformable tracker per tracked object.
 
     ``feedback_delay``: the trackers' word on which map points lie on the object reaches the localization this
     many frames late (0: at once; in the live graph the localization is already on the next frame, 1).
@@ -33,57 +33,31 @@ class Pipeline:
         self.mode = loc["mode"]
         self.freeze_map = bool(loc.get("freeze_map_on_deformation", False))
         self.cam = cam
-        if self.mode == "markers":
-            from simreal_nodes.vision.markers import MarkerLocalizer
-
-            mk = loc["markers"]
-            self.loc = MarkerLocalizer(cam, mk["dictionary"], mk["size_m"],
-                                       {int(k): G.pose7_to_matrix(v) for k, v in mk["poses"].items()})
-        elif self.mode == "static":
-            self.loc = None
-            self.static = G.pose7_to_matrix(loc["static_pose"])
-        else:
-            from simreal_nodes.vision.slam.system import Slam
-
-            self.loc = Slam(cam, self.mode, loc["features"], loc["scale_factor"], loc["pyramid_levels"],
-                            baseline=baseline, known_scale=loc.get("known_scale_m"), async_mapping=False,
-                            config=slam_config)
-        self.trackers = {}
-        for o in scene["objects"]:
-            if not o["tracking"]["enabled"]:
-                continue
-            m = (models or {}).get(o["id"]) or load_model(o["model"], fields=["displacement"])
-            self.trackers[o["id"]] = DeformableTracker(m, G.pose7_to_matrix(o["anchor"]["pose"]), o["parameters"], cam,
-                                                       tracker_config(o, **cfg_overrides))
+        self.loc = make_localizer(loc, cam, baseline, slam_config=slam_config)
+        tracked = [o for o in scene["objects"] if o["tracking"]["enabled"]]
+        models = {o["id"]: (models or {}).get(o["id"]) or load_model(o["model"], fields=["displacement"])
+                  for o in tracked}
+        self.objects = ObjectTrackers(tracked, models, **cfg_overrides)
+        self.objects.set_camera(cam)
+        self.trackers = self.objects.trackers
 
     def step(self, bgr: np.ndarray, stamp_ns: int, depth=None, right=None) -> tuple[np.ndarray | None, dict[str, Estimate]]:
         gray = cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY)
         ids = P = uv = None
-        if self.mode == "markers":
-            T_wc = self.loc.locate(gray).T_wc
-        elif self.mode == "static":
-            T_wc = self.static
-        else:
-            r = self.loc.track(gray, stamp_ns, depth=depth, right=right)
-            T_wc = r.T_wc
-            if T_wc is not None and len(r.obs_ids):
-                ids, P, uv = np.asarray(r.obs_ids), np.asarray(r.obs_pos), np.asarray(r.obs_uv)
-        out = {}
-        deforming = False
-        for oid, tr in self.trackers.items():
-            out[oid] = tr.update(T_wc, ids, P, uv, bgr)
-            deforming |= out[oid].deforming
-        if deforming and self.freeze_map and self.loc is not None and hasattr(self.loc, "set_localization_only"):
+        r = self.loc.step(gray, stamp_ns, depth=depth, right=right)
+        T_wc = r.T_wc
+        if T_wc is not None and len(r.obs_ids):
+            ids, P, uv = np.asarray(r.obs_ids), np.asarray(r.obs_pos), np.asarray(r.obs_uv)
+        out = self.objects.update(T_wc, ids, P, uv, bgr)
+        if self.freeze_map and any(e.deforming for e in out.values()):
             self.loc.set_localization_only(True)
-        if self.loc is not None and hasattr(self.loc, "set_deformable"):
-            # points on a tracked object leave the pose estimate as soon as they are linked (static/deformable
-            # split, §4.4.1); they are searched where the current estimate puts them
-            self._feedback.append(deformable_feedback(self.trackers.values()))
-            while len(self._feedback) > self.feedback_delay:
-                ids, P, drop = self._feedback.pop(0)
-                if len(ids):
-                    self.loc.set_deformable(ids, P)
-                    self.loc.drop_tracks(ids[drop == 1])
+        # points on a tracked object leave the pose estimate as soon as they are linked (static/deformable
+        # split, §4.4.1); they are searched where the current estimate puts them
+        self._feedback.append(self.objects.feedback())
+        while len(self._feedback) > self.feedback_delay:
+            ids, P, drop = self._feedback.pop(0)
+            if len(ids):
+                self.loc.feedback(ids, P, drop)
         return T_wc, out
 
 

@@ -136,6 +136,16 @@ def to_bgr8(img: np.ndarray, encoding: str) -> np.ndarray:
     raise ImageFormatError(f"encoding '{encoding}' is not a colour or grey image")
 
 
+def to_gray8(img: np.ndarray, encoding: str) -> np.ndarray:
+    """Colour or grey image to a grey uint8 array (what feature detection takes); a grey image of another type
+    is scaled so that its largest value is 255."""
+    import cv2
+
+    if img.ndim == 2:
+        return img if img.dtype == np.uint8 else cv2.convertScaleAbs(img, alpha=255.0 / max(float(img.max()), 1.0))
+    return cv2.cvtColor(to_bgr8(img, encoding), cv2.COLOR_BGR2GRAY)
+
+
 def depth_to_metres(img: np.ndarray, encoding: str) -> np.ndarray:
     """Depth image to float32 metres with NaN for invalid pixels.
 
@@ -152,6 +162,21 @@ def depth_to_metres(img: np.ndarray, encoding: str) -> np.ndarray:
         return d
     raise ImageFormatError(
         f"depth encoding '{encoding}' is not supported (16UC1 millimetres or 32FC1 metres)")
+
+
+def bgr8_of(msg) -> np.ndarray:
+    """:func:`to_bgr8` of an Image message's pixels."""
+    return to_bgr8(image_to_array(msg), msg.encoding)
+
+
+def gray8_of(msg) -> np.ndarray:
+    """:func:`to_gray8` of an Image message's pixels."""
+    return to_gray8(image_to_array(msg), msg.encoding)
+
+
+def depth_metres_of(msg) -> np.ndarray:
+    """:func:`depth_to_metres` of a depth Image message's pixels."""
+    return depth_to_metres(image_to_array(msg), msg.encoding)
 
 
 def decode_compressed(msg) -> tuple[np.ndarray, str]:

@@ -126,3 +126,16 @@ def bag_frames(path: str | Path, image_topic: str, info_topic: str, depth_topic:
             yield make(stamp, msg)
     for stamp, _, msg in pending_img:
         yield make(stamp, msg)
+
+
+def open_source(source: str, path: str, rate_hz: float, image_topic: str = "", info_topic: str = "",
+                depth_topic: str | None = None) -> Iterator[Frame]:
+    """The frames of a file source: ``video``, ``images`` (a folder) at ``rate_hz``, or ``bag`` (its image, CameraInfo
+    and depth topics)."""
+    if source == "video":
+        return video_frames(path, rate_hz)
+    if source == "images":
+        return folder_frames(path, rate_hz)
+    if source == "bag":
+        return bag_frames(path, image_topic, info_topic, depth_topic)
+    raise SimrealError(f"unknown source '{source}'")

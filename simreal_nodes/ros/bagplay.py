@@ -21,7 +21,9 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Header
 
 from simreal_nodes.io import bags
-from simreal_nodes.ros.common import data_qos, parse_progress, reliable_qos, stamp_ns
+from simreal_nodes.ros.convert import stamp_ns
+from simreal_nodes.ros.node import parse_progress
+from simreal_nodes.ros.qos import data_qos, reliable_qos
 from simreal_nodes.scene import graph
 
 

@@ -1,10 +1,16 @@
-"""Undistortion with cached maps (computed once per camera model, applied per frame)."""
+"""Undistortion with cached maps (computed once per camera model, applied per frame), and the camera of an
+ingest: the intrinsics it publishes and the check every incoming image goes through."""
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import cv2
 import numpy as np
 
+from simreal_nodes.errors import CameraInfoError, ImageFormatError
+from simreal_nodes.io import images
+from simreal_nodes.io.sources import Frame
 from simreal_nodes.camera import CameraModel
 
 
@@ -27,3 +33,107 @@ class Undistorter:
     def depth(self, depth: np.ndarray) -> np.ndarray:
         """Depth must not be blended across edges: nearest-neighbour remap."""
         return cv2.remap(depth, self._maps[0], self._maps[1], cv2.INTER_NEAREST)
+
+
+_STREAM_NAMES = {"image": "image", "depth": "depth image", "right": "right image"}
+
+
+@dataclass
+class Checked:
+    """An incoming image after :meth:`IngestCamera.check`: ``why`` it is left out (''= it is published) and the
+    ``pixels`` to publish instead of the message's own (None: the message passes as it is)."""
+
+    why: str = ""
+    pixels: np.ndarray | None = None
+
+
+class IngestCamera:
+    """The camera an ingest publishes: its intrinsics (a calibration file, if given, wins over CameraInfo), the
+    undistortion that goes with them when asked (the published CameraInfo is then the ideal pinhole one), the right
+    camera of a stereo pair, and the one check every incoming image of a stream goes through."""
+
+    def __init__(self, undistort: bool, calibration: CameraModel | None = None):
+        self.undistort = undistort
+        self.calibration = calibration
+        self.cam: CameraModel | None = calibration
+        self.right: CameraModel | None = None
+        self.info_error = ""  # why the last CameraInfo was unusable ('' = it was not)
+        self._und: Undistorter | None = None
+
+    def set_camera(self, cam: CameraModel) -> None:
+        self.cam = cam
+        if self.undistort and cam.has_distortion and (self._und is None or not self._und.matches(cam)):
+            self._und = Undistorter(cam)
+
+    def camera_info(self, msg) -> str:
+        """Take a CameraInfo (ignored when a calibration file gives the intrinsics): '' or why it is unusable
+        (then no camera until a usable one comes)."""
+        if self.calibration is not None:
+            return ""
+        try:
+            cam = CameraModel.from_camera_info(msg)
+        except CameraInfoError as e:
+            self.info_error, self.cam = str(e), None
+            return self.info_error
+        self.info_error = ""
+        if self.cam is None or not np.allclose(cam.K, self.cam.K) or cam.width != self.cam.width:
+            self.set_camera(cam)
+        return ""
+
+    def right_info(self, msg) -> str:
+        """Take the right camera's CameraInfo: '' or why it is unusable (then no right camera)."""
+        try:
+            self.right = CameraModel.from_camera_info(msg)
+        except CameraInfoError as e:
+            self.right = None
+            return str(e)
+        return ""
+
+    @property
+    def out_camera(self) -> CameraModel:
+        """The camera of the published images: the ideal one when they are undistorted."""
+        return self._und.ideal if self._und is not None else self.cam
+
+    def file_frame(self, f: Frame) -> str:
+        """Take a frame of a file source (a bag's carries its CameraInfo, unless a calibration file wins): '' or
+        why it cannot be published."""
+        if f.error:
+            return f.error
+        if f.camera_info is not None and self.calibration is None:
+            try:
+                self.set_camera(CameraModel.from_camera_info(f.camera_info))
+            except CameraInfoError as e:
+                return f"unusable CameraInfo in bag: {e}"
+        if self.cam is None:
+            h, w = f.image.shape[:2]
+            return f"no intrinsics for {w}x{h} frames: give camera.calibration (see `simreal calibrate`)"
+        return ""
+
+    def undistorted(self, kind: str, img: np.ndarray) -> np.ndarray:
+        """An ``image`` or ``depth`` (nearest neighbour: depth is not blended across edges) undistorted when asked;
+        ``img`` itself otherwise."""
+        if self._und is None:
+            return img
+        return self._und.depth(img) if kind == "depth" else self._und.image(img)
+
+    def check(self, kind: str, msg, arr: np.ndarray | None = None) -> Checked:
+        """One incoming Image (anything with its fields) of stream ``kind``, its pixels ``arr`` if already decoded:
+        an ``image`` needs the camera and must be of its size, a ``depth`` must be 16UC1 or 32FC1, a ``right``
+        image needs the right camera and passes as it is; every one must be well formed. The image and the depth
+        are undistorted when asked."""
+        if kind == "image" and self.cam is None:
+            return Checked(f"unusable CameraInfo: {self.info_error}" if self.info_error
+                           else "waiting for a valid CameraInfo")
+        if kind == "depth" and msg.encoding not in images.DEPTH_ENCODINGS:
+            return Checked(f"depth encoding '{msg.encoding}' (expected 16UC1 or 32FC1)")
+        if kind == "right" and self.right is None:
+            return Checked("right image without a valid right CameraInfo")
+        if arr is None:
+            try:
+                arr = images.image_to_array(msg)
+            except ImageFormatError as e:
+                return Checked(f"malformed {_STREAM_NAMES[kind]}: {e}")
+        if kind == "image" and (arr.shape[1], arr.shape[0]) != (self.cam.width, self.cam.height):
+            return Checked(f"image is {arr.shape[1]}x{arr.shape[0]} but CameraInfo says "
+                           f"{self.cam.width}x{self.cam.height}")
+        return Checked(pixels=self.undistorted(kind, arr) if kind != "right" and self._und is not None else None)

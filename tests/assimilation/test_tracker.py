@@ -62,7 +62,7 @@ def beam():
 def _tracker(scene, cam, model=None, **kw):
     o = scene["objects"][0]
     m = model or load_model(o["model"], fields=["displacement"])
-    from simreal_nodes.assimilation.offline import tracker_config
+    from simreal_nodes.assimilation.tracker import tracker_config
 
     return DeformableTracker(m, G.pose7_to_matrix(o["anchor"]["pose"]), o["parameters"], cam, tracker_config(o, **kw))
 
@@ -72,7 +72,7 @@ def test_extremes_are_stated_not_crashing(beam):
     cam = seq["cam"]
     i = 60
     bgr = np.ascontiguousarray(seq["rgb"][i][:, :, ::-1])
-    T_wc = Pipeline(scene, cam).loc.locate(seq["gray"][i]).T_wc
+    T_wc = Pipeline(scene, cam).loc.step(seq["gray"][i], 0).T_wc
     assert T_wc is not None
     tr = _tracker(scene, cam)
     ok = tr.update(T_wc, image_bgr=bgr)
@@ -108,7 +108,7 @@ def test_model_an_order_of_magnitude_off_in_scale_is_reported(beam):
     loc = Pipeline(scene, cam).loc
     states = []
     for i in (30, 60, 90):
-        T_wc = loc.locate(seq["gray"][i]).T_wc
+        T_wc = loc.step(seq["gray"][i], 0).T_wc
         e = tr.update(T_wc, image_bgr=np.ascontiguousarray(seq["rgb"][i][:, :, ::-1]))
         assert np.all(np.isfinite(e.values)) and 0.0 <= e.values[0] <= SPAN
         states.append(e.state)

@@ -1,5 +1,5 @@
-"""Alg. 5.1 state machine: approach, press, hold, release; no data; a probe inside the object; two objects
-and virtual-virtual pushing order."""
+"""Alg. 5.1 state machine: approach, press, hold, release; no data; a probe inside the object; two independent
+objects."""
 
 from dataclasses import replace
 
@@ -8,7 +8,6 @@ import pytest
 
 from simreal_nodes import geometry as G
 from simreal_nodes.collision.contact import CONTACT, FREE, NO_DATA, RELEASING, ContactTracker
-from simreal_nodes.ros.nodes.collision import pusher_order
 from tests.modelkit import probe_model
 
 T_WO = G.make_T(t=[1.0, 2.0, 0.5])
@@ -88,7 +87,7 @@ def test_no_data_nan_points_and_probe_inside():
     assert st.state == RELEASING and "no valid points" in st.reason
 
 
-def test_two_objects_are_independent_and_pushers_go_first():
+def test_two_objects_are_independent():
     m = probe_model()
     a = ContactTracker(m, T_WO, threshold=0.005, step=0.5)
     b = ContactTracker(m, G.make_T(t=[1.0, 2.0, 0.3]), threshold=0.005, step=0.5)
@@ -96,11 +95,6 @@ def test_two_objects_are_independent_and_pushers_go_first():
     pts = _probe(node_a, 0.002)
     sa, sb = a.update(pts), b.update(pts)
     assert sa.state == CONTACT and sb.state == FREE
-    objs = [{"id": "lower", "collision": {"pushes": []}}, {"id": "upper", "collision": {"pushes": ["lower"]}},
-            {"id": "free", "collision": {"pushes": []}}]
-    assert [o["id"] for o in pusher_order(objs)] == ["upper", "lower", "free"]
-    cyc = [{"id": "x", "collision": {"pushes": ["y"]}}, {"id": "y", "collision": {"pushes": ["x"]}}]
-    assert sorted(o["id"] for o in pusher_order(cyc)) == ["x", "y"]
 
 
 def test_model_without_load_points_is_rejected():

@@ -10,7 +10,7 @@ from sensor_msgs.msg import Image
 from simreal_msgs.msg import ModelParameters
 
 from simreal_nodes.io.images import fill_image_msg
-from simreal_nodes.ros.common import data_qos, reliable_qos
+from simreal_nodes.ros.qos import data_qos, reliable_qos
 
 
 def params_msg(i: int) -> ModelParameters:

@@ -21,7 +21,7 @@ from simreal_nodes.io import bags  # noqa: E402
 from simreal_nodes.io.images import image_to_array  # noqa: E402
 from simreal_nodes.launch import ros_environment  # noqa: E402
 from simreal_nodes.ros.bagplay import Recorder  # noqa: E402
-from simreal_nodes.ros.common import data_qos, reliable_qos  # noqa: E402
+from simreal_nodes.ros.qos import data_qos, reliable_qos  # noqa: E402
 from tests.ros import _publisher  # noqa: E402
 
 pytestmark = pytest.mark.ros

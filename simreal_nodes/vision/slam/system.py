@@ -75,6 +75,11 @@ class Slam:
         return self.ctx.map
 
     @property
+    def baseline(self) -> float | None:
+        """Stereo baseline in metres (None for mono and RGB-D)."""
+        return self.ctx.baseline
+
+    @property
     def state(self) -> int:
         return self.ctx.state
 

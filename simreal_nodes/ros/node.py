@@ -1,4 +1,4 @@
-"""What every simreal node shares: QoS, message conversions, diagnostics, progress, main().
+"""The base of every simreal node: declared parameters, diagnostics, progress reports, guarded callbacks, main().
 
 Nodes are thin: they declare parameters, convert messages to numpy, call the ROS-free core and
 convert back. A callback that raises is caught here, logged, counted in diagnostics, and the
@@ -9,118 +9,23 @@ from __future__ import annotations
 
 import functools
 import os
-import signal
 import time
 import traceback
 
-import numpy as np
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from geometry_msgs.msg import Pose, PoseStamped, TransformStamped
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
-from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy,
-                       qos_profile_sensor_data)
 from std_msgs.msg import Header
 
-from simreal_nodes import geometry
 from simreal_nodes.metrics import StageMetrics
+from simreal_nodes.ros.convert import ns_to_stamp, stamp_ns
+from simreal_nodes.ros.qos import reliable_qos
 from simreal_nodes.scene import graph
-
-# ------------------------------------------------------------------------------------------
-# QoS
-
-
-def data_qos(lossless: bool, depth: int = 5) -> QoSProfile:
-    """Sensor-data QoS (best effort, keep last ``depth``) live; reliable with a deep queue when lossless.
-
-    Live, the input that triggers a node's work (its newest frame) is subscribed with depth 1, so a node
-    that was busy takes the newest frame next, not the oldest one still queued (the SLAM localization keeps
-    a few, for even gaps between the frames it tracks); the inputs it pairs with that frame by stamp keep a
-    few frames (the default 5), as they arrive earlier than the trigger."""
-    if lossless:
-        return QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST,
-                          depth=1000, durability=DurabilityPolicy.VOLATILE)
-    q = QoSProfile(**{k: getattr(qos_profile_sensor_data, k) for k in ("reliability", "history", "durability")},
-                   depth=depth)
-    return q
-
-
-def reliable_qos(depth: int = 10) -> QoSProfile:
-    return QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST, depth=depth)
-
-
-def latched_qos() -> QoSProfile:
-    return QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST, depth=1,
-                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
-
 
 STALL_S = 3.0  # live: a node that skips every frame for this long says so in its status
 
-TF_QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST, depth=100)
-
-# ------------------------------------------------------------------------------------------
-# Conversions
-
-
-def stamp_ns(stamp) -> int:
-    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
-
-
-def ns_to_stamp(ns: int, msg=None):
-    from builtin_interfaces.msg import Time
-
-    t = msg or Time()
-    t.sec, t.nanosec = int(ns // 1_000_000_000), int(ns % 1_000_000_000)
-    return t
-
-
-def pose_to_matrix(p: Pose) -> np.ndarray:
-    q = (p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w)
-    T = np.eye(4)
-    T[:3, :3] = geometry.quat_to_matrix(q)
-    T[:3, 3] = (p.position.x, p.position.y, p.position.z)
-    return T
-
-
-def observation_pose(obs) -> np.ndarray | None:
-    """T_map_camera of a FeatureObservations, or None when localization had no pose (zero quaternion)."""
-    q = obs.camera_pose.orientation
-    if abs(q.x) + abs(q.y) + abs(q.z) + abs(q.w) == 0:
-        return None
-    return pose_to_matrix(obs.camera_pose)
-
-
-def matrix_to_pose(T: np.ndarray, p: Pose | None = None) -> Pose:
-    p = p or Pose()
-    q = geometry.matrix_to_quat(T[:3, :3])
-    p.position.x, p.position.y, p.position.z = (float(v) for v in T[:3, 3])
-    p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w = (float(v) for v in q)
-    return p
-
-
-def pose_stamped(T: np.ndarray, header: Header, frame_id: str) -> PoseStamped:
-    m = PoseStamped()
-    m.header.stamp = header.stamp
-    m.header.frame_id = frame_id
-    matrix_to_pose(T, m.pose)
-    return m
-
-
-def transform_stamped(T: np.ndarray, stamp, parent: str, child: str) -> TransformStamped:
-    m = TransformStamped()
-    m.header.stamp = stamp
-    m.header.frame_id = parent
-    m.child_frame_id = child
-    q = geometry.matrix_to_quat(T[:3, :3])
-    m.transform.translation.x, m.transform.translation.y, m.transform.translation.z = (float(v) for v in T[:3, 3])
-    r = m.transform.rotation
-    r.x, r.y, r.z, r.w = (float(v) for v in q)
-    return m
-
-
-# ------------------------------------------------------------------------------------------
 # Progress reports (/simreal/progress, std_msgs/Header: the frame's stamp, and in frame_id who, when, what)
 
 
@@ -138,10 +43,6 @@ def parse_progress(frame_id: str) -> tuple[str, float | None, str]:
         return name, float(t), why
     except ValueError:
         return name, None, why
-
-
-# ------------------------------------------------------------------------------------------
-# Node base
 
 
 class SimrealNode(Node):
@@ -221,6 +122,11 @@ class SimrealNode(Node):
         for _, frame in ready:
             process(frame)
 
+    def on_input(self, key: str, msg) -> None:
+        """Subscription callback of an input synchronised by stamp: :meth:`feed` into the node's ``sync``, the
+        frames it completes to the node's ``process``."""
+        self.feed(self.sync, key, stamp_ns(msg.header.stamp), msg, self.process)
+
     def skip(self, stamp, reason: str) -> None:
         """Live: a frame left out because the graph is busy or an upstream node left it out (normal
         load shedding: counted, reported in progress, no warning) -- unless no frame at all has been
@@ -248,6 +154,17 @@ class SimrealNode(Node):
         except CameraInfoError as e:
             self.set_status("error", f"unusable CameraInfo: {e}")
             return None
+
+    def stereo_baseline(self, msg, current: float | None) -> float | None:
+        """Stereo baseline (metres) of the right camera's CameraInfo, or ``current`` (status set to error with the
+        reason) when its projection matrix holds none."""
+        from simreal_nodes.vision.stereo import baseline_from_projection
+
+        try:
+            return baseline_from_projection(msg.p)
+        except ValueError as e:
+            self.set_status("error", str(e))
+            return current
 
     def age_ms(self, stamp) -> float:
         """How old an input stamped ``stamp`` is now (meaningful for live sources only)."""
@@ -317,72 +234,3 @@ def run_node(node_cls, args=None) -> int:
         if rclpy.ok():
             rclpy.shutdown()
     return 0
-
-
-def ignore_sigint_in_children() -> None:
-    """Used by launchers: children get SIGINT from the terminal's process group anyway."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-
-
-def wall_ms() -> float:
-    return time.monotonic() * 1e3
-
-
-def env_summary() -> str:
-    return f"ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID', '0')}"
-
-
-_PF_TYPES = {np.dtype(np.int8): 1, np.dtype(np.uint8): 2, np.dtype(np.int16): 3, np.dtype(np.uint16): 4,
-             np.dtype(np.int32): 5, np.dtype(np.uint32): 6, np.dtype(np.float32): 7, np.dtype(np.float64): 8}
-
-
-def cloud_msg(points: np.ndarray, header: Header, frame_id: str, extra: dict | None = None):
-    """sensor_msgs/PointCloud2 with float32 x, y, z and optional per-point ``extra`` fields
-    (name -> (N,) array of a PointField type, e.g. uint32 ids); no sensor_msgs_py on PyPI."""
-    import array
-
-    from sensor_msgs.msg import PointCloud2, PointField
-
-    P = np.asarray(points, dtype=np.float32).reshape(-1, 3)
-    cols = [("x", P[:, 0]), ("y", P[:, 1]), ("z", P[:, 2])]
-    for name, v in (extra or {}).items():
-        v = np.asarray(v).reshape(-1)
-        if len(v) != len(P) or v.dtype not in _PF_TYPES:
-            raise ValueError(f"cloud field '{name}': {len(v)} values of {v.dtype} for {len(P)} points")
-        cols.append((name, v))
-    rec = np.zeros(len(P), dtype=[(n, v.dtype.newbyteorder("<")) for n, v in cols])  # packed, little-endian
-    for n, v in cols:
-        rec[n] = v
-    m = PointCloud2()
-    m.header.stamp = header.stamp
-    m.header.frame_id = frame_id
-    m.height, m.width = 1, len(P)
-    m.fields = [PointField(name=n, offset=rec.dtype.fields[n][1], datatype=_PF_TYPES[np.dtype(v.dtype)], count=1)
-                for n, v in cols]
-    m.is_bigendian = False
-    m.point_step, m.row_step = rec.dtype.itemsize, rec.dtype.itemsize * len(P)
-    m.is_dense = True
-    m.data = array.array("B", rec.tobytes())
-    return m
-
-
-def cloud_field(msg, name: str) -> np.ndarray:
-    """One named field of a PointCloud2 as an (N,) array (ValueError if absent or malformed)."""
-    f = next((f for f in msg.fields if f.name == name), None)
-    if f is None:
-        raise ValueError(f"PointCloud2 without a '{name}' field")
-    dt = next((d for d, t in _PF_TYPES.items() if t == f.datatype), None)
-    if dt is None:
-        raise ValueError(f"PointCloud2 field '{name}' has unknown datatype {f.datatype}")
-    n = msg.width * msg.height
-    data = bytes(msg.data)
-    if msg.point_step < f.offset + dt.itemsize or len(data) < n * msg.point_step:
-        raise ValueError(f"PointCloud2 of {n} points with step {msg.point_step} has only {len(data)} bytes")
-    raw = np.frombuffer(data, np.uint8, count=n * msg.point_step).reshape(n, msg.point_step)
-    field = raw[:, f.offset:f.offset + dt.itemsize].copy().view(dt.newbyteorder(">" if msg.is_bigendian else "<"))
-    return field.ravel().astype(dt)
-
-
-def cloud_to_array(msg) -> np.ndarray:
-    """x, y, z of a PointCloud2 into (N, 3)."""
-    return np.stack([cloud_field(msg, k).astype(np.float64) for k in "xyz"], axis=1)

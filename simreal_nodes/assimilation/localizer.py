@@ -1,0 +1,236 @@
+"""Where the camera is, frame by frame, behind one interface: fiducial markers, ORB SLAM (mono / RGB-D / stereo)
+or a camera that does not move (thesis §2.3, §4.4.1, §5.2.3).
+
+:func:`make_localizer` builds the one the scene's localization section asks for; the localization node and the
+offline pipeline both use it, so they localize alike. Every :class:`Localizer` answers :meth:`~Localizer.step` with
+a :class:`Localization` and takes the deformable tracker's word on which map points lie on the object
+(:meth:`~Localizer.feedback`); those without a map have nothing to do with it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from simreal_nodes import geometry as G
+from simreal_nodes.camera import CameraModel
+
+if TYPE_CHECKING:
+    from simreal_nodes.vision.markers import MarkerLocalizer
+    from simreal_nodes.vision.slam.config import SlamConfig
+    from simreal_nodes.vision.slam.map import Map
+    from simreal_nodes.vision.slam.system import Slam
+
+
+@dataclass
+class Localization:
+    """One frame's camera pose (``T_wc``, map <- camera; None: no pose), the tracking state (the numbers of
+    ``vision.slam.system``: not started, initializing, ok, lost, relocalized) with its reason, and what the
+    localization node reports about it: features tracked (SLAM: pose inliers; markers: 4 corners per marker),
+    the map points observed (SLAM only), stage timings (SLAM only, ms) and the map's size."""
+
+    T_wc: np.ndarray | None
+    state: int
+    reason: str = ""
+    features: int = 0
+    obs_ids: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    obs_pos: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    obs_uv: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), np.float32))
+    obs_inlier: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+    timings: dict[str, float] | None = None
+    map_points: int = 0
+    keyframes: int = 0
+    localization_only: bool = False
+
+
+class Localizer:
+    """The interface every localizer has. ``map``: the SLAM map (None: none to publish or save)."""
+
+    mode: str
+    map: Map | None = None
+
+    def step(self, gray: np.ndarray, stamp_ns: int, depth: np.ndarray | None = None,
+             right: np.ndarray | None = None) -> Localization:
+        """Localize one grey image (uint8), with the registered depth in metres (RGB-D) or the right grey image
+        (stereo)."""
+        raise NotImplementedError
+
+    def set_localization_only(self, on: bool) -> None:
+        """Freeze (or resume) mapping; without a map there is nothing to freeze."""
+
+    def feedback(self, ids: np.ndarray, predicted: np.ndarray, drop: np.ndarray) -> None:
+        """The trackers' word after a frame (:func:`~simreal_nodes.assimilation.tracker.deformable_feedback`):
+        map points ``ids`` lie on a deforming object, ``predicted`` where (map frame), ``drop`` == 1 those whose
+        image tracks the last fit rejected. Only a map has such points."""
+
+    def close(self) -> None:
+        """Release workers (SLAM's mapping process)."""
+
+
+class MarkerLocalization(Localizer):
+    """Camera pose from the fiducial markers laid out in the map: no continuity, no map."""
+
+    mode = "markers"
+
+    def __init__(self, markers: MarkerLocalizer):
+        self.markers = markers
+
+    def step(self, gray: np.ndarray, stamp_ns: int, depth: np.ndarray | None = None,
+             right: np.ndarray | None = None) -> Localization:
+        res = self.markers.locate(gray)
+        state = 2 if res.T_wc is not None else 3
+        reason = res.reason if res.T_wc is None else f"{len(res.ids)} markers, {res.rms_px:.2f} px"
+        return Localization(res.T_wc, state, reason, features=4 * len(res.ids))
+
+
+class SlamLocalization(Localizer):
+    """ORB SLAM: the map it builds, the deformable map points it follows for the tracker."""
+
+    def __init__(self, slam: Slam):
+        self.slam = slam
+        self.mode = slam.mode
+
+    @property
+    def map(self) -> Map:
+        return self.slam.map
+
+    def step(self, gray: np.ndarray, stamp_ns: int, depth: np.ndarray | None = None,
+             right: np.ndarray | None = None) -> Localization:
+        r = self.slam.track(gray, stamp_ns, depth=depth, right=right)
+        return Localization(r.T_wc, r.state, r.reason, int(r.n_inliers), r.obs_ids, r.obs_pos, r.obs_uv, r.obs_inlier,
+                            r.timings, len(self.slam.map.points), len(self.slam.map.keyframes),
+                            bool(self.slam.localization_only))
+
+    def set_localization_only(self, on: bool) -> None:
+        self.slam.set_localization_only(on)
+
+    def feedback(self, ids: np.ndarray, predicted: np.ndarray, drop: np.ndarray) -> None:
+        self.slam.set_deformable(ids, predicted)
+        self.slam.drop_tracks(ids[drop == 1])
+
+    def close(self) -> None:
+        self.slam.close()
+
+
+class StaticLocalization(Localizer):
+    """A camera that does not move: the scene's ``static_pose`` every frame."""
+
+    mode = "static"
+
+    def __init__(self, T_wc: np.ndarray):
+        self.T_wc = T_wc
+
+    def step(self, gray: np.ndarray, stamp_ns: int, depth: np.ndarray | None = None,
+             right: np.ndarray | None = None) -> Localization:
+        return Localization(self.T_wc, 2)
+
+
+def make_localizer(loc: dict, cam: CameraModel, baseline: float | None = None, async_mapping: bool = False,
+                   map_file: str = "", localization_only: bool = False,
+                   slam_config: SlamConfig | None = None) -> Localizer:
+    """The localizer of a scene's ``localization`` section (``mode``; for markers ``markers``, for a static camera
+    ``static_pose``, for SLAM ``features``, ``scale_factor``, ``pyramid_levels``, ``known_scale_m``) on camera
+    ``cam``. SLAM only: ``baseline`` (stereo, metres), ``async_mapping`` (local bundle adjustment in a worker
+    process), ``map_file`` (a saved map to relocalize into), ``localization_only`` (start with mapping frozen),
+    ``slam_config`` (the SLAM's tuning; default :class:`SlamConfig`)."""
+    mode = loc["mode"]
+    if mode == "markers":
+        from simreal_nodes.vision.markers import MarkerLocalizer
+
+        mk = loc["markers"]
+        return MarkerLocalization(MarkerLocalizer(cam, mk["dictionary"], mk["size_m"],
+                                                  {int(k): G.pose7_to_matrix(v) for k, v in mk["poses"].items()}))
+    if mode == "static":
+        return StaticLocalization(G.pose7_to_matrix(loc["static_pose"]))
+    from simreal_nodes.vision.slam.map import Map
+    from simreal_nodes.vision.slam.system import Slam
+
+    slam = Slam(cam, mode, loc["features"], loc["scale_factor"], loc["pyramid_levels"], baseline=baseline,
+                known_scale=loc.get("known_scale_m"), async_mapping=async_mapping, config=slam_config)
+    if localization_only:
+        slam.set_localization_only(True)
+    if map_file:
+        slam.load_map(Map.load(map_file))
+    return SlamLocalization(slam)
+
+
+class LiveLocalizer:
+    """The localizer of a live camera, as the localization node keeps it: built once the intrinsics are known (for
+    stereo, and the baseline), built again when they change; mapping frozen or not as last asked.
+
+    ``loc``, ``async_mapping``, ``map_file``, ``localization_only``: as :func:`make_localizer` takes them."""
+
+    def __init__(self, loc: dict, async_mapping: bool = False, map_file: str = "", localization_only: bool = False):
+        self.loc, self.async_mapping, self.map_file = loc, async_mapping, map_file
+        self.localization_only = localization_only
+        self.cam: CameraModel | None = None
+        self.baseline: float | None = None
+        self.core: Localizer | None = None
+
+    def set_camera(self, cam: CameraModel) -> bool:
+        """Intrinsics from a CameraInfo; True when they are new and the localizer was (re)built. Built now, not on
+        the first frame: live, the frames that arrive while it builds (a mapping worker starts) would be skipped."""
+        if self.cam is not None and cam.width == self.cam.width and np.allclose(cam.K, self.cam.K):
+            return False
+        if self.core is not None:
+            self.core.close()
+        self.cam, self.core = cam, None
+        self.core = self._build()
+        return True
+
+    def _build(self) -> Localizer | None:
+        if self.loc["mode"] == "stereo" and self.baseline is None:
+            return None
+        return make_localizer(self.loc, self.cam, self.baseline, self.async_mapping, self.map_file,
+                              self.localization_only)
+
+    def not_ready(self) -> str:
+        """Why the localizer cannot take a frame yet ('' = it can: :attr:`core` is built)."""
+        if self.cam is None:
+            return "waiting for a valid CameraInfo"
+        if self.core is None:
+            self.core = self._build()
+            if self.core is None:
+                return "stereo: waiting for the right CameraInfo (baseline)"
+        return ""
+
+    def set_localization_only(self, on: bool) -> None:
+        self.localization_only = bool(on)
+        if self.core is not None:
+            self.core.set_localization_only(self.localization_only)
+
+    def feedback(self, ids: np.ndarray, predicted: np.ndarray, drop: np.ndarray) -> None:
+        """:meth:`Localizer.feedback`, once there is a localizer."""
+        if self.core is not None:
+            self.core.feedback(ids, predicted, drop)
+
+    @property
+    def map(self) -> Map | None:
+        """The SLAM map (None: no localizer yet, or one without a map)."""
+        return self.core.map if self.core is not None else None
+
+    def map_points(self) -> np.ndarray | None:
+        """(N, 3) points of the SLAM map (None: no map, or an empty one)."""
+        if self.map is None or not self.map.points:
+            return None
+        return self.map.point_arrays()[1]
+
+    def close(self, save_map: str = "") -> bool:
+        """Release the localizer, its map saved to ``save_map`` first if given (and there is one): True if saved."""
+        saved = bool(save_map) and self.map is not None
+        if saved:
+            self.map.save(save_map, self.cam, self.loc["mode"])
+        if self.core is not None:
+            self.core.close()
+        return saved
+
+
+STATE_NAMES = {0: "not started", 1: "initializing", 2: "ok", 3: "lost", 4: "relocalized"}
+
+
+def status_text(r: Localization) -> tuple[str, str]:
+    """(diagnostic level ok / warn / error, text) of a frame's localization: lost is an error, starting a warning."""
+    level = "ok" if r.state in (2, 4) else ("warn" if r.state in (0, 1) else "error")
+    return level, f"{STATE_NAMES.get(r.state, r.state)}" + (f": {r.reason}" if r.reason else "")

@@ -1,0 +1,244 @@
+"""Messages <-> numpy for the nodes: stamps, poses, transforms, point clouds, CameraInfo and the simreal_msgs they
+publish (no cv_bridge, no sensor_msgs_py)."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+from geometry_msgs.msg import Pose, PoseStamped, TransformStamped
+from sensor_msgs.msg import CameraInfo
+from simreal_msgs.msg import ContactState as ContactMsg
+from simreal_msgs.msg import FeatureObservations, ModelParameters, TrackingStatus
+from std_msgs.msg import Header
+
+from simreal_nodes import geometry
+
+if TYPE_CHECKING:  # (annotations only: the player imports this module and needs none of the cores)
+    from simreal_nodes.assimilation.localizer import Localization
+    from simreal_nodes.assimilation.tracker import Estimate
+    from simreal_nodes.collision.contact import ContactState, ContactTracker
+    from simreal_nodes.camera import CameraModel
+
+
+def stamp_ns(stamp) -> int:
+    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
+
+
+def ns_to_stamp(ns: int, msg=None):
+    from builtin_interfaces.msg import Time
+
+    t = msg or Time()
+    t.sec, t.nanosec = int(ns // 1_000_000_000), int(ns % 1_000_000_000)
+    return t
+
+
+def camera_info_msg(cam: CameraModel, stamp, frame_id: str) -> CameraInfo:
+    """sensor_msgs/CameraInfo of a camera model."""
+    m = CameraInfo()
+    m.header.stamp, m.header.frame_id = stamp, frame_id
+    for k, v in cam.camera_info_fields().items():
+        setattr(m, k, v)
+    return m
+
+
+def pose_to_matrix(p: Pose) -> np.ndarray:
+    q = (p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w)
+    T = np.eye(4)
+    T[:3, :3] = geometry.quat_to_matrix(q)
+    T[:3, 3] = (p.position.x, p.position.y, p.position.z)
+    return T
+
+
+def observation_pose(obs) -> np.ndarray | None:
+    """T_map_camera of a FeatureObservations, or None when localization had no pose (zero quaternion)."""
+    q = obs.camera_pose.orientation
+    if abs(q.x) + abs(q.y) + abs(q.z) + abs(q.w) == 0:
+        return None
+    return pose_to_matrix(obs.camera_pose)
+
+
+def matrix_to_pose(T: np.ndarray, p: Pose | None = None) -> Pose:
+    p = p or Pose()
+    q = geometry.matrix_to_quat(T[:3, :3])
+    p.position.x, p.position.y, p.position.z = (float(v) for v in T[:3, 3])
+    p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w = (float(v) for v in q)
+    return p
+
+
+def pose_stamped(T: np.ndarray, header: Header, frame_id: str) -> PoseStamped:
+    m = PoseStamped()
+    m.header.stamp = header.stamp
+    m.header.frame_id = frame_id
+    matrix_to_pose(T, m.pose)
+    return m
+
+
+def transform_stamped(T: np.ndarray, stamp, parent: str, child: str) -> TransformStamped:
+    m = TransformStamped()
+    m.header.stamp = stamp
+    m.header.frame_id = parent
+    m.child_frame_id = child
+    q = geometry.matrix_to_quat(T[:3, :3])
+    m.transform.translation.x, m.transform.translation.y, m.transform.translation.z = (float(v) for v in T[:3, 3])
+    r = m.transform.rotation
+    r.x, r.y, r.z, r.w = (float(v) for v in q)
+    return m
+
+
+_PF_TYPES = {np.dtype(np.int8): 1, np.dtype(np.uint8): 2, np.dtype(np.int16): 3, np.dtype(np.uint16): 4,
+             np.dtype(np.int32): 5, np.dtype(np.uint32): 6, np.dtype(np.float32): 7, np.dtype(np.float64): 8}
+
+
+def cloud_msg(points: np.ndarray, header: Header, frame_id: str, extra: dict | None = None):
+    """sensor_msgs/PointCloud2 with float32 x, y, z and optional per-point ``extra`` fields
+    (name -> (N,) array of a PointField type, e.g. uint32 ids); no sensor_msgs_py on PyPI."""
+    import array
+
+    from sensor_msgs.msg import PointCloud2, PointField
+
+    P = np.asarray(points, dtype=np.float32).reshape(-1, 3)
+    cols = [("x", P[:, 0]), ("y", P[:, 1]), ("z", P[:, 2])]
+    for name, v in (extra or {}).items():
+        v = np.asarray(v).reshape(-1)
+        if len(v) != len(P) or v.dtype not in _PF_TYPES:
+            raise ValueError(f"cloud field '{name}': {len(v)} values of {v.dtype} for {len(P)} points")
+        cols.append((name, v))
+    rec = np.zeros(len(P), dtype=[(n, v.dtype.newbyteorder("<")) for n, v in cols])  # packed, little-endian
+    for n, v in cols:
+        rec[n] = v
+    m = PointCloud2()
+    m.header.stamp = header.stamp
+    m.header.frame_id = frame_id
+    m.height, m.width = 1, len(P)
+    m.fields = [PointField(name=n, offset=rec.dtype.fields[n][1], datatype=_PF_TYPES[np.dtype(v.dtype)], count=1)
+                for n, v in cols]
+    m.is_bigendian = False
+    m.point_step, m.row_step = rec.dtype.itemsize, rec.dtype.itemsize * len(P)
+    m.is_dense = True
+    m.data = array.array("B", rec.tobytes())
+    return m
+
+
+def cloud_field(msg, name: str) -> np.ndarray:
+    """One named field of a PointCloud2 as an (N,) array (ValueError if absent or malformed)."""
+    f = next((f for f in msg.fields if f.name == name), None)
+    if f is None:
+        raise ValueError(f"PointCloud2 without a '{name}' field")
+    dt = next((d for d, t in _PF_TYPES.items() if t == f.datatype), None)
+    if dt is None:
+        raise ValueError(f"PointCloud2 field '{name}' has unknown datatype {f.datatype}")
+    n = msg.width * msg.height
+    data = bytes(msg.data)
+    if msg.point_step < f.offset + dt.itemsize or len(data) < n * msg.point_step:
+        raise ValueError(f"PointCloud2 of {n} points with step {msg.point_step} has only {len(data)} bytes")
+    raw = np.frombuffer(data, np.uint8, count=n * msg.point_step).reshape(n, msg.point_step)
+    field = raw[:, f.offset:f.offset + dt.itemsize].copy().view(dt.newbyteorder(">" if msg.is_bigendian else "<"))
+    return field.ravel().astype(dt)
+
+
+def cloud_to_array(msg) -> np.ndarray:
+    """x, y, z of a PointCloud2 into (N, 3)."""
+    return np.stack([cloud_field(msg, k).astype(np.float64) for k in "xyz"], axis=1)
+
+
+def deformable_points(msg) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(ids (N,) int64, (N, 3) points, drop (N,) uint8) of the tracker's deformable-points cloud (fields x, y, z,
+    id and optionally drop; absent: nothing dropped); ValueError when malformed."""
+    ids = cloud_field(msg, "id").astype(np.int64)
+    P = cloud_to_array(msg)
+    drop = cloud_field(msg, "drop") if any(f.name == "drop" for f in msg.fields) else np.zeros(len(ids), np.uint8)
+    return ids, P, drop
+
+
+# simreal_msgs ------------------------------------------------------------------------------------------------
+
+
+def observation_arrays(obs: FeatureObservations) -> tuple[np.ndarray | None, np.ndarray, np.ndarray, np.ndarray]:
+    """(T_map_camera or None, point ids (N,), map points (N, 3), pixels (N, 2)) of a FeatureObservations;
+    ValueError when the three lists disagree in length."""
+    ids = np.asarray(obs.point_ids, dtype=np.int64)
+    P = np.asarray(obs.points_xyz, dtype=np.float64).reshape(-1, 3)
+    uv = np.asarray(obs.pixels_uv, dtype=np.float64).reshape(-1, 2)
+    if len(P) != len(ids) or len(uv) != len(ids):
+        raise ValueError(f"malformed observations ({len(ids)} ids, {len(P)} points, {len(uv)} pixels)")
+    return observation_pose(obs), ids, P, uv
+
+
+def observations_msg(r: Localization, stamp, frame_id: str) -> FeatureObservations:
+    """FeatureObservations of one localized frame: the camera pose (zero quaternion: none this frame) and the map
+    points matched in the image, with their pixels and whether they voted for the pose."""
+    obs = FeatureObservations()
+    obs.header.stamp = stamp
+    obs.header.frame_id = frame_id
+    if r.T_wc is not None:
+        matrix_to_pose(r.T_wc, obs.camera_pose)
+    else:
+        obs.camera_pose.orientation.w = 0.0  # no pose this frame (quaternion zero = invalid)
+    if r.T_wc is not None and len(r.obs_ids):
+        obs.point_ids = [int(i) for i in r.obs_ids]
+        obs.points_xyz = r.obs_pos.astype(np.float32).ravel().tolist()
+        obs.pixels_uv = np.asarray(r.obs_uv, np.float32).ravel().tolist()
+        obs.flags = [FeatureObservations.FLAG_POSE_INLIER if x else 0 for x in r.obs_inlier]
+    return obs
+
+
+def localization_status_msg(r: Localization, stamp, node: str, mode: str) -> TrackingStatus:
+    """TrackingStatus of one localized frame: state, reason, features tracked and the map's size."""
+    st = TrackingStatus()
+    st.header.stamp = stamp
+    st.node, st.mode, st.state, st.reason = node, mode, int(r.state), r.reason
+    st.tracked_features, st.map_points, st.keyframes = r.features, r.map_points, r.keyframes
+    st.localization_only = r.localization_only
+    return st
+
+
+def contact_msg(oid: str, st: ContactState, source: str, stamp, frame_id: str) -> ContactMsg:
+    """simreal_msgs/ContactState of one object's Alg. 5.1 state (a non-finite contact point is sent as zeros)."""
+    c = ContactMsg()
+    c.header.stamp = stamp
+    c.header.frame_id = frame_id
+    c.object_id, c.state, c.in_contact = oid, int(st.state), bool(st.in_contact)
+    c.contact_node, c.load_point = int(st.node), int(st.load_point)
+    c.pseudo_time, c.min_distance = float(st.pseudo_time), float(st.min_distance)
+    cp = st.contact_point
+    c.contact_point.x, c.contact_point.y, c.contact_point.z = (float(v) if np.isfinite(v) else 0.0 for v in cp)
+    c.source, c.points_used, c.reason = source, int(st.points_used), st.reason
+    return c
+
+
+def contact_parameters_msg(oid: str, tr: ContactTracker, st: ContactState, stamp) -> ModelParameters:
+    """ModelParameters of a contact (load point / position and pseudo-time or load scale): what the overlay draws.
+    No fit behind them: no covariance, no residual."""
+    m = ModelParameters()
+    m.header.stamp = stamp
+    m.header.frame_id = oid
+    m.object_id, m.model_id = oid, tr.model.model_id
+    m.names = tr.parameter_names()
+    axes_units = [a.unit for a in tr.model.axes]
+    m.units = axes_units + [""] * (len(m.names) - len(axes_units))
+    m.values = [float(v) for v in tr.parameters()]
+    m.frozen = [False] * len(m.names)
+    m.covariance = [0.0] * (len(m.names) ** 2)
+    m.residual_rms_px = -1.0
+    m.state = ModelParameters.STATE_OK if st.state in (0, 1, 2) else ModelParameters.STATE_LOW_CONFIDENCE
+    m.reason = st.reason
+    return m
+
+
+def estimate_msg(oid: str, model_id: str, est: Estimate, stamp) -> ModelParameters:
+    """ModelParameters of a deformable tracker's estimate (a non-finite covariance entry is sent as inf, a
+    non-finite residual as -1)."""
+    m = ModelParameters()
+    m.header.stamp = stamp
+    m.header.frame_id = oid
+    m.object_id = oid
+    m.model_id = model_id
+    m.names, m.units = list(est.names), list(est.units)
+    m.values = [float(v) for v in est.values]
+    m.frozen = [bool(f) for f in est.frozen]
+    m.covariance = [float(c) if np.isfinite(c) else float("inf") for c in np.asarray(est.cov).ravel()]
+    m.residual_rms_px = float(est.rms_px) if np.isfinite(est.rms_px) else -1.0
+    m.inliers, m.measurements, m.iterations = int(est.inliers), int(est.measurements), int(est.iterations)
+    m.state, m.reason = int(est.state), est.reason
+    return m

@@ -1,0 +1,88 @@
+"""The localizer factory and the one interface of its localizers (markers, static, SLAM), and the live localizer
+the node keeps (built on CameraInfo, rebuilt when the intrinsics change, stereo waiting for its baseline)."""
+
+import cv2
+import numpy as np
+import pytest
+
+from simreal_nodes import geometry as G
+from simreal_nodes.assimilation.localizer import (LiveLocalizer, MarkerLocalization, SlamLocalization,
+                                                  StaticLocalization, make_localizer, status_text)
+from simreal_nodes.camera import CameraModel
+
+CAM = CameraModel.from_intrinsics(640, 480, 500.0, 500.0, 320.0, 240.0)
+MARKERS = {"mode": "markers", "markers": {"dictionary": "DICT_4X4_50", "size_m": 0.1,
+                                          "poses": {"0": [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0]}}}
+SLAM = {"mode": "mono", "features": 500, "scale_factor": 1.2, "pyramid_levels": 8, "known_scale_m": None}
+
+
+def _marker_image() -> np.ndarray:
+    """Marker 0 (10 cm) seen face on from 0.5 m: 100 px wide in the middle of the image."""
+    img = np.full((480, 640), 255, np.uint8)
+    marker = cv2.aruco.generateImageMarker(cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_4X4_50), 0, 100)
+    img[190:290, 270:370] = marker
+    return img
+
+
+def test_markers():
+    loc = make_localizer(MARKERS, CAM)
+    assert isinstance(loc, MarkerLocalization) and loc.mode == "markers" and loc.map is None
+    r = loc.step(_marker_image(), 0)
+    assert r.state == 2 and r.reason.startswith("1 markers, ") and r.features == 4 and r.timings is None
+    # the camera 0.5 m in front of the marker, looking at it (camera y down = world -y, z into the marker)
+    np.testing.assert_allclose(r.T_wc[:3, :3], np.diag([1.0, -1.0, -1.0]), atol=0.02)
+    np.testing.assert_allclose(r.T_wc[:3, 3], [0.0, 0.0, 0.5], atol=0.01)
+    assert len(r.obs_ids) == 0 and r.obs_pos.shape == (0, 3)
+    lost = loc.step(np.full((480, 640), 255, np.uint8), 1)
+    assert lost.T_wc is None and lost.state == 3 and lost.reason == "no marker of the layout in view"
+    assert status_text(lost) == ("error", "lost: no marker of the layout in view")
+    # no map: feedback, freezing and closing do nothing
+    loc.feedback(np.arange(3), np.zeros((3, 3)), np.zeros(3, np.uint8))
+    loc.set_localization_only(True)
+    loc.close()
+
+
+def test_static():
+    pose = [0.1, 0.2, 0.3, 0.0, 0.0, 0.0, 1.0]
+    loc = make_localizer({"mode": "static", "static_pose": pose}, CAM)
+    assert isinstance(loc, StaticLocalization) and loc.map is None
+    r = loc.step(np.zeros((480, 640), np.uint8), 0)
+    np.testing.assert_array_equal(r.T_wc, G.pose7_to_matrix(pose))
+    assert r.state == 2 and r.reason == "" and status_text(r) == ("ok", "ok")
+
+
+def test_slam():
+    loc = make_localizer(SLAM, CAM, localization_only=True)
+    assert isinstance(loc, SlamLocalization) and loc.mode == "mono" and loc.map is loc.slam.map
+    assert loc.slam.localization_only
+    r = loc.step(np.zeros((480, 640), np.uint8), 0)  # nothing to see
+    assert r.T_wc is None and r.state in (0, 1) and r.reason and r.timings is not None
+    assert r.map_points == 0 and r.keyframes == 0 and r.localization_only
+    loc.set_localization_only(False)
+    assert not loc.slam.localization_only
+    loc.feedback(np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0, np.uint8))
+    loc.close()
+    with pytest.raises(ValueError, match="baseline"):
+        make_localizer(dict(SLAM, mode="stereo"), CAM)
+
+
+def test_live_localizer_follows_the_camera():
+    live = LiveLocalizer(MARKERS)
+    assert live.not_ready() == "waiting for a valid CameraInfo" and live.map_points() is None
+    assert live.set_camera(CAM) and live.not_ready() == "" and isinstance(live.core, MarkerLocalization)
+    first = live.core
+    assert not live.set_camera(CameraModel.from_intrinsics(640, 480, 500.0, 500.0, 320.0, 240.0))  # same intrinsics
+    assert live.core is first
+    assert live.set_camera(CameraModel.from_intrinsics(640, 480, 510.0, 510.0, 320.0, 240.0)) and live.core is not first
+    assert not live.close("/nonexistent/map.h5")  # no map to save
+
+
+def test_live_stereo_waits_for_the_baseline():
+    live = LiveLocalizer(dict(SLAM, mode="stereo"))
+    assert live.set_camera(CAM) and live.core is None
+    assert live.not_ready() == "stereo: waiting for the right CameraInfo (baseline)"
+    live.baseline = 0.12
+    assert live.not_ready() == "" and live.core.slam.baseline == 0.12
+    live.set_localization_only(True)
+    assert live.core.slam.localization_only
+    live.close()

@@ -1,0 +1,81 @@
+"""One collision frame over a scene's objects (ContactScene): pusher order, real points from depth, and
+virtual-virtual contact -- an upper plate pressed by a probe seen in depth bends onto a lower plate it crosses."""
+
+import numpy as np
+import pytest
+
+from simreal_nodes import geometry as G
+from simreal_nodes.collision.contact import CONTACT, FREE, NO_DATA
+from simreal_nodes.collision.scene import ContactScene, pusher_order
+from simreal_nodes.camera import CameraModel
+from tests.modelkit import probe_model
+
+CAM = CameraModel.from_intrinsics(64, 48, 100.0, 100.0, 32.0, 24.0)
+# looking straight down from 0.3 m above the plates' node 14 (0.04, 0.04): camera z = -world z, camera y = -world y
+T_WC = G.make_T(np.diag([1.0, -1.0, -1.0]), [0.04, 0.04, 0.3])
+GAP = 0.006  # the upper plate lies this far above the lower one
+
+
+def test_pushers_go_first():
+    objs = [{"id": "lower", "collision": {"pushes": []}}, {"id": "upper", "collision": {"pushes": ["lower"]}},
+            {"id": "free", "collision": {"pushes": []}}]
+    assert [o["id"] for o in pusher_order(objs)] == ["upper", "lower", "free"]
+    cyc = [{"id": "x", "collision": {"pushes": ["y"]}}, {"id": "y", "collision": {"pushes": ["x"]}}]
+    assert sorted(o["id"] for o in pusher_order(cyc)) == ["x", "y"]
+
+
+def _obj(oid, z, pushes=()):
+    return {"id": oid, "anchor": {"pose": [0.0, 0.0, z, 0.0, 0.0, 0.0, 1.0]},
+            "collision": {"enabled": True, "pushes": list(pushes), "threshold_m": 0.005, "step": 0.5,
+                          "decimation": 1, "max_depth_m": 2.0}}
+
+
+def _scene():
+    upper = probe_model()
+    upper.surface = np.vstack([upper.surface, upper.surface[:, ::-1]])  # both faces of the plate: its lower one
+    # faces the lower plate
+    objects = [_obj("lower", 0.0), _obj("upper", GAP, pushes=["lower"])]  # file order: the pushed one first
+    return ContactScene(objects, {"lower": probe_model(), "upper": upper})
+
+
+def _probe_depth(height: float) -> np.ndarray:
+    """Depth of a small probe tip ``height`` above the upper plate at node 14, nothing else seen (NaN)."""
+    d = np.full((CAM.height, CAM.width), np.nan, np.float32)
+    d[23:26, 31:34] = 0.3 - (GAP + height)
+    return d
+
+
+def test_a_pressed_upper_plate_pushes_the_lower_one():
+    scene = _scene()
+    assert [o["id"] for o in scene.objects] == ["upper", "lower"]
+    # the probe 2 mm above the upper plate: only the upper one is within delta
+    up, low = scene.step(_probe_depth(0.002), CAM, T_WC)
+    assert up.object_id == "upper" and up.state.state == CONTACT and up.state.load_point == 14 and up.source == "depth"
+    assert up.state.points_used == 9
+    # the upper plate bent 5 mm down at node 14 (pseudo-time 0.5) in this frame: 1 mm above the lower plate now
+    assert low.object_id == "lower" and low.source == "depth+upper"
+    assert low.state.state == CONTACT and low.state.load_point == 14
+    assert low.state.min_distance == pytest.approx(0.001, abs=3e-4)
+
+
+def test_the_probe_alone_does_not_reach_the_lower_plate():
+    scene = _scene()
+    up, low = scene.step(_probe_depth(0.02), CAM, T_WC)  # 2 cm above: nobody in contact, no surface pushed
+    assert up.state.state == FREE and low.state.state == FREE and low.source == "depth"
+    assert low.state.min_distance == pytest.approx(GAP + 0.02, abs=3e-3)
+
+
+def test_no_pose_and_no_depth_are_stated():
+    scene = _scene()
+    for r in scene.step(_probe_depth(0.002), CAM, None):  # (the tracker's own reason comes first)
+        assert r.state.state == NO_DATA and r.state.reason
+    empty = np.full((CAM.height, CAM.width), np.nan, np.float32)
+    for r in scene.step(empty, CAM, T_WC):
+        assert r.state.state == NO_DATA and r.state.reason
+
+
+def test_decimation_override():
+    scene = _scene()
+    scene.decimation = 4  # every 4th pixel: the 3x3 patch at rows/cols 23..25 keeps (24, 32) only
+    up, _ = scene.step(_probe_depth(0.002), CAM, T_WC)
+    assert up.state.points_used == 1 and up.state.state == CONTACT

@@ -1,0 +1,89 @@
+"""The ingest's camera (IngestCamera): CameraInfo handling, the check of every incoming stream, undistortion of
+the image (bilinear) and the depth (nearest neighbour) against a distorted camera, file-source frames."""
+
+from types import SimpleNamespace
+
+import numpy as np
+
+from simreal_nodes.io import images
+from simreal_nodes.io.sources import Frame
+from simreal_nodes.camera import CameraModel
+from simreal_nodes.vision.undistort import IngestCamera, Undistorter
+
+DIST = CameraModel.from_intrinsics(64, 48, 60.0, 60.0, 32.0, 24.0, D=[-0.3, 0.1, 0.001, -0.001, 0.0])
+PINHOLE = CameraModel.from_intrinsics(64, 48, 60.0, 60.0, 32.0, 24.0)
+
+
+def _msg(img: np.ndarray, encoding: str) -> SimpleNamespace:
+    return images.fill_image_msg(SimpleNamespace(), img, encoding)
+
+
+def _info(cam: CameraModel) -> SimpleNamespace:
+    return SimpleNamespace(header=SimpleNamespace(frame_id="cam"), **cam.camera_info_fields())
+
+
+def _checker() -> np.ndarray:
+    y, x = np.mgrid[:48, :64]
+    return np.repeat((((x // 8 + y // 8) % 2) * 255).astype(np.uint8)[..., None], 3, axis=2)
+
+
+def test_a_distorted_image_and_depth_are_undistorted():
+    ic = IngestCamera(undistort=True)
+    assert ic.camera_info(_info(DIST)) == ""
+    und = Undistorter(DIST)
+    img = _checker()
+    c = ic.check("image", _msg(img, "bgr8"))
+    assert c.why == "" and c.pixels is not None
+    np.testing.assert_array_equal(c.pixels, und.image(img))
+    assert not np.array_equal(c.pixels, img)
+    # the published camera is the ideal one: same K, no distortion
+    assert not ic.out_camera.has_distortion and np.allclose(ic.out_camera.K, DIST.K)
+    depth = np.arange(48 * 64, dtype=np.uint16).reshape(48, 64)
+    d = ic.check("depth", _msg(depth, "16UC1"))
+    np.testing.assert_array_equal(d.pixels, und.depth(depth))
+    assert np.isin(d.pixels[d.pixels > 0], depth).all()  # nearest neighbour: no blended depths
+    assert np.array_equal(ic.undistorted("image", img), c.pixels)
+
+
+def test_without_undistortion_messages_pass_as_they_are():
+    ic = IngestCamera(undistort=False)
+    ic.camera_info(_info(DIST))
+    img = _checker()
+    assert ic.check("image", _msg(img, "bgr8")).pixels is None and ic.out_camera is ic.cam
+    assert ic.undistorted("depth", img[..., 0]) is not None
+    ic2 = IngestCamera(undistort=True)
+    ic2.camera_info(_info(PINHOLE))  # nothing to undistort
+    assert ic2.check("image", _msg(img, "bgr8")).pixels is None
+
+
+def test_every_stream_states_why_it_is_left_out():
+    ic = IngestCamera(undistort=False)
+    img = _checker()
+    assert ic.check("image", _msg(img, "bgr8")).why == "waiting for a valid CameraInfo"
+    bad = _info(DIST)
+    bad.k = [0.0] * 9
+    err = ic.camera_info(bad)
+    assert err and ic.info_error == err and ic.cam is None
+    assert ic.check("image", _msg(img, "bgr8")).why == f"unusable CameraInfo: {err}"
+    ic.camera_info(_info(DIST))
+    assert ic.info_error == ""
+    assert ic.check("image", _msg(img[:40], "bgr8")).why == "image is 64x40 but CameraInfo says 64x48"
+    broken = _msg(img, "bgr8")
+    broken.step = 10
+    assert ic.check("image", broken).why.startswith("malformed image: ")
+    assert ic.check("depth", _msg(img, "bgr8")).why == "depth encoding 'bgr8' (expected 16UC1 or 32FC1)"
+    assert ic.check("right", _msg(img, "bgr8")).why == "right image without a valid right CameraInfo"
+    assert ic.right_info(_info(PINHOLE)) == "" and ic.check("right", _msg(img, "bgr8")).why == ""
+    assert ic.check("right", broken).why.startswith("malformed right image: ")
+    # a calibration file wins: CameraInfo is ignored
+    cal = IngestCamera(undistort=True, calibration=PINHOLE)
+    assert cal.camera_info(bad) == "" and cal.cam is PINHOLE
+
+
+def test_file_frames():
+    ic = IngestCamera(undistort=True)
+    img = _checker()
+    assert ic.file_frame(Frame(0, 0, error="cannot decode")) == "cannot decode"
+    assert ic.file_frame(Frame(0, 0, image=img)).startswith("no intrinsics for 64x48 frames")
+    assert ic.file_frame(Frame(0, 0, image=img, camera_info=_info(DIST))) == ""
+    assert ic.cam is not None and ic.out_camera is not ic.cam  # the bag's distorted camera, undistorted
