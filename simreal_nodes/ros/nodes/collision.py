@@ -27,6 +27,7 @@ from simreal_nodes.ros.common import (SimrealNode, data_qos, guarded, observatio
 from simreal_nodes.rom.model_file import load_model
 from simreal_nodes.scene import graph
 from simreal_nodes.scene.schema import load_scene
+from simreal_nodes.states import ContactPhase
 from simreal_nodes.sync import StampSync
 from simreal_nodes.vision.camera import CameraModel
 from simreal_nodes.vision.depth import depth_points
@@ -202,7 +203,7 @@ class CollisionNode(SimrealNode):
         m.frozen = [False] * len(m.names)
         m.covariance = [0.0] * (len(m.names) ** 2)
         m.residual_rms_px = -1.0
-        m.state = ModelParameters.STATE_OK if st.state in (0, 1, 2) else ModelParameters.STATE_LOW_CONFIDENCE
+        m.state = ModelParameters.STATE_OK if st.state != ContactPhase.NO_DATA else ModelParameters.STATE_LOW_CONFIDENCE
         m.reason = st.reason
         self.pub_params[oid].publish(m)
 

@@ -26,6 +26,7 @@ from simreal_nodes.ros.common import (TF_QOS, SimrealNode, cloud_field, cloud_ms
                                       pose_stamped, reliable_qos, run_node, stamp_ns, transform_stamped)
 from simreal_nodes.scene import graph
 from simreal_nodes.scene.schema import load_scene
+from simreal_nodes.states import TrackingState
 from simreal_nodes.sync import StampSync
 from simreal_nodes.vision.camera import CameraModel
 
@@ -159,7 +160,7 @@ class LocalizationNode(SimrealNode):
             return
         if self.mode == "markers":
             res = self.core.locate(gray)
-            T, state = res.T_wc, (2 if res.T_wc is not None else 3)
+            T, state = res.T_wc, (TrackingState.OK if res.T_wc is not None else TrackingState.LOST)
             reason = res.reason if res.T_wc is None else f"{len(res.ids)} markers, {res.rms_px:.2f} px"
             self._publish(header, T, state, reason, n_feat=4 * len(res.ids))
         else:

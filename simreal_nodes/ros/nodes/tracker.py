@@ -26,6 +26,7 @@ from simreal_nodes.ros.common import (SimrealNode, cloud_msg, data_qos, guarded,
 from simreal_nodes.rom.model_file import load_model
 from simreal_nodes.scene import graph
 from simreal_nodes.scene.schema import load_scene
+from simreal_nodes.states import EstimateState, tracking_state
 from simreal_nodes.sync import StampSync
 from simreal_nodes.vision.camera import CameraModel
 
@@ -143,12 +144,11 @@ class TrackerNode(SimrealNode):
         st = TrackingStatus()
         st.header.stamp = head.stamp
         st.node, st.mode = self.get_name(), f"deformable:{o['id']}"
-        st.state = {0: TrackingStatus.STATE_OK, 1: TrackingStatus.STATE_LOW_CONFIDENCE, 2: TrackingStatus.STATE_LOST,
-                    3: TrackingStatus.STATE_INITIALIZING}[est.state]
+        st.state = int(tracking_state(est.state))
         st.reason, st.tracked_features = est.reason, int(est.inliers)
         self.pub_status.publish(st)
         self.metrics.extra[f"{o['id']}_solve_ms"] = f"{est.solve_ms:.2f}"
-        self.set_status("ok" if est.state == 0 else "warn", f"{o['id']}: " + (est.reason or "ok"))
+        self.set_status("ok" if est.state == EstimateState.OK else "warn", f"{o['id']}: " + (est.reason or "ok"))
 
     def _coordinate_localization(self, deforming: bool, head) -> None:
         """Points on the object leave the pose estimate and are searched where the estimate predicts them;

@@ -26,12 +26,14 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from simreal_nodes import geometry as G
+from simreal_nodes.states import TrackingState
 from simreal_nodes.vision.camera import CameraModel
 from simreal_nodes.vision.orb import Features, OrbExtractor, match_descriptors
 from simreal_nodes.vision.slam.map import KeyFrame, Map
 from simreal_nodes.vision.slam.optimize import CHI2_2D, AsyncBundleAdjuster, ba_request, bundle_adjust, project, refine_pose
 
-NOT_STARTED, INITIALIZING, OK, LOST, RELOCALIZED = 0, 1, 2, 3, 4
+NOT_STARTED, INITIALIZING, OK, LOST, RELOCALIZED = (TrackingState.NOT_STARTED, TrackingState.INITIALIZING, TrackingState.OK,
+                                                    TrackingState.LOST, TrackingState.RELOCALIZED)
 STATE_NAMES = {NOT_STARTED: "not started", INITIALIZING: "initializing", OK: "ok", LOST: "lost", RELOCALIZED: "relocalized"}
 POPCOUNT = np.array([bin(i).count("1") for i in range(256)], np.uint8)
 
