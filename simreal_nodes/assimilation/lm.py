@@ -215,6 +215,6 @@ def solve_generic(model: MeasurementModel, obs: Vector, x0: ArrayLike, lo: Vecto
     inl = valid & (rnorm <= 3 * huber)
     dof = max(2 * int(inl.sum()) - n, 1)
     s2 = float(np.sum(r[inl] ** 2)) / dof if inl.any() else float("nan")
-    cov = np.linalg.pinv(H) * s2 if np.all(np.isfinite(H)) else np.full((n, n), np.inf)
+    cov = np.asarray(np.linalg.pinv(H) * s2 if np.all(np.isfinite(H)) else np.full((n, n), np.inf), dtype=np.float64)
     rms = float(np.sqrt(np.mean(np.sum((r[inl] * sig[inl, None]) ** 2, axis=1)))) if inl.any() else float("nan")
     return Result(x, cov, rms, int(inl.sum()), it, converged, r, cost)

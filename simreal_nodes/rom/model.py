@@ -3,6 +3,7 @@ evaluation of a model state's deformation (:meth:`ReducedModel.deformation`, :cl
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -13,7 +14,7 @@ from simreal_nodes.rom.separated import Axis, FieldView, SeparatedField
 from simreal_nodes.rom.state import ModelState
 
 Vector = NDArray[np.float64]
-Nodes = ArrayLike | None
+Nodes = NDArray[np.integer[Any]] | Sequence[int] | None  # model node indices (None: all)
 
 
 @dataclass
@@ -38,7 +39,7 @@ class ReducedModel:
 
     @property
     def n_nodes(self) -> int:
-        return self.points.shape[0]
+        return int(self.points.shape[0])
 
     def axis(self, name: str) -> Axis:
         for a in self.axes:

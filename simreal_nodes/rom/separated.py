@@ -16,6 +16,7 @@ import bisect
 from dataclasses import dataclass, field
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.interpolate import CubicSpline
 
 AXIS_KINDS = ("continuous", "discrete")
@@ -252,7 +253,7 @@ class FieldView:
         """The selected space modes, (n_modes, n_sel, n_comp) (a view of the evaluation layout)."""
         return self.S.reshape(self.n_modes, self.n_sel, self.n_comp)
 
-    def evaluate(self, mu, n_modes: int | None = None) -> np.ndarray:
+    def evaluate(self, mu: ArrayLike, n_modes: int | None = None) -> np.ndarray:
         """u at the view's points with its modes, or with the first ``n_modes`` of them (a live truncation:
         the overlay's per-view mode count)."""
         m = self.n_modes if n_modes is None else n_modes

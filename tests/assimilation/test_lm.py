@@ -117,3 +117,15 @@ def test_lm_separates_the_load_from_an_object_shift():
     no_shift = lm.Problem(p.X, p.uv, p.disp, p.T_cw, p.R_wo, p.K, replace(p.layout, shift=False))
     biased = lm.solve(no_shift, np.r_[0.2, 0.0], lo[:2], hi[:2], huber_px=1.0, max_iter=40)
     assert biased.rms_px > 2 * res.rms_px  # without the shift the same pixels cannot be explained
+
+
+def test_prediction_is_the_projected_model_state() -> None:
+    """predict decodes x with the problem's StateLayout: the map-frame point is X + R_wo R_z(alpha_z) dX(mu) + shift."""
+    p, x = _shifted_problem()
+    x = x + np.r_[0.01, 0.05, 0.001, -0.002, 0.003]
+    uv, _, _ = lm.predict(p, x, with_jacobian=False)
+    dX = p.disp(x[:1])[0]
+    Xw = p.X + dX @ (p.R_wo @ G.rot_axis("z", x[1])).T + x[2:]
+    Xc = Xw @ p.T_cw[:3, :3].T + p.T_cw[:3, 3]
+    q = Xc @ p.K.T
+    np.testing.assert_allclose(uv, q[:, :2] / q[:, 2:], rtol=1e-12)
