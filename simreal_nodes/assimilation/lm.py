@@ -10,10 +10,10 @@ Jacobian (Eq. 4.12):  d u / d mu_i = J_Pi(X_c) R_cw R_wo R_z(alpha) d dX_j / d m
                       d u / d alpha = J_Pi(X_c) R_cw R_wo R_z(alpha) [e_z]x dX_j(mu)     (the SO(3) derivative)
 
 with J_Pi = [[fx/Z, 0, -fx X/Z^2], [0, fy/Z, -fy Y/Z^2]] the image Jacobian. Parameters stay inside
-the model's range (a step that leaves it is clipped). The unknowns x are a model state laid out by a
-:class:`~simreal_nodes.rom.state.StateLayout`: mu, then alpha_z and the object shift when it carries them. The covariance of the estimate is
+the model's range (a step that leaves it is clipped). The covariance of the estimate is
 s^2 (J^T W J)^-1 with s^2 the weighted residual variance: a parameter the images barely see (a load
-at the clamp) gets a large variance instead of a wild value.
+at the clamp) gets a large variance instead of a wild value. The unknowns x are a model state laid out
+by a :class:`~simreal_nodes.rom.state.StateLayout`: mu, then alpha_z and the object shift when it has them.
 """
 
 from __future__ import annotations

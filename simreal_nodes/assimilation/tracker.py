@@ -466,7 +466,8 @@ class DeformableTracker:
                 J = np.concatenate([J, np.zeros((len(J), 2, 1))], axis=2)
             return pred, J, np.ones(len(pred), bool)
 
-        res = lm.solve_generic(model, obs, self.values, lo, hi, np.full(len(obs), px), self.cfg.huber_px, self.cfg.max_iterations)
+        res = lm.solve_generic(model, obs, self.values, lo, hi, np.full(len(obs), px), self.cfg.huber_px,
+                               self.cfg.max_iterations)
         rest = np.linalg.norm(obs - np.c_[Xo[:, 0], Xo[:, 2]], axis=1) / px
         return res, float(np.sqrt(np.mean(np.minimum(rest, 3 * self.cfg.huber_px) ** 2)))
 

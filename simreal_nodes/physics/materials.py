@@ -205,7 +205,8 @@ class NeoHookean(Material):
 
     def energy(self, F):
         J = det3(F)
-        return 0.5 * self.lame_mu * (ddot(F, F) - 3) - self.lame_mu * np.log(J) + 0.5 * self.lame_lambda * np.log(J) ** 2
+        lnJ = np.log(J)
+        return 0.5 * self.lame_mu * (ddot(F, F) - 3) - self.lame_mu * lnJ + 0.5 * self.lame_lambda * lnJ ** 2
 
 
 class NeoHookeanDecoupled(Material):

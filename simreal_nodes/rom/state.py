@@ -112,7 +112,8 @@ class StateLayout:
     shift: bool = False
 
     @classmethod
-    def of(cls, model: ReducedModel, alpha_z: bool = False, load_scale: bool = False, shift: bool = False) -> StateLayout:
+    def of(cls, model: ReducedModel, alpha_z: bool = False, load_scale: bool = False,
+           shift: bool = False) -> StateLayout:
         """The layout of ``model`` with the extras asked for; alpha_z's range is the one the model declares."""
         rng = None
         if alpha_z:

@@ -32,8 +32,8 @@ from simreal_nodes.vision.orb import Features, OrbExtractor, match_descriptors
 from simreal_nodes.vision.slam.map import KeyFrame, Map
 from simreal_nodes.vision.slam.optimize import CHI2_2D, AsyncBundleAdjuster, ba_request, bundle_adjust, project, refine_pose
 
-NOT_STARTED, INITIALIZING, OK, LOST, RELOCALIZED = (TrackingState.NOT_STARTED, TrackingState.INITIALIZING, TrackingState.OK,
-                                                    TrackingState.LOST, TrackingState.RELOCALIZED)
+NOT_STARTED, INITIALIZING, OK, LOST, RELOCALIZED = (TrackingState.NOT_STARTED, TrackingState.INITIALIZING,
+                                                    TrackingState.OK, TrackingState.LOST, TrackingState.RELOCALIZED)
 STATE_NAMES = {NOT_STARTED: "not started", INITIALIZING: "initializing", OK: "ok", LOST: "lost", RELOCALIZED: "relocalized"}
 POPCOUNT = np.array([bin(i).count("1") for i in range(256)], np.uint8)
 
