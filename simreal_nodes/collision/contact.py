@@ -55,7 +55,7 @@ class ContactTracker:
 
     def __init__(self, model: ReducedModel, T_world_object: np.ndarray, threshold: float = 0.01, step: float = 0.05,
                  tau_min: float = 0.0, tau_max: float = 1.0, n_modes: int | None = None, min_fraction: float = 0.02):
-        self.states = LoadPointStates(model)
+        self.load_states = LoadPointStates(model)
         self.model = model
         self.T = np.asarray(T_world_object, dtype=np.float64)
         self.threshold, self.step, self.tau_min, self.tau_max = threshold, step, tau_min, tau_max
@@ -69,7 +69,7 @@ class ContactTracker:
         real geometry too) the largest precomputed displacement is ~0, and they are left out of the search."""
         full = np.zeros(len(self.lp_nodes))
         for i in range(len(self.lp_nodes)):
-            u = self.model.deformation(self.states.state(i, self.tau_max), nodes=[self.lp_nodes[i]])[0]
+            u = self.model.deformation(self.load_states.state(i, self.tau_max), nodes=[self.lp_nodes[i]])[0]
             full[i] = np.linalg.norm(u)
         act = full >= min_fraction * full.max() if full.max() > 0 else np.ones(len(full), bool)
         return np.nonzero(act)[0]
@@ -78,14 +78,14 @@ class ContactTracker:
     def model_state(self, state: ContactState | None = None) -> ModelState:
         """The model state of the current contact (load point 0 when there is none)."""
         st = state or self.state
-        return self.states.state(max(st.load_point, 0), st.pseudo_time)
+        return self.load_states.state(max(st.load_point, 0), st.pseudo_time)
 
     def parameter_names(self) -> list[str]:
-        return self.states.layout.names
+        return self.load_states.layout.names
 
     def parameters(self, state: ContactState | None = None) -> np.ndarray:
         """The contact's model state as a vector: (load_point, pseudo_time) or (s..., load_scale)."""
-        return self.states.layout.vector(self.model_state(state))
+        return self.load_states.layout.vector(self.model_state(state))
 
     def displacement(self, nodes=None, state: ContactState | None = None, n_modes=None) -> np.ndarray:
         st = state or self.state
