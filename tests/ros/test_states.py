@@ -9,9 +9,14 @@ import pytest
 
 pytest.importorskip("rclpy")
 
-from simreal_msgs.msg import ContactState, ModelParameters, TrackingStatus  # noqa: E402
+from simreal_msgs.msg import ContactState, ModelParameters, TrackingStatus
 
-from simreal_nodes.states import ContactPhase, EstimateState, TrackingState, tracking_state  # noqa: E402
+from simreal_nodes.states import (
+    ContactPhase,
+    EstimateState,
+    TrackingState,
+    tracking_state,
+)
 
 
 @pytest.mark.parametrize("enum, msg", [(TrackingState, TrackingStatus), (EstimateState, ModelParameters),
