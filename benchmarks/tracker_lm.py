@@ -22,6 +22,7 @@ from simreal_nodes.assimilation import lm
 from simreal_nodes.assimilation.registration import surface_nodes
 from simreal_nodes.rom.build import cached_model
 from simreal_nodes.rom.model_file import load_model
+from simreal_nodes.rom.state import StateLayout
 
 SPAN = 0.48
 
@@ -37,9 +38,9 @@ def run_case(m, n_modes=19, n_points=150, width=640, huber=2.0, noise=0.5, outli
     top = cand[m.points[cand, 2] > m.points[:, 2].max() - 1e-6]
     pool = top if len(top) >= n_points else cand
     nodes = np.sort(rng.choice(pool, min(n_points, len(pool)), replace=False))
-    fld = m.field("displacement")
-    truth_view = fld.view(nodes, None)
-    est_view = fld.view(nodes, n_modes)
+    truth_view = m.deformation_view(nodes, None)
+    est_view = m.deformation_view(nodes, n_modes)
+    layout = StateLayout.of(m)
     K = _camera(width)
     R_wo = np.eye(3)
     T_wo = G.make_T(R_wo, [0, 0, 0])
@@ -50,14 +51,14 @@ def run_case(m, n_modes=19, n_points=150, width=640, huber=2.0, noise=0.5, outli
     x = np.array([0.24])
     errs, times = [], []
     for s in s_true:
-        p = lm.Problem(X, np.zeros((len(X), 2)), truth_view.evaluate_with_jacobian, T_cw, R_wo, K)
-        uv, _, _ = lm.predict(p, np.array([s]), 1, with_jacobian=False)
+        p = lm.Problem(X, np.zeros((len(X), 2)), truth_view.with_jacobian, T_cw, R_wo, K, layout)
+        uv, _, _ = lm.predict(p, np.array([s]), with_jacobian=False)
         uv = uv + rng.normal(0, noise, uv.shape)
         k = int(outlier_frac * len(uv))
         if k:
             idx = rng.choice(len(uv), k, replace=False)
             uv[idx] += rng.uniform(20, 60, (k, 2)) * rng.choice([-1, 1], (k, 2))
-        q = lm.Problem(X, uv, est_view.evaluate_with_jacobian, T_cw, R_wo, K)
+        q = lm.Problem(X, uv, est_view.with_jacobian, T_cw, R_wo, K, layout)
         t0 = time.perf_counter()
         r = lm.solve(q, x, np.array([0.0]), np.array([SPAN]), huber, 20)
         times.append(time.perf_counter() - t0)

@@ -19,8 +19,8 @@ import numpy as np
 
 from benchmarks.common import RESULTS, save
 from simreal_nodes.assimilation.offline import Pipeline
-from simreal_nodes.assimilation.tracker import LOST, OK
 from simreal_nodes.scene.schema import build_spec_models, validate_scene
+from simreal_nodes.states import EstimateState
 from simreal_nodes.synth.sequence import sequence
 from simreal_nodes.vision.slam.config import SlamConfig
 
@@ -73,7 +73,8 @@ def main():
             seqs = {(name, w): sequence(name, w, h)}  # one rendered sequence in memory at a time
         names, truth, est, states, step_ms, solve_ms = run_case(seqs[(name, w)], name, oid, freeze, knob)
         row = dict(scene=name, resolution=f"{w}x{h}", map="frozen" if freeze else "mapping", knob=knob[0],
-                   ok_pct=100 * np.mean(states == OK), lost_pct=100 * np.mean(states == LOST),
+                   ok_pct=100 * np.mean(states == EstimateState.OK),
+                   lost_pct=100 * np.mean(states == EstimateState.LOST),
                    step_ms=float(np.median(step_ms)), solve_ms=float(np.median(solve_ms[solve_ms > 0])))
         loaded = np.isfinite(truth[:, 0]) & (np.abs(truth[:, 0]) > (0.02 if name == "joint_boot" else -1))
         for j, n in enumerate(names):

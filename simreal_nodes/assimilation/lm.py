@@ -12,19 +12,28 @@ Jacobian (Eq. 4.12):  d u / d mu_i = J_Pi(X_c) R_cw R_wo R_z(alpha) d dX_j / d m
 with J_Pi = [[fx/Z, 0, -fx X/Z^2], [0, fy/Z, -fy Y/Z^2]] the image Jacobian. Parameters stay inside
 the model's range (a step that leaves it is clipped). The covariance of the estimate is
 s^2 (J^T W J)^-1 with s^2 the weighted residual variance: a parameter the images barely see (a load
-at the clamp) gets a large variance instead of a wild value.
+at the clamp) gets a large variance instead of a wild value. The unknowns x are a model state laid out
+by a :class:`~simreal_nodes.rom.state.StateLayout`: mu, then alpha_z and the object shift when it has them.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
-from simreal_nodes import geometry as G
+from simreal_nodes.rom.state import StateLayout
+
+Vector = NDArray[np.float64]
+# mu -> (dX (N, 3) object frame, d dX / d mu (N, 3, n_mu)): e.g. DeformationView.with_jacobian
+Displacement = Callable[[Vector], tuple[Vector, Vector]]
+# x -> (prediction (N, 2), Jacobian (N, 2, n), valid (N,))
+MeasurementModel = Callable[[Vector], tuple[Vector, Vector, NDArray[np.bool_]]]
 
 
-def huber_weights(r_norm: np.ndarray, k: float) -> np.ndarray:
+def huber_weights(r_norm: Vector, k: float) -> Vector:
     """IRLS weights of Huber's loss on residual norms: 1 inside k, k/|r| outside."""
     w = np.ones_like(r_norm)
     big = r_norm > k
@@ -32,7 +41,7 @@ def huber_weights(r_norm: np.ndarray, k: float) -> np.ndarray:
     return w
 
 
-def image_jacobian(Xc: np.ndarray, K: np.ndarray) -> np.ndarray:
+def image_jacobian(Xc: Vector, K: Vector) -> Vector:
     """(N, 2, 3): d(u, v)/d(X_c) of the pinhole projection (thesis's ^I J Pi_C)."""
     X, Y = Xc[:, 0], Xc[:, 1]
     iz = 1.0 / Xc[:, 2]
@@ -51,88 +60,88 @@ class Problem:
     """One frame's measurements and geometry.
 
     ``X``: (N, 3) undeformed positions of the measured points, map frame; ``uv``: (N, 2) observed ideal
-    pixels; ``disp``: callable mu -> (dX (N, 3) object frame, ddX (N, 3, n_mu)); ``T_cw``: camera pose;
-    ``R_wo``: object orientation in the map; ``sigma``: (N,) pixel noise scale of each measurement.
-    X, T_cw and K are read once (``q0``, K times the undeformed points in the camera frame).
+    pixels; ``disp``: mu -> (dX (N, 3) object frame, ddX (N, 3, n_mu)); ``T_cw``: camera pose;
+    ``R_wo``: object orientation in the map; ``layout``: what the unknowns are (mu, alpha_z: a rotation about
+    the object's z axis, shift: a map-frame translation of the whole object, metres; no load_scale);
+    ``sigma``: (N,) pixel noise scale of each measurement. X, T_cw and K are read once (``q0``, K times the
+    undeformed points in the camera frame).
     """
 
-    X: np.ndarray
-    uv: np.ndarray
-    disp: callable
-    T_cw: np.ndarray
-    R_wo: np.ndarray
-    K: np.ndarray
-    sigma: np.ndarray | None = None
-    rigid_z: bool = False  # estimate alpha_z (after mu) as a rotation about the object's z axis
-    shift: bool = False  # 3 more parameters (last): a translation of the whole object in the map frame, metres
+    X: Vector
+    uv: Vector
+    disp: Displacement
+    T_cw: Vector
+    R_wo: Vector
+    K: Vector
+    layout: StateLayout
+    sigma: Vector | None = None
+    q0: Vector = field(init=False, repr=False)
 
-    def n_mu(self, n: int) -> int:
-        """How many of ``n`` parameters are the model's (mu): the rest are alpha_z and the shift."""
-        return n - (1 if self.rigid_z else 0) - (3 if self.shift else 0)
-
-    def __post_init__(self):
+    def __post_init__(self) -> None:
+        if self.layout.load_scale:
+            raise ValueError("the image residuals cannot estimate a load_scale: it is set by the contact")
         self.q0 = (np.asarray(self.X, dtype=np.float64) @ self.T_cw[:3, :3].T + self.T_cw[:3, 3]) @ self.K.T
 
 
 @dataclass
 class Result:
-    x: np.ndarray
-    cov: np.ndarray
+    x: Vector
+    cov: Vector
     rms_px: float
     inliers: int
     iterations: int
     converged: bool
-    residuals: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    residuals: Vector = field(default_factory=lambda: np.zeros(0))
     cost: float = float("nan")
     reason: str = ""
 
 
-def predict(p: Problem, x: np.ndarray, n_mu: int, with_jacobian: bool = True):
+def predict(p: Problem, x: Vector, with_jacobian: bool = True) -> tuple[Vector, Vector, Vector | None]:
     """Projected pixels (N, 2), the points' depths (N,) and, optionally, the Jacobian (N, 2, n) for x.
 
     Written with q = K X_c (K's last row is (0, 0, 1), so q_z = Z): u = q_xy / Z and, for any derivative
     dX_c = A dX of the displaced point, du = (K dX_c)_xy / Z - u (K dX_c)_z / Z — Eq. 4.12's image Jacobian
     J_Pi applied without forming it."""
-    mu = x[:n_mu]
-    alpha = x[n_mu] if p.rigid_z else 0.0
-    dX, ddX = p.disp(mu)
-    A = p.T_cw[:3, :3] @ p.R_wo @ G.rot_axis("z", alpha)  # object frame -> camera frame (rotation only)
+    state = p.layout.state(x)
+    dX, ddX = p.disp(state.mu)
+    A = p.T_cw[:3, :3] @ p.R_wo @ state.rotation()  # object frame -> camera frame (rotation only)
     KA = p.K @ A
     q = p.q0 + dX @ KA.T
-    if p.shift:
+    if p.layout.shift:
         KR = p.K @ p.T_cw[:3, :3]  # a map-frame translation of every point
-        q = q + KR @ x[-3:]
+        q = q + KR @ state.shift
     with np.errstate(divide="ignore", invalid="ignore"):
         iz = 1.0 / q[:, 2]
         uv = q[:, :2] * iz[:, None]
     if not with_jacobian:
         return uv, q[:, 2], None
-    if p.rigid_z:
+    if p.layout.alpha_z is not None:
         ez_dX = np.stack([-dX[:, 1], dX[:, 0], np.zeros(len(dX))], axis=1)  # [e_z]x dX (the SO(3) derivative)
         dXo = np.concatenate([ddX, ez_dX[:, :, None]], axis=2)
     else:
         dXo = ddX
     dq = np.matmul(KA, dXo)  # (N, 3, n)
-    if p.shift:
+    if p.layout.shift:
         dq = np.concatenate([dq, np.broadcast_to(KR, (len(dq), 3, 3))], axis=2)
     J = (dq[:, :2, :] - uv[:, :, None] * dq[:, 2:3, :]) * iz[:, None, None]
     return uv, q[:, 2], J
 
 
-def solve(p: Problem, x0: np.ndarray, lo: np.ndarray, hi: np.ndarray, huber_px: float = 2.0, max_iter: int = 20,
+def solve(p: Problem, x0: ArrayLike, lo: Vector, hi: Vector, huber_px: float = 2.0, max_iter: int = 20,
           lam0: float = 1e-3, tol: float = 1e-7, cost_tol: float = 1e-6) -> Result:
     """Levenberg-Marquardt with Huber IRLS weights and box bounds (Eq. 4.8) on image residuals."""
-    n_mu = p.n_mu(len(x0))
 
-    def model(x):
-        uv, z, J = predict(p, x, n_mu)
+    def model(x: Vector) -> tuple[Vector, Vector, NDArray[np.bool_]]:
+        uv, z, J = predict(p, x)
+        assert J is not None
         return uv, J, z > 0
 
     return solve_generic(model, p.uv, x0, lo, hi, p.sigma, huber_px, max_iter, lam0, tol, cost_tol)
 
 
-def solve_generic(model, obs: np.ndarray, x0, lo, hi, sigma=None, huber: float = 2.0, max_iter: int = 20,
-                  lam0: float = 1e-3, tol: float = 1e-7, cost_tol: float = 1e-6) -> Result:
+def solve_generic(model: MeasurementModel, obs: Vector, x0: ArrayLike, lo: Vector, hi: Vector,
+                  sigma: ArrayLike | None = None, huber: float = 2.0, max_iter: int = 20, lam0: float = 1e-3,
+                  tol: float = 1e-7, cost_tol: float = 1e-6) -> Result:
     """LM for any measurement model: ``model(x) -> (prediction (N, 2), Jacobian (N, 2, n), valid (N,))``;
     residual r = (obs - prediction) / sigma; Huber threshold ``huber`` in units of r.
 
@@ -146,7 +155,7 @@ def solve_generic(model, obs: np.ndarray, x0, lo, hi, sigma=None, huber: float =
 
     isig = 1.0 / sig
 
-    def evaluate(x):
+    def evaluate(x: Vector) -> tuple[Vector, Vector, Vector, NDArray[np.bool_], float]:
         pred, J, ok = model(x)
         r = (obs - pred) * isig[:, None]
         valid = ok & np.isfinite(r).all(axis=1)
@@ -206,6 +215,6 @@ def solve_generic(model, obs: np.ndarray, x0, lo, hi, sigma=None, huber: float =
     inl = valid & (rnorm <= 3 * huber)
     dof = max(2 * int(inl.sum()) - n, 1)
     s2 = float(np.sum(r[inl] ** 2)) / dof if inl.any() else float("nan")
-    cov = np.linalg.pinv(H) * s2 if np.all(np.isfinite(H)) else np.full((n, n), np.inf)
+    cov = np.asarray(np.linalg.pinv(H) * s2 if np.all(np.isfinite(H)) else np.full((n, n), np.inf), dtype=np.float64)
     rms = float(np.sqrt(np.mean(np.sum((r[inl] * sig[inl, None]) ** 2, axis=1)))) if inl.any() else float("nan")
     return Result(x, cov, rms, int(inl.sum()), it, converged, r, cost)

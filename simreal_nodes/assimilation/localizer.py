@@ -16,6 +16,7 @@ import numpy as np
 
 from simreal_nodes import geometry as G
 from simreal_nodes.camera import CameraModel
+from simreal_nodes.states import TrackingState
 
 if TYPE_CHECKING:
     from simreal_nodes.vision.markers import MarkerLocalizer
@@ -80,7 +81,7 @@ class MarkerLocalization(Localizer):
     def step(self, gray: np.ndarray, stamp_ns: int, depth: np.ndarray | None = None,
              right: np.ndarray | None = None) -> Localization:
         res = self.markers.locate(gray)
-        state = 2 if res.T_wc is not None else 3
+        state = TrackingState.OK if res.T_wc is not None else TrackingState.LOST
         reason = res.reason if res.T_wc is None else f"{len(res.ids)} markers, {res.rms_px:.2f} px"
         return Localization(res.T_wc, state, reason, features=4 * len(res.ids))
 
@@ -227,10 +228,12 @@ class LiveLocalizer:
         return saved
 
 
-STATE_NAMES = {0: "not started", 1: "initializing", 2: "ok", 3: "lost", 4: "relocalized"}
+STATE_NAMES = {TrackingState.NOT_STARTED: "not started", TrackingState.INITIALIZING: "initializing",
+               TrackingState.OK: "ok", TrackingState.LOST: "lost", TrackingState.RELOCALIZED: "relocalized"}
 
 
 def status_text(r: Localization) -> tuple[str, str]:
     """(diagnostic level ok / warn / error, text) of a frame's localization: lost is an error, starting a warning."""
-    level = "ok" if r.state in (2, 4) else ("warn" if r.state in (0, 1) else "error")
+    level = ("ok" if r.state in (TrackingState.OK, TrackingState.RELOCALIZED)
+             else "warn" if r.state in (TrackingState.NOT_STARTED, TrackingState.INITIALIZING) else "error")
     return level, f"{STATE_NAMES.get(r.state, r.state)}" + (f": {r.reason}" if r.reason else "")

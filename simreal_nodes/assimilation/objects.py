@@ -7,8 +7,8 @@ import numpy as np
 
 from simreal_nodes import geometry as G
 from simreal_nodes.assimilation.tracker import DeformableTracker, Estimate, deformable_feedback, tracker_config
-from simreal_nodes.rom.model import ReducedModel
 from simreal_nodes.camera import CameraModel
+from simreal_nodes.rom.model import ReducedModel
 
 
 class ObjectTrackers:

@@ -14,6 +14,7 @@ import numpy as np
 from simreal_nodes.assimilation.localizer import make_localizer
 from simreal_nodes.assimilation.objects import ObjectTrackers
 from simreal_nodes.assimilation.tracker import Estimate
+from simreal_nodes.camera import CameraModel
 from simreal_nodes.rom.model_file import load_model
 from simreal_nodes.vision.slam.config import SlamConfig
 

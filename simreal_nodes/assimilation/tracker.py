@@ -13,7 +13,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 from typing import NamedTuple
 
-import cv2
 import numpy as np
 from scipy.spatial import cKDTree
 
@@ -22,8 +21,8 @@ from simreal_nodes.assimilation import lm
 from simreal_nodes.assimilation.registration import link, ray_weights, surface_nodes
 from simreal_nodes.camera import CameraModel
 from simreal_nodes.rom.model import ReducedModel
-
-OK, LOW_CONFIDENCE, LOST, INITIALIZING = 0, 1, 2, 3  # ModelParameters.STATE_*
+from simreal_nodes.rom.state import ALPHA_Z, ModelState, StateLayout
+from simreal_nodes.states import EstimateState
 
 
 class Link(NamedTuple):
@@ -69,7 +68,7 @@ class Estimate:
     inliers: int = 0
     measurements: int = 0
     iterations: int = 0
-    state: int = INITIALIZING
+    state: EstimateState = EstimateState.INITIALIZING
     reason: str = ""
     deforming: bool = False
     solve_ms: float = 0.0
@@ -77,6 +76,9 @@ class Estimate:
 
 
 class DeformableTracker:
+    """One object's estimate. ``values``: the model state in ``layout`` order (mu, then alpha_z when the scene
+    estimates it), what :class:`Estimate` and the ModelParameters message carry."""
+
     def __init__(self, model: ReducedModel, T_map_obj: np.ndarray, params: dict, cam: CameraModel,
                  cfg: TrackerConfig | None = None):
         self.model = model
@@ -84,21 +86,17 @@ class DeformableTracker:
         self.cam = cam
         self.K = cam.K
         self.T_map_obj = np.asarray(T_map_obj, dtype=np.float64)
-        self.field = model.field("displacement")
         axes = model.axes
         for a in axes:
             if a.kind != "continuous":
                 raise ValueError(f"parameter '{a.name}' of model '{model.name}' is discrete: it cannot be tracked "
                                  "from images (it is set by collision)")
-        rigid = {r["name"]: r for r in model.rigid_parameters}
-        self.rigid_z = "alpha_z" in params and "alpha_z" in rigid
-        self.names = [a.name for a in axes] + (["alpha_z"] if self.rigid_z else [])
-        self.units = [a.unit for a in axes] + (["rad"] if self.rigid_z else [])
-        lo = [a.range[0] for a in axes] + ([rigid["alpha_z"]["range"][0]] if self.rigid_z else [])
-        hi = [a.range[1] for a in axes] + ([rigid["alpha_z"]["range"][1]] if self.rigid_z else [])
-        self.lo, self.hi = np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64)
+        self.rigid_z = ALPHA_Z in params and any(r["name"] == ALPHA_Z for r in model.rigid_parameters)
+        self.layout = StateLayout.of(model, alpha_z=self.rigid_z)
+        self.names, self.units = self.layout.names, self.layout.units
+        self.lo, self.hi = self.layout.bounds()
         n = len(self.names)
-        self.x = 0.5 * (self.lo + self.hi)
+        self.values = 0.5 * (self.lo + self.hi)
         self.shift = np.zeros(3)  # object translation (map frame) fitted with cfg.object_shift_m
         self.mode = ["tracked"] * n
         for i, name in enumerate(self.names):
@@ -108,13 +106,12 @@ class DeformableTracker:
             if self.mode[i] == "fixed":
                 init = cfgp.get("value")
             if init is not None:
-                self.x[i] = float(np.clip(init, self.lo[i], self.hi[i]))
-            elif self.names[i] == "alpha_z":
-                self.x[i] = 0.0
+                self.values[i] = float(np.clip(init, self.lo[i], self.hi[i]))
+            elif self.names[i] == ALPHA_Z:
+                self.values[i] = 0.0
         self.frozen = np.array([m == "fixed" for m in self.mode])
         self._const_samples: list[np.ndarray] = []
         self._was_deforming = False  # constants move only once deformation makes them observable
-        self.n_mu = len(axes)
         self.cand_nodes = surface_nodes(model)
         # map point id -> (nodes (3,), weights (3,), X_map (3,) rest position measured, P_map (3,) as mapped,
         #                  mu it was mapped in or None for the rest shape)
@@ -137,18 +134,15 @@ class DeformableTracker:
     def R_wo(self) -> np.ndarray:
         return self.T_map_obj[:3, :3]
 
-    def _alpha(self) -> float:
-        return float(self.x[self.n_mu]) if self.rigid_z else 0.0
+    @property
+    def model_state(self) -> ModelState:
+        """The current estimate as a model state (its mu is a view of ``values``)."""
+        return self.layout.state(self.values)
 
-    def _disp_fn(self, nodes: np.ndarray, weights: np.ndarray):
+    def _disp_fn(self, nodes: np.ndarray, weights: np.ndarray) -> lm.Displacement:
         """mu -> (dX (N, 3), d dX / d mu (N, 3, n_mu)) in the object frame, through the linked nodes (the link
         weights folded into the modes once: one small product per evaluation)."""
-        view = self.field.view(nodes, self.cfg.n_modes or None, weights=weights)
-
-        def f(mu):
-            return view.evaluate_with_jacobian(mu, checked=True)  # LM keeps mu inside the bounds
-
-        return f
+        return self.model.deformation_view(nodes, self.cfg.n_modes or None, weights).with_jacobian
 
     def viewing_rays(self, T_wc: np.ndarray, uv: np.ndarray) -> np.ndarray:
         """(N, 2, 3) map-frame viewing rays (camera centre, unit direction) of raw pixels ``uv`` (N, 2)."""
@@ -171,14 +165,15 @@ class DeformableTracker:
             return
         P = P_map[new]
         T_om = G.inv(self.T_map_obj)
-        X = G.transform(T_om, P) @ G.rot_axis("z", self._alpha())  # R_z(-a) applied: row vectors
+        Rz = self.model_state.rotation()
+        X = G.transform(T_om, P) @ Rz  # R_z(-a) applied: row vectors
         V = self.model.points
         if isinstance(mu, str):
-            mu = self.x[: self.n_mu].copy() if (self._was_deforming and self.cfg.snap_to_surface) else None
+            mu = self.model_state.mu.copy() if (self._was_deforming and self.cfg.snap_to_surface) else None
         if mu is not None:
             # a point first mapped while the object is deformed sits on the deformed surface: link it there
             # and carry its weights back to the rest configuration (the inverse of Eq. 4.10's interpolation)
-            u = self.field.view(self.cand_nodes, self.cfg.n_modes or None).evaluate_with_jacobian(mu, checked=True)[0]
+            u = self.model.deformation_view(self.cand_nodes, self.cfg.n_modes or None).with_jacobian(mu)[0]
             V = V.copy()
             V[self.cand_nodes] += u
         L = link(X, V, self.cand_nodes, self.cfg.link_dist, triangles=self.model.surface)
@@ -186,13 +181,12 @@ class DeformableTracker:
         if self.cfg.snap_to_surface and self.cfg.anchor == "ray" and R is not None:
             # the material point a track follows is the one under its pixel: where that pixel's viewing ray
             # crosses the link's triangle (a depth error along the ray then moves nothing)
-            Rz = G.rot_axis("z", self._alpha())
             O = G.transform(T_om, R[:, 0]) @ Rz
             D = R[:, 1] @ T_om[:3, :3].T @ Rz
             L.weights = ray_weights(O, D, V[L.nodes], L.weights)
         if self.cfg.snap_to_surface:
             foot = np.einsum("nk,nkd->nd", L.weights, self.model.points[L.nodes])  # rest configuration
-            X_rest = G.transform(self.T_map_obj, foot @ G.rot_axis("z", self._alpha()).T)
+            X_rest = G.transform(self.T_map_obj, foot @ Rz.T)
         else:
             X_rest = P
         for k, i in enumerate(new):
@@ -234,8 +228,9 @@ class DeformableTracker:
             return ids, X
         nodes = np.array([self.links[int(i)].nodes for i in ids])
         w = np.array([self.links[int(i)].weights for i in ids])
-        dX = self._disp_fn(nodes, w)(self.x[: self.n_mu])[0]
-        return ids, X + dX @ (self.R_wo @ G.rot_axis("z", self._alpha())).T
+        state = self.model_state
+        dX = self._disp_fn(nodes, w)(state.mu)[0]
+        return ids, X + dX @ (self.R_wo @ state.rotation()).T
 
     # -- measurements ------------------------------------------------------------------------------------------
     def _map_point_measurements(self, ids, P_map, uv):
@@ -259,8 +254,9 @@ class DeformableTracker:
         if len(found) == 0:
             return None, 0
         # predicted dot pixels with the current estimate
-        dX, _ = self._disp_fn(nodes, w)(self.x[: self.n_mu])
-        Xw = X + dX @ (self.R_wo @ G.rot_axis("z", self._alpha())).T
+        state = self.model_state
+        dX, _ = self._disp_fn(nodes, w)(state.mu)
+        Xw = X + dX @ (self.R_wo @ state.rotation()).T
         pred, z = _project(T_cw, Xw, self.K)
         und = self.cam.undistort_points(found)
         tree = cKDTree(und)
@@ -276,14 +272,15 @@ class DeformableTracker:
     def update(self, T_wc: np.ndarray | None, ids=None, P_map=None, uv=None, image_bgr=None) -> Estimate:
         import time
 
-        est = Estimate(self.names, self.units, self.x.copy(), self.frozen.copy(), np.full((len(self.x),) * 2, np.nan))
+        est = Estimate(self.names, self.units, self.values.copy(), self.frozen.copy(),
+                       np.full((len(self.values),) * 2, np.nan))
         if T_wc is None:
-            est.state, est.reason = LOST, "no camera pose this frame (localization lost)"
+            est.state, est.reason = EstimateState.LOST, "no camera pose this frame (localization lost)"
             return est
         T_cw = G.inv(T_wc)
         if self.cfg.measurements == "map_points":
             if ids is None or len(ids) == 0:
-                est.state, est.reason = LOST, "no measurements: no map points observed on the object"
+                est.state, est.reason = EstimateState.LOST, "no measurements: no map points observed on the object"
                 return est
             ids = np.asarray(ids)
             P_map = np.asarray(P_map, dtype=np.float64).reshape(-1, 3)
@@ -295,12 +292,12 @@ class DeformableTracker:
             found = len(ids)
         else:
             if image_bgr is None:
-                est.state, est.reason = LOST, "measurements 'dots' need the image"
+                est.state, est.reason = EstimateState.LOST, "measurements 'dots' need the image"
                 return est
             meas, found = self._dot_measurements(image_bgr, T_cw)
         if meas is None or len(meas[0]) < self.cfg.min_measurements:
             n = 0 if meas is None else len(meas[0])
-            est.state = LOST
+            est.state = EstimateState.LOST
             est.reason = f"too few measurements on the object ({n}, need {self.cfg.min_measurements}; {found} candidates seen)"
             est.measurements = n
             return est
@@ -312,24 +309,24 @@ class DeformableTracker:
             # an undeformed object says nothing about its constants (alpha_z of an axisymmetric boot, a stiffness):
             # hold them until a deformation is seen, or they drift along the flat directions of the cost
             free &= np.array([m != "constant" for m in self.mode])
-        lo = np.where(free, self.lo, self.x)
-        hi = np.where(free, self.hi, self.x)
+        lo = np.where(free, self.lo, self.values)
+        hi = np.where(free, self.hi, self.values)
         t0 = time.perf_counter()
         if self.cfg.measurements == "homography":
             res, rest_rms = self._solve_planar(X, uvm, disp, T_cw, lo, hi)
         else:
             sh = self.cfg.object_shift_m
-            p = lm.Problem(X, uvm, disp, T_cw, self.R_wo, self.K, rigid_z=self.rigid_z, shift=sh > 0)
-            x0, lo_p, hi_p = self.x, lo, hi
+            p = lm.Problem(X, uvm, disp, T_cw, self.R_wo, self.K, self.layout.with_shift() if sh > 0 else self.layout)
+            x0, lo_p, hi_p = self.values, lo, hi
             if sh > 0:
-                x0, lo_p, hi_p = np.r_[self.x, self.shift], np.r_[lo, -sh, -sh, -sh], np.r_[hi, sh, sh, sh]
+                x0, lo_p, hi_p = np.r_[self.values, self.shift], np.r_[lo, -sh, -sh, -sh], np.r_[hi, sh, sh, sh]
             res = lm.solve(p, x0, lo_p, hi_p, self.cfg.huber_px, self.cfg.max_iterations)
             self._frames += 1
             if self.cfg.global_samples and self._fits_badly(res, len(X)):
                 res = self._global_restart(p, res, lo_p, hi_p)
                 est.debug["restarted"] = True
             if sh > 0:  # the shift is a nuisance: kept for the next frame, reported in debug, marginalised out
-                n = len(self.x)
+                n = len(self.values)
                 self.shift = res.x[n:].copy()
                 est.debug["object_shift_m"] = self.shift.copy()
                 res.x, res.cov = res.x[:n], res.cov[:n, :n]
@@ -344,7 +341,7 @@ class DeformableTracker:
         if len(meas) > 4 and res.inliers >= 0.6 * len(X):  # a fit the majority agrees with judges the rest
             self.outlier_ids = meas[4][np.linalg.norm(res.residuals, axis=1) > 2 * self.cfg.huber_px]
         if res.inliers < self.cfg.min_measurements or not np.isfinite(res.rms_px):
-            est.state = LOST
+            est.state = EstimateState.LOST
             est.reason = f"only {res.inliers} of {len(X)} measurements agree with the model (all outliers?)"
             return est
         gain = rest_rms - res.rms_px
@@ -354,19 +351,19 @@ class DeformableTracker:
             # barely anything to see (load absent, or near the clamp where the images hardly see its effect):
             # report the bounded estimate with the large variance the normal equations give, flagged; the
             # constants are not estimated from such frames
-            self.x = res.x.copy()
-            est.state = LOW_CONFIDENCE
+            self.values = res.x.copy()
+            est.state = EstimateState.LOW_CONFIDENCE
             est.reason = (f"no measurable deformation (residual {res.rms_px:.2f} px vs {rest_rms:.2f} px undeformed): "
                           "the load may be absent or where the images cannot see its effect")
             return est
-        self.x = res.x.copy()
+        self.values = res.x.copy()
         self.deforming_frames += 1
-        est.state = OK
+        est.state = EstimateState.OK
         std = np.sqrt(np.clip(np.diag(est.cov), 0, None))
         weak = [(nm, s, h - l) for nm, s, l, h, fr in zip(self.names, std, self.lo, self.hi, self.frozen)
                 if not fr and s > 0.05 * (h - l)]
         if weak:
-            est.state = LOW_CONFIDENCE
+            est.state = EstimateState.LOW_CONFIDENCE
             est.reason = "; ".join(f"{nm} barely observable (std {s:.3g}, {100 * s / r:.0f} % of its range)" for nm, s, r in weak)
         self._update_constants(est)
         est.frozen = self.frozen.copy()
@@ -387,19 +384,18 @@ class DeformableTracker:
         parameters (about ``global_samples`` points; the others at the current estimate) and run LM again
         from the best sample if it beats the warm start's result; keep the lower cost."""
         free = np.flatnonzero(hi > lo)
-        free = free[free < len(self.x)]  # not the object shift: it stays at the warm start's value
+        free = free[free < len(self.values)]  # not the object shift: it stays at the warm start's value
         if len(free) == 0:
             return res
         per_axis = max(2, int(round(self.cfg.global_samples ** (1.0 / len(free)))))
         axes = [np.linspace(lo[i], hi[i], per_axis) for i in free]
         grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, len(free))
-        n_mu = p.n_mu(len(res.x))
         k = self.cfg.huber_px
         best, best_cost = None, res.cost
         for g in grid:
             x = res.x.copy()
             x[free] = g
-            uv, z, _ = lm.predict(p, x, n_mu, with_jacobian=False)
+            uv, z, _ = lm.predict(p, x, with_jacobian=False)
             rn = np.linalg.norm(p.uv - uv, axis=1)
             rn = rn[np.isfinite(rn) & (z > 0)]
             c = float(np.sum(np.where(rn <= k, rn * rn, 2 * k * rn - k * k)))
@@ -415,7 +411,7 @@ class DeformableTracker:
         sh = self.cfg.object_shift_m
         if sh > 0:
             still = lambda mu: (np.zeros_like(X), np.zeros((len(X), 3, 0)))  # noqa: E731
-            p0 = lm.Problem(X, uvm, still, T_cw, self.R_wo, self.K, shift=True)
+            p0 = lm.Problem(X, uvm, still, T_cw, self.R_wo, self.K, StateLayout((), shift=True))
             r0 = lm.solve(p0, self.shift, np.full(3, -sh), np.full(3, sh), self.cfg.huber_px, 10)
             X = X + r0.x
         pred, z = _project(T_cw, X, self.K)
@@ -429,22 +425,23 @@ class DeformableTracker:
         range: a barely bent boot says little about how it is turned) and frozen at the median of
         ``constant_frames`` such frames."""
         const = np.array([m == "constant" for m in self.mode]) & ~self.frozen
-        if not const.any() or est.state == LOST or not est.deforming:
+        if not const.any() or est.state == EstimateState.LOST or not est.deforming:
             return
         std = np.sqrt(np.clip(np.diag(est.cov), 0, None))
         if not np.all(std[const] < self.cfg.constant_std_frac * (self.hi - self.lo)[const]):
             return
-        self._const_samples.append(self.x.copy())
-        if self.rigid_z and const[self.n_mu]:
+        self._const_samples.append(self.values.copy())
+        if self.rigid_z and const[self.layout.alpha_index]:
             # the links were made with an earlier alpha: re-link the map points once it moved noticeably
-            if self._alpha_linked is None or abs(self._alpha() - self._alpha_linked) > np.deg2rad(0.25):
+            alpha = self.model_state.alpha_z
+            if self._alpha_linked is None or abs(alpha - self._alpha_linked) > np.deg2rad(0.25):
                 self.relink()
-                self._alpha_linked = self._alpha()
+                self._alpha_linked = self.model_state.alpha_z
         if len(self._const_samples) >= self.cfg.constant_frames:
             vals = np.median(np.array(self._const_samples), axis=0)
-            self.x[const] = vals[const]
+            self.values[const] = vals[const]
             self.frozen |= const
-            if self.rigid_z and const[self.n_mu]:
+            if self.rigid_z and const[self.layout.alpha_index]:
                 self.relink()
 
     def _solve_planar(self, X, uvm, disp, T_cw, lo, hi):
@@ -458,7 +455,7 @@ class DeformableTracker:
         Xo = G.transform(G.inv(self.T_map_obj), X)
         depth = np.median((Xo @ T_co[:3, :3].T + T_co[:3, 3])[:, 2])
         px = depth / self.K[0, 0]  # metres per pixel on the face
-        n_mu = self.n_mu
+        n_mu = self.layout.n_mu
 
         def model(x):
             dX, ddX = disp(x[:n_mu])
@@ -468,7 +465,8 @@ class DeformableTracker:
                 J = np.concatenate([J, np.zeros((len(J), 2, 1))], axis=2)
             return pred, J, np.ones(len(pred), bool)
 
-        res = lm.solve_generic(model, obs, self.x, lo, hi, np.full(len(obs), px), self.cfg.huber_px, self.cfg.max_iterations)
+        res = lm.solve_generic(model, obs, self.values, lo, hi, np.full(len(obs), px), self.cfg.huber_px,
+                               self.cfg.max_iterations)
         rest = np.linalg.norm(obs - np.c_[Xo[:, 0], Xo[:, 2]], axis=1) / px
         return res, float(np.sqrt(np.mean(np.minimum(rest, 3 * self.cfg.huber_px) ** 2)))
 

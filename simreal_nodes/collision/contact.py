@@ -23,8 +23,8 @@ from scipy.spatial import cKDTree
 
 from simreal_nodes import geometry as G
 from simreal_nodes.rom.model import ReducedModel
-
-FREE, CONTACT, RELEASING, NO_DATA = 0, 1, 2, 3
+from simreal_nodes.rom.state import LoadPointStates, ModelState
+from simreal_nodes.states import ContactPhase
 
 
 @dataclass
@@ -34,41 +34,34 @@ class ContactState:
     node: int = -1  # model node of that load point
     min_distance: float = float("inf")
     nearest_load_point: int = -1  # where the nearest real point is now (may differ while a contact is held)
-    state: int = FREE
+    state: ContactPhase = ContactPhase.FREE
     points_used: int = 0
     contact_point: tuple = (np.nan, np.nan, np.nan)
     reason: str = ""
 
     @property
     def in_contact(self) -> bool:
-        return self.state == CONTACT
+        return self.state == ContactPhase.CONTACT
 
 
 class ContactTracker:
     """Alg. 5.1 for one virtual object.
 
-    ``model``: the object's reduced model; its load points are the contact nodes. Parameters are
-    (load_point, pseudo_time) for probe models (NI-PGD over contact point x pseudo-time), and
-    (s_x[, s_y], load_scale) for linear PGD beams, where the pseudo-time scales the precomputed load.
-    ``T_world_object``: where the virtual object sits.
+    ``model``: the object's reduced model; its load points are the contact nodes. The contact is a model
+    state (:class:`~simreal_nodes.rom.state.LoadPointStates`): parameters (load_point, pseudo_time) for probe
+    models (NI-PGD over contact point x pseudo-time), and (s_x[, s_y], load_scale) for linear PGD beams, where
+    the pseudo-time scales the precomputed load. ``T_world_object``: where the virtual object sits.
     """
 
     def __init__(self, model: ReducedModel, T_world_object: np.ndarray, threshold: float = 0.01, step: float = 0.05,
                  tau_min: float = 0.0, tau_max: float = 1.0, n_modes: int | None = None, min_fraction: float = 0.02):
-        if model.load_points is None or len(model.load_points) == 0:
-            raise ValueError(f"model '{model.name}' has no load points: it cannot take contacts")
+        self.load_states = LoadPointStates(model)
         self.model = model
         self.T = np.asarray(T_world_object, dtype=np.float64)
         self.threshold, self.step, self.tau_min, self.tau_max = threshold, step, tau_min, tau_max
         self.state = ContactState()
         self.lp_nodes = np.asarray(model.load_points, dtype=np.int64)
-        self.field = model.field("displacement")
-        self.view = self.field.view(self.lp_nodes, n_modes)
-        names = [a.name for a in model.axes]
-        self.kind = "probe" if "pseudo_time" in names else "linear"
-        if self.kind == "linear" and model.material.get("law") != "linear_elastic":
-            raise ValueError(f"model '{model.name}' has no pseudo_time axis and is not linear: cannot scale its load")
-        self._lp_param = self._load_point_parameters()
+        self.view = model.deformation_view(self.lp_nodes, n_modes)
         self.active = self._active_load_points(min_fraction)
 
     def _active_load_points(self, min_fraction: float) -> np.ndarray:
@@ -76,53 +69,36 @@ class ContactTracker:
         real geometry too) the largest precomputed displacement is ~0, and they are left out of the search."""
         full = np.zeros(len(self.lp_nodes))
         for i in range(len(self.lp_nodes)):
-            mu = np.concatenate([self._lp_param[i], [self.tau_max]])
-            u = self.field.evaluate(mu if self.kind == "probe" else mu[:-1], nodes=[self.lp_nodes[i]])[0]
-            full[i] = np.linalg.norm(u) * (1.0 if self.kind == "probe" else self.tau_max)
+            u = self.model.deformation(self.load_states.state(i, self.tau_max), nodes=[self.lp_nodes[i]])[0]
+            full[i] = np.linalg.norm(u)
         act = full >= min_fraction * full.max() if full.max() > 0 else np.ones(len(full), bool)
         return np.nonzero(act)[0]
 
-    # -- parameters ----------------------------------------------------------------------------------
-    def _load_point_parameters(self) -> np.ndarray:
-        """Model parameters (without pseudo-time) that put the load at each load point."""
-        P = self.model.points[self.lp_nodes]
-        names = [a.name for a in self.model.axes]
-        if self.kind == "probe":
-            return np.arange(len(self.lp_nodes), dtype=np.float64)[:, None]
-        cols = []
-        for n in names:
-            cols.append(P[:, {"s": 0, "s_x": 0, "s_y": 1}[n]])
-        return np.stack(cols, axis=1)
+    # -- the contact as a model state -----------------------------------------------------------------------
+    def model_state(self, state: ContactState | None = None) -> ModelState:
+        """The model state of the current contact (load point 0 when there is none)."""
+        st = state or self.state
+        return self.load_states.state(max(st.load_point, 0), st.pseudo_time)
 
     def parameter_names(self) -> list[str]:
-        names = [a.name for a in self.model.axes]
-        return names if self.kind == "probe" else names + ["load_scale"]
+        return self.load_states.layout.names
 
     def parameters(self, state: ContactState | None = None) -> np.ndarray:
-        """mu for the current contact: (load_point, pseudo_time) or (s..., load_scale)."""
-        st = state or self.state
-        lp = max(st.load_point, 0)
-        return np.concatenate([self._lp_param[lp], [st.pseudo_time]])
+        """The contact's model state as a vector: (load_point, pseudo_time) or (s..., load_scale)."""
+        return self.load_states.layout.vector(self.model_state(state))
 
     def displacement(self, nodes=None, state: ContactState | None = None, n_modes=None) -> np.ndarray:
         st = state or self.state
         if st.pseudo_time <= 0 or st.load_point < 0:
             n = self.model.n_nodes if nodes is None else len(nodes)
             return np.zeros((n, 3))
-        mu = self.parameters(st)
-        if self.kind == "probe":
-            return self.field.evaluate(mu, nodes, n_modes)
-        return mu[-1] * self.field.evaluate(mu[:-1], nodes, n_modes)
+        return self.model.deformation(self.model_state(st), nodes, n_modes)
 
     def contact_nodes_world(self) -> np.ndarray:
         """Load points at their current deformed positions, world frame."""
         P = self.model.points[self.lp_nodes]
         if self.state.pseudo_time > 0 and self.state.load_point >= 0:
-            mu = self.parameters()
-            if self.kind == "probe":
-                P = P + self.view.evaluate(mu)
-            else:
-                P = P + mu[-1] * self.field.evaluate(mu[:-1], self.lp_nodes)
+            P = P + self.view(self.model_state())
         return G.transform(self.T, P)
 
     # -- Alg. 5.1 ------------------------------------------------------------------------------------------
@@ -155,16 +131,16 @@ class ContactTracker:
             if st.pseudo_time <= 0 or st.load_point < 0:
                 st.load_point = nearest  # a new contact starts where the real point is
             st.pseudo_time = min(self.tau_max, st.pseudo_time + self.step)
-            st.state, st.reason = CONTACT, ""
+            st.state, st.reason = ContactPhase.CONTACT, ""
         elif d_min < self.threshold:
-            st.state, st.reason = CONTACT, "largest precomputed deformation reached"
+            st.state, st.reason = ContactPhase.CONTACT, "largest precomputed deformation reached"
         elif st.pseudo_time > self.tau_min + 1e-12:
             st.pseudo_time = max(self.tau_min, st.pseudo_time - self.step)
-            st.state = RELEASING
+            st.state = ContactPhase.RELEASING
             st.reason = "" if pts is not None and len(pts) else "no valid points: relaxing"
         else:
-            st.state = NO_DATA if pts is None or len(pts) == 0 else FREE
-            st.reason = "no valid points" if st.state == NO_DATA else ""
+            st.state = ContactPhase.NO_DATA if pts is None or len(pts) == 0 else ContactPhase.FREE
+            st.reason = "no valid points" if st.state == ContactPhase.NO_DATA else ""
         if st.pseudo_time <= 1e-12:
             st.pseudo_time = 0.0
             st.load_point = -1

@@ -106,11 +106,11 @@ class Material:
                              "which a displacement-only formulation cannot represent")
 
     @property
-    def lam(self) -> float:
+    def lame_lambda(self) -> float:
         return lame(self.E, self.nu)[0]
 
     @property
-    def mu(self) -> float:
+    def lame_mu(self) -> float:
         return lame(self.E, self.nu)[1]
 
     @property
@@ -154,15 +154,15 @@ class LinearElastic(Material):
 
     def P(self, F):
         eps = sym(F - eye_like(F))
-        return self.lam * tr(eps) * eye_like(F) + 2 * self.mu * eps
+        return self.lame_lambda * tr(eps) * eye_like(F) + 2 * self.lame_mu * eps
 
     def dP(self, F, H):
         e = sym(H)
-        return self.lam * tr(e) * eye_like(H) + 2 * self.mu * e
+        return self.lame_lambda * tr(e) * eye_like(H) + 2 * self.lame_mu * e
 
     def energy(self, F):
         eps = sym(F - eye_like(F))
-        return 0.5 * self.lam * tr(eps) ** 2 + self.mu * ddot(eps, eps)
+        return 0.5 * self.lame_lambda * tr(eps) ** 2 + self.lame_mu * ddot(eps, eps)
 
     def cauchy(self, F):
         return self.P(F)  # small strain: no distinction
@@ -173,19 +173,19 @@ class SaintVenantKirchhoff(Material):
 
     def _S(self, F):
         E = 0.5 * (mul(T(F), F) - eye_like(F))
-        return self.lam * tr(E) * eye_like(F) + 2 * self.mu * E
+        return self.lame_lambda * tr(E) * eye_like(F) + 2 * self.lame_mu * E
 
     def P(self, F):
         return mul(F, self._S(F))
 
     def dP(self, F, H):
         dE = sym(mul(T(F), H))
-        dS = self.lam * tr(dE) * eye_like(F) + 2 * self.mu * dE
+        dS = self.lame_lambda * tr(dE) * eye_like(F) + 2 * self.lame_mu * dE
         return mul(H, self._S(F)) + mul(F, dS)
 
     def energy(self, F):
         E = 0.5 * (mul(T(F), F) - eye_like(F))
-        return 0.5 * self.lam * tr(E) ** 2 + self.mu * ddot(E, E)
+        return 0.5 * self.lame_lambda * tr(E) ** 2 + self.lame_mu * ddot(E, E)
 
 
 class NeoHookean(Material):
@@ -194,18 +194,19 @@ class NeoHookean(Material):
     def P(self, F):
         Finv, J = inv3(F)
         FiT = T(Finv)
-        return self.mu * (F - FiT) + self.lam * np.log(J) * FiT
+        return self.lame_mu * (F - FiT) + self.lame_lambda * np.log(J) * FiT
 
     def dP(self, F, H):
         Finv, J = inv3(F)
         FiT = T(Finv)
         lnJ = np.log(J)
-        return (self.mu * H + (self.mu - self.lam * lnJ) * mul(mul(FiT, T(H)), FiT)
-                + self.lam * tr(mul(Finv, H)) * FiT)
+        return (self.lame_mu * H + (self.lame_mu - self.lame_lambda * lnJ) * mul(mul(FiT, T(H)), FiT)
+                + self.lame_lambda * tr(mul(Finv, H)) * FiT)
 
     def energy(self, F):
         J = det3(F)
-        return 0.5 * self.mu * (ddot(F, F) - 3) - self.mu * np.log(J) + 0.5 * self.lam * np.log(J) ** 2
+        lnJ = np.log(J)
+        return 0.5 * self.lame_mu * (ddot(F, F) - 3) - self.lame_mu * lnJ + 0.5 * self.lame_lambda * lnJ ** 2
 
 
 class NeoHookeanDecoupled(Material):
@@ -218,7 +219,7 @@ class NeoHookeanDecoupled(Material):
         FiT = T(Finv)
         I1 = ddot(F, F)
         Jm23 = J ** (-2.0 / 3.0)
-        return 0.5 * self.kappa * (J * J - 1) * FiT + self.mu * Jm23 * (F - I1 / 3.0 * FiT)
+        return 0.5 * self.kappa * (J * J - 1) * FiT + self.lame_mu * Jm23 * (F - I1 / 3.0 * FiT)
 
     def dP(self, F, H):
         Finv, J = inv3(F)
@@ -229,13 +230,13 @@ class NeoHookeanDecoupled(Material):
         dFiT = -mul(mul(FiT, T(H)), FiT)
         dvol = self.kappa * J * J * trFiH * FiT + 0.5 * self.kappa * (J * J - 1) * dFiT
         dI1 = 2.0 * ddot(F, H)
-        diso = self.mu * (-2.0 / 3.0 * Jm23 * trFiH * (F - I1 / 3.0 * FiT)
+        diso = self.lame_mu * (-2.0 / 3.0 * Jm23 * trFiH * (F - I1 / 3.0 * FiT)
                           + Jm23 * (H - dI1 / 3.0 * FiT - I1 / 3.0 * dFiT))
         return dvol + diso
 
     def energy(self, F):
         J = det3(F)
-        return 0.25 * self.kappa * (J * J - 1 - 2 * np.log(J)) + 0.5 * self.mu * (J ** (-2 / 3) * ddot(F, F) - 3)
+        return 0.25 * self.kappa * (J * J - 1 - 2 * np.log(J)) + 0.5 * self.lame_mu * (J ** (-2 / 3) * ddot(F, F) - 3)
 
 
 LAWS = {c.law: c for c in (LinearElastic, SaintVenantKirchhoff, NeoHookean, NeoHookeanDecoupled)}

@@ -3,7 +3,8 @@
 Per object and frame:
 
     u_m(x)   = sum_{i<m} c_i(mu) F_i(x)            (surface nodes only, m chosen live, below)
-    x_def    = X + k R_z(alpha) u_m(X)               (k: the scene's drawing magnification)
+    x_def    = X + k s R_z(alpha) u_m(X)             (k: the scene's drawing magnification; the model state's
+                                                      alpha_z and load_scale s, ReducedModel.deformation)
     colour   = colormap(|u| or von Mises(sigma(x, mu)))   with a fixed colour range per object
 
 The number of modes m is the smallest whose truncation error, *as seen in this view*, stays below
@@ -26,6 +27,7 @@ import numpy as np
 from simreal_nodes import geometry as G
 from simreal_nodes.camera import CameraModel
 from simreal_nodes.rom.model import ReducedModel
+from simreal_nodes.rom.state import ModelState
 
 COLORMAPS = {"turbo": cv2.COLORMAP_TURBO, "viridis": cv2.COLORMAP_VIRIDIS, "jet": cv2.COLORMAP_JET,
              "inferno": cv2.COLORMAP_INFERNO}
@@ -132,16 +134,13 @@ class ObjectOverlay:
         self.nodes, inv = np.unique(tri.ravel(), return_inverse=True)
         self.triangles = inv.reshape(-1, 3)
         self.X = model.points[self.nodes]
-        self.u_field = model.field("displacement")
-        self.M = self.u_field.n_modes
+        u_field = model.field("displacement")
+        self.M = u_field.n_modes
         if self.fixed_modes > self.M:
             raise ValueError(f"overlay asks for {self.fixed_modes} modes; model '{model.name}' has {self.M}")
-        self.S_u = np.ascontiguousarray(self.u_field.space[:, self.nodes], dtype=np.float64)  # (M, n, 3)
-        self.s_field = None
-        if field == "von_mises":
-            self.s_field = model.field("stress")
-            self.S_s = np.ascontiguousarray(self.s_field.space[:, self.nodes], dtype=np.float64)
-        self.unit = "Pa" if field == "von_mises" else self.u_field.unit or "m"
+        self.u_view = model.deformation_view(self.nodes)  # all M modes; each frame evaluates the first m
+        self.s_view = model.field("stress").view(self.nodes) if field == "von_mises" else None
+        self.unit = "Pa" if field == "von_mises" else u_field.unit or "m"
         self.label = "von Mises" if field == "von_mises" else "|u|"
         self.axis_names = [a.name for a in model.axes]
         self.value_range = tuple(value_range) if value_range is not None else self._model_range()
@@ -156,47 +155,35 @@ class ObjectOverlay:
         mus = np.stack(np.meshgrid(*grids, indexing="ij"), -1).reshape(-1, len(grids))
         vmax = 0.0
         for mu in mus:
-            vmax = max(vmax, float(np.nanmax(self.values(mu, self.M)[1])))
+            vmax = max(vmax, float(np.nanmax(self.values(ModelState(mu), self.M)[1])))
         return (0.0, vmax if vmax > 0 else 1.0)
 
-    def mu_from(self, names, values) -> tuple[np.ndarray, float]:
-        """Model parameters (clipped to range) and alpha_z from a (names, values) estimate."""
-        d = dict(zip(names, values))
-        mu = []
-        for a in self.model.axes:
-            v = float(d.get(a.name, a.values[0]))
-            lo, hi = a.range
-            mu.append(min(max(v if np.isfinite(v) else lo, lo), hi))
-        alpha = float(d.get("alpha_z", 0.0))
-        scale = float(d.get("load_scale", 1.0))  # linear models loaded by contact: the pseudo-time scales the load
-        self._scale = scale if np.isfinite(scale) else 0.0
-        return np.asarray(mu), (alpha if np.isfinite(alpha) else 0.0)
-
-    def values(self, mu, m: int) -> tuple[np.ndarray, np.ndarray]:
-        """(u (n, 3), colour values (n,)) with m modes."""
-        c = self.u_field.coefficients(mu, m)
-        u = np.tensordot(c, self.S_u[:m], axes=(0, 0))
-        if self.field_name == "von_mises":
-            ms = min(m, self.s_field.n_modes)
-            cs = self.s_field.coefficients(mu, ms)
-            val = von_mises(np.tensordot(cs, self.S_s[:ms], axes=(0, 0)))
+    def values(self, state: ModelState, m: int) -> tuple[np.ndarray, np.ndarray]:
+        """(deformation u (n, 3), colour values (n,)) of a model state with m modes; stress scales with the
+        load like the displacement (the linear models that have a load_scale)."""
+        u = self.u_view(state, m)
+        if self.s_view is not None:
+            s = self.s_view.evaluate(state.mu, min(m, self.s_view.n_modes))
+            val = abs(state.load_scale) * von_mises(s)
         elif self.field_name == "displacement":
             val = np.linalg.norm(u, axis=1)
         else:
             val = np.zeros(len(u))
         return u, val
 
-    def choose_modes(self, mu, T_cam_obj: np.ndarray, cam: CameraModel) -> tuple[int, float]:
+    def choose_modes(self, state: ModelState, T_cam_obj: np.ndarray, cam: CameraModel) -> tuple[int, float]:
         """Smallest m whose on-screen truncation error over visible nodes is <= max_error_px."""
         if self.fixed_modes:
             return self.fixed_modes, float("nan")
-        c = self.u_field.coefficients(mu, self.M)
+        c = self.u_view.coefficients(state.mu)
         Xc = G.transform(T_cam_obj, self.X)
         vis = Xc[:, 2] > 1e-3
         if not np.any(vis):
             return 1, 0.0
-        scale = abs(getattr(self, "_scale", 1.0)) * self.magnify * max(cam.fx, cam.fy) / Xc[vis, 2]  # px per metre at each visible node
-        S = self.S_u if vis.all() else self.S_u[:, vis]
+        # px per metre at each visible node
+        scale = abs(state.load_scale) * self.magnify * max(cam.fx, cam.fy) / Xc[vis, 2]
+        S_u = self.u_view.modes  # (M, n, 3)
+        S = S_u if vis.all() else S_u[:, vis]
         contrib = c[1:, None, None] * S[1:]  # (M - 1, n_vis, 3): modes 2..M
         tail = np.cumsum(contrib[::-1], axis=0)[::-1]  # tail[m - 1] = sum_{i>=m} (omitted when using m modes)
         err2 = np.einsum("mni,mni->mn", tail, tail) * (scale * scale)[None, :]
@@ -207,17 +194,14 @@ class ObjectOverlay:
 
     def geometry(self, names, values, T_world_cam: np.ndarray, cam: CameraModel):
         """Deformed vertices (object frame), RGB colours and the draw state for this frame."""
-        mu, alpha = self.mu_from(names, values)
+        state = ModelState.from_named(self.model.axes, names, values)
         T_cam_obj = np.linalg.inv(T_world_cam) @ self.T
         st = DrawState()
         Xc = G.transform(T_cam_obj, self.X)
         st.visible_nodes = int(np.count_nonzero(Xc[:, 2] > 1e-3))
         st.behind_camera = st.visible_nodes == 0
-        m, err = self.choose_modes(mu, T_cam_obj, cam)
-        u, val = self.values(mu, m)
-        u, val = self._scale * u, abs(self._scale) * val
-        if alpha:
-            u = u @ G.rot_axis("z", alpha).T
+        m, err = self.choose_modes(state, T_cam_obj, cam)
+        u, val = self.values(state, m)
         V = self.X + self.magnify * u
         if self.field_name == "none":
             col = np.tile(np.asarray(self.tint, dtype=np.float64), (len(V), 1))

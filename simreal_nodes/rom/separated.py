@@ -280,9 +280,19 @@ class FieldView:
         # modes as rows (m, n_sel * n_comp): one streaming pass over memory per evaluation
         self.S = np.ascontiguousarray(sel.reshape(n_modes, -1), dtype=np.float64)
 
-    def evaluate(self, mu: ArrayLike) -> NDArray[np.float64]:
-        c = self.field.coefficients(mu, self.n_modes)
-        return (c @ self.S).reshape(self.n_sel, self.n_comp)
+    @property
+    def modes(self) -> NDArray[np.float64]:
+        """The selected space modes, (n_modes, n_sel, n_comp) (a view of the evaluation layout)."""
+        return self.S.reshape(self.n_modes, self.n_sel, self.n_comp)
+
+    def evaluate(self, mu: ArrayLike, n_modes: int | None = None) -> NDArray[np.float64]:
+        """u at the view's points with its modes, or with the first ``n_modes`` of them (a live truncation:
+        the overlay's per-view mode count)."""
+        m = self.n_modes if n_modes is None else n_modes
+        if not 0 < m <= self.n_modes:
+            raise ValueError(f"view of field '{self.field.name}' has {self.n_modes} modes; {m} were requested")
+        c = self.field.coefficients(mu, m)
+        return (c @ self.S[:m]).reshape(self.n_sel, self.n_comp)
 
     def evaluate_with_jacobian(self, mu: ArrayLike, checked: bool = False
                                ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:

@@ -13,12 +13,13 @@ from simreal_msgs.msg import FeatureObservations, ModelParameters, TrackingStatu
 from std_msgs.msg import Header
 
 from simreal_nodes import geometry
+from simreal_nodes.states import ContactPhase
 
 if TYPE_CHECKING:  # (annotations only: the player imports this module and needs none of the cores)
     from simreal_nodes.assimilation.localizer import Localization
     from simreal_nodes.assimilation.tracker import Estimate
-    from simreal_nodes.collision.contact import ContactState, ContactTracker
     from simreal_nodes.camera import CameraModel
+    from simreal_nodes.collision.contact import ContactState, ContactTracker
 
 
 def stamp_ns(stamp) -> int:
@@ -221,7 +222,7 @@ def contact_parameters_msg(oid: str, tr: ContactTracker, st: ContactState, stamp
     m.frozen = [False] * len(m.names)
     m.covariance = [0.0] * (len(m.names) ** 2)
     m.residual_rms_px = -1.0
-    m.state = ModelParameters.STATE_OK if st.state in (0, 1, 2) else ModelParameters.STATE_LOW_CONFIDENCE
+    m.state = ModelParameters.STATE_OK if st.state != ContactPhase.NO_DATA else ModelParameters.STATE_LOW_CONFIDENCE
     m.reason = st.reason
     return m
 

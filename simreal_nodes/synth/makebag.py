@@ -20,6 +20,7 @@ from simreal_nodes.io import bags
 from simreal_nodes.render.gl import Renderer
 from simreal_nodes.rom.build import cached_model
 from simreal_nodes.rom.model_file import load_model
+from simreal_nodes.states import EstimateState
 from simreal_nodes.synth import world as W
 from simreal_nodes.synth.scenes import SCENES, SynthScene
 
@@ -85,7 +86,7 @@ class MsgFactory:
         return self.Params(header=self.header(ns, oid), object_id=oid, model_id="ground_truth", names=list(names),
                            units=list(units), values=np.asarray(values, np.float64), frozen=np.zeros(n, bool),
                            covariance=np.zeros(n * n), residual_rms_px=0.0, inliers=0, measurements=0, iterations=0,
-                           state=0, reason="ground truth")
+                           state=int(EstimateState.OK), reason="ground truth")
 
     def contact(self, ns, oid, st, frame="map"):
         cp = st.contact_point

@@ -454,9 +454,8 @@ def _probe_scene(kind: str, width, height, duration, fps, stereo: bool) -> Synth
         tr = ContactTracker(m, sc.state["T_wo"])
         presses = []
         for lp in contacts:
-            mu = np.concatenate([tr._load_point_parameters()[lp], [1.0]])
             node = m.load_points[lp]
-            u = (m.field("displacement").evaluate(mu if tr.kind == "probe" else mu[:-1], nodes=[node])[0])
+            u = m.deformation(tr.load_states.state(lp, 1.0), nodes=[node])[0]
             presses.append(0.7 * float(abs(u @ m.load_directions[lp])))
         sc.state["presses"] = presses
         # contact distance: a fifth of the largest deflection, never under 8 mm: a depth camera at ~0.6 m loses
@@ -486,8 +485,7 @@ def _probe_scene(kind: str, width, height, duration, fps, stereo: bool) -> Synth
         main = "beam_a" if kind == "crossed_beams" else "object"  # the ids of the scene YAML
         truth.object_poses[main] = T_map @ T_wo
         truth.contacts[main] = _copy_state(st)
-        truth.params[main] = (tr.parameter_names(), [a.unit for a in m.axes] + ([""] if tr.kind == "linear" else []),
-                                  [float(v) for v in tr.parameters()])
+        truth.params[main] = (tr.parameter_names(), tr.load_states.layout.units, [float(v) for v in tr.parameters()])
         if kind == "crossed_beams":
             tb = sc.state["tracker_b"]
             # beam A's deformed bottom surface pushes beam B

@@ -2,29 +2,37 @@
 Jacobian, with the SO(3) derivative of alpha_z) against finite differences; LM recovers a known mu; robust
 to outliers with the Huber loss; bounded."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
 from simreal_nodes import geometry as G
 from simreal_nodes.assimilation import lm
+from simreal_nodes.rom.state import StateLayout
 from tests.modelkit import beam_model
 
 K = np.array([[520.0, 0.5, 320.0], [0, 515.0, 240.0], [0, 0, 1]])
 
 
+def _layout(m, rigid_z):
+    """mu, and alpha_z with a +-0.5 rad range when asked (the test beam declares no rigid parameter)."""
+    return StateLayout(tuple(m.axes), (-0.5, 0.5) if rigid_z else None)
+
+
 def _problem(rigid_z=False, noise=0.0, outliers=0, seed=0):
     m = beam_model(n_modes=6)
     nodes = np.arange(0, m.n_nodes, 2)
-    view = m.field("displacement").view(nodes)
+    view = m.deformation_view(nodes)
     R_wo = G.rot_axis("z", 0.3)
     T_wo = G.make_T(R_wo, [0.1, -0.2, 0.05])
     T_wc = G.make_T(G.rot_axis("x", np.pi) @ G.rot_axis("y", 0.2), [0.3, 0.0, 0.6])
     T_cw = np.linalg.inv(T_wc)
     X = G.transform(T_wo, m.points[nodes])
-    disp = view.evaluate_with_jacobian
+    disp = view.with_jacobian
     x_true = np.array([0.37] + ([0.08] if rigid_z else []))
-    p = lm.Problem(X, np.zeros((len(X), 2)), disp, T_cw, R_wo, K, rigid_z=rigid_z)
-    uv, _, _ = lm.predict(p, x_true, 1, with_jacobian=False)
+    p = lm.Problem(X, np.zeros((len(X), 2)), disp, T_cw, R_wo, K, _layout(m, rigid_z))
+    uv, _, _ = lm.predict(p, x_true, with_jacobian=False)
     rng = np.random.default_rng(seed)
     uv = uv + rng.normal(0, noise, uv.shape)
     if outliers:
@@ -38,12 +46,12 @@ def _problem(rigid_z=False, noise=0.0, outliers=0, seed=0):
 def test_jacobian_matches_finite_differences(rigid_z):
     p, x, _ = _problem(rigid_z)
     x = x + np.r_[0.013, [0.02] * rigid_z]
-    uv, _, J = lm.predict(p, x, 1)
+    uv, _, J = lm.predict(p, x)
     for k in range(len(x)):
         h = 1e-6
         e = np.zeros_like(x)
         e[k] = h
-        fd = (lm.predict(p, x + e, 1, False)[0] - lm.predict(p, x - e, 1, False)[0]) / (2 * h)
+        fd = (lm.predict(p, x + e, False)[0] - lm.predict(p, x - e, False)[0]) / (2 * h)
         np.testing.assert_allclose(J[:, :, k], fd, rtol=1e-5, atol=1e-6 * np.abs(fd).max())
 
 
@@ -69,8 +77,8 @@ def test_huber_loss_limits_the_pull_of_outliers():
 
 def test_bounds_hold_when_the_data_pull_outside():
     p, _, _ = _problem()
-    uv_far, _, _ = lm.predict(p, np.array([0.5]), 1, False)
-    p.uv = uv_far + (uv_far - lm.predict(p, np.array([0.3]), 1, False)[0])  # "beyond the tip"
+    uv_far, _, _ = lm.predict(p, np.array([0.5]), False)
+    p.uv = uv_far + (uv_far - lm.predict(p, np.array([0.3]), False)[0])  # "beyond the tip"
     res = lm.solve(p, np.array([0.25]), np.array([0.0]), np.array([0.5]), 2.0, 30)
     assert 0.0 <= res.x[0] <= 0.5
 
@@ -78,22 +86,22 @@ def test_bounds_hold_when_the_data_pull_outside():
 def _shifted_problem(noise=0.0):
     """The beam problem with alpha_z and a 3-parameter object shift (map frame), true shift 4 mm."""
     p, x_true, m = _problem(rigid_z=True)
-    p = lm.Problem(p.X, p.uv, p.disp, p.T_cw, p.R_wo, p.K, rigid_z=True, shift=True)
+    p = lm.Problem(p.X, p.uv, p.disp, p.T_cw, p.R_wo, p.K, _layout(m, True).with_shift())
     x_true = np.r_[x_true, 0.004, -0.003, 0.002]
-    uv, _, _ = lm.predict(p, x_true, 1, with_jacobian=False)
+    uv, _, _ = lm.predict(p, x_true, with_jacobian=False)
     p.uv = uv + np.random.default_rng(1).normal(0, noise, uv.shape)
     return p, x_true
 
 
 def test_object_shift_jacobian_matches_finite_differences():
     p, x = _shifted_problem()
-    assert p.n_mu(len(x)) == 1
+    assert p.layout.n_mu == 1 and p.layout.size == len(x)
     x = x + np.r_[0.013, 0.02, 0.001, 0.002, -0.001]
-    _, _, J = lm.predict(p, x, 1)
+    _, _, J = lm.predict(p, x)
     for k in range(len(x)):
         e = np.zeros_like(x)
         e[k] = 1e-6
-        fd = (lm.predict(p, x + e, 1, False)[0] - lm.predict(p, x - e, 1, False)[0]) / 2e-6
+        fd = (lm.predict(p, x + e, False)[0] - lm.predict(p, x - e, False)[0]) / 2e-6
         np.testing.assert_allclose(J[:, :, k], fd, rtol=1e-5, atol=1e-6 * np.abs(fd).max())
 
 
@@ -106,6 +114,18 @@ def test_lm_separates_the_load_from_an_object_shift():
     tol = 3 * np.sqrt(np.diag(res.cov))
     assert np.all(np.abs(res.x - x_true) <= tol), (res.x, x_true, tol)
     assert abs(res.x[0] - x_true[0]) < 0.01
-    no_shift = lm.Problem(p.X, p.uv, p.disp, p.T_cw, p.R_wo, p.K, rigid_z=True)
+    no_shift = lm.Problem(p.X, p.uv, p.disp, p.T_cw, p.R_wo, p.K, replace(p.layout, shift=False))
     biased = lm.solve(no_shift, np.r_[0.2, 0.0], lo[:2], hi[:2], huber_px=1.0, max_iter=40)
     assert biased.rms_px > 2 * res.rms_px  # without the shift the same pixels cannot be explained
+
+
+def test_prediction_is_the_projected_model_state() -> None:
+    """predict decodes x with the problem's StateLayout: the map-frame point is X + R_wo R_z(alpha_z) dX(mu) + shift."""
+    p, x = _shifted_problem()
+    x = x + np.r_[0.01, 0.05, 0.001, -0.002, 0.003]
+    uv, _, _ = lm.predict(p, x, with_jacobian=False)
+    dX = p.disp(x[:1])[0]
+    Xw = p.X + dX @ (p.R_wo @ G.rot_axis("z", x[1])).T + x[2:]
+    Xc = Xw @ p.T_cw[:3, :3].T + p.T_cw[:3, 3]
+    q = Xc @ p.K.T
+    np.testing.assert_allclose(uv, q[:, :2] / q[:, 2:], rtol=1e-12)

@@ -6,8 +6,14 @@ import numpy as np
 import pytest
 
 from simreal_nodes import geometry as G
-from simreal_nodes.assimilation.localizer import (LiveLocalizer, MarkerLocalization, SlamLocalization,
-                                                  StaticLocalization, make_localizer, status_text)
+from simreal_nodes.assimilation.localizer import (
+    LiveLocalizer,
+    MarkerLocalization,
+    SlamLocalization,
+    StaticLocalization,
+    make_localizer,
+    status_text,
+)
 from simreal_nodes.camera import CameraModel
 
 CAM = CameraModel.from_intrinsics(640, 480, 500.0, 500.0, 320.0, 240.0)

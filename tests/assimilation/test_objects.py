@@ -5,9 +5,9 @@ import numpy as np
 
 from simreal_nodes.assimilation.localizer import make_localizer
 from simreal_nodes.assimilation.objects import ObjectTrackers
-from simreal_nodes.assimilation.tracker import LOST, LOW_CONFIDENCE, OK
 from simreal_nodes.rom.model_file import load_model
 from simreal_nodes.scene.schema import validate_scene
+from simreal_nodes.states import EstimateState
 from tests.synthdata import sequence
 
 
@@ -27,8 +27,8 @@ def test_object_trackers_on_the_aluminium_beam():
     T_wc = make_localizer(scene["localization"], seq["cam"]).step(seq["gray"][60], 0).T_wc
     bgr = np.ascontiguousarray(seq["rgb"][60][:, :, ::-1])
     est = trackers.update(T_wc, bgr=bgr)
-    assert list(est) == [o["id"]] and est[o["id"]].state == OK
+    assert list(est) == [o["id"]] and est[o["id"]].state == EstimateState.OK
     ids, P, drop = trackers.feedback()  # glued dots: no map point on the object
     assert len(ids) == 0 and P.shape == (0, 3) and len(drop) == 0
     del trackers.trackers[o["id"]]  # (a build that failed on CameraInfo) -> built on the next frame
-    assert trackers.update(T_wc, bgr=bgr)[o["id"]].state in (OK, LOW_CONFIDENCE, LOST) and o["id"] in trackers.trackers
+    assert trackers.update(T_wc, bgr=bgr)[o["id"]].state in (EstimateState.OK, EstimateState.LOW_CONFIDENCE, EstimateState.LOST) and o["id"] in trackers.trackers

@@ -7,10 +7,11 @@ import pytest
 
 from simreal_nodes import geometry as G
 from simreal_nodes.assimilation.offline import Pipeline, track_sequence
-from simreal_nodes.assimilation.tracker import LOST, LOW_CONFIDENCE, OK, DeformableTracker, TrackerConfig
+from simreal_nodes.assimilation.tracker import DeformableTracker
 from simreal_nodes.rom.build import cached_model
 from simreal_nodes.rom.model_file import load_model
 from simreal_nodes.scene.schema import build_spec_models, validate_scene
+from simreal_nodes.states import EstimateState
 from tests.synthdata import sequence
 
 SPAN = 0.48  # the load range of the model, metres
@@ -35,7 +36,7 @@ def test_aluminium_beam_load_position_over_the_range():
     assert np.all((est >= 0.0) & (est <= SPAN))
     settled = np.abs(np.gradient(truth)) < 1e-9  # frames where the load rests
     assert np.percentile(err[settled], 90) < 0.02 * SPAN
-    assert np.mean(states == OK) > 0.9
+    assert np.mean(states == EstimateState.OK) > 0.9
 
 
 def test_near_the_clamp_variance_grows_instead_of_wild_values():
@@ -45,7 +46,7 @@ def test_near_the_clamp_variance_grows_instead_of_wild_values():
     far = truth > 0.1
     assert near.any() and far.any()
     assert np.nanmedian(std[near]) > 5 * np.nanmedian(std[far])  # low sensitivity shows as variance
-    assert np.all(states[near] == LOW_CONFIDENCE)
+    assert np.all(states[near] == EstimateState.LOW_CONFIDENCE)
     # flagged estimates are consistent with their variance; confident ones are accurate
     z = np.abs(est - truth)[near] / std[near]
     assert np.median(z) < 2.0
@@ -76,27 +77,27 @@ def test_extremes_are_stated_not_crashing(beam):
     assert T_wc is not None
     tr = _tracker(scene, cam)
     ok = tr.update(T_wc, image_bgr=bgr)
-    assert ok.state == OK
+    assert ok.state == EstimateState.OK
     # no measurements: a black image
     e = tr.update(T_wc, image_bgr=np.zeros_like(bgr))
-    assert e.state == LOST and "too few measurements" in e.reason
+    assert e.state == EstimateState.LOST and "too few measurements" in e.reason
     # no camera pose
     e = tr.update(None, image_bgr=bgr)
-    assert e.state == LOST and "pose" in e.reason
+    assert e.state == EstimateState.LOST and "pose" in e.reason
     # all outliers: every dot moved far from where any load could put it (blue blobs shifted 40 px up)
     shifted = np.roll(bgr, -40, axis=0)
     shifted[-40:] = bgr[-40:]
     e = tr.update(T_wc, image_bgr=shifted)
-    assert e.state in (LOST, LOW_CONFIDENCE) and e.reason
+    assert e.state in (EstimateState.LOST, EstimateState.LOW_CONFIDENCE) and e.reason
     # NaN pixel coordinates and NaN points in map-point measurements
     trm = _tracker(scene, cam, measurements="map_points")
     ids = np.arange(10)
     P = np.full((10, 3), np.nan)
     uv = np.full((10, 2), np.nan)
     e = trm.update(T_wc, ids, P, uv)
-    assert e.state == LOST and np.all(np.isfinite(e.values))
+    assert e.state == EstimateState.LOST and np.all(np.isfinite(e.values))
     # the tracker recovers on the next good frame
-    assert tr.update(T_wc, image_bgr=bgr).state == OK
+    assert tr.update(T_wc, image_bgr=bgr).state == EstimateState.OK
 
 
 def test_model_an_order_of_magnitude_off_in_scale_is_reported(beam):
@@ -112,8 +113,8 @@ def test_model_an_order_of_magnitude_off_in_scale_is_reported(beam):
         e = tr.update(T_wc, image_bgr=np.ascontiguousarray(seq["rgb"][i][:, :, ::-1]))
         assert np.all(np.isfinite(e.values)) and 0.0 <= e.values[0] <= SPAN
         states.append(e.state)
-        assert e.state == OK or e.reason
-    assert OK not in states, f"a model 10x too large must not look fine: {states}"
+        assert e.state == EstimateState.OK or e.reason
+    assert EstimateState.OK not in states, f"a model 10x too large must not look fine: {states}"
 
 
 # -- deformable ORB tracking through the RGB-D map (thesis §4.4, §4.5.2-4.5.4) ----------------------------------
@@ -140,7 +141,7 @@ def test_joint_boot_lever_angle_and_unknown_rotation_from_map_points():
     print(f"joint boot, every 10th frame, feedback 1 frame late: theta median {np.median(err_theta):.2f} deg, "
           f"p90 {np.percentile(err_theta, 90):.2f}, states {np.bincount(states, minlength=4)}")
     assert np.median(err_theta) < 1.5 and np.percentile(err_theta, 90) < 8.0
-    assert not np.any(states == LOST)
+    assert not np.any(states == EstimateState.LOST)
     truth, est, states = _track_map_points("joint_boot", "boot", seq=seq)
     loaded = truth[:, 0] > 0.02  # the lever is moving
     err_theta = np.abs(est[loaded, 0] - truth[loaded, 0])
@@ -151,7 +152,7 @@ def test_joint_boot_lever_angle_and_unknown_rotation_from_map_points():
     assert np.degrees(np.median(err_theta)) < 0.5
     assert np.degrees(np.percentile(err_theta, 90)) < 1.5
     assert np.degrees(err_alpha) < 1.0
-    assert np.mean(states[loaded] == OK) > 0.9
+    assert np.mean(states[loaded] == EstimateState.OK) > 0.9
 
 
 def test_foam_beam_load_position_from_its_own_texture():
@@ -167,4 +168,4 @@ def test_foam_beam_load_position_from_its_own_texture():
           f"span, p90 {1e3 * np.percentile(err, 90):.1f} mm; states {np.bincount(states, minlength=4)}")
     assert np.median(err) < 0.005 * span
     assert np.percentile(err, 90) < 0.04 * span
-    assert np.mean(states[loaded] != LOST) > 0.95
+    assert np.mean(states[loaded] != EstimateState.LOST) > 0.95

@@ -5,9 +5,9 @@ import numpy as np
 import pytest
 
 from simreal_nodes import geometry as G
-from simreal_nodes.collision.contact import CONTACT, FREE, NO_DATA
-from simreal_nodes.collision.scene import ContactScene, pusher_order
 from simreal_nodes.camera import CameraModel
+from simreal_nodes.collision.scene import ContactScene, pusher_order
+from simreal_nodes.states import ContactPhase
 from tests.modelkit import probe_model
 
 CAM = CameraModel.from_intrinsics(64, 48, 100.0, 100.0, 32.0, 24.0)
@@ -50,32 +50,32 @@ def test_a_pressed_upper_plate_pushes_the_lower_one():
     assert [o["id"] for o in scene.objects] == ["upper", "lower"]
     # the probe 2 mm above the upper plate: only the upper one is within delta
     up, low = scene.step(_probe_depth(0.002), CAM, T_WC)
-    assert up.object_id == "upper" and up.state.state == CONTACT and up.state.load_point == 14 and up.source == "depth"
+    assert up.object_id == "upper" and up.state.state == ContactPhase.CONTACT and up.state.load_point == 14 and up.source == "depth"
     assert up.state.points_used == 9
     # the upper plate bent 5 mm down at node 14 (pseudo-time 0.5) in this frame: 1 mm above the lower plate now
     assert low.object_id == "lower" and low.source == "depth+upper"
-    assert low.state.state == CONTACT and low.state.load_point == 14
+    assert low.state.state == ContactPhase.CONTACT and low.state.load_point == 14
     assert low.state.min_distance == pytest.approx(0.001, abs=3e-4)
 
 
 def test_the_probe_alone_does_not_reach_the_lower_plate():
     scene = _scene()
     up, low = scene.step(_probe_depth(0.02), CAM, T_WC)  # 2 cm above: nobody in contact, no surface pushed
-    assert up.state.state == FREE and low.state.state == FREE and low.source == "depth"
+    assert up.state.state == ContactPhase.FREE and low.state.state == ContactPhase.FREE and low.source == "depth"
     assert low.state.min_distance == pytest.approx(GAP + 0.02, abs=3e-3)
 
 
 def test_no_pose_and_no_depth_are_stated():
     scene = _scene()
     for r in scene.step(_probe_depth(0.002), CAM, None):  # (the tracker's own reason comes first)
-        assert r.state.state == NO_DATA and r.state.reason
+        assert r.state.state == ContactPhase.NO_DATA and r.state.reason
     empty = np.full((CAM.height, CAM.width), np.nan, np.float32)
     for r in scene.step(empty, CAM, T_WC):
-        assert r.state.state == NO_DATA and r.state.reason
+        assert r.state.state == ContactPhase.NO_DATA and r.state.reason
 
 
 def test_decimation_override():
     scene = _scene()
     scene.decimation = 4  # every 4th pixel: the 3x3 patch at rows/cols 23..25 keeps (24, 32) only
     up, _ = scene.step(_probe_depth(0.002), CAM, T_WC)
-    assert up.state.points_used == 1 and up.state.state == CONTACT
+    assert up.state.points_used == 1 and up.state.state == ContactPhase.CONTACT

@@ -28,6 +28,7 @@ from simreal_nodes.ros.node import SimrealNode, guarded, run_node
 from simreal_nodes.ros.qos import data_qos, reliable_qos
 from simreal_nodes.scene import graph
 from simreal_nodes.scene.schema import load_scene
+from simreal_nodes.states import EstimateState, tracking_state
 from simreal_nodes.sync import StampSync
 
 
@@ -109,12 +110,11 @@ class TrackerNode(SimrealNode):
         st = TrackingStatus()
         st.header.stamp = head.stamp
         st.node, st.mode = self.get_name(), f"deformable:{oid}"
-        st.state = {0: TrackingStatus.STATE_OK, 1: TrackingStatus.STATE_LOW_CONFIDENCE, 2: TrackingStatus.STATE_LOST,
-                    3: TrackingStatus.STATE_INITIALIZING}[est.state]
+        st.state = int(tracking_state(est.state))
         st.reason, st.tracked_features = est.reason, int(est.inliers)
         self.pub_status.publish(st)
         self.metrics.extra[f"{oid}_solve_ms"] = f"{est.solve_ms:.2f}"
-        self.set_status("ok" if est.state == 0 else "warn", f"{oid}: " + (est.reason or "ok"))
+        self.set_status("ok" if est.state == EstimateState.OK else "warn", f"{oid}: " + (est.reason or "ok"))
 
     def _coordinate_localization(self, deforming: bool, head) -> None:
         """Points on the object leave the pose estimate and are searched where the estimate predicts them;

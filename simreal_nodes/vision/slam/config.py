@@ -12,8 +12,11 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
+from simreal_nodes.states import TrackingState
+
 # tracking states (the TrackingStatus message's ``state`` field)
-NOT_STARTED, INITIALIZING, OK, LOST, RELOCALIZED = 0, 1, 2, 3, 4
+NOT_STARTED, INITIALIZING, OK, LOST, RELOCALIZED = (TrackingState.NOT_STARTED, TrackingState.INITIALIZING,
+                                                    TrackingState.OK, TrackingState.LOST, TrackingState.RELOCALIZED)
 STATE_NAMES = {NOT_STARTED: "not started", INITIALIZING: "initializing", OK: "ok", LOST: "lost",
                RELOCALIZED: "relocalized"}
 
