@@ -100,6 +100,9 @@ class MsgFactory:
 
 def make_scene(name: str, width: int = 640, height: int = 480, duration: float | None = None,
                fps: float = 30.0) -> SynthScene:
+    if name[:7] in ("family-", "family_") and name[7:].isdigit():  # one scene of the scene family (synth.family)
+        from simreal_nodes.synth.family import family_scene
+        return family_scene(int(name[7:]), width, height, fps=fps, duration=duration)
     if name not in SCENES:
         from simreal_nodes.errors import SimrealError
         raise SimrealError(f"unknown scene '{name}' (known: {', '.join(SCENES)})")
@@ -107,6 +110,19 @@ def make_scene(name: str, width: int = 640, height: int = 480, duration: float |
     if duration:
         kw["duration"] = duration
     return SCENES[name](**kw)
+
+
+def render_frame(scene: SynthScene, r: Renderer, t: float, T: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Colour and depth at time t from camera pose T; with ``scene.blur_subframes`` > 1 the colour is the mean of
+    renders along the camera's path over half a frame period (motion blur of a 1/(2 fps) exposure)."""
+    rgb, depth = r.render(T)
+    n = scene.blur_subframes
+    if n > 1:
+        acc = rgb.astype(np.float32)
+        for k in range(1, n):
+            acc += r.render(scene.camera_pose(t + 0.5 * k / (n * scene.fps)))[0]
+        rgb = np.clip(acc / n + 0.5, 0, 255).astype(np.uint8)
+    return rgb, depth
 
 
 def load_models(scene: SynthScene, progress=None) -> dict:
@@ -152,7 +168,7 @@ def make_bag(name: str, out: str | Path, width: int = 640, height: int = 480, du
             ns = EPOCH_S * 10**9 + round(t * 1e9)
             truth = scene.update(scene, r, t)
             T = scene.camera_pose(t)
-            rgb, depth = r.render(T)
+            rgb, depth = render_frame(scene, r, t, T)
             rgb = W.pixel_noise(rgb, scene.pixel_sigma, rng)
             w.write("/camera/camera_info", ns, fac.camera_info(ns, frame, cam), "sensor_msgs/msg/CameraInfo")
             if image_format == "raw":

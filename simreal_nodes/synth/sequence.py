@@ -10,7 +10,7 @@ import numpy as np
 from simreal_nodes import geometry as G
 from simreal_nodes.render.gl import Renderer
 from simreal_nodes.synth import world as W
-from simreal_nodes.synth.makebag import load_models, make_scene
+from simreal_nodes.synth.makebag import load_models, make_scene, render_frame
 
 
 @functools.cache
@@ -37,7 +37,7 @@ def sequence(name: str, width=640, height=480, duration=None, fps=30.0, stereo=F
         t = i / sc.fps
         truth = sc.update(sc, r, t)
         T = sc.camera_pose(t)
-        rgb, d = r.render(T)
+        rgb, d = render_frame(sc, r, t, T)
         rgb = W.pixel_noise(rgb, sc.pixel_sigma, rng)
         out["rgb"].append(rgb)
         out["gray"].append(cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY))

@@ -1,0 +1,177 @@
+"""Independent physics for the scenes that measure accuracy (no inverse crime).
+
+A scene that scores the deformable tracker must not be rendered by the reduced model being fitted: its error
+would then be zero by construction wherever the images are clean. Here a loaded beam's deformation comes from
+its own full-order finite-element solve (scikit-fem through :class:`~simreal_nodes.physics.fem.Solid`) that
+differs from the model's in every discretisation choice:
+
+- another mesh: tetrahedra on a finer grid (the PGD models use hexahedra);
+- another element: quadratic P2 tetrahedra;
+- the load as what a weight physically is: a uniform pressure over its footprint (a disk of radius ``r``) on the
+  top face, placed anywhere, instead of the model's nodal force on one of its centreline vertices.
+
+For a linear material the stiffness is factorised once and the solution tabulated at load positions ``step``
+apart; between two tabulated positions it is interpolated linearly — superposition: the exact solution for the
+load shared between the two footprints, a smoothing far below the footprint's own size when ``step`` is small.
+
+:func:`model_error` then measures how far the reduced model is from this truth — the error a perfect tracker
+would still make — so that every tracking error can be reported beside the model error of its scene.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse.linalg as spla
+
+from simreal_nodes.errors import FemError
+from simreal_nodes.physics import fem, materials, meshes
+from simreal_nodes.rom.model import ReducedModel
+
+
+@dataclass
+class BeamLoadTruth:
+    """Full-order displacement of a beam for a load at position ``s`` along its top centreline (object frame:
+    x along the beam from 0 to L, y across 0..W, z up 0..H)."""
+
+    points: np.ndarray  # (n, 3) reference vertices of the truth mesh
+    surface: np.ndarray  # (m, 3) outward boundary triangles of the truth mesh
+    tets: np.ndarray  # (k, 4) tetrahedra (for interpolation at arbitrary points)
+    s: np.ndarray  # (n_s,) tabulated load positions, increasing
+    U: np.ndarray  # (n_s, n, 3) vertex displacement for the load at each tabulated position, metres
+    description: str = ""
+    info: dict = field(default_factory=dict)
+
+    def displacement(self, s: float) -> np.ndarray:
+        """(n, 3) vertex displacement for the load at ``s`` (clipped to the tabulated range)."""
+        k, w = self._bracket(s)
+        return (1 - w) * self.U[k] + w * self.U[k + 1] if w else self.U[k].copy()
+
+    def scaled(self, factor: float) -> BeamLoadTruth:
+        """The same truth for a load ``factor`` times larger (linear material: superposition)."""
+        out = BeamLoadTruth(self.points, self.surface, self.tets, self.s, self.U * factor, self.description,
+                            {**self.info, "scaled": factor})
+        out._embeds = self._embeds
+        return out
+
+    def deformed_points(self, s: float) -> np.ndarray:
+        return self.points + self.displacement(s)
+
+    def at(self, s: float, P: np.ndarray) -> np.ndarray:
+        """(len(P), 3) displacement at arbitrary reference points, interpolated linearly inside the truth mesh."""
+        nodes, w = self.embed(P)
+        return np.einsum("nk,nkc->nc", w, self.displacement(s)[nodes])
+
+    def embed(self, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Tetrahedron vertices (N, 4) and barycentric weights (N, 4) of reference points P (N, 3)."""
+        import skfem
+
+        key = np.asarray(P, dtype=np.float64).tobytes()
+        hit = self._embeds.get(key)
+        if hit is None:
+            mesh = skfem.MeshTet(np.ascontiguousarray(self.points.T), np.ascontiguousarray(self.tets.T))
+            hit = self._embeds[key] = meshes.embed_points(mesh, np.asarray(P, dtype=np.float64).reshape(-1, 3))
+        return hit
+
+    def _bracket(self, s: float) -> tuple[int, float]:
+        if len(self.s) == 1:
+            return 0, 0.0
+        x = float(np.clip(s, self.s[0], self.s[-1]))
+        k = int(np.clip(np.searchsorted(self.s, x, side="right") - 1, 0, len(self.s) - 2))
+        w = (x - self.s[k]) / (self.s[k + 1] - self.s[k])
+        return (k + 1, 0.0) if w >= 1.0 else (k, float(w))
+
+    def __post_init__(self) -> None:
+        self._embeds: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
+
+
+def beam_load_truth(length: float, width: float, height: float, material: materials.Material, supports: list[dict],
+                    force: float, footprint_radius: float, s_range: tuple[float, float], step: float = 0.0025,
+                    cells: tuple[int, int, int] | None = None, order: int = 2,
+                    direction: tuple[float, float, float] = (0.0, 0.0, -1.0)) -> BeamLoadTruth:
+    """Tabulate the full-order linear-elastic solution of a beam loaded by a weight of ``force`` newtons resting
+    on a disk of ``footprint_radius`` centred on the top centreline at x = s, for s over ``s_range``.
+
+    ``supports``: as in model specs ({region, kind[, component]}). ``cells``: tetrahedral grid (default: about
+    4 elements through the smaller cross-section side, and elements no longer than twice that size along the beam,
+    capped so a scene's truth stays under ~30 000 dofs; tests/synth/test_truth.py bounds its error against
+    Euler-Bernoulli). ``order``: 2 (P2, the default) or 1."""
+    if not isinstance(material, materials.LinearElastic):
+        raise FemError("beam_load_truth tabulates a linear solution; use a linear_elastic material")
+    if cells is None:  # 3 quadratic elements through the thinner side, about square in section, <= 2:1 along the beam
+        h = min(width, height) / 3
+        cells = (int(np.clip(np.ceil(length / (2 * h)), 8, 90)), int(np.clip(round(width / h), 2, 8)),
+                 int(np.clip(round(height / h), 2, 8)))
+    mesh = meshes.box(length, width, height, cells, "tet")
+    solid = fem.Solid(mesh, material, order, supports)
+    lo, hi = s_range
+    n_s = max(2, int(np.ceil((hi - lo) / step)) + 1)
+    s_tab = np.linspace(lo, hi, n_s)
+    dirv = np.asarray(direction, dtype=np.float64)
+    dirv = dirv / np.linalg.norm(dirv)
+    F = np.stack([solid.patch_load({"face": "zmax"}, (s, width / 2, height), footprint_radius, force * dirv)
+                  for s in s_tab], axis=1)  # (N, n_s)
+    K = solid.stiffness()
+    free = solid.free
+    lu = spla.splu(K[free][:, free].tocsc(), permc_spec="MMD_AT_PLUS_A")  # symmetric: ~1/3 less fill than COLAMD
+    X = np.zeros((solid.N, n_s))
+    X[free] = lu.solve(F[free] / material.E)  # the stiffness is assembled in units of E (fem.Solid)
+    if not np.all(np.isfinite(X)):
+        raise FemError("the truth solve returned NaN/inf")
+    U = np.stack([solid.vertex_displacement(X[:, k]) for k in range(n_s)])
+    desc = (f"full-order P{order} tetrahedra {cells[0]}x{cells[1]}x{cells[2]} cells ({solid.N} dofs), weight "
+            f"{force:g} N on a {2e3 * footprint_radius:.0f} mm disk, "
+            f"tabulated every {1e3 * (s_tab[1] - s_tab[0]):.2f} mm")
+    return BeamLoadTruth(mesh.p.T.copy(), meshes.boundary_triangles(mesh), mesh.t.T.copy(), s_tab, U, desc,
+                         {"cells": list(cells), "order": order, "dofs": int(solid.N), "n_s": int(n_s)})
+
+
+@dataclass
+class ModelError:
+    """How far a reduced model is from the truth, over the truth's tabulated load positions.
+
+    ``rel_l2``: ||u_model(s) - u_truth(s)|| / ||u_truth(s)|| over the model's surface nodes, per position;
+    ``best_fit``: the model parameter whose displacement is closest to the truth's (least squares over the
+    surface nodes) — what a tracker that saw every surface point exactly would report; ``bias``: best_fit - s."""
+
+    s: np.ndarray
+    rel_l2: np.ndarray
+    best_fit: np.ndarray
+
+    @property
+    def bias(self) -> np.ndarray:
+        return self.best_fit - self.s
+
+    def summary(self, span: float) -> dict:
+        b = np.abs(self.bias) / span * 100
+        return {"model_rel_l2_median_pct": float(100 * np.median(self.rel_l2)),
+                "model_rel_l2_max_pct": float(100 * np.max(self.rel_l2)),
+                "model_bias_median_pct_span": float(np.median(b)), "model_bias_max_pct_span": float(np.max(b))}
+
+
+def model_error(model: ReducedModel, truth: BeamLoadTruth, axis: str = "s", n_fit: int = 401,
+                every: int = 4) -> ModelError:
+    """Compare a one-parameter load-position model with the truth at every ``every``-th tabulated position.
+
+    Both are expressed in the same object frame; the truth is interpolated at the model's surface nodes."""
+    ax = model.axis(axis)
+    if len(model.axes) != 1:
+        raise ValueError(f"model_error compares one-parameter models; '{model.name}' has {len(model.axes)} axes")
+    nodes = np.unique(np.asarray(model.surface).ravel()) if len(model.surface) else np.arange(model.n_nodes)
+    emb = truth.embed(model.points[nodes])
+    grid = np.linspace(*ax.range, n_fit)
+    view = model.field("displacement").view(nodes)
+    table = np.stack([view.evaluate([g]).ravel() for g in grid])  # (n_fit, 3 n)
+    s_out, rel, best = [], [], []
+    for k in range(0, len(truth.s), every):
+        s = float(truth.s[k])
+        if not ax.contains(s):
+            continue
+        ut = np.einsum("nk,nkc->nc", emb[1], truth.U[k][emb[0]]).ravel()
+        um = view.evaluate([s]).ravel()
+        s_out.append(s)
+        rel.append(float(np.linalg.norm(um - ut)) / max(float(np.linalg.norm(ut)), 1e-300))
+        j = int(np.argmin(np.sum((table - ut) ** 2, axis=1)))
+        best.append(grid[j])
+    return ModelError(np.asarray(s_out), np.asarray(rel), np.asarray(best))

@@ -1,0 +1,87 @@
+"""The independent truth of the scene family: a full-order solve checked against beam theory, and the family's
+seed discipline (same seed, same scene; development and held-out seeds disjoint)."""
+
+import numpy as np
+import pytest
+
+from simreal_nodes.physics import materials
+from simreal_nodes.rom.build import SPECS
+from simreal_nodes.spec import Context
+from simreal_nodes.synth import family
+from simreal_nodes.synth.truth import beam_load_truth, model_error
+from tests.modelkit import beam_model
+
+L, W, H, E, F = 0.4, 0.02, 0.02, 2.0e9, 5.0
+I = W * H ** 3 / 12
+
+
+@pytest.fixture(scope="module")
+def cantilever():
+    m = materials.make_material("linear_elastic", E, 0.3)
+    return beam_load_truth(L, W, H, m, [{"region": "xmin", "kind": "clamped"}], F, 0.006, (0.1, 0.39), step=0.029,
+                           cells=(30, 2, 2))
+
+
+def tip_deflection(tr, s):
+    u = tr.at(s, np.array([[L, W / 2, H / 2]]))
+    return -u[0, 2]
+
+
+def test_cantilever_matches_euler_bernoulli(cantilever):
+    # a slender (L/h = 20) cantilever: tip deflection F a^2 (3L - a) / (6 E I) within 3 % (shear, the footprint,
+    # the clamp's full fixity and the coarse mesh all stay below that)
+    for a in (0.2, 0.3, 0.39):
+        eb = F * a ** 2 * (3 * L - a) / (6 * E * I)
+        assert tip_deflection(cantilever, a) == pytest.approx(eb, rel=0.03)
+
+
+def test_interpolates_linearly_between_tabulated_positions(cantilever):
+    s0, s1 = cantilever.s[3], cantilever.s[4]
+    mid = cantilever.displacement(0.5 * (s0 + s1))
+    assert np.allclose(mid, 0.5 * (cantilever.U[3] + cantilever.U[4]))
+    assert np.array_equal(cantilever.displacement(-1.0), cantilever.U[0])  # clipped to the tabulated range
+    assert np.allclose(cantilever.scaled(2.0).displacement(0.25), 2.0 * cantilever.displacement(0.25))
+
+
+def test_model_error_finds_the_bias_of_a_shifted_model(cantilever):
+    # a "model" that is the truth itself, tabulated at shifted load positions: the best fit sits exactly that
+    # shift away, and the error measure reports it (what a perfect tracker would still be off by)
+    from simreal_nodes.rom.model import ReducedModel
+    from simreal_nodes.rom.separated import Axis, SeparatedField
+
+    shift = cantilever.s[1] - cantilever.s[0]
+    s_axis = cantilever.s[1:] - shift  # the model says s where the truth had s + shift
+    space = cantilever.U[1:]  # one mode per tabulated position, indicator parameter modes
+    fld = SeparatedField("displacement", space, [np.eye(len(s_axis))], [Axis("s", s_axis, "m", interpolation="linear")])
+    m = ReducedModel("shifted", cantilever.points, cantilever.tets, "tet4", [Axis("s", s_axis, "m")],
+                     {"displacement": fld}, cantilever.surface)
+    err = model_error(m, cantilever, n_fit=len(s_axis), every=1)
+    inside = (err.s > s_axis[0]) & (err.s < s_axis[-1])
+    assert np.allclose(err.bias[inside], -shift, atol=1e-9)
+
+
+def test_model_error_of_a_model_with_another_shape_is_large(cantilever):
+    err = model_error(beam_model(), cantilever, every=2)
+    assert np.all(err.rel_l2 > 0.05)
+
+
+def test_family_draws_are_reproducible_and_the_seed_sets_are_disjoint():
+    assert family.draw(7) == family.draw(7)
+    assert family.draw(7) != family.draw(8)
+    assert not set(family.DEV_SEEDS) & set(family.HELD_OUT_SEEDS)
+    draws = [family.draw(s) for s in range(40)]
+    assert {d.support for d in draws} == {"cantilever", "two_support"}
+    peaks = [d.peak_px for d in draws]
+    assert min(peaks) >= 2.0 and max(peaks) <= 40.0 and max(peaks) / min(peaks) > 5
+    contrast = [d.speckle_contrast for d in draws]
+    assert min(contrast) < 0.1 and max(contrast) > 0.5  # faint to painted
+    for d in draws:
+        assert d.s_range[0] < min(d.positions) and max(d.positions) <= d.s_range[1]
+        assert np.linalg.norm(d.pose_error[:3]) < 0.02  # a user's measurement: millimetres, not centimetres
+
+
+def test_family_model_spec_is_a_valid_beam_spec():
+    d = family.draw(3)
+    spec = SPECS["beam_pgd"].validate(family.model_spec(d), "", Context("family", "."))
+    assert spec["geometry"]["length"] == pytest.approx(d.length)
+    assert spec["load"]["x_range"] == pytest.approx(list(d.s_range))
