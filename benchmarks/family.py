@@ -18,13 +18,14 @@ import collections
 import copy
 import json
 import time
+from pathlib import Path
 
 import numpy as np
 
 from benchmarks.common import RESULTS, save
 from simreal_nodes.assimilation.offline import Pipeline
-from simreal_nodes.assimilation.tracker import OK
 from simreal_nodes.scene.schema import build_spec_models, validate_scene
+from simreal_nodes.states import EstimateState
 from simreal_nodes.synth.family import HELD_OUT_SEEDS, scene_model_error
 from simreal_nodes.synth.sequence import sequence
 
@@ -62,8 +63,9 @@ def run_scene(seed: int, width: int = 640, height: int = 480) -> dict:
     truth_a, est_a, states_a = np.array(truth), np.array(est), np.array(states)
     loaded = np.isfinite(truth_a)
     err = 100 * np.abs(est_a[loaded] - truth_a[loaded]) / d.span
-    ok = states_a[loaded] == OK
-    why = collections.Counter(r for r, s in zip(np.array(reasons)[loaded], states_a[loaded]) if s != OK and r)
+    ok = states_a[loaded] == EstimateState.OK
+    why = collections.Counter(r for r, s in zip(np.array(reasons)[loaded], states_a[loaded])
+                              if s != EstimateState.OK and r)
     row = {
         "seed": seed, "support": d.support, "slenderness": round(d.slenderness, 1), "peak_px": round(d.peak_px, 1),
         "contrast": round(d.speckle_contrast, 3), "distance_m": round(d.distance, 2),
@@ -124,6 +126,47 @@ def write(rows: list[dict], label: str) -> None:
     table_rows = [{k: v for k, v in r.items() if k != "curve"} for r in rows]
     save("family", table_rows, COLS, "Deformable tracking on the scene family (independent physics)", notes, plot,
          extra={"summary": s, "label": label, "curves": {r["seed"]: r["curve"] for r in rows}})
+    doc = Path(__file__).resolve().parents[1] / "docs" / "family.md"
+    body = (RESULTS / "family.md").read_text().replace("](family.png)", "](../benchmarks/results/family.png)")
+    doc.write_text(INTRO + "\n" + body.split("\n", 1)[1])
+
+
+INTRO = """# The scene family: deformable tracking on scenes it was not built for
+
+Made by `./run bench family` (held-out seeds) or `python -m benchmarks.family --seeds 0-49` (development seeds);
+the table below is its output, with the label of the seeds it ran on.
+
+What a scene is (`simreal_nodes/synth/family.py`, `simreal make-bag family --seed N`): a loaded beam drawn at
+random — cantilever or two supports, length 0.3-1 m, slenderness 10-60 (8-40 on two supports), section width 1-4x
+its height, E 1e6-7e10 Pa, nu 0-0.45, a weight whose size makes the largest surface motion 2-40 px at the drawn
+camera distance, a speckle texture from faint (contrast 0.04) to painted (1.0) with 1.5-6 mm speckles, 0-11
+pieces of clutter of drawn contrast, drawn lighting, pixel noise sigma 0.5-3, motion blur of 1-3 sub-frames, the
+camera on an arc of 20-70 degrees at 1.1-2x the beam length, 640x480 RGB-D at 15 fps, the load placed at 4-6
+positions after 1.5 s of unloaded mapping.
+
+The rules that make it evidence:
+
+- **Held-out seeds.** Defaults may be chosen on the development seeds 0-49 only; accuracy is quoted on the
+  held-out seeds 1000-1099, which nothing was tuned on.
+- **No inverse crime.** The images are rendered from an independent full-order solve (`synth/truth.py`:
+  quadratic tetrahedra on a finer grid, the weight as a pressure over its footprint), never from the reduced
+  model the tracker fits (hexahedra, a nodal force on the centreline). Both discretise the same continuum
+  problem: the truth's grid along the beam is a whole multiple of the model's so that a support strip ends on a
+  node of both (before that alignment, the strips' discrete widths differed and the model error was 2.3 % of
+  the range on seed 0 instead of 0.08 %). The tests check the truth against Euler-Bernoulli (3 %).
+- **Model error stated.** Each row gives the model's own error: its relative displacement error against the
+  truth, and its load-position bias — the least-squares best fit of the model to the truth's surface
+  displacement, what a tracker that saw every surface point exactly would report.
+- **No truth in the scene file** except where stated: the object pose is what a user would measure by hand
+  (the true pose moved by about 3.5 mm and 1 degree rms). The RGB-D map starts at the first camera frame,
+  which a user cannot measure, so until `anchor: registration` places the model in the map, that one frame's
+  pose comes from the rendered trajectory (said in each scene file's description).
+
+Where we stand: the table is the first run of the defaults on development seeds. It reproduces the issue's
+finding on unseen data — on low-contrast surfaces and small deflections the tracker reports no measurable
+deformation, or too few measurements agree with the model, and the estimate stays near its start value. The
+targets (held-out median < 1 % of the range, p90 < 3 %, >= 90 % of scenes within 2 %) are not met.
+"""
 
 
 def main() -> None:

@@ -26,7 +26,8 @@ def cmd_make_bag(a: argparse.Namespace) -> int:
     w, h = (int(x) for x in a.resolution.lower().split("x"))
     progress = TqdmProgress() if not a.quiet else None
     try:
-        info = make_bag(a.scene, a.output, w, h, a.duration, a.fps, a.storage, a.seed, a.scene_out, a.ssaa, progress,
+        name = f"family-{a.seed}" if a.scene == "family" else a.scene  # the family's scene is drawn from the seed
+        info = make_bag(name, a.output, w, h, a.duration, a.fps, a.storage, a.seed, a.scene_out, a.ssaa, progress,
                         image_format=a.image_format, jpeg_quality=a.jpeg_quality)
     finally:
         if progress:
@@ -46,13 +47,15 @@ def add_make_bag(sub: argparse._SubParsersAction) -> None:
     from simreal_nodes.synth.scenes import SCENES
 
     s = sub.add_parser("make-bag", help="render a synthetic seed scene with ground truth into a bag")
-    s.add_argument("scene", choices=sorted(SCENES))
+    s.add_argument("scene", choices=[*sorted(SCENES), "family"],
+                   help="a seed scene, or 'family': one scene of the held-out family drawn from --seed")
     s.add_argument("-o", "--output", required=True)
     s.add_argument("--resolution", default="640x480")
     s.add_argument("--duration", type=float, help="seconds (default: the scene's)")
     s.add_argument("--fps", type=float, default=30.0)
     s.add_argument("--storage", choices=("mcap", "sqlite3"), default="mcap")
-    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--seed", type=int, default=0, help="noise seed; for 'family' also the scene drawn (development "
+                   "seeds 0-49 for tuning, held-out 1000-1099 for reporting)")
     s.add_argument("--ssaa", type=int, default=2, help="supersampling factor (anti-aliasing)")
     s.add_argument("--scene-out", help="also write the scene YAML that runs the graph on this bag")
     s.add_argument("--image-format", choices=("raw", "jpeg", "png"), default="raw",
