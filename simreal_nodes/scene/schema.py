@@ -194,6 +194,11 @@ def _cross_checks(scene: dict, ctx: Context) -> None:
         if o["anchor"]["kind"] == "registration" and loc["mode"] in ("static", "markers"):
             raise SceneError(f"{src}: objects[{i}].anchor.kind: 'registration' needs a SLAM map "
                              f"(localization.mode mono, rgbd or stereo); found mode '{loc['mode']}'")
+        if o["anchor"]["kind"] == "registration":
+            # the nodes do not run registration.register() yet: such an object would sit at the map origin,
+            # silently wrong; refused until the registration is wired and measured
+            raise SceneError(f"{src}: objects[{i}].anchor.kind: 'registration' is not available yet (the object "
+                             "would sit at the map origin); give kind 'pose' with the object frame in the map")
         _resolve_model_ref(o, i, src)
         # a spec's model is not built yet: its parameter names are checked by build_spec_models
         _check_parameters(o, i, src, None if o["_model_spec"] else _model_header(o, i, src))
