@@ -5,9 +5,9 @@ import numpy as np
 import pytest
 
 from simreal_nodes import geometry as G
+from simreal_nodes.camera import CameraModel
 from simreal_nodes.collision.contact import CONTACT, FREE, NO_DATA
 from simreal_nodes.collision.scene import ContactScene, pusher_order
-from simreal_nodes.camera import CameraModel
 from tests.modelkit import probe_model
 
 CAM = CameraModel.from_intrinsics(64, 48, 100.0, 100.0, 32.0, 24.0)
