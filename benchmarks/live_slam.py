@@ -54,7 +54,8 @@ def report(rows):
         fig, ax = plt.subplots(1, 2, figsize=(10, 3.6))
         for q, c in ((1, "tab:red"), (5, "tab:blue")):
             sel = [r for r in rows if r["live_queue"] == q]
-            ax[0].plot([r["run"] for r in sel], [r["theta_median_deg"] for r in sel], "o-", color=c, label=f"live_queue {q}")
+            ax[0].plot([r["run"] for r in sel], [r["theta_median_deg"] for r in sel], "o-", color=c,
+                       label=f"live_queue {q}")
             ax[1].plot([r["run"] for r in sel], [r["latency_p50"] for r in sel], "o-", color=c, label=f"live_queue {q}")
         ax[0].set_yscale("log")
         ax[0].set_ylabel("theta median |error| (deg)")
@@ -67,7 +68,8 @@ def report(rows):
 
     n = {q: sum(1 for r in rows if r["live_queue"] == q) for q in (1, 5)}
     ok = {q: sum(r["tracked"] for r in rows if r["live_queue"] == q) for q in (1, 5)}
-    save("live_slam", rows, [("live_queue", "live_queue", "{}"), ("run", "run", "{}"), ("frames", "frames estimated", "{}"),
+    save("live_slam", rows, [("live_queue", "live_queue", "{}"), ("run", "run", "{}"),
+                             ("frames", "frames estimated", "{}"),
                              ("theta_median_deg", "theta median err (deg)", "{:.2f}"),
                              ("alpha_median_deg", "alpha_z median err (deg)", "{:.2f}"),
                              ("lost_frames", "frames lost", "{}"), ("fps_through", "fps through", "{:.1f}"),

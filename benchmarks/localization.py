@@ -35,7 +35,8 @@ def run_slam(seq, mode, n_features, async_mapping=True):
     wall = time.perf_counter() - t0
     slam.close()
     ok = [i for i, T in enumerate(est) if T is not None]
-    a = ate(np.array([est[i][:3, 3] for i in ok]), np.array([seq["T"][i][:3, 3] for i in ok]), with_scale=(mode == "mono"))
+    a = ate(np.array([est[i][:3, 3] for i in ok]), np.array([seq["T"][i][:3, 3] for i in ok]),
+            with_scale=(mode == "mono"))
     tracking = [r.timings.get("total_ms", np.nan) - r.timings.get("mapping_ms", 0.0) for r in res[5:]]
     row = {"mode": mode, "features": n_features, "frames": len(est), "tracked": len(ok), "ate_mm": a["rmse"] * 1e3,
            "ate_pct": a["rmse_pct_length"], "fps_wall": len(est) / wall,
@@ -63,7 +64,8 @@ def main():
                 print(row, flush=True)
     seq = sequence("aluminium_beam", 640, 480, duration=5.0, fps=30.0)
     doc = seq["scene"].scene_yaml(seq["scene"])["localization"]["markers"]
-    loc = MarkerLocalizer(seq["cam"], doc["dictionary"], doc["size_m"], {k: G.pose7_to_matrix(v) for k, v in doc["poses"].items()})
+    loc = MarkerLocalizer(seq["cam"], doc["dictionary"], doc["size_m"],
+                          {k: G.pose7_to_matrix(v) for k, v in doc["poses"].items()})
     errs, tt = [], []
     for g, T in zip(seq["gray"], seq["T"]):
         t0 = time.perf_counter()
@@ -71,7 +73,8 @@ def main():
         tt.append((time.perf_counter() - t0) * 1e3)
         if r.T_wc is not None:
             errs.append(np.linalg.norm(r.T_wc[:3, 3] - T[:3, 3]))
-    rows.append({"mode": "markers", "resolution": "640x480", "features": 0, "frames": len(seq["gray"]), "tracked": len(errs),
+    rows.append({"mode": "markers", "resolution": "640x480", "features": 0, "frames": len(seq["gray"]),
+                 "tracked": len(errs),
                  "ate_mm": float(np.sqrt(np.mean(np.square(errs)))) * 1e3, "ate_pct": float("nan"),
                  "tracking_ms_p50": float(np.median(tt)), "tracking_ms_p95": float(np.percentile(tt, 95)),
                  "fps_wall": 1e3 / np.mean(tt)})
@@ -79,8 +82,8 @@ def main():
             ("tracked", "tracked", "{}"), ("frames", "frames", "{}"), ("ate_mm", "ATE (mm)", "{:.2f}"),
             ("ate_pct", "ATE % length", "{:.3f}"), ("tracking_ms_p50", "tracking p50 (ms)", "{:.1f}"),
             ("tracking_ms_p95", "p95 (ms)", "{:.1f}"), ("fps_wall", "fps (wall, all work)", "{:.1f}"),
-            ("extract_ms", "extract", "{:.1f}"), ("depth_ms", "depth/stereo", "{:.1f}"), ("match_ms", "match", "{:.1f}"),
-            ("pose_ms", "pose", "{:.1f}"), ("local_map_ms", "local map", "{:.1f}"),
+            ("extract_ms", "extract", "{:.1f}"), ("depth_ms", "depth/stereo", "{:.1f}"),
+            ("match_ms", "match", "{:.1f}"), ("pose_ms", "pose", "{:.1f}"), ("local_map_ms", "local map", "{:.1f}"),
             ("mapping_ms_per_frame", "keyframe+BA submit / frame", "{:.1f}"), ("keyframes", "keyframes", "{}")]
 
     def plot(plt):
@@ -91,7 +94,8 @@ def main():
                 if not sel:
                     continue
                 ax[0].plot([r["features"] for r in sel], [r["ate_mm"] for r in sel], mk + ls, label=f"{mode} {res}")
-                ax[1].plot([r["features"] for r in sel], [r["tracking_ms_p50"] for r in sel], mk + ls, label=f"{mode} {res}")
+                ax[1].plot([r["features"] for r in sel], [r["tracking_ms_p50"] for r in sel], mk + ls,
+                           label=f"{mode} {res}")
         ax[0].set_ylabel("ATE RMSE (mm)")
         ax[1].set_ylabel("tracking time p50 (ms / frame)")
         ax[1].axhline(33.3, color="k", lw=0.8, ls=":", label="30 fps")

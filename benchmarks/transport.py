@@ -136,7 +136,8 @@ def main():
             rows.append(run_case(mode, w, h, 0.0, reliable=True))
     cols = [("mode", "mode", "{}"), ("resolution", "resolution", "{}"), ("qos", "QoS", "{}"), ("rate", "rate", "{}"),
             ("delivered_pct", "delivered %", "{:.1f}"), ("fps", "received fps", "{:.1f}"),
-            ("p50_ms", "latency p50 (ms)", "{:.2f}"), ("p95_ms", "p95 (ms)", "{:.2f}"), ("max_ms", "max (ms)", "{:.1f}")]
+            ("p50_ms", "latency p50 (ms)", "{:.2f}"), ("p95_ms", "p95 (ms)", "{:.2f}"),
+            ("max_ms", "max (ms)", "{:.1f}")]
 
     def plot(plt):
         fig, axes = plt.subplots(1, 2, figsize=(10, 3.8))

@@ -42,7 +42,7 @@ def test_project_backproject_and_yaml(tmp_path):
 def test_bad_calibration_yaml(tmp_path):
     f = tmp_path / "c.yaml"
     f.write_text("image_width: 640\nimage_height: 480\ncamera_matrix: {rows: 3, cols: 3, data: [1, 2]}\n")
-    with pytest.raises(CameraInfoError, match="camera_matrix.data"):
+    with pytest.raises(CameraInfoError, match=r"camera_matrix.data"):
         CameraModel.from_calibration_yaml(f)
     with pytest.raises(CameraInfoError, match="not found"):
         CameraModel.from_calibration_yaml(tmp_path / "missing.yaml")

@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 from simreal_nodes import geometry as G
-from simreal_nodes.render.scene import SceneOverlay
 from simreal_nodes.camera import CameraModel
+from simreal_nodes.render.scene import SceneOverlay
 from tests.modelkit import beam_model
 
 CAM = CameraModel.from_intrinsics(320, 240, 262.0, 260.0, 159.3, 120.6)

@@ -8,10 +8,10 @@ import pytest
 pytest.importorskip("rclpy")
 pytest.importorskip("simreal_msgs.msg", reason="simreal_msgs is built by ./run setup")
 
-from simreal_nodes.assimilation.evaluate import compare_contacts, read_contacts  # noqa: E402
-from simreal_nodes.io import bags  # noqa: E402
-from simreal_nodes.ros.commands import replay  # noqa: E402
-from simreal_nodes.synth.samples import render_sample, sample  # noqa: E402
+from simreal_nodes.assimilation.evaluate import compare_contacts, read_contacts
+from simreal_nodes.io import bags
+from simreal_nodes.ros.commands import replay
+from simreal_nodes.synth.samples import render_sample, sample
 
 pytestmark = pytest.mark.ros
 
@@ -25,18 +25,19 @@ def test_probe_pushes_crossed_beams_through_the_graph(tmp_path):
     info = {"frames": sum(1 for _ in bags.read_bag(bag, topics=["/camera/camera_info"]))}
     out = tmp_path / "run"
     # synchronous local BA: the localization (and so the contacts) is the same on every run
-    stats, report, counts = replay(str(bag), str(scene), lossless=True, record=str(out),
+    stats, _report, counts = replay(str(bag), str(scene), lossless=True, record=str(out),
                                    extra_params={"localization": {"async_mapping": False}})
     n = info["frames"]
     assert stats.frames_completed == n and stats.frames_dropped == 0
-    for t in ("/simreal/objects/beam_a/contact", "/simreal/objects/beam_b/contact", "/simreal/objects/beam_a/parameters",
-              "/simreal/overlay/image_raw"):
+    for t in ("/simreal/objects/beam_a/contact", "/simreal/objects/beam_b/contact",
+              "/simreal/objects/beam_a/parameters", "/simreal/overlay/image_raw"):
         assert counts[t] == n, t
     a = compare_contacts(read_contacts(out, "/simreal/objects/beam_a/contact"),
                          read_contacts(bag, "/ground_truth/objects/beam_a/contact"))
     print(f"beam_a: {a}")
     assert a.contact_agreement >= 0.8  # measured 0.91 (the depth sees the probe's near side a little late)
-    assert a.pseudo_time_median_abs <= 0.4  # measured 0.2-0.36: pseudo-time lags while the noisy distance hovers at delta
+    # measured 0.2-0.36: pseudo-time lags while the noisy distance hovers at delta
+    assert a.pseudo_time_median_abs <= 0.4
     # the contact point found from depth is the true one or a neighbour on the load grid
     est = read_contacts(out, "/simreal/objects/beam_a/contact")
     tru = read_contacts(bag, "/ground_truth/objects/beam_a/contact")
@@ -50,7 +51,8 @@ def test_probe_pushes_crossed_beams_through_the_graph(tmp_path):
     dist = np.array([np.linalg.norm(P[est[s][1]] - P[tru[s][1]]) for s in both])
     assert np.median(dist) < 0.03, np.median(dist)  # measured 28 mm: the diagonal neighbour on the 20 mm load grid
     # the overlay shows the deformation: overlay images differ from the camera images while pressed
-    imgs = {bags.stamp_ns(o): o for o in (bags.decode(x) for x in bags.read_bag(out, topics=["/simreal/overlay/image_raw"]))}
+    imgs = {bags.stamp_ns(o): o
+            for o in (bags.decode(x) for x in bags.read_bag(out, topics=["/simreal/overlay/image_raw"]))}
     assert len(imgs) == n
 
 

@@ -11,7 +11,7 @@ import pytest
 
 pytest.importorskip("rclpy")
 
-from simreal_nodes.launch import ros_environment  # noqa: E402
+from simreal_nodes.launch import ros_environment
 
 pytestmark = pytest.mark.ros
 
@@ -24,7 +24,8 @@ overlay: {enabled: false}
 
 
 def node_children(proc):
-    return [c for c in psutil.Process(proc.pid).children(recursive=True) if "simreal_nodes.ros.nodes" in " ".join(c.cmdline())]
+    return [c for c in psutil.Process(proc.pid).children(recursive=True)
+            if "simreal_nodes.ros.nodes" in " ".join(c.cmdline())]
 
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])

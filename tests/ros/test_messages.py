@@ -6,9 +6,9 @@ import pytest
 
 pytest.importorskip("rclpy")
 
-from std_msgs.msg import Header  # noqa: E402
+from std_msgs.msg import Header
 
-from simreal_nodes.ros.convert import cloud_field, cloud_msg, cloud_to_array  # noqa: E402
+from simreal_nodes.ros.convert import cloud_field, cloud_msg, cloud_to_array
 
 
 def test_cloud_with_ids_and_flags_round_trips():

@@ -9,9 +9,9 @@ import pytest
 pytest.importorskip("rclpy")
 pytest.importorskip("simreal_msgs.msg", reason="simreal_msgs is built by ./run setup")
 
-from simreal_nodes.io import bags  # noqa: E402
-from simreal_nodes.ros.commands import replay  # noqa: E402
-from tests.helpers import write_camera_bag  # noqa: E402
+from simreal_nodes.io import bags
+from simreal_nodes.ros.commands import replay
+from tests.helpers import write_camera_bag
 
 pytestmark = pytest.mark.ros
 
@@ -38,7 +38,7 @@ def recorded(path, topic):
 def test_lossless_replay_loses_no_frame_and_keeps_order(tmp_path, scene):
     stamps = write_camera_bag(tmp_path / "in", n=60, w=320, h=240, depth=True)
     out = tmp_path / "out"
-    stats, report, counts = replay(str(tmp_path / "in"), scene, lossless=True, record=str(out), echo=lambda *_: None)
+    stats, report, _counts = replay(str(tmp_path / "in"), scene, lossless=True, record=str(out), echo=lambda *_: None)
     assert report.problems == 0
     assert stats.frames_published == 60 and stats.frames_completed == 60
     imgs = recorded(out, "/simreal/camera/image")

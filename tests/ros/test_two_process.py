@@ -35,7 +35,9 @@ def test_images_and_parameters_between_processes_and_through_a_bag(tmp_path):
         ex = SingleThreadedExecutor()
         ex.add_node(node)
         got_img, got_par = [], []
-        node.create_subscription(Image, "/test/image", lambda m: got_img.append((m.header.stamp.sec, image_to_array(m)[0, 0, 0])), data_qos(True))
+        node.create_subscription(Image, "/test/image",
+                                 lambda m: got_img.append((m.header.stamp.sec, image_to_array(m)[0, 0, 0])),
+                                 data_qos(True))
         node.create_subscription(ModelParameters, "/test/params", got_par.append, reliable_qos(100))
         rec = Recorder(node, tmp_path / "rec", topics={"/test/params": "simreal_msgs/msg/ModelParameters"})
         proc = subprocess.Popen([sys.executable, _publisher.__file__, str(n), str(w), str(h)], env=ros_environment())
@@ -59,4 +61,5 @@ def test_images_and_parameters_between_processes_and_through_a_bag(tmp_path):
     for i, m in enumerate(recorded):
         assert deserialize_message(m.raw, ModelParameters) == _publisher.params_msg(i)
         obj = bags.decode(m)
-        assert list(obj.names) == ["s", "E"] and np.allclose(obj.values, [0.01 * i, 69e9]) and obj.reason == f"frame {i}"
+        assert (list(obj.names) == ["s", "E"] and np.allclose(obj.values, [0.01 * i, 69e9])
+                and obj.reason == f"frame {i}")

@@ -30,14 +30,17 @@ def test_minimal_scene_gets_defaults_and_starts_only_ingest(tmp_path):
 
 @pytest.mark.parametrize("text,match", [
     (BASE + "camra: {}\n", r"camra: unknown key \(did you mean 'camera'\?\)"),
-    (BASE.replace("mode: static", "mode: sttic"), r"localization.mode: expected one of 'markers', 'mono'.*found 'sttic'"),
+    (BASE.replace("mode: static", "mode: sttic"),
+     r"localization.mode: expected one of 'markers', 'mono'.*found 'sttic'"),
     (BASE + "camera: {undistort: 3}\n", r"camera.undistort: expected true or false; found 3 \(int\)"),
     (BASE + "camera: {image: camera/image}\n", r"camera.image: expected a ROS topic name"),
     (BASE.replace("simreal_scene: 1", "simreal_scene: 7"), r"simreal_scene: expected format version 1; found 7"),
     (BASE.replace("name: cam_only\n", ""), r"name: required key is missing"),
-    (BASE + "objects:\n  - {id: beam, model: no_such_model.h5}\n", r"objects\[0\].model: file not found: .*no_such_model.h5"),
+    (BASE + "objects:\n  - {id: beam, model: no_such_model.h5}\n",
+     r"objects\[0\].model: file not found: .*no_such_model.h5"),
     (BASE + "objects:\n  - {id: beam}\n", r"objects\[0\].model: required key is missing"),
-    (BASE.replace("static_pose: [0, 0, 0, 0, 0, 0, 1]", "static_pose: [0, 0, 0]"), r"localization.static_pose: expected a pose"),
+    (BASE.replace("static_pose: [0, 0, 0, 0, 0, 0, 1]", "static_pose: [0, 0, 0]"),
+     r"localization.static_pose: expected a pose"),
     (BASE + "localization: {mode: rgbd}\n", r"duplicate|camera.depth: required"),
     ("- just a list\n", r"expected a mapping at the top level"),
     ("a: [unclosed\n", r"not valid YAML"),
@@ -48,8 +51,9 @@ def test_mistakes_name_key_expected_and_found(tmp_path, text, match):
 
 
 def test_rgbd_without_depth_topic(tmp_path):
-    text = BASE.replace("localization: {mode: static, static_pose: [0, 0, 0, 0, 0, 0, 1]}", "localization: {mode: rgbd}")
-    with pytest.raises(SceneError, match="camera.depth: required for localization.mode 'rgbd'"):
+    text = BASE.replace("localization: {mode: static, static_pose: [0, 0, 0, 0, 0, 0, 1]}",
+                        "localization: {mode: rgbd}")
+    with pytest.raises(SceneError, match=r"camera.depth: required for localization.mode 'rgbd'"):
         load_scene(write(tmp_path, text))
 
 

@@ -46,13 +46,13 @@ def test_series_solution_satisfies_the_pde():
 
 @pytest.mark.parametrize("update", [False, True])
 def test_each_strategy_reaches_the_tolerance(small_heat, update):
-    h, pr, Uref = small_heat
+    _h, pr, Uref = small_heat
     nt = pr.axes[0]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", LP.PartitionWarning)
         sols = {"C": LP.solve_local(pr, [LP.constant_partition(nt, 6)], tol=1e-5, update=update)}
-        cuts, sols["MNO"] = LP.mno_partition(pr, 12, tol=1e-5, update=update)
-        kc, km = LP.kpca_partition(pr, 6, block=6, eps=0.15, seed=0, update=update)
+        _cuts, sols["MNO"] = LP.mno_partition(pr, 12, tol=1e-5, update=update)
+        kc, _km = LP.kpca_partition(pr, 6, block=6, eps=0.15, seed=0, update=update)
         sols["k"] = LP.solve_local(pr, kc, tol=1e-5, update=update)
     for name, L in sols.items():
         e = LP.rel_error(L.full(), Uref)
@@ -64,7 +64,7 @@ def test_each_strategy_reaches_the_tolerance(small_heat, update):
 
 def test_continuity_across_sub_domain_boundaries(small_heat):
     """The assembled ℓ-PGD solution obeys the FOM's time step across every boundary as well as inside."""
-    h, pr, Uref = small_heat
+    h, pr, _Uref = small_heat
     nt = pr.axes[0]
     cuts = LP.constant_partition(nt, 8)
     U = LP.solve_local(pr, [cuts], tol=1e-8, update=True).full()
@@ -107,7 +107,7 @@ def test_kpca_works_on_two_partitioned_axes():
 
 @pytest.mark.parametrize("sigma", [1e-9, 1e9])
 def test_kernel_width_far_off_warns_and_falls_back(small_heat, sigma):
-    _, pr, Uref = small_heat
+    _, pr, _Uref = small_heat
     with pytest.warns(LP.PartitionWarning, match="far too"):
         cuts, km = LP.kpca_partition(pr, 5, block=6, eps=0.15, sigma=sigma)
     assert cuts[0].tolist() == LP.constant_partition(pr.axes[0], 5).tolist()
@@ -171,7 +171,8 @@ def test_normal_equations_are_the_kronecker_sum_they_claim():
     import scipy.sparse as sp
 
     rng = np.random.default_rng(0)
-    ops = [[sp.random(5, 5, density=0.6, random_state=1) + sp.eye(5), sp.diags([np.ones(4), -np.ones(3)], [0, -1]), np.ones(3)],
+    ops = [[sp.random(5, 5, density=0.6, random_state=1) + sp.eye(5), sp.diags([np.ones(4), -np.ones(3)], [0, -1]),
+            np.ones(3)],
            [2.0 * sp.eye(5), np.ones(4), rng.random(3)]]
     full = [[A.toarray() if sp.issparse(A) else np.diag(A) for A in a] for a in ops]
     A = sum(np.kron(np.kron(*a[:2]), a[2]) for a in full)

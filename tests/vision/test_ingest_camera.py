@@ -5,9 +5,9 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from simreal_nodes.camera import CameraModel
 from simreal_nodes.io import images
 from simreal_nodes.io.sources import Frame
-from simreal_nodes.camera import CameraModel
 from simreal_nodes.vision.undistort import IngestCamera, Undistorter
 
 DIST = CameraModel.from_intrinsics(64, 48, 60.0, 60.0, 32.0, 24.0, D=[-0.3, 0.1, 0.001, -0.001, 0.0])

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from simreal_nodes import geometry as G
-from simreal_nodes.vision.slam.map import Map
 from simreal_nodes.vision.slam.config import INITIALIZING, LOST, NOT_STARTED, OK, RELOCALIZED, SlamConfig
+from simreal_nodes.vision.slam.map import Map
 from simreal_nodes.vision.slam.system import Slam
 from simreal_nodes.vision.trajectory import ate
 from tests.synthdata import sequence
@@ -44,7 +44,7 @@ def test_metric_modes_reach_one_centimetre(room, mode):
 
 
 def test_monocular_within_one_percent_of_length(room):
-    slam, out = run(room, "mono", config=SlamConfig(ba_iterations=5))
+    _slam, out = run(room, "mono", config=SlamConfig(ba_iterations=5))
     states = [r.state for _, r in out]
     assert states[0] == INITIALIZING and OK in states
     res, n = trajectory_error(room, out, with_scale=True)
@@ -60,7 +60,7 @@ def test_blackout_is_reported_and_recovered_within_a_second(room):
     black = set(range(b0, b0 + fps))
     seq["gray"] = [np.zeros_like(g) if i in black else g for i, g in enumerate(room["gray"])]
     seq["depth"] = [np.full_like(d, np.nan) if i in black else d for i, d in enumerate(room["depth"])]
-    slam, out = run(seq, "rgbd")
+    _slam, out = run(seq, "rgbd")
     during = [r for i, r in out if i in black]
     assert all(r.state == LOST and "black frame" in r.reason for r in during)
     after = [(i, r) for i, r in out if i >= b0 + fps]
@@ -110,7 +110,7 @@ def test_pure_rotation_cannot_initialize_a_monocular_map(room):
 
 
 def test_map_save_load_and_relocalize(room, tmp_path):
-    slam, out = run(room, "rgbd", frames=range(0, 60))
+    slam, _out = run(room, "rgbd", frames=range(0, 60))
     f = tmp_path / "map.h5"
     slam.map.save(f, room["cam"], "rgbd")
     m = Map.load(f)

@@ -26,9 +26,10 @@ from __future__ import annotations
 
 import time
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import reduce
-from typing import Callable
+from typing import Any, cast
 
 import numpy as np
 import scipy.linalg as sla
@@ -44,7 +45,7 @@ class PartitionWarning(UserWarning):
 # ------------------------------------------------------------------------------------------------
 # Greedy PGD on a Kronecker-sum operator (dense residual: the benchmark sizes are small)
 
-Op = sp.spmatrix | np.ndarray  # matrix, or a 1D array for a diagonal operator
+Op = sp.csr_matrix | np.ndarray  # matrix (dense, or sparse as CSR), or a 1D array for a diagonal operator
 
 
 def _apply(A: Op, v: np.ndarray) -> np.ndarray:
@@ -55,9 +56,9 @@ def _quad(A: Op, u: np.ndarray, v: np.ndarray) -> float:
     return float(u @ _apply(A, v))
 
 
-def _lhs_solve(terms: list[tuple[float, Op]], rhs: np.ndarray) -> np.ndarray:
+def _lhs_solve(terms: list[tuple[float | np.floating[Any], Op]], rhs: np.ndarray) -> np.ndarray:
     if all(isinstance(A, np.ndarray) and A.ndim == 1 for _, A in terms):
-        d = sum(c * A for c, A in terms)
+        d = sum(c * cast(np.ndarray, A) for c, A in terms)  # cast: every operator is a 1D array (checked above)
         with np.errstate(divide="ignore", invalid="ignore"):
             return np.where(np.abs(d) > 0, rhs / d, 0.0)
     mats = [c * (sp.diags(A) if isinstance(A, np.ndarray) and A.ndim == 1 else sp.csr_matrix(A)) for c, A in terms]
@@ -68,8 +69,9 @@ def _contract(T: np.ndarray, vecs: list[np.ndarray | None]) -> np.ndarray:
     """T contracted with vecs[d] on every axis d whose vector is given (the free axis keeps its place)."""
     out = T
     for d in reversed(range(len(vecs))):
-        if vecs[d] is not None:
-            out = np.tensordot(out, vecs[d], axes=([d], [0]))
+        v = vecs[d]
+        if v is not None:
+            out = np.tensordot(out, v, axes=([d], [0]))
     return out
 
 
@@ -115,10 +117,10 @@ def _op_mul(A: Op, B: Op) -> Op:
     da, db = isinstance(A, np.ndarray) and A.ndim == 1, isinstance(B, np.ndarray) and B.ndim == 1
     if da and db:
         return A * B
-    if da:
-        return sp.diags(A) @ sp.csr_matrix(B)
-    if db:
-        return sp.csr_matrix(A) @ sp.diags(B)
+    if da:  # cast: da says A is a 1D array
+        return sp.diags(cast(np.ndarray, A)) @ sp.csr_matrix(B)
+    if db:  # cast: db says B is a 1D array
+        return sp.csr_matrix(A) @ sp.diags(cast(np.ndarray, B))
     return (sp.csr_matrix(A) @ sp.csr_matrix(B)).tocsr()
 
 
@@ -179,7 +181,7 @@ def pgd(ops: list[list[Op]], B: np.ndarray, tol: float = 1e-4, max_modes: int = 
         f = [v / np.linalg.norm(v) for v in f]
         prev = None
         it = 0
-        for it in range(1, max_fp + 1):
+        for it in range(1, max_fp + 1):  # noqa: B007 - read after the loop: the fixed-point iterations used
             for d in range(D):
                 coef = [np.prod([_quad(ops_a[l], f[l], f[l]) for l in range(D) if l != d]) for ops_a in ops]
                 rhs = _contract(res, [None if l == d else f[l] for l in range(D)])
@@ -220,7 +222,8 @@ def _project_second(ops: list[list[Op]], Q: np.ndarray, B: np.ndarray) -> np.nda
     n, ny = Q.shape[0], B.shape[1]
     Ar = [Q @ _apply(a[0], Q.T) for a in ops]
     C = Q @ B
-    Ay = [sp.diags(a[1]).tocsr() if (isinstance(a[1], np.ndarray) and a[1].ndim == 1) else sp.csr_matrix(a[1]) for a in ops]
+    Ay = [sp.diags(a[1]).tocsr() if (isinstance(a[1], np.ndarray) and a[1].ndim == 1) else sp.csr_matrix(a[1])
+          for a in ops]
     if any(sp.triu(A, 1).nnz for A in Ay):
         raise ValueError("the update step needs diagonal or lower-triangular second-axis operators")
     diag = [A.diagonal() for A in Ay]
@@ -254,7 +257,7 @@ def _pgd_updated(ops, B, tol, max_modes, max_fp, fp_tol, seed) -> Separated:
         f = [v / np.linalg.norm(v) for v in f]
         prev = None
         it = 0
-        for it in range(1, max_fp + 1):
+        for it in range(1, max_fp + 1):  # noqa: B007 - read after the loop: the fixed-point iterations used
             for d in range(2):
                 o = 1 - d
                 coef = [_quad(a[o], f[o], f[o]) for a in ops]
@@ -277,7 +280,7 @@ def _pgd_updated(ops, B, tol, max_modes, max_fp, fp_tol, seed) -> Separated:
         Q = np.vstack([Q, r / nr])
         G = _project_second(ops, Q, B)
         # indicator: size of the rank-one correction the fixed point found (as in plain PGD), over ‖U_n‖
-        ind = float(np.linalg.norm(f[0]) * np.linalg.norm(f[1]) / max(np.linalg.norm(G), 1e-300))
+        ind = float(np.linalg.norm(f[0]) * np.linalg.norm(f[1]) / max(float(np.linalg.norm(G)), 1e-300))
         out.indicator.append(ind)
         out.fp_iterations.append(it)
         res = B - sum(_apply(a[0], Q.T) @ (_apply(a[1], G.T) if not (isinstance(a[1], np.ndarray) and a[1].ndim == 1)
@@ -320,7 +323,7 @@ class LocalProblem:
 class ParametricStatic(LocalProblem):
     """K U = T, U (x, s): the cantilever (operator K ⊗ I_s; sub-domains in s are independent)."""
 
-    def __init__(self, K: sp.spmatrix, T: np.ndarray):
+    def __init__(self, K: sp.csr_matrix, T: np.ndarray):
         self.K = sp.csr_matrix(K)
         self.T = np.asarray(T, dtype=np.float64)
         self.axes = (self.T.shape[1],)
@@ -336,7 +339,7 @@ class TransientHeat(LocalProblem):
     """M U Dᵀ + K U diag(k) = B over time nodes 1 … N_t−1 (and conductivities k, if several):
     operator M ⊗ D ⊗ I_k + K ⊗ I_t ⊗ diag(k). Axis 0 of the partitioned axes is time."""
 
-    def __init__(self, M: sp.spmatrix, K: sp.spmatrix, B: np.ndarray, dt: float, k: np.ndarray):
+    def __init__(self, M: sp.csr_matrix, K: sp.csr_matrix, B: np.ndarray, dt: float, k: np.ndarray):
         self.M, self.K = sp.csr_matrix(M), sp.csr_matrix(K)
         self.dt = float(dt)
         self.k = np.atleast_1d(np.asarray(k, dtype=np.float64))
@@ -346,17 +349,16 @@ class TransientHeat(LocalProblem):
         self.time_axis = 0
 
     def _D(self, n: int) -> sp.csr_matrix:
-        return sp.diags([np.ones(n), -np.ones(n - 1)], [0, -1], format="csr") / self.dt
+        # scipy-stubs types `diagonals` as one array or nested sequences of scalars, not the documented list of
+        # 1D arrays of different lengths
+        return sp.diags([np.ones(n), -np.ones(n - 1)], [0, -1], format="csr") / self.dt  # type: ignore[call-overload]
 
     def block(self, box, ic):
         t = box[0]
         kk = self.k[box[1]] if self.parametric else self.k
         nt = len(range(*t.indices(self.axes[0])))
         B = self.B[:, t]
-        if self.parametric:
-            B = np.repeat(B[:, :, None], len(kk), axis=2)
-        else:
-            B = B.copy()
+        B = np.repeat(B[:, :, None], len(kk), axis=2) if self.parametric else B.copy()
         if ic is not None:  # M (u¹ − u⁰)/Δt: the known u⁰ moves to the right-hand side of the first row
             B[:, 0] += (self.M @ ic) / self.dt
         D, It = self._D(nt), np.ones(nt)
@@ -412,7 +414,7 @@ class LocalSolution:
 def boxes_of(cuts: list[np.ndarray]) -> list[tuple[slice, ...]]:
     """All boxes of a tensor grid of cuts, the first axis (time) outermost so initial conditions flow."""
     ranges = [[slice(int(c[i]), int(c[i + 1])) for i in range(len(c) - 1)] for c in cuts]
-    out = [()]
+    out: list[tuple[slice, ...]] = [()]
     for r in ranges:
         out = [b + (s,) for b in out for s in r]
     return out
@@ -486,10 +488,10 @@ def mno_partition(problem: LocalProblem, M: int, tol: float = 1e-4, seed_length:
         cache: dict[int, Separated] = {}
 
         def local(p: int) -> Separated:
-            if p not in cache:
-                ops, B = problem.block((slice(a, a + p),), ic)
-                cache[p] = pgd(ops, B, tol, max_modes=M + 1, seed=seed, update=update)
-            return cache[p]
+            if p not in cache:  # noqa: B023 - called in the same iteration
+                ops, B = problem.block((slice(a, a + p),), ic)  # noqa: B023 - called in the same iteration
+                cache[p] = pgd(ops, B, tol, max_modes=M + 1, seed=seed, update=update)  # noqa: B023 - same iteration
+            return cache[p]  # noqa: B023 - called in the same iteration
 
         def fits(p: int) -> bool:
             return local(p).n_modes <= M
@@ -597,7 +599,8 @@ def eps_neighbourhood_cuts(curves: np.ndarray, axis: int, eps: float) -> np.ndar
 
 def kpca_partition(problem: LocalProblem, first_parts: list[int] | int, block: int, eps: float = 0.1,
                    sigma: float | None = None, n_components: int = 3, tol_first: float = 1e-2,
-                   seed: int = 0, max_parts: int | None = None, update: bool = False) -> tuple[list[np.ndarray], KpcaMap]:
+                   seed: int = 0, max_parts: int | None = None,
+                   update: bool = False) -> tuple[list[np.ndarray], KpcaMap]:
     """Alg. 3.2: a constant-partition solution at a coarse tolerance, k-PCA of it, Hausdorff distances,
     ε-neighbourhood clusters → cuts. ``eps`` is a fraction of the diameter of the k-PCA point cloud.
     Degenerate kernels (width far too small: every sample orthogonal to every other; far too large: all

@@ -11,7 +11,8 @@
 2. :func:`heat` (§3.3.2, Idelsohn's benchmark): ρ c_p ∂ₜu − ∇·(k∇u) = f(x, t) on Ω = [0, π], I = [0, 1],
    u = 0 on ∂Ω and at t = 0, with the moving source
 
-       f = A cos(π/L (x − x₀(t)))  for t_i < t < t_f and |x − x₀(t)| < L/2,   x₀(t) = x_i + (x_f − x_i)(t − t_i)/(t_f − t_i)
+       f = A cos(π/L (x − x₀(t)))  for t_i < t < t_f and |x − x₀(t)| < L/2,
+       x₀(t) = x_i + (x_f − x_i)(t − t_i)/(t_f − t_i)
 
    and A = 100, L = 0.15, t_i = 0.2, t_f = 0.7, x_i = 2π/7, k = 0.05, ρ = c_p = 1; N_x = 301, N_t = 401.
    Linear finite elements in x, implicit Euler in t:  M (uⁿ − uⁿ⁻¹)/Δt + k K uⁿ = M f(·, tⁿ), i.e. in matrix
@@ -69,7 +70,7 @@ class Cantilever:
 
 def cantilever(L: float = 9.0, H: float = 1.0, h: float = 0.1, E: float = 1000.0, nu: float = 0.3,
                F: float = -1.0) -> Cantilever:
-    nx, ny = int(round(L / h)), int(round(H / h))
+    nx, ny = round(L / h), round(H / h)
     mesh = skfem.MeshQuad.init_tensor(np.linspace(0, L, nx + 1), np.linspace(0, H, ny + 1))
     basis = skfem.Basis(mesh, skfem.ElementVector(skfem.ElementQuad1()))
     lam = E * nu / (1 - nu ** 2)  # plane stress: σ = λ' tr(ε) I + 2 μ ε with λ' = Eν/(1 − ν²)
