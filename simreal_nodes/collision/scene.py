@@ -13,9 +13,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from simreal_nodes import geometry as G
+from simreal_nodes.camera import CameraModel
 from simreal_nodes.collision.contact import ContactState, ContactTracker, facing_surface_samples
 from simreal_nodes.rom.model import ReducedModel
-from simreal_nodes.camera import CameraModel
 from simreal_nodes.vision.depth import depth_points
 
 

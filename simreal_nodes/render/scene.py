@@ -7,11 +7,11 @@ from __future__ import annotations
 import numpy as np
 
 from simreal_nodes import geometry as G
+from simreal_nodes.camera import CameraModel
 from simreal_nodes.io.cdr import TriangleListMarker
 from simreal_nodes.render.overlay import DrawState, ObjectOverlay, OverlayCompositor
 from simreal_nodes.rom.model import ReducedModel
 from simreal_nodes.rom.model_file import load_model
-from simreal_nodes.camera import CameraModel
 
 Parameters = tuple[list[str], list[float]]  # (names, values) of one object's model parameters
 

@@ -17,8 +17,8 @@ from simreal_nodes import geometry
 if TYPE_CHECKING:  # (annotations only: the player imports this module and needs none of the cores)
     from simreal_nodes.assimilation.localizer import Localization
     from simreal_nodes.assimilation.tracker import Estimate
-    from simreal_nodes.collision.contact import ContactState, ContactTracker
     from simreal_nodes.camera import CameraModel
+    from simreal_nodes.collision.contact import ContactState, ContactTracker
 
 
 def stamp_ns(stamp) -> int:

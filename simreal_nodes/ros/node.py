@@ -146,8 +146,8 @@ class SimrealNode(Node):
 
     def camera_model(self, msg):
         """CameraModel of a CameraInfo, or None (status set to error with the reason) when it is unusable."""
-        from simreal_nodes.errors import CameraInfoError
         from simreal_nodes.camera import CameraModel
+        from simreal_nodes.errors import CameraInfoError
 
         try:
             return CameraModel.from_camera_info(msg)

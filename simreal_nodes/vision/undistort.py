@@ -8,10 +8,10 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from simreal_nodes.camera import CameraModel
 from simreal_nodes.errors import CameraInfoError, ImageFormatError
 from simreal_nodes.io import images
 from simreal_nodes.io.sources import Frame
-from simreal_nodes.camera import CameraModel
 
 
 class Undistorter:

@@ -19,6 +19,7 @@ from simreal_msgs.msg import ContactState as ContactMsg
 from simreal_msgs.msg import FeatureObservations, ModelParameters
 
 from simreal_nodes import geometry as G
+from simreal_nodes.camera import CameraModel
 from simreal_nodes.collision.scene import ContactScene, ObjectContact
 from simreal_nodes.errors import ImageFormatError
 from simreal_nodes.io import images
@@ -29,7 +30,6 @@ from simreal_nodes.ros.qos import data_qos, reliable_qos
 from simreal_nodes.scene import graph
 from simreal_nodes.scene.schema import load_scene
 from simreal_nodes.sync import StampSync
-from simreal_nodes.camera import CameraModel
 
 
 class CollisionNode(SimrealNode):

@@ -12,6 +12,7 @@ import functools
 
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image
 
+from simreal_nodes.camera import CameraModel
 from simreal_nodes.errors import ImageFormatError
 from simreal_nodes.io import images, sources
 from simreal_nodes.ros.convert import camera_info_msg, ns_to_stamp
@@ -19,7 +20,6 @@ from simreal_nodes.ros.node import SimrealNode, guarded, run_node
 from simreal_nodes.ros.qos import data_qos
 from simreal_nodes.scene import graph
 from simreal_nodes.scene.schema import load_scene
-from simreal_nodes.camera import CameraModel
 from simreal_nodes.vision.undistort import IngestCamera
 
 

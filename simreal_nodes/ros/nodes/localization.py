@@ -20,8 +20,15 @@ from tf2_msgs.msg import TFMessage
 from simreal_nodes.assimilation.localizer import LiveLocalizer, Localization, status_text
 from simreal_nodes.errors import ImageFormatError
 from simreal_nodes.io import images
-from simreal_nodes.ros.convert import (cloud_msg, deformable_points, localization_status_msg, observations_msg,
-                                       pose_stamped, stamp_ns, transform_stamped)
+from simreal_nodes.ros.convert import (
+    cloud_msg,
+    deformable_points,
+    localization_status_msg,
+    observations_msg,
+    pose_stamped,
+    stamp_ns,
+    transform_stamped,
+)
 from simreal_nodes.ros.node import SimrealNode, guarded, run_node
 from simreal_nodes.ros.qos import TF_QOS, data_qos, reliable_qos
 from simreal_nodes.scene import graph

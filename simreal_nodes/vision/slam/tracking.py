@@ -141,7 +141,7 @@ class Tracker:
                     continue
                 for kid in p.obs:
                     counts[kid] = counts.get(kid, 0) + 1
-            for kid in sorted(counts, key=counts.get, reverse=True)[:n_local]:
+            for kid in sorted(counts, key=counts.__getitem__, reverse=True)[:n_local]:
                 kfs[kid] = m.keyframes[kid]
         if ctx.ref_kf is not None and ctx.ref_kf.id in m.keyframes:
             kfs[ctx.ref_kf.id] = ctx.ref_kf
