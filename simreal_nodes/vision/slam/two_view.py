@@ -159,6 +159,7 @@ class Initializer:
     def initialize(self, f: Features, z: np.ndarray | None, stamp: int) -> TrackResult:
         ctx, m = self.ctx, self.ctx.map
         if ctx.mode in ("rgbd", "stereo"):
+            assert z is not None  # rgbd / stereo frames always come with their feature depths
             ok = np.isfinite(z)
             if ok.sum() < 100:
                 ctx.state = INITIALIZING
