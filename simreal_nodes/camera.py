@@ -35,12 +35,12 @@ class CameraModel:
 
     # -- construction -------------------------------------------------------------------
     @classmethod
-    def from_intrinsics(cls, width, height, fx, fy, cx, cy, D=None, **kw) -> "CameraModel":
+    def from_intrinsics(cls, width, height, fx, fy, cx, cy, D=None, **kw) -> CameraModel:
         K = np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1]], dtype=np.float64)
         return cls(int(width), int(height), K, np.zeros(5) if D is None else np.asarray(D), **kw)
 
     @classmethod
-    def from_camera_info(cls, msg) -> "CameraModel":
+    def from_camera_info(cls, msg) -> CameraModel:
         """From a sensor_msgs/CameraInfo (rclpy or rosbags message); validates it."""
         k = np.asarray(msg.k, dtype=np.float64)
         if k.size != 9:
@@ -98,14 +98,14 @@ class CameraModel:
         """Distortion vector as OpenCV wants it (zeros when none)."""
         return self.D.copy() if self.has_distortion else np.zeros(5)
 
-    def scaled(self, factor: float) -> "CameraModel":
+    def scaled(self, factor: float) -> CameraModel:
         """The same camera at a resolution scaled by ``factor`` (pixel-centre convention kept)."""
         K = self.K.copy()
         K[0, 0] *= factor
         K[1, 1] *= factor
         K[0, 2] = (K[0, 2] + 0.5) * factor - 0.5
         K[1, 2] = (K[1, 2] + 0.5) * factor - 0.5
-        return CameraModel(int(round(self.width * factor)), int(round(self.height * factor)), K,
+        return CameraModel(round(self.width * factor), round(self.height * factor), K,
                            self.D.copy(), self.distortion_model, self.frame_id)
 
     # -- geometry -----------------------------------------------------------------------
@@ -172,7 +172,7 @@ class CameraModel:
         Path(path).write_text(yaml.safe_dump(doc, sort_keys=False))
 
     @classmethod
-    def from_calibration_yaml(cls, path: str | Path) -> "CameraModel":
+    def from_calibration_yaml(cls, path: str | Path) -> CameraModel:
         """Read the ROS camera_calibration YAML format; errors name the missing or bad key."""
         path = Path(path)
         try:

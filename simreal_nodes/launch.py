@@ -9,6 +9,7 @@ prefixed with its name, a node that exits unexpectedly is reported and restarted
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import os
 import signal
@@ -20,6 +21,7 @@ import time
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import IO
 
 import yaml
 
@@ -62,7 +64,7 @@ def ros_environment(base: dict | None = None) -> dict:
 class _Proc:
     spec: NodeSpec
     cmd: list[str]
-    popen: subprocess.Popen | None = None
+    popen: subprocess.Popen[bytes] | None = None
     restarts: int = 0
     exit_codes: list[int] = field(default_factory=list)
 
@@ -100,20 +102,21 @@ class Launcher:
             self.procs.append(_Proc(spec, cmd))
 
     # -----------------------------------------------------------------------------------------
-    def start(self) -> "Launcher":
+    def start(self) -> Launcher:
         for p in self.procs:
             self._spawn(p)
         threading.Thread(target=self._watch, daemon=True).start()
         return self
 
     def _spawn(self, p: _Proc) -> None:
-        log = open(self.log_dir / f"{p.spec.name}.log", "ab")
+        log = open(self.log_dir / f"{p.spec.name}.log", "ab")  # noqa: SIM115 - the pump thread owns and closes it
         p.popen = subprocess.Popen(p.cmd, env=self.env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                                    stdin=subprocess.DEVNULL, start_new_session=True)
         threading.Thread(target=self._pump, args=(p, p.popen, log), daemon=True).start()
         self.echo(f"[launch] started {p.spec.name} (pid {p.popen.pid})")
 
-    def _pump(self, p: _Proc, popen: subprocess.Popen, log) -> None:
+    def _pump(self, p: _Proc, popen: subprocess.Popen[bytes], log: IO[bytes]) -> None:
+        assert popen.stdout is not None  # started with stdout=PIPE
         with log:
             for line in iter(popen.stdout.readline, b""):
                 log.write(line)
@@ -149,7 +152,7 @@ class Launcher:
             for d in os.listdir("/proc"):
                 if d.isdigit():
                     try:
-                        f = open(f"/proc/{d}/stat").read().rsplit(")", 1)[1].split()
+                        f = Path(f"/proc/{d}/stat").read_text().rsplit(")", 1)[1].split()
                     except OSError:
                         continue
                     stats[int(d)] = (int(f[1]), (int(f[11]) + int(f[12])) / tick)  # ppid, utime + stime
@@ -177,18 +180,17 @@ class Launcher:
         """SIGINT every node, wait, then SIGTERM, then SIGKILL. Returns exit codes."""
         with self._lock:
             self._stopping = True
-        live = [p for p in self.procs if p.popen is not None and p.popen.poll() is None]
+        # the processes themselves: with _stopping set, _watch no longer replaces or clears any p.popen
+        live = [p.popen for p in self.procs if p.popen is not None and p.popen.poll() is None]
         for sig, wait in ((signal.SIGINT, timeout), (signal.SIGTERM, 3.0), (signal.SIGKILL, 2.0)):
-            for p in live:
-                if p.popen.poll() is None:
-                    try:
-                        p.popen.send_signal(sig)
-                    except ProcessLookupError:
-                        pass
+            for popen in live:
+                if popen.poll() is None:
+                    with contextlib.suppress(ProcessLookupError):
+                        popen.send_signal(sig)
             t_end = time.monotonic() + wait
-            while time.monotonic() < t_end and any(p.popen.poll() is None for p in live):
+            while time.monotonic() < t_end and any(popen.poll() is None for popen in live):
                 time.sleep(0.05)
-            live = [p for p in live if p.popen.poll() is None]
+            live = [popen for popen in live if popen.poll() is None]
             if not live:
                 break
         codes = {p.spec.name: (p.popen.returncode if p.popen else (p.exit_codes[-1] if p.exit_codes else None))
@@ -196,7 +198,7 @@ class Launcher:
         self._tmp.cleanup()
         return codes
 
-    def __enter__(self) -> "Launcher":
+    def __enter__(self) -> Launcher:
         return self.start()
 
     def __exit__(self, *exc) -> None:

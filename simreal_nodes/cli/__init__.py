@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import argparse
 import sys
-from typing import Callable
+from collections.abc import Callable
 
 from simreal_nodes.cli import camera, demo, evaluate, graph, models, scene
 from simreal_nodes.errors import SimrealError

@@ -31,7 +31,7 @@ def cmd_launch(a: argparse.Namespace) -> int:
 def cmd_replay(a: argparse.Namespace) -> int:
     from simreal_nodes.ros.commands import replay
 
-    stats, report, _ = replay(a.bag, a.scene, rate=a.rate, lossless=a.lossless, record=a.record,
+    stats, _report, _ = replay(a.bag, a.scene, rate=a.rate, lossless=a.lossless, record=a.record,
                               storage=a.storage, launch=not a.no_launch, frame_timeout_s=a.frame_timeout,
                               metrics_json=a.metrics)
     return 0 if stats is not None else 1

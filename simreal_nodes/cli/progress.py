@@ -3,6 +3,10 @@
 from __future__ import annotations
 
 import sys
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from tqdm import tqdm
 
 
 class TqdmProgress:
@@ -12,7 +16,7 @@ class TqdmProgress:
         from tqdm import tqdm
 
         self._tqdm = tqdm
-        self._bars = {}
+        self._bars: dict[str, tqdm[Any]] = {}
 
     def __call__(self, stage: str, done: int, total: int, message: str = "") -> None:
         bar = self._bars.get(stage)

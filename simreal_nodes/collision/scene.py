@@ -85,8 +85,8 @@ class ContactScene:
                 pts = pts_by_step[step]
                 why = "" if len(pts) else "no valid depth"
             pushers = [p for p in self.objects if o["id"] in p["collision"]["pushes"]]
-            extra = [self._surface_world(p["id"], toward=o["id"]) for p in pushers]
-            extra = [e for e in extra if e is not None and len(e)]
+            surfaces = [self._surface_world(p["id"], toward=o["id"]) for p in pushers]
+            extra = [e for e in surfaces if e is not None and len(e)]
             if extra:
                 pts = np.vstack([pts] + extra) if pts is not None and len(pts) else np.vstack(extra)
             st = self.trackers[o["id"]].update(pts)

@@ -3,16 +3,20 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    import cv2
 
 
 class VideoSink:
     """MP4 writer that opens on the first frame (size known then) and is closed on shutdown."""
 
-    def __init__(self, path: str, fps: float):
+    def __init__(self, path: str, fps: float) -> None:
         self.path, self.fps = path, fps
-        self.writer = None
+        self.writer: cv2.VideoWriter | None = None
         self.frames = 0
 
     def write(self, bgr: np.ndarray) -> None:
@@ -21,7 +25,7 @@ class VideoSink:
 
         if self.writer is None:
             Path(self.path).parent.mkdir(parents=True, exist_ok=True)
-            self.writer = cv2.VideoWriter(self.path, cv2.VideoWriter_fourcc(*"mp4v"), self.fps,
+            self.writer = cv2.VideoWriter(self.path, cv2.VideoWriter.fourcc(*"mp4v"), self.fps,
                                           (bgr.shape[1], bgr.shape[0]))
             if not self.writer.isOpened():
                 self.writer = None

@@ -117,7 +117,7 @@ class Material:
     def kappa(self) -> float:
         return self.E / (3 * (1 - 2 * self.nu))
 
-    def scaled(self, factor: float) -> "Material":
+    def scaled(self, factor: float) -> Material:
         """The same law with every modulus multiplied by ``factor`` (used to solve in E units)."""
         return type(self)(self.E * factor, self.nu, self.name)
 

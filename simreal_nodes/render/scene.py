@@ -52,6 +52,7 @@ class SceneOverlay:
 
     def build(self) -> OverlayCompositor:
         """(Re)build the compositor for the current camera."""
+        assert self.cam is not None  # built once a camera is set (set_camera; the node checks it first)
         obs = {}
         for o in self.objects:
             ov = o["overlay"]
@@ -75,6 +76,7 @@ class SceneOverlay:
             notes.append(f"depth {depth.shape[1]}x{depth.shape[0]} is not registered to the "
                          f"{bgr.shape[1]}x{bgr.shape[0]} image: drawn without occlusion")
             depth = None
+        assert self.comp is not None  # the camera is set (set_camera built the compositor)
         out, states = self.comp.compose(bgr, T_wc, est, depth)
         notes += [f"{k}: behind the camera" for k, s in states.items() if s.behind_camera]
         return out, states, "; ".join(notes)
@@ -82,6 +84,7 @@ class SceneOverlay:
     def markers(self) -> list[TriangleListMarker]:
         """The deformed surfaces of the last frame drawn, as RViz TRIANGLE_LIST markers with vertex colours."""
         arr = []
+        assert self.comp is not None  # asked after frames were drawn, hence with a compositor
         for k, (oid, ob) in enumerate(self.comp.objects.items()):
             V, col = self.comp.last.get(oid, (None, None))
             if V is None:

@@ -13,7 +13,9 @@ from __future__ import annotations
 import importlib
 import time
 from collections import defaultdict, deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 from rclpy.node import Node
@@ -25,6 +27,9 @@ from simreal_nodes.ros.convert import stamp_ns
 from simreal_nodes.ros.node import parse_progress
 from simreal_nodes.ros.qos import data_qos, reliable_qos
 from simreal_nodes.scene import graph
+
+if TYPE_CHECKING:
+    from rclpy.subscription import Subscription
 
 
 def message_class(msgtype: str):
@@ -44,7 +49,7 @@ class Recorder:
         self.node = node
         self.writer = bags.BagWriter(path, storage).open()
         self.exclude = exclude
-        self._subs = {}
+        self._subs: dict[str, Subscription | None] = {}  # None: waiting for a publisher
         self._pending: dict[str, str] = {}  # topics waiting for a publisher (to match its QoS)
         self.counts: dict[str, int] = defaultdict(int)
         for t, ty in (topics or {}).items():
@@ -63,7 +68,8 @@ class Recorder:
         reliable = bool(infos) and all(i.qos_profile.reliability == ReliabilityPolicy.RELIABLE for i in infos)
         latched = bool(infos) and all(i.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL for i in infos)
         if latched:
-            return QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+            return QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
+                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
         return reliable_qos(1000) if reliable else data_qos(False, depth=100)
 
     def add(self, topic: str, msgtype: str) -> None:
@@ -157,9 +163,10 @@ class Player:
         self.stats = PlayStats()
         self.should_stop = lambda: False
         self.extra_ready = lambda: True
-        self.dead_nodes = lambda: []
+        self.dead_nodes: Callable[[], list[str]] = lambda: []
         self.node_inputs: dict[str, list[str]] = {}
-        self.pubs = {t: node.create_publisher(message_class(ty), t, data_qos(lossless)) for t, ty in input_topics.items()}
+        self.pubs = {t: node.create_publisher(message_class(ty), t, data_qos(lossless))
+                     for t, ty in input_topics.items()}
         self._reports: dict[int, dict[str, str]] = defaultdict(dict)
         self._t_pub: dict[int, float] = {}
         self._t_first: float | None = None
@@ -195,8 +202,9 @@ class Player:
                     self.executor.spin_once(timeout_sec=0.05)
                 return True
         missing = want - set(self.node.get_node_names())
-        self.echo(f"[replay] graph not ready after {timeout_s:.0f} s; missing nodes: {', '.join(sorted(missing)) or 'none'}"
-                  f"; image subscribers: {self.pubs[self.image_topic].get_subscription_count()}")
+        self.echo(f"[replay] graph not ready after {timeout_s:.0f} s; missing nodes: "
+                  f"{', '.join(sorted(missing)) or 'none'}; "
+                  f"image subscribers: {self.pubs[self.image_topic].get_subscription_count()}")
         return False
 
     def _inputs_matched(self) -> bool:
@@ -309,6 +317,7 @@ class Player:
             seen_since.pop(0)
             release(0)
         if self._t_pub:
+            assert self._t_first is not None  # set with the first publication
             self.stats.play_s = time.monotonic() - self._t_first
         # let the graph drain what is in flight (outputs travel on other topics than progress)
         t_end = time.monotonic() + (2.0 if not self.lossless else 0.5)

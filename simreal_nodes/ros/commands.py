@@ -52,6 +52,7 @@ def replay(bag: str, scene_file: str, rate: float = 1.0, lossless: bool = False,
     report = bags.BagReport()
     topics = bags.bag_topics(bag)
     img = image_topic(cam)
+    assert img is not None  # camera.image is never null in a validated scene (it has a default)
     if img not in topics:
         hint = ""
         if not cam["compressed"] and img + "/compressed" in topics:

@@ -3,7 +3,7 @@ publish (no cv_bridge, no sensor_msgs_py)."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from geometry_msgs.msg import Pose, PoseStamped, TransformStamped
@@ -87,8 +87,9 @@ def transform_stamped(T: np.ndarray, stamp, parent: str, child: str) -> Transfor
     return m
 
 
-_PF_TYPES = {np.dtype(np.int8): 1, np.dtype(np.uint8): 2, np.dtype(np.int16): 3, np.dtype(np.uint16): 4,
-             np.dtype(np.int32): 5, np.dtype(np.uint32): 6, np.dtype(np.float32): 7, np.dtype(np.float64): 8}
+_PF_TYPES: dict[np.dtype[Any], int] = {
+    np.dtype(np.int8): 1, np.dtype(np.uint8): 2, np.dtype(np.int16): 3, np.dtype(np.uint16): 4,
+    np.dtype(np.int32): 5, np.dtype(np.uint32): 6, np.dtype(np.float32): 7, np.dtype(np.float64): 8}
 
 
 def cloud_msg(points: np.ndarray, header: Header, frame_id: str, extra: dict | None = None):
@@ -112,7 +113,9 @@ def cloud_msg(points: np.ndarray, header: Header, frame_id: str, extra: dict | N
     m.header.stamp = header.stamp
     m.header.frame_id = frame_id
     m.height, m.width = 1, len(P)
-    m.fields = [PointField(name=n, offset=rec.dtype.fields[n][1], datatype=_PF_TYPES[np.dtype(v.dtype)], count=1)
+    fields = rec.dtype.fields
+    assert fields is not None  # a structured dtype has its fields
+    m.fields = [PointField(name=n, offset=fields[n][1], datatype=_PF_TYPES[np.dtype(v.dtype)], count=1)
                 for n, v in cols]
     m.is_bigendian = False
     m.point_step, m.row_step = rec.dtype.itemsize, rec.dtype.itemsize * len(P)

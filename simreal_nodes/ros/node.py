@@ -11,6 +11,8 @@ import functools
 import os
 import time
 import traceback
+from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -23,6 +25,9 @@ from simreal_nodes.metrics import StageMetrics
 from simreal_nodes.ros.convert import ns_to_stamp, stamp_ns
 from simreal_nodes.ros.qos import reliable_qos
 from simreal_nodes.scene import graph
+
+if TYPE_CHECKING:
+    from simreal_nodes.sync import StampSync
 
 STALL_S = 3.0  # live: a node that skips every frame for this long says so in its status
 
@@ -47,6 +52,10 @@ def parse_progress(frame_id: str) -> tuple[str, float | None, str]:
 
 class SimrealNode(Node):
     """Base of simreal nodes: declared parameters, diagnostics on /diagnostics, progress reports."""
+
+    # a node whose inputs go through on_input sets its ``sync`` and defines ``process`` (takes a completed frame)
+    sync: StampSync
+    process: Callable[[dict], None]
 
     def __init__(self, name: str, **kw):
         super().__init__(name, **kw)
@@ -220,6 +229,7 @@ def run_node(node_cls, args=None) -> int:
         pass
     finally:
         if prof is not None:
+            assert profile_dir is not None and node is not None  # prof is made only once both exist
             prof.disable()
             os.makedirs(profile_dir, exist_ok=True)
             prof.dump_stats(os.path.join(profile_dir, f"{node.get_name()}.prof"))

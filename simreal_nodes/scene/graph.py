@@ -91,7 +91,8 @@ def required_nodes(scene: dict, lossless: bool = False) -> list[NodeSpec]:
     if loc["mode"] != "static":
         nodes.append(NodeSpec(
             "localization", dict(common),
-            [CAM_IMAGE, CAM_INFO] + ([CAM_DEPTH] if depth else []) + ([CAM_RIGHT_IMAGE, CAM_RIGHT_INFO] if stereo else [])
+            [CAM_IMAGE, CAM_INFO] + ([CAM_DEPTH] if depth else [])
+            + ([CAM_RIGHT_IMAGE, CAM_RIGHT_INFO] if stereo else [])
             + ([LOC_DEFORMABLE] if any(o["tracking"]["enabled"] for o in objs) else []),
             {POSE: "geometry_msgs/msg/PoseStamped", TF: "tf2_msgs/msg/TFMessage",
              LOC_STATUS: "simreal_msgs/msg/TrackingStatus", LOC_MAP: "sensor_msgs/msg/PointCloud2",

@@ -12,6 +12,7 @@ scene calls :func:`build_spec_models` first; the nodes, which validate the same 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import yaml
 
@@ -25,15 +26,16 @@ class ModelRef(FilePath):
     """A model file path, or ``spec:NAME`` (a built-in spec, or a spec file), kept as written here:
     :func:`_resolve_model_ref` turns it into the model's cache path once the object record is complete."""
 
-    def check(self, v, path, ctx):
+    def check(self, v: object, path: str, ctx: Context) -> Any:
         if isinstance(v, str) and v.startswith(SPEC_PREFIX):
             return v
         return super().check(v, path, ctx)
 
 
 SCENE_FORMAT = 1
-IDENT = dict(pattern=lambda s: s.replace("_", "a").isalnum() and s[:1].isalpha(),
-             what="an identifier (letters, digits, '_', starting with a letter)")
+# keyword arguments of a Str that holds an identifier (Any: Str takes each with its own type)
+IDENT: dict[str, Any] = dict(pattern=lambda s: s.replace("_", "a").isalnum() and s[:1].isalpha(),
+                             what="an identifier (letters, digits, '_', starting with a letter)")
 POSE7 = "a pose [x, y, z, qx, qy, qz, qw] (metres, unit quaternion)"
 
 CAMERA = Record({
@@ -44,7 +46,8 @@ CAMERA = Record({
     "right_camera_info": Topic("CameraInfo of the right camera", nullable=True),
     "calibration": FilePath("ROS calibration YAML that overrides CameraInfo", nullable=True),
     "undistort": Bool("undistort images in the ingest node", default=False),
-    "compressed": Bool("images arrive as sensor_msgs/CompressedImage on <image>/compressed (image_transport)", default=False),
+    "compressed": Bool("images arrive as sensor_msgs/CompressedImage on <image>/compressed (image_transport)",
+                       default=False),
     "source": Enum(("topic", "bag", "video", "images"), "where the ingest node reads frames", default="topic"),
     "path": FilePath("bag, video file or image folder for non-topic sources", nullable=True),
     "rate_hz": Number("publishing rate for video / image-folder sources", lo=0, lo_open=True, default=30.0),
@@ -54,7 +57,8 @@ CAMERA = Record({
 MARKERS = Record({
     "dictionary": Str("OpenCV ArUco / AprilTag dictionary name, e.g. DICT_4X4_50", default="DICT_4X4_50"),
     "size_m": Number("marker side length, metres", lo=0, lo_open=True, default=0.05),
-    "poses": MapOf(Vector(7, what=POSE7), key=Number(integer=True, lo=0), doc="marker id -> pose of its centre in the map frame", default={}),
+    "poses": MapOf(Vector(7, what=POSE7), key=Number(integer=True, lo=0),
+                   doc="marker id -> pose of its centre in the map frame", default={}),
 })
 
 LOCALIZATION = Record({
@@ -66,10 +70,12 @@ LOCALIZATION = Record({
     "static_pose": Vector(7, what=POSE7, doc="camera pose in the map for mode 'static'", nullable=True),
     "map_file": FilePath("load a saved map (HDF5) at start", nullable=True),
     "localization_only": Bool("start with mapping frozen", default=False),
-    "freeze_map_on_deformation": Bool("stop mapping once a tracked object deforms (thesis §4.4.1). Off: mapping goes on, "
-                                      "points on the object never vote for the pose and new ones are linked in the "
-                                      "estimated deformed shape (measured more accurate: docs/tracking.md)", default=False),
-    "known_scale_m": Number("monocular: distance between the first two keyframes, metres", lo=0, lo_open=True, nullable=True),
+    "freeze_map_on_deformation": Bool("stop mapping once a tracked object deforms (thesis §4.4.1). Off: mapping goes "
+                                      "on, points on the object never vote for the pose and new ones are linked in the "
+                                      "estimated deformed shape (measured more accurate: docs/tracking.md)",
+                                      default=False),
+    "known_scale_m": Number("monocular: distance between the first two keyframes, metres", lo=0, lo_open=True,
+                            nullable=True),
 })
 
 PARAMETER = Record({
@@ -80,18 +86,21 @@ PARAMETER = Record({
 })
 
 ANCHOR = Record({
-    "kind": Enum(("pose", "registration"), "pose: given below; registration: found by RANSAC + ICP on the map", default="pose"),
+    "kind": Enum(("pose", "registration"), "pose: given below; registration: found by RANSAC + ICP on the map",
+                 default="pose"),
     "pose": Vector(7, what=POSE7, doc="object frame in the map frame", default=[0, 0, 0, 0, 0, 0, 1]),
     "with_scale": Bool("registration also estimates scale (monocular maps)", default=False),
 })
 
 TRACKING = Record({
     "enabled": Bool("estimate the tracked parameters from the images", default=False),
-    "measurements": Enum(("map_points", "dots", "homography"), "what gives the image measurements", default="map_points"),
+    "measurements": Enum(("map_points", "dots", "homography"), "what gives the image measurements",
+                         default="map_points"),
     "huber_px": Number("Huber threshold of the robust loss, pixels", lo=0, lo_open=True, default=2.0),
     "modes": Number("number of PGD modes used (0 = all)", integer=True, lo=0, default=0),
     "max_iterations": Number("Levenberg-Marquardt iterations per frame", integer=True, lo=1, hi=500, default=20),
-    "constant_frames": Number("deformed frames used to estimate 'constant' parameters before freezing", integer=True, lo=1, default=15),
+    "constant_frames": Number("deformed frames used to estimate 'constant' parameters before freezing", integer=True,
+                              lo=1, default=15),
     "constant_std_frac": Number("a frame informs a 'constant' parameter only if its standard deviation is below this "
                                 "fraction of its range", lo=0, lo_open=True, hi=1, default=0.0025),
     "min_measurements": Number("fewer inlier measurements than this -> lost", integer=True, lo=1, default=6),
@@ -103,8 +112,8 @@ TRACKING = Record({
     "anchor": Enum(("ray", "foot"), "where a map point sits on its model triangle: where its pixel's viewing ray "
                    "crosses it (ray) or the mapped point's foot on it (foot; keeps the depth error's tangential part)",
                    default="ray"),
-    "dots": ListOf(Vector(3, what="[x, y, z] in the object frame"), "measurements 'dots': reference positions of glued dots",
-                   default=[]),
+    "dots": ListOf(Vector(3, what="[x, y, z] in the object frame"),
+                   "measurements 'dots': reference positions of glued dots", default=[]),
     "dot_color": Vector(3, what="[r, g, b] in 0..1", default=[0.1, 0.25, 0.95]),
 })
 
@@ -112,15 +121,18 @@ COLLISION = Record({
     "enabled": Bool("real points in depth (or other objects) push this object", default=False),
     "threshold_m": Number("contact distance delta, metres", lo=0, lo_open=True, default=0.01),
     "decimation": Number("use every N-th depth pixel in each direction", integer=True, lo=1, hi=64, default=4),
-    "step": Number("pseudo-time increment per frame while in contact (and decrement after)", lo=0, lo_open=True, hi=1, default=0.05),
-    "pushes": ListOf(Str(**IDENT), "ids of objects this object can press when deformed (virtual-virtual contact)", default=[]),
+    "step": Number("pseudo-time increment per frame while in contact (and decrement after)", lo=0, lo_open=True, hi=1,
+                   default=0.05),
+    "pushes": ListOf(Str(**IDENT), "ids of objects this object can press when deformed (virtual-virtual contact)",
+                     default=[]),
     "max_depth_m": Number("ignore depth beyond this, metres", lo=0, lo_open=True, default=5.0),
 })
 
 OBJECT_OVERLAY = Record({
     "field": Enum(("displacement", "von_mises", "none"), "what the colour map shows", default="displacement"),
     "colormap": Enum(("turbo", "viridis", "jet", "inferno"), default="turbo"),
-    "modes": Number("PGD modes for drawing (0 = choose live to keep truncation error below max_error_px)", integer=True, lo=0, default=0),
+    "modes": Number("PGD modes for drawing (0 = choose live to keep truncation error below max_error_px)", integer=True,
+                    lo=0, default=0),
     "max_error_px": Number("truncation error bound on screen, pixels", lo=0, lo_open=True, default=0.5),
     "magnify": Number("displacement magnification for drawing", lo=0, lo_open=True, default=1.0),
     "range": Vector(2, what="[min, max] of the colour bar (model units)", nullable=True),
@@ -158,7 +170,8 @@ SCENE = Record({
     "objects": ListOf(OBJECT, "deformable objects", default=[]),
     "overlay": OVERLAY,
     "ground_truth": Record({
-        "topic_prefix": Str("prefix of ground-truth topics in synthetic bags (never read by estimators)", default="/ground_truth"),
+        "topic_prefix": Str("prefix of ground-truth topics in synthetic bags (never read by estimators)",
+                            default="/ground_truth"),
     }),
 })
 
@@ -166,7 +179,8 @@ SCENE = Record({
 def _cross_checks(scene: dict, ctx: Context) -> None:
     src = ctx.source
     if scene["simreal_scene"] != SCENE_FORMAT:
-        raise SceneError(f"{src}: simreal_scene: expected format version {SCENE_FORMAT}; found {scene['simreal_scene']}")
+        raise SceneError(f"{src}: simreal_scene: expected format version {SCENE_FORMAT}; "
+                         f"found {scene['simreal_scene']}")
     ids = [o["id"] for o in scene["objects"]]
     for i, oid in enumerate(ids):
         if ids.index(oid) != i:
@@ -175,11 +189,13 @@ def _cross_checks(scene: dict, ctx: Context) -> None:
     if loc["mode"] == "static" and loc["static_pose"] is None:
         raise SceneError(f"{src}: localization.static_pose: required when localization.mode is 'static'; found nothing")
     if loc["mode"] == "markers" and not loc["markers"]["poses"]:
-        raise SceneError(f"{src}: localization.markers.poses: expected at least one marker pose for mode 'markers'; found none")
+        raise SceneError(f"{src}: localization.markers.poses: expected at least one marker pose for mode 'markers'; "
+                         "found none")
     if loc["mode"] == "rgbd" and cam["depth"] is None:
         raise SceneError(f"{src}: camera.depth: required for localization.mode 'rgbd'; found nothing")
     if loc["mode"] == "stereo" and (cam["right_image"] is None or cam["right_camera_info"] is None):
-        raise SceneError(f"{src}: camera.right_image / camera.right_camera_info: required for localization.mode 'stereo'")
+        raise SceneError(f"{src}: camera.right_image / camera.right_camera_info: required for localization.mode "
+                         "'stereo'")
     if cam["source"] != "topic" and cam["path"] is None:
         raise SceneError(f"{src}: camera.path: required for camera.source '{cam['source']}'; found nothing")
     for i, o in enumerate(scene["objects"]):

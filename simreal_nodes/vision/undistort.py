@@ -8,10 +8,10 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from simreal_nodes.camera import CameraModel
 from simreal_nodes.errors import CameraInfoError, ImageFormatError
 from simreal_nodes.io import images
 from simreal_nodes.io.sources import Frame
-from simreal_nodes.camera import CameraModel
 
 
 class Undistorter:
@@ -92,6 +92,7 @@ class IngestCamera:
     @property
     def out_camera(self) -> CameraModel:
         """The camera of the published images: the ideal one when they are undistorted."""
+        assert self.cam is not None  # asked only once a frame passed check / file_frame, which need the camera
         return self._und.ideal if self._und is not None else self.cam
 
     def file_frame(self, f: Frame) -> str:
@@ -105,6 +106,7 @@ class IngestCamera:
             except CameraInfoError as e:
                 return f"unusable CameraInfo in bag: {e}"
         if self.cam is None:
+            assert f.image is not None  # a frame without an error carries its image
             h, w = f.image.shape[:2]
             return f"no intrinsics for {w}x{h} frames: give camera.calibration (see `simreal calibrate`)"
         return ""
@@ -133,7 +135,9 @@ class IngestCamera:
                 arr = images.image_to_array(msg)
             except ImageFormatError as e:
                 return Checked(f"malformed {_STREAM_NAMES[kind]}: {e}")
-        if kind == "image" and (arr.shape[1], arr.shape[0]) != (self.cam.width, self.cam.height):
-            return Checked(f"image is {arr.shape[1]}x{arr.shape[0]} but CameraInfo says "
-                           f"{self.cam.width}x{self.cam.height}")
+        if kind == "image":
+            assert self.cam is not None  # an image without the camera returned above
+            if (arr.shape[1], arr.shape[0]) != (self.cam.width, self.cam.height):
+                return Checked(f"image is {arr.shape[1]}x{arr.shape[0]} but CameraInfo says "
+                               f"{self.cam.width}x{self.cam.height}")
         return Checked(pixels=self.undistorted(kind, arr) if kind != "right" and self._und is not None else None)

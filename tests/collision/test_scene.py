@@ -50,7 +50,8 @@ def test_a_pressed_upper_plate_pushes_the_lower_one():
     assert [o["id"] for o in scene.objects] == ["upper", "lower"]
     # the probe 2 mm above the upper plate: only the upper one is within delta
     up, low = scene.step(_probe_depth(0.002), CAM, T_WC)
-    assert up.object_id == "upper" and up.state.state == ContactPhase.CONTACT and up.state.load_point == 14 and up.source == "depth"
+    assert up.object_id == "upper" and up.state.state == ContactPhase.CONTACT
+    assert up.state.load_point == 14 and up.source == "depth"
     assert up.state.points_used == 9
     # the upper plate bent 5 mm down at node 14 (pseudo-time 0.5) in this frame: 1 mm above the lower plate now
     assert low.object_id == "lower" and low.source == "depth+upper"

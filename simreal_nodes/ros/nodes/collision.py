@@ -33,7 +33,7 @@ from simreal_nodes.sync import StampSync
 
 
 class CollisionNode(SimrealNode):
-    def __init__(self):
+    def __init__(self) -> None:
         super().__init__("collision")
         self.scene = load_scene(self.scene_file)
         cam = self.scene["camera"]
@@ -47,8 +47,9 @@ class CollisionNode(SimrealNode):
         self.core = ContactScene(colliding, models, decimation, spacing)
         self.objects = self.core.objects
         for o in self.objects:
-            c = o["collision"]
-            self.get_logger().info(f"object {o['id']}: {len(models[o['id']].load_points)} contact nodes, "
+            c, lp = o["collision"], models[o["id"]].load_points
+            assert lp is not None  # ContactScene refuses a model without load points
+            self.get_logger().info(f"object {o['id']}: {len(lp)} contact nodes, "
                                    f"delta {c['threshold_m']} m")
         self.cam: CameraModel | None = None
         self.baseline: float | None = None
@@ -71,8 +72,8 @@ class CollisionNode(SimrealNode):
             self.create_subscription(FeatureObservations, graph.LOC_OBS, lambda m: self.on_input("obs", m), trigger)
         self.pub_contact = {o["id"]: self.create_publisher(ContactMsg, graph.contact_topic(o["id"]), reliable_qos(50))
                             for o in self.objects}
-        self.pub_params = {o["id"]: self.create_publisher(ModelParameters, graph.params_topic(o["id"]), reliable_qos(50))
-                           for o in self.objects}
+        self.pub_params = {o["id"]: self.create_publisher(ModelParameters, graph.params_topic(o["id"]),
+                                                          reliable_qos(50)) for o in self.objects}
         self.set_status("ok", f"waiting for {'stereo pairs' if self.stereo else 'depth'}")
 
     @guarded
@@ -92,6 +93,7 @@ class CollisionNode(SimrealNode):
 
         left = images.bgr8_of(frame["image"])
         right = images.bgr8_of(frame["right"])
+        assert self.cam is not None and self.baseline is not None  # process waits for both in stereo
         return disparity_to_depth(sgbm_disparity(left, right), self.cam.fx, self.baseline)
 
     @guarded

@@ -1,9 +1,8 @@
-"""Camera ingest node: one validated camera stream for the rest of the graph.
+"""Camera ingest node: one validated camera stream for the rest of the graph, from a topic, bag, video or folder.
 
-Sources: a live topic (default), a bag, a video file or an image folder (scene ``camera.source``). Publishes
-``/simreal/camera/image`` + ``camera_info`` (+ ``depth``, + right image/info for stereo) with sensor-data QoS.
-Intrinsics come from CameraInfo or from a calibration YAML (which wins); images can be undistorted here. A malformed
-Image or an unusable CameraInfo is dropped with a reason on /diagnostics; the node keeps going.
+Source: scene ``camera.source`` (default: a live topic). Publishes ``/simreal/camera/image`` + ``camera_info`` (+
+``depth``, + right image/info for stereo) with sensor-data QoS, intrinsics from CameraInfo or a calibration YAML (which
+wins), images undistorted if asked. A malformed Image or unusable CameraInfo is dropped with a reason on /diagnostics.
 """
 
 from __future__ import annotations
@@ -32,15 +31,16 @@ class IngestNode(SimrealNode):
         self.rate_hz = self.param("rate_hz", float(cam.get("rate_hz", 30.0)), "rate for video / folder sources")
         self.loop = self.param("loop", bool(cam.get("loop", False)), "restart file sources at their end")
         undistort = self.param("undistort", bool(cam.get("undistort", False)), "undistort images here")
-        calib = self.param("calibration_file", cam.get("calibration") or "", "ROS calibration YAML overriding CameraInfo")
+        cal = self.param("calibration_file", cam.get("calibration") or "", "ROS calibration YAML overriding CameraInfo")
         self.image_topic = self.param("image_topic", cam.get("image", "/camera/image_raw"), "input image topic")
-        self.info_topic = self.param("camera_info_topic", cam.get("camera_info", "/camera/camera_info"), "input CameraInfo topic")
+        self.info_topic = self.param("camera_info_topic", cam.get("camera_info", "/camera/camera_info"),
+                                     "input CameraInfo topic")
         self.depth_topic = self.param("depth_topic", cam.get("depth") or "", "input depth topic ('' = none)")
         right_topic = self.param("right_image_topic", cam.get("right_image") or "", "right image topic ('' = mono)")
-        right_info_topic = self.param("right_camera_info_topic", cam.get("right_camera_info") or "", "right CameraInfo topic")
+        right_info = self.param("right_camera_info_topic", cam.get("right_camera_info") or "", "right CameraInfo topic")
         compressed = self.param("compressed", bool(cam.get("compressed", False)),
                                 "subscribe to <image>/compressed (sensor_msgs/CompressedImage) instead of raw images")
-        self.core = IngestCamera(undistort, CameraModel.from_calibration_yaml(calib) if calib else None)
+        self.core = IngestCamera(undistort, CameraModel.from_calibration_yaml(cal) if cal else None)
         q = data_qos(self.lossless)
         self.pubs = {"image": self.create_publisher(Image, graph.CAM_IMAGE, q)}
         self.pub_info = {"image": self.create_publisher(CameraInfo, graph.CAM_INFO, q)}
@@ -57,7 +57,7 @@ class IngestNode(SimrealNode):
             if self.depth_topic:
                 self.create_subscription(Image, self.depth_topic, lambda m: self.on_image("depth", m), q)
             if right_topic:
-                self.create_subscription(CameraInfo, right_info_topic, self.on_right_info, q)
+                self.create_subscription(CameraInfo, right_info, self.on_right_info, q)
                 self.create_subscription(msg_t, right_topic + suffix, lambda m: self.on_image("right", m), q)
         else:
             self._open = functools.partial(sources.open_source, self.source, self.path, self.rate_hz, self.image_topic,

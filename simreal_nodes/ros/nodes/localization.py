@@ -20,15 +20,7 @@ from tf2_msgs.msg import TFMessage
 from simreal_nodes.assimilation.localizer import LiveLocalizer, Localization, status_text
 from simreal_nodes.errors import ImageFormatError
 from simreal_nodes.io import images
-from simreal_nodes.ros.convert import (
-    cloud_msg,
-    deformable_points,
-    localization_status_msg,
-    observations_msg,
-    pose_stamped,
-    stamp_ns,
-    transform_stamped,
-)
+from simreal_nodes.ros import convert
 from simreal_nodes.ros.node import SimrealNode, guarded, run_node
 from simreal_nodes.ros.qos import TF_QOS, data_qos, reliable_qos
 from simreal_nodes.scene import graph
@@ -42,22 +34,23 @@ class LocalizationNode(SimrealNode):
         loc = load_scene(self.scene_file)["localization"] if self.scene_file else {}
         self.mode = self.param("mode", loc.get("mode", "mono"), "markers | mono | rgbd | stereo", read_only=True)
         n_features = self.param("features", int(loc.get("features", 1000)), "ORB features per frame", read_only=True)
-        scale_factor = self.param("scale_factor", float(loc.get("scale_factor", 1.2)), "ORB pyramid factor", read_only=True)
+        scale = self.param("scale_factor", float(loc.get("scale_factor", 1.2)), "ORB pyramid factor", read_only=True)
         levels = self.param("pyramid_levels", int(loc.get("pyramid_levels", 8)), "ORB pyramid levels", read_only=True)
         self.map_file = self.param("map_file", loc.get("map_file") or "", "HDF5 map to load at start")
         self.save_map = self.param("save_map", "", "save the map here on shutdown ('' = no)")
         known_scale = self.param("known_scale_m", float(loc.get("known_scale_m") or 0.0),
                                  "monocular: metric distance between the first two keyframes (0 = unknown)")
         async_mapping = self.param("async_mapping", True, "run local bundle adjustment in a worker process")
-        loc_only = self.param("localization_only", bool(loc.get("localization_only", False)), "start with mapping frozen")
-        section = dict(loc, mode=self.mode, features=n_features, scale_factor=scale_factor, pyramid_levels=levels,
+        frozen = self.param("localization_only", bool(loc.get("localization_only", False)), "start with mapping frozen")
+        section = dict(loc, mode=self.mode, features=n_features, scale_factor=scale, pyramid_levels=levels,
                        known_scale_m=known_scale or None)
-        self.live = LiveLocalizer(section, async_mapping, self.map_file, loc_only)
+        self.live = LiveLocalizer(section, async_mapping, self.map_file, frozen)
         q = data_qos(self.lossless)
         self.pub_pose = self.create_publisher(PoseStamped, graph.POSE, q if self.lossless else reliable_qos(10))
         self.pub_tf = self.create_publisher(TFMessage, graph.TF, TF_QOS)
         self.pub_status = self.create_publisher(TrackingStatus, graph.LOC_STATUS, reliable_qos(10))
-        self.pub_obs = self.create_publisher(FeatureObservations, graph.LOC_OBS, q if self.lossless else reliable_qos(10))
+        self.pub_obs = self.create_publisher(FeatureObservations, graph.LOC_OBS,
+                                             q if self.lossless else reliable_qos(10))
         self.pub_map = self.create_publisher(PointCloud2, graph.LOC_MAP, reliable_qos(1))
         self.sync = StampSync(("image",), {"rgbd": ("depth",), "stereo": ("right",)}.get(self.mode, ()), wait=2)
         self.create_subscription(CameraInfo, graph.CAM_INFO, self.on_info, q)
@@ -105,19 +98,19 @@ class LocalizationNode(SimrealNode):
         except ImageFormatError as e:
             self.drop(header.stamp, f"malformed input: {e}")
             return
-        self._publish(header, self.live.core.step(gray, stamp_ns(header.stamp), depth=depth, right=right))
+        self._publish(header, self.live.core.step(gray, convert.stamp_ns(header.stamp), depth=depth, right=right))
         self.metrics.done(t0, self.age_ms(header.stamp))
         self.progress(header.stamp)
 
     def _publish(self, header, r: Localization) -> None:
         if r.T_wc is not None:
-            self.pub_pose.publish(pose_stamped(r.T_wc, header, self.map_frame))
-            tf = transform_stamped(r.T_wc, header.stamp, self.map_frame, self.camera_frame)
+            self.pub_pose.publish(convert.pose_stamped(r.T_wc, header, self.map_frame))
+            tf = convert.transform_stamped(r.T_wc, header.stamp, self.map_frame, self.camera_frame)
             self.pub_tf.publish(TFMessage(transforms=[tf]))
-        self.pub_obs.publish(observations_msg(r, header.stamp, self.camera_frame))
+        self.pub_obs.publish(convert.observations_msg(r, header.stamp, self.camera_frame))
         if r.timings is not None:
             self.metrics.extra = {k: f"{v:.1f}" for k, v in r.timings.items()}
-        self.pub_status.publish(localization_status_msg(r, header.stamp, self.get_name(), self.mode))
+        self.pub_status.publish(convert.localization_status_msg(r, header.stamp, self.get_name(), self.mode))
         level, text = status_text(r)
         self.set_status(level, text)
         if r.state != self._last_status:
@@ -133,7 +126,7 @@ class LocalizationNode(SimrealNode):
     @guarded
     def on_deformable(self, msg: PointCloud2) -> None:
         try:
-            ids, P, drop = deformable_points(msg)
+            ids, P, drop = convert.deformable_points(msg)
         except ValueError as e:
             self.get_logger().warning(f"ignored malformed deformable points: {e}")
             return
@@ -142,7 +135,7 @@ class LocalizationNode(SimrealNode):
     def publish_map(self) -> None:
         P = self.live.map_points()
         if P is not None:
-            self.pub_map.publish(cloud_msg(P, Header(stamp=self.get_clock().now().to_msg()), self.map_frame))
+            self.pub_map.publish(convert.cloud_msg(P, Header(stamp=self.get_clock().now().to_msg()), self.map_frame))
 
     def close(self) -> None:
         if self.live.close(self.save_map):

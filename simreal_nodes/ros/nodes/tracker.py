@@ -77,7 +77,9 @@ class TrackerNode(SimrealNode):
 
     @guarded
     def process(self, frame: dict) -> None:
-        head = (frame.get("obs") or frame.get("image")).header
+        first = frame.get("obs") or frame.get("image")
+        assert first is not None  # a frame holds the observations or the image it was completed by
+        head = first.header
         t0 = self.metrics.arrived()
         if self.core.cam is None:
             self.drop(head.stamp, "waiting for a valid CameraInfo")

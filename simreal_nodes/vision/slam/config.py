@@ -17,7 +17,7 @@ from simreal_nodes.states import TrackingState
 # tracking states (the TrackingStatus message's ``state`` field)
 NOT_STARTED, INITIALIZING, OK, LOST, RELOCALIZED = (TrackingState.NOT_STARTED, TrackingState.INITIALIZING,
                                                     TrackingState.OK, TrackingState.LOST, TrackingState.RELOCALIZED)
-STATE_NAMES = {NOT_STARTED: "not started", INITIALIZING: "initializing", OK: "ok", LOST: "lost",
+STATE_NAMES: dict[int, str] = {NOT_STARTED: "not started", INITIALIZING: "initializing", OK: "ok", LOST: "lost",
                RELOCALIZED: "relocalized"}
 
 

@@ -33,7 +33,8 @@ class DeformableTracks:
         self._predicted: dict[int, np.ndarray] = {}  # deformable point id -> predicted deformed position (map frame)
         self._last_desc: dict[int, np.ndarray] = {}  # deformable point id -> descriptor of its last match
         self._flow: dict[int, np.ndarray] = {}  # deformable point id -> raw pixel in the frame ``_flow_frame``
-        self._flow_frame, self._flow_gray = -1, None
+        self._flow_frame = -1
+        self._flow_gray: np.ndarray | None = None  # the image of the frame ``_flow_frame``
         self._anchor: dict[int, tuple[int, np.ndarray]] = {}  # point id -> (frame id, raw pixel) its track started at
         self._anchor_gray: dict[int, np.ndarray] = {}  # frame id -> image, for the anchors
         self._frame_obs: dict[int, np.ndarray] = {}  # point id -> raw pixel, every observation of the last frame
@@ -118,9 +119,10 @@ class DeformableTracks:
         if self._flow and flow_ready:
             sel = np.array([k for k, pid in enumerate(ids_a) if int(pid) in self._flow and zc[k] > 0], np.int64)
             if len(sel):
+                assert self._flow_gray is not None and self.gray is not None  # flow_ready
                 p0 = np.array([self._flow[int(ids_a[k])] for k in sel], np.float32).reshape(-1, 1, 2)
                 guess = np.where(np.isfinite(raw_pred[sel]), raw_pred[sel], p0.reshape(-1, 2)).astype(np.float32)
-                lk = dict(winSize=(cfg.flow_win, cfg.flow_win), maxLevel=3, criteria=_LK_CRITERIA)
+                lk: dict[str, Any] = dict(winSize=(cfg.flow_win, cfg.flow_win), maxLevel=3, criteria=_LK_CRITERIA)
                 p1, st, _ = cv2.calcOpticalFlowPyrLK(self._flow_gray, self.gray, p0, guess.reshape(-1, 1, 2).copy(),
                                                      flags=cv2.OPTFLOW_USE_INITIAL_FLOW, **lk)
                 pb, st2, _ = cv2.calcOpticalFlowPyrLK(self.gray, self._flow_gray, p1, p0.copy(),
@@ -148,13 +150,13 @@ class DeformableTracks:
                 centres = [uv[k]] if (has_pred[k] or pid not in self._last_seen) else []
                 if pid in self._last_seen:
                     centres.append(self._last_seen[pid])
-                c = set()
+                near: set[int] = set()
                 for q in centres:
                     if np.all(np.isfinite(q)):
-                        c.update(tree.query_ball_point(q, radius))
-                if not c:
+                        near.update(tree.query_ball_point(q, radius))
+                if not near:
                     continue
-                c = kp_idx[np.fromiter(c, np.int64)]
+                c = kp_idx[np.fromiter(near, np.int64)]
                 d = hamming(np.repeat(D[k][None], len(c), axis=0), f.desc[c])
                 last = self._last_desc.get(pid)
                 if last is not None:
@@ -192,6 +194,7 @@ class DeformableTracks:
         res.obs_pos = np.concatenate([res.obs_pos, m._pos[new_ids]])
 
     def _start_anchor(self, pid: int, raw: np.ndarray) -> None:
+        assert self.gray is not None  # anchors start in a frame given to new_frame
         self._anchor[pid] = (self.ctx.frame_id, np.asarray(raw, np.float64).copy())
         self._anchor_gray.setdefault(self.ctx.frame_id, self.gray)
 
@@ -210,6 +213,7 @@ class DeformableTracks:
             if a is not None and a[0] != self.ctx.frame_id and a[0] in self._anchor_gray:
                 groups.setdefault(a[0], []).append(pid)
         moved = set()
+        assert self.gray is not None  # called from _measure, after new_frame
         H, W = self.gray.shape[:2]
         for fid, pids in groups.items():
             p0 = np.array([self._anchor[p][1] for p in pids], np.float32).reshape(-1, 1, 2)

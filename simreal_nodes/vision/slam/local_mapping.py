@@ -173,7 +173,7 @@ class LocalMapper:
                 for kid in p.obs:
                     if kid not in opt_ids and kid in m.keyframes:
                         fixed[kid] = fixed.get(kid, 0) + 1
-            kfs_fixed = [m.keyframes[k] for k in sorted(fixed, key=fixed.get, reverse=True)[:10]]
+            kfs_fixed = [m.keyframes[k] for k in sorted(fixed, key=fixed.__getitem__, reverse=True)[:10]]
             # gauge: 6 dof need one fixed keyframe; a monocular map's scale needs a second one
             need = 2 if ctx.mode == "mono" else 1
             for oldest in sorted(kfs_opt, key=lambda k: k.id):
@@ -226,9 +226,8 @@ class LocalMapper:
             if p is None:
                 continue
             age = kf.id - kid
-            if p.found_ratio < 0.25 and p.n_visible > 4:
-                m.erase_point(pid)
-            elif age >= 2 and len(p.obs) <= (2 if self.ctx.mode == "mono" else 1):
+            if (p.found_ratio < 0.25 and p.n_visible > 4) or (
+                    age >= 2 and len(p.obs) <= (2 if self.ctx.mode == "mono" else 1)):
                 m.erase_point(pid)
             elif age < 3:
                 keep.append((pid, kid))

@@ -18,9 +18,9 @@ MAP_VERSION = 1
 class MapPoint:
     """A map point; its position and descriptor live in the map's arrays (fast batch access)."""
 
-    __slots__ = ("id", "_m", "obs", "first_kf", "bad", "deformable")
+    __slots__ = ("_m", "bad", "deformable", "first_kf", "id", "obs")
 
-    def __init__(self, id: int, store: "Map", obs=None, deformable: bool = False):
+    def __init__(self, id: int, store: Map, obs=None, deformable: bool = False):
         self.id, self._m = id, store
         self.obs: dict = obs if obs is not None else {}  # keyframe id -> feature index
         store._nvis[id] = 1
@@ -89,7 +89,7 @@ class KeyFrame:
 
 
 class Map:
-    def __init__(self):
+    def __init__(self) -> None:
         self.points: dict[int, MapPoint] = {}
         self.keyframes: dict[int, KeyFrame] = {}
         self._next_pt = 0
@@ -120,7 +120,8 @@ class Map:
 
     # -- editing --------------------------------------------------------------------------------------------
     def new_keyframe(self, stamp, T_wc, feats, depth=None) -> KeyFrame:
-        kf = KeyFrame(self._next_kf, stamp, np.array(T_wc, dtype=np.float64), feats, -np.ones(len(feats), np.int64), depth)
+        kf = KeyFrame(self._next_kf, stamp, np.array(T_wc, dtype=np.float64), feats, -np.ones(len(feats), np.int64),
+                      depth)
         self.keyframes[kf.id] = kf
         self.version += 1
         self._next_kf += 1
@@ -134,6 +135,7 @@ class Map:
         self._next_pt += 1
         self.points[p.id] = p
         if kf is not None:
+            assert idx is not None  # every caller that links to a keyframe names the feature
             p.first_kf = kf.id
             self.link(p, kf, idx)
         return p
@@ -160,7 +162,7 @@ class Map:
         if kf is None:
             return
         self.version += 1
-        for idx, pid in enumerate(kf.mp):
+        for pid in kf.mp:
             if pid >= 0 and pid in self.points:
                 p = self.points[pid]
                 p.obs.pop(kid, None)
@@ -241,13 +243,14 @@ class Map:
                 h = k.create_group(str(kf.id))
                 h.attrs["stamp"] = kf.stamp
                 h["T_wc"], h["uv"], h["und"] = kf.T_wc, kf.feats.uv, kf.feats.und
-                h["octave"], h["desc"], h["response"], h["mp"] = kf.feats.octave, kf.feats.desc, kf.feats.response, kf.mp
+                h["octave"], h["desc"], h["response"] = kf.feats.octave, kf.feats.desc, kf.feats.response
+                h["mp"] = kf.mp
                 h.attrs["scale_factor"] = kf.feats.scale_factor
                 if kf.depth is not None:
                     h["depth"] = kf.depth
 
     @classmethod
-    def load(cls, path: str | Path) -> "Map":
+    def load(cls, path: str | Path) -> Map:
         import h5py
 
         path = Path(path)

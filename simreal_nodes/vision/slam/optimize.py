@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+
 import cv2
 import numpy as np
 
@@ -34,14 +36,14 @@ def refine_pose(T_cw: np.ndarray, P: np.ndarray, uv: np.ndarray, sigma2: np.ndar
     inl = (e2 < 16 * CHI2_2D) & (z > 0)
     if inl.sum() < 6:
         inl = np.ones(len(P), bool)
-    for r in range(rounds):
+    for _ in range(rounds):
         if inl.sum() < 4:
             break
         rvec, _ = cv2.Rodrigues(T[:3, :3])
         tvec = T[:3, 3].reshape(3, 1).copy()  # (3, 1): OpenCV silently ignores a flat tvec here
         try:
-            rvec, tvec = cv2.solvePnPRefineLM(P[inl].astype(np.float64), uv[inl].astype(np.float64), K, None, rvec, tvec,
-                                              (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 10, 1e-9))
+            rvec, tvec = cv2.solvePnPRefineLM(P[inl].astype(np.float64), uv[inl].astype(np.float64), K, None, rvec,
+                                              tvec, (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 10, 1e-9))
         except cv2.error:
             break
         T = G.make_T(cv2.Rodrigues(rvec)[0], tvec.ravel())
@@ -69,7 +71,8 @@ def ba_request(kfs_opt, kfs_fixed, points) -> dict:
             sig.append(kf.feats.scale_factor ** float(kf.feats.octave[idx]))
     return {"kf_ids": np.array([kf.id for kf in kfs], np.int64), "poses": np.array([kf.T_wc for kf in kfs]),
             "fixed": np.array([False] * len(kfs_opt) + [True] * len(kfs_fixed)),
-            "pt_ids": np.array([p.id for p in points], np.int64), "pos": np.array([p.pos for p in points]).reshape(-1, 3),
+            "pt_ids": np.array([p.id for p in points], np.int64),
+            "pos": np.array([p.pos for p in points]).reshape(-1, 3),
             "obs_p": np.array(obs_p, np.int64), "obs_k": np.array(obs_k, np.int64), "uv": np.array(uv).reshape(-1, 2),
             "z": np.array(z, np.float64), "sigma": np.array(sig, np.float64)}
 
@@ -89,7 +92,7 @@ def bundle_adjust(req: dict, K: np.ndarray, baseline: float | None = None, itera
     stereo_cal = gtsam.Cal3_S2Stereo(K[0, 0], K[1, 1], K[0, 1], K[0, 2], K[1, 2], baseline) if baseline else None
     huber2 = gtsam.noiseModel.mEstimator.Huber.Create(np.sqrt(CHI2_2D))
     huber3 = gtsam.noiseModel.mEstimator.Huber.Create(np.sqrt(CHI2_3D))
-    for i, (kid, T, fx) in enumerate(zip(req["kf_ids"], req["poses"], req["fixed"])):
+    for kid, T, fx in zip(req["kf_ids"], req["poses"], req["fixed"]):
         vals.insert(X(int(kid)), gtsam.Pose3(T))
         if fx:
             graph.add(gtsam.NonlinearEqualityPose3(X(int(kid)), gtsam.Pose3(T)))
@@ -98,28 +101,32 @@ def bundle_adjust(req: dict, K: np.ndarray, baseline: float | None = None, itera
         vals.insert(L(int(pid)), gtsam.Point3(*P))
         if n_obs[j] < 2 and stereo_cal is None:
             graph.add(gtsam.PriorFactorPoint3(L(int(pid)), gtsam.Point3(*P), gtsam.noiseModel.Isotropic.Sigma(3, 1.0)))
-    robust2 = {}
-    robust3 = {}
+    # one robust noise model per pyramid-level sigma, shared by the factors at that level
+    robust2: dict[float, gtsam.noiseModel.Robust] = {}
+    robust3: dict[float, gtsam.noiseModel.Robust] = {}
     for j, i, (u, v), z, s in zip(req["obs_p"], req["obs_k"], req["uv"], req["z"], req["sigma"]):
         kx, lx = X(int(req["kf_ids"][i])), L(int(req["pt_ids"][j]))
         if stereo_cal is not None and np.isfinite(z) and z > 0:
-            nm = robust3.get(s) or robust3.setdefault(s, gtsam.noiseModel.Robust.Create(huber3, gtsam.noiseModel.Isotropic.Sigma(3, s)))
-            graph.add(gtsam.GenericStereoFactor3D(gtsam.StereoPoint2(u, u - K[0, 0] * baseline / z, v), nm, kx, lx, stereo_cal))
+            nm = robust3.get(s) or robust3.setdefault(
+                s, gtsam.noiseModel.Robust.Create(huber3, gtsam.noiseModel.Isotropic.Sigma(3, s)))
+            graph.add(gtsam.GenericStereoFactor3D(gtsam.StereoPoint2(u, u - K[0, 0] * baseline / z, v), nm, kx, lx,
+                                                  stereo_cal))
         else:
-            nm = robust2.get(s) or robust2.setdefault(s, gtsam.noiseModel.Robust.Create(huber2, gtsam.noiseModel.Isotropic.Sigma(2, s)))
+            nm = robust2.get(s) or robust2.setdefault(
+                s, gtsam.noiseModel.Robust.Create(huber2, gtsam.noiseModel.Isotropic.Sigma(2, s)))
             graph.add(gtsam.GenericProjectionFactorCal3_S2(gtsam.Point2(u, v), nm, kx, lx, cal))
     try:
         if optimizer == "gauss_newton":
-            params = gtsam.GaussNewtonParams()
-            params.setMaxIterations(iterations)
-            params.setRelativeErrorTol(1e-5)
-            result = gtsam.GaussNewtonOptimizer(graph, vals, params).optimize()
+            gn = gtsam.GaussNewtonParams()
+            gn.setMaxIterations(iterations)
+            gn.setRelativeErrorTol(1e-5)
+            result = gtsam.GaussNewtonOptimizer(graph, vals, gn).optimize()
         else:
-            params = gtsam.LevenbergMarquardtParams()
-            params.setMaxIterations(iterations)
-            params.setRelativeErrorTol(1e-5)
-            params.setVerbosityLM("SILENT")
-            result = gtsam.LevenbergMarquardtOptimizer(graph, vals, params).optimize()
+            lm = gtsam.LevenbergMarquardtParams()
+            lm.setMaxIterations(iterations)
+            lm.setRelativeErrorTol(1e-5)
+            lm.setVerbosityLM("SILENT")
+            result = gtsam.LevenbergMarquardtOptimizer(graph, vals, lm).optimize()
     except RuntimeError as e:
         return {"ok": False, "error": str(e)}
     poses = np.array([result.atPose3(X(int(k))).matrix() for k in req["kf_ids"]])
@@ -180,10 +187,8 @@ class AsyncBundleAdjuster:
         return None
 
     def close(self) -> None:
-        try:
+        with contextlib.suppress(BrokenPipeError, OSError):
             self.conn.send(None)
-        except (BrokenPipeError, OSError):
-            pass
         self.proc.join(timeout=2)
         if self.proc.is_alive():
             self.proc.terminate()

@@ -173,6 +173,7 @@ class Slam:
         if self.mode == "stereo":
             if right is None:
                 return np.full(len(f), np.nan)
+            assert self.ctx.baseline is not None  # __init__ refuses stereo without a baseline
             return sparse_stereo_depth(f, right, self.extractor, self.cam, self.ctx.baseline, self.config.max_depth)
         return None
 

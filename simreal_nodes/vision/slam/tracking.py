@@ -53,6 +53,7 @@ class Tracker:
         step timings, in ms)."""
         ctx = self.ctx
         t0 = time.perf_counter()
+        assert ctx.T_cw_last is not None  # tracking runs only after an initialization or relocalization set it
         T_pred = ctx.velocity @ ctx.T_cw_last if ctx.velocity is not None else ctx.T_cw_last
         local_ids = self.local_points()
         match = self.search_projection(f, T_pred, local_ids, radius=15.0)
@@ -141,7 +142,7 @@ class Tracker:
                     continue
                 for kid in p.obs:
                     counts[kid] = counts.get(kid, 0) + 1
-            for kid in sorted(counts, key=counts.get, reverse=True)[:n_local]:
+            for kid in sorted(counts, key=counts.__getitem__, reverse=True)[:n_local]:
                 kfs[kid] = m.keyframes[kid]
         if ctx.ref_kf is not None and ctx.ref_kf.id in m.keyframes:
             kfs[ctx.ref_kf.id] = ctx.ref_kf
@@ -187,7 +188,7 @@ class Tracker:
         rmax = radius * f.scale_factor ** 2
         k = min(8, len(kp_idx))
         dpix, nn = tree.query(uv, k=k, distance_upper_bound=rmax)  # fixed shape: vectorized candidates
-        dpix, nn = dpix.reshape(len(uv), k), nn.reshape(len(uv), k)
+        dpix, nn = np.reshape(dpix, (len(uv), k)), nn.reshape(len(uv), k)  # np.reshape: stubs say float | ndarray
         valid = np.isfinite(dpix)
         rows = np.broadcast_to(np.arange(len(uv))[:, None], nn.shape)[valid]
         cols = kp_idx[nn[valid]]

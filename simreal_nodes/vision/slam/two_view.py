@@ -46,7 +46,7 @@ def two_view(f0: Features, f1: Features, K: np.ndarray, min_parallax: float) -> 
     if len(m) < 100:
         return f"only {len(m)} matches with the reference frame (need 100): too little overlap or texture", None
     x0, x1 = f0.und[m[:, 0]], f1.und[m[:, 1]]
-    H, mh = cv2.findHomography(x0, x1, cv2.RANSAC, 2.0)
+    H, _mh = cv2.findHomography(x0, x1, cv2.RANSAC, 2.0)
     F, mf = cv2.findFundamentalMat(x0, x1, cv2.FM_RANSAC, 1.5, 0.999)
     if F is None or F.shape != (3, 3) or H is None:
         return "cannot estimate two-view geometry", None
@@ -109,7 +109,7 @@ def _from_f(F: np.ndarray, x0: np.ndarray, x1: np.ndarray, inl: np.ndarray, K: n
 
 def _from_h(H: np.ndarray, x0: np.ndarray, x1: np.ndarray, K: np.ndarray) -> _Reconstruction | None:
     """The decomposition that triangulates most points, refused when the second best comes close (ambiguous)."""
-    n, Rs, ts, _ = cv2.decomposeHomographyMat(H, K)
+    _n, Rs, ts, _ = cv2.decomposeHomographyMat(H, K)
     best, second = None, 0
     for R, t in zip(Rs, ts):
         t = t.ravel()
@@ -159,6 +159,7 @@ class Initializer:
     def initialize(self, f: Features, z: np.ndarray | None, stamp: int) -> TrackResult:
         ctx, m = self.ctx, self.ctx.map
         if ctx.mode in ("rgbd", "stereo"):
+            assert z is not None  # rgbd / stereo frames always come with their feature depths
             ok = np.isfinite(z)
             if ok.sum() < 100:
                 ctx.state = INITIALIZING
