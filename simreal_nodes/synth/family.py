@@ -235,8 +235,10 @@ def speckle_texture(contrast: float, seed: int, size: int = 512, dots: int = 260
 
 
 def family_scene(seed: int, width: int = 640, height: int = 480, fps: float = 15.0,
-                 duration: float | None = None) -> SynthScene:
-    """One scene of the family (see the module docstring). Frame rate 15 fps like the issue's recording."""
+                 duration: float | None = None, t_free: float = T_FREE) -> SynthScene:
+    """One scene of the family (see the module docstring). Frame rate 15 fps like the issue's recording.
+    ``t_free``: seconds of unloaded mapping before the load is placed (0: loaded from the first frame, so every
+    map point is first seen on the deformed object — the case where links could carry an estimate's error)."""
     cam = default_camera(width, height)
     d = scaled_force(draw(seed, width, height), max(cam.fx, cam.fy))
     if duration:
@@ -244,11 +246,11 @@ def family_scene(seed: int, width: int = 640, height: int = 480, fps: float = 15
     yaw = np.deg2rad(d.yaw_deg)
     origin = np.array([0.0, 0.0, 0.12])
     T_wo = G.make_T(G.rot_axis("z", yaw), origin)
-    hold = max((d.duration - T_FREE) / len(d.positions) * 0.7, 0.3)
-    move = max((d.duration - T_FREE) / len(d.positions) * 0.3, 0.2)
+    hold = max((d.duration - t_free) / len(d.positions) * 0.7, 0.3)
+    move = max((d.duration - t_free) / len(d.positions) * 0.3, 0.2)
 
     def s_of_t(t: float) -> float:
-        return float(W.holds(np.array([max(t - T_FREE, 0.0)]), d.positions, hold_s=hold, move_s=move)[0])
+        return float(W.holds(np.array([max(t - t_free, 0.0)]), d.positions, hold_s=hold, move_s=move)[0])
 
     def build(sc: SynthScene, r: Renderer, models: dict) -> None:
         tr = truth_for(d)
@@ -284,7 +286,7 @@ def family_scene(seed: int, width: int = 640, height: int = 480, fps: float = 15
 
     def update(sc: SynthScene, r: Renderer, t: float) -> Truth:
         tr: BeamLoadTruth = sc.state["truth"]
-        loaded = t >= T_FREE
+        loaded = t >= t_free
         s = s_of_t(t)
         r.update("beam", vertices=tr.deformed_points(s) if loaded else tr.points)
         r.meshes["weight"].visible = loaded

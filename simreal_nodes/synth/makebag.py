@@ -9,6 +9,7 @@ Deterministic: same command, same pixels (seeded noise; single-threaded software
 
 from __future__ import annotations
 
+import re
 import time
 from pathlib import Path
 
@@ -100,9 +101,11 @@ class MsgFactory:
 
 def make_scene(name: str, width: int = 640, height: int = 480, duration: float | None = None,
                fps: float = 30.0) -> SynthScene:
-    if name[:7] in ("family-", "family_") and name[7:].isdigit():  # one scene of the scene family (synth.family)
-        from simreal_nodes.synth.family import family_scene
-        return family_scene(int(name[7:]), width, height, fps=fps, duration=duration)
+    family = re.fullmatch(r"family[-_](\d+)(-preloaded)?", name)  # one scene of the scene family (synth.family)
+    if family:  # "-preloaded": the load is on from the first frame
+        from simreal_nodes.synth.family import T_FREE, family_scene
+        return family_scene(int(family[1]), width, height, fps=fps, duration=duration,
+                            t_free=0.0 if family[2] else T_FREE)
     if name not in SCENES:
         from simreal_nodes.errors import SimrealError
         raise SimrealError(f"unknown scene '{name}' (known: {', '.join(SCENES)})")
