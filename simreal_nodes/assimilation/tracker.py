@@ -48,8 +48,8 @@ class TrackerConfig:
     n_modes: int = 0  # 0: all
     max_iterations: int = 20
     constant_frames: int = 15
-    constant_std_frac: float = 0.0025  # a frame informs a constant only if its std is below this fraction of its
-    #                                    range
+    # a frame informs a constant only if its std is below this fraction of its range
+    constant_std_frac: float = 0.0025
     min_measurements: int = 6
     link_dist: float = 0.01  # metres from the model surface for a map point to belong to the object
     snap_to_surface: bool = True  # measure a linked point at its foot on the model surface, not at its mapped position
@@ -59,8 +59,8 @@ class TrackerConfig:
     dot_color: tuple[float, ...] = (0.1, 0.25, 0.95)
     dot_radius_px: float = 12.0  # association radius
     min_deformation_px: float = 0.3  # below this improvement over "no deformation": nothing measurable
-    object_shift_m: float = 0.0  # > 0: also fit a translation of the whole object (bounded), absorbing camera-pose
-    #                              drift
+    # > 0: also fit a translation of the whole object (bounded), absorbing camera-pose drift
+    object_shift_m: float = 0.0
     global_samples: int = 32  # coarse search over the tracked parameters when the warm start fits badly (0: off)
 
 
