@@ -6,7 +6,9 @@ the true value, the mean estimate over those frames and their absolute differenc
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -17,16 +19,17 @@ from simreal_nodes.io import bags
 @dataclass
 class Series:
     stamps: np.ndarray
-    names: list
-    units: list
+    names: list[str]
+    units: list[str]
     values: np.ndarray  # (T, n)
     states: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
     std: np.ndarray | None = None
 
 
-def read_parameters(path, topic: str) -> Series:
+def read_parameters(path: str | Path, topic: str) -> Series:
     st, vals, states, stds = [], [], [], []
-    names = units = None
+    names: list[str] | None = None
+    units: list[str] | None = None
     for m in bags.read_bag(path, topics=[topic]):
         o = bags.decode(m)
         st.append(bags.stamp_ns(o))
@@ -39,6 +42,7 @@ def read_parameters(path, topic: str) -> Series:
         stds.append(np.sqrt(np.clip(np.diag(c.reshape(n, n)), 0, None)) if c.size == n * n else np.full(n, np.nan))
     if not st:
         raise SimrealError(f"{path} has no messages on {topic}")
+    assert names is not None and units is not None  # every message sets them, and there was one
     width = max(len(v) for v in vals)
     V = np.full((len(vals), width), np.nan)
     for i, v in enumerate(vals):
@@ -59,8 +63,8 @@ class ParameterReport:
     max_abs: float
     span: float
     outside_range: int
-    table: list  # (true, mean estimate, |difference|, frames)
-    states: dict
+    table: list[tuple[float, float, float, int]]  # (true, mean estimate, |difference|, frames)
+    states: dict[int, int]  # estimate state -> frames
 
 
 def holds(truth: np.ndarray, min_frames: int = 5) -> list[tuple[int, int]]:
@@ -74,7 +78,8 @@ def holds(truth: np.ndarray, min_frames: int = 5) -> list[tuple[int, int]]:
     return out
 
 
-def compare(est: Series, truth: Series, ranges: dict | None = None, skip_states=()) -> list[ParameterReport]:
+def compare(est: Series, truth: Series, ranges: dict[str, tuple[float, float]] | None = None,
+            skip_states: Iterable[int] = ()) -> list[ParameterReport]:
     common, ie, it = np.intersect1d(est.stamps, truth.stamps, return_indices=True)
     if len(common) == 0:
         raise SimrealError("no estimate has the stamp of a ground-truth message (did the bags come from the same run?)")
@@ -128,17 +133,19 @@ class ContactReport:
     est_contact_frames: int
 
 
-def read_contacts(path, topic: str) -> dict[int, tuple[bool, int, float]]:
-    out = {}
+def read_contacts(path: str | Path, topic: str) -> dict[int, tuple[bool, int, float]]:
+    out: dict[int, tuple[bool, int, float]] = {}
     for m in bags.read_bag(path, topics=[topic]):
         o = bags.decode(m)
-        out[bags.stamp_ns(o)] = (bool(o.in_contact) or float(o.pseudo_time) > 0, int(o.load_point), float(o.pseudo_time))
+        out[bags.stamp_ns(o)] = (bool(o.in_contact) or float(o.pseudo_time) > 0, int(o.load_point),
+                                 float(o.pseudo_time))
     if not out:
         raise SimrealError(f"{path} has no messages on {topic}")
     return out
 
 
-def compare_contacts(est: dict, truth: dict) -> ContactReport:
+def compare_contacts(est: dict[int, tuple[bool, int, float]],
+                     truth: dict[int, tuple[bool, int, float]]) -> ContactReport:
     """Contact state, contact node and pseudo-time of a run against the synthetic truth (same stamps)."""
     common = sorted(set(est) & set(truth))
     if not common:

@@ -9,8 +9,9 @@ a :class:`Localization` and takes the deformable tracker's word on which map poi
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -50,7 +51,11 @@ class Localizer:
     """The interface every localizer has. ``map``: the SLAM map (None: none to publish or save)."""
 
     mode: str
-    map: Map | None = None
+
+    @property
+    def map(self) -> Map | None:
+        """None here; a localizer that builds a map overrides it."""
+        return None
 
     def step(self, gray: np.ndarray, stamp_ns: int, depth: np.ndarray | None = None,
              right: np.ndarray | None = None) -> Localization:
@@ -128,7 +133,7 @@ class StaticLocalization(Localizer):
         return Localization(self.T_wc, 2)
 
 
-def make_localizer(loc: dict, cam: CameraModel, baseline: float | None = None, async_mapping: bool = False,
+def make_localizer(loc: dict[str, Any], cam: CameraModel, baseline: float | None = None, async_mapping: bool = False,
                    map_file: str = "", localization_only: bool = False,
                    slam_config: SlamConfig | None = None) -> Localizer:
     """The localizer of a scene's ``localization`` section (``mode``; for markers ``markers``, for a static camera
@@ -163,7 +168,8 @@ class LiveLocalizer:
 
     ``loc``, ``async_mapping``, ``map_file``, ``localization_only``: as :func:`make_localizer` takes them."""
 
-    def __init__(self, loc: dict, async_mapping: bool = False, map_file: str = "", localization_only: bool = False):
+    def __init__(self, loc: dict[str, Any], async_mapping: bool = False, map_file: str = "",
+                 localization_only: bool = False):
         self.loc, self.async_mapping, self.map_file = loc, async_mapping, map_file
         self.localization_only = localization_only
         self.cam: CameraModel | None = None
@@ -184,6 +190,7 @@ class LiveLocalizer:
     def _build(self) -> Localizer | None:
         if self.loc["mode"] == "stereo" and self.baseline is None:
             return None
+        assert self.cam is not None  # built only once set_camera gave the intrinsics
         return make_localizer(self.loc, self.cam, self.baseline, self.async_mapping, self.map_file,
                               self.localization_only)
 
@@ -216,19 +223,22 @@ class LiveLocalizer:
         """(N, 3) points of the SLAM map (None: no map, or an empty one)."""
         if self.map is None or not self.map.points:
             return None
-        return self.map.point_arrays()[1]
+        # Map.point_arrays is not annotated (vision): called through the signature it has
+        point_arrays: Callable[[], tuple[np.ndarray, np.ndarray, np.ndarray]] = self.map.point_arrays
+        return point_arrays()[1]
 
     def close(self, save_map: str = "") -> bool:
         """Release the localizer, its map saved to ``save_map`` first if given (and there is one): True if saved."""
         saved = bool(save_map) and self.map is not None
         if saved:
+            assert self.map is not None  # what saved says
             self.map.save(save_map, self.cam, self.loc["mode"])
         if self.core is not None:
             self.core.close()
         return saved
 
 
-STATE_NAMES = {TrackingState.NOT_STARTED: "not started", TrackingState.INITIALIZING: "initializing",
+STATE_NAMES: dict[int, str] = {TrackingState.NOT_STARTED: "not started", TrackingState.INITIALIZING: "initializing",
                TrackingState.OK: "ok", TrackingState.LOST: "lost", TrackingState.RELOCALIZED: "relocalized"}
 
 

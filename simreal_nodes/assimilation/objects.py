@@ -3,6 +3,8 @@ one :class:`DeformableTracker` per object, built for a camera, updated together 
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from simreal_nodes import geometry as G
@@ -18,7 +20,7 @@ class ObjectTrackers:
     The trackers depend on the intrinsics (they project the model): :meth:`set_camera` (re)builds them;
     ``trackers`` is the same dict throughout, so a reference to it stays valid."""
 
-    def __init__(self, objects: list[dict], models: dict[str, ReducedModel], **cfg_overrides):
+    def __init__(self, objects: list[dict[str, Any]], models: dict[str, ReducedModel], **cfg_overrides: Any) -> None:
         self.objects = [o for o in objects if o["tracking"]["enabled"]]
         self.models = models
         self.cfg_overrides = cfg_overrides
@@ -32,9 +34,10 @@ class ObjectTrackers:
         for o in self.objects:
             self._tracker(o)
 
-    def _tracker(self, o: dict) -> DeformableTracker:
+    def _tracker(self, o: dict[str, Any]) -> DeformableTracker:
         tr = self.trackers.get(o["id"])
         if tr is None:
+            assert self.cam is not None, "ObjectTrackers.set_camera comes first"
             tr = DeformableTracker(self.models[o["id"]], G.pose7_to_matrix(o["anchor"]["pose"]), o["parameters"],
                                    self.cam, tracker_config(o, **self.cfg_overrides))
             self.trackers[o["id"]] = tr

@@ -8,6 +8,8 @@ images (+ depth for RGB-D, + right grey image for stereo) with stamps. Returns o
 
 from __future__ import annotations
 
+from typing import Any
+
 import cv2
 import numpy as np
 
@@ -15,6 +17,7 @@ from simreal_nodes.assimilation.localizer import make_localizer
 from simreal_nodes.assimilation.objects import ObjectTrackers
 from simreal_nodes.assimilation.tracker import Estimate
 from simreal_nodes.camera import CameraModel
+from simreal_nodes.rom.model import ReducedModel
 from simreal_nodes.rom.model_file import load_model
 from simreal_nodes.vision.slam.config import SlamConfig
 
@@ -26,10 +29,11 @@ class Pipeline:
     many frames late (0: at once; in the live graph the localization is already on the next frame, 1).
     ``slam_config``: the SLAM's tuning (SLAM modes; default :class:`SlamConfig`)."""
 
-    def __init__(self, scene: dict, cam: CameraModel, baseline: float | None = None, models: dict | None = None,
-                 feedback_delay: int = 0, slam_config: SlamConfig | None = None, **cfg_overrides):
+    def __init__(self, scene: dict[str, Any], cam: CameraModel, baseline: float | None = None,
+                 models: dict[str, ReducedModel] | None = None, feedback_delay: int = 0,
+                 slam_config: SlamConfig | None = None, **cfg_overrides: Any) -> None:
         self.feedback_delay = int(feedback_delay)
-        self._feedback: list = []
+        self._feedback: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
         loc = scene["localization"]
         self.mode = loc["mode"]
         self.freeze_map = bool(loc.get("freeze_map_on_deformation", False))
@@ -42,7 +46,8 @@ class Pipeline:
         self.objects.set_camera(cam)
         self.trackers = self.objects.trackers
 
-    def step(self, bgr: np.ndarray, stamp_ns: int, depth=None, right=None) -> tuple[np.ndarray | None, dict[str, Estimate]]:
+    def step(self, bgr: np.ndarray, stamp_ns: int, depth: np.ndarray | None = None,
+             right: np.ndarray | None = None) -> tuple[np.ndarray | None, dict[str, Estimate]]:
         gray = cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY)
         ids = P = uv = None
         r = self.loc.step(gray, stamp_ns, depth=depth, right=right)
@@ -62,12 +67,14 @@ class Pipeline:
         return T_wc, out
 
 
-def track_sequence(seq: dict, scene: dict, every: int = 1, feedback_delay: int = 0, **cfg_overrides) -> dict:
+def track_sequence(seq: dict[str, Any], scene: dict[str, Any], every: int = 1, feedback_delay: int = 0,
+                   **cfg_overrides: Any) -> dict[str, dict[str, Any]]:
     """Run the pipeline over a rendered :func:`~simreal_nodes.synth.sequence.sequence` (every ``every``-th frame);
     returns per object (truth (T, n), estimates list, names)."""
     pipe = Pipeline(scene, seq["cam"], baseline=seq["scene"].stereo_baseline, feedback_delay=feedback_delay,
                     **cfg_overrides)
-    res = {oid: {"truth": [], "est": [], "names": tr.names} for oid, tr in pipe.trackers.items()}
+    res: dict[str, dict[str, Any]] = {oid: {"truth": [], "est": [], "names": tr.names}
+                                      for oid, tr in pipe.trackers.items()}
     for i in range(0, len(seq["rgb"]), every):
         bgr = np.ascontiguousarray(seq["rgb"][i][:, :, ::-1])
         depth = seq["depth"][i] if scene["camera"]["depth"] else None

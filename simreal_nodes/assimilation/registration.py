@@ -14,11 +14,13 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any, cast
 
 import numpy as np
 from scipy.spatial import cKDTree
 
 from simreal_nodes import geometry as G
+from simreal_nodes.rom.model import ReducedModel
 
 
 @dataclass
@@ -37,7 +39,8 @@ def link(points_obj: np.ndarray, model_points: np.ndarray, candidate_nodes: np.n
     P = np.asarray(points_obj, dtype=np.float64).reshape(-1, 3)
     cand = np.asarray(candidate_nodes, dtype=np.int64)
     tree = cKDTree(model_points[cand])
-    d, idx = tree.query(P, k=k)
+    # an array of points: arrays of distances and indices (the stubs also allow scalars)
+    d, idx = cast(tuple[np.ndarray, np.ndarray], tree.query(P, k=k))
     d = d.reshape(len(P), k)
     idx = idx.reshape(len(P), k)
     w = 1.0 / np.maximum(d, 1e-9)  # inverse distance (a point on a node takes that node)
@@ -64,9 +67,9 @@ def link(points_obj: np.ndarray, model_points: np.ndarray, candidate_nodes: np.n
 
 def ray_weights(origin: np.ndarray, directions: np.ndarray, corners: np.ndarray, weights: np.ndarray,
                 tol: float = 0.02) -> np.ndarray:
-    """Barycentric weights of where each viewing ray (``origin`` (3,) or (N, 3) + t ``directions[n]``, t > 0) meets the plane
-    of its triangle ``corners[n]`` (3, 3); rows whose ray misses the triangle (beyond ``tol`` outside an edge)
-    or runs along its plane keep ``weights``. Solves o + t d = w0 A + w1 B + (1 - w0 - w1) C."""
+    """Barycentric weights of where each viewing ray (``origin`` (3,) or (N, 3) + t ``directions[n]``, t > 0)
+    meets the plane of its triangle ``corners[n]`` (3, 3); rows whose ray misses the triangle (beyond ``tol``
+    outside an edge) or runs along its plane keep ``weights``. Solves o + t d = w0 A + w1 B + (1 - w0 - w1) C."""
     C = np.asarray(corners, dtype=np.float64)
     D = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
     out = np.array(weights, dtype=np.float64, copy=True)
@@ -86,7 +89,8 @@ def ray_weights(origin: np.ndarray, directions: np.ndarray, corners: np.ndarray,
     return out
 
 
-def _near_node_triangles(P: np.ndarray, V: np.ndarray, cand: np.ndarray, k: int = 6):
+def _near_node_triangles(P: np.ndarray, V: np.ndarray, cand: np.ndarray,
+                         k: int = 6) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Among the triangles of each point's k nearest candidate nodes that hold the point's foot, the one
     nearest the point (ties: the smallest): its nodes and the foot's barycentric coordinates, which
     reproduce any linear displacement field (a rigid motion) exactly at the foot; distance inf where no
@@ -126,7 +130,8 @@ def _near_node_triangles(P: np.ndarray, V: np.ndarray, cand: np.ndarray, k: int 
     return best_n, best_b, best_d
 
 
-def closest_triangles(P: np.ndarray, V: np.ndarray, F: np.ndarray, n_candidates: int = 12):
+def closest_triangles(P: np.ndarray, V: np.ndarray, F: np.ndarray,
+                      n_candidates: int = 12) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """For each point, the closest of the triangles F (among the ``n_candidates`` with the nearest
     centroids): its corner nodes (N, 3), the barycentric coordinates of the closest point (N, 3) and the
     distance (N,)."""
@@ -144,12 +149,15 @@ def closest_triangles(P: np.ndarray, V: np.ndarray, F: np.ndarray, n_candidates:
     return F[ti[r, j]], bary[r, j], dist[r, j]
 
 
-def _closest_point_barycentric(Q, A, B, C):
+def _closest_point_barycentric(Q: np.ndarray, A: np.ndarray, B: np.ndarray, C: np.ndarray) -> np.ndarray:
     """Barycentric coordinates of the point of triangle ABC closest to Q (broadcast over leading axes):
     the foot of the perpendicular when it falls inside, else the closest point of the nearest edge."""
-    def seg(Pa, Pb):  # closest point of segment Pa-Pb to Q as the parameter t in [0, 1]
+    def seg(Pa: np.ndarray, Pb: np.ndarray) -> np.ndarray:
+        """The closest point of segment Pa-Pb to Q as the parameter t in [0, 1]."""
         e = Pb - Pa
-        return np.clip(np.einsum("...i,...i", Q - Pa, e) / np.maximum(np.einsum("...i,...i", e, e), 1e-300), 0.0, 1.0)
+        t: np.ndarray = np.clip(np.einsum("...i,...i", Q - Pa, e) / np.maximum(np.einsum("...i,...i", e, e), 1e-300),
+                                0.0, 1.0)  # einsum is typed Any
+        return t
 
     e0, e1, q = B - A, C - A, Q - A
     d00, d01, d11 = (np.einsum("...i,...i", a, b) for a, b in ((e0, e0), (e0, e1), (e1, e1)))
@@ -164,7 +172,8 @@ def _closest_point_barycentric(Q, A, B, C):
              np.stack([np.zeros_like(t_bc), 1 - t_bc, t_bc], axis=-1),
              np.stack([t_ca, np.zeros_like(t_ca), 1 - t_ca], axis=-1)]
     ok_inside = (v >= 0) & (w >= 0) & (v + w <= 1)
-    best, best_d = None, None
+    best: np.ndarray  # set by the first candidate (inside), which every later one is compared with
+    best_d: np.ndarray
     for i, bc in enumerate(cands):
         foot = bc[..., :1] * A + bc[..., 1:2] * B + bc[..., 2:] * C
         dd = np.linalg.norm(foot - Q, axis=-1)
@@ -178,7 +187,7 @@ def _closest_point_barycentric(Q, A, B, C):
     return best
 
 
-def surface_nodes(model) -> np.ndarray:
+def surface_nodes(model: ReducedModel) -> np.ndarray:
     """Nodes a camera can see: the surface vertices, and the extra (lever / embedded) nodes."""
     s = np.unique(model.surface) if len(model.surface) else np.arange(model.n_nodes)
     extra = model.provenance.get("lever_nodes") if isinstance(model.provenance, dict) else None
@@ -204,10 +213,11 @@ def sample_surface(V: np.ndarray, F: np.ndarray, n: int, seed: int = 0) -> np.nd
     u, v = rng.random(n), rng.random(n)
     flip = u + v > 1
     u[flip], v[flip] = 1 - u[flip], 1 - v[flip]
-    return A[tri] + u[:, None] * (B[tri] - A[tri]) + v[:, None] * (C[tri] - A[tri])
+    pts: np.ndarray = A[tri] + u[:, None] * (B[tri] - A[tri]) + v[:, None] * (C[tri] - A[tri])  # indexing: Any
+    return pts
 
 
-def register(map_points: np.ndarray, model, guess: np.ndarray | None = None, with_scale: bool = False,
+def register(map_points: np.ndarray, model: ReducedModel, guess: np.ndarray | None = None, with_scale: bool = False,
              max_dist: float = 0.02, yaw_hypotheses: int = 12, seed: int = 0) -> Registration:
     """Place the model in the map. ``guess`` (T_map_obj) seeds ICP; without it the support plane and the
     centroid of the off-plane points give the seed and yaw is searched."""
@@ -227,7 +237,7 @@ def register(map_points: np.ndarray, model, guess: np.ndarray | None = None, wit
     src = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(src_pts))
     est = o3d.pipelines.registration.TransformationEstimationPointToPoint(with_scaling=with_scale)
     crit = o3d.pipelines.registration.ICPConvergenceCriteria(max_iteration=60)
-    seeds = []
+    seeds: list[np.ndarray] = []
     if guess is not None:
         seeds = [np.asarray(guess, dtype=np.float64)]
     else:
@@ -243,14 +253,15 @@ def register(map_points: np.ndarray, model, guess: np.ndarray | None = None, wit
         for k in range(yaw_hypotheses):
             R = base @ G.rot_axis("z", 2 * np.pi * k / yaw_hypotheses)
             seeds.append(G.make_T(R, target_c - R @ c_obj))
-    best = None
+    best: tuple[tuple[float, float], Any] | None = None
     for T0 in seeds:
         r = o3d.pipelines.registration.registration_icp(src, tgt, max_dist * 2, T0, est, crit)
         r = o3d.pipelines.registration.registration_icp(src, tgt, max_dist, r.transformation, est, crit)
         score = (r.fitness, -r.inlier_rmse)
         if best is None or score > best[0]:
             best = (score, r)
-    r = best[1]
+    # seeds is never empty (a guess, or yaw_hypotheses seeds); the cast keeps the error of an empty one as it was
+    r = cast(tuple[tuple[float, float], Any], best)[1]
     T = np.asarray(r.transformation)
     s = float(np.cbrt(np.linalg.det(T[:3, :3]))) if with_scale else 1.0
     return Registration(T, s, float(r.fitness), float(r.inlier_rmse), plane)

@@ -10,10 +10,12 @@ alpha_z of §4.5.4) are estimated jointly over the first frames with deformation
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass, field, replace
-from typing import NamedTuple
+from typing import Any, NamedTuple, cast
 
 import numpy as np
+from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
 from simreal_nodes import geometry as G
@@ -23,6 +25,9 @@ from simreal_nodes.camera import CameraModel
 from simreal_nodes.rom.model import ReducedModel
 from simreal_nodes.rom.state import ALPHA_Z, ModelState, StateLayout
 from simreal_nodes.states import EstimateState
+
+# (X map-frame rest positions (N, 3), ideal pixels (N, 2), nodes (N, 3), weights (N, 3)[, map point ids (N,)])
+Measurements = tuple[np.ndarray, ...]
 
 
 class Link(NamedTuple):
@@ -43,24 +48,26 @@ class TrackerConfig:
     n_modes: int = 0  # 0: all
     max_iterations: int = 20
     constant_frames: int = 15
-    constant_std_frac: float = 0.0025  # a frame informs a constant only if its std is below this fraction of its range
+    # a frame informs a constant only if its std is below this fraction of its range
+    constant_std_frac: float = 0.0025
     min_measurements: int = 6
     link_dist: float = 0.01  # metres from the model surface for a map point to belong to the object
     snap_to_surface: bool = True  # measure a linked point at its foot on the model surface, not at its mapped position
     anchor: str = "ray"  # where on its triangle a linked point sits: "ray" (the observed pixel's viewing ray) | "foot"
     max_points: int = 0  # 0: all
     dots: np.ndarray | None = None  # (N, 3) object frame
-    dot_color: tuple = (0.1, 0.25, 0.95)
+    dot_color: tuple[float, ...] = (0.1, 0.25, 0.95)
     dot_radius_px: float = 12.0  # association radius
     min_deformation_px: float = 0.3  # below this improvement over "no deformation": nothing measurable
-    object_shift_m: float = 0.0  # > 0: also fit a translation of the whole object (bounded), absorbing camera-pose drift
+    # > 0: also fit a translation of the whole object (bounded), absorbing camera-pose drift
+    object_shift_m: float = 0.0
     global_samples: int = 32  # coarse search over the tracked parameters when the warm start fits badly (0: off)
 
 
 @dataclass
 class Estimate:
-    names: list
-    units: list
+    names: list[str]
+    units: list[str]
     values: np.ndarray
     frozen: np.ndarray
     cov: np.ndarray
@@ -72,15 +79,15 @@ class Estimate:
     reason: str = ""
     deforming: bool = False
     solve_ms: float = 0.0
-    debug: dict = field(default_factory=dict)
+    debug: dict[str, Any] = field(default_factory=dict)
 
 
 class DeformableTracker:
     """One object's estimate. ``values``: the model state in ``layout`` order (mu, then alpha_z when the scene
     estimates it), what :class:`Estimate` and the ModelParameters message carry."""
 
-    def __init__(self, model: ReducedModel, T_map_obj: np.ndarray, params: dict, cam: CameraModel,
-                 cfg: TrackerConfig | None = None):
+    def __init__(self, model: ReducedModel, T_map_obj: np.ndarray, params: dict[str, dict[str, Any]],
+                 cam: CameraModel, cfg: TrackerConfig | None = None) -> None:
         self.model = model
         self.cfg = cfg or TrackerConfig()
         self.cam = cam
@@ -113,13 +120,12 @@ class DeformableTracker:
         self._const_samples: list[np.ndarray] = []
         self._was_deforming = False  # constants move only once deformation makes them observable
         self.cand_nodes = surface_nodes(model)
-        # map point id -> (nodes (3,), weights (3,), X_map (3,) rest position measured, P_map (3,) as mapped,
-        #                  mu it was mapped in or None for the rest shape)
-        self.links: dict[int, tuple] = {}
+        # map point id -> its link (nodes, weights, rest position, position as mapped, mu it was mapped in, ray)
+        self.links: dict[int, Link] = {}
         self.static: set[int] = set()
-        self._alpha_linked = None
+        self._alpha_linked: float | None = None
         self.deforming_frames = 0
-        self._dot_links = None
+        self._dot_links: tuple[np.ndarray, np.ndarray] | None = None
         self.outlier_ids = np.zeros(0, np.int64)  # map points the last fit rejected (their image tracks slid)
         self._rms_ref: float | None = None  # running residual RMS of good fits: what "fits badly" is measured against
         self._frames = 0  # frames solved (a periodic global restart every 30th)
@@ -151,7 +157,8 @@ class DeformableTracker:
         d /= np.linalg.norm(d, axis=1, keepdims=True)
         return np.stack([np.broadcast_to(T_wc[:3, 3], d.shape), d], axis=1)
 
-    def link_points(self, ids: np.ndarray, P_map: np.ndarray, mu="current", rays: np.ndarray | None = None) -> None:
+    def link_points(self, ids: np.ndarray, P_map: np.ndarray, mu: np.ndarray | str | None = "current",
+                    rays: np.ndarray | None = None) -> None:
         """Link newly seen map points to model nodes (object frame, undoing the current alpha). ``mu``: the
         deformation the points were mapped in, None for the rest shape; "current": the current estimate once
         deformation was seen, else the rest shape.
@@ -202,7 +209,7 @@ class DeformableTracker:
         deformation it was mapped in)."""
         if not self.links:
             return
-        groups: dict = {}
+        groups: dict[tuple[Any, ...] | None, list[int]] = {}
         for pid, lk in self.links.items():
             key = None if lk.mu is None else tuple(np.round(lk.mu, 12))
             groups.setdefault(key, []).append(pid)
@@ -233,7 +240,7 @@ class DeformableTracker:
         return ids, X + dX @ (self.R_wo @ state.rotation()).T
 
     # -- measurements ------------------------------------------------------------------------------------------
-    def _map_point_measurements(self, ids, P_map, uv):
+    def _map_point_measurements(self, ids: np.ndarray, P_map: np.ndarray, uv: np.ndarray) -> Measurements | None:
         sel = [k for k, pid in enumerate(ids) if int(pid) in self.links]
         if self.cfg.max_points and len(sel) > self.cfg.max_points:
             sel = sel[:: max(1, len(sel) // self.cfg.max_points)][: self.cfg.max_points]
@@ -245,10 +252,12 @@ class DeformableTracker:
         X = np.array([lk.X_rest for lk in lks])
         return X, self.cam.undistort_points(uv[sel]), nodes, w, np.asarray(ids)[sel]
 
-    def _dot_measurements(self, image_bgr, T_cw):
+    def _dot_measurements(self, image_bgr: np.ndarray, T_cw: np.ndarray) -> tuple[Measurements | None, int]:
         from simreal_nodes.vision.blobs import detect_color_blobs
 
         found = detect_color_blobs(image_bgr, self.cfg.dot_color)
+        # the constructor linked the dots (it raises without them) for the dot measurements this serves
+        assert self._dot_links is not None and self.cfg.dots is not None
         nodes, w = self._dot_links
         X = G.transform(self.T_map_obj, self.cfg.dots)
         if len(found) == 0:
@@ -260,7 +269,8 @@ class DeformableTracker:
         pred, z = _project(T_cw, Xw, self.K)
         und = self.cam.undistort_points(found)
         tree = cKDTree(und)
-        d, j = tree.query(np.nan_to_num(pred, nan=-1e6), k=1)
+        # many query points with k=1: arrays of distances and indices (the stubs also allow scalars)
+        d, j = cast(tuple[np.ndarray, np.ndarray], tree.query(np.nan_to_num(pred, nan=-1e6), k=1))
         ok = (d <= self.cfg.dot_radius_px) & (z > 0)
         # one detection per dot
         ok &= np.bincount(j[ok], minlength=len(und))[j] == 1
@@ -269,7 +279,8 @@ class DeformableTracker:
         return (X[ok], und[j[ok]], nodes[ok], w[ok]), len(found)
 
     # -- per frame ----------------------------------------------------------------------------------------------
-    def update(self, T_wc: np.ndarray | None, ids=None, P_map=None, uv=None, image_bgr=None) -> Estimate:
+    def update(self, T_wc: np.ndarray | None, ids: np.ndarray | None = None, P_map: np.ndarray | None = None,
+               uv: np.ndarray | None = None, image_bgr: np.ndarray | None = None) -> Estimate:
         import time
 
         est = Estimate(self.names, self.units, self.values.copy(), self.frozen.copy(),
@@ -298,7 +309,8 @@ class DeformableTracker:
         if meas is None or len(meas[0]) < self.cfg.min_measurements:
             n = 0 if meas is None else len(meas[0])
             est.state = EstimateState.LOST
-            est.reason = f"too few measurements on the object ({n}, need {self.cfg.min_measurements}; {found} candidates seen)"
+            est.reason = (f"too few measurements on the object ({n}, need {self.cfg.min_measurements}; "
+                          f"{found} candidates seen)")
             est.measurements = n
             return est
         X, uvm, nodes, w = meas[:4]
@@ -364,7 +376,8 @@ class DeformableTracker:
                 if not fr and s > 0.05 * (h - l)]
         if weak:
             est.state = EstimateState.LOW_CONFIDENCE
-            est.reason = "; ".join(f"{nm} barely observable (std {s:.3g}, {100 * s / r:.0f} % of its range)" for nm, s, r in weak)
+            est.reason = "; ".join(f"{nm} barely observable (std {s:.3g}, {100 * s / r:.0f} % of its range)"
+                                   for nm, s, r in weak)
         self._update_constants(est)
         est.frozen = self.frozen.copy()
         return est
@@ -387,7 +400,7 @@ class DeformableTracker:
         free = free[free < len(self.values)]  # not the object shift: it stays at the warm start's value
         if len(free) == 0:
             return res
-        per_axis = max(2, int(round(self.cfg.global_samples ** (1.0 / len(free)))))
+        per_axis = max(2, round(self.cfg.global_samples ** (1.0 / len(free))))
         axes = [np.linspace(lo[i], hi[i], per_axis) for i in free]
         grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, len(free))
         k = self.cfg.huber_px
@@ -406,7 +419,7 @@ class DeformableTracker:
         res2 = lm.solve(p, best, lo, hi, k, self.cfg.max_iterations)
         return res2 if res2.cost < res.cost else res
 
-    def _rest_rms(self, X, uvm, T_cw) -> float:
+    def _rest_rms(self, X: np.ndarray, uvm: np.ndarray, T_cw: np.ndarray) -> float:
         """Residual of the undeformed object (moved by the best object shift when that is estimated)."""
         sh = self.cfg.object_shift_m
         if sh > 0:
@@ -414,7 +427,7 @@ class DeformableTracker:
             p0 = lm.Problem(X, uvm, still, T_cw, self.R_wo, self.K, StateLayout((), shift=True))
             r0 = lm.solve(p0, self.shift, np.full(3, -sh), np.full(3, sh), self.cfg.huber_px, 10)
             X = X + r0.x
-        pred, z = _project(T_cw, X, self.K)
+        pred, _z = _project(T_cw, X, self.K)
         r = np.linalg.norm(uvm - pred, axis=1)
         r = r[np.isfinite(r)]
         return float(np.sqrt(np.mean(np.minimum(r, 3 * self.cfg.huber_px) ** 2))) if len(r) else float("nan")
@@ -444,7 +457,8 @@ class DeformableTracker:
             if self.rigid_z and const[self.layout.alpha_index]:
                 self.relink()
 
-    def _solve_planar(self, X, uvm, disp, T_cw, lo, hi):
+    def _solve_planar(self, X: np.ndarray, uvm: np.ndarray, disp: lm.Displacement, T_cw: np.ndarray,
+                      lo: np.ndarray, hi: np.ndarray) -> tuple[lm.Result, float]:
         """Homography variant (§4.5.1): observations mapped onto the object's y = 0 face, residuals in
         metres in that plane; the Huber threshold is converted with the pixel size on the face."""
         T_co = T_cw @ self.T_map_obj
@@ -457,7 +471,7 @@ class DeformableTracker:
         px = depth / self.K[0, 0]  # metres per pixel on the face
         n_mu = self.layout.n_mu
 
-        def model(x):
+        def model(x: lm.Vector) -> tuple[lm.Vector, lm.Vector, NDArray[np.bool_]]:
             dX, ddX = disp(x[:n_mu])
             pred = np.c_[Xo[:, 0] + dX[:, 0], Xo[:, 2] + dX[:, 2]]
             J = ddX[:, [0, 2], :]
@@ -471,18 +485,19 @@ class DeformableTracker:
         return res, float(np.sqrt(np.mean(np.minimum(rest, 3 * self.cfg.huber_px) ** 2)))
 
 
-def tracker_config(obj: dict, **overrides) -> TrackerConfig:
+def tracker_config(obj: dict[str, Any], **overrides: Any) -> TrackerConfig:
     """The tracker settings of a validated scene object (its ``tracking`` block), with overrides."""
     t = obj["tracking"]
     cfg = TrackerConfig(measurements=t["measurements"], huber_px=t["huber_px"], n_modes=t["modes"],
-                        max_iterations=t["max_iterations"], constant_frames=t["constant_frames"], constant_std_frac=t["constant_std_frac"],
+                        max_iterations=t["max_iterations"], constant_frames=t["constant_frames"],
+                        constant_std_frac=t["constant_std_frac"],
                         min_measurements=t["min_measurements"], max_points=t["points"], anchor=t["anchor"],
                         object_shift_m=t["object_shift_m"],
                         dots=np.asarray(t["dots"]) if t["dots"] else None, dot_color=tuple(t["dot_color"]))
     return replace(cfg, **overrides)
 
 
-def deformable_feedback(trackers) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def deformable_feedback(trackers: Iterable[DeformableTracker]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """What the trackers tell the localization after a frame: (ids (N,) uint32, predicted map-frame positions
     (N, 3), drop (N,) uint8: 1 = the last fit rejected this point, forget its image track)."""
     ids, P, drop = [], [], []
@@ -497,8 +512,10 @@ def deformable_feedback(trackers) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
             np.concatenate(drop).astype(np.uint8))
 
 
-def _project(T_cw, X, K):
+def _project(T_cw: np.ndarray, X: np.ndarray, K: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Ideal pixels (N, 2) and depths (N,) of map-frame points X (N, 3) seen from camera pose T_cw."""
     Xc = X @ T_cw[:3, :3].T + T_cw[:3, 3]
     with np.errstate(divide="ignore", invalid="ignore"):
-        uv = np.c_[K[0, 0] * Xc[:, 0] / Xc[:, 2] + K[0, 1] * Xc[:, 1] / Xc[:, 2] + K[0, 2], K[1, 1] * Xc[:, 1] / Xc[:, 2] + K[1, 2]]
+        uv = np.c_[K[0, 0] * Xc[:, 0] / Xc[:, 2] + K[0, 1] * Xc[:, 1] / Xc[:, 2] + K[0, 2],
+                   K[1, 1] * Xc[:, 1] / Xc[:, 2] + K[1, 2]]
     return uv, Xc[:, 2]

@@ -17,6 +17,7 @@ the finger.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -122,7 +123,8 @@ class ContactTracker:
             if len(near) == 0:  # nothing can touch: the reported distance from at most 5 000 of the points
                 near = pts[:: max(1, len(pts) // 5000)]
             if len(near):
-                d, idx = cKDTree(near).query(nodes[self.active], k=1)
+                # many query points with k=1: arrays of distances and indices (the stubs also allow scalars)
+                d, idx = cast(tuple[np.ndarray, np.ndarray], cKDTree(near).query(nodes[self.active], k=1))
                 k = int(np.argmin(d))
                 nearest, d_min = int(self.active[k]), float(d[k])
                 st.contact_point = tuple(float(x) for x in near[idx[k]])
@@ -166,7 +168,8 @@ def surface_samples(V: np.ndarray, F: np.ndarray, spacing: float) -> np.ndarray:
     if len(F) == 0:
         return np.zeros((0, 3))
     A, B, C = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
-    edge = np.max(np.stack([np.linalg.norm(B - A, axis=1), np.linalg.norm(C - B, axis=1), np.linalg.norm(A - C, axis=1)]), axis=0)
+    edge = np.max(np.stack([np.linalg.norm(B - A, axis=1), np.linalg.norm(C - B, axis=1),
+                            np.linalg.norm(A - C, axis=1)]), axis=0)
     out = [V[np.unique(F)]]
     for n in np.unique(np.clip(np.ceil(edge / max(spacing, 1e-9)).astype(int), 1, 16)):
         sel = np.ceil(edge / max(spacing, 1e-9)).clip(1, 16).astype(int) == n
@@ -176,6 +179,7 @@ def surface_samples(V: np.ndarray, F: np.ndarray, spacing: float) -> np.ndarray:
         keep = i + j <= n
         a, b = i[keep] / n, j[keep] / n
         c = 1 - a - b
-        P = (a[None, :, None] * A[sel][:, None, :] + b[None, :, None] * B[sel][:, None, :] + c[None, :, None] * C[sel][:, None, :])
+        P = (a[None, :, None] * A[sel][:, None, :] + b[None, :, None] * B[sel][:, None, :]
+             + c[None, :, None] * C[sel][:, None, :])
         out.append(P.reshape(-1, 3))
     return np.concatenate(out)

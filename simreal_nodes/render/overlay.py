@@ -85,7 +85,7 @@ def draw_colorbar(img_bgr: np.ndarray, vmin: float, vmax: float, lut: np.ndarray
     font, fs, th = cv2.FONT_HERSHEY_SIMPLEX, 0.42 * s, 1
     for k in range(5):
         v = vmin + (vmax - vmin) * k / 4
-        y = y0 + bh - int(round(bh * k / 4))
+        y = y0 + bh - round(bh * k / 4)
         cv2.line(img_bgr, (x0 + bw, y), (x0 + bw + 4, y), (255, 255, 255), 1)
         txt = f"{v * f:.3g}"
         cv2.putText(img_bgr, txt, (x0 + bw + 6, y + 4), font, fs, (0, 0, 0), th + 2, cv2.LINE_AA)
@@ -143,7 +143,7 @@ class ObjectOverlay:
         self.unit = "Pa" if field == "von_mises" else u_field.unit or "m"
         self.label = "von Mises" if field == "von_mises" else "|u|"
         self.axis_names = [a.name for a in model.axes]
-        self.value_range = tuple(value_range) if value_range is not None else self._model_range()
+        self.value_range: tuple[float, float] = tuple(value_range) if value_range is not None else self._model_range()
         self.state = DrawState()
 
     # -- model side -------------------------------------------------------------------------------------
@@ -252,7 +252,7 @@ class OverlayCompositor:
         depth = real_depth if (self.occlusion and real_depth is not None) else None
         out = self.renderer.composite(T_world_cam, image_bgr, real_depth=depth, occlusion_margin=self.margin, bgr=True)
         if self.colorbar:
-            for k, (oid, ob) in enumerate(self.objects.items()):
+            for oid, ob in self.objects.items():
                 if ob.field_name != "none":
                     draw_colorbar(out, *ob.value_range, ob.lut, f"{oid} {ob.label}", ob.unit)
                     break  # one bar: the first coloured object (scenes colour one object)

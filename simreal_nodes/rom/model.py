@@ -36,6 +36,9 @@ class ReducedModel:
     provenance: dict[str, Any] = field(default_factory=dict)
     model_id: str = ""  # name@content-hash once saved / loaded
     path: str = ""
+    # the full-order tensors a snapshot builder reduced, by field name (only when rom.build.KEEP_SNAPSHOTS: the
+    # benchmarks compare NI-PGD with HOSVD on them); never saved to the model file
+    snapshots: dict[str, NDArray[np.float64]] | None = field(default=None, repr=False, compare=False)
 
     @property
     def n_nodes(self) -> int:
@@ -45,7 +48,8 @@ class ReducedModel:
         for a in self.axes:
             if a.name == name:
                 return a
-        raise KeyError(f"model '{self.name}' has no parameter '{name}' (it has: {', '.join(a.name for a in self.axes)})")
+        raise KeyError(f"model '{self.name}' has no parameter '{name}' "
+                       f"(it has: {', '.join(a.name for a in self.axes)})")
 
     def axis_index(self, name: str) -> int:
         return [a.name for a in self.axes].index(self.axis(name).name)
@@ -54,7 +58,8 @@ class ReducedModel:
         try:
             return self.fields[name]
         except KeyError:
-            raise KeyError(f"model '{self.name}' has no field '{name}' (loaded: {', '.join(self.fields) or 'none'})") from None
+            raise KeyError(f"model '{self.name}' has no field '{name}' "
+                           f"(loaded: {', '.join(self.fields) or 'none'})") from None
 
     def displacement(self, mu: ArrayLike, nodes: Nodes = None, n_modes: int | None = None) -> Vector:
         """u(x, mu) of the displacement field alone (no rigid extras): (n_nodes or len(nodes), 3)."""
@@ -76,10 +81,11 @@ class ReducedModel:
         return DeformationView(self.field("displacement").view(nodes, n_modes, weights))
 
     def summary(self) -> str:
-        lines = [f"model '{self.name}' {self.model_id}: {self.n_nodes} nodes, {len(self.cells)} {self.cell_type} cells, "
-                 f"{len(self.surface)} surface triangles"]
+        lines = [f"model '{self.name}' {self.model_id}: {self.n_nodes} nodes, {len(self.cells)} {self.cell_type} "
+                 f"cells, {len(self.surface)} surface triangles"]
         for a in self.axes:
-            lines.append(f"  parameter {a.name} [{a.unit}] {a.kind}: {a.range[0]:g} .. {a.range[1]:g} ({len(a.values)} grid values)")
+            lines.append(f"  parameter {a.name} [{a.unit}] {a.kind}: {a.range[0]:g} .. {a.range[1]:g} "
+                         f"({len(a.values)} grid values)")
         for f in self.fields.values():
             err = "" if f.error_vs_modes is None or not len(f.error_vs_modes) else \
                 f", error {f.error_vs_modes[0]:.2e} (1 mode) .. {f.error_vs_modes[-1]:.2e} ({f.n_modes} modes)"

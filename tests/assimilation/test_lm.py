@@ -46,7 +46,7 @@ def _problem(rigid_z=False, noise=0.0, outliers=0, seed=0):
 def test_jacobian_matches_finite_differences(rigid_z):
     p, x, _ = _problem(rigid_z)
     x = x + np.r_[0.013, [0.02] * rigid_z]
-    uv, _, J = lm.predict(p, x)
+    _uv, _, J = lm.predict(p, x)
     for k in range(len(x)):
         h = 1e-6
         e = np.zeros_like(x)
@@ -57,7 +57,7 @@ def test_jacobian_matches_finite_differences(rigid_z):
 
 @pytest.mark.parametrize("rigid_z", [False, True])
 def test_lm_recovers_parameters_within_its_covariance(rigid_z):
-    p, x_true, m = _problem(rigid_z, noise=0.2)
+    p, x_true, _m = _problem(rigid_z, noise=0.2)
     lo, hi = np.r_[0.0, [-0.5] * rigid_z], np.r_[0.5, [0.5] * rigid_z]
     res = lm.solve(p, np.r_[0.2, [0.0] * rigid_z], lo, hi, huber_px=1.0, max_iter=30)
     assert res.converged

@@ -31,4 +31,5 @@ def test_object_trackers_on_the_aluminium_beam():
     ids, P, drop = trackers.feedback()  # glued dots: no map point on the object
     assert len(ids) == 0 and P.shape == (0, 3) and len(drop) == 0
     del trackers.trackers[o["id"]]  # (a build that failed on CameraInfo) -> built on the next frame
-    assert trackers.update(T_wc, bgr=bgr)[o["id"]].state in (EstimateState.OK, EstimateState.LOW_CONFIDENCE, EstimateState.LOST) and o["id"] in trackers.trackers
+    assert trackers.update(T_wc, bgr=bgr)[o["id"]].state in (EstimateState.OK, EstimateState.LOW_CONFIDENCE,
+                                                             EstimateState.LOST) and o["id"] in trackers.trackers

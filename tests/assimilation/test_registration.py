@@ -83,7 +83,7 @@ def test_ray_anchor_finds_the_material_point_under_the_pixel_despite_depth_error
     """A mapped point with a depth error along its viewing ray: its foot on the surface is a neighbouring
     material point (the error's tangential part), the ray's crossing with the triangle is the point itself."""
     rng = np.random.default_rng(3)
-    P, f, b = _surface_samples(boot, 300, seed=1)
+    P, f, _b = _surface_samples(boot, 300, seed=1)
     cam = np.array([0.25, -0.3, 0.35])  # an oblique view
     D = P - cam
     D /= np.linalg.norm(D, axis=1, keepdims=True)

@@ -83,7 +83,7 @@ def test_modes_chosen_live_bound_the_screen_error():
     ob = ObjectOverlay(m, np.eye(4), "displacement", modes=0, max_error_px=0.5)
     chosen = []
     for d in (0.4, 1.0, 4.0, 20.0):
-        V, col, st = ob.geometry(["s"], [0.45], _view(d), cam)
+        V, _col, st = ob.geometry(["s"], [0.45], _view(d), cam)
         # the bound holds: compare with the full-mode drawing projected
         full = m.points[ob.nodes] + m.displacement([0.45], ob.nodes)
         T_co = np.linalg.inv(_view(d))

@@ -50,7 +50,7 @@ def test_bounds() -> None:
 
 def test_from_named_unknown_missing_non_finite_out_of_range() -> None:
     axes = beam_model().axes  # s in [0, 0.5]
-    with pytest.raises(ValueError, match="unknown parameter 'theta'.*s, alpha_z, load_scale"):
+    with pytest.raises(ValueError, match=r"unknown parameter 'theta'.*s, alpha_z, load_scale"):
         ModelState.from_named(axes, ["s", "theta"], [0.1, 0.2])
     with pytest.raises(ValueError, match="2 parameter names for 1 values"):
         ModelState.from_named(axes, ["s", "alpha_z"], [0.1])
