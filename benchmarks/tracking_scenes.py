@@ -164,7 +164,7 @@ How a frame is measured (thesis ch. 4, `vision/slam/deformable.py`, `assimilatio
 
 Why mapping goes on by default: with the map frozen, the camera leaves the mapped views and its pose error grows
 to 6-25 mm, which the tracker reads as deformation (the 'frozen' rows below: boot theta error 4x larger, the foam
-beam lost on 16 % of the frames). The thesis's behaviour stays available:
+beam lost on 11 % of the frames). The thesis's behaviour stays available:
 `localization.freeze_map_on_deformation: true`.
 
 The foam beam's load position (target: median under 0.5 % of the span, at the thesis's 1280 x 720) is weakly
