@@ -42,6 +42,10 @@ class BeamLoadTruth:
     U: np.ndarray  # (n_s, n, 3) vertex displacement for the load at each tabulated position, metres
     description: str = ""
     info: dict = field(default_factory=dict)
+    # interpolation of arbitrary points: the skfem mesh, built once, and the last few point sets' embeddings
+    _mesh: object | None = field(default=None, init=False, repr=False, compare=False)
+    _embeds: dict[bytes, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict, init=False, repr=False,
+                                                                compare=False)
 
     def displacement(self, s: float) -> np.ndarray:
         """(n, 3) vertex displacement for the load at ``s`` (clipped to the tabulated range)."""
@@ -52,7 +56,7 @@ class BeamLoadTruth:
         """The same truth for a load ``factor`` times larger (linear material: superposition)."""
         out = BeamLoadTruth(self.points, self.surface, self.tets, self.s, self.U * factor, self.description,
                             {**self.info, "scaled": factor})
-        out._embeds = self._embeds
+        out._embeds, out._mesh = self._embeds, self._mesh
         return out
 
     def deformed_points(self, s: float) -> np.ndarray:
@@ -67,11 +71,16 @@ class BeamLoadTruth:
         """Tetrahedron vertices (N, 4) and barycentric weights (N, 4) of reference points P (N, 3)."""
         import skfem
 
-        key = np.asarray(P, dtype=np.float64).tobytes()
+        P = np.asarray(P, dtype=np.float64).reshape(-1, 3)
+        key = P.tobytes()
         hit = self._embeds.get(key)
         if hit is None:
-            mesh = skfem.MeshTet(np.ascontiguousarray(self.points.T), np.ascontiguousarray(self.tets.T))
-            hit = self._embeds[key] = meshes.embed_points(mesh, np.asarray(P, dtype=np.float64).reshape(-1, 3))
+            if self._mesh is None:
+                self._mesh = skfem.MeshTet(np.ascontiguousarray(self.points.T), np.ascontiguousarray(self.tets.T))
+            hit = meshes.embed_points(self._mesh, P)
+            if len(self._embeds) >= 8:  # a few point sets are asked for again and again (the model's nodes);
+                self._embeds.pop(next(iter(self._embeds)))  # a moving weight asks once per frame: bounded
+            self._embeds[key] = hit
         return hit
 
     def _bracket(self, s: float) -> tuple[int, float]:
@@ -81,9 +90,6 @@ class BeamLoadTruth:
         k = int(np.clip(np.searchsorted(self.s, x, side="right") - 1, 0, len(self.s) - 2))
         w = (x - self.s[k]) / (self.s[k + 1] - self.s[k])
         return (k + 1, 0.0) if w >= 1.0 else (k, float(w))
-
-    def __post_init__(self) -> None:
-        self._embeds: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
 
 
 def beam_load_truth(length: float, width: float, height: float, material: materials.Material, supports: list[dict],
