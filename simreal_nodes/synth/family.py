@@ -25,6 +25,7 @@ import functools
 import hashlib
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 import yaml
@@ -81,6 +82,10 @@ class FamilyDraw:
         return self.length / self.height
 
     @property
+    def beam(self) -> Beam:
+        return Beam(self.support, self.length, self.width, self.height)
+
+    @property
     def span(self) -> float:
         """The range of the load parameter (what errors are quoted against)."""
         return self.s_range[1] - self.s_range[0]
@@ -129,12 +134,21 @@ def draw(seed: int, width_px: int = 640, height_px: int = 480) -> FamilyDraw:
         pose_error=tuple(float(x) for x in np.r_[err_t, err_r]), width_px=width_px, height_px=height_px)
 
 
-def model_cells(d: FamilyDraw) -> tuple[int, int, int]:
+class Beam(NamedTuple):
+    """What the supports and both discretisations depend on: the beam's support kind and dimensions (metres)."""
+
+    support: str
+    length: float
+    width: float
+    height: float
+
+
+def model_cells(d: Beam) -> tuple[int, int, int]:
     """The tracked model's hexahedral grid: about two elements per beam height along it (24..60)."""
     return int(np.clip(round(d.length / d.height * 2), 24, 60)), (2 if d.width / d.height < 2 else 4), 2
 
 
-def truth_cells(d: FamilyDraw) -> tuple[int, int, int]:
+def truth_cells(d: Beam) -> tuple[int, int, int]:
     """The truth's tetrahedral grid: a whole multiple of the model's along the beam (so a support strip ends on a
     node of both: the same continuum problem, discretised independently), >= 3 elements through the thinner side
     of the section, at most ~100 along."""
@@ -144,7 +158,7 @@ def truth_cells(d: FamilyDraw) -> tuple[int, int, int]:
     return nx_m * k, int(np.clip(round(d.width / h), 3, 10)), int(np.clip(round(d.height / h), 3, 6))
 
 
-def supports(d: FamilyDraw) -> list[dict]:
+def supports(d: Beam) -> list[dict]:
     """Model-spec supports: a clamp at x = 0, or pinned / sliding strips under both ends (about 5 % of the length,
     4 cm at most, ending on a node of the model's grid)."""
     if d.support == "cantilever":
@@ -156,14 +170,12 @@ def supports(d: FamilyDraw) -> list[dict]:
              "component": "z"}]
 
 
-def _material(d: FamilyDraw) -> materials.Material:
-    return materials.make_material("linear_elastic", d.E, d.nu)
 
 
 def model_spec(d: FamilyDraw) -> dict:
     """The reduced model a user would build for this set-up: a beam_pgd with the known weight (hexahedra, a nodal
     force at the centreline vertices), covering the load's range. Built once per scene into the model cache."""
-    nx, ny, nz = model_cells(d)
+    nx, ny, nz = model_cells(d.beam)
     return {
         "simreal_model_spec": 1, "name": f"family_{d.seed}", "kind": "beam_pgd",
         "description": f"family scene {d.seed}: {d.support} beam {1e3 * d.length:.0f} x {1e3 * d.width:.1f} x "
@@ -171,7 +183,7 @@ def model_spec(d: FamilyDraw) -> dict:
         "material": {"law": "linear_elastic", "E": float(d.E), "nu": float(d.nu)},
         "geometry": {"length": float(d.length), "width": float(d.width), "height": float(d.height)},
         "mesh": {"cells": [nx, ny, nz], "element": "hex", "order": 2},
-        "supports": supports(d),
+        "supports": supports(d.beam),
         "load": {"force": float(d.force), "direction": [0, 0, -1], "where": "centreline",
                  "x_range": [float(d.s_range[0]), float(d.s_range[1])]},
         "pgd": {"max_modes": 19, "tol": 1e-6},
@@ -198,13 +210,10 @@ def truth_for(d: FamilyDraw) -> BeamLoadTruth:
 @functools.lru_cache(maxsize=4)
 def _unit_truth(length: float, width: float, height: float, E: float, nu: float, support: str, footprint: float,
                 s_range: tuple[float, float]) -> BeamLoadTruth:
-    d = FamilyDraw(seed=0, support=support, length=length, width=width, height=height, E=E, nu=nu, peak_px=0.0,
-                   force=1.0, footprint=footprint, positions=(), s_range=s_range, speckle_contrast=0.0, speckle_mm=0.0,
-                   clutter=0, clutter_contrast=0.0, ambient=0.0, light=(0.0, 0.0, -1.0), pixel_sigma=0.0,
-                   blur_subframes=1, distance=1.0, arc_deg=0.0, cam_elevation_deg=0.0, duration=0.0, yaw_deg=0.0,
-                   pose_error=(0.0,) * 6)
-    return beam_load_truth(length, width, height, _material(d), supports(d), 1.0, footprint, s_range,
-                           step=max((s_range[1] - s_range[0]) / 48, 0.002), cells=truth_cells(d))
+    beam = Beam(support, length, width, height)
+    return beam_load_truth(length, width, height, materials.make_material("linear_elastic", E, nu), supports(beam),
+                           1.0, footprint, s_range, step=max((s_range[1] - s_range[0]) / 48, 0.002),
+                           cells=truth_cells(beam))
 
 
 def scaled_force(d: FamilyDraw, cam_f: float) -> FamilyDraw:
