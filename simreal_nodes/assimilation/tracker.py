@@ -20,6 +20,7 @@ from scipy.spatial import cKDTree
 
 from simreal_nodes import geometry as G
 from simreal_nodes.assimilation import lm
+from simreal_nodes.assimilation.dense import DenseAligner, DenseResult, DenseSettings
 from simreal_nodes.assimilation.registration import link, ray_weights, surface_nodes
 from simreal_nodes.camera import CameraModel
 from simreal_nodes.rom.model import ReducedModel
@@ -43,7 +44,7 @@ class Link(NamedTuple):
 
 @dataclass
 class TrackerConfig:
-    measurements: str = "map_points"  # map_points | dots | homography
+    measurements: str = "map_points"  # map_points | dots | homography | dense
     huber_px: float = 2.0
     n_modes: int = 0  # 0: all
     max_iterations: int = 20
@@ -62,6 +63,9 @@ class TrackerConfig:
     # > 0: also fit a translation of the whole object (bounded), absorbing camera-pose drift
     object_shift_m: float = 0.0
     global_samples: int = 32  # coarse search over the tracked parameters when the warm start fits badly (0: off)
+    dense: DenseSettings = field(default_factory=DenseSettings)  # measurements 'dense'
+    # measurements 'dense': a deformation is seen when it lowers the photometric residual by this fraction
+    dense_min_gain: float = 0.05
 
 
 @dataclass
@@ -129,6 +133,11 @@ class DeformableTracker:
         self.outlier_ids = np.zeros(0, np.int64)  # map points the last fit rejected (their image tracks slid)
         self._rms_ref: float | None = None  # running residual RMS of good fits: what "fits badly" is measured against
         self._frames = 0  # frames solved (a periodic global restart every 30th)
+        self.dense: DenseAligner | None = None
+        if self.cfg.measurements == "dense":
+            if self.rigid_z:
+                raise ValueError("measurements 'dense' do not estimate alpha_z: use map_points for this object")
+            self.dense = DenseAligner(model, self.T_map_obj, cam, self.cfg.n_modes or None, self.cfg.dense)
         if self.cfg.measurements in ("dots", "homography"):
             if self.cfg.dots is None or len(self.cfg.dots) == 0:
                 raise ValueError("measurements 'dots' need the dots' reference positions (tracking.dots)")
@@ -289,6 +298,8 @@ class DeformableTracker:
             est.state, est.reason = EstimateState.LOST, "no camera pose this frame (localization lost)"
             return est
         T_cw = G.inv(T_wc)
+        if self.dense is not None:
+            return self._update_dense(est, T_wc, ids, P_map, uv, image_bgr)
         if self.cfg.measurements == "map_points":
             if ids is None or len(ids) == 0:
                 est.state, est.reason = EstimateState.LOST, "no measurements: no map points observed on the object"
@@ -316,13 +327,7 @@ class DeformableTracker:
         X, uvm, nodes, w = meas[:4]
         est.measurements = len(X)
         disp = self._disp_fn(nodes, w)
-        free = ~self.frozen
-        if not self._was_deforming:
-            # an undeformed object says nothing about its constants (alpha_z of an axisymmetric boot, a stiffness):
-            # hold them until a deformation is seen, or they drift along the flat directions of the cost
-            free &= np.array([m != "constant" for m in self.mode])
-        lo = np.where(free, self.lo, self.values)
-        hi = np.where(free, self.hi, self.values)
+        lo, hi = self._free_bounds()
         t0 = time.perf_counter()
         if self.cfg.measurements == "homography":
             res, rest_rms = self._solve_planar(X, uvm, disp, T_cw, lo, hi)
@@ -357,18 +362,32 @@ class DeformableTracker:
             est.reason = f"only {res.inliers} of {len(X)} measurements agree with the model (all outliers?)"
             return est
         gain = rest_rms - res.rms_px
-        est.deforming = bool(gain > self.cfg.min_deformation_px)
+        return self._conclude(est, res.x, bool(gain > self.cfg.min_deformation_px),
+                              f"residual {res.rms_px:.2f} px vs {rest_rms:.2f} px undeformed")
+
+    def _free_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """This frame's bounds: fixed and frozen parameters pinned at their values (lo == hi)."""
+        free = ~self.frozen
+        if not self._was_deforming:
+            # an undeformed object says nothing about its constants (alpha_z of an axisymmetric boot, a stiffness):
+            # hold them until a deformation is seen, or they drift along the flat directions of the cost
+            free &= np.array([m != "constant" for m in self.mode])
+        return np.where(free, self.lo, self.values), np.where(free, self.hi, self.values)
+
+    def _conclude(self, est: Estimate, x: np.ndarray, deforming: bool, evidence: str) -> Estimate:
+        """The common end of a solved frame: the new estimate, whether a deformation was seen (``evidence``
+        says how it was judged), the observability check and the constants."""
+        est.deforming = deforming
         self._was_deforming = est.deforming
+        self.values = x.copy()
         if not est.deforming:
             # barely anything to see (load absent, or near the clamp where the images hardly see its effect):
             # report the bounded estimate with the large variance the normal equations give, flagged; the
             # constants are not estimated from such frames
-            self.values = res.x.copy()
             est.state = EstimateState.LOW_CONFIDENCE
-            est.reason = (f"no measurable deformation (residual {res.rms_px:.2f} px vs {rest_rms:.2f} px undeformed): "
+            est.reason = (f"no measurable deformation ({evidence}): "
                           "the load may be absent or where the images cannot see its effect")
             return est
-        self.values = res.x.copy()
         self.deforming_frames += 1
         est.state = EstimateState.OK
         std = np.sqrt(np.clip(np.diag(est.cov), 0, None))
@@ -381,6 +400,51 @@ class DeformableTracker:
         self._update_constants(est)
         est.frozen = self.frozen.copy()
         return est
+
+    def _update_dense(self, est: Estimate, T_wc: np.ndarray, ids: np.ndarray | None, P_map: np.ndarray | None,
+                      uv: np.ndarray | None, image_bgr: np.ndarray | None) -> Estimate:
+        """Measurements 'dense' (:mod:`.dense`): the object's own texture against the reference view. Map points
+        observed on the object are still linked: the localization must leave them out of the camera pose and
+        look for them where the estimate moves them (the SLAM feedback), as with sparse measurements."""
+        import time
+
+        import cv2
+
+        assert self.dense is not None
+        if ids is not None and len(ids) and P_map is not None and uv is not None:
+            P = np.asarray(P_map, np.float64).reshape(-1, 3)
+            q = np.asarray(uv, np.float64).reshape(-1, 2)
+            good = np.all(np.isfinite(P), axis=1) & np.all(np.isfinite(q), axis=1)
+            self.link_points(np.asarray(ids)[good], P[good], rays=self.viewing_rays(T_wc, q[good]))
+        if image_bgr is None:
+            est.state, est.reason = EstimateState.LOST, "measurements 'dense' need the image"
+            return est
+        gray = cv2.cvtColor(image_bgr, cv2.COLOR_BGR2GRAY) if image_bgr.ndim == 3 else image_bgr
+        T_cw = G.inv(T_wc)
+        if not self.dense.has_template:
+            if self.dense.set_reference(gray, T_cw):
+                est.reason = ("reference view taken for dense measurement (the object is taken to be at rest "
+                              f"in it; {len(self.dense.levels[0].x)} surface samples)")
+            else:
+                est.state, est.reason = EstimateState.LOST, "the object is not in view: no reference view yet"
+            return est
+        lo, hi = self._free_bounds()
+        t0 = time.perf_counter()
+        res: DenseResult = self.dense.solve(gray, T_cw, self.values, lo, hi)
+        est.solve_ms = (time.perf_counter() - t0) * 1e3
+        est.values, est.cov = res.mu.copy(), res.cov_mu
+        est.measurements, est.inliers, est.iterations = res.used, res.inliers, res.iterations
+        est.debug.update(res.debug, photometric_rms=res.rms, rest_photometric_rms=res.rest_rms,
+                         motion_px=res.motion_px)
+        if res.reason:
+            est.state, est.reason = EstimateState.LOST, res.reason
+            return est
+        fit = res.debug.get("rms_at_rest_level", res.rms)
+        deforming = res.rest_rms - fit > self.cfg.dense_min_gain * res.rest_rms and \
+            res.motion_px > self.cfg.min_deformation_px
+        return self._conclude(est, res.mu, bool(deforming),
+                              f"photometric residual {fit:.2f} vs {res.rest_rms:.2f} undeformed, "
+                              f"motion {res.motion_px:.2f} px")
 
     def _fits_badly(self, res: lm.Result, n: int) -> bool:
         """The warm-started fit may sit in the wrong basin: its residual jumped above the running level of good
@@ -493,6 +557,7 @@ def tracker_config(obj: dict[str, Any], **overrides: Any) -> TrackerConfig:
                         constant_std_frac=t["constant_std_frac"],
                         min_measurements=t["min_measurements"], max_points=t["points"], anchor=t["anchor"],
                         object_shift_m=t["object_shift_m"],
+                        dense=DenseSettings(step_px=t["dense_step_px"], rigid=t["dense_rigid"]),
                         dots=np.asarray(t["dots"]) if t["dots"] else None, dot_color=tuple(t["dot_color"]))
     return replace(cfg, **overrides)
 

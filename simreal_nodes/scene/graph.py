@@ -57,14 +57,17 @@ class NodeSpec:
     outputs: dict[str, str] = field(default_factory=dict)  # topic -> message type
 
 
+IMAGE_MEASUREMENTS = ("dots", "homography", "dense")  # tracking.measurements that read the image's pixels
+
+
 def tracker_inputs(scene: dict) -> tuple[str, ...]:
     """What the tracker node synchronises per frame: the localization's observations, and the image only where it
-    is measured (glued dots, homography) or where a static camera paces the tracker."""
+    is measured (glued dots, homography, dense) or where a static camera paces the tracker."""
     tracked = [o for o in scene["objects"] if o["tracking"]["enabled"]]
     static = scene["localization"]["mode"] == "static"
     if static:
         return ("image",)
-    if any(o["tracking"]["measurements"] in ("dots", "homography") for o in tracked):
+    if any(o["tracking"]["measurements"] in IMAGE_MEASUREMENTS for o in tracked):
         return ("obs", "image")
     return ("obs",)
 

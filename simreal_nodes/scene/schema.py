@@ -94,8 +94,14 @@ ANCHOR = Record({
 
 TRACKING = Record({
     "enabled": Bool("estimate the tracked parameters from the images", default=False),
-    "measurements": Enum(("map_points", "dots", "homography"), "what gives the image measurements",
+    "measurements": Enum(("map_points", "dots", "homography", "dense"), "what gives the image measurements: map "
+                         "points on the object (sparse), glued dots, dots on a face through a homography, or dense "
+                         "photometric alignment of the object's own texture against a first view at rest",
                          default="map_points"),
+    "dense_step_px": Number("measurements 'dense': surface sample spacing in the reference view, pixels (smaller: "
+                            "more samples, slower)", lo=0.5, hi=16, default=1.5),
+    "dense_rigid": Bool("measurements 'dense': also fit a small rigid correction of the object each frame (absorbs "
+                        "camera-pose drift and the anchor's error)", default=True),
     "huber_px": Number("Huber threshold of the robust loss, pixels", lo=0, lo_open=True, default=2.0),
     "modes": Number("number of PGD modes used (0 = all)", integer=True, lo=0, default=0),
     "max_iterations": Number("Levenberg-Marquardt iterations per frame", integer=True, lo=1, hi=500, default=20),

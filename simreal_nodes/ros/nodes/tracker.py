@@ -48,7 +48,7 @@ class TrackerNode(SimrealNode):
         overrides = {k: v for k, v in (("huber_px", huber), ("n_modes", modes)) if v}  # 0: the scene's
         self.core = ObjectTrackers(self.objects, models, **overrides)
         keys = graph.tracker_inputs(self.scene)
-        self.need_image = any(o["tracking"]["measurements"] in ("dots", "homography") for o in self.objects)
+        self.need_image = any(o["tracking"]["measurements"] in graph.IMAGE_MEASUREMENTS for o in self.objects)
         self.sync = StampSync(keys, (), wait=2)
         q = data_qos(self.lossless)
         self.pubs = {o["id"]: self.create_publisher(ModelParameters, graph.params_topic(o["id"]), reliable_qos(50))

@@ -1,0 +1,460 @@
+"""Dense model-based measurement (``tracking.measurements: dense``): photometric alignment of the object's own
+surface texture, the idea of digital image correlation carried through the reduced model.
+
+Where the sparse tracker needs ORB keypoints on the object (none on a faint texture), this uses every pixel the
+object covers. Points are sampled on the model's surface (object frame, rest shape) about ``step_px`` apart in the
+reference view; their intensities in that view are the template. In a new image each sample sits where the model
+deformed by mu puts it,
+
+    X_k(theta) = c + R(omega) (T_map_obj (x_k + u_k(mu)) - c) + t                  (map frame)
+    r_k(theta) = I(pi(T_cw X_k)) - (a I_ref,k + b),     theta = (mu, omega, t, a, b),
+
+with u_k(mu) = sum_i w_ki u(x_i, mu) interpolated in the surface triangle (Eq. 4.10's link, dense), pi the
+camera, (omega, t) a small rigid correction of the object about its centre c (it absorbs the camera pose's drift
+and the hand-measured anchor's error: a few mm, which is a pixel or two, as large as a faint deflection) and
+(a, b) an affine brightness change. Gauss-Newton with Levenberg damping on the Huber cost of r (scale from the
+median absolute residual, so an occluder such as the load itself counts little), the Jacobian through the PGD
+sensitivities du/dmu (Eq. 4.11 with image gradients in place of the reprojection's), coarse to fine over an
+image pyramid. mu stays in its box (projected steps, as :func:`lm.solve`); weak Gaussian priors hold the rigid
+correction near zero along directions the image cannot see (translation along the viewing ray).
+
+The template is taken once, in the first frame with a camera pose that shows enough of the object: the object is
+taken to be at rest there (zero displacement). That is the one assumption of this measurement; a scene whose
+object is loaded from its first frame needs the reference state from elsewhere (see the tracker's docs).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from simreal_nodes import geometry as G
+from simreal_nodes.camera import CameraModel
+from simreal_nodes.rom.model import DeformationView, ReducedModel
+
+Array = NDArray[np.float64]
+Grad = tuple[NDArray[np.float32], NDArray[np.float32]]  # d image / du, d image / dv
+N_RIGID = 6  # omega (3), t (3)
+N_PHOTO = 2  # a, b
+
+
+@dataclass
+class DenseSettings:
+    """What the dense measurement trades (each measured in benchmarks/family.py's dense rows)."""
+
+    step_px: float = 1.5  # sample spacing in the reference view (pixels): finer = more samples, slower
+    levels: int = 3  # pyramid levels (coarse levels reach larger motions)
+    max_samples: int = 20000
+    min_samples: int = 200  # fewer visible samples: no measurement
+    iterations: int = 8  # at most, per level
+    tolerance: float = 2e-3  # converged when an iteration lowers the cost by less than this fraction
+    rigid: bool = True  # estimate the rigid correction (omega, t)
+    prior_rot_rad: float = np.deg2rad(2.0)  # 1-sigma of the rigid correction's prior
+    prior_trans_m: float = 0.01
+    grid: int = 32  # coarse search over mu at the coarsest level every frame (0: off)
+    min_grazing: float = 0.25  # |cos| of the viewing angle below which a surface sample is not used
+
+
+@dataclass
+class SurfaceSamples:
+    """Points on the model surface: rest positions (object frame), their triangle's corners and barycentric
+    weights (for the displacement), and the triangle normal (for visibility)."""
+
+    x: Array  # (N, 3)
+    nodes: NDArray[np.int64]  # (N, 3)
+    weights: Array  # (N, 3)
+    normal: Array  # (N, 3) unit; orientation not assumed (visibility uses |cos| and a depth buffer)
+
+
+def sample_surface(model: ReducedModel, spacing: float, max_samples: int, seed: int = 0) -> SurfaceSamples:
+    """About one sample per ``spacing``^2 of surface (stochastic rounding per triangle, seeded), at most
+    ``max_samples`` (the spacing grows to fit)."""
+    V, F = np.asarray(model.points, np.float64), np.asarray(model.surface, np.int64)
+    A, B, C = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
+    cr = np.cross(B - A, C - A)
+    area = 0.5 * np.linalg.norm(cr, axis=1)
+    spacing = max(spacing, float(np.sqrt(area.sum() / max(max_samples, 1))))
+    rng = np.random.default_rng(seed)
+    want = area / spacing**2
+    count = np.floor(want + rng.random(len(F))).astype(np.int64)
+    tri = np.repeat(np.arange(len(F)), count)
+    r1, r2 = np.sqrt(rng.random(len(tri))), rng.random(len(tri))
+    w = np.c_[1 - r1, r1 * (1 - r2), r1 * r2]
+    x = w[:, :1] * A[tri] + w[:, 1:2] * B[tri] + w[:, 2:] * C[tri]
+    n = cr[tri] / np.maximum(np.linalg.norm(cr[tri], axis=1, keepdims=True), 1e-300)
+    return SurfaceSamples(x, F[tri], w, n)
+
+
+def pyramid(gray: NDArray[np.generic], levels: int) -> list[NDArray[np.float32]]:
+    """Gaussian pyramid (level 0 = the image) as float32."""
+    out = [np.asarray(gray, np.float32)]
+    for _ in range(1, levels):
+        out.append(np.asarray(cv2.pyrDown(out[-1]), np.float32))
+    return out
+
+
+def _at_level(uv: Array, level: int) -> Array:
+    """Full-resolution pixel coordinates -> coordinates in pyramid level ``level`` (pixel centres kept)."""
+    s = 0.5**level
+    out: Array = (uv + 0.5) * s - 0.5
+    return out
+
+
+def bilinear(img: NDArray[np.float32], uv: Array) -> NDArray[np.float32]:
+    """Bilinear samples of ``img`` at (N, 2) pixel coordinates; outside the image: NaN."""
+    m = np.ascontiguousarray(uv.reshape(-1, 1, 2), np.float32)
+    v = cv2.remap(img, m, None, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,  # type: ignore[call-overload]
+                  borderValue=np.nan)
+    return np.asarray(v, np.float32).reshape(-1)
+
+
+
+@dataclass
+class Level:
+    """The template at one pyramid level: its samples' rest positions, normals, displacement view and
+    intensities in the reference view."""
+
+    x: Array  # (M, 3) object frame
+    normal: Array  # (M, 3) object frame
+    view: DeformationView
+    values: NDArray[np.float64]  # (M,) reference intensities at this level
+
+
+@dataclass
+class DenseResult:
+    mu: Array
+    cov_mu: Array  # (n_mu, n_mu); NaN where a parameter was not free
+    rms: float  # robust residual scale of the fit (intensity levels, 1.4826 MAD)
+    rest_rms: float  # the same with zero displacement (rigid correction and brightness refitted)
+    used: int  # samples in the finest level's fit
+    inliers: int  # of them within the Huber threshold
+    motion_px: float  # 90th percentile of the image motion the fitted deformation makes
+    iterations: int
+    reason: str = ""
+    debug: dict[str, float] = field(default_factory=dict)
+
+
+class _Fit:
+    """One Gauss-Newton / Levenberg solve over the levels (the deformed or the rest configuration)."""
+
+    def __init__(self, mu: Array | None, free: NDArray[np.bool_], rigid: Array, photo: Array) -> None:
+        self.mu = None if mu is None else mu.copy()
+        self.free = free
+        self.rigid = rigid.copy()
+        self.photo = photo.copy()
+        self.iterations = 0
+
+
+class DenseAligner:
+    """One object's dense measurement: the template and the current rigid / brightness nuisances."""
+
+    def __init__(self, model: ReducedModel, T_map_obj: Array, cam: CameraModel, n_modes: int | None,
+                 settings: DenseSettings | None = None) -> None:
+        self.model = model
+        self.cam = cam
+        self.K = cam.K
+        self.T_mo = np.asarray(T_map_obj, np.float64)
+        self.s = settings or DenseSettings()
+        self.n_modes = n_modes
+        self.levels: list[Level] = []
+        self.rigid = np.zeros(N_RIGID)  # (omega, t) of the last fit: the next frame's start
+        self.rest_rigid = np.zeros(N_RIGID)  # the same for the zero-displacement fit
+        self.photo = np.array([1.0, 0.0])
+        self.rest_photo = np.array([1.0, 0.0])
+        self.c = G.transform(self.T_mo, np.asarray(model.points, np.float64).mean(axis=0, keepdims=True))[0]
+        # images are undistorted once per frame (one remap) so that the hot loop projects with the pinhole alone
+        self._maps = None
+        if cam.has_distortion:
+            self._maps = cv2.initUndistortRectifyMap(cam.K, cam.cv_dist(), None, cam.K, (cam.width, cam.height),
+                                                     cv2.CV_32FC1)
+
+    def ideal(self, gray: NDArray[np.generic]) -> NDArray[np.float32]:
+        """The image as the pinhole camera of the same K would see it (float32)."""
+        g = np.asarray(gray, np.float32)
+        if self._maps is None:
+            return g
+        return np.asarray(cv2.remap(g, self._maps[0], self._maps[1], cv2.INTER_LINEAR,
+                                    borderMode=cv2.BORDER_CONSTANT, borderValue=np.nan), np.float32)
+
+    @property
+    def has_template(self) -> bool:
+        return bool(self.levels)
+
+    # -- the template ---------------------------------------------------------------------------------------
+    def visible(self, T_cw: Array, X_map: Array, normal_map: Array) -> NDArray[np.bool_]:
+        """Samples in front of the camera, inside the image, not seen edge-on and nearest in a coarse depth
+        buffer (2-pixel cells): the back faces and whatever the object hides of itself drop out."""
+        Xc = X_map @ T_cw[:3, :3].T + T_cw[:3, 3]
+        uv = self.cam.project(Xc, distort=False)
+        ok: NDArray[np.bool_] = np.all(np.isfinite(uv), axis=1) & (Xc[:, 2] > 0)
+        ok &= (uv[:, 0] >= 1) & (uv[:, 1] >= 1) & (uv[:, 0] <= self.cam.width - 2) & (uv[:, 1] <= self.cam.height - 2)
+        view = Xc / np.maximum(np.linalg.norm(Xc, axis=1, keepdims=True), 1e-12)
+        cosang = np.abs(np.sum((normal_map @ T_cw[:3, :3].T) * view, axis=1))
+        ok &= cosang >= self.s.min_grazing
+        if not ok.any():
+            return ok
+        cell = 2.0
+        cw = int(self.cam.width / cell) + 1
+        key = (uv[ok, 1] // cell).astype(np.int64) * cw + (uv[ok, 0] // cell).astype(np.int64)
+        zbuf = np.full(int(key.max()) + 1, np.inf)
+        np.minimum.at(zbuf, key, Xc[ok, 2])
+        tol = 0.004 + 0.01 * zbuf[key]  # a few mm: the surface's own thickness in a cell passes
+        sel = np.flatnonzero(ok)
+        ok[sel[Xc[ok, 2] > zbuf[key] + tol]] = False
+        return ok
+
+    def set_reference(self, gray: NDArray[np.generic], T_cw: Array) -> bool:
+        """Take this image as the template (the object at rest). False when too little of it is visible."""
+        Xc = G.transform(T_cw @ self.T_mo, np.asarray(self.model.points, np.float64))
+        z = float(np.median(Xc[:, 2][Xc[:, 2] > 0])) if np.any(Xc[:, 2] > 0) else 1.0
+        smp = sample_surface(self.model, self.s.step_px * z / float(self.K[0, 0]), self.s.max_samples)
+        vis = self.visible(T_cw, G.transform(self.T_mo, smp.x), smp.normal @ self.T_mo[:3, :3].T)
+        idx = np.flatnonzero(vis)
+        self.levels = []
+        if len(idx) < self.s.min_samples:
+            return False
+        uv = self.cam.project(G.transform(T_cw @ self.T_mo, smp.x[idx]), distort=False)
+        for lvl, img in enumerate(pyramid(self.ideal(gray), self.s.levels)):
+            sel = idx[np.arange(0, len(idx), 4**lvl)]  # coarser levels: fewer samples, the same spread
+            v = bilinear(img, _at_level(uv[np.arange(0, len(idx), 4**lvl)], lvl)).astype(np.float64)
+            good = np.isfinite(v)
+            sel = sel[good]
+            self.levels.append(Level(smp.x[sel], smp.normal[sel],
+                                     self.model.deformation_view(smp.nodes[sel], self.n_modes, smp.weights[sel]),
+                                     v[good]))
+        self.rigid[:] = 0.0
+        self.rest_rigid[:] = 0.0
+        self.photo[:] = (1.0, 0.0)
+        self.rest_photo[:] = (1.0, 0.0)
+        return True
+
+    # -- geometry -------------------------------------------------------------------------------------------
+    def _geometry(self, L: Level, rows: NDArray[np.int64], mu: Array | None, rigid: Array, T_cw: Array,
+                  jac: bool) -> tuple[Array, Array | None]:
+        """Ideal pixels (N, 2) of the level's samples ``rows`` and d(pixel)/d(mu, omega, t)
+        (N, 2, n_mu + 6); ``mu`` None: zero displacement (no mu columns)."""
+        x = L.x[rows]
+        du: Array | None = None
+        if mu is not None and jac:
+            u_all, du_all = L.view.with_jacobian(mu)
+            x = x + u_all[rows]
+            du = du_all[rows]
+        elif mu is not None:
+            x = x + L.view.field.evaluate(mu)[rows]
+        R_mo = self.T_mo[:3, :3]
+        Rr = G.exp_so3(rigid[:3])
+        d0 = (x @ R_mo.T + self.T_mo[:3, 3] - self.c) @ Rr.T
+        Xc = (self.c + d0 + rigid[3:]) @ T_cw[:3, :3].T + T_cw[:3, 3]
+        z = Xc[:, 2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            uv = np.c_[self.K[0, 0] * Xc[:, 0] / z + self.K[0, 2], self.K[1, 1] * Xc[:, 1] / z + self.K[1, 2]]
+        uv[z <= 0] = np.nan
+        if not jac:
+            return uv, None
+        fx, fy = self.K[0, 0], self.K[1, 1]
+        P = np.zeros((len(z), 2, 3))
+        P[:, 0, 0] = fx / z
+        P[:, 0, 2] = -fx * Xc[:, 0] / z**2
+        P[:, 1, 1] = fy / z
+        P[:, 1, 2] = -fy * Xc[:, 1] / z**2
+        PR = P @ T_cw[:3, :3]  # d pixel / d X (map), (N, 2, 3)
+        cols = []
+        if du is not None:
+            cols.append(PR @ np.einsum("ij,njk->nik", Rr @ R_mo, du))
+        skew = np.zeros((len(z), 3, 3))  # d X / d omega for a left increment: -[d0]x
+        skew[:, 0, 1], skew[:, 0, 2] = d0[:, 2], -d0[:, 1]
+        skew[:, 1, 0], skew[:, 1, 2] = -d0[:, 2], d0[:, 0]
+        skew[:, 2, 0], skew[:, 2, 1] = d0[:, 1], -d0[:, 0]
+        cols += [PR @ skew, PR]
+        return uv, np.concatenate(cols, axis=2)
+
+    def _visible_rows(self, L: Level, mu: Array | None, rigid: Array, T_cw: Array) -> NDArray[np.int64]:
+        x = L.x if mu is None else L.x + L.view.field.evaluate(mu)
+        R = G.exp_so3(rigid[:3]) @ self.T_mo[:3, :3]
+        X = (x @ self.T_mo[:3, :3].T + self.T_mo[:3, 3] - self.c) @ G.exp_so3(rigid[:3]).T + self.c + rigid[3:]
+        return np.flatnonzero(self.visible(T_cw, X, L.normal @ R.T))
+
+    # -- the solve ------------------------------------------------------------------------------------------
+    def _residuals(self, lvl: int, img: NDArray[np.float32], rows: NDArray[np.int64], f: _Fit,
+                   T_cw: Array) -> Array:
+        L = self.levels[lvl]
+        uv, _ = self._geometry(L, rows, f.mu, f.rigid, T_cw, jac=False)
+        r: Array = bilinear(img, _at_level(uv, lvl)).astype(np.float64) - (f.photo[0] * L.values[rows] + f.photo[1])
+        return r
+
+    def _prior(self, f: _Fit, sigma: float) -> tuple[Array, Array]:
+        """Diagonal weights and values of the rigid correction's Gaussian prior, in the data's units."""
+        wr = (sigma / self.s.prior_rot_rad) ** 2
+        wt = (sigma / self.s.prior_trans_m) ** 2
+        return np.r_[np.full(3, wr), np.full(3, wt)], f.rigid
+
+    @staticmethod
+    def _huber(r: Array, k: float) -> float:
+        a = np.abs(r)
+        return float(np.sum(np.where(a <= k, 0.5 * a * a, k * a - 0.5 * k * k)))
+
+    def _solve_level(self, lvl: int, pyr: list[NDArray[np.float32]], grads: list[Grad],
+                     f: _Fit, T_cw: Array, lo: Array, hi: Array) -> tuple[Array, Array, float, NDArray[np.int64]]:
+        """Levenberg-damped Gauss-Newton at one level; returns (J^T W J, final residuals, sigma, rows)."""
+        L = self.levels[lvl]
+        rows = self._visible_rows(L, f.mu, f.rigid, T_cw)
+        n_mu = 0 if f.mu is None else len(f.mu)
+        free_mu = np.zeros(0, np.int64) if f.mu is None else np.flatnonzero(f.free)
+        lam = 1e-3
+        H = np.zeros((0, 0))
+        r = np.zeros(0)
+        sigma = 1.0
+        for _ in range(self.s.iterations):
+            uv, Jg = self._geometry(L, rows, f.mu, f.rigid, T_cw, jac=True)
+            assert Jg is not None
+            q = _at_level(uv, lvl)
+            img, (gx, gy) = pyr[lvl], grads[lvl]
+            r = bilinear(img, q).astype(np.float64) - (f.photo[0] * L.values[rows] + f.photo[1])
+            ok = np.isfinite(r)
+            if ok.sum() < self.s.min_samples // max(1, 4**lvl) or ok.sum() < 10:
+                break
+            rr = r[ok]
+            sigma = max(1.4826 * float(np.median(np.abs(rr - np.median(rr)))), 0.5)
+            k = 1.345 * sigma
+            w = np.where(np.abs(rr) <= k, 1.0, k / np.maximum(np.abs(rr), 1e-12))
+            g = np.c_[bilinear(gx, q[ok]), bilinear(gy, q[ok])].astype(np.float64) * 0.5**lvl
+            Jgeo = np.einsum("nc,ncp->np", g, Jg[ok])  # (N, n_mu + 6)
+            cols = [Jgeo[:, free_mu]]
+            if self.s.rigid:
+                cols.append(Jgeo[:, n_mu:])
+            cols.append(np.c_[-L.values[rows][ok], -np.ones(ok.sum())])
+            J = np.concatenate(cols, axis=1)
+            H = J.T @ (J * w[:, None])
+            grad = J.T @ (w * rr)
+            n_f = len(free_mu)
+            if self.s.rigid:
+                pw, px = self._prior(f, sigma)
+                H[n_f:n_f + 6, n_f:n_f + 6] += np.diag(pw)
+                grad[n_f:n_f + 6] += pw * px
+            c0 = self._huber(rr, k) + (0.5 * float(np.sum(pw * px * px)) if self.s.rigid else 0.0)
+            improved = False
+            for _try in range(4):
+                A = H + lam * np.diag(np.maximum(np.diag(H), 1e-9))
+                try:
+                    step = -np.linalg.solve(A, grad)
+                except np.linalg.LinAlgError:
+                    lam *= 10
+                    continue
+                trial = self._apply(f, step, free_mu, lo, hi)
+                r2 = self._residuals(lvl, img, rows, trial, T_cw)
+                ok2 = np.isfinite(r2)
+                c1 = self._huber(r2[ok2], k) * ok.sum() / max(ok2.sum(), 1)
+                if self.s.rigid:
+                    pw2, px2 = self._prior(trial, sigma)
+                    c1 += 0.5 * float(np.sum(pw2 * px2 * px2))
+                if c1 < c0:
+                    f.mu, f.rigid, f.photo = trial.mu, trial.rigid, trial.photo
+                    lam = max(lam / 3, 1e-7)
+                    improved = c0 - c1 > self.s.tolerance * c0
+                    break
+                lam *= 4
+            f.iterations += 1
+            if not improved:  # converged (the cost moves by less than the tolerance) or no step helps
+                break
+        return H, r, sigma, rows
+
+    def _apply(self, f: _Fit, step: Array, free_mu: NDArray[np.int64], lo: Array, hi: Array) -> _Fit:
+        out = _Fit(f.mu, f.free, f.rigid, f.photo)
+        n_f = len(free_mu)
+        if out.mu is not None and n_f:
+            out.mu[free_mu] = np.clip(out.mu[free_mu] + step[:n_f], lo[free_mu], hi[free_mu])
+        k = n_f
+        if self.s.rigid:
+            out.rigid = out.rigid + step[k:k + 6]
+            k += 6
+        out.photo = out.photo + step[k:k + 2]
+        return out
+
+    def _grid_start(self, pyr: list[NDArray[np.float32]], f: _Fit, T_cw: Array, lo: Array, hi: Array) -> None:
+        """Coarse search over the free parameters at the coarsest level (the warm start included): a load that
+        jumped lands in another basin of the photometric cost."""
+        if f.mu is None or not self.s.grid or not f.free.any():
+            return
+        lvl = len(self.levels) - 1
+        L = self.levels[lvl]
+        rows = self._visible_rows(L, f.mu, f.rigid, T_cw)
+        free = np.flatnonzero(f.free)
+        per = max(2, round(self.s.grid ** (1.0 / len(free))))
+        axes = [np.linspace(lo[i], hi[i], per) for i in free]
+        cands = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, len(free))
+        r0 = self._residuals(lvl, pyr[lvl], rows, f, T_cw)
+        ok0 = np.isfinite(r0)
+        if ok0.sum() < 10:
+            return
+        sigma = max(1.4826 * float(np.median(np.abs(r0[ok0] - np.median(r0[ok0])))), 0.5)
+        k = 1.345 * sigma
+        best, best_c = None, self._huber(r0[ok0], k) / ok0.sum()
+        for cnd in cands:
+            t = _Fit(f.mu, f.free, f.rigid, f.photo)
+            assert t.mu is not None
+            t.mu[free] = cnd
+            r = self._residuals(lvl, pyr[lvl], rows, t, T_cw)
+            ok = np.isfinite(r)
+            if ok.sum() < 0.8 * ok0.sum():
+                continue
+            c = self._huber(r[ok], k) / ok.sum()
+            if c < best_c:
+                best, best_c = t.mu, c
+        if best is not None:
+            f.mu = best
+
+    def _run(self, pyr: list[NDArray[np.float32]], grads: list[Grad], f: _Fit,
+             T_cw: Array, lo: Array, hi: Array, finest: int = 0) -> list[tuple[Array, Array, float, NDArray[np.int64]]]:
+        """Coarse to fine down to level ``finest``: per level (J^T W J, residuals, sigma, rows), coarsest first."""
+        return [self._solve_level(lvl, pyr, grads, f, T_cw, lo, hi)
+                for lvl in reversed(range(finest, len(self.levels)))]
+
+    def solve(self, gray: NDArray[np.generic], T_cw: Array, mu0: Array, lo: Array, hi: Array,
+              with_rest: bool = True) -> DenseResult:
+        """Fit mu (within [lo, hi]; a parameter with lo == hi stays put) and the nuisances to this image."""
+        T_cw = np.asarray(T_cw, np.float64)
+        pyr = pyramid(self.ideal(gray), len(self.levels))
+        # central differences: [-1, 0, 1] / 2
+        grads = [(np.asarray(cv2.Sobel(p, cv2.CV_32F, 1, 0, ksize=1, scale=0.5), np.float32),
+                  np.asarray(cv2.Sobel(p, cv2.CV_32F, 0, 1, ksize=1, scale=0.5), np.float32)) for p in pyr]
+        free = hi > lo
+        f = _Fit(np.clip(mu0, lo, hi), free, self.rigid, self.photo)
+        self._grid_start(pyr, f, T_cw, lo, hi)
+        per_level = self._run(pyr, grads, f, T_cw, lo, hi)
+        H, r, sigma, rows = per_level[-1]
+        assert f.mu is not None
+        n_mu = len(mu0)
+        res = DenseResult(f.mu.copy(), np.full((n_mu, n_mu), np.nan), sigma, float("nan"), len(rows),
+                          int(np.sum(np.abs(r[np.isfinite(r)]) <= 1.345 * sigma * 2)), 0.0, f.iterations)
+        if len(rows) < self.s.min_samples or not np.isfinite(sigma):
+            res.reason = f"only {len(rows)} object samples visible (need {self.s.min_samples})"
+            return res
+        self.rigid, self.photo = f.rigid.copy(), f.photo.copy()
+        fi = np.flatnonzero(free)
+        if len(fi) and H.shape[0] >= len(fi):
+            try:
+                cov = np.linalg.inv(H) * sigma**2
+                res.cov_mu[np.ix_(fi, fi)] = cov[: len(fi), : len(fi)]
+            except np.linalg.LinAlgError:
+                pass
+        L = self.levels[0]
+        uv_d, _ = self._geometry(L, rows, f.mu, f.rigid, T_cw, jac=False)
+        uv_0, _ = self._geometry(L, rows, None, f.rigid, T_cw, jac=False)
+        mv = np.linalg.norm(uv_d - uv_0, axis=1)
+        res.motion_px = float(np.percentile(mv[np.isfinite(mv)], 90)) if np.isfinite(mv).any() else 0.0
+        res.debug.update(rigid_rot_deg=float(np.rad2deg(np.linalg.norm(f.rigid[:3]))),
+                         rigid_trans_mm=float(1e3 * np.linalg.norm(f.rigid[3:])), gain=float(f.photo[0]),
+                         bias=float(f.photo[1]))
+        if with_rest:
+            # is there a deformation at all? The same fit with zero displacement, at the coarser levels only (it
+            # is a yes/no question), compared with the deformed fit's residual at the same level
+            cmp = min(1, len(self.levels) - 1)
+            g0 = _Fit(None, free, self.rest_rigid, self.rest_photo)
+            sigma0 = self._run(pyr, grads, g0, T_cw, lo, hi, finest=cmp)[-1][2]
+            self.rest_rigid, self.rest_photo = g0.rigid.copy(), g0.photo.copy()
+            res.rest_rms = sigma0
+            res.debug["rms_at_rest_level"] = per_level[len(per_level) - 1 - cmp][2]
+        return res
