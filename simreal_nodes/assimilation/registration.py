@@ -240,6 +240,7 @@ class RegistrationConfig:
     margin: float = 0.15
     floor_dist: float = 0.008
     floor_clear: float = 0.006
+    contact_band: float = 0.004
     inlier_dist: float = 0.006
     min_fitness: float = 0.5
     max_rmse: float = 0.004
@@ -358,6 +359,11 @@ def register_rgbd(cloud: np.ndarray, model: ReducedModel, guess: np.ndarray, cam
         if best is None or fit > best[0] + 1e-9:
             best = (fit, T)
     assert best is not None  # starts is never empty
+    # the band where the object meets its supports: a clamp's top face is level with the object's underside and
+    # ends where the object begins, so its points would pair with the object's end face and pull the object
+    # onto the clamp (millimetres along a beam's axis); points within contact_band of the model's underside go
+    z_obj = P @ best[1][2, :3] + best[1][2, 3]
+    P = P[z_obj > model.points[:, 2].min() + cfg.contact_band]
     T = icp(_cloud(P), best[1], (0.012, 0.006, 0.004))
     fitness, rmse, hits = _quality(P, T, S, N, cams, cfg.inlier_dist)
     out = Registration(G.inv(T), fitness, rmse, hits, plane)
