@@ -228,7 +228,9 @@ class RegistrationConfig:
     ``stride``: pixel step of the back-projection, ``voxel``: the fused cloud's grid. ``margin``: the crop around
     the guessed model box: it must hold the guess's error (a hand guess is off by centimetres and degrees: at
     10 degrees a 1 m beam's ends move 9 cm). ``floor_clear``: points this close above the support plane are
-    dropped (the object rests there: its lower edge is lost, not its faces). The fit is refused below
+    dropped (the object rests there: its lower edge is lost, not its faces); ``contact_band``: the same for the
+    object's underside in the fine stage (see :func:`register_rgbd`). A fit turned more than ``max_turn_deg`` from
+    the (levelled) guess is in another basin and is not taken. The fit is refused below
     ``min_fitness`` (share of the model surface facing the cameras that has a measured point within
     ``inlier_dist``) or above ``max_rmse`` (point-to-plane residual of those inliers; the depth noise of a
     structured-light sensor at 1.5 m is about 4 mm)."""
@@ -241,6 +243,7 @@ class RegistrationConfig:
     floor_dist: float = 0.008
     floor_clear: float = 0.006
     contact_band: float = 0.004
+    max_turn_deg: float = 30.0
     inlier_dist: float = 0.006
     min_fitness: float = 0.5
     max_rmse: float = 0.004
@@ -293,10 +296,13 @@ def register_rgbd(cloud: np.ndarray, model: ReducedModel, guess: np.ndarray, cam
     2. a crop to the guessed model box grown by ``margin``;
     3. point-to-plane ICP (Open3D, Tukey-robust) of the cropped points onto samples of the model surface with
        their exact normals: each measured point finds its nearest model surface point, so the faces the cameras
-       did not see take no part. Coarse: on a 5 mm grid from the levelled guess and from starts moved by a third
+       did not see take no part. Coarse (:func:`_icp_upright`, 4 degrees of freedom: translation and a turn
+       about the up axis): on a 5 mm grid from the levelled guess and from starts moved by a third
        of the margin along each object axis and turned 10 degrees about z either way (a guess centimetres off
-       locks onto a neighbouring structure, a clamp's face, from a single start); the start that covers most of
-       the model surface facing the cameras goes on to the fine stage (full cloud, radii down to 4 mm);
+       locks onto a neighbouring structure, a clamp's face, from a single start); of the fits that stay within
+       ``max_turn_deg`` of the guess (a box beam of square section also fits rolled a quarter turn), the one
+       that covers most of the model surface facing the cameras goes on to the fine stage (full cloud, radii
+       down to 4 mm), without the points in the ``contact_band`` above the model's underside;
     4. the quality (:class:`Registration`), judged on the model faces turned to ``cam_centres`` (the cameras'
        positions, map frame); :class:`RegistrationError` (carrying the registration) when it falls short of
        ``cfg``.
@@ -348,17 +354,22 @@ def register_rgbd(cloud: np.ndarray, model: ReducedModel, guess: np.ndarray, cam
     starts = [np.zeros(4)] + [np.r_[step * sgn * np.eye(3)[k], 0.0] for k in range(3) for sgn in (-1, 1)]
     starts += [np.r_[0.0, 0.0, 0.0, sgn * np.deg2rad(10.0)] for sgn in (-1, 1)]
     coarse = _down(P, 0.005)
-    src = _cloud(coarse)
+    tree = cKDTree(S)
     best: tuple[float, np.ndarray] | None = None
     for off in starts:
         # the start: the guess moved by off[:3] (object frame) and turned by off[3] about its z axis through the
         # model's centre; T maps the map into the object frame
         T_start = guess @ G.make_T(t=centre + off[:3]) @ G.make_T(G.rot_axis("z", off[3])) @ G.make_T(t=-centre)
-        T = icp(src, G.inv(T_start), (0.05, 0.025, 0.012))
+        T = _icp_upright(coarse, tree, N, G.inv(T_start), centre, (0.05, 0.025, 0.012))
         fit = _quality(coarse, T, S, N, cams, 0.008)[0]
+        turn = np.arccos(np.clip((np.trace(T[:3, :3] @ guess[:3, :3]) - 1) / 2, -1.0, 1.0))
+        if turn > np.deg2rad(cfg.max_turn_deg):  # another basin: a mirror image, a square section rolled over
+            continue
         if best is None or fit > best[0] + 1e-9:
             best = (fit, T)
-    assert best is not None  # starts is never empty
+    if best is None:
+        raise RegistrationError(f"registration: every fit turned more than {cfg.max_turn_deg:.0f} degrees away from "
+                                "the guess (anchor.guess): is it the object's orientation?")
     # the band where the object meets its supports: a clamp's top face is level with the object's underside and
     # ends where the object begins, so its points would pair with the object's end face and pull the object
     # onto the clamp (millimetres along a beam's axis); points within contact_band of the model's underside go
@@ -372,6 +383,33 @@ def register_rgbd(cloud: np.ndarray, model: ReducedModel, guess: np.ndarray, cam
                                 f"camera is matched (at least {100 * cfg.min_fitness:.0f} % needed), residual "
                                 f"{1e3 * rmse:.1f} mm (at most {1e3 * cfg.max_rmse:.1f} mm)", out)
     return out
+
+
+def _icp_upright(P: np.ndarray, tree: cKDTree, N: np.ndarray, T: np.ndarray, centre: np.ndarray,
+                 radii: tuple[float, ...], iterations: int = 15) -> np.ndarray:
+    """Point-to-plane ICP (Tukey weights, each radius in turn) that moves the object only in the 4 degrees of
+    freedom a resting object has: a translation and a turn about its z axis through ``centre`` (object frame).
+    Roll and pitch stay the levelled guess's: a slender beam of a few centimetres' section rolls over freely under
+    correspondences centimetres long. P: map points; tree / N: the model samples and their normals; T: map ->
+    object; returns the refined T."""
+    for radius in radii:
+        for _ in range(iterations):
+            Q = P @ T[:3, :3].T + T[:3, 3] - centre
+            d, j = tree.query(Q + centre, distance_upper_bound=radius)
+            ok = np.isfinite(d)
+            if ok.sum() < 10:
+                break
+            q, n = Q[ok], N[j[ok]]
+            r = np.einsum("ij,ij->i", q + centre - tree.data[j[ok]], n)
+            w = np.where(np.abs(r) < radius, (1 - (r / radius) ** 2) ** 2, 0.0)  # Tukey
+            J = np.c_[n, n[:, 0] * -q[:, 1] + n[:, 1] * q[:, 0]]  # d r / d (t, turn about z)
+            H = J.T @ (w[:, None] * J) + 1e-9 * np.eye(4)
+            x = -np.linalg.solve(H, J.T @ (w * r))
+            step = G.make_T(t=centre + x[:3]) @ G.make_T(G.rot_axis("z", x[3])) @ G.make_T(t=-centre)
+            T = step @ T
+            if np.linalg.norm(x[:3]) < 1e-5 and abs(x[3]) < 1e-5:
+                break
+    return T
 
 
 def _cloud(P: np.ndarray, normals: np.ndarray | None = None) -> Any:
