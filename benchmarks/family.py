@@ -122,8 +122,9 @@ def run_registration(seed: int, width: int = 640, height: int = 480) -> dict:
     guess = G.pose7_to_matrix(yaml_doc["objects"][0]["anchor"]["guess"])
     D = G.inv(seq["truth"][0].object_poses["beam"]) @ guess
     d = sc.state["draw"]
-    return {"seed": seed, "support": d.support, "length_mm": round(1e3 * d.length), "height_mm": round(1e3 * d.height, 1),
-            "distance_m": round(d.distance, 2), "guess_mm": float(1e3 * np.linalg.norm(D[:3, 3])),
+    return {"seed": seed, "support": d.support, "length_mm": round(1e3 * d.length),
+            "height_mm": round(1e3 * d.height, 1), "distance_m": round(d.distance, 2),
+            "guess_mm": float(1e3 * np.linalg.norm(D[:3, 3])),
             "guess_deg": float(np.rad2deg(np.arccos(np.clip((np.trace(D[:3, :3]) - 1) / 2, -1.0, 1.0)))),
             **registration_error(pipe, seq), "frame": frame, "seconds": round(time.perf_counter() - t0, 1),
             "reason": "" if frame >= 0 else reason}
@@ -140,11 +141,11 @@ REG_COLS = [("seed", "seed", "{}"), ("support", "support", "{}"), ("length_mm", 
 def write_registration(rows: list[dict], label: str) -> None:
     mm = np.array([r["registration_mm"] for r in rows])
     deg = np.array([r["registration_deg"] for r in rows])
-    notes = (f"{label}: the registration step alone (`anchor: registration`) on each scene's first frames, RGB-D SLAM "
-             f"poses, the scene file's guess (about 5 cm and 10 degrees rms off). Median error {np.nanmedian(mm):.2f} mm, "
-             f"{np.nanmedian(deg):.2f} deg (target <= 3 mm, <= 0.5 deg); {int(np.isnan(mm).sum())} of {len(rows)} "
-             "scenes refused. Error: the object frame's origin (the beam's clamped corner) and the rotation angle "
-             "against the true pose in the map frame.")
+    notes = (f"{label}: the registration step alone (`anchor: registration`) on each scene's first frames, RGB-D "
+             "SLAM poses, the scene file's guess (about 5 cm and 10 degrees rms off). Median error "
+             f"{np.nanmedian(mm):.2f} mm, {np.nanmedian(deg):.2f} deg (target <= 3 mm, <= 0.5 deg); "
+             f"{int(np.isnan(mm).sum())} of {len(rows)} scenes refused. Error: the object frame's origin (the beam's "
+             "clamped corner) and the rotation angle against the true pose in the map frame.")
     save("family_registration", rows, REG_COLS, "Registration of the beam on the scene family", notes,
          extra={"summary": {"median_mm": float(np.nanmedian(mm)), "median_deg": float(np.nanmedian(deg)),
                             "refused": int(np.isnan(mm).sum()), "label": label}})

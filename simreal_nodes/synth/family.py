@@ -321,8 +321,8 @@ def family_scene(seed: int, width: int = 640, height: int = 480, fps: float = 15
         return {
             "simreal_scene": 1, "name": sc.name,
             "description": (f"Family scene {d.seed} ({d.support}, L/h {d.slenderness:.0f}, peak {d.peak_px:.1f} px, "
-                            f"speckle contrast {d.speckle_contrast:.2f}); object placed by registration from a guess by "
-                            f"eye (off by {1e3 * np.linalg.norm(err[:3]):.0f} mm, "
+                            f"speckle contrast {d.speckle_contrast:.2f}); object placed by registration from a "
+                            f"guess by eye (off by {1e3 * np.linalg.norm(err[:3]):.0f} mm, "
                             f"{np.rad2deg(np.linalg.norm(err[3:])):.0f} deg)."),
             "camera": _camera_yaml(sc),
             "localization": {"mode": "rgbd", "features": 1500},
