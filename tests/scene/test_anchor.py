@@ -32,3 +32,12 @@ def test_registration_anchor_needs_a_guess_and_depth():
 def test_pose_anchor_needs_no_guess():
     assert validate_scene(_doc({"kind": "pose", "pose": [0.1, 0, 0, 0, 0, 0, 1]}), "reg", ".")["objects"][0][
         "anchor"]["kind"] == "pose"
+
+
+def test_a_registering_tracker_subscribes_to_depth():
+    from simreal_nodes.scene import graph
+
+    for anchor, wants in (({"kind": "registration", "guess": GUESS}, True), ({"kind": "pose"}, False)):
+        s = validate_scene(_doc(anchor), "reg", ".")
+        nodes = {n.name: n for n in graph.required_nodes(s)}
+        assert (graph.CAM_DEPTH in nodes["tracker"].inputs) == wants
