@@ -92,13 +92,17 @@ def run_scene(seed: int, width: int = 640, height: int = 480, preloaded: bool = 
 
 def registration_error(pipe: Pipeline, seq: dict) -> dict:
     """The registered beam pose against the truth (both in the map frame, the first camera frame): position error
-    of the object frame's origin (mm) and rotation angle (deg); NaN where no registration was accepted."""
+    of the object frame's origin (mm), the largest displacement of a model node it causes (mm) and the rotation
+    angle (deg); NaN where no registration was accepted."""
     reg = pipe.objects.registrations.get("beam")
     if reg is None:
-        return {"registration_mm": float("nan"), "registration_deg": float("nan"), "registration_fitness": 0.0}
+        return {"registration_mm": float("nan"), "registration_max_mm": float("nan"),
+                "registration_deg": float("nan"), "registration_fitness": 0.0}
     T_true = seq["truth"][0].object_poses["beam"]
     D = G.inv(T_true) @ reg.T_map_obj
+    X = pipe.objects.models["beam"].points
     return {"registration_mm": float(1e3 * np.linalg.norm(D[:3, 3])),
+            "registration_max_mm": float(1e3 * np.linalg.norm(X @ D[:3, :3].T + D[:3, 3] - X, axis=1).max()),
             "registration_deg": float(np.rad2deg(np.arccos(np.clip((np.trace(D[:3, :3]) - 1) / 2, -1.0, 1.0)))),
             "registration_fitness": float(reg.fitness)}
 
@@ -133,7 +137,9 @@ def run_registration(seed: int, width: int = 640, height: int = 480) -> dict:
 REG_COLS = [("seed", "seed", "{}"), ("support", "support", "{}"), ("length_mm", "length (mm)", "{}"),
             ("height_mm", "height (mm)", "{}"), ("distance_m", "camera distance (m)", "{}"),
             ("guess_mm", "guess off (mm)", "{:.0f}"), ("guess_deg", "guess off (deg)", "{:.1f}"),
-            ("registration_mm", "registration error (mm)", "{:.2f}"), ("registration_deg", "(deg)", "{:.2f}"),
+            ("registration_mm", "registration error (mm)", "{:.2f}"),
+            ("registration_max_mm", "largest node displacement (mm)", "{:.2f}"),
+            ("registration_deg", "(deg)", "{:.2f}"),
             ("registration_fitness", "fitness", "{:.2f}"), ("frame", "placed at frame", "{}"),
             ("seconds", "time (s)", "{}"), ("reason", "refused because", "{}")]
 
@@ -141,13 +147,17 @@ REG_COLS = [("seed", "seed", "{}"), ("support", "support", "{}"), ("length_mm", 
 def write_registration(rows: list[dict], label: str) -> None:
     mm = np.array([r["registration_mm"] for r in rows])
     deg = np.array([r["registration_deg"] for r in rows])
+    worst = np.array([r["registration_max_mm"] for r in rows])
     notes = (f"{label}: the registration step alone (`anchor: registration`) on each scene's first frames, RGB-D "
              "SLAM poses, the scene file's guess (about 5 cm and 10 degrees rms off). Median error "
-             f"{np.nanmedian(mm):.2f} mm, {np.nanmedian(deg):.2f} deg (target <= 3 mm, <= 0.5 deg); "
+             f"{np.nanmedian(mm):.2f} mm, {np.nanmedian(deg):.2f} deg (target <= 3 mm, <= 0.5 deg), largest node "
+             f"displacement {np.nanmedian(worst):.2f} mm at the median; "
              f"{int(np.isnan(mm).sum())} of {len(rows)} scenes refused. Error: the object frame's origin (the beam's "
-             "clamped corner) and the rotation angle against the true pose in the map frame.")
+             "clamped corner), the largest displacement of a model node and the rotation angle, against the true pose "
+             "in the map frame.")
     save("family_registration", rows, REG_COLS, "Registration of the beam on the scene family", notes,
          extra={"summary": {"median_mm": float(np.nanmedian(mm)), "median_deg": float(np.nanmedian(deg)),
+                            "median_max_mm": float(np.nanmedian(worst)),
                             "refused": int(np.isnan(mm).sum()), "label": label}})
 
 

@@ -287,8 +287,9 @@ def register_rgbd(cloud: np.ndarray, model: ReducedModel, guess: np.ndarray, cam
 
     ``guess`` (T_map_obj) is the user's rough placement (centimetres, degrees off): it only picks the basin. A prism
     such as a box beam fits its own cloud as well turned end for end or upside down; the fit converges to the pose
-    nearest the guess, so a guess within about 45 degrees decides between those mirror images (the load position
-    of a beam turned end for end would be read mirrored). Steps, deterministic for one ``seed``:
+    nearest the guess and may not turn more than ``max_turn_deg`` from it, so the guess decides between those
+    mirror images (the load position of a beam turned end for end would be read mirrored). Steps, deterministic for
+    one ``seed``:
 
     1. the support plane by RANSAC (Open3D ``segment_plane``, its generator seeded, then a least-squares refit on
        the inliers so that the plane does not depend on which sample won); used only when it is within 30 degrees
