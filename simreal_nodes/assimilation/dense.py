@@ -12,8 +12,8 @@ deformed by mu puts it,
 with u_k(mu) = sum_i w_ki u(x_i, mu) interpolated in the surface triangle (Eq. 4.10's link, dense), pi the
 camera, (omega, t) a small rigid correction of the object about its centre c (it absorbs the camera pose's drift
 and the hand-measured anchor's error: a few mm, which is a pixel or two, as large as a faint deflection) and
-(a, b) an affine brightness change. Gauss-Newton with Levenberg damping on the Huber cost of r (scale from the
-median absolute residual, so an occluder such as the load itself counts little), the Jacobian through the PGD
+(a, b) an affine brightness change. Gauss-Newton with Levenberg damping on Tukey's biweight cost of r (scale from
+the median absolute residual, so an occluder such as the load itself counts nothing), the Jacobian through the PGD
 sensitivities du/dmu (Eq. 4.11 with image gradients in place of the reprojection's), coarse to fine over an
 image pyramid. mu stays in its box (projected steps, as :func:`lm.solve`); weak Gaussian priors hold the rigid
 correction near zero along directions the image cannot see (translation along the viewing ray).
@@ -38,6 +38,7 @@ from simreal_nodes.rom.model import DeformationView, ReducedModel
 Array = NDArray[np.float64]
 Grad = tuple[NDArray[np.float32], NDArray[np.float32]]  # d image / du, d image / dv
 N_RIGID = 6  # omega (3), t (3)
+TUKEY = 4.685  # biweight threshold in robust standard deviations (95 % efficiency under Gaussian noise)
 N_PHOTO = 2  # a, b
 
 
@@ -52,8 +53,13 @@ class DenseSettings:
     iterations: int = 8  # at most, per level
     tolerance: float = 2e-3  # converged when an iteration lowers the cost by less than this fraction
     rigid: bool = True  # estimate the rigid correction (omega, t)
-    prior_rot_rad: float = np.deg2rad(2.0)  # 1-sigma of the rigid correction's prior
+    prior_rot_rad: float = np.deg2rad(2.0)  # 1-sigma of the rigid correction's prior (about zero)
     prior_trans_m: float = 0.01
+    # once a frame at rest has measured the correction (the anchor's error as the images see it), a deformed
+    # fit keeps its rotation within this of it and its translation within held_trans_m (the camera's drift): a
+    # free rotation would take the blame for a cantilever's bending
+    held_rot_rad: float = np.deg2rad(0.1)
+    held_trans_m: float = 0.003
     grid: int = 32  # coarse search over mu at the coarsest level every frame (0: off)
     min_grazing: float = 0.25  # |cos| of the viewing angle below which a surface sample is not used
 
@@ -130,7 +136,7 @@ class DenseResult:
     rms: float  # robust residual scale of the fit (intensity levels, 1.4826 MAD)
     rest_rms: float  # the same with zero displacement (rigid correction and brightness refitted)
     used: int  # samples in the finest level's fit
-    inliers: int  # of them within the Huber threshold
+    inliers: int  # of them within the biweight threshold
     motion_px: float  # 90th percentile of the image motion the fitted deformation makes
     iterations: int
     reason: str = ""
@@ -140,12 +146,17 @@ class DenseResult:
 class _Fit:
     """One Gauss-Newton / Levenberg solve over the levels (the deformed or the rest configuration)."""
 
-    def __init__(self, mu: Array | None, free: NDArray[np.bool_], rigid: Array, photo: Array) -> None:
+    def __init__(self, mu: Array | None, free: NDArray[np.bool_], rigid: Array, photo: Array,
+                 prior: tuple[Array, Array]) -> None:
         self.mu = None if mu is None else mu.copy()
         self.free = free
         self.rigid = rigid.copy()
         self.photo = photo.copy()
+        self.prior = prior  # (mean, 1-sigma) of the rigid correction, (6,) each
         self.iterations = 0
+
+    def copy(self) -> _Fit:
+        return _Fit(self.mu, self.free, self.rigid, self.photo, self.prior)
 
 
 class DenseAligner:
@@ -164,6 +175,7 @@ class DenseAligner:
         self.rest_rigid = np.zeros(N_RIGID)  # the same for the zero-displacement fit
         self.photo = np.array([1.0, 0.0])
         self.rest_photo = np.array([1.0, 0.0])
+        self.held: Array | None = None  # the rigid correction measured at rest (see :meth:`hold_rest`)
         self.c = G.transform(self.T_mo, np.asarray(model.points, np.float64).mean(axis=0, keepdims=True))[0]
         # images are undistorted once per frame (one remap) so that the hot loop projects with the pinhole alone
         self._maps = None
@@ -229,7 +241,13 @@ class DenseAligner:
         self.rest_rigid[:] = 0.0
         self.photo[:] = (1.0, 0.0)
         self.rest_photo[:] = (1.0, 0.0)
+        self.held = None
         return True
+
+    def hold_rest(self) -> None:
+        """The last frame showed no deformation: its zero-displacement fit's rigid correction is the object's
+        placement error as the images see it; deformed fits stay near it from now on."""
+        self.held = self.rest_rigid.copy()
 
     # -- geometry -------------------------------------------------------------------------------------------
     def _geometry(self, L: Level, rows: NDArray[np.int64], mu: Array | None, rigid: Array, T_cw: Array,
@@ -286,15 +304,23 @@ class DenseAligner:
         return r
 
     def _prior(self, f: _Fit, sigma: float) -> tuple[Array, Array]:
-        """Diagonal weights and values of the rigid correction's Gaussian prior, in the data's units."""
-        wr = (sigma / self.s.prior_rot_rad) ** 2
-        wt = (sigma / self.s.prior_trans_m) ** 2
-        return np.r_[np.full(3, wr), np.full(3, wt)], f.rigid
+        """Diagonal weights and offsets of the rigid correction's Gaussian prior, in the data's units."""
+        mean, sd = f.prior
+        return (sigma / sd) ** 2, f.rigid - mean
 
     @staticmethod
-    def _huber(r: Array, k: float) -> float:
-        a = np.abs(r)
-        return float(np.sum(np.where(a <= k, 0.5 * a * a, k * a - 0.5 * k * k)))
+    def _rho(r: Array, c: float) -> float:
+        """Tukey's biweight loss: a residual beyond ``c`` costs a constant. A redescending loss, not Huber's:
+        an occluder's edge (the load itself) has image gradients fifty times the faint texture's, and under
+        Huber every such sample would still pull with its full gradient."""
+        q = np.minimum((r / c) ** 2, 1.0)
+        return float(np.sum(c * c / 6.0 * (1.0 - (1.0 - q) ** 3)))
+
+    @staticmethod
+    def _weights(r: Array, c: float) -> Array:
+        q = (r / c) ** 2
+        w: Array = np.where(q < 1.0, (1.0 - q) ** 2, 0.0)
+        return w
 
     def _solve_level(self, lvl: int, pyr: list[NDArray[np.float32]], grads: list[Grad],
                      f: _Fit, T_cw: Array, lo: Array, hi: Array) -> tuple[Array, Array, float, NDArray[np.int64]]:
@@ -318,8 +344,8 @@ class DenseAligner:
                 break
             rr = r[ok]
             sigma = max(1.4826 * float(np.median(np.abs(rr - np.median(rr)))), 0.5)
-            k = 1.345 * sigma
-            w = np.where(np.abs(rr) <= k, 1.0, k / np.maximum(np.abs(rr), 1e-12))
+            k = TUKEY * sigma
+            w = self._weights(rr, k)
             g = np.c_[bilinear(gx, q[ok]), bilinear(gy, q[ok])].astype(np.float64) * 0.5**lvl
             Jgeo = np.einsum("nc,ncp->np", g, Jg[ok])  # (N, n_mu + 6)
             cols = [Jgeo[:, free_mu]]
@@ -334,7 +360,7 @@ class DenseAligner:
                 pw, px = self._prior(f, sigma)
                 H[n_f:n_f + 6, n_f:n_f + 6] += np.diag(pw)
                 grad[n_f:n_f + 6] += pw * px
-            c0 = self._huber(rr, k) + (0.5 * float(np.sum(pw * px * px)) if self.s.rigid else 0.0)
+            c0 = self._rho(rr, k) + (0.5 * float(np.sum(pw * px * px)) if self.s.rigid else 0.0)
             improved = False
             for _try in range(4):
                 A = H + lam * np.diag(np.maximum(np.diag(H), 1e-9))
@@ -346,7 +372,7 @@ class DenseAligner:
                 trial = self._apply(f, step, free_mu, lo, hi)
                 r2 = self._residuals(lvl, img, rows, trial, T_cw)
                 ok2 = np.isfinite(r2)
-                c1 = self._huber(r2[ok2], k) * ok.sum() / max(ok2.sum(), 1)
+                c1 = self._rho(r2[ok2], k) * ok.sum() / max(ok2.sum(), 1)
                 if self.s.rigid:
                     pw2, px2 = self._prior(trial, sigma)
                     c1 += 0.5 * float(np.sum(pw2 * px2 * px2))
@@ -362,7 +388,7 @@ class DenseAligner:
         return H, r, sigma, rows
 
     def _apply(self, f: _Fit, step: Array, free_mu: NDArray[np.int64], lo: Array, hi: Array) -> _Fit:
-        out = _Fit(f.mu, f.free, f.rigid, f.photo)
+        out = f.copy()
         n_f = len(free_mu)
         if out.mu is not None and n_f:
             out.mu[free_mu] = np.clip(out.mu[free_mu] + step[:n_f], lo[free_mu], hi[free_mu])
@@ -390,17 +416,17 @@ class DenseAligner:
         if ok0.sum() < 10:
             return
         sigma = max(1.4826 * float(np.median(np.abs(r0[ok0] - np.median(r0[ok0])))), 0.5)
-        k = 1.345 * sigma
-        best, best_c = None, self._huber(r0[ok0], k) / ok0.sum()
+        k = TUKEY * sigma
+        best, best_c = None, self._rho(r0[ok0], k) / ok0.sum()
         for cnd in cands:
-            t = _Fit(f.mu, f.free, f.rigid, f.photo)
+            t = f.copy()
             assert t.mu is not None
             t.mu[free] = cnd
             r = self._residuals(lvl, pyr[lvl], rows, t, T_cw)
             ok = np.isfinite(r)
             if ok.sum() < 0.8 * ok0.sum():
                 continue
-            c = self._huber(r[ok], k) / ok.sum()
+            c = self._rho(r[ok], k) / ok.sum()
             if c < best_c:
                 best, best_c = t.mu, c
         if best is not None:
@@ -421,14 +447,17 @@ class DenseAligner:
         grads = [(np.asarray(cv2.Sobel(p, cv2.CV_32F, 1, 0, ksize=1, scale=0.5), np.float32),
                   np.asarray(cv2.Sobel(p, cv2.CV_32F, 0, 1, ksize=1, scale=0.5), np.float32)) for p in pyr]
         free = hi > lo
-        f = _Fit(np.clip(mu0, lo, hi), free, self.rigid, self.photo)
+        wide = np.r_[np.full(3, self.s.prior_rot_rad), np.full(3, self.s.prior_trans_m)]
+        held = np.r_[np.full(3, self.s.held_rot_rad), np.full(3, self.s.held_trans_m)]
+        prior = (np.zeros(N_RIGID), wide) if self.held is None else (self.held, held)
+        f = _Fit(np.clip(mu0, lo, hi), free, self.rigid, self.photo, prior)
         self._grid_start(pyr, f, T_cw, lo, hi)
         per_level = self._run(pyr, grads, f, T_cw, lo, hi)
         H, r, sigma, rows = per_level[-1]
         assert f.mu is not None
         n_mu = len(mu0)
         res = DenseResult(f.mu.copy(), np.full((n_mu, n_mu), np.nan), sigma, float("nan"), len(rows),
-                          int(np.sum(np.abs(r[np.isfinite(r)]) <= 1.345 * sigma * 2)), 0.0, f.iterations)
+                          int(np.sum(np.abs(r[np.isfinite(r)]) <= TUKEY * sigma)), 0.0, f.iterations)
         if len(rows) < self.s.min_samples or not np.isfinite(sigma):
             res.reason = f"only {len(rows)} object samples visible (need {self.s.min_samples})"
             return res
@@ -452,7 +481,7 @@ class DenseAligner:
             # is there a deformation at all? The same fit with zero displacement, at the coarser levels only (it
             # is a yes/no question), compared with the deformed fit's residual at the same level
             cmp = min(1, len(self.levels) - 1)
-            g0 = _Fit(None, free, self.rest_rigid, self.rest_photo)
+            g0 = _Fit(None, free, self.rest_rigid, self.rest_photo, (np.zeros(N_RIGID), wide))
             sigma0 = self._run(pyr, grads, g0, T_cw, lo, hi, finest=cmp)[-1][2]
             self.rest_rigid, self.rest_photo = g0.rigid.copy(), g0.photo.copy()
             res.rest_rms = sigma0

@@ -1,5 +1,12 @@
 """The deformable trackers of a scene's tracked objects, as the tracker node and the offline pipeline both keep them:
-one :class:`DeformableTracker` per object, built for a camera, updated together every frame."""
+one :class:`DeformableTracker` per object, built for a camera, updated together every frame.
+
+An object with ``anchor: registration`` is placed by :func:`~simreal_nodes.assimilation.registration.register_rgbd`
+before it is tracked: its depth views (``RegistrationConfig.frames`` frames that have a camera pose, every
+``every``-th) are collected, fused in the map frame and registered from the scene's rough ``anchor.guess``. Until
+that succeeds its estimate is LOST with the reason (waiting, or the refusal of a bad fit: the views are then
+collected afresh from later frames), and its tracker sits at the guess without being updated (it holds no links,
+so it tells the localization nothing); on success the tracker is built again at the registered pose."""
 
 from __future__ import annotations
 
@@ -8,29 +15,46 @@ from typing import Any
 import numpy as np
 
 from simreal_nodes import geometry as G
+from simreal_nodes.assimilation.registration import (
+    Registration,
+    RegistrationConfig,
+    RegistrationError,
+    depth_cloud,
+    register_rgbd,
+)
 from simreal_nodes.assimilation.tracker import DeformableTracker, Estimate, deformable_feedback, tracker_config
 from simreal_nodes.camera import CameraModel
 from simreal_nodes.rom.model import ReducedModel
+from simreal_nodes.states import EstimateState
 
 
 class ObjectTrackers:
     """``objects``: validated scene objects (those with tracking enabled are tracked); ``models``: their reduced
-    models by id; ``cfg_overrides``: :class:`TrackerConfig` fields that override every object's scene settings.
+    models by id; ``registration``: how registered objects are placed; ``cfg_overrides``: :class:`TrackerConfig`
+    fields that override every object's scene settings.
 
     The trackers depend on the intrinsics (they project the model): :meth:`set_camera` (re)builds them;
-    ``trackers`` is the same dict throughout, so a reference to it stays valid."""
+    ``trackers`` is the same dict throughout, so a reference to it stays valid. ``registrations``: the
+    registered objects' :class:`Registration` by id, once found."""
 
-    def __init__(self, objects: list[dict[str, Any]], models: dict[str, ReducedModel], **cfg_overrides: Any) -> None:
+    def __init__(self, objects: list[dict[str, Any]], models: dict[str, ReducedModel],
+                 registration: RegistrationConfig | None = None, **cfg_overrides: Any) -> None:
         self.objects = [o for o in objects if o["tracking"]["enabled"]]
         self.models = models
+        self.registration = registration or RegistrationConfig()
         self.cfg_overrides = cfg_overrides
         self.cam: CameraModel | None = None
         self.trackers: dict[str, DeformableTracker] = {}
+        self.registrations: dict[str, Registration] = {}
+        self._views: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
+        self._posed: dict[str, int] = {}  # frames with a camera pose seen while waiting for the registration
 
     def set_camera(self, cam: CameraModel) -> None:
-        """New intrinsics: every tracker starts again (built now, not on the first frame: that frame would wait)."""
+        """New intrinsics: every tracker starts again (built now, not on the first frame: that frame would wait);
+        depth views taken with the old intrinsics are dropped, a registration found stays."""
         self.cam = cam
         self.trackers.clear()
+        self._views.clear()
         for o in self.objects:
             self._tracker(o)
 
@@ -38,16 +62,63 @@ class ObjectTrackers:
         tr = self.trackers.get(o["id"])
         if tr is None:
             assert self.cam is not None, "ObjectTrackers.set_camera comes first"
-            tr = DeformableTracker(self.models[o["id"]], G.pose7_to_matrix(o["anchor"]["pose"]), o["parameters"],
-                                   self.cam, tracker_config(o, **self.cfg_overrides))
+            tr = DeformableTracker(self.models[o["id"]], self._pose(o), o["parameters"], self.cam,
+                                   tracker_config(o, **self.cfg_overrides))
             self.trackers[o["id"]] = tr
         return tr
 
+    def _pose(self, o: dict[str, Any]) -> np.ndarray:
+        """The object's pose in the map: the scene's, the registered one, or (not registered yet) the guess."""
+        if o["anchor"]["kind"] != "registration":
+            return G.pose7_to_matrix(o["anchor"]["pose"])
+        reg = self.registrations.get(o["id"])
+        return reg.T_map_obj if reg is not None else G.pose7_to_matrix(o["anchor"]["guess"])
+
     def update(self, T_wc: np.ndarray | None, ids: np.ndarray | None = None, P: np.ndarray | None = None,
-               uv: np.ndarray | None = None, bgr: np.ndarray | None = None) -> dict[str, Estimate]:
-        """One frame for every object (arguments as :meth:`DeformableTracker.update`): estimates by object id.
-        A tracker whose build failed on :meth:`set_camera` is built again here."""
-        return {o["id"]: self._tracker(o).update(T_wc, ids, P, uv, bgr) for o in self.objects}
+               uv: np.ndarray | None = None, bgr: np.ndarray | None = None,
+               depth: np.ndarray | None = None) -> dict[str, Estimate]:
+        """One frame for every object (arguments as :meth:`DeformableTracker.update`; ``depth``: the frame's depth
+        image, metres, which a registered object needs until it is placed): estimates by object id. A tracker whose
+        build failed on :meth:`set_camera` is built again here."""
+        out = {}
+        for o in self.objects:
+            waiting = self._register(o, T_wc, depth)
+            if waiting:
+                tr = self._tracker(o)
+                out[o["id"]] = Estimate(tr.names, tr.units, tr.values.copy(), tr.frozen.copy(),
+                                        np.full((len(tr.values),) * 2, np.nan), state=EstimateState.LOST,
+                                        reason=waiting)
+            else:
+                out[o["id"]] = self._tracker(o).update(T_wc, ids, P, uv, bgr)
+        return out
+
+    def _register(self, o: dict[str, Any], T_wc: np.ndarray | None, depth: np.ndarray | None) -> str:
+        """Registration of a registered object not placed yet, fed this frame: '' once it is placed (or needs no
+        registration), else why its estimate waits."""
+        oid, cfg = o["id"], self.registration
+        if o["anchor"]["kind"] != "registration" or oid in self.registrations:
+            return ""
+        if T_wc is None:
+            return "waiting for registration: no camera pose yet"
+        if depth is None:
+            return "waiting for registration: it needs the depth image"
+        assert self.cam is not None, "ObjectTrackers.set_camera comes first"
+        k = self._posed[oid] = self._posed.get(oid, -1) + 1
+        views = self._views.setdefault(oid, [])
+        if k % cfg.every == 0:
+            views.append((np.array(depth, dtype=np.float32), np.asarray(T_wc, dtype=np.float64).copy()))
+        if len(views) < cfg.frames:
+            return f"waiting for registration ({len(views)} of {cfg.frames} depth views)"
+        cloud = np.vstack([depth_cloud(self.cam, d, T, cfg.stride, cfg.max_range) for d, T in views])
+        cams = np.array([T[:3, 3] for _, T in views])
+        views.clear()
+        try:
+            reg = register_rgbd(cloud, self.models[oid], G.pose7_to_matrix(o["anchor"]["guess"]), cams, cfg)
+        except RegistrationError as e:
+            return f"waiting for registration: {e.args[0]}"
+        self.registrations[oid] = reg
+        self.trackers.pop(oid, None)  # built again at the registered pose
+        return ""
 
     def feedback(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """What the localization needs after a frame: :func:`deformable_feedback` of every tracker."""

@@ -54,7 +54,7 @@ class Pipeline:
         T_wc = r.T_wc
         if T_wc is not None and len(r.obs_ids):
             ids, P, uv = np.asarray(r.obs_ids), np.asarray(r.obs_pos), np.asarray(r.obs_uv)
-        out = self.objects.update(T_wc, ids, P, uv, bgr)
+        out = self.objects.update(T_wc, ids, P, uv, bgr, depth)
         if self.freeze_map and any(e.deforming for e in out.values()):
             self.loc.set_localization_only(True)
         # points on a tracked object leave the pose estimate as soon as they are linked (static/deformable
@@ -74,7 +74,7 @@ def track_sequence(seq: dict[str, Any], scene: dict[str, Any], every: int = 1, f
     pipe = Pipeline(scene, seq["cam"], baseline=seq["scene"].stereo_baseline, feedback_delay=feedback_delay,
                     **cfg_overrides)
     res: dict[str, dict[str, Any]] = {oid: {"truth": [], "est": [], "names": tr.names}
-                                      for oid, tr in pipe.trackers.items()}
+                                      for oid, tr in pipe.trackers.items()}  # a registered object's: at its guess
     for i in range(0, len(seq["rgb"]), every):
         bgr = np.ascontiguousarray(seq["rgb"][i][:, :, ::-1])
         depth = seq["depth"][i] if scene["camera"]["depth"] else None

@@ -442,6 +442,8 @@ class DeformableTracker:
         fit = res.debug.get("rms_at_rest_level", res.rms)
         deforming = res.rest_rms - fit > self.cfg.dense_min_gain * res.rest_rms and \
             res.motion_px > self.cfg.min_deformation_px
+        if not deforming:
+            self.dense.hold_rest()
         return self._conclude(est, res.mu, bool(deforming),
                               f"photometric residual {fit:.2f} vs {res.rest_rms:.2f} undeformed, "
                               f"motion {res.motion_px:.2f} px")

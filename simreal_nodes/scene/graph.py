@@ -105,7 +105,8 @@ def required_nodes(scene: dict, lossless: bool = False) -> list[NodeSpec]:
     if tracked:
         nodes.append(NodeSpec(
             "tracker", dict(common),
-            [LOC_OBS if k == "obs" else CAM_IMAGE for k in tracker_inputs(scene)] + [CAM_INFO],
+            [LOC_OBS if k == "obs" else CAM_IMAGE for k in tracker_inputs(scene)] + [CAM_INFO]
+            + ([CAM_DEPTH] if any(o["anchor"]["kind"] == "registration" for o in tracked) else []),
             {**{params_topic(o["id"]): "simreal_msgs/msg/ModelParameters" for o in tracked},
              TRACKER_STATUS: "simreal_msgs/msg/TrackingStatus",
              **({LOC_DEFORMABLE: "sensor_msgs/msg/PointCloud2"} if loc["mode"] != "static" else {})}))

@@ -86,10 +86,12 @@ PARAMETER = Record({
 })
 
 ANCHOR = Record({
-    "kind": Enum(("pose", "registration"), "pose: given below; registration: found by RANSAC + ICP on the map",
-                 default="pose"),
+    "kind": Enum(("pose", "registration"), "pose: given below; registration: found from the first depth images "
+                 "(support plane by RANSAC, then ICP of the model surface), starting from 'guess'", default="pose"),
     "pose": Vector(7, what=POSE7, doc="object frame in the map frame", default=[0, 0, 0, 0, 0, 0, 1]),
-    "with_scale": Bool("registration also estimates scale (monocular maps)", default=False),
+    "guess": Vector(7, what=POSE7, doc="registration: the object frame in the map frame (the first camera frame) "
+                    "as judged by eye, centimetres and some degrees off; it picks between mirror-image fits of a "
+                    "symmetric object", nullable=True),
 })
 
 TRACKING = Record({
@@ -213,14 +215,14 @@ def _cross_checks(scene: dict, ctx: Context) -> None:
                 o["id"] in p["collision"]["pushes"] for p in scene["objects"]):
             raise SceneError(f"{src}: objects[{i}].collision.enabled: collision needs camera.depth or a stereo pair "
                              "(or another object that pushes it); found neither")
-        if o["anchor"]["kind"] == "registration" and loc["mode"] in ("static", "markers"):
-            raise SceneError(f"{src}: objects[{i}].anchor.kind: 'registration' needs a SLAM map "
-                             f"(localization.mode mono, rgbd or stereo); found mode '{loc['mode']}'")
-        if o["anchor"]["kind"] == "registration":
-            # the nodes do not run registration.register() yet: such an object would sit at the map origin,
-            # silently wrong; refused until the registration is wired and measured
-            raise SceneError(f"{src}: objects[{i}].anchor.kind: 'registration' is not available yet (the object "
-                             "would sit at the map origin); give kind 'pose' with the object frame in the map")
+        if o["anchor"]["kind"] == "registration" and loc["mode"] != "rgbd":
+            # registration works on depth images (assimilation.registration.register_rgbd); a monocular or stereo
+            # map's sparse points alone do not place a model to millimetres
+            raise SceneError(f"{src}: objects[{i}].anchor.kind: 'registration' needs the depth images of "
+                             f"localization.mode 'rgbd'; found mode '{loc['mode']}' (give kind 'pose')")
+        if o["anchor"]["kind"] == "registration" and o["anchor"]["guess"] is None:
+            raise SceneError(f"{src}: objects[{i}].anchor.guess: required for kind 'registration' (the object frame "
+                             "in the first camera frame, judged by eye); found nothing")
         _resolve_model_ref(o, i, src)
         # a spec's model is not built yet: its parameter names are checked by build_spec_models
         _check_parameters(o, i, src, None if o["_model_spec"] else _model_header(o, i, src))

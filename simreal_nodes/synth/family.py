@@ -12,11 +12,11 @@ and motion blur, camera distance, arc and speed. Two rules make it evidence rath
   never from the reduced model that the tracker fits (hexahedra, a nodal force), and the model error of each scene
   (:func:`~simreal_nodes.synth.truth.model_error`) is reported beside its tracking error.
 
-The scene file gives the object pose as a user would measure it: the true pose moved by a drawn error of a few
-millimetres and about a degree (:attr:`FamilyDraw.pose_error`). The map of the RGB-D localization starts at the
-first camera frame, which a user cannot measure; until ``anchor: registration`` places the model in the map,
-that frame's pose is taken from the rendered trajectory — the one place truth reaches the scene file, stated in
-the scene's description.
+The scene file does not give the object pose: it asks for ``anchor: registration``
+(:func:`~simreal_nodes.assimilation.registration.register_rgbd` places the model from the first depth images) from a
+guess as a user gives it by eye ("about a metre in front of the first view, clamp on the left"): the true pose in
+the first camera frame moved by a drawn error of about 5 cm and 10 degrees rms (:attr:`FamilyDraw.guess_error`), far
+more than the millimetres the registration is scored at, so no precise truth reaches the scene file.
 """
 
 from __future__ import annotations
@@ -73,7 +73,7 @@ class FamilyDraw:
     cam_elevation_deg: float
     duration: float
     yaw_deg: float  # the beam's orientation on the table
-    pose_error: tuple[float, ...]  # user's pose measurement error: dx, dy, dz (m), rx, ry, rz (rad)
+    guess_error: tuple[float, ...]  # the user's guess of the pose, its error: dx, dy, dz (m), rx, ry, rz (rad)
     width_px: int = 640
     height_px: int = 480
 
@@ -120,8 +120,8 @@ def draw(seed: int, width_px: int = 640, height_px: int = 480) -> FamilyDraw:
     light = rng.normal(size=3)
     light[2] = -abs(light[2]) - 0.5  # from above
     unit = light / np.linalg.norm(light)
-    err_t = rng.normal(0.0, 0.002, 3)  # ~3.5 mm rms
-    err_r = rng.normal(0.0, np.deg2rad(0.6), 3)  # ~1 degree rms
+    err_t = rng.normal(0.0, 0.03, 3)  # ~5 cm rms: a guess by eye
+    err_r = rng.normal(0.0, np.deg2rad(6.0), 3)  # ~10 degrees rms
     return FamilyDraw(
         seed=int(seed), support=support, length=length, width=width, height=height, E=E, nu=nu,
         peak_px=peak_px, force=1.0, footprint=footprint, positions=positions, s_range=s_range,
@@ -131,7 +131,7 @@ def draw(seed: int, width_px: int = 640, height_px: int = 480) -> FamilyDraw:
         pixel_sigma=float(rng.uniform(0.5, 3.0)), blur_subframes=int(rng.integers(1, 4)),
         distance=distance, arc_deg=float(rng.uniform(20.0, 70.0)), cam_elevation_deg=float(rng.uniform(20.0, 50.0)),
         duration=float(rng.uniform(6.0, 9.0)), yaw_deg=float(rng.uniform(-25.0, 25.0)),
-        pose_error=tuple(float(x) for x in np.r_[err_t, err_r]), width_px=width_px, height_px=height_px)
+        guess_error=tuple(float(x) for x in np.r_[err_t, err_r]), width_px=width_px, height_px=height_px)
 
 
 class Beam(NamedTuple):
@@ -315,21 +315,20 @@ def family_scene(seed: int, width: int = 640, height: int = 480, fps: float = 15
                                 jitter=0.004, seed=d.seed, period=d.duration)[0]
 
     def scene_yaml(sc: SynthScene) -> dict:
-        err = np.asarray(d.pose_error)
+        err = np.asarray(d.guess_error)
         R_err = G.rot_axis("x", err[3]) @ G.rot_axis("y", err[4]) @ G.rot_axis("z", err[5])
-        T_user = G.make_T(R_err @ T_wo[:3, :3], T_wo[:3, 3] + err[:3])  # what the user measured, world frame
+        T_user = G.make_T(R_err @ T_wo[:3, :3], T_wo[:3, 3] + err[:3])  # the user's guess, world frame
         return {
             "simreal_scene": 1, "name": sc.name,
             "description": (f"Family scene {d.seed} ({d.support}, L/h {d.slenderness:.0f}, peak {d.peak_px:.1f} px, "
-                            f"speckle contrast {d.speckle_contrast:.2f}); object pose measured by hand "
-                            f"(error {1e3 * np.linalg.norm(err[:3]):.1f} mm, "
-                            f"{np.rad2deg(np.linalg.norm(err[3:])):.2f} deg) "
-                            "and carried into the first camera frame by the rendered trajectory until registration."),
+                            f"speckle contrast {d.speckle_contrast:.2f}); object placed by registration from a "
+                            f"guess by eye (off by {1e3 * np.linalg.norm(err[:3]):.0f} mm, "
+                            f"{np.rad2deg(np.linalg.norm(err[3:])):.0f} deg)."),
             "camera": _camera_yaml(sc),
             "localization": {"mode": "rgbd", "features": 1500},
             "objects": [{
                 "id": "beam", "model": "spec:" + str(spec_path(d)),
-                "anchor": {"kind": "pose", "pose": _pose7(sc.T_map_world() @ T_user)},
+                "anchor": {"kind": "registration", "guess": _pose7(sc.T_map_world() @ T_user)},
                 "parameters": {"s": {"mode": "tracked", "initial": float(np.mean(d.s_range))}},
                 "tracking": {"enabled": True, "measurements": "map_points"},
                 "overlay": {"field": "displacement"},

@@ -14,8 +14,9 @@ from simreal_nodes.synth.makebag import load_models, make_scene, render_frame
 
 
 @functools.cache
-def sequence(name: str, width=640, height=480, duration=None, fps=30.0, stereo=False, seed=0, ssaa=2):
-    """dict(cam, gray[], rgb[], depth[] (noisy metres, NaN invalid), right[], T_map_cam[], truth[], scene)."""
+def sequence(name: str, width=640, height=480, duration=None, fps=30.0, stereo=False, seed=0, ssaa=2, frames=None):
+    """dict(cam, gray[], rgb[], depth[] (noisy metres, NaN invalid), right[], T_map_cam[], truth[], scene).
+    ``frames``: render only the first so many frames of the scene (its timing unchanged)."""
     import cv2
 
     sc = make_scene(name, width, height, duration, fps)
@@ -33,7 +34,8 @@ def sequence(name: str, width=640, height=480, duration=None, fps=30.0, stereo=F
     out: dict[str, Any] = {"cam": cam, "gray": [], "rgb": [], "depth": [], "right": [], "T": [], "truth": [],
                            "scene": sc}
     T_mw = sc.T_map_world()
-    for i in range(round(sc.duration * sc.fps)):
+    n = round(sc.duration * sc.fps)
+    for i in range(n if frames is None else min(n, int(frames))):
         t = i / sc.fps
         truth = sc.update(sc, r, t)
         T = sc.camera_pose(t)

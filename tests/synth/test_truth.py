@@ -77,7 +77,9 @@ def test_family_draws_are_reproducible_and_the_seed_sets_are_disjoint():
     assert min(contrast) < 0.1 and max(contrast) > 0.5  # faint to painted
     for d in draws:
         assert d.s_range[0] < min(d.positions) and max(d.positions) <= d.s_range[1]
-        assert np.linalg.norm(d.pose_error[:3]) < 0.02  # a user's measurement: millimetres, not centimetres
+        assert np.linalg.norm(d.guess_error[:3]) < 0.25  # a guess by eye: centimetres, not metres
+    guess_mm = [1e3 * np.linalg.norm(d.guess_error[:3]) for d in draws]
+    assert 30 < np.sqrt(np.mean(np.square(guess_mm))) < 80  # about 5 cm rms: no precise truth in the scene file
 
 
 def test_family_model_spec_is_a_valid_beam_spec():
@@ -89,7 +91,7 @@ def test_family_model_spec_is_a_valid_beam_spec():
 
 def test_make_bag_family_renders_a_drawn_scene_whose_scene_file_runs(tmp_path):
     # `simreal make-bag family --seed N`: the bag carries the truth, the scene file names the scene's own model spec
-    # (a model a user would build for that set-up) and gives the object pose as measured by hand, not the truth's
+    # (a model a user would build for that set-up) and asks for registration from a guess by eye, not the truth
     import yaml
 
     from simreal_nodes import geometry as G
@@ -110,10 +112,11 @@ def test_make_bag_family_renders_a_drawn_scene_whose_scene_file_runs(tmp_path):
     obj = doc["objects"][0]
     assert obj["model"].startswith("spec:") and obj["model"].endswith(".yaml")
     scene = load_scene(tmp_path / "fam.yaml")  # validates without building the model
-    T_pose = G.pose7_to_matrix(scene["objects"][0]["anchor"]["pose"])
+    assert scene["objects"][0]["anchor"]["kind"] == "registration"
+    T_pose = G.pose7_to_matrix(scene["objects"][0]["anchor"]["guess"])
     pose = bags.decode(next(m for m in msgs if m.topic == "/ground_truth/objects/beam/pose")).pose
     T_true = G.pose7_to_matrix([pose.position.x, pose.position.y, pose.position.z, pose.orientation.x,
                                 pose.orientation.y, pose.orientation.z, pose.orientation.w])
     err_mm = 1e3 * np.linalg.norm(T_pose[:3, 3] - T_true[:3, 3])
-    assert 0.5 < err_mm < 20.0  # a user's measurement: off by millimetres, never the truth itself
+    assert 10.0 < err_mm < 250.0  # a guess by eye: off by centimetres, never the truth itself
 

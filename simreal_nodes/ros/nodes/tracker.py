@@ -5,7 +5,8 @@ and, for glued-dot measurements, the image of the same stamp, runs the ROS-free
 :class:`DeformableTracker` of every tracked object and publishes ``/simreal/objects/<id>/parameters``
 (ModelParameters: values, covariance, residual, inliers, state and reason). Once deformation appears
 (if the scene's ``localization.freeze_map_on_deformation``) it asks the localization node to stop mapping
-(``set_localization_only``). After every frame it tells the localization which map points lie on the
+(``set_localization_only``). An object with ``anchor: registration`` is placed from the depth images (taken
+while it waits for them). After every frame it tells the localization which map points lie on the
 object, where the current estimate predicts them and which the fit rejected
 (``/simreal/localization/deformable_points``, PointCloud2 x, y, z, id, drop in the map frame).
 """
@@ -49,7 +50,8 @@ class TrackerNode(SimrealNode):
         self.core = ObjectTrackers(self.objects, models, **overrides)
         keys = graph.tracker_inputs(self.scene)
         self.need_image = any(o["tracking"]["measurements"] in graph.IMAGE_MEASUREMENTS for o in self.objects)
-        self.sync = StampSync(keys, (), wait=2)
+        registers = any(o["anchor"]["kind"] == "registration" for o in self.objects)
+        self.sync = StampSync(keys, ("depth",) if registers else (), wait=2)
         q = data_qos(self.lossless)
         self.pubs = {o["id"]: self.create_publisher(ModelParameters, graph.params_topic(o["id"]), reliable_qos(50))
                      for o in self.objects}
@@ -63,6 +65,8 @@ class TrackerNode(SimrealNode):
         if "image" in keys:
             self.create_subscription(Image, graph.CAM_IMAGE, lambda m: self.on_input("image", m),
                                      q if "obs" in keys else trigger)
+        if registers:
+            self.create_subscription(Image, graph.CAM_DEPTH, lambda m: self.on_input("depth", m), q)
         self.loc_client = self.create_client(SetBool, "/localization/set_localization_only")
         self._loc_only_requested = False
         self.set_status("ok", f"tracking {', '.join(o['id'] for o in self.objects)}")
@@ -93,14 +97,14 @@ class TrackerNode(SimrealNode):
                 return
         else:
             T_wc = self.static_pose
-        bgr = None
-        if "image" in frame and self.need_image:
-            try:
-                bgr = images.bgr8_of(frame["image"])
-            except ImageFormatError as e:
-                self.drop(head.stamp, f"malformed image: {e}")
-                return
-        estimates = self.core.update(T_wc, ids, P, uv, bgr)
+        bgr = depth = None
+        try:
+            bgr = images.bgr8_of(frame["image"]) if "image" in frame and self.need_image else None
+            depth = images.depth_metres_of(frame["depth"]) if "depth" in frame else None
+        except ImageFormatError as e:
+            self.drop(head.stamp, f"malformed image: {e}")
+            return
+        estimates = self.core.update(T_wc, ids, P, uv, bgr, depth)
         for oid, est in estimates.items():
             self._publish(oid, est, head)
         self._coordinate_localization(any(e.deforming for e in estimates.values()), head)

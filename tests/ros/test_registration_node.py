@@ -1,0 +1,28 @@
+"""`anchor: registration` through the node graph: the tracker node takes the depth images and places the beam
+of a family scene (its scene file gives only a guess by eye) before it tracks it."""
+
+import pytest
+
+pytest.importorskip("rclpy")
+pytest.importorskip("simreal_msgs.msg", reason="simreal_msgs is built by ./run setup")
+
+from simreal_nodes.io import bags
+from simreal_nodes.ros.commands import replay
+
+pytestmark = pytest.mark.ros
+
+
+def test_tracker_node_registers_the_beam_from_depth(tmp_path):
+    from simreal_nodes.cli import main
+
+    assert main(["make-bag", "family", "--seed", "3", "-o", str(tmp_path / "fam"), "--resolution", "320x240",
+                 "--duration", "1.4", "--fps", "15", "--ssaa", "1", "--scene-out", str(tmp_path / "fam.yaml"),
+                 "-q"]) == 0
+    out = tmp_path / "out"
+    _stats, report, _counts = replay(str(tmp_path / "fam"), str(tmp_path / "fam.yaml"), lossless=True,
+                                     record=str(out), echo=lambda *_: None)
+    assert report.problems == 0
+    params = [bags.decode(m) for m in bags.read_bag(out, topics=["/simreal/objects/beam/parameters"])]
+    reasons = [p.reason for p in params]
+    assert reasons and reasons[0].startswith("waiting for registration")
+    assert not reasons[-1].startswith("waiting for registration"), reasons[-1]  # placed, then tracked
