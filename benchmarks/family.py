@@ -18,8 +18,12 @@ from __future__ import annotations
 
 import argparse
 import collections
+import contextlib
 import copy
+import functools
 import json
+import multiprocessing
+import os
 import time
 from pathlib import Path
 
@@ -45,14 +49,19 @@ def parse_seeds(text: str) -> list[int]:
     return out
 
 
-def run_scene(seed: int, width: int = 640, height: int = 480, preloaded: bool = False) -> dict:
+def run_scene(seed: int, width: int = 640, height: int = 480, preloaded: bool = False,
+              measurements: str | None = None) -> dict:
+    """One scene through the offline pipeline; ``measurements`` overrides the scene's ``tracking.measurements``."""
     t0 = time.perf_counter()
     name = f"family-{seed}" + ("-preloaded" if preloaded else "")
     seq = sequence.__wrapped__(name, width, height, fps=FPS)  # not cached: one scene in memory at a time
     t_render = time.perf_counter() - t0
     sc = seq["scene"]
     d = sc.state["draw"]
-    scene = build_spec_models(validate_scene(copy.deepcopy(sc.scene_yaml(sc)), sc.name, "."))
+    doc = copy.deepcopy(sc.scene_yaml(sc))
+    if measurements:
+        doc["objects"][0]["tracking"]["measurements"] = measurements
+    scene = build_spec_models(validate_scene(doc, sc.name, "."))
     pipe = Pipeline(scene, seq["cam"])
     truth, est, states, reasons, step_ms, cam_err = [], [], [], [], [], []
     for i in range(len(seq["rgb"])):
@@ -74,7 +83,8 @@ def run_scene(seed: int, width: int = 640, height: int = 480, preloaded: bool = 
     why = collections.Counter(r for r, s in zip(np.array(reasons)[loaded], states_a[loaded])
                               if s != EstimateState.OK and r)
     row = {
-        "seed": seed, "support": d.support, "slenderness": round(d.slenderness, 1), "peak_px": round(d.peak_px, 1),
+        "seed": seed, "measurements": scene["objects"][0]["tracking"]["measurements"],
+        "support": d.support, "slenderness": round(d.slenderness, 1), "peak_px": round(d.peak_px, 1),
         "contrast": round(d.speckle_contrast, 3), "distance_m": round(d.distance, 2),
         "loaded_frames": int(loaded.sum()),
         "ok_pct": float(100 * ok.mean()), "median_err_pct": float(np.median(err)),
@@ -290,6 +300,9 @@ def main() -> None:
     ap.add_argument("--report", action="store_true", help="rewrite table and plot from the results JSON")
     ap.add_argument("--registration", action="store_true",
                     help="the registration step alone on each scene's first frames: results/family_registration.*")
+    ap.add_argument("--measurements", choices=("map_points", "dense"),
+                    help="override the scenes' tracking.measurements (results name gets the suffix)")
+    ap.add_argument("--jobs", type=int, default=1, help="scenes run in parallel processes (one core each)")
     a = ap.parse_args()
     seeds = parse_seeds(a.seeds)
     if a.registration:
@@ -301,18 +314,37 @@ def main() -> None:
         return
     held_out = all(s >= HELD_OUT_SEEDS.start for s in seeds)
     name = "family_preloaded" if a.preloaded else ("family" if held_out else "family_dev")
+    if a.measurements:
+        name += f"_{a.measurements}"
     if a.report:
         doc = json.loads((RESULTS / f"{name}.json").read_text())
         curves = doc.get("curves", {})
         rows = [{**r, "curve": curves.get(str(r["seed"]), {})} for r in doc["rows"]]
         write(rows, doc.get("label", ""), name)
         return
-    label = "held-out seeds" if held_out else "development seeds"
-    rows = []
-    for seed in seeds:
-        rows.append(run_scene(seed, preloaded=a.preloaded))
-        print({k: v for k, v in rows[-1].items() if k != "curve"}, flush=True)
-        write(rows, f"{label} {a.seeds}" + (", load on from the first frame" if a.preloaded else ""), name)
+    label = ("held-out seeds" if held_out else "development seeds") + f" {a.seeds}"
+    label += ", load on from the first frame" if a.preloaded else ""
+    label += f", measurements {a.measurements}" if a.measurements else ""
+    rows: list[dict] = []
+    if a.jobs > 1:  # the spawned workers inherit it before numpy loads its BLAS
+        for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+            os.environ[var] = "1"
+    job = functools.partial(run_scene, preloaded=a.preloaded, measurements=a.measurements)
+    with multiprocessing.get_context("spawn").Pool(a.jobs, initializer=_one_thread) if a.jobs > 1 else \
+            contextlib.nullcontext() as pool:
+        results = pool.imap(job, seeds) if pool is not None else map(job, seeds)
+        for row in results:
+            rows.append(row)
+            print({k: v for k, v in row.items() if k != "curve"}, flush=True)
+            write(sorted(rows, key=lambda r: r["seed"]), label, name)
+
+
+def _one_thread() -> None:
+    """A worker of ``--jobs``: one OpenCV thread (BLAS is held to one by the environment it was spawned with),
+    so that N workers share N cores fairly."""
+    import cv2
+
+    cv2.setNumThreads(1)
 
 
 if __name__ == "__main__":

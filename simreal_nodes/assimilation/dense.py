@@ -48,13 +48,17 @@ class DenseSettings:
 
     step_px: float = 1.5  # sample spacing in the reference view (pixels): finer = more samples, slower
     levels: int = 3  # pyramid levels (coarse levels reach larger motions)
+    finest: int = 0  # the finest level fitted (1: half resolution, where blur and aliasing weigh less)
     max_samples: int = 20000
     min_samples: int = 200  # fewer visible samples: no measurement
     iterations: int = 8  # at most, per level
     tolerance: float = 2e-3  # converged when an iteration lowers the cost by less than this fraction
     rigid: bool = True  # estimate the rigid correction (omega, t)
-    prior_rot_rad: float = np.deg2rad(2.0)  # 1-sigma of the rigid correction's prior (about zero)
-    prior_trans_m: float = 0.01
+    # 1-sigma of the rigid correction's prior (about zero): the camera's drift and the placement's error, a few
+    # mm; the correction is also bounded at 3 sigma (a fit at rest that turned the object by degrees to explain a
+    # bending it cannot model would otherwise run away)
+    prior_rot_rad: float = np.deg2rad(0.5)
+    prior_trans_m: float = 0.005
     # once a frame at rest has measured the correction (the anchor's error as the images see it), a deformed
     # fit keeps its rotation within this of it and its translation within held_trans_m (the camera's drift): a
     # free rotation would take the blame for a cantilever's bending
@@ -394,7 +398,8 @@ class DenseAligner:
             out.mu[free_mu] = np.clip(out.mu[free_mu] + step[:n_f], lo[free_mu], hi[free_mu])
         k = n_f
         if self.s.rigid:
-            out.rigid = out.rigid + step[k:k + 6]
+            mean, sd = f.prior
+            out.rigid = np.clip(out.rigid + step[k:k + 6], mean - 3 * sd, mean + 3 * sd)
             k += 6
         out.photo = out.photo + step[k:k + 2]
         return out
@@ -452,7 +457,7 @@ class DenseAligner:
         prior = (np.zeros(N_RIGID), wide) if self.held is None else (self.held, held)
         f = _Fit(np.clip(mu0, lo, hi), free, self.rigid, self.photo, prior)
         self._grid_start(pyr, f, T_cw, lo, hi)
-        per_level = self._run(pyr, grads, f, T_cw, lo, hi)
+        per_level = self._run(pyr, grads, f, T_cw, lo, hi, finest=min(self.s.finest, len(self.levels) - 1))
         H, r, sigma, rows = per_level[-1]
         assert f.mu is not None
         n_mu = len(mu0)
@@ -469,7 +474,7 @@ class DenseAligner:
                 res.cov_mu[np.ix_(fi, fi)] = cov[: len(fi), : len(fi)]
             except np.linalg.LinAlgError:
                 pass
-        L = self.levels[0]
+        L = self.levels[min(self.s.finest, len(self.levels) - 1)]
         uv_d, _ = self._geometry(L, rows, f.mu, f.rigid, T_cw, jac=False)
         uv_0, _ = self._geometry(L, rows, None, f.rigid, T_cw, jac=False)
         mv = np.linalg.norm(uv_d - uv_0, axis=1)
@@ -480,7 +485,7 @@ class DenseAligner:
         if with_rest:
             # is there a deformation at all? The same fit with zero displacement, at the coarser levels only (it
             # is a yes/no question), compared with the deformed fit's residual at the same level
-            cmp = min(1, len(self.levels) - 1)
+            cmp = min(max(1, self.s.finest), len(self.levels) - 1)
             g0 = _Fit(None, free, self.rest_rigid, self.rest_photo, (np.zeros(N_RIGID), wide))
             sigma0 = self._run(pyr, grads, g0, T_cw, lo, hi, finest=cmp)[-1][2]
             self.rest_rigid, self.rest_photo = g0.rigid.copy(), g0.photo.copy()

@@ -442,7 +442,9 @@ class DeformableTracker:
         fit = res.debug.get("rms_at_rest_level", res.rms)
         deforming = res.rest_rms - fit > self.cfg.dense_min_gain * res.rest_rms and \
             res.motion_px > self.cfg.min_deformation_px
-        if not deforming:
+        if not deforming and self.deforming_frames == 0:
+            # at rest before any load was seen: the placement error as the images see it (later frames judged
+            # undeformed may carry a small load the rigid fit would absorb)
             self.dense.hold_rest()
         return self._conclude(est, res.mu, bool(deforming),
                               f"photometric residual {fit:.2f} vs {res.rest_rms:.2f} undeformed, "

@@ -330,7 +330,7 @@ def family_scene(seed: int, width: int = 640, height: int = 480, fps: float = 15
                 "id": "beam", "model": "spec:" + str(spec_path(d)),
                 "anchor": {"kind": "registration", "guess": _pose7(sc.T_map_world() @ T_user)},
                 "parameters": {"s": {"mode": "tracked", "initial": float(np.mean(d.s_range))}},
-                "tracking": {"enabled": True, "measurements": "map_points"},
+                "tracking": {"enabled": True, "measurements": "dense"},
                 "overlay": {"field": "displacement"},
             }],
             "overlay": {"enabled": True},
