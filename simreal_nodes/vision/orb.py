@@ -66,9 +66,9 @@ class OrbExtractor:
         # opencv's stubs list only cv2.ORB.create; ORB_create and KeyPoint_convert are its run-time aliases
         self.describer = cv2.ORB_create(  # type: ignore[attr-defined]
             nfeatures=self.n, scaleFactor=self.sf, nlevels=self.levels, edgeThreshold=EDGE, patchSize=2 * RADIUS + 1)
-        self.fast = cv2.FastFeatureDetector_create(int(fast_threshold), True)
-        self.fast_low = cv2.FastFeatureDetector_create(int(min_threshold), True)
-        self.fast_focus = cv2.FastFeatureDetector_create(3, True)
+        self.fast = cv2.FastFeatureDetector.create(int(fast_threshold), True)
+        self.fast_low = cv2.FastFeatureDetector.create(int(min_threshold), True)
+        self.fast_focus = cv2.FastFeatureDetector.create(FOCUS_THRESHOLD, True)
         f = 1.0 / self.sf
         per = self.n * (1 - f) / (1 - f ** self.levels)
         self.per_level = [round(per * f ** k) for k in range(self.levels)]
@@ -189,6 +189,7 @@ class OrbExtractor:
 
 
 EDGE = 19  # pixels kept clear of a level's border: OpenCV ORB's edgeThreshold (the rotated 31 x 31 patch fits)
+FOCUS_THRESHOLD = 3  # FAST threshold inside a focus polygon: a faint object's texture, a few grey levels
 RADIUS = 15  # the orientation patch's radius (ORB: half the 31-pixel patch)
 _YY, _XX = np.mgrid[-RADIUS:RADIUS + 1, -RADIUS:RADIUS + 1]
 _DISC = np.hypot(_YY, _XX) <= RADIUS + 0.5
