@@ -95,7 +95,7 @@ class OrbExtractor:
         if gray.dtype != np.uint8:
             gray = cv2.convertScaleAbs(gray)
         polys = [np.asarray(p, np.float64).reshape(-1, 2) for p in focus if len(p) >= 3]
-        xs, ys, octs, resps, angles = [], [], [], [], []
+        kps: list[cv2.KeyPoint] = []
         for lvl, img in enumerate(self.pyramid(gray)):
             s = self.sf ** lvl
             lmask = None if mask is None else cv2.resize(mask, img.shape[::-1], interpolation=cv2.INTER_NEAREST)
@@ -122,16 +122,14 @@ class OrbExtractor:
             if not len(sel):
                 continue
             p = sel[:, :2].astype(np.int64)
-            angles.append(ic_angle(img, p))
-            xs.append(p[:, 0] * s)
-            ys.append(p[:, 1] * s)
-            octs.append(np.full(len(p), lvl, np.int32))
-            resps.append(sel[:, 2])
-        if not xs:
+            # keypoints built in OpenCV per level (one call), then their orientation and score set
+            level_kps = cv2.KeyPoint_convert((p * s).astype(np.float32), (2 * RADIUS + 1) * s, 0.0,  # type: ignore
+                                             lvl)
+            for k, ang, r in zip(level_kps, ic_angle(img, p).tolist(), sel[:, 2].tolist()):
+                k.angle, k.response = ang, r
+            kps.extend(level_kps)
+        if not kps:
             return Features.empty(self.sf)
-        x, y, octv, resp, ang = (np.concatenate(a) for a in (xs, ys, octs, resps, angles))
-        kps = [cv2.KeyPoint(float(x[i]), float(y[i]), (2 * RADIUS + 1) * self.sf ** int(octv[i]), float(ang[i]),
-                            float(resp[i]), int(octv[i])) for i in range(len(x))]
         kps, desc = self.describer.compute(gray, kps)
         if desc is None or not kps:
             return Features.empty(self.sf)
@@ -157,10 +155,13 @@ class OrbExtractor:
         empty = np.flatnonzero(np.bincount(cid, minlength=nx * ny) == 0)
         if not len(empty):
             return pts, resp
-        if len(empty) > 0.25 * nx * ny:
-            wp, wr = _fast(weak, img, (x0, y0, x1, y1), mask)
-            inside = np.isin(_cell_ids(wp, x0, y0, cw, ch, nx, ny), empty)
-            wp, wr = wp[inside], wr[inside]
+        if len(empty) > 0.25 * nx * ny:  # one pass, the empty cells as its mask (OpenCV drops the rest)
+            flags = np.zeros(nx * ny, np.uint8)
+            flags[empty] = 255
+            allowed = np.zeros((h, w), np.uint8)
+            allowed[y0:y1, x0:x1] = cv2.resize(flags.reshape(ny, nx), (x1 - x0, y1 - y0),
+                                               interpolation=cv2.INTER_NEAREST)
+            wp, wr = _fast(weak, img, (x0, y0, x1, y1), allowed if mask is None else allowed & mask)
         else:
             parts = [_fast(weak, img, (round(x0 + (k % nx) * cw), round(y0 + (k // nx) * ch),
                                        round(x0 + (k % nx + 1) * cw), round(y0 + (k // nx + 1) * ch)), mask)
@@ -181,7 +182,7 @@ class OrbExtractor:
         if x1 - x0 < 1 or y1 - y0 < 1:
             return np.zeros((0, 2), np.int64), np.zeros(0, np.float32), 0.0
         inside = np.zeros((h, w), np.uint8)
-        cv2.fillPoly(inside, [np.rint(poly).astype(np.int32)], 255)
+        cv2.fillPoly(inside[y0 - 3:y1 + 3, x0 - 3:x1 + 3], [np.rint(poly - (x0 - 3, y0 - 3)).astype(np.int32)], 255)
         if mask is not None:
             inside &= mask
         pts, resp = _fast(self.fast_focus, img, (x0, y0, x1, y1), inside)
