@@ -74,7 +74,7 @@ class LocalizationNode(SimrealNode):
             self.create_subscription(Image, graph.CAM_RIGHT_IMAGE, lambda m: self.on_input("right", m), q)
             self.create_subscription(CameraInfo, graph.CAM_RIGHT_INFO, self.on_right_info, q)
         self.create_subscription(PointCloud2, graph.LOC_DEFORMABLE, self.on_deformable, reliable_qos(10))
-        self.focus: dict[int, tuple[int, np.ndarray]] = {}  # object index -> (stamp ns, image polygon)
+        self.focus = {}  # object index -> (stamp ns, (K, 2) image polygon)
         self.create_subscription(PolygonInstanceStamped, graph.LOC_FOCUS, self.on_focus, reliable_qos(10))
         self.create_service(SetBool, "~/set_localization_only", self.on_set_localization_only)
         self.create_timer(1.0, self.publish_map)
