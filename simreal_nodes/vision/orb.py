@@ -1,9 +1,12 @@
 """ORB features with a scale pyramid and a spatially even distribution (in the style of ORB-SLAM2).
 
 OpenCV's ORB ranks keypoints by response over the whole image, which piles them on the most textured
-patch. Here FAST keypoints are detected generously on every pyramid level, bucketed into a grid per
-level, and the strongest few per cell are kept, so features cover the image and every scale; then
-OpenCV computes their orientation and rBRIEF descriptors.
+patch: a faint object beside a textured background gets none. Here, as ORB-SLAM2 does, FAST runs on
+every pyramid level with a per-cell threshold fall-back (a cell with no corner at the threshold offers
+its corners at a lower one), each level keeps its share of the budget spread evenly over the image
+(every occupied cell its best corner first; a vectorised per-cell round robin in place of ORB-SLAM2's
+quadtree), the orientation is the intensity centroid's, and OpenCV computes the rBRIEF descriptors.
+Image regions where tracked objects are predicted (``focus``) get a guaranteed share of the budget.
 """
 
 from __future__ import annotations
