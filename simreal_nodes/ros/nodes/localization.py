@@ -13,7 +13,6 @@ features (``SlamConfig.focus_share``), so a faint object is measured beside a st
 
 from __future__ import annotations
 
-import numpy as np
 from geometry_msgs.msg import PolygonInstanceStamped, PoseStamped
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 from simreal_msgs.msg import FeatureObservations, TrackingStatus
