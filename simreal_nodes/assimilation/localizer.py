@@ -9,7 +9,7 @@ a :class:`Localization` and takes the deformable tracker's word on which map poi
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -58,9 +58,10 @@ class Localizer:
         return None
 
     def step(self, gray: np.ndarray, stamp_ns: int, depth: np.ndarray | None = None,
-             right: np.ndarray | None = None) -> Localization:
+             right: np.ndarray | None = None, focus: Sequence[np.ndarray] = ()) -> Localization:
         """Localize one grey image (uint8), with the registered depth in metres (RGB-D) or the right grey image
-        (stereo)."""
+        (stereo). ``focus``: image polygons ((K, 2) pixels) where tracked objects are predicted (a frame late: the
+        trackers' word on the previous frame); a feature-based localizer guarantees them a share of its features."""
         raise NotImplementedError
 
     def set_localization_only(self, on: bool) -> None:
@@ -84,7 +85,7 @@ class MarkerLocalization(Localizer):
         self.markers = markers
 
     def step(self, gray: np.ndarray, stamp_ns: int, depth: np.ndarray | None = None,
-             right: np.ndarray | None = None) -> Localization:
+             right: np.ndarray | None = None, focus: Sequence[np.ndarray] = ()) -> Localization:
         res = self.markers.locate(gray)
         state = TrackingState.OK if res.T_wc is not None else TrackingState.LOST
         reason = res.reason if res.T_wc is None else f"{len(res.ids)} markers, {res.rms_px:.2f} px"
@@ -103,8 +104,8 @@ class SlamLocalization(Localizer):
         return self.slam.map
 
     def step(self, gray: np.ndarray, stamp_ns: int, depth: np.ndarray | None = None,
-             right: np.ndarray | None = None) -> Localization:
-        r = self.slam.track(gray, stamp_ns, depth=depth, right=right)
+             right: np.ndarray | None = None, focus: Sequence[np.ndarray] = ()) -> Localization:
+        r = self.slam.track(gray, stamp_ns, depth=depth, right=right, focus=focus)
         return Localization(r.T_wc, r.state, r.reason, int(r.n_inliers), r.obs_ids, r.obs_pos, r.obs_uv, r.obs_inlier,
                             r.timings, len(self.slam.map.points), len(self.slam.map.keyframes),
                             bool(self.slam.localization_only))
@@ -129,7 +130,7 @@ class StaticLocalization(Localizer):
         self.T_wc = T_wc
 
     def step(self, gray: np.ndarray, stamp_ns: int, depth: np.ndarray | None = None,
-             right: np.ndarray | None = None) -> Localization:
+             right: np.ndarray | None = None, focus: Sequence[np.ndarray] = ()) -> Localization:
         return Localization(self.T_wc, 2)
 
 

@@ -34,6 +34,7 @@ class Pipeline:
                  slam_config: SlamConfig | None = None, **cfg_overrides: Any) -> None:
         self.feedback_delay = int(feedback_delay)
         self._feedback: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+        self.focus: list[np.ndarray] = []  # where the trackers put their objects in the last frame (image polygons)
         loc = scene["localization"]
         self.mode = loc["mode"]
         self.freeze_map = bool(loc.get("freeze_map_on_deformation", False))
@@ -50,11 +51,15 @@ class Pipeline:
              right: np.ndarray | None = None) -> tuple[np.ndarray | None, dict[str, Estimate]]:
         gray = cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY)
         ids = P = uv = None
-        r = self.loc.step(gray, stamp_ns, depth=depth, right=right)
+        r = self.loc.step(gray, stamp_ns, depth=depth, right=right, focus=self.focus)
         T_wc = r.T_wc
         if T_wc is not None and len(r.obs_ids):
             ids, P, uv = np.asarray(r.obs_ids), np.asarray(r.obs_pos), np.asarray(r.obs_uv)
         out = self.objects.update(T_wc, ids, P, uv, bgr, depth)
+        # the objects' image regions for the next frame's features (a frame late, like the feedback; the camera
+        # moves little in a frame and the polygons are hulls of the whole surface)
+        self.focus = [] if T_wc is None else [p for p in (tr.screen_region(T_wc) for tr in self.trackers.values())
+                                              if p is not None]
         if self.freeze_map and any(e.deforming for e in out.values()):
             self.loc.set_localization_only(True)
         # points on a tracked object leave the pose estimate as soon as they are linked (static/deformable

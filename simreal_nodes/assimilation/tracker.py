@@ -248,6 +248,26 @@ class DeformableTracker:
         dX = self._disp_fn(nodes, w)(state.mu)[0]
         return ids, X + dX @ (self.R_wo @ state.rotation()).T
 
+    def screen_region(self, T_wc: np.ndarray, max_nodes: int = 200) -> np.ndarray | None:
+        """(K, 2) convex polygon in image pixels (distorted) where the object's surface projects from camera pose
+        ``T_wc`` under the current estimate, or None where none of it is in front of the camera: the region whose
+        features the SLAM's extractor guarantees a share (a faint object still gets measured). Up to ``max_nodes``
+        surface nodes, evenly picked, bound it: the hull needs only the outline, not every node."""
+        import cv2
+
+        cand = self.cand_nodes[:: max(1, len(self.cand_nodes) // max_nodes)]
+        X = self.model.points[cand].astype(np.float64)
+        state = self.model_state
+        if self._was_deforming:
+            dX = self._disp_fn(cand[:, None], np.ones((len(cand), 1)))(state.mu)[0]
+            X = X + dX @ state.rotation().T
+        Xc = G.transform(G.inv(np.asarray(T_wc, np.float64)) @ self.T_map_obj, X)
+        Xc = Xc[Xc[:, 2] > 0.05]
+        if len(Xc) < 3:
+            return None
+        uv = self.cam.project(Xc).astype(np.float32)
+        return cv2.convexHull(uv)[:, 0].astype(np.float64)
+
     # -- measurements ------------------------------------------------------------------------------------------
     def _map_point_measurements(self, ids: np.ndarray, P_map: np.ndarray, uv: np.ndarray) -> Measurements | None:
         sel = [k for k, pid in enumerate(ids) if int(pid) in self.links]

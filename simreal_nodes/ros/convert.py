@@ -6,7 +6,15 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from geometry_msgs.msg import Pose, PoseStamped, TransformStamped
+from geometry_msgs.msg import (
+    Point32,
+    Polygon,
+    PolygonInstance,
+    PolygonInstanceStamped,
+    Pose,
+    PoseStamped,
+    TransformStamped,
+)
 from sensor_msgs.msg import CameraInfo
 from simreal_msgs.msg import ContactState as ContactMsg
 from simreal_msgs.msg import FeatureObservations, ModelParameters, TrackingStatus
@@ -153,6 +161,21 @@ def deformable_points(msg) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     P = cloud_to_array(msg)
     drop = cloud_field(msg, "drop") if any(f.name == "drop" for f in msg.fields) else np.zeros(len(ids), np.uint8)
     return ids, P, drop
+
+
+def focus_msg(poly: np.ndarray, index: int, header: Header, frame_id: str) -> PolygonInstanceStamped:
+    """A tracked object's predicted image region ((K, 2) pixels of the camera image in ``frame_id``) for the
+    localization's feature budget; ``index``: the object's place in the scene's tracked objects."""
+    m = PolygonInstanceStamped(header=Header(stamp=header.stamp, frame_id=frame_id))
+    m.polygon = PolygonInstance(id=int(index), polygon=Polygon(
+        points=[Point32(x=float(x), y=float(y), z=0.0) for x, y in np.asarray(poly, np.float64).reshape(-1, 2)]))
+    return m
+
+
+def focus_polygon(msg: PolygonInstanceStamped) -> tuple[int, np.ndarray]:
+    """(object index, (K, 2) pixels) of :func:`focus_msg`'s message."""
+    pts = np.array([(p.x, p.y) for p in msg.polygon.polygon.points], np.float64).reshape(-1, 2)
+    return int(msg.polygon.id), pts
 
 
 # simreal_msgs ------------------------------------------------------------------------------------------------

@@ -21,6 +21,7 @@ LOC_STATUS = "/simreal/localization/status"
 LOC_MAP = "/simreal/localization/map"
 LOC_OBS = "/simreal/localization/observations"
 LOC_DEFORMABLE = "/simreal/localization/deformable_points"  # tracker -> localization: PointCloud2 x, y, z, id, drop
+LOC_FOCUS = "/simreal/localization/focus"  # tracker -> localization: an object's image region (PolygonInstanceStamped)
 TRACKER_STATUS = "/simreal/tracker/status"
 OVERLAY_IMAGE = "/simreal/overlay/image_raw"
 OVERLAY_MARKERS = "/simreal/overlay/markers"
@@ -96,7 +97,7 @@ def required_nodes(scene: dict, lossless: bool = False) -> list[NodeSpec]:
             "localization", dict(common),
             [CAM_IMAGE, CAM_INFO] + ([CAM_DEPTH] if depth else [])
             + ([CAM_RIGHT_IMAGE, CAM_RIGHT_INFO] if stereo else [])
-            + ([LOC_DEFORMABLE] if any(o["tracking"]["enabled"] for o in objs) else []),
+            + ([LOC_DEFORMABLE, LOC_FOCUS] if any(o["tracking"]["enabled"] for o in objs) else []),
             {POSE: "geometry_msgs/msg/PoseStamped", TF: "tf2_msgs/msg/TFMessage",
              LOC_STATUS: "simreal_msgs/msg/TrackingStatus", LOC_MAP: "sensor_msgs/msg/PointCloud2",
              LOC_OBS: "simreal_msgs/msg/FeatureObservations"}))
@@ -109,7 +110,8 @@ def required_nodes(scene: dict, lossless: bool = False) -> list[NodeSpec]:
             + ([CAM_DEPTH] if any(o["anchor"]["kind"] == "registration" for o in tracked) else []),
             {**{params_topic(o["id"]): "simreal_msgs/msg/ModelParameters" for o in tracked},
              TRACKER_STATUS: "simreal_msgs/msg/TrackingStatus",
-             **({LOC_DEFORMABLE: "sensor_msgs/msg/PointCloud2"} if loc["mode"] != "static" else {})}))
+             **({LOC_DEFORMABLE: "sensor_msgs/msg/PointCloud2", LOC_FOCUS: "geometry_msgs/msg/PolygonInstanceStamped"}
+                if loc["mode"] != "static" else {})}))
 
     colliding = [o for o in objs if o["collision"]["enabled"]]
     if colliding:

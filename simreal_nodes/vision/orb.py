@@ -1,13 +1,17 @@
 """ORB features with a scale pyramid and a spatially even distribution (in the style of ORB-SLAM2).
 
 OpenCV's ORB ranks keypoints by response over the whole image, which piles them on the most textured
-patch. Here FAST keypoints are detected generously on every pyramid level, bucketed into a grid per
-level, and the strongest few per cell are kept, so features cover the image and every scale; then
-OpenCV computes their orientation and rBRIEF descriptors.
+patch: a faint object beside a textured background gets none. Here, as ORB-SLAM2 does, FAST runs on
+every pyramid level with a per-cell threshold fall-back (a cell with no corner at the threshold offers
+its corners at a lower one), each level keeps its share of the budget spread evenly over the image
+(every occupied cell its best corner first; a vectorised per-cell round robin in place of ORB-SLAM2's
+quadtree), the orientation is the intensity centroid's, and OpenCV computes the rBRIEF descriptors.
+Image regions where tracked objects are predicted (``focus``) get a guaranteed share of the budget.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import cv2
@@ -45,76 +49,216 @@ class Features:
 
 
 class OrbExtractor:
-    """ORB with an even spatial distribution: OpenCV detects ~2.5x the wanted keypoints over its scale
-    pyramid (FAST + Harris ranking), then each level keeps its share (geometric in the level, as
-    ORB-SLAM2) spread over a grid of cells, strongest first; descriptors for the kept ones only."""
+    """ORB in the style of ORB-SLAM2's extractor: FAST on every level of a scale pyramid with a per-cell threshold
+    fall-back, each level's share of the budget (geometric in the level) spread evenly over the image, orientation
+    by the intensity centroid, rBRIEF descriptors by OpenCV for the kept keypoints only.
 
-    def __init__(self, n_features: int = 1000, scale_factor: float = 1.2, n_levels: int = 8, grid_cell: int = 32,
-                 fast_threshold: int = 20, oversample: float = 2.5):
+    Per cell the fall-back matters: a global threshold lets a few strong patches take the whole budget while a
+    faint object (a beam with a low-contrast texture) gets nothing; with the fall-back a cell with no corner at
+    ``fast_threshold`` offers its corners at ``min_threshold``, and the even selection gives every occupied cell
+    its best corner before any cell gets a second. ``focus`` regions (:meth:`extract`) get a guaranteed share.
+    """
+
+    def __init__(self, n_features: int = 1000, scale_factor: float = 1.2, n_levels: int = 8, grid_cell: int = 30,
+                 fast_threshold: int = 20, min_threshold: int = 7):
         self.n = int(n_features)
         self.sf = float(scale_factor)
         self.levels = int(n_levels)
         self.cell = int(grid_cell)
+        self.edge = EDGE
         # opencv's stubs list only cv2.ORB.create; ORB_create and KeyPoint_convert are its run-time aliases
-        self.detector = cv2.ORB_create(  # type: ignore[attr-defined]
-            nfeatures=int(self.n * oversample), scaleFactor=self.sf, nlevels=self.levels, edgeThreshold=19,
-            patchSize=31, fastThreshold=fast_threshold)
-        self.detector_low = cv2.ORB_create(  # type: ignore[attr-defined]
-            nfeatures=int(self.n * oversample), scaleFactor=self.sf, nlevels=self.levels, edgeThreshold=19,
-            patchSize=31, fastThreshold=max(5, fast_threshold // 3))
+        self.describer = cv2.ORB_create(  # type: ignore[attr-defined]
+            nfeatures=self.n, scaleFactor=self.sf, nlevels=self.levels, edgeThreshold=EDGE, patchSize=2 * RADIUS + 1)
+        self.fast = cv2.FastFeatureDetector.create(int(fast_threshold), True)
+        self.fast_low = cv2.FastFeatureDetector.create(int(min_threshold), True)
+        self.fast_focus = cv2.FastFeatureDetector.create(FOCUS_THRESHOLD, True)
         f = 1.0 / self.sf
         per = self.n * (1 - f) / (1 - f ** self.levels)
         self.per_level = [round(per * f ** k) for k in range(self.levels)]
         self.per_level[0] += self.n - sum(self.per_level)
 
-    def extract(self, gray: np.ndarray, cam: CameraModel | None = None, mask: np.ndarray | None = None) -> Features:
+    def pyramid(self, gray: np.ndarray) -> list[np.ndarray]:
+        """Level k is the image scaled by 1 / scale_factor^k (sizes rounded as OpenCV's ORB rounds them, so that its
+        descriptors are computed on the same grid)."""
+        h, w = gray.shape
+        levels = [gray]
+        for k in range(1, self.levels):
+            s = self.sf ** k
+            levels.append(cv2.resize(levels[-1], (round(w / s), round(h / s)), interpolation=cv2.INTER_LINEAR))
+        return levels
+
+    def extract(self, gray: np.ndarray, cam: CameraModel | None = None, mask: np.ndarray | None = None,
+                focus: Sequence[np.ndarray] = (), focus_share: float = 0.2) -> Features:
+        """ORB features of one image. ``mask`` (uint8, non-zero = allowed) limits where keypoints may lie.
+        ``focus``: image polygons ((K, 2) pixels, e.g. the hull of where a tracked object is predicted); each first
+        receives up to ``focus_share`` of every level's budget from its own best corners, spread evenly over it (a
+        faint object is measured although the rest of the image is stronger), then competes with the rest."""
         if gray.ndim == 3:
             gray = cv2.cvtColor(gray, cv2.COLOR_BGR2GRAY)
         if gray.dtype != np.uint8:
             gray = cv2.convertScaleAbs(gray)
-        h, w = gray.shape
-        kps = self.detector.detect(gray, mask)
-        if len(kps) < self.n // 2:  # low contrast: a lower FAST threshold
-            kps = self.detector_low.detect(gray, mask)
+        polys = [np.asarray(p, np.float64).reshape(-1, 2) for p in focus if len(p) >= 3]
+        kps: list[cv2.KeyPoint] = []
+        for lvl, img in enumerate(self.pyramid(gray)):
+            s = self.sf ** lvl
+            lmask = None if mask is None else cv2.resize(mask, img.shape[::-1], interpolation=cv2.INTER_NEAREST)
+            pts, resp = self._candidates(img, lmask)
+            chosen: list[np.ndarray] = []
+            taken = np.zeros(0, np.int64)  # pixel keys of the focus picks, so the even selection skips them
+            for poly in polys:
+                want = int(focus_share * self.per_level[lvl])
+                if want <= 0:
+                    continue
+                bp, br, area = self._focus_candidates(img, lmask, poly / s)
+                key = _keys(bp, img.shape[1])
+                fresh = ~np.isin(key, taken)
+                bp, br, key = bp[fresh], br[fresh], key[fresh]
+                keep = _grid_select(bp, br, _cell_for(area, want), want)
+                chosen.append(np.c_[bp[keep], br[keep]])
+                taken = np.r_[taken, key[keep]]
+            rest = self.per_level[lvl] - sum(len(c) for c in chosen)
+            fresh = ~np.isin(_keys(pts, img.shape[1]), taken)
+            pts, resp = pts[fresh], resp[fresh]
+            keep = _grid_select(pts, resp, _cell_for(float(img.shape[0] * img.shape[1]), max(rest, 1)), max(rest, 0))
+            chosen.append(np.c_[pts[keep], resp[keep]])
+            sel = np.concatenate(chosen)
+            if not len(sel):
+                continue
+            p = sel[:, :2].astype(np.int64)
+            # keypoints built in OpenCV per level (one call), then their orientation and score set
+            level_kps = cv2.KeyPoint_convert((p * s).astype(np.float32), (2 * RADIUS + 1) * s, 0.0,  # type: ignore
+                                             lvl)
+            for k, ang, r in zip(level_kps, ic_angle(img, p).tolist(), sel[:, 2].tolist()):
+                k.angle, k.response = ang, r
+            kps.extend(level_kps)
         if not kps:
             return Features.empty(self.sf)
-        pts = cv2.KeyPoint_convert(kps)  # type: ignore[attr-defined]
-        resp = np.fromiter((k.response for k in kps), np.float32, len(kps))
-        octv = np.fromiter((k.octave for k in kps), np.int32, len(kps))
-        sel = []
-        for lvl in range(self.levels):
-            idx = np.flatnonzero(octv == lvl)
-            if len(idx) == 0:
-                continue
-            s = self.sf ** lvl
-            keep = _grid_select(pts[idx] / s, resp[idx], self.cell, self.per_level[lvl], int(w / s), int(h / s))
-            sel.append(idx[keep])
-        chosen = np.concatenate(sel) if sel else np.zeros(0, np.int64)
-        kps, desc = self.detector.compute(gray, [kps[i] for i in chosen])
+        kps, desc = self.describer.compute(gray, kps)
         if desc is None or not kps:
             return Features.empty(self.sf)
         uv = cv2.KeyPoint_convert(kps).astype(np.float32)  # type: ignore[attr-defined]
         octave = np.fromiter((k.octave for k in kps), np.int32, len(kps))
-        resp = np.fromiter((k.response for k in kps), np.float32, len(kps))
+        response = np.fromiter((k.response for k in kps), np.float32, len(kps))
         und = cam.undistort_points(uv) if cam is not None and cam.has_distortion else uv.astype(np.float64)
-        return Features(uv, und, octave, desc, resp, self.sf)
+        return Features(uv, und, octave, desc, response, self.sf)
+
+    def _candidates(self, img: np.ndarray, mask: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+        """FAST corners of one level (all of it but the border), (N, 2) int pixel positions and their FAST scores:
+        those at the threshold, plus, in the cells of about ``grid_cell`` pixels that have none, those at the
+        fall-back threshold (one pass over the level where many cells are empty, one pass per empty cell where few
+        are)."""
+        h, w = img.shape
+        e, c = self.edge, self.cell
+        x0, y0, x1, y1 = e, e, w - e, h - e
+        strong, weak = self.fast, self.fast_low
+        pts, resp = _fast(strong, img, (x0, y0, x1, y1), mask)
+        nx, ny = max((x1 - x0) // c, 1), max((y1 - y0) // c, 1)
+        cw, ch = (x1 - x0) / nx, (y1 - y0) / ny  # the box split into whole cells of about c pixels
+        cid = _cell_ids(pts, x0, y0, cw, ch, nx, ny)
+        empty = np.flatnonzero(np.bincount(cid, minlength=nx * ny) == 0)
+        if not len(empty):
+            return pts, resp
+        if len(empty) > 0.25 * nx * ny:  # one pass, the empty cells as its mask (OpenCV drops the rest)
+            flags = np.zeros(nx * ny, np.uint8)
+            flags[empty] = 255
+            allowed = np.zeros((h, w), np.uint8)
+            allowed[y0:y1, x0:x1] = cv2.resize(flags.reshape(ny, nx), (x1 - x0, y1 - y0),
+                                               interpolation=cv2.INTER_NEAREST)
+            wp, wr = _fast(weak, img, (x0, y0, x1, y1), allowed if mask is None else allowed & mask)
+        else:
+            parts = [_fast(weak, img, (round(x0 + (k % nx) * cw), round(y0 + (k // nx) * ch),
+                                       round(x0 + (k % nx + 1) * cw), round(y0 + (k // nx + 1) * ch)), mask)
+                     for k in empty]
+            wp = np.concatenate([p for p, _ in parts])
+            wr = np.concatenate([r for _, r in parts])
+        return np.r_[pts, wp], np.r_[resp, wr]
+
+    def _focus_candidates(self, img: np.ndarray, mask: np.ndarray | None,
+                          poly: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+        """FAST corners down to threshold 3 inside one focus polygon (level pixels, kept off the border), their
+        scores, and the polygon's area in pixels. So low a threshold is for the object alone: a faint texture's
+        corners, of which the even selection takes the best per cell."""
+        h, w = img.shape
+        e = self.edge
+        x0, y0 = max(int(np.floor(poly[:, 0].min())), e), max(int(np.floor(poly[:, 1].min())), e)
+        x1, y1 = min(int(np.ceil(poly[:, 0].max())) + 1, w - e), min(int(np.ceil(poly[:, 1].max())) + 1, h - e)
+        if x1 - x0 < 1 or y1 - y0 < 1:
+            return np.zeros((0, 2), np.int64), np.zeros(0, np.float32), 0.0
+        inside = np.zeros((h, w), np.uint8)
+        cv2.fillPoly(inside[y0 - 3:y1 + 3, x0 - 3:x1 + 3], [np.rint(poly - (x0 - 3, y0 - 3)).astype(np.int32)], 255)
+        if mask is not None:
+            inside &= mask
+        pts, resp = _fast(self.fast_focus, img, (x0, y0, x1, y1), inside)
+        return pts, resp, float(np.count_nonzero(inside[y0:y1, x0:x1]))
 
 
-def _grid_select(pts: np.ndarray, resp: np.ndarray, cell: int, n: int, w: int, h: int) -> np.ndarray:
-    """Strongest keypoints spread over a grid: round-robin over cells by rank until ``n`` are taken."""
+EDGE = 19  # pixels kept clear of a level's border: OpenCV ORB's edgeThreshold (the rotated 31 x 31 patch fits)
+FOCUS_THRESHOLD = 3  # FAST threshold inside a focus polygon: a faint object's texture, a few grey levels
+RADIUS = 15  # the orientation patch's radius (ORB: half the 31-pixel patch)
+_YY, _XX = np.mgrid[-RADIUS:RADIUS + 1, -RADIUS:RADIUS + 1]
+_DISC = np.hypot(_YY, _XX) <= RADIUS + 0.5
+_MOMENTS = np.stack([(_XX * _DISC).ravel(), (_YY * _DISC).ravel()], axis=1).astype(np.float32)  # (961, 2)
+
+
+def ic_angle(img: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """Orientation in degrees [0, 360) of keypoints ``p`` ((N, 2) int x, y, at least RADIUS off the border): the
+    direction to the intensity centroid of the circular patch (Rosin; ORB). All patches are gathered at once
+    from a strided window view and their first moments taken by one matrix product (no loop per keypoint)."""
+    k = 2 * RADIUS + 1
+    patches = np.lib.stride_tricks.sliding_window_view(img, (k, k))[p[:, 1] - RADIUS, p[:, 0] - RADIUS]
+    m = patches.reshape(len(p), k * k).astype(np.float32) @ _MOMENTS
+    return np.degrees(np.arctan2(m[:, 1], m[:, 0])) % 360.0
+
+
+def _fast(det: cv2.FastFeatureDetector, img: np.ndarray, box: tuple[int, int, int, int],
+          mask: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """FAST corners with their scores inside ``box`` (x0, y0, x1, y1): detected on the box grown by FAST's
+    3-pixel circle, so that a corner may lie on the box's edge, and those outside the box dropped."""
+    x0, y0, x1, y1 = box
+    h, w = img.shape
+    a0, b0, a1, b1 = max(x0 - 3, 0), max(y0 - 3, 0), min(x1 + 3, w), min(y1 + 3, h)
+    sub = np.ascontiguousarray(img[b0:b1, a0:a1])
+    kps = det.detect(sub, None if mask is None else np.ascontiguousarray(mask[b0:b1, a0:a1]))
+    if not kps:
+        return np.zeros((0, 2), np.int64), np.zeros(0, np.float32)
+    p = np.rint(cv2.KeyPoint_convert(kps)).astype(np.int64) + (a0, b0)  # type: ignore[attr-defined]
+    r = np.fromiter((k.response for k in kps), np.float32, len(kps))
+    ok = (p[:, 0] >= x0) & (p[:, 0] < x1) & (p[:, 1] >= y0) & (p[:, 1] < y1)
+    return p[ok], r[ok]
+
+
+def _cell_ids(p: np.ndarray, x0: int, y0: int, cw: float, ch: float, nx: int, ny: int) -> np.ndarray:
+    cx = np.clip(((p[:, 0] - x0) / cw).astype(np.int64), 0, nx - 1)
+    cy = np.clip(((p[:, 1] - y0) / ch).astype(np.int64), 0, ny - 1)
+    return cy * nx + cx
+
+
+def _keys(p: np.ndarray, w: int) -> np.ndarray:
+    return p[:, 1] * w + p[:, 0]
+
+
+def _cell_for(area: float, n: int) -> float:
+    """The distribution cell over ``area`` pixels: about one cell per wanted keypoint, so that the first round of
+    the even selection covers the area as ORB-SLAM2's quadtree would."""
+    return max(float(np.sqrt(area / max(n, 1))), 1.0)
+
+
+def _grid_select(pts: np.ndarray, resp: np.ndarray, cell: float, n: int) -> np.ndarray:
+    """Indices of ``n`` keypoints spread evenly: every occupied cell gives its strongest, then every cell its
+    second strongest, ...; within one round the stronger first (deterministic: a stable sort on exact keys).
+    A vectorised stand-in for ORB-SLAM2's quadtree: the same even coverage with no loop over nodes."""
+    if n <= 0 or len(pts) == 0:
+        return np.zeros(0, np.int64)
     if len(pts) <= n:
         return np.arange(len(pts))
     cx = (pts[:, 0] // cell).astype(np.int64)
     cy = (pts[:, 1] // cell).astype(np.int64)
-    cid = cy * (w // cell + 1) + cx
-    order = np.lexsort((-resp, cid))  # by cell, strongest first
-    cid_sorted = cid[order]
+    weak = 255 - np.clip(resp, 0, 255).astype(np.int64)  # FAST scores are whole grey levels: one sort key each
+    order = np.argsort((cy * (int(cx.max()) + 1) + cx) * 256 + weak, kind="stable")  # by cell, strongest first
+    cid_sorted = (cy * (int(cx.max()) + 1) + cx)[order]
     first = np.r_[0, np.flatnonzero(np.diff(cid_sorted)) + 1]
     rank = np.arange(len(order)) - np.repeat(first, np.diff(np.r_[first, len(order)]))
-    # take rank 0 of every cell, then rank 1, ... ; within one rank prefer strong responses
-    key = rank * 1e9 - resp[order] / (resp.max() + 1e-9)
-    chosen = order[np.argsort(key, kind="stable")[:n]]
-    return chosen
+    return order[np.argsort(rank * 256 + weak[order], kind="stable")[:n]]
 
 
 def hamming(a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -33,3 +33,15 @@ def test_malformed_clouds_are_refused_with_a_reason():
         cloud_field(m, "id")
     with pytest.raises(ValueError, match="3 values"):
         cloud_msg(np.zeros((4, 3)), Header(), "map", {"id": np.arange(3, dtype=np.uint32)})
+
+
+def test_focus_polygon_round_trips():
+    from simreal_nodes.ros.convert import focus_msg, focus_polygon
+
+    poly = np.array([[10.5, 20.0], [300.0, 22.25], [280.0, 200.0], [12.0, 190.0]])
+    head = Header()
+    head.stamp.sec = 7
+    m = focus_msg(poly, 2, head, "camera_optical")
+    assert m.header.frame_id == "camera_optical" and m.header.stamp.sec == 7
+    index, back = focus_polygon(m)
+    assert index == 2 and np.allclose(back, poly, atol=1e-4)

@@ -82,6 +82,7 @@ def test_tracker_inputs_are_what_it_subscribes(name, needs_image):
     assert (graph.CAM_IMAGE in nodes["tracker"].inputs) == needs_image
     assert graph.LOC_DEFORMABLE in nodes["localization"].inputs
     assert graph.LOC_DEFORMABLE in nodes["tracker"].outputs
+    assert graph.LOC_FOCUS in nodes["localization"].inputs and graph.LOC_FOCUS in nodes["tracker"].outputs
 
 
 SPEC_SCENE = BASE + "objects:\n  - {id: beam, model: 'spec:aluminium_beam', parameters: {PARAM: {mode: tracked}}}\n"

@@ -6,11 +6,14 @@ image (FeatureObservations, what the deformable tracker measures); the map as Po
 ``~/set_localization_only`` (std_srvs/SetBool) freezes mapping. ``/simreal/localization/deformable_points``
 (PointCloud2 in the map frame: x, y, z, id (uint32), drop (uint8); from the tracker after each frame) names the map
 points on a deforming object, where the estimate predicts them and which the last fit rejected (tracks to restart).
+``/simreal/localization/focus`` (geometry_msgs/PolygonInstanceStamped, image pixels, id = the object's index; from
+the tracker after each frame) is where each tracked object projects: the next frames guarantee it a share of the ORB
+features (``SlamConfig.focus_share``), so a faint object is measured beside a strongly textured background.
 """
 
 from __future__ import annotations
 
-from geometry_msgs.msg import PoseStamped
+from geometry_msgs.msg import PolygonInstanceStamped, PoseStamped
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 from simreal_msgs.msg import FeatureObservations, TrackingStatus
 from std_msgs.msg import Header
@@ -26,6 +29,8 @@ from simreal_nodes.ros.qos import TF_QOS, data_qos, reliable_qos
 from simreal_nodes.scene import graph
 from simreal_nodes.scene.schema import load_scene
 from simreal_nodes.sync import StampSync
+
+FOCUS_MAX_AGE_NS = 500_000_000  # an object's image region older than this (ns) no longer steers the features
 
 
 class LocalizationNode(SimrealNode):
@@ -68,6 +73,8 @@ class LocalizationNode(SimrealNode):
             self.create_subscription(Image, graph.CAM_RIGHT_IMAGE, lambda m: self.on_input("right", m), q)
             self.create_subscription(CameraInfo, graph.CAM_RIGHT_INFO, self.on_right_info, q)
         self.create_subscription(PointCloud2, graph.LOC_DEFORMABLE, self.on_deformable, reliable_qos(10))
+        self.focus = {}  # object index -> (stamp ns, (K, 2) image polygon)
+        self.create_subscription(PolygonInstanceStamped, graph.LOC_FOCUS, self.on_focus, reliable_qos(10))
         self.create_service(SetBool, "~/set_localization_only", self.on_set_localization_only)
         self.create_timer(1.0, self.publish_map)
         self._last_status = None
@@ -98,7 +105,10 @@ class LocalizationNode(SimrealNode):
         except ImageFormatError as e:
             self.drop(header.stamp, f"malformed input: {e}")
             return
-        self._publish(header, self.live.core.step(gray, convert.stamp_ns(header.stamp), depth=depth, right=right))
+        ns = convert.stamp_ns(header.stamp)
+        # the trackers' regions of a recent frame (live a frame or two late); an object no longer reported is dropped
+        focus = [p for t, p in self.focus.values() if abs(ns - t) < FOCUS_MAX_AGE_NS]
+        self._publish(header, self.live.core.step(gray, ns, depth=depth, right=right, focus=focus))
         self.metrics.done(t0, self.age_ms(header.stamp))
         self.progress(header.stamp)
 
@@ -131,6 +141,11 @@ class LocalizationNode(SimrealNode):
             self.get_logger().warning(f"ignored malformed deformable points: {e}")
             return
         self.live.feedback(ids, P, drop)
+
+    @guarded
+    def on_focus(self, msg: PolygonInstanceStamped) -> None:
+        index, poly = convert.focus_polygon(msg)
+        self.focus[index] = (convert.stamp_ns(msg.header.stamp), poly)
 
     def publish_map(self) -> None:
         P = self.live.map_points()

@@ -8,12 +8,14 @@ and, for glued-dot measurements, the image of the same stamp, runs the ROS-free
 (``set_localization_only``). An object with ``anchor: registration`` is placed from the depth images (taken
 while it waits for them). After every frame it tells the localization which map points lie on the
 object, where the current estimate predicts them and which the fit rejected
-(``/simreal/localization/deformable_points``, PointCloud2 x, y, z, id, drop in the map frame).
+(``/simreal/localization/deformable_points``, PointCloud2 x, y, z, id, drop in the map frame) and where each
+object projects in the image (``/simreal/localization/focus``, PolygonInstanceStamped, id = the object's index).
 """
 
 from __future__ import annotations
 
 import numpy as np
+from geometry_msgs.msg import PolygonInstanceStamped
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 from simreal_msgs.msg import FeatureObservations, ModelParameters, TrackingStatus
 from std_srvs.srv import SetBool
@@ -24,7 +26,7 @@ from simreal_nodes.assimilation.tracker import Estimate
 from simreal_nodes.errors import ImageFormatError
 from simreal_nodes.io import images
 from simreal_nodes.rom.model_file import load_model
-from simreal_nodes.ros.convert import cloud_msg, estimate_msg, observation_arrays
+from simreal_nodes.ros.convert import cloud_msg, estimate_msg, focus_msg, observation_arrays
 from simreal_nodes.ros.node import SimrealNode, guarded, run_node
 from simreal_nodes.ros.qos import data_qos, reliable_qos
 from simreal_nodes.scene import graph
@@ -57,6 +59,7 @@ class TrackerNode(SimrealNode):
                      for o in self.objects}
         self.pub_status = self.create_publisher(TrackingStatus, graph.TRACKER_STATUS, reliable_qos(10))
         self.pub_deformable = self.create_publisher(PointCloud2, graph.LOC_DEFORMABLE, reliable_qos(10))
+        self.pub_focus = self.create_publisher(PolygonInstanceStamped, graph.LOC_FOCUS, reliable_qos(10))
         self.freeze_map = bool(loc.get("freeze_map_on_deformation", False))
         self.create_subscription(CameraInfo, graph.CAM_INFO, self.on_info, q)
         trigger = data_qos(self.lossless, depth=1)  # the newest frame first (live)
@@ -107,7 +110,7 @@ class TrackerNode(SimrealNode):
         estimates = self.core.update(T_wc, ids, P, uv, bgr, depth)
         for oid, est in estimates.items():
             self._publish(oid, est, head)
-        self._coordinate_localization(any(e.deforming for e in estimates.values()), head)
+        self._coordinate_localization(any(e.deforming for e in estimates.values()), head, T_wc)
         self.metrics.done(t0, self.age_ms(head.stamp))
         self.progress(head.stamp)
 
@@ -122,13 +125,17 @@ class TrackerNode(SimrealNode):
         self.metrics.extra[f"{oid}_solve_ms"] = f"{est.solve_ms:.2f}"
         self.set_status("ok" if est.state == EstimateState.OK else "warn", f"{oid}: " + (est.reason or "ok"))
 
-    def _coordinate_localization(self, deforming: bool, head) -> None:
-        """Points on the object leave the pose estimate and are searched where the estimate predicts them;
-        mapping stops once deformation appears if the scene asks for it (§4.4.1)."""
+    def _coordinate_localization(self, deforming: bool, head, T_wc: np.ndarray | None) -> None:
+        """Points on the object leave the pose estimate and are searched where the estimate predicts them; each
+        object's image region gets its share of the next frame's features; mapping stops once deformation appears
+        if the scene asks for it (§4.4.1)."""
         if self.static_pose is None:
             ids, P, drop = self.core.feedback()
             if len(ids):
                 self.pub_deformable.publish(cloud_msg(P, head, self.map_frame, {"id": ids, "drop": drop}))
+            for k, tr in enumerate(self.core.trackers.values()) if T_wc is not None else ():
+                if (poly := tr.screen_region(T_wc)) is not None:
+                    self.pub_focus.publish(focus_msg(poly, k, head, self.camera_frame))
         if deforming and self.freeze_map and not self._loc_only_requested and self.loc_client.service_is_ready():
             self.loc_client.call_async(SetBool.Request(data=True))
             self._loc_only_requested = True

@@ -38,11 +38,14 @@ class SlamConfig:
     flow_win: int = 11  # Lucas-Kanade window (pixels); larger straddles the object's silhouette and drifts
     flow_anchor_px: float = 0.0  # > 0: re-measure tracks on their first image if within this (drift vs. bias)
     max_anchor_images: int = 40  # images kept for the anchored re-measurement (memory vs. track restarts)
+    focus_share: float = 0.2  # ORB budget guaranteed to each tracked object's predicted image region (faint objects)
 
     def __post_init__(self) -> None:
         for f in fields(self):
             if getattr(self, f.name) < 0:
                 raise ValueError(f"SlamConfig.{f.name} must not be negative, not {getattr(self, f.name)}")
+        if self.focus_share > 1:
+            raise ValueError(f"SlamConfig.focus_share is a share of the ORB budget (0..1), not {self.focus_share}")
         if self.flow_win < 3 or self.local_kfs < 1 or self.ba_iterations < 1:
             raise ValueError(f"SlamConfig: flow_win >= 3, local_kfs >= 1 and ba_iterations >= 1 needed, not "
                              f"{self.flow_win}, {self.local_kfs}, {self.ba_iterations}")

@@ -20,7 +20,7 @@ by one :class:`~.config.SlamConfig`.
 from __future__ import annotations
 
 import time
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -111,9 +111,10 @@ class Slam:
         self.set_deformable({p.id for p in m.points.values() if p.deformable})
 
     def track(self, gray: np.ndarray, stamp: int = 0, depth: np.ndarray | None = None,
-              right: np.ndarray | None = None) -> TrackResult:
+              right: np.ndarray | None = None, focus: Sequence[np.ndarray] = ()) -> TrackResult:
         """Process one frame. ``gray``: uint8 image; ``depth``: metres (NaN/0 invalid) registered to it;
-        ``right``: the right image of a rectified stereo pair."""
+        ``right``: the right image of a rectified stereo pair; ``focus``: image polygons ((K, 2) pixels) where
+        tracked objects are predicted, each guaranteed ``config.focus_share`` of the ORB features."""
         ctx = self.ctx
         t0 = time.perf_counter()
         ctx.frame_id += 1
@@ -121,7 +122,8 @@ class Slam:
         tim: dict[str, float] = {}
         self.mapper.poll()
         quality = image_problem(gray)
-        feats = Features.empty() if quality else self.extractor.extract(gray, self.cam)
+        feats = Features.empty() if quality else self.extractor.extract(gray, self.cam, focus=focus,
+                                                                           focus_share=self.config.focus_share)
         tim["extract_ms"] = (time.perf_counter() - t0) * 1e3
         if not quality and len(feats) < self.config.min_features:
             quality = f"too few features ({len(feats)}): textureless view"

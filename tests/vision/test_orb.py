@@ -1,0 +1,74 @@
+"""ORB extraction: the per-cell FAST threshold fall-back, the focus regions' guaranteed share, determinism."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from simreal_nodes.vision.orb import OrbExtractor, ic_angle
+
+
+def _speckle(rng: np.random.Generator, h: int, w: int, contrast: float) -> np.ndarray:
+    """Blurred random dots around mid grey with the given peak-to-peak contrast (grey levels)."""
+    dots = (rng.random((h, w)) < 0.02).astype(np.float32)
+    tex = cv2.GaussianBlur(dots, (0, 0), 1.5)
+    return 128 + contrast * (tex / tex.max() - 0.5)
+
+
+def faint_beside_strong(seed: int = 0) -> np.ndarray:
+    """640 x 480: the left half painted speckle (contrast 200), the right half a faint one (contrast 30) that
+    FAST at 20 barely finds, as a low-contrast beam beside a textured background."""
+    rng = np.random.default_rng(seed)
+    img = np.empty((480, 640), np.float32)
+    img[:, :320] = _speckle(rng, 480, 320, 200.0)
+    img[:, 320:] = _speckle(rng, 480, 320, 30.0)
+    return np.clip(img + rng.normal(0, 0.5, img.shape), 0, 255).astype(np.uint8)
+
+
+def test_per_cell_fallback_puts_features_on_the_faint_half():
+    """A global threshold gives the strong half the whole budget; the per-cell fall-back offers the faint cells'
+    corners, and the even selection takes them (the old extractor put almost none there)."""
+    img = faint_beside_strong()
+    strong_only = cv2.FastFeatureDetector_create(20).detect(img[:, 320:])
+    f = OrbExtractor(1000).extract(img)
+    on_faint = int((f.uv[:, 0] >= 330).sum())
+    assert len(f) >= 900
+    assert len(strong_only) < 100  # the faint half has few corners at the usual threshold
+    assert on_faint >= 0.3 * len(f), (on_faint, len(f))
+
+
+def test_focus_region_receives_its_share():
+    """A faint patch inside a strong image: without focus it gets few features; as a focus polygon it gets at
+    least its share of the budget."""
+    rng = np.random.default_rng(1)
+    img = _speckle(rng, 480, 640, 200.0)
+    img[180:300, 240:400] = _speckle(rng, 120, 160, 12.0)
+    img = np.clip(img + rng.normal(0, 0.5, img.shape), 0, 255).astype(np.uint8)
+    poly = np.array([[240, 180], [399, 180], [399, 299], [240, 299]], np.float64)
+    ex = OrbExtractor(1000)
+
+    def inside(f):
+        return int(((f.uv[:, 0] >= 240) & (f.uv[:, 0] < 400) & (f.uv[:, 1] >= 180) & (f.uv[:, 1] < 300)).sum())
+
+    plain = ex.extract(img)
+    focused = ex.extract(img, focus=[poly], focus_share=0.2)
+    assert inside(focused) >= 0.17 * ex.n, (inside(plain), inside(focused))
+    assert inside(focused) > 3 * max(inside(plain), 1)
+    assert abs(len(focused) - ex.n) <= 0.05 * ex.n  # the share comes out of the budget, not on top of it
+
+
+def test_extraction_is_deterministic_and_oriented():
+    img = faint_beside_strong(3)
+    ex = OrbExtractor(800)
+    poly = np.array([[350, 100], [600, 100], [600, 400], [350, 400]], np.float64)
+    a, b = ex.extract(img, focus=[poly]), OrbExtractor(800).extract(img.copy(), focus=[poly])
+    assert np.array_equal(a.uv, b.uv) and np.array_equal(a.desc, b.desc) and np.array_equal(a.octave, b.octave)
+    assert len(np.unique(a.octave)) == ex.levels  # every pyramid level contributes
+
+
+def test_ic_angle_points_to_the_bright_side():
+    """The intensity centroid of a patch bright on its right is at 0 degrees, bright below at 90 (image y down)."""
+    img = np.zeros((64, 64), np.uint8)
+    img[:, 33:] = 200
+    assert abs(ic_angle(img, np.array([[32, 32]]))[0] - 0.0) < 1.0
+    assert abs(ic_angle(img.T.copy(), np.array([[32, 32]]))[0] - 90.0) < 1.0
