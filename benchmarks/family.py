@@ -231,6 +231,7 @@ def write(rows: list[dict], label: str, name: str = "family") -> None:
 
 TABLES = (("family", "Held-out seeds (the accuracy this project reports)"),
           ("family_dev", "Development seeds (the only ones defaults may be chosen on)"),
+          ("family_dev_map_points", "Development seeds, sparse measurements (`--measurements map_points`) beside"),
           ("family_preloaded", "Diagnostic: the load on from the first frame (development seeds)"))
 
 

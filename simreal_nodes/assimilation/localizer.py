@@ -163,6 +163,9 @@ def make_localizer(loc: dict[str, Any], cam: CameraModel, baseline: float | None
     return SlamLocalization(slam)
 
 
+FOCUS_MAX_AGE_NS = 500_000_000  # an object's image region older than this (ns) no longer steers the features
+
+
 class LiveLocalizer:
     """The localizer of a live camera, as the localization node keeps it: built once the intrinsics are known (for
     stereo, and the baseline), built again when they change; mapping frozen or not as last asked.
@@ -176,6 +179,17 @@ class LiveLocalizer:
         self.cam: CameraModel | None = None
         self.baseline: float | None = None
         self.core: Localizer | None = None
+        self._focus: dict[int, tuple[int, np.ndarray]] = {}  # object index -> (stamp ns, (K, 2) image polygon)
+
+    def set_focus(self, index: int, stamp_ns: int, polygon: np.ndarray) -> None:
+        """Where tracked object ``index`` projected in the frame of ``stamp_ns`` (from the tracker)."""
+        self._focus[int(index)] = (int(stamp_ns), np.asarray(polygon, np.float64).reshape(-1, 2))
+
+    def focus(self, stamp_ns: int) -> list[np.ndarray]:
+        """The objects' image regions that steer the features of the frame at ``stamp_ns``: those reported for a
+        frame within :data:`FOCUS_MAX_AGE_NS` (live they come a frame or two late; an object no longer reported
+        stops steering)."""
+        return [p for t, p in self._focus.values() if abs(stamp_ns - t) < FOCUS_MAX_AGE_NS]
 
     def set_camera(self, cam: CameraModel) -> bool:
         """Intrinsics from a CameraInfo; True when they are new and the localizer was (re)built. Built now, not on

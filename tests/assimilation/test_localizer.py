@@ -92,3 +92,17 @@ def test_live_stereo_waits_for_the_baseline():
     live.set_localization_only(True)
     assert live.core.slam.localization_only
     live.close()
+
+
+def test_live_focus_regions_expire():
+    """The trackers' image regions steer the features of frames near their stamp only; a newer report replaces an
+    object's region."""
+    live = LiveLocalizer(MARKERS)
+    square = np.array([[0, 0], [10, 0], [10, 10], [0, 10]], float)
+    live.set_focus(0, 1_000_000_000, square)
+    live.set_focus(1, 1_000_000_000, square + 50)
+    assert len(live.focus(1_200_000_000)) == 2
+    assert live.focus(2_000_000_000) == []  # a second later: stale
+    live.set_focus(0, 1_900_000_000, square + 5)
+    (p,) = live.focus(2_000_000_000)
+    np.testing.assert_allclose(p, square + 5)

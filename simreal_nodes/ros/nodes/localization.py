@@ -6,9 +6,8 @@ image (FeatureObservations, what the deformable tracker measures); the map as Po
 ``~/set_localization_only`` (std_srvs/SetBool) freezes mapping. ``/simreal/localization/deformable_points``
 (PointCloud2 in the map frame: x, y, z, id (uint32), drop (uint8); from the tracker after each frame) names the map
 points on a deforming object, where the estimate predicts them and which the last fit rejected (tracks to restart).
-``/simreal/localization/focus`` (geometry_msgs/PolygonInstanceStamped, image pixels, id = the object's index; from
-the tracker after each frame) is where each tracked object projects: the next frames guarantee it a share of the ORB
-features (``SlamConfig.focus_share``), so a faint object is measured beside a strongly textured background.
+``/simreal/localization/focus`` (geometry_msgs/PolygonInstanceStamped, image pixels, id = object index; from the
+tracker) is where each object projects: a share of the next frames' ORB features (``SlamConfig.focus_share``).
 """
 
 from __future__ import annotations
@@ -30,8 +29,6 @@ from simreal_nodes.scene import graph
 from simreal_nodes.scene.schema import load_scene
 from simreal_nodes.sync import StampSync
 
-FOCUS_MAX_AGE_NS = 500_000_000  # an object's image region older than this (ns) no longer steers the features
-
 
 class LocalizationNode(SimrealNode):
     def __init__(self):
@@ -51,20 +48,18 @@ class LocalizationNode(SimrealNode):
                        known_scale_m=known_scale or None)
         self.live = LiveLocalizer(section, async_mapping, self.map_file, frozen)
         q = data_qos(self.lossless)
-        self.pub_pose = self.create_publisher(PoseStamped, graph.POSE, q if self.lossless else reliable_qos(10))
+        ordered = q if self.lossless else reliable_qos(10)  # poses and observations: each one, in order
+        self.pub_pose = self.create_publisher(PoseStamped, graph.POSE, ordered)
         self.pub_tf = self.create_publisher(TFMessage, graph.TF, TF_QOS)
         self.pub_status = self.create_publisher(TrackingStatus, graph.LOC_STATUS, reliable_qos(10))
-        self.pub_obs = self.create_publisher(FeatureObservations, graph.LOC_OBS,
-                                             q if self.lossless else reliable_qos(10))
+        self.pub_obs = self.create_publisher(FeatureObservations, graph.LOC_OBS, ordered)
         self.pub_map = self.create_publisher(PointCloud2, graph.LOC_MAP, reliable_qos(1))
         self.sync = StampSync(("image",), {"rgbd": ("depth",), "stereo": ("right",)}.get(self.mode, ()), wait=2)
         self.create_subscription(CameraInfo, graph.CAM_INFO, self.on_info, q)
-        # live, which frames a busy node takes: 1 = always the newest (least latency); more = the oldest of that
-        # many newest (a few frames of lag, but after a slow frame the next one is not far away: frame-to-frame
-        # SLAM tracking keeps its features). Markers need no continuity.
         depth = self.param("live_queue", 1 if self.mode in ("markers", "static") else 5,
-                           "live: images kept while busy (1 = newest first; SLAM modes default to 5: smaller gaps "
-                           "between the frames tracked, a few frames of lag)", read_only=True)
+                           "live: images kept while busy (1 = newest first, least latency; SLAM modes default to 5: "
+                           "smaller gaps between the frames tracked keep their features, a few frames of lag; "
+                           "markers need no continuity)", read_only=True)
         self.create_subscription(Image, graph.CAM_IMAGE, lambda m: self.on_input("image", m),
                                  data_qos(self.lossless, depth=max(1, int(depth))))
         if self.mode == "rgbd":
@@ -73,7 +68,6 @@ class LocalizationNode(SimrealNode):
             self.create_subscription(Image, graph.CAM_RIGHT_IMAGE, lambda m: self.on_input("right", m), q)
             self.create_subscription(CameraInfo, graph.CAM_RIGHT_INFO, self.on_right_info, q)
         self.create_subscription(PointCloud2, graph.LOC_DEFORMABLE, self.on_deformable, reliable_qos(10))
-        self.focus = {}  # object index -> (stamp ns, (K, 2) image polygon)
         self.create_subscription(PolygonInstanceStamped, graph.LOC_FOCUS, self.on_focus, reliable_qos(10))
         self.create_service(SetBool, "~/set_localization_only", self.on_set_localization_only)
         self.create_timer(1.0, self.publish_map)
@@ -106,9 +100,7 @@ class LocalizationNode(SimrealNode):
             self.drop(header.stamp, f"malformed input: {e}")
             return
         ns = convert.stamp_ns(header.stamp)
-        # the trackers' regions of a recent frame (live a frame or two late); an object no longer reported is dropped
-        focus = [p for t, p in self.focus.values() if abs(ns - t) < FOCUS_MAX_AGE_NS]
-        self._publish(header, self.live.core.step(gray, ns, depth=depth, right=right, focus=focus))
+        self._publish(header, self.live.core.step(gray, ns, depth=depth, right=right, focus=self.live.focus(ns)))
         self.metrics.done(t0, self.age_ms(header.stamp))
         self.progress(header.stamp)
 
@@ -145,7 +137,7 @@ class LocalizationNode(SimrealNode):
     @guarded
     def on_focus(self, msg: PolygonInstanceStamped) -> None:
         index, poly = convert.focus_polygon(msg)
-        self.focus[index] = (convert.stamp_ns(msg.header.stamp), poly)
+        self.live.set_focus(index, convert.stamp_ns(msg.header.stamp), poly)
 
     def publish_map(self) -> None:
         P = self.live.map_points()
