@@ -63,7 +63,7 @@ def run_scene(seed: int, width: int = 640, height: int = 480, preloaded: bool = 
         doc["objects"][0]["tracking"]["measurements"] = measurements
     scene = build_spec_models(validate_scene(doc, sc.name, "."))
     pipe = Pipeline(scene, seq["cam"])
-    truth, est, states, reasons, step_ms, cam_err = [], [], [], [], [], []
+    truth, est, states, reasons, step_ms, cam_err, solve_ms = [], [], [], [], [], [], []
     for i in range(len(seq["rgb"])):
         bgr = np.ascontiguousarray(seq["rgb"][i][:, :, ::-1])
         t1 = time.perf_counter()
@@ -72,6 +72,8 @@ def run_scene(seed: int, width: int = 640, height: int = 480, preloaded: bool = 
             cam_err.append(float(np.linalg.norm(T_wc[:3, 3] - seq["T"][i][:3, 3])))
         step_ms.append(1e3 * (time.perf_counter() - t1))
         e = out["beam"]
+        if e.solve_ms > 0:
+            solve_ms.append(e.solve_ms)
         truth.append(seq["truth"][i].params["beam"][2][0])
         est.append(float(e.values[0]))
         states.append(int(e.state))
@@ -90,6 +92,7 @@ def run_scene(seed: int, width: int = 640, height: int = 480, preloaded: bool = 
         "ok_pct": float(100 * ok.mean()), "median_err_pct": float(np.median(err)),
         "p90_err_pct": float(np.percentile(err, 90)), "mean_err_pct": float(np.mean(err)),
         "step_ms_p50": float(np.median(step_ms)), "render_s": round(t_render, 1),
+        "solve_ms_p50": float(np.median(solve_ms)) if solve_ms else float("nan"),
         "camera_ate_mm": float(1e3 * np.sqrt(np.mean(np.square(cam_err)))) if cam_err else float("nan"),
         "camera_tracked_pct": float(100 * len(cam_err) / len(seq["rgb"])),
         "reason": why.most_common(1)[0][0] if why else "",
@@ -178,7 +181,7 @@ COLS = [("seed", "seed", "{}"), ("support", "support", "{}"), ("slenderness", "L
         ("model_bias_median_pct_span", "model bias (% range)", "{:.2f}"),
         ("model_rel_l2_median_pct", "model error |u| (%)", "{:.1f}"),
         ("camera_ate_mm", "camera ATE (mm)", "{:.1f}"), ("camera_tracked_pct", "camera tracked (%)", "{:.0f}"),
-        ("step_ms_p50", "step (ms)", "{:.0f}"),
+        ("step_ms_p50", "step (ms)", "{:.0f}"), ("solve_ms_p50", "tracker (ms)", "{:.0f}"),
         ("registration_mm", "registration (mm)", "{:.1f}"), ("registration_deg", "registration (deg)", "{:.2f}"),
         ("reason", "most common reason when not OK", "{}")]
 
