@@ -44,7 +44,7 @@ class Link(NamedTuple):
 
 @dataclass
 class TrackerConfig:
-    measurements: str = "map_points"  # map_points | dots | homography | dense
+    measurements: str = "map_points"  # map_points | dots | homography | dense (a scene's default is dense)
     huber_px: float = 2.0
     n_modes: int = 0  # 0: all
     max_iterations: int = 20

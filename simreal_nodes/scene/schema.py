@@ -98,8 +98,9 @@ TRACKING = Record({
     "enabled": Bool("estimate the tracked parameters from the images", default=False),
     "measurements": Enum(("map_points", "dots", "homography", "dense"), "what gives the image measurements: map "
                          "points on the object (sparse), glued dots, dots on a face through a homography, or dense "
-                         "photometric alignment of the object's own texture against a first view at rest",
-                         default="map_points"),
+                         "photometric alignment of the object's own texture against a first view at rest (the "
+                         "default: it did best on the development scene family, docs/family.md)",
+                         default="dense"),
     "dense_step_px": Number("measurements 'dense': surface sample spacing in the reference view, pixels (smaller: "
                             "more samples, slower)", lo=0.5, hi=16, default=1.5),
     "dense_rigid": Bool("measurements 'dense': also fit a small rigid correction of the object each frame (absorbs "
