@@ -5,7 +5,7 @@ polygon (its convex hull, as the tracker's ``screen_region`` gives it), and the 
     python -m benchmarks.orb_focus --seeds 0,1,3,4,7,8 [--features 1500] [--frames 6]
 
 CPU time (process time, one OpenCV thread) rather than wall time: the figure then holds on a shared machine.
-Prints one line per scene; writes nothing.
+Writes benchmarks/results/orb_focus.{json,md,png}.
 """
 
 from __future__ import annotations
@@ -16,9 +16,11 @@ import time
 import cv2
 import numpy as np
 
+from benchmarks.common import save
 from benchmarks.family import parse_seeds
 from simreal_nodes.render.gl import Renderer
 from simreal_nodes.synth import world as W
+from simreal_nodes.synth.family import draw
 from simreal_nodes.synth.makebag import load_models, make_scene, render_frame
 from simreal_nodes.vision.orb import OrbExtractor
 
@@ -53,6 +55,7 @@ def main() -> None:
     a = ap.parse_args()
     cv2.setNumThreads(1)
     ex = OrbExtractor(a.features)
+    rows = []
     for seed in parse_seeds(a.seeds):
         plain, focused, ms_plain, ms_focus = [], [], [], []
         for gray, mask in frames_with_masks(seed, a.frames):
@@ -67,6 +70,29 @@ def main() -> None:
                 counts.append(int(mask[u[:, 1], u[:, 0]].sum()))
         print(f"seed {seed}: on-object keypoints of {a.features} {plain} (focus {focused}); "
               f"CPU ms/frame {np.median(ms_plain):.1f} (focus {np.median(ms_focus):.1f})", flush=True)
+        rows.append({"seed": seed, "contrast": round(draw(seed).speckle_contrast, 3),
+                     "on_object": float(np.median(plain)), "on_object_focus": float(np.median(focused)),
+                     "cpu_ms": float(np.median(ms_plain)), "cpu_ms_focus": float(np.median(ms_focus))})
+
+    def plot(plt):
+        fig, ax = plt.subplots(figsize=(6, 3.4))
+        x = np.arange(len(rows))
+        ax.bar(x - 0.2, [r["on_object"] for r in rows], 0.4, label="even spread")
+        ax.bar(x + 0.2, [r["on_object_focus"] for r in rows], 0.4, label="+ object focus")
+        ax.set_xticks(x, [f"{r['seed']} ({r['contrast']:.2f})" for r in rows])
+        ax.set_xlabel("development seed (texture contrast)")
+        ax.set_ylabel(f"keypoints on the object (of {a.features})")
+        ax.legend()
+        fig.tight_layout()
+        return fig
+
+    cols = [("seed", "seed", "{}"), ("contrast", "texture contrast", "{:.2f}"),
+            ("on_object", "keypoints on the object", "{:.0f}"), ("on_object_focus", "with focus", "{:.0f}"),
+            ("cpu_ms", "CPU ms / frame", "{:.1f}"), ("cpu_ms_focus", "with focus", "{:.1f}")]
+    save("orb_focus", rows, cols, "ORB keypoints on the object (development family scenes)",
+         f"{a.features} features, median of {a.frames} frames per scene; the focus polygon is the convex hull of the "
+         "object's true visible pixels (the tracker gives the hull of its projected model). CPU time: process time, "
+         "one OpenCV thread, median of 3 calls per frame.", plot)
 
 
 if __name__ == "__main__":
