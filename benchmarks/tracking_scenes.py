@@ -153,8 +153,8 @@ How a frame is measured (thesis ch. 4, `vision/slam/deformable.py`, `assimilatio
    first version, which searched by descriptor near the last observation, lost the foam beam from frame 80
    (median error 0.12 m) and the boot at large theta. Frame-to-frame flow drifts (0.4 px after 5 frames, 1 px
    after 30 on the foam beam); re-measuring each track against its first image (`SlamConfig.flow_anchor_px`, off by
-   default) holds it at 0.3 px there, but its translation-only window biases the boot's turning lever (the
-   'flow anchor' rows).
+   default) holds it at 0.3 px there; its window is translation-only, which a turning surface strains (the
+   'flow anchor' rows measure both scenes).
 4. **Assimilation** (Eq. 4.7-4.12). LM with Huber weights from the previous frame's estimate; if that fit is poor
    (RMS above 0.75 x Huber or under 85 % inliers) the cost is evaluated on a coarse grid of the free parameters and
    LM restarted from the best sample (a load moved across mid-span passes a larger deflection, a second basin).
@@ -175,32 +175,34 @@ absolute deviation: the load's dark edges have gradients fifty times a faint spe
 a coarse search over mu at the coarsest level every frame (a load that jumps lands in another basin), visibility by
 a coarse depth buffer of the samples. Nuisances: an affine brightness (a, b) and a small rigid correction (omega, t)
 of the object (camera drift, placement error). Once a frame at rest has measured that correction, deformed fits
-stay within 0.1 deg / 3 mm of it: a free rotation would take the blame for a cantilever's bending (development
-seed 4: 5.3 % -> 2.3 % median error). Whether a deformation is seen: the same fit with zero displacement, at the
+stay within 0.1 deg / 3 mm of it: a free rotation about the object's centre looks much like a cantilever's
+bending and took its blame on the development scenes. Whether a deformation is seen: the same fit with zero displacement, at the
 half-resolution level, must be worse by 5 % and the fitted deformation must move the image by more than 0.3 px.
 Map points on the object are still linked, so the localization leaves them out of the camera pose. What it assumes:
 the object is at rest in the reference view (a scene loaded from its first frame is the self-confirming case below,
 not solved). Numbers: `docs/family.md` (the scene family, dense by default, the sparse mode beside it).
 
 Why mapping goes on by default: with the map frozen, the camera leaves the mapped views and its pose error grows
-to 6-25 mm, which the tracker reads as deformation (the 'frozen' rows below: boot theta error 4x larger, the foam
-beam lost on 11 % of the frames). The thesis's behaviour stays available:
+to centimetres, which the tracker reads as deformation (the 'frozen' rows below: boot theta error 5x larger and
+lost on a third of the frames, the foam beam lost on 35 % of the frames). The thesis's behaviour stays available:
 `localization.freeze_map_on_deformation: true`.
+
+These two scenes run the sparse measurements (`tracking.measurements: map_points` in their scene files); they are
+rendered by the model they fit (no independent physics yet: issue 16 keeps them open), so they show the
+mechanics, not the accuracy on unseen scenes (that is `docs/family.md`).
 
 The foam beam's load position (target: median under 0.5 % of the span, at the thesis's 1280 x 720) is weakly
 observable where it matters: the beam rests on two supports, a load near mid-span gives the largest deflection
-and the deflected shape changes slowly with s there, and most tracked points lie near the supports. With the
-measurements above, what limits it is the camera pose: the RGB-D map drifts 3-4 mm while the camera sweeps past
-the beam, and the object's registration does not follow (fed the true camera pose, a development diagnostic and
-not a mode of the system, the same measurements give 1.7 mm median, 7.8 mm p90). So the foam scene also fits a
-bounded translation of the whole object each frame (`tracking.object_shift_m: 0.01`, a nuisance parameter
-marginalised out of the reported covariance): its supports and unloaded parts fix where the beam is relative to
-the camera, and the median falls from 3.0 to about 1.5 mm. It is not for an object whose visible part turns (the
-joint boot's lever: the shift absorbs the rotation, the 'object shift' row). The load at mid-span (s = 0.4 m)
-remains the weak position (about 1-2 cm). At 640 x 480 a pixel covers twice the beam, and there the shift trades
-median for tail (8.2 -> 11.1 mm median, 39.7 -> 32.5 mm p90). The foam's knob rows run with the shift on; with it,
-re-measuring tracks against their first image (`flow anchor`) gives the best foam numbers (1.0 mm median, 6.9 mm
-p90) but biases the boot's alpha_z, so the flow anchor stays off by default.
+and the deflected shape changes slowly with s there, and most tracked points lie near the supports. What limits it
+is the camera pose: the RGB-D map drifts a few mm while the camera sweeps past the beam, and the object's
+placement does not follow. So the foam scene also fits a bounded translation of the whole object each frame
+(`tracking.object_shift_m: 0.01`, a nuisance parameter marginalised out of the reported covariance): its supports
+and unloaded parts fix where the beam is relative to the camera (median 3.2 mm without it, 2.0 mm with it, at a
+longer p90 tail: 9.3 -> 14.6 mm). It is not for an object whose visible part turns (the joint boot's lever: the
+shift absorbs the rotation, the 'object shift' row). The load at mid-span (s = 0.4 m) remains the weak position. At
+640 x 480 a pixel covers twice the beam (9.9 mm median). Re-measuring tracks against their first image (`flow
+anchor`) gives the best boot numbers here (0.20 deg, alpha_z 0.08 deg) but not the best foam median; two scenes
+rendered by their own model do not choose a default (the development family does), so it stays a measured knob.
 """
 
 
