@@ -176,8 +176,9 @@ a coarse search over mu at the coarsest level every frame (a load that jumps lan
 a coarse depth buffer of the samples. Nuisances: an affine brightness (a, b) and a small rigid correction (omega, t)
 of the object (camera drift, placement error). Once a frame at rest has measured that correction, deformed fits
 stay within 0.1 deg / 3 mm of it: a free rotation about the object's centre looks much like a cantilever's
-bending and took its blame on the development scenes. Whether a deformation is seen: the same fit with zero displacement, at the
-half-resolution level, must be worse by 5 % and the fitted deformation must move the image by more than 0.3 px.
+bending and took its blame on the development scenes. Whether a deformation is seen: the same fit with zero
+displacement, at the half-resolution level, must be worse by 5 % and the fitted deformation must move the image by
+more than 0.3 px.
 Map points on the object are still linked, so the localization leaves them out of the camera pose. What it assumes:
 the object is at rest in the reference view (a scene loaded from its first frame is the self-confirming case below,
 not solved). Numbers: `docs/family.md` (the scene family, dense by default, the sparse mode beside it).
