@@ -213,13 +213,18 @@ def write(rows: list[dict], label: str, name: str = "family") -> None:
     def plot(plt):
         fig, ax = plt.subplots(1, 2, figsize=(10, 3.6))
         med = [r["median_err_pct"] for r in rows]
-        ax[0].scatter([r["peak_px"] for r in rows], med, c=[r["contrast"] for r in rows], cmap="viridis")
+        for support, marker in (("cantilever", "^"), ("two_support", "o")):
+            sel = [r for r in rows if r["support"] == support]
+            ax[0].scatter([r["peak_px"] for r in sel], [r["median_err_pct"] for r in sel], marker=marker,
+                          c=[r["contrast"] for r in sel], cmap="viridis", vmin=0, vmax=1, label=support)
+        ax[0].legend(fontsize=8)
         ax[0].set_xscale("log")
+        ax[0].xaxis.set_minor_formatter(plt.NullFormatter())
         ax[0].set_yscale("log")
         ax[0].axhline(1.0, color="k", lw=0.8, ls="--")
         ax[0].set_xlabel("peak image motion (px)")
         ax[0].set_ylabel("median error (% of range)")
-        ax[0].set_title("per scene (colour: texture contrast)", fontsize=9)
+        ax[0].set_title("per scene (colour: texture contrast 0-1)", fontsize=9)
         ax[1].hist(np.clip(med, 0, 50), bins=25, color="tab:blue")
         ax[1].set_xlabel("median error (% of range, clipped at 50)")
         ax[1].set_ylabel("scenes")
