@@ -295,9 +295,9 @@ class DenseAligner:
 
     def _visible_rows(self, L: Level, mu: Array | None, rigid: Array, T_cw: Array) -> NDArray[np.int64]:
         x = L.x if mu is None else L.x + L.view.field.evaluate(mu)
-        R = G.exp_so3(rigid[:3]) @ self.T_mo[:3, :3]
-        X = (x @ self.T_mo[:3, :3].T + self.T_mo[:3, 3] - self.c) @ G.exp_so3(rigid[:3]).T + self.c + rigid[3:]
-        return np.flatnonzero(self.visible(T_cw, X, L.normal @ R.T))
+        Rr = G.exp_so3(rigid[:3])
+        X = (x @ self.T_mo[:3, :3].T + self.T_mo[:3, 3] - self.c) @ Rr.T + self.c + rigid[3:]
+        return np.flatnonzero(self.visible(T_cw, X, L.normal @ (Rr @ self.T_mo[:3, :3]).T))
 
     # -- the solve ------------------------------------------------------------------------------------------
     def _residuals(self, lvl: int, img: NDArray[np.float32], rows: NDArray[np.int64], f: _Fit,

@@ -120,6 +120,20 @@ class ObjectTrackers:
         self.trackers.pop(oid, None)  # built again at the registered pose
         return ""
 
+    @property
+    def needs_depth(self) -> bool:
+        """Whether a registered object still waits for its depth views (afterwards depth is not read)."""
+        return any(o["anchor"]["kind"] == "registration" and o["id"] not in self.registrations for o in self.objects)
+
+    def focus(self, T_wc: np.ndarray | None) -> list[tuple[int, np.ndarray]]:
+        """(object index, image polygon) of every object in view from camera pose ``T_wc``: the regions whose
+        features the localization guarantees a share in the next frame (see
+        :meth:`DeformableTracker.screen_region`)."""
+        if T_wc is None:
+            return []
+        regions = ((k, tr.screen_region(T_wc)) for k, tr in enumerate(self.trackers.values()))
+        return [(k, poly) for k, poly in regions if poly is not None]
+
     def feedback(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """What the localization needs after a frame: :func:`deformable_feedback` of every tracker."""
         return deformable_feedback(self.trackers.values())

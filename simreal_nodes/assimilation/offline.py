@@ -58,8 +58,7 @@ class Pipeline:
         out = self.objects.update(T_wc, ids, P, uv, bgr, depth)
         # the objects' image regions for the next frame's features (a frame late, like the feedback; the camera
         # moves little in a frame and the polygons are hulls of the whole surface)
-        self.focus = [] if T_wc is None else [p for p in (tr.screen_region(T_wc) for tr in self.trackers.values())
-                                              if p is not None]
+        self.focus = [poly for _, poly in self.objects.focus(T_wc)]
         if self.freeze_map and any(e.deforming for e in out.values()):
             self.loc.set_localization_only(True)
         # points on a tracked object leave the pose estimate as soon as they are linked (static/deformable

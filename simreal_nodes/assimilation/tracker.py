@@ -133,6 +133,7 @@ class DeformableTracker:
         self.outlier_ids = np.zeros(0, np.int64)  # map points the last fit rejected (their image tracks slid)
         self._rms_ref: float | None = None  # running residual RMS of good fits: what "fits badly" is measured against
         self._frames = 0  # frames solved (a periodic global restart every 30th)
+        self._outline: tuple[np.ndarray, lm.Displacement] | None = None  # screen_region's nodes and their view
         self.dense: DenseAligner | None = None
         if self.cfg.measurements == "dense":
             if self.rigid_z:
@@ -259,8 +260,9 @@ class DeformableTracker:
         X = self.model.points[cand].astype(np.float64)
         state = self.model_state
         if self._was_deforming:
-            dX = self._disp_fn(cand[:, None], np.ones((len(cand), 1)))(state.mu)[0]
-            X = X + dX @ state.rotation().T
+            if self._outline is None or len(self._outline[0]) != len(cand):  # the outline's view, built once
+                self._outline = (cand, self._disp_fn(cand[:, None], np.ones((len(cand), 1))))
+            X = X + self._outline[1](state.mu)[0] @ state.rotation().T
         Xc = G.transform(G.inv(np.asarray(T_wc, np.float64)) @ self.T_map_obj, X)
         Xc = Xc[Xc[:, 2] > 0.05]
         if len(Xc) < 3:

@@ -76,6 +76,7 @@ def test_object_trackers_wait_for_the_registration_then_track_from_it(scene3):
     objs = ObjectTrackers(scene["objects"], {"beam": s["model"]}, registration=CFG)
     objs.set_camera(seq["cam"])
     assert objs.update(None)["beam"].reason == "waiting for registration: no camera pose yet"
+    assert objs.needs_depth
     for i in range(9):
         est = objs.update(seq["T"][i], depth=seq["depth"][i])["beam"]
         if i < 8:
@@ -84,3 +85,6 @@ def test_object_trackers_wait_for_the_registration_then_track_from_it(scene3):
     assert mm < 2.0 and deg < 0.5
     assert np.allclose(objs.trackers["beam"].T_map_obj, objs.registrations["beam"].T_map_obj)
     assert est.reason != "" and not est.reason.startswith("waiting")  # tracked now (no map points given here)
+    assert not objs.needs_depth  # placed: depth is not read any more
+    (k, poly), = objs.focus(seq["T"][8])  # the beam's image region, for the localization's feature budget
+    assert k == 0 and len(poly) >= 3 and objs.focus(None) == []

@@ -103,7 +103,7 @@ class TrackerNode(SimrealNode):
         bgr = depth = None
         try:
             bgr = images.bgr8_of(frame["image"]) if "image" in frame and self.need_image else None
-            depth = images.depth_metres_of(frame["depth"]) if "depth" in frame else None
+            depth = images.depth_metres_of(frame["depth"]) if "depth" in frame and self.core.needs_depth else None
         except ImageFormatError as e:
             self.drop(head.stamp, f"malformed image: {e}")
             return
@@ -133,9 +133,8 @@ class TrackerNode(SimrealNode):
             ids, P, drop = self.core.feedback()
             if len(ids):
                 self.pub_deformable.publish(cloud_msg(P, head, self.map_frame, {"id": ids, "drop": drop}))
-            for k, tr in enumerate(self.core.trackers.values()) if T_wc is not None else ():
-                if (poly := tr.screen_region(T_wc)) is not None:
-                    self.pub_focus.publish(focus_msg(poly, k, head, self.camera_frame))
+            for k, poly in self.core.focus(T_wc):
+                self.pub_focus.publish(focus_msg(poly, k, head, self.camera_frame))
         if deforming and self.freeze_map and not self._loc_only_requested and self.loc_client.service_is_ready():
             self.loc_client.call_async(SetBool.Request(data=True))
             self._loc_only_requested = True
