@@ -115,6 +115,8 @@ def _at_level(uv: Array, level: int) -> Array:
 
 def bilinear(img: NDArray[np.float32], uv: Array) -> NDArray[np.float32]:
     """Bilinear samples of ``img`` at (N, 2) pixel coordinates; outside the image: NaN."""
+    if uv.size == 0:
+        return np.zeros(0, np.float32)
     m = np.ascontiguousarray(uv.reshape(-1, 1, 2), np.float32)
     v = cv2.remap(img, m, None, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,  # type: ignore[call-overload]
                   borderValue=np.nan)

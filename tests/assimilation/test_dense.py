@@ -129,3 +129,22 @@ def test_tracker_dense_mode_takes_a_reference_then_measures(model):
     assert abs(e1.values[0] - 0.7) < 0.02
     e2 = tr.update(pose(0.02), image_bgr=None)
     assert e2.state == EstimateState.LOST and "image" in e2.reason
+
+
+def test_hostile_frames_are_flagged_and_the_tracker_recovers(model):
+    """A black, a saturated and a pure-noise frame give a flagged estimate, a view without the object gives LOST
+    with its reason (it once crashed on zero visible samples), and the next good frame is measured again."""
+    tex = texture(0.5)
+    bgr = lambda img: cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)  # noqa: E731
+    tr = DeformableTracker(model, np.eye(4), {"s": {"mode": "tracked", "initial": 0.5}}, CAM,
+                           TrackerConfig(measurements="dense"))
+    tr.update(pose(), image_bgr=bgr(render(tex, pose(), 0.0)))
+    noise = np.random.default_rng(0).integers(0, 255, (CAM.height, CAM.width, 3)).astype(np.uint8)
+    for img in (np.zeros_like(noise), np.full_like(noise, 255), noise):
+        e = tr.update(pose(0.02), image_bgr=img)
+        assert e.state == EstimateState.LOW_CONFIDENCE and np.all(np.isfinite(e.values)), e.reason
+    away = G.look_at([2.0, 2.0, 0.35], [2.0, 2.5, 0.0], up=(0, 0, 1))
+    e = tr.update(away, image_bgr=bgr(render(tex, pose(), 0.0)))
+    assert e.state == EstimateState.LOST and "samples visible" in e.reason
+    e = tr.update(pose(0.02), image_bgr=bgr(render(tex, pose(0.02), 0.6)))
+    assert e.state == EstimateState.OK and abs(e.values[0] - 0.6) < 0.02
