@@ -28,6 +28,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import yaml
 
 from benchmarks.common import RESULTS, save
 from simreal_nodes import geometry as G
@@ -50,8 +51,9 @@ def parse_seeds(text: str) -> list[int]:
 
 
 def run_scene(seed: int, width: int = 640, height: int = 480, preloaded: bool = False,
-              measurements: str | None = None) -> dict:
-    """One scene through the offline pipeline; ``measurements`` overrides the scene's ``tracking.measurements``."""
+              measurements: str | None = None, tracking: dict | None = None) -> dict:
+    """One scene through the offline pipeline; ``measurements`` overrides the scene's ``tracking.measurements``,
+    ``tracking`` any other key of its ``tracking`` block (a knob's trade)."""
     t0 = time.perf_counter()
     name = f"family-{seed}" + ("-preloaded" if preloaded else "")
     seq = sequence.__wrapped__(name, width, height, fps=FPS)  # not cached: one scene in memory at a time
@@ -61,6 +63,7 @@ def run_scene(seed: int, width: int = 640, height: int = 480, preloaded: bool = 
     doc = copy.deepcopy(sc.scene_yaml(sc))
     if measurements:
         doc["objects"][0]["tracking"]["measurements"] = measurements
+    doc["objects"][0]["tracking"].update(tracking or {})
     scene = build_spec_models(validate_scene(doc, sc.name, "."))
     pipe = Pipeline(scene, seq["cam"])
     truth, est, states, reasons, step_ms, cam_err, solve_ms = [], [], [], [], [], [], []
@@ -240,6 +243,8 @@ def write(rows: list[dict], label: str, name: str = "family") -> None:
 TABLES = (("family", "Held-out seeds (the accuracy this project reports)"),
           ("family_dev", "Development seeds (the only ones defaults may be chosen on)"),
           ("family_dev_map_points", "Development seeds, sparse measurements (`--measurements map_points`) beside"),
+          ("family_dev_dense_step_px_3", "Knob: dense samples 3 px apart, not 1.5 (`--tracking dense_step_px=3`)"),
+          ("family_dev_dense_rigid_false", "Knob: no rigid correction (`--tracking dense_rigid=false`)"),
           ("family_preloaded", "Diagnostic: the load on from the first frame (development seeds)"))
 
 
@@ -318,6 +323,8 @@ def main() -> None:
                     help="the registration step alone on each scene's first frames: results/family_registration.*")
     ap.add_argument("--measurements", choices=("map_points", "dense"),
                     help="override the scenes' tracking.measurements (results name gets the suffix)")
+    ap.add_argument("--tracking", action="append", default=[], metavar="KEY=VALUE",
+                    help="override a key of the scenes' tracking block (YAML value; results name gets the suffix)")
     ap.add_argument("--jobs", type=int, default=1, help="scenes run in parallel processes (one core each)")
     a = ap.parse_args()
     seeds = parse_seeds(a.seeds)
@@ -332,6 +339,9 @@ def main() -> None:
     name = "family_preloaded" if a.preloaded else ("family" if held_out else "family_dev")
     if a.measurements:
         name += f"_{a.measurements}"
+    pairs = [t.partition("=")[::2] for t in a.tracking]
+    knobs = {k: yaml.safe_load(v) for k, v in pairs}
+    name += "".join(f"_{k}_{v.lower()}" for k, v in pairs)
     if a.report:
         doc = json.loads((RESULTS / f"{name}.json").read_text())
         curves = doc.get("curves", {})
@@ -341,11 +351,12 @@ def main() -> None:
     label = ("held-out seeds" if held_out else "development seeds") + f" {a.seeds}"
     label += ", load on from the first frame" if a.preloaded else ""
     label += f", measurements {a.measurements}" if a.measurements else ""
+    label += "".join(f", tracking.{k}: {v}" for k, v in knobs.items())
     rows: list[dict] = []
     if a.jobs > 1:  # the spawned workers inherit it before numpy loads its BLAS
         for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
             os.environ[var] = "1"
-    job = functools.partial(run_scene, preloaded=a.preloaded, measurements=a.measurements)
+    job = functools.partial(run_scene, preloaded=a.preloaded, measurements=a.measurements, tracking=knobs)
     with multiprocessing.get_context("spawn").Pool(a.jobs, initializer=_one_thread) if a.jobs > 1 else \
             contextlib.nullcontext() as pool:
         results = pool.imap(job, seeds) if pool is not None else map(job, seeds)
