@@ -270,6 +270,17 @@ class DeformableTracker:
         uv = self.cam.project(Xc).astype(np.float32)
         return cv2.convexHull(uv)[:, 0].astype(np.float64)
 
+    def _link_observed(self, T_wc: np.ndarray, ids: np.ndarray, P_map: np.ndarray,
+                       uv: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """This frame's observed map points with finite positions and pixels, the new ones linked (from their
+        pixels' viewing rays): (ids, map positions (N, 3), raw pixels (N, 2))."""
+        P = np.asarray(P_map, dtype=np.float64).reshape(-1, 3)
+        q = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
+        good = np.all(np.isfinite(P), axis=1) & np.all(np.isfinite(q), axis=1)
+        ids, P, q = np.asarray(ids)[good], P[good], q[good]
+        self.link_points(ids, P, rays=self.viewing_rays(T_wc, q))
+        return ids, P, q
+
     # -- measurements ------------------------------------------------------------------------------------------
     def _map_point_measurements(self, ids: np.ndarray, P_map: np.ndarray, uv: np.ndarray) -> Measurements | None:
         sel = [k for k, pid in enumerate(ids) if int(pid) in self.links]
@@ -323,15 +334,10 @@ class DeformableTracker:
         if self.dense is not None:
             return self._update_dense(est, T_wc, ids, P_map, uv, image_bgr)
         if self.cfg.measurements == "map_points":
-            if ids is None or len(ids) == 0:
+            if ids is None or len(ids) == 0 or P_map is None or uv is None:
                 est.state, est.reason = EstimateState.LOST, "no measurements: no map points observed on the object"
                 return est
-            ids = np.asarray(ids)
-            P_map = np.asarray(P_map, dtype=np.float64).reshape(-1, 3)
-            uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
-            good = np.all(np.isfinite(P_map), axis=1) & np.all(np.isfinite(uv), axis=1)
-            ids, P_map, uv = ids[good], P_map[good], uv[good]
-            self.link_points(ids, P_map, rays=self.viewing_rays(T_wc, uv))
+            ids, P_map, uv = self._link_observed(T_wc, ids, P_map, uv)
             meas = self._map_point_measurements(ids, P_map, uv)
             found = len(ids)
         else:
@@ -434,10 +440,7 @@ class DeformableTracker:
 
         assert self.dense is not None
         if ids is not None and len(ids) and P_map is not None and uv is not None:
-            P = np.asarray(P_map, np.float64).reshape(-1, 3)
-            q = np.asarray(uv, np.float64).reshape(-1, 2)
-            good = np.all(np.isfinite(P), axis=1) & np.all(np.isfinite(q), axis=1)
-            self.link_points(np.asarray(ids)[good], P[good], rays=self.viewing_rays(T_wc, q[good]))
+            self._link_observed(T_wc, ids, P_map, uv)
         if image_bgr is None:
             est.state, est.reason = EstimateState.LOST, "measurements 'dense' need the image"
             return est
