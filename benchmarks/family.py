@@ -1,11 +1,14 @@
 """Deformable tracking on the scene family (issue 16): scenes drawn at random from wide ranges, rendered from an
 independent full-order truth (never the tracked model), with held-out seeds that no default was tuned on.
 
-    ./run bench family                       # the held-out seeds 1000-1099 (hours on 2 cores)
+    ./run bench family                       # the held-out seeds 1000-1099 (45 min with --jobs 2 on 2 cores)
     python -m benchmarks.family --seeds 0-9  # development seeds (tuning happens on 0-49 only): results/family_dev.*
     python -m benchmarks.family --report [--seeds 0-9]   # rewrite a table and plot from its JSON
     python -m benchmarks.family --seeds 0-4 --preloaded   # the load on from the first frame (no unloaded mapping)
     python -m benchmarks.family --seeds 0-9 --registration  # the registration step alone: results/family_registration.*
+    python -m benchmarks.family --seeds 0-9 --measurements map_points  # the sparse mode beside: *_map_points.*
+    python -m benchmarks.family --seeds 0-4 --tracking dense_step_px=3  # a knob's trade: *_dense_step_px_3.*
+    ... --jobs 2                             # scenes in 2 processes (one core each)
 
 Per scene: the load-position error over the loaded frames (median, p90, mean, in % of the load's range), the share
 of loaded frames with an estimate of state OK, the scene's model error (how far the reduced model is from the

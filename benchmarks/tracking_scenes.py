@@ -179,7 +179,9 @@ stay within 0.1 deg / 3 mm of it: a free rotation about the object's centre look
 bending and took its blame on the development scenes. Whether a deformation is seen: the same fit with zero
 displacement, at the half-resolution level, must be worse by 5 % and the fitted deformation must move the image by
 more than 0.3 px.
-Map points on the object are still linked, so the localization leaves them out of the camera pose. What it assumes:
+Map points on the object are still linked, so the localization leaves them out of the camera pose. Scene keys:
+`tracking.dense_step_px` (sample spacing, 1.5 px) and `tracking.dense_rigid` (the rigid correction, on); their
+trades are measured on development seeds in `docs/family.md`'s knob tables. What it assumes:
 the object is at rest in the reference view (a scene loaded from its first frame is the self-confirming case below,
 not solved). Numbers: `docs/family.md` (the scene family, dense by default, the sparse mode beside it).
 
