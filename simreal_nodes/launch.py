@@ -1,7 +1,8 @@
 """`simreal launch SCENE.yaml`: start only the nodes a scene requires, one OS process each.
 
 There is no ros2 launch on PyPI, so this is a small process supervisor: each node runs as
-``python -m <module> --ros-args --params-file <generated.yaml> [-r from:=to ...]`` (the module of its
+``python -m <module> --ros-args -r __node:=NAME [-r __ns:=NAMESPACE] --params-file <generated.yaml> [-r from:=to ...]``
+(the module of its
 ``simreal-NAME`` entry in pyproject.toml's ``[project.scripts]``, :func:`node_modules`), its output is
 prefixed with its name, a node that exits unexpectedly is reported and restarted (up to
 ``respawn`` times), and SIGINT / SIGTERM stop every node cleanly (SIGINT, then SIGTERM, then SIGKILL).
@@ -70,10 +71,14 @@ class _Proc:
 
 
 class Launcher:
-    """Start, watch and stop a set of node processes."""
+    """Start, watch and stop a set of node processes.
+
+    ``namespace`` (e.g. ``/cell2``): every node is started in it, so node names and the services they address by
+    relative names (the tracker's call to ``localization/set_localization_only``) do not collide with a second
+    graph; the data topics are absolute (:mod:`simreal_nodes.scene.graph`) and move only by ``remaps``."""
 
     def __init__(self, nodes: list[NodeSpec], remaps: dict[str, str] | None = None, respawn: int = 2,
-                 env: dict | None = None, echo=print, log_dir: str | Path | None = None):
+                 env: dict | None = None, echo=print, log_dir: str | Path | None = None, namespace: str = ""):
         self.nodes = nodes
         self.remaps = remaps or {}
         self.respawn = respawn
@@ -94,9 +99,11 @@ class Launcher:
                 raise SimrealError(f"node '{spec.name}' has no entry {NODE_SCRIPT_PREFIX}{spec.name} in the "
                                    f"[project.scripts] of {PYPROJECT}")
             pfile = Path(self._tmp.name) / f"{spec.name}.params.yaml"
-            pfile.write_text(yaml.safe_dump({spec.name: {"ros__parameters": spec.parameters}}))
-            cmd = [sys.executable, "-m", modules[spec.name], "--ros-args", "-r", f"__node:={spec.name}",
-                   "--params-file", str(pfile)]
+            fqn = f"{namespace.rstrip('/')}/{spec.name}" if namespace else spec.name  # a params file names the node
+            pfile.write_text(yaml.safe_dump({fqn: {"ros__parameters": spec.parameters}}))
+            cmd = [sys.executable, "-m", modules[spec.name], "--ros-args", "-r", f"__node:={spec.name}"]
+            cmd += ["-r", f"__ns:={namespace}"] if namespace else []
+            cmd += ["--params-file", str(pfile)]
             for a, b in self.remaps.items():
                 cmd += ["-r", f"{a}:={b}"]
             self.procs.append(_Proc(spec, cmd))

@@ -38,8 +38,9 @@ class _StopFlag:
 
 def replay(bag: str, scene_file: str, rate: float = 1.0, lossless: bool = False, record: str | None = None,
            storage: str = "mcap", launch: bool = True, frame_timeout_s: float = 30.0, ready_timeout_s: float = 90.0,
-           metrics_json: str | None = None, echo=print, extra_params: dict | None = None):
-    """Replay ``bag`` into the graph of ``scene_file``; returns (PlayStats, BagReport, recorder counts)."""
+           metrics_json: str | None = None, echo=print, extra_params: dict | None = None, namespace: str = ""):
+    """Replay ``bag`` into the graph of ``scene_file``; returns (PlayStats, BagReport, recorder counts).
+    ``namespace``: the nodes' namespace (:class:`~simreal_nodes.launch.Launcher`)."""
     scene = load_scene(scene_file)
     if launch:
         build_spec_models(scene)  # before the nodes start: they find the built spec:NAME models in the cache
@@ -64,7 +65,7 @@ def replay(bag: str, scene_file: str, rate: float = 1.0, lossless: bool = False,
     inputs = {t: topics[t] for t in wanted if t and t in topics}
     hold_for = tuple(t for t in (cam["depth"], right, cam["right_camera_info"]) if t and t in topics)
 
-    launcher = Launcher(nodes, echo=echo) if launch else None
+    launcher = Launcher(nodes, echo=echo, namespace=namespace) if launch else None
     env = ros_environment()
     import os
     os.environ.setdefault("FASTRTPS_DEFAULT_PROFILES_FILE", env["FASTRTPS_DEFAULT_PROFILES_FILE"])
