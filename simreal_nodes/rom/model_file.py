@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
 import time
 from pathlib import Path
 from typing import Any
@@ -42,7 +43,7 @@ def save_model(model: ReducedModel, path: str | Path) -> str:
     """Write ``model``; returns its id (name@sha256 prefix of the file)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(path.suffix + ".partial")
+    tmp = path.with_suffix(f"{path.suffix}.{os.getpid()}.partial")  # two processes may build the same model
     with h5py.File(tmp, "w") as f:
         f.attrs.update(format=FORMAT, format_version=FORMAT_VERSION, name=model.name, description=model.description,
                        created=time.strftime("%Y-%m-%dT%H:%M:%S%z"), simreal_version=__version__)
