@@ -53,11 +53,18 @@ def _write(path, content):
 
 @pytest.mark.parametrize("target", fuzz.TARGETS)
 def test_a_few_hundred_inputs_each_end_in_one_outcome(seed_files, target, tmp_path):
-    recs = fuzz.run(target, 0, 200, tmp_path, hang_s=10.0)
+    recs = fuzz.run(target, 0, 200, tmp_path, hang_s=5.0)
     assert sorted(r["case"] for r in recs) == list(range(200))
-    rows, _messages = fuzz.summary(recs)
+    rows, messages = fuzz.summary(recs)
     total = next(r for r in rows if r["target"] == target and r["mutation"] == "all")
     assert total["inputs"] == 200 and total["rejected"] > 50
     assert total["accepted"] + total["rejected"] + total["crashes"] + total["hangs"] == 200
+    # every damaged input is rejected with one line naming it, none crashes (found before: invalid UTF-8 in a
+    # scene; KeyError / RuntimeError from h5py on corrupt object headers, int() of an odd format_version, a group
+    # where a dataset belongs, text where numbers belong)
+    assert total["crashes"] == 0, messages[target]["crashes"]
+    # seed 0's model case 34 (a zeroed block) makes HDF5 loop for ever reading the root's attributes, inside its C
+    # library: seen as a hang (the worker is killed after hang_s), left open
+    assert total["hangs"] <= (1 if target == "model" else 0)
     truncated = [r for r in recs if r["mutation"] == "truncate"]
     assert truncated and all(r["outcome"] == "rejected" for r in truncated if target == "model")  # HDF5: no tail spare

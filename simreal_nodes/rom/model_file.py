@@ -19,10 +19,12 @@ some fields only and for the first ``n_modes`` modes only (read by slicing, not 
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import os
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -104,15 +106,28 @@ def _open(path: Path) -> h5py.File:
     except OSError as e:
         raise ModelFileError(f"{path} is not a readable HDF5 file (truncated or corrupt?): {e}") from None
     try:
-        if f.attrs.get("format") != FORMAT:
-            raise ModelFileError(f"{path} is not a simreal model file (format attribute: {f.attrs.get('format')!r})")
-        v = int(f.attrs.get("format_version", -1))
+        with _as_model_error(path):
+            if f.attrs.get("format") != FORMAT:
+                raise ModelFileError(f"{path} is not a simreal model file (format attribute: "
+                                     f"{f.attrs.get('format')!r})")
+            v = int(f.attrs.get("format_version", -1))
         if v > FORMAT_VERSION or v < 1:
             raise ModelFileError(f"{path} has model format version {v}; this simreal reads version {FORMAT_VERSION}")
     except ModelFileError:
         f.close()
         raise
     return f
+
+
+@contextlib.contextmanager
+def _as_model_error(path: Path) -> Iterator[None]:
+    """What h5py, json or numpy raise on a file whose structure is damaged or not ours (a corrupt object header, a
+    group where a dataset belongs, text where numbers belong) becomes a ModelFileError naming the file: the file is
+    at fault, and the user gets one line instead of a traceback (found by ``benchmarks/fuzz.py``)."""
+    try:
+        yield
+    except (OSError, KeyError, RuntimeError, TypeError, ValueError, AttributeError, IndexError) as e:
+        raise ModelFileError(f"{path}: not a valid model file ({type(e).__name__}: {e})") from None
 
 
 def _get(f: h5py.Group, key: str, path: Path) -> h5py.Group | h5py.Dataset:
@@ -145,7 +160,7 @@ def _axes(f: h5py.File, path: Path) -> list[Axis]:
 def read_header(path: str | Path) -> dict[str, Any]:
     """Name, parameters, fields and rigid parameters, without reading modes (cheap; for scene checks)."""
     path = Path(path)
-    with _open(path) as f:
+    with _open(path) as f, _as_model_error(path):
         axes = _axes(f, path)
         fields = list(_get(f, "fields", path).keys())
         meta = _get(f, "meta", path)
@@ -160,7 +175,7 @@ def load_model(path: str | Path, fields: list[str] | tuple[str, ...] | None = No
                n_modes: int | None = None, mesh: bool = True) -> ReducedModel:
     """Read and validate a model. ``fields``: only these (default all); ``n_modes``: only the first modes."""
     path = Path(path)
-    with _open(path) as f:
+    with _open(path) as f, _as_model_error(path):
         name = str(f.attrs.get("name", path.stem))
         axes = _axes(f, path)
         pts = _read(_get(f, "mesh/points", path), path)

@@ -308,6 +308,10 @@ def load_scene(path: str | Path) -> dict:
         text = path.read_text()
     except FileNotFoundError:
         raise SceneError(f"scene file not found: {path}") from None
+    except OSError as e:
+        raise SceneError(f"{path}: cannot read the scene file: {e.strerror}") from None
+    except UnicodeDecodeError as e:
+        raise SceneError(f"{path}: not UTF-8 text: {e}") from None
     try:
         doc = yaml.safe_load(text)
     except yaml.YAMLError as e:
