@@ -39,6 +39,7 @@ from simreal_nodes.rom.separated import Axis, SeparatedField
 FORMAT = "simreal-model"
 FORMAT_VERSION = 1
 CELL_TYPES = {"tet4": 4, "hex8": 8, "tri3": 3, "quad4": 4}
+MAX_EXPANSION = 100  # a dataset over 64 MiB may declare at most this times the bytes the file stores of it
 
 
 def save_model(model: ReducedModel, path: str | Path) -> str:
@@ -137,7 +138,16 @@ def _get(f: h5py.Group, key: str, path: Path) -> h5py.Group | h5py.Dataset:
 
 
 def _read(ds: h5py.Dataset, path: Path, sel: Any = ()) -> Any:
-    """The dataset's value (array or scalar, as stored; h5py ships no types), ``sel`` an h5py selection."""
+    """The dataset's value (array or scalar, as stored; h5py ships no types), ``sel`` an h5py selection.
+
+    A dataset that declares far more than the file stores of it is refused before anything is allocated: a damaged
+    or hostile header must not make a reader allocate (and HDF5 fill) gigabytes. Compression shrinks real modes a
+    few times; :data:`MAX_EXPANSION` leaves room for far more."""
+    declared = int(ds.size or 0) * ds.dtype.itemsize
+    stored = ds.id.get_storage_size()
+    if declared > 1 << 26 and declared > MAX_EXPANSION * stored:
+        raise ModelFileError(f"{path}: '{ds.name}' declares shape {ds.shape} ({declared / 2**30:.1f} GiB) but the "
+                             f"file stores {stored} bytes of it (corrupt file?)")
     try:
         return ds[sel] if sel != () else ds[()]
     except Exception as e:  # noqa: BLE001 - h5py raises OSError/KeyError/RuntimeError on corrupt data

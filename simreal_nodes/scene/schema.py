@@ -269,8 +269,9 @@ def _check_parameters(obj: dict, i: int, source: str, header: dict | None) -> No
 
 
 def build_spec_models(scene: dict, progress=None) -> dict:
-    """Build the model of every ``spec:NAME`` object into the cache (once; again when its spec changed) and check
-    the object's parameter names against it; returns ``scene`` (its ``objects[].model`` already name these files).
+    """Build the model of every ``spec:NAME`` object into the cache (once; again when its spec or the builders' code
+    changed: :func:`~simreal_nodes.rom.build.cached_model`) and check the object's parameter names against it;
+    returns ``scene`` (its ``objects[].model`` already name these files).
 
     Called by what starts nodes (launch, replay, the demo) or uses the models in-process (evaluation, offline
     pipelines, benchmarks) before anything reads a model file; never by validation."""
