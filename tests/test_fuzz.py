@@ -68,3 +68,12 @@ def test_a_few_hundred_inputs_each_end_in_one_outcome(seed_files, target, tmp_pa
     assert total["hangs"] <= (1 if target == "model" else 0)
     truncated = [r for r in recs if r["mutation"] == "truncate"]
     assert truncated and all(r["outcome"] == "rejected" for r in truncated if target == "model")  # HDF5: no tail spare
+
+
+@pytest.mark.parametrize("target,case", [("model", 950), ("scene", 1106), ("scene", 4227)])
+def test_inputs_a_longer_run_found_crashing_are_rejected(seed_files, target, case, tmp_path):
+    """From ``python -m benchmarks.fuzz --cases 5000``: format_version = inf (int() overflowed), a model path with a
+    NUL character, one too long for the file system."""
+    _d, files = seed_files
+    rec = fuzz.run_case(target, 0, case, files, tmp_path)
+    assert rec["outcome"] == "rejected", rec

@@ -127,7 +127,7 @@ def _as_model_error(path: Path) -> Iterator[None]:
     at fault, and the user gets one line instead of a traceback (found by ``benchmarks/fuzz.py``)."""
     try:
         yield
-    except (OSError, KeyError, RuntimeError, TypeError, ValueError, AttributeError, IndexError) as e:
+    except (OSError, KeyError, RuntimeError, TypeError, ValueError, AttributeError, IndexError, OverflowError) as e:
         raise ModelFileError(f"{path}: not a valid model file ({type(e).__name__}: {e})") from None
 
 
@@ -143,6 +143,8 @@ def _read(ds: h5py.Dataset, path: Path, sel: Any = ()) -> Any:
     A dataset that declares far more than the file stores of it is refused before anything is allocated: a damaged
     or hostile header must not make a reader allocate (and HDF5 fill) gigabytes. Compression shrinks real modes a
     few times; :data:`MAX_EXPANSION` leaves room for far more."""
+    if not isinstance(ds, h5py.Dataset):
+        raise ModelFileError(f"{path}: '{ds.name}' is a group where a dataset belongs (corrupt file?)")
     declared = int(ds.size or 0) * ds.dtype.itemsize
     stored = ds.id.get_storage_size()
     if declared > 1 << 26 and declared > MAX_EXPANSION * stored:
