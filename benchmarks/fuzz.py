@@ -330,10 +330,13 @@ def run(target: str, seed: int, cases: int, workdir: Path, hang_s: float = 10.0)
         got = [r for r in map(json.loads, log.read_text().splitlines()) if "ready" not in r] if log.exists() else []
         out += got
         if len(got) < cases - first:
+            case = first + len(got)
             why = {"outcome": "hang", "error": "hang", "message": f"no answer in {hang_s:.0f} s"} if hung else \
                 {"outcome": "crash", "error": f"process exit {p.returncode}", "message": err.read_text()[-240:]}
-            out.append({"target": target, "case": first + len(got), "mutation": "?", "ms": 0.0, "site": "worker",
-                        **why})
+            path, what = make_input(target, seed, case, seeds(workdir), workdir)  # what the input was
+            path.unlink()
+            out.append({"target": target, "case": case, "mutation": what.split(": ", 1)[1].split(" ")[0],
+                        "what": what, "ms": 0.0, "site": "worker", **why})
             first += len(got) + 1
         else:
             first = cases
@@ -400,7 +403,8 @@ def main(argv: list[str] | None = None) -> None:
              "Accepted inputs are mostly mutations the loader cannot tell from valid content (a flipped bit inside "
              "a stored number, a scene value changed to another valid one).\n\n" + "\n".join(lines))
     save("fuzz", rows, COLUMNS, "Hostile input to the model-file and scene loaders", notes,
-         extra={"seed": a.seed, "cases_per_loader": a.cases, "messages": messages,
+         extra={"seed": a.seed, "cases_per_loader": a.cases,
+                "messages": {t: {k: v[:100] for k, v in m.items()} for t, m in messages.items()},
                 "crash_cases": [r for r in records if r["outcome"] in ("crash", "hang")][:200]})
 
 
