@@ -1,11 +1,10 @@
 """`simreal launch SCENE.yaml`: start only the nodes a scene requires, one OS process each.
 
 There is no ros2 launch on PyPI, so this is a small process supervisor: each node runs as
-``python -m <module> --ros-args -r __node:=NAME [-r __ns:=NAMESPACE] --params-file <generated.yaml> [-r from:=to ...]``
-(the module of its
-``simreal-NAME`` entry in pyproject.toml's ``[project.scripts]``, :func:`node_modules`), its output is
-prefixed with its name, a node that exits unexpectedly is reported and restarted (up to
-``respawn`` times), and SIGINT / SIGTERM stop every node cleanly (SIGINT, then SIGTERM, then SIGKILL).
+``python -m <module> --ros-args -r __node:=NAME [-r __ns:=NAMESPACE] --params-file <generated.yaml> [-r from:=to]``
+(the module of its ``simreal-NAME`` entry in pyproject.toml's ``[project.scripts]``, :func:`node_modules`), its
+output is prefixed with its name, a node that exits unexpectedly is reported and restarted (up to ``respawn``
+times), and SIGINT / SIGTERM stop every node cleanly (SIGINT, then SIGTERM, then SIGKILL).
 """
 
 from __future__ import annotations
