@@ -6,10 +6,11 @@ and, for glued-dot measurements, the image of the same stamp, runs the ROS-free
 (ModelParameters: values, covariance, residual, inliers, state and reason). Once deformation appears
 (if the scene's ``localization.freeze_map_on_deformation``) it asks the localization node to stop mapping
 (``set_localization_only``). An object with ``anchor: registration`` is placed from the depth images (taken
-while it waits for them). After every frame it tells the localization which map points lie on the
-object, where the current estimate predicts them and which the fit rejected
-(``/simreal/localization/deformable_points``, PointCloud2 x, y, z, id, drop in the map frame) and where each
-object projects in the image (``/simreal/localization/focus``, PolygonInstanceStamped, id = the object's index).
+while it waits for them); dense measurements on an RGB-D camera read the depth of their reference view.
+After every frame it tells the localization which map points lie on the object, where the current estimate
+predicts them and which the fit rejected (``/simreal/localization/deformable_points``, PointCloud2 x, y, z, id,
+drop in the map frame) and where each object projects in the image (``/simreal/localization/focus``,
+PolygonInstanceStamped, id = the object's index).
 """
 
 from __future__ import annotations
@@ -52,8 +53,8 @@ class TrackerNode(SimrealNode):
         self.core = ObjectTrackers(self.objects, models, **overrides)
         keys = graph.tracker_inputs(self.scene)
         self.need_image = any(o["tracking"]["measurements"] in graph.IMAGE_MEASUREMENTS for o in self.objects)
-        registers = any(o["anchor"]["kind"] == "registration" for o in self.objects)
-        self.sync = StampSync(keys, ("depth",) if registers else (), wait=2)
+        reads_depth = graph.tracker_reads_depth(self.scene)
+        self.sync = StampSync(keys, ("depth",) if reads_depth else (), wait=2)
         q = data_qos(self.lossless)
         self.pubs = {o["id"]: self.create_publisher(ModelParameters, graph.params_topic(o["id"]), reliable_qos(50))
                      for o in self.objects}
@@ -68,7 +69,7 @@ class TrackerNode(SimrealNode):
         if "image" in keys:
             self.create_subscription(Image, graph.CAM_IMAGE, lambda m: self.on_input("image", m),
                                      q if "obs" in keys else trigger)
-        if registers:
+        if reads_depth:
             self.create_subscription(Image, graph.CAM_DEPTH, lambda m: self.on_input("depth", m), q)
         self.loc_client = self.create_client(SetBool, "/localization/set_localization_only")
         self._loc_only_requested = False
