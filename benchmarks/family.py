@@ -248,6 +248,8 @@ TABLES = (("family", "Held-out seeds (the accuracy this project reports)"),
           ("family_dev_map_points", "Development seeds, sparse measurements (`--measurements map_points`) beside"),
           ("family_dev_dense_step_px_3", "Knob: dense samples 3 px apart, not 1.5 (`--tracking dense_step_px=3`)"),
           ("family_dev_dense_rigid_false", "Knob: no rigid correction (`--tracking dense_rigid=false`)"),
+          ("family_dev_dense_surroundings_px_0", "Knob: the rigid correction on the object alone, no surroundings "
+           "(`--tracking dense_surroundings_px=0`; the defaults before the surroundings)"),
           ("family_preloaded", "Diagnostic: the load on from the first frame (development seeds)"))
 
 

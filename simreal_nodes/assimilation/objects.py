@@ -78,8 +78,8 @@ class ObjectTrackers:
                uv: np.ndarray | None = None, bgr: np.ndarray | None = None,
                depth: np.ndarray | None = None) -> dict[str, Estimate]:
         """One frame for every object (arguments as :meth:`DeformableTracker.update`; ``depth``: the frame's depth
-        image, metres, which a registered object needs until it is placed): estimates by object id. A tracker whose
-        build failed on :meth:`set_camera` is built again here."""
+        image, metres, which a registered object needs until it is placed and a dense tracker in its reference
+        view): estimates by object id. A tracker whose build failed on :meth:`set_camera` is built again here."""
         out = {}
         for o in self.objects:
             waiting = self._register(o, T_wc, depth)
@@ -89,7 +89,7 @@ class ObjectTrackers:
                                         np.full((len(tr.values),) * 2, np.nan), state=EstimateState.LOST,
                                         reason=waiting)
             else:
-                out[o["id"]] = self._tracker(o).update(T_wc, ids, P, uv, bgr)
+                out[o["id"]] = self._tracker(o).update(T_wc, ids, P, uv, bgr, depth)
         return out
 
     def _register(self, o: dict[str, Any], T_wc: np.ndarray | None, depth: np.ndarray | None) -> str:
@@ -122,8 +122,11 @@ class ObjectTrackers:
 
     @property
     def needs_depth(self) -> bool:
-        """Whether a registered object still waits for its depth views (afterwards depth is not read)."""
-        return any(o["anchor"]["kind"] == "registration" and o["id"] not in self.registrations for o in self.objects)
+        """Whether depth is still read: a registered object waits for its depth views, or a dense tracker for its
+        reference view (the surroundings' depth); afterwards depth is not read."""
+        return any(o["anchor"]["kind"] == "registration" and o["id"] not in self.registrations for o in self.objects) \
+            or any(tr.dense is not None and not tr.dense.has_template for tr in self.trackers.values()) \
+            or any(o["tracking"]["measurements"] == "dense" and o["id"] not in self.trackers for o in self.objects)
 
     def focus(self, T_wc: np.ndarray | None) -> list[tuple[int, np.ndarray]]:
         """(object index, image polygon) of every object in view from camera pose ``T_wc``: the regions whose

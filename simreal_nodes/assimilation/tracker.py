@@ -322,7 +322,8 @@ class DeformableTracker:
 
     # -- per frame ----------------------------------------------------------------------------------------------
     def update(self, T_wc: np.ndarray | None, ids: np.ndarray | None = None, P_map: np.ndarray | None = None,
-               uv: np.ndarray | None = None, image_bgr: np.ndarray | None = None) -> Estimate:
+               uv: np.ndarray | None = None, image_bgr: np.ndarray | None = None,
+               depth: np.ndarray | None = None) -> Estimate:
         import time
 
         est = Estimate(self.names, self.units, self.values.copy(), self.frozen.copy(),
@@ -332,7 +333,7 @@ class DeformableTracker:
             return est
         T_cw = G.inv(T_wc)
         if self.dense is not None:
-            return self._update_dense(est, T_wc, ids, P_map, uv, image_bgr)
+            return self._update_dense(est, T_wc, ids, P_map, uv, image_bgr, depth)
         if self.cfg.measurements == "map_points":
             if ids is None or len(ids) == 0 or P_map is None or uv is None:
                 est.state, est.reason = EstimateState.LOST, "no measurements: no map points observed on the object"
@@ -430,7 +431,7 @@ class DeformableTracker:
         return est
 
     def _update_dense(self, est: Estimate, T_wc: np.ndarray, ids: np.ndarray | None, P_map: np.ndarray | None,
-                      uv: np.ndarray | None, image_bgr: np.ndarray | None) -> Estimate:
+                      uv: np.ndarray | None, image_bgr: np.ndarray | None, depth: np.ndarray | None) -> Estimate:
         """Measurements 'dense' (:mod:`.dense`): the object's own texture against the reference view. Map points
         observed on the object are still linked: the localization must leave them out of the camera pose and
         look for them where the estimate moves them (the SLAM feedback), as with sparse measurements."""
@@ -447,9 +448,11 @@ class DeformableTracker:
         gray = cv2.cvtColor(image_bgr, cv2.COLOR_BGR2GRAY) if image_bgr.ndim == 3 else image_bgr
         T_cw = G.inv(T_wc)
         if not self.dense.has_template:
-            if self.dense.set_reference(gray, T_cw):
+            if self.dense.set_reference(gray, T_cw, depth):
+                n_s = len(self.dense.static[0].X) if self.dense.static else 0
                 est.reason = ("reference view taken for dense measurement (the object is taken to be at rest "
-                              f"in it; {len(self.dense.levels[0].x)} surface samples)")
+                              f"in it; {len(self.dense.levels[0].x)} surface samples, {n_s} of its static "
+                              "surroundings)")
             else:
                 est.state, est.reason = EstimateState.LOST, "the object is not in view: no reference view yet"
             return est
@@ -586,7 +589,9 @@ def tracker_config(obj: dict[str, Any], **overrides: Any) -> TrackerConfig:
                         constant_std_frac=t["constant_std_frac"],
                         min_measurements=t["min_measurements"], max_points=t["points"], anchor=t["anchor"],
                         object_shift_m=t["object_shift_m"],
-                        dense=DenseSettings(step_px=t["dense_step_px"], rigid=t["dense_rigid"]),
+                        dense=DenseSettings(step_px=t["dense_step_px"], rigid=t["dense_rigid"],
+                                          static_ring_px=t["dense_surroundings_px"],
+                                          placement_measured=obj["anchor"]["kind"] == "registration"),
                         dots=np.asarray(t["dots"]) if t["dots"] else None, dot_color=tuple(t["dot_color"]))
     return replace(cfg, **overrides)
 

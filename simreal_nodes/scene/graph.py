@@ -73,6 +73,14 @@ def tracker_inputs(scene: dict) -> tuple[str, ...]:
     return ("obs",)
 
 
+def tracker_reads_depth(scene: dict) -> bool:
+    """Whether the tracker node takes the depth image (optional in its frame): an object placed by registration
+    (its depth views), or dense measurements on an RGB-D camera (the static surroundings of the reference view)."""
+    tracked = [o for o in scene["objects"] if o["tracking"]["enabled"]]
+    return any(o["anchor"]["kind"] == "registration" for o in tracked) or (
+        scene["camera"]["depth"] is not None and any(o["tracking"]["measurements"] == "dense" for o in tracked))
+
+
 def required_nodes(scene: dict, lossless: bool = False) -> list[NodeSpec]:
     """The nodes the scene requires, in pipeline order. Only those are started."""
     common = {"scene_file": scene["_source"], "lossless": lossless,

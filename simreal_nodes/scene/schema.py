@@ -105,6 +105,10 @@ TRACKING = Record({
                             "more samples, slower)", lo=0.5, hi=16, default=1.5),
     "dense_rigid": Bool("measurements 'dense': also fit a small rigid correction of the object each frame (absorbs "
                         "camera-pose drift and the anchor's error)", default=True),
+    "dense_surroundings_px": Number("measurements 'dense' with a depth image: width of the ring of static "
+                                    "surroundings around the object's outline (reference view, pixels) that "
+                                    "measures the camera's error apart from the object's bending; 0: off",
+                                    lo=0, hi=200, default=32.0),
     "huber_px": Number("Huber threshold of the robust loss, pixels", lo=0, lo_open=True, default=2.0),
     "modes": Number("number of PGD modes used (0 = all)", integer=True, lo=0, default=0),
     "max_iterations": Number("Levenberg-Marquardt iterations per frame", integer=True, lo=1, hi=500, default=20),

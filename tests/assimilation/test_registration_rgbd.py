@@ -85,6 +85,10 @@ def test_object_trackers_wait_for_the_registration_then_track_from_it(scene3):
     assert mm < 2.0 and deg < 0.5
     assert np.allclose(objs.trackers["beam"].T_map_obj, objs.registrations["beam"].T_map_obj)
     assert est.reason != "" and not est.reason.startswith("waiting")  # tracked now (no map points given here)
-    assert not objs.needs_depth  # placed: depth is not read any more
+    assert objs.needs_depth  # placed; the dense tracker still waits for its reference view (image and depth)
+    bgr = np.ascontiguousarray(seq["rgb"][8][:, :, ::-1])
+    est = objs.update(seq["T"][8], bgr=bgr, depth=seq["depth"][8])["beam"]
+    assert est.reason.startswith("reference view") and objs.trackers["beam"].dense.static, est.reason
+    assert not objs.needs_depth  # depth is not read any more
     (k, poly), = objs.focus(seq["T"][8])  # the beam's image region, for the localization's feature budget
     assert k == 0 and len(poly) >= 3 and objs.focus(None) == []

@@ -7,11 +7,11 @@ and, for glued-dot measurements, the image of the same stamp, runs the ROS-free
 (if the scene's ``localization.freeze_map_on_deformation``) it asks the localization node to stop mapping
 (parameter ``localization_service``: a name relative to the tracker's namespace, so a graph launched in a
 namespace reaches its own localization node; remappable like any service name). An object with
-``anchor: registration`` is placed from the depth images (taken while it waits for them). After every frame it
-tells the localization which map points lie on the object, where the current estimate predicts them and which
-the fit rejected (``/simreal/localization/deformable_points``, PointCloud2 x, y, z, id, drop in the map frame) and
-where each object projects in the image (``/simreal/localization/focus``, PolygonInstanceStamped, id = the
-object's index).
+``anchor: registration`` is placed from the depth images (taken while it waits for them); dense measurements on
+an RGB-D camera read the depth of their reference view. After every frame it tells the localization which map
+points lie on the object, where the current estimate predicts them and which the fit rejected
+(``/simreal/localization/deformable_points``, PointCloud2 x, y, z, id, drop in the map frame) and where each
+object projects in the image (``/simreal/localization/focus``, PolygonInstanceStamped, id = the object's index).
 """
 
 from __future__ import annotations
@@ -54,8 +54,8 @@ class TrackerNode(SimrealNode):
         self.core = ObjectTrackers(self.objects, models, **overrides)
         keys = graph.tracker_inputs(self.scene)
         self.need_image = any(o["tracking"]["measurements"] in graph.IMAGE_MEASUREMENTS for o in self.objects)
-        registers = any(o["anchor"]["kind"] == "registration" for o in self.objects)
-        self.sync = StampSync(keys, ("depth",) if registers else (), wait=2)
+        reads_depth = graph.tracker_reads_depth(self.scene)
+        self.sync = StampSync(keys, ("depth",) if reads_depth else (), wait=2)
         q = data_qos(self.lossless)
         self.pubs = {o["id"]: self.create_publisher(ModelParameters, graph.params_topic(o["id"]), reliable_qos(50))
                      for o in self.objects}
@@ -70,7 +70,7 @@ class TrackerNode(SimrealNode):
         if "image" in keys:
             self.create_subscription(Image, graph.CAM_IMAGE, lambda m: self.on_input("image", m),
                                      q if "obs" in keys else trigger)
-        if registers:
+        if reads_depth:
             self.create_subscription(Image, graph.CAM_DEPTH, lambda m: self.on_input("depth", m), q)
         service = self.param("localization_service", "localization/set_localization_only",
                              "the localization node's SetBool freezing its map; relative: in this node's namespace",
