@@ -1,10 +1,10 @@
 """`simreal launch SCENE.yaml`: start only the nodes a scene requires, one OS process each.
 
 There is no ros2 launch on PyPI, so this is a small process supervisor: each node runs as
-``python -m <module> --ros-args --params-file <generated.yaml> [-r from:=to ...]`` (the module of its
-``simreal-NAME`` entry in pyproject.toml's ``[project.scripts]``, :func:`node_modules`), its output is
-prefixed with its name, a node that exits unexpectedly is reported and restarted (up to
-``respawn`` times), and SIGINT / SIGTERM stop every node cleanly (SIGINT, then SIGTERM, then SIGKILL).
+``python -m <module> --ros-args -r __node:=NAME [-r __ns:=NAMESPACE] --params-file <generated.yaml> [-r from:=to]``
+(the module of its ``simreal-NAME`` entry in pyproject.toml's ``[project.scripts]``, :func:`node_modules`), its
+output is prefixed with its name, a node that exits unexpectedly is reported and restarted (up to ``respawn``
+times), and SIGINT / SIGTERM stop every node cleanly (SIGINT, then SIGTERM, then SIGKILL).
 """
 
 from __future__ import annotations
@@ -48,9 +48,25 @@ def node_modules(pyproject: Path = PYPROJECT) -> dict[str, str]:
             if name.startswith(NODE_SCRIPT_PREFIX)}
 
 
-def ros_environment(base: dict | None = None) -> dict:
-    """Environment for node processes: SHM transport profile, ament prefix of the venv."""
+DISCOVERY_RANGE = "ROS_AUTOMATIC_DISCOVERY_RANGE"
+DISCOVERY_RANGES = ("LOCALHOST", "SUBNET", "SYSTEM_DEFAULT", "OFF")  # the values rmw accepts (ROS 2 Jazzy)
+
+
+def ros_environment(base: dict | None = None, discovery_range: str | None = None) -> dict:
+    """Environment for node processes: SHM transport profile, ament prefix of the venv, DDS discovery range.
+
+    Discovery stays on this host unless widened: ROS 2's own default (SUBNET) would announce every node, its camera
+    images included, to the whole network, and take commands from it. ``discovery_range`` (one of
+    :data:`DISCOVERY_RANGES`) sets it explicitly; otherwise a range already set in ``base`` (the user's environment)
+    is kept; otherwise LOCALHOST."""
     env = dict(os.environ if base is None else base)
+    if discovery_range is not None:
+        if discovery_range not in DISCOVERY_RANGES:
+            raise SimrealError(f"DDS discovery range: expected one of {', '.join(DISCOVERY_RANGES)}; "
+                               f"found {discovery_range!r}")
+        env[DISCOVERY_RANGE] = discovery_range
+    elif not env.get(DISCOVERY_RANGE):
+        env[DISCOVERY_RANGE] = "LOCALHOST"
     env.setdefault("FASTRTPS_DEFAULT_PROFILES_FILE", str(FASTDDS_PROFILE))
     prefix = sys.prefix
     ament = env.get("AMENT_PREFIX_PATH", "")
@@ -70,14 +86,20 @@ class _Proc:
 
 
 class Launcher:
-    """Start, watch and stop a set of node processes."""
+    """Start, watch and stop a set of node processes.
+
+    ``env`` and ``discovery_range``: as :func:`ros_environment` takes them (DDS discovery on this host unless
+    widened). ``namespace`` (e.g. ``/cell2``): every node is started in it, so node names and the services they
+    address by relative names (the tracker's call to ``localization/set_localization_only``) do not collide with a
+    second graph; the data topics are absolute (:mod:`simreal_nodes.scene.graph`) and move only by ``remaps``."""
 
     def __init__(self, nodes: list[NodeSpec], remaps: dict[str, str] | None = None, respawn: int = 2,
-                 env: dict | None = None, echo=print, log_dir: str | Path | None = None):
+                 env: dict | None = None, echo=print, log_dir: str | Path | None = None, namespace: str = "",
+                 discovery_range: str | None = None):
         self.nodes = nodes
         self.remaps = remaps or {}
         self.respawn = respawn
-        self.env = ros_environment(env)
+        self.env = ros_environment(env, discovery_range)
         self.echo = echo
         self._tmp = tempfile.TemporaryDirectory(prefix="simreal-launch-")
         if log_dir is None:
@@ -94,9 +116,11 @@ class Launcher:
                 raise SimrealError(f"node '{spec.name}' has no entry {NODE_SCRIPT_PREFIX}{spec.name} in the "
                                    f"[project.scripts] of {PYPROJECT}")
             pfile = Path(self._tmp.name) / f"{spec.name}.params.yaml"
-            pfile.write_text(yaml.safe_dump({spec.name: {"ros__parameters": spec.parameters}}))
-            cmd = [sys.executable, "-m", modules[spec.name], "--ros-args", "-r", f"__node:={spec.name}",
-                   "--params-file", str(pfile)]
+            fqn = f"{namespace.rstrip('/')}/{spec.name}" if namespace else spec.name  # a params file names the node
+            pfile.write_text(yaml.safe_dump({fqn: {"ros__parameters": spec.parameters}}))
+            cmd = [sys.executable, "-m", modules[spec.name], "--ros-args", "-r", f"__node:={spec.name}"]
+            cmd += ["-r", f"__ns:={namespace}"] if namespace else []
+            cmd += ["--params-file", str(pfile)]
             for a, b in self.remaps.items():
                 cmd += ["-r", f"{a}:={b}"]
             self.procs.append(_Proc(spec, cmd))

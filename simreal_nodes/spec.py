@@ -181,10 +181,15 @@ class FilePath(Spec):
     def check(self, v: object, path: str, ctx: Context) -> Any:
         if not isinstance(v, str) or not v:
             self.fail(path, "a file path", v, ctx)
-        p = Path(v).expanduser()
-        if not p.is_absolute():
-            p = (ctx.base_dir / p).resolve()
-        if self.must_exist and not p.exists():
+        try:
+            p = Path(v).expanduser()
+            if not p.is_absolute():
+                p = (ctx.base_dir / p).resolve()
+            missing = self.must_exist and not p.exists()
+        except (OSError, ValueError) as e:  # a name too long for the file system, a NUL character
+            raise SceneError(f"{ctx.source}: {path}: not a usable file path ({e.__class__.__name__}: "
+                             f"{str(e)[:60]}): {v[:60]!r}") from None
+        if missing:
             raise SceneError(f"{ctx.source}: {path}: file not found: {p}")
         return str(p)
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 from simreal_nodes.errors import SimrealError
+from simreal_nodes.launch import DISCOVERY_RANGES
 
 
 def _remaps(items: list[str] | None) -> dict[str, str]:
@@ -25,7 +26,8 @@ def cmd_launch(a: argparse.Namespace) -> int:
     scene = build_spec_models(load_scene(a.scene))  # before the nodes start: they load the built models
     nodes = required_nodes(scene, lossless=a.lossless)
     print(f"[launch] scene '{scene['name']}': starting {', '.join(n.name for n in nodes)}")
-    return run_until_signal(Launcher(nodes, remaps=_remaps(a.remap), respawn=a.respawn))
+    return run_until_signal(Launcher(nodes, remaps=_remaps(a.remap), respawn=a.respawn, namespace=a.namespace,
+                                     discovery_range=a.discovery_range))
 
 
 def cmd_replay(a: argparse.Namespace) -> int:
@@ -33,7 +35,7 @@ def cmd_replay(a: argparse.Namespace) -> int:
 
     stats, _report, _ = replay(a.bag, a.scene, rate=a.rate, lossless=a.lossless, record=a.record,
                               storage=a.storage, launch=not a.no_launch, frame_timeout_s=a.frame_timeout,
-                              metrics_json=a.metrics)
+                              metrics_json=a.metrics, namespace=a.namespace)
     return 0 if stats is not None else 1
 
 
@@ -60,6 +62,9 @@ def add_launch(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--remap", action="append", metavar="FROM:=TO", help="remap a topic in every node")
     s.add_argument("--lossless", action="store_true", help="reliable QoS everywhere")
     s.add_argument("--respawn", type=int, default=2, help="restarts allowed per node (default 2)")
+    s.add_argument("--namespace", default="", help="start the nodes in this ROS namespace")
+    s.add_argument("--discovery-range", choices=DISCOVERY_RANGES,
+                   help="DDS discovery range (default: LOCALHOST unless ROS_AUTOMATIC_DISCOVERY_RANGE is set)")
     s.set_defaults(fn=cmd_launch)
 
 
@@ -75,6 +80,7 @@ def add_replay(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--no-launch", action="store_true", help="the graph is already running")
     s.add_argument("--frame-timeout", type=float, default=30.0, help="lossless: seconds to wait per frame")
     s.add_argument("--metrics", metavar="JSON", help="write replay statistics here")
+    s.add_argument("--namespace", default="", help="the graph's ROS namespace")
     s.set_defaults(fn=cmd_replay)
 
 

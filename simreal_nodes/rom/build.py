@@ -19,6 +19,9 @@ its provenance (spec, versions, timings).
 
 from __future__ import annotations
 
+import ast
+import functools
+import hashlib
 import os
 import platform
 import subprocess
@@ -214,9 +217,9 @@ def _provenance(spec: ModelSpec, t0: float, extra: dict[str, Any] | None = None)
     except Exception:  # noqa: BLE001
         git = ""
     d = {"spec": spec["_text"], "spec_path": spec["_path"], "build_time_s": round(time.time() - t0, 2),
-         "simreal": __version__, "git": git, "numpy": np.__version__, "scipy": scipy.__version__,
-         "scikit_fem": getattr(skfem, "__version__", ""), "h5py": h5py.__version__, "python": platform.python_version(),
-         "host": platform.node(), "built": time.strftime("%Y-%m-%dT%H:%M:%S")}
+         "builder": builder_version(), "simreal": __version__, "git": git, "numpy": np.__version__,
+         "scipy": scipy.__version__, "scikit_fem": getattr(skfem, "__version__", ""), "h5py": h5py.__version__,
+         "python": platform.python_version(), "host": platform.node(), "built": time.strftime("%Y-%m-%dT%H:%M:%S")}
     d.update(extra or {})
     return d
 
@@ -605,6 +608,54 @@ def build_model(spec: ModelSpec, progress: Progress | None = None) -> ReducedMod
     return BUILDERS[spec["kind"]](spec, progress)
 
 
+def source_digest(root: Path, module: str) -> str:
+    """Digest of the code of ``module`` and of every module of its package that it imports, transitively (also
+    imports inside functions), found as files under ``root`` (the folder holding the package).
+
+    Each file enters as its syntax tree without docstrings, so comments, docstrings and layout do not count and
+    any change to what the code does does: a model built by older code is never taken for a current one, and
+    editing the prose of ``rom`` / ``physics`` does not rebuild every cached model."""
+    package = module.partition(".")[0]
+
+    def file_of(name: str) -> Path | None:
+        base = root.joinpath(*name.split("."))
+        return next((f for f in (base.with_suffix(".py"), base / "__init__.py") if f.is_file()), None)
+
+    trees: dict[str, str] = {}
+    todo = [module]
+    while todo:
+        name = todo.pop()
+        path = file_of(name)
+        if name in trees or path is None:
+            continue
+        tree = ast.parse(path.read_text(), str(path))
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+                todo += [node.module] + [f"{node.module}.{a.name}" for a in node.names]  # a name may be a module
+            elif isinstance(node, ast.Import):
+                todo += [a.name for a in node.names]
+            if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)) and node.body \
+                    and isinstance(first := node.body[0], ast.Expr) and isinstance(first.value, ast.Constant) \
+                    and isinstance(first.value.value, str):
+                node.body = node.body[1:]
+        todo = [t for t in todo if t.partition(".")[0] == package]
+        trees[name] = ast.dump(tree)
+    h = hashlib.sha256()
+    for name in sorted(trees):
+        h.update(f"{name}\n{trees[name]}\n".encode())
+    return h.hexdigest()[:16]
+
+
+@functools.cache
+def builder_version() -> str:
+    """The version of the model builders that a cached model must match (with its spec): the digest of this
+    module's code and of the package code it uses (:func:`source_digest`; FEM, PGD, NI-PGD, the model file).
+
+    Computed rather than a number bumped by hand: a forgotten bump is exactly how a stale model stays in use, and
+    the cost, one rebuild after a change that did not alter the result, is paid once."""
+    return source_digest(Path(__file__).resolve().parents[2], __name__)
+
+
 def cache_dir() -> Path:
     return Path(os.environ.get("SIMREAL_CACHE", REPO / "cache")) / "models"
 
@@ -628,7 +679,8 @@ def cached_model_path(spec_name: str) -> Path:
 def cached_model(spec_name: str, progress: Progress | None = None, rebuild: bool = False) -> Path:
     """Path of the model built from a built-in (or given) spec, building it once into the cache.
 
-    The cached file is rebuilt when the spec text changed since it was built.
+    The cached file is rebuilt when the spec text or the builders' code (:func:`builder_version`) changed since
+    it was built.
     """
     from simreal_nodes.rom.model_file import load_model, save_model
 
@@ -637,7 +689,7 @@ def cached_model(spec_name: str, progress: Progress | None = None, rebuild: bool
     if out.exists() and not rebuild:
         try:
             prov = load_model(out, fields=[], mesh=False).provenance
-            if prov.get("spec") == spec["_text"]:
+            if prov.get("spec") == spec["_text"] and prov.get("builder") == builder_version():
                 return out
         except Exception:  # noqa: BLE001 - a damaged cache entry is rebuilt
             pass

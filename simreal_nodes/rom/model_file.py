@@ -19,9 +19,12 @@ some fields only and for the first ``n_modes`` modes only (read by slicing, not 
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
+import os
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -36,13 +39,14 @@ from simreal_nodes.rom.separated import Axis, SeparatedField
 FORMAT = "simreal-model"
 FORMAT_VERSION = 1
 CELL_TYPES = {"tet4": 4, "hex8": 8, "tri3": 3, "quad4": 4}
+MAX_EXPANSION = 100  # a dataset over 64 MiB may declare at most this times the bytes the file stores of it
 
 
 def save_model(model: ReducedModel, path: str | Path) -> str:
     """Write ``model``; returns its id (name@sha256 prefix of the file)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(path.suffix + ".partial")
+    tmp = path.with_suffix(f"{path.suffix}.{os.getpid()}.partial")  # two processes may build the same model
     with h5py.File(tmp, "w") as f:
         f.attrs.update(format=FORMAT, format_version=FORMAT_VERSION, name=model.name, description=model.description,
                        created=time.strftime("%Y-%m-%dT%H:%M:%S%z"), simreal_version=__version__)
@@ -103,15 +107,28 @@ def _open(path: Path) -> h5py.File:
     except OSError as e:
         raise ModelFileError(f"{path} is not a readable HDF5 file (truncated or corrupt?): {e}") from None
     try:
-        if f.attrs.get("format") != FORMAT:
-            raise ModelFileError(f"{path} is not a simreal model file (format attribute: {f.attrs.get('format')!r})")
-        v = int(f.attrs.get("format_version", -1))
+        with _as_model_error(path):
+            if f.attrs.get("format") != FORMAT:
+                raise ModelFileError(f"{path} is not a simreal model file (format attribute: "
+                                     f"{f.attrs.get('format')!r})")
+            v = int(f.attrs.get("format_version", -1))
         if v > FORMAT_VERSION or v < 1:
             raise ModelFileError(f"{path} has model format version {v}; this simreal reads version {FORMAT_VERSION}")
     except ModelFileError:
         f.close()
         raise
     return f
+
+
+@contextlib.contextmanager
+def _as_model_error(path: Path) -> Iterator[None]:
+    """What h5py, json or numpy raise on a file whose structure is damaged or not ours (a corrupt object header, a
+    group where a dataset belongs, text where numbers belong) becomes a ModelFileError naming the file: the file is
+    at fault, and the user gets one line instead of a traceback (found by ``benchmarks/fuzz.py``)."""
+    try:
+        yield
+    except (OSError, KeyError, RuntimeError, TypeError, ValueError, AttributeError, IndexError, OverflowError) as e:
+        raise ModelFileError(f"{path}: not a valid model file ({type(e).__name__}: {e})") from None
 
 
 def _get(f: h5py.Group, key: str, path: Path) -> h5py.Group | h5py.Dataset:
@@ -121,7 +138,18 @@ def _get(f: h5py.Group, key: str, path: Path) -> h5py.Group | h5py.Dataset:
 
 
 def _read(ds: h5py.Dataset, path: Path, sel: Any = ()) -> Any:
-    """The dataset's value (array or scalar, as stored; h5py ships no types), ``sel`` an h5py selection."""
+    """The dataset's value (array or scalar, as stored; h5py ships no types), ``sel`` an h5py selection.
+
+    A dataset that declares far more than the file stores of it is refused before anything is allocated: a damaged
+    or hostile header must not make a reader allocate (and HDF5 fill) gigabytes. Compression shrinks real modes a
+    few times; :data:`MAX_EXPANSION` leaves room for far more."""
+    if not isinstance(ds, h5py.Dataset):
+        raise ModelFileError(f"{path}: '{ds.name}' is a group where a dataset belongs (corrupt file?)")
+    declared = int(ds.size or 0) * ds.dtype.itemsize
+    stored = ds.id.get_storage_size()
+    if declared > 1 << 26 and declared > MAX_EXPANSION * stored:
+        raise ModelFileError(f"{path}: '{ds.name}' declares shape {ds.shape} ({declared / 2**30:.1f} GiB) but the "
+                             f"file stores {stored} bytes of it (corrupt file?)")
     try:
         return ds[sel] if sel != () else ds[()]
     except Exception as e:  # noqa: BLE001 - h5py raises OSError/KeyError/RuntimeError on corrupt data
@@ -144,7 +172,7 @@ def _axes(f: h5py.File, path: Path) -> list[Axis]:
 def read_header(path: str | Path) -> dict[str, Any]:
     """Name, parameters, fields and rigid parameters, without reading modes (cheap; for scene checks)."""
     path = Path(path)
-    with _open(path) as f:
+    with _open(path) as f, _as_model_error(path):
         axes = _axes(f, path)
         fields = list(_get(f, "fields", path).keys())
         meta = _get(f, "meta", path)
@@ -159,7 +187,7 @@ def load_model(path: str | Path, fields: list[str] | tuple[str, ...] | None = No
                n_modes: int | None = None, mesh: bool = True) -> ReducedModel:
     """Read and validate a model. ``fields``: only these (default all); ``n_modes``: only the first modes."""
     path = Path(path)
-    with _open(path) as f:
+    with _open(path) as f, _as_model_error(path):
         name = str(f.attrs.get("name", path.stem))
         axes = _axes(f, path)
         pts = _read(_get(f, "mesh/points", path), path)

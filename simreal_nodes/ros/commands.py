@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import signal
 import threading
 import time
@@ -15,7 +16,7 @@ from rclpy.signals import SignalHandlerOptions
 
 from simreal_nodes.errors import BagError, SimrealError
 from simreal_nodes.io import bags
-from simreal_nodes.launch import Launcher, ros_environment
+from simreal_nodes.launch import DISCOVERY_RANGE, Launcher, ros_environment
 from simreal_nodes.ros.bagplay import Player, Recorder
 from simreal_nodes.scene.graph import image_topic, output_topics, required_nodes
 from simreal_nodes.scene.schema import build_spec_models, load_scene
@@ -36,10 +37,18 @@ class _StopFlag:
             signal.signal(s, h)
 
 
+def _share_node_environment() -> None:
+    """This process's own node (player, recorder) uses the nodes' transport profile and discovery range: with
+    another range it would not meet them, or would announce itself beyond this host."""
+    env = ros_environment()
+    os.environ.update({k: env[k] for k in ("FASTRTPS_DEFAULT_PROFILES_FILE", DISCOVERY_RANGE)})
+
+
 def replay(bag: str, scene_file: str, rate: float = 1.0, lossless: bool = False, record: str | None = None,
            storage: str = "mcap", launch: bool = True, frame_timeout_s: float = 30.0, ready_timeout_s: float = 90.0,
-           metrics_json: str | None = None, echo=print, extra_params: dict | None = None):
-    """Replay ``bag`` into the graph of ``scene_file``; returns (PlayStats, BagReport, recorder counts)."""
+           metrics_json: str | None = None, echo=print, extra_params: dict | None = None, namespace: str = ""):
+    """Replay ``bag`` into the graph of ``scene_file``; returns (PlayStats, BagReport, recorder counts).
+    ``namespace``: the nodes' namespace (:class:`~simreal_nodes.launch.Launcher`)."""
     scene = load_scene(scene_file)
     if launch:
         build_spec_models(scene)  # before the nodes start: they find the built spec:NAME models in the cache
@@ -64,10 +73,8 @@ def replay(bag: str, scene_file: str, rate: float = 1.0, lossless: bool = False,
     inputs = {t: topics[t] for t in wanted if t and t in topics}
     hold_for = tuple(t for t in (cam["depth"], right, cam["right_camera_info"]) if t and t in topics)
 
-    launcher = Launcher(nodes, echo=echo) if launch else None
-    env = ros_environment()
-    import os
-    os.environ.setdefault("FASTRTPS_DEFAULT_PROFILES_FILE", env["FASTRTPS_DEFAULT_PROFILES_FILE"])
+    launcher = Launcher(nodes, echo=echo, namespace=namespace) if launch else None
+    _share_node_environment()
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     node = Node("simreal_player")
     ex = SingleThreadedExecutor()
@@ -117,10 +124,9 @@ def replay(bag: str, scene_file: str, rate: float = 1.0, lossless: bool = False,
 def record(out: str, topics: list[str] | None = None, storage: str = "mcap", echo=print,
            duration_s: float | None = None) -> dict[str, int]:
     """Record live topics (all, if none are named) until SIGINT / SIGTERM or ``duration_s``."""
-    import os
     import time
 
-    os.environ.setdefault("FASTRTPS_DEFAULT_PROFILES_FILE", ros_environment()["FASTRTPS_DEFAULT_PROFILES_FILE"])
+    _share_node_environment()
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     node = Node("simreal_recorder")
     ex = SingleThreadedExecutor()

@@ -273,8 +273,9 @@ def _check_parameters(obj: dict, i: int, source: str, header: dict | None) -> No
 
 
 def build_spec_models(scene: dict, progress=None) -> dict:
-    """Build the model of every ``spec:NAME`` object into the cache (once; again when its spec changed) and check
-    the object's parameter names against it; returns ``scene`` (its ``objects[].model`` already name these files).
+    """Build the model of every ``spec:NAME`` object into the cache (once; again when its spec or the builders' code
+    changed: :func:`~simreal_nodes.rom.build.cached_model`) and check the object's parameter names against it;
+    returns ``scene`` (its ``objects[].model`` already name these files).
 
     Called by what starts nodes (launch, replay, the demo) or uses the models in-process (evaluation, offline
     pipelines, benchmarks) before anything reads a model file; never by validation."""
@@ -312,6 +313,10 @@ def load_scene(path: str | Path) -> dict:
         text = path.read_text()
     except FileNotFoundError:
         raise SceneError(f"scene file not found: {path}") from None
+    except OSError as e:
+        raise SceneError(f"{path}: cannot read the scene file: {e.strerror}") from None
+    except UnicodeDecodeError as e:
+        raise SceneError(f"{path}: not UTF-8 text: {e}") from None
     try:
         doc = yaml.safe_load(text)
     except yaml.YAMLError as e:

@@ -115,6 +115,27 @@ def test_damaged_and_foreign_files_are_rejected(built, tmp_path):
         load_model(tmp_path / "absent.h5")
 
 
+def test_an_absurd_declared_size_is_refused_before_allocating(built, tmp_path):
+    """A header that declares 3 GiB of mode values the file does not hold (HDF5 would fill them in)."""
+    import time
+    import tracemalloc
+
+    _, path = built
+    huge = tmp_path / "huge.h5"
+    shutil.copy(path, huge)
+    with h5py.File(huge, "a") as f:
+        del f["fields/displacement/space"]
+        f.create_dataset("fields/displacement/space", shape=(2**26, 2, 3), dtype=np.float64, chunks=(1, 2, 3))
+    tracemalloc.start()
+    t0 = time.perf_counter()
+    with pytest.raises(ModelFileError, match=r"'/fields/displacement/space' declares shape \(67108864, 2, 3\) "
+                                             r"\(3.0 GiB\) but the file stores 0 bytes of it"):
+        load_model(huge)
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    assert peak < 50e6 and time.perf_counter() - t0 < 5.0
+
+
 def test_spec_errors_name_the_key(tmp_path):
     f = tmp_path / "s.yaml"
     f.write_text(SPEC.replace("nu: 0.334", "nu: 0.7"))

@@ -5,12 +5,13 @@ and, for glued-dot measurements, the image of the same stamp, runs the ROS-free
 :class:`DeformableTracker` of every tracked object and publishes ``/simreal/objects/<id>/parameters``
 (ModelParameters: values, covariance, residual, inliers, state and reason). Once deformation appears
 (if the scene's ``localization.freeze_map_on_deformation``) it asks the localization node to stop mapping
-(``set_localization_only``). An object with ``anchor: registration`` is placed from the depth images (taken
-while it waits for them); dense measurements on an RGB-D camera read the depth of their reference view.
-After every frame it tells the localization which map points lie on the object, where the current estimate
-predicts them and which the fit rejected (``/simreal/localization/deformable_points``, PointCloud2 x, y, z, id,
-drop in the map frame) and where each object projects in the image (``/simreal/localization/focus``,
-PolygonInstanceStamped, id = the object's index).
+(parameter ``localization_service``: a name relative to the tracker's namespace, so a graph launched in a
+namespace reaches its own localization node; remappable like any service name). An object with
+``anchor: registration`` is placed from the depth images (taken while it waits for them); dense measurements on
+an RGB-D camera read the depth of their reference view. After every frame it tells the localization which map
+points lie on the object, where the current estimate predicts them and which the fit rejected
+(``/simreal/localization/deformable_points``, PointCloud2 x, y, z, id, drop in the map frame) and where each
+object projects in the image (``/simreal/localization/focus``, PolygonInstanceStamped, id = the object's index).
 """
 
 from __future__ import annotations
@@ -71,7 +72,10 @@ class TrackerNode(SimrealNode):
                                      q if "obs" in keys else trigger)
         if reads_depth:
             self.create_subscription(Image, graph.CAM_DEPTH, lambda m: self.on_input("depth", m), q)
-        self.loc_client = self.create_client(SetBool, "/localization/set_localization_only")
+        service = self.param("localization_service", "localization/set_localization_only",
+                             "the localization node's SetBool freezing its map; relative: in this node's namespace",
+                             read_only=True)
+        self.loc_client = self.create_client(SetBool, service)
         self._loc_only_requested = False
         self.set_status("ok", f"tracking {', '.join(o['id'] for o in self.objects)}")
 
