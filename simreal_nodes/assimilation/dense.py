@@ -572,7 +572,8 @@ class DenseAligner:
                 grad[n_f:n_f + len(pw)] += pw * px
             counts = (int(ok.sum()), n_s)
             sig = (sigma, sigma_s)
-            c0 = self._cost(lvl, img, rows, srows if use_s and n_s >= 10 else srows[:0], f, T_cw, sig, counts)
+            s_fit = srows if n_s >= 10 else srows[:0]  # the surroundings' rows that entered this iteration
+            c0 = self._cost(lvl, img, rows, s_fit, f, T_cw, sig, counts)
             improved = False
             for _try in range(4):
                 A = H + lam * np.diag(np.maximum(np.diag(H), 1e-9))
@@ -582,8 +583,7 @@ class DenseAligner:
                     lam *= 10
                     continue
                 trial = self._apply(f, step, free_mu, lo, hi, use_s)
-                c1 = self._cost(lvl, img, rows, srows if use_s and n_s >= 10 else srows[:0], trial, T_cw, sig,
-                                counts)
+                c1 = self._cost(lvl, img, rows, s_fit, trial, T_cw, sig, counts)
                 if c1 < c0:
                     f.mu, f.rigid, f.cam, f.photo, f.photo_s = trial.mu, trial.rigid, trial.cam, trial.photo, \
                         trial.photo_s
