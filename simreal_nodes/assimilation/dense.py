@@ -86,6 +86,13 @@ class DenseSettings:
     # the fit, no placement correction of the object on top of the camera's (see :meth:`DenseAligner.solve`)
     placement_measured: bool = False
     min_grazing: float = 0.25  # |cos| of the viewing angle below which a surface sample is not used
+    # after Gauss-Newton, a search of the cost over each free mu within this share of its range about the
+    # solution (finest level; at most three free parameters); False: Gauss-Newton alone
+    refine: bool = True
+    refine_span: float = 0.1
+    # with surroundings: the camera's error measured on them alone first, then held in the object's fit; False
+    # (the default, better on development seeds 12-49): both in one joint fit
+    camera_first: bool = False
 
 
 @dataclass
@@ -290,10 +297,10 @@ class DenseAligner:
         uv = self.cam.project(G.transform(T_cw @ self.T_mo, smp.x[idx]), distort=False)
         pyr = pyramid(self.ideal(gray), self.s.levels)
         for lvl, img in enumerate(pyr):
-            sel = idx[np.arange(0, len(idx), 4**lvl)]  # coarser levels: fewer samples, the same spread
-            v = bilinear(img, _at_level(uv[np.arange(0, len(idx), 4**lvl)], lvl)).astype(np.float64)
+            pick = np.arange(0, len(idx), 4**lvl)  # coarser levels: fewer samples, the same spread
+            v = bilinear(img, _at_level(uv[pick], lvl)).astype(np.float64)
             good = np.isfinite(v)
-            sel = sel[good]
+            sel = idx[pick][good]
             self.levels.append(Level(smp.x[sel], smp.normal[sel],
                                      self.model.deformation_view(smp.nodes[sel], self.n_modes, smp.weights[sel]),
                                      v[good]))
@@ -596,6 +603,76 @@ class DenseAligner:
                 break
         return H, r, sigma, rows
 
+    def _fit_camera(self, pyr: list[NDArray[np.float32]], grads: list[Grad], f: _Fit, T_cw: Array) -> bool:
+        """The camera pose's error epsilon (and the surroundings' brightness) from the static surroundings
+        alone, coarse to fine, before the object's fit: what cannot deform measures the camera, and the object's
+        fit then has no rigid motion of the whole view to trade against its bending. False (f untouched) when
+        too few surroundings samples are in view."""
+        wide = self._wide()
+        cam, photo_s = f.cam.copy(), f.photo_s.copy()
+        done = False
+        for lvl in reversed(range(min(self.s.finest, len(self.levels) - 1), len(self.levels))):
+            L, S = self.levels[lvl], self.static[lvl]
+            rows = self._visible_rows(L, f.mu, f.total, T_cw)
+            probe = _Fit(f.mu, f.free, f.rigid, cam, f.photo, photo_s, f.prior, False, True)
+            srows = self._static_rows(lvl, probe, T_cw, rows)
+            if len(srows) < max(10, self.s.min_samples // 4**lvl):
+                continue
+            img, (gx, gy) = pyr[lvl], grads[lvl]
+            lam = 1e-3
+            for _ in range(self.s.iterations):
+                uv, Js, _ = self._rigid_project(S.X[srows], cam, T_cw, jac=True)
+                assert Js is not None
+                q = _at_level(uv, lvl)
+                r = bilinear(img, q).astype(np.float64) - (photo_s[0] * S.values[srows] + photo_s[1])
+                ok = np.isfinite(r)
+                if ok.sum() < 10:
+                    break
+                sig = self._scale(r[ok])
+                g = np.stack([bilinear(gx, q[ok]), bilinear(gy, q[ok])], axis=1).astype(np.float64) * 0.5**lvl
+                J = np.concatenate([np.einsum("nc,ncp->np", g, Js[ok]),
+                                    np.stack([-S.values[srows][ok], -np.ones(ok.sum())], axis=1)], axis=1) / sig
+                res = r[ok] / sig
+                w = self._weights(res, TUKEY)
+                pw = np.r_[1.0 / wide**2, 0.0, 0.0]
+                H = J.T @ (J * w[:, None]) + np.diag(pw)
+                grad = J.T @ (w * res) + pw * np.r_[cam, 0.0, 0.0]
+
+                n_ok = int(ok.sum())
+                c0 = self._camera_cost(lvl, img, S, srows, cam, photo_s, T_cw, sig, n_ok)
+                improved = False
+                for _try in range(4):
+                    try:
+                        step = -np.linalg.solve(H + lam * np.diag(np.maximum(np.diag(H), 1e-9)), grad)
+                    except np.linalg.LinAlgError:
+                        lam *= 10
+                        continue
+                    c_t = np.clip(cam + step[:6], -3 * wide, 3 * wide)
+                    p_t = photo_s + step[6:]
+                    c1 = self._camera_cost(lvl, img, S, srows, c_t, p_t, T_cw, sig, n_ok)
+                    if c1 < c0:
+                        cam, photo_s = c_t, p_t
+                        lam = max(lam / 3, 1e-7)
+                        improved = c0 - c1 > self.s.tolerance * c0
+                        break
+                    lam *= 4
+                if not improved:
+                    break
+            done = True
+        if done:
+            f.cam, f.photo_s = cam, photo_s
+        return done
+
+    def _camera_cost(self, lvl: int, img: NDArray[np.float32], S: StaticLevel, srows: NDArray[np.int64], cam: Array,
+                     photo_s: Array, T_cw: Array, sig: float, count: int) -> float:
+        """The surroundings' robust cost (mean loss scaled to ``count``, as :meth:`_cost`) plus epsilon's prior."""
+        uv, _, _ = self._rigid_project(S.X[srows], cam, T_cw, jac=False)
+        r = bilinear(img, _at_level(uv, lvl)).astype(np.float64) - (photo_s[0] * S.values[srows] + photo_s[1])
+        ok = np.isfinite(r)
+        wide = self._wide()
+        return (self._rho(r[ok] / sig, TUKEY) * count / max(int(ok.sum()), 1)
+                + 0.5 * float(np.sum(cam * cam / wide**2)))
+
     def _apply(self, f: _Fit, step: Array, free_mu: NDArray[np.int64], lo: Array, hi: Array,
                use_s: bool) -> _Fit:
         out = f.copy()
@@ -615,6 +692,59 @@ class DenseAligner:
         if use_s:
             out.photo_s = out.photo_s + step[k + 2:k + 4]
         return out
+
+    def _profile_cost(self, lvl: int, img: NDArray[np.float32], rows: NDArray[np.int64], f: _Fit, mu: Array,
+                      T_cw: Array, sigma: float) -> float:
+        """The level's robust cost of the object's samples at ``mu`` with the brightness (a, b) at its best for
+        that mu (Tukey-weighted least squares, two passes) and the rigid parts as fitted: the profile of the cost
+        over mu."""
+        L = self.levels[lvl]
+        uv, _ = self._geometry(L, rows, mu, f.total, T_cw, jac=False)
+        v = bilinear(img, _at_level(uv, lvl)).astype(np.float64)
+        ok = np.isfinite(v)
+        if ok.sum() < 10:
+            return float("inf")
+        v, ref = v[ok], L.values[rows][ok]
+        a, b = f.photo
+        for _ in range(2):
+            w = self._weights((v - a * ref - b) / sigma, TUKEY)
+            sw = float(w.sum())
+            if sw <= 0:
+                return float("inf")
+            mr, mv = float(w @ ref) / sw, float(w @ v) / sw
+            var = float(w @ (ref - mr) ** 2)
+            a = float(w @ ((ref - mr) * (v - mv))) / var if var > 0 else 1.0
+            b = mv - a * mr
+        return self._rho((v - a * ref - b) / sigma, TUKEY) / len(v)
+
+    def _refine(self, lvl: int, img: NDArray[np.float32], rows: NDArray[np.int64], f: _Fit, T_cw: Array,
+                lo: Array, hi: Array, sigma: float) -> Array:
+        """A derivative-free search of the profile cost over each free mu about the Gauss-Newton solution, at
+        the finest level fitted. On a faint texture the image gradients that Gauss-Newton linearises with are
+        mostly noise (its steps come out short, and the brightness gain trades against the misalignment), and
+        the coarse levels it starts from are biased (a pyramid level sees the texture at another scale than the
+        reference did); the profile cost itself has its minimum where the samples line up."""
+        assert f.mu is not None
+        mu = f.mu.copy()
+        free = np.flatnonzero(f.free)
+        if len(free) == 0 or len(free) > 3:
+            return mu
+        best = self._profile_cost(lvl, img, rows, f, mu, T_cw, sigma)
+        for _sweep in range(1 if len(free) == 1 else 2):
+            for i in free:
+                width = self.s.refine_span * (hi[i] - lo[i])
+                for _round in range(3):  # a grid of 7 about the best so far, narrowed by 3 each round
+                    grid = np.clip(mu[i] + np.linspace(-width, width, 7), lo[i], hi[i])
+                    for g in grid:
+                        if g == mu[i]:
+                            continue
+                        trial = mu.copy()
+                        trial[i] = g
+                        c = self._profile_cost(lvl, img, rows, f, trial, T_cw, sigma)
+                        if c < best:
+                            best, mu = c, trial
+                    width /= 3.0
+        return mu
 
     def _grid_start(self, pyr: list[NDArray[np.float32]], f: _Fit, T_cw: Array, lo: Array, hi: Array) -> None:
         """Coarse search over the free parameters at the coarsest level (the warm start included): a load that
@@ -673,10 +803,16 @@ class DenseAligner:
         rho_free = self.s.rigid and not (use_s and (self.s.placement_measured or self.held is not None))
         rho0 = self.held if (self.held is not None and not rho_free) else self.rigid
         f = _Fit(np.clip(mu0, lo, hi), free, rho0, self.cam_corr, self.photo, self.photo_s, prior, rho_free, use_s)
+        cam_first = use_s and self.s.camera_first and self._fit_camera(pyr, grads, f, T_cw)
+        if cam_first:
+            f.cam_free = False  # measured on the surroundings alone: held in the object's fit
         self._grid_start(pyr, f, T_cw, lo, hi)
-        per_level = self._run(pyr, grads, f, T_cw, lo, hi, finest=min(self.s.finest, len(self.levels) - 1))
+        finest = min(self.s.finest, len(self.levels) - 1)
+        per_level = self._run(pyr, grads, f, T_cw, lo, hi, finest=finest)
         H, r, sigma, rows = per_level[-1]
         assert f.mu is not None
+        if self.s.refine and len(rows) >= self.s.min_samples and np.isfinite(sigma):
+            f.mu = self._refine(finest, pyr[finest], rows, f, T_cw, lo, hi, sigma)
         n_mu = len(mu0)
         res = DenseResult(f.mu.copy(), np.full((n_mu, n_mu), np.nan), sigma, float("nan"), len(rows),
                           int(np.sum(np.abs(r[np.isfinite(r)]) <= TUKEY * sigma)), 0.0, f.iterations)
@@ -703,8 +839,9 @@ class DenseAligner:
             # is there a deformation at all? The same fit with zero displacement, at the coarser levels only (it
             # is a yes/no question), compared with the deformed fit's residual at the same level
             cmp = min(max(1, self.s.finest), len(self.levels) - 1)
-            g0 = _Fit(None, free, self.rest_rigid, self.rest_cam, self.rest_photo, self.rest_photo_s,
-                      (np.zeros(N_RIGID), wide), self.s.rigid and not (use_s and self.s.placement_measured), use_s)
+            g0 = _Fit(None, free, self.rest_rigid, f.cam if cam_first else self.rest_cam, self.rest_photo,
+                      self.rest_photo_s, (np.zeros(N_RIGID), wide),
+                      self.s.rigid and not (use_s and self.s.placement_measured), use_s and not cam_first)
             sigma0 = self._run(pyr, grads, g0, T_cw, lo, hi, finest=cmp)[-1][2]
             self.rest_rigid, self.rest_cam = g0.rigid.copy(), g0.cam.copy()
             self.rest_photo, self.rest_photo_s = g0.photo.copy(), g0.photo_s.copy()

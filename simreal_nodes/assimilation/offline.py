@@ -8,6 +8,7 @@ images (+ depth for RGB-D, + right grey image for stereo) with stamps. Returns o
 
 from __future__ import annotations
 
+import time
 from typing import Any
 
 import cv2
@@ -46,6 +47,7 @@ class Pipeline:
         self.objects = ObjectTrackers(tracked, models, **cfg_overrides)
         self.objects.set_camera(cam)
         self.trackers = self.objects.trackers
+        self.tracker_ms = 0.0  # the last step's deformable-tracking work (update, focus, feedback): the tracker node's
 
     def step(self, bgr: np.ndarray, stamp_ns: int, depth: np.ndarray | None = None,
              right: np.ndarray | None = None) -> tuple[np.ndarray | None, dict[str, Estimate]]:
@@ -55,15 +57,18 @@ class Pipeline:
         T_wc = r.T_wc
         if T_wc is not None and len(r.obs_ids):
             ids, P, uv = np.asarray(r.obs_ids), np.asarray(r.obs_pos), np.asarray(r.obs_uv)
+        t0 = time.perf_counter()
         out = self.objects.update(T_wc, ids, P, uv, bgr, depth)
         # the objects' image regions for the next frame's features (a frame late, like the feedback; the camera
         # moves little in a frame and the polygons are hulls of the whole surface)
         self.focus = [poly for _, poly in self.objects.focus(T_wc)]
+        feedback = self.objects.feedback()
+        self.tracker_ms = (time.perf_counter() - t0) * 1e3
         if self.freeze_map and any(e.deforming for e in out.values()):
             self.loc.set_localization_only(True)
         # points on a tracked object leave the pose estimate as soon as they are linked (static/deformable
         # split, §4.4.1); they are searched where the current estimate puts them
-        self._feedback.append(self.objects.feedback())
+        self._feedback.append(feedback)
         while len(self._feedback) > self.feedback_delay:
             ids, P, drop = self._feedback.pop(0)
             if len(ids):

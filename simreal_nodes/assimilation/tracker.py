@@ -590,7 +590,8 @@ def tracker_config(obj: dict[str, Any], **overrides: Any) -> TrackerConfig:
                         min_measurements=t["min_measurements"], max_points=t["points"], anchor=t["anchor"],
                         object_shift_m=t["object_shift_m"],
                         dense=DenseSettings(step_px=t["dense_step_px"], rigid=t["dense_rigid"],
-                                          static_ring_px=t["dense_surroundings_px"],
+                                          static_ring_px=t["dense_surroundings_px"], refine=t["dense_refine"],
+                                          camera_first=t["dense_camera_first"],
                                           placement_measured=obj["anchor"]["kind"] == "registration"),
                         dots=np.asarray(t["dots"]) if t["dots"] else None, dot_color=tuple(t["dot_color"]))
     return replace(cfg, **overrides)

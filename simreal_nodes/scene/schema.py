@@ -109,6 +109,12 @@ TRACKING = Record({
                                     "surroundings around the object's outline (reference view, pixels) that "
                                     "measures the camera's error apart from the object's bending; 0: off",
                                     lo=0, hi=200, default=32.0),
+    "dense_refine": Bool("measurements 'dense': after Gauss-Newton, search the cost over each free parameter "
+                         "about the solution at full resolution (on a faint texture Gauss-Newton stops short; "
+                         "slower)", default=True),
+    "dense_camera_first": Bool("measurements 'dense' with the surroundings: measure the camera's error on them "
+                               "alone, then fit the object with it held (off, the default: one joint fit)",
+                               default=False),
     "huber_px": Number("Huber threshold of the robust loss, pixels", lo=0, lo_open=True, default=2.0),
     "modes": Number("number of PGD modes used (0 = all)", integer=True, lo=0, default=0),
     "max_iterations": Number("Levenberg-Marquardt iterations per frame", integer=True, lo=1, hi=500, default=20),
