@@ -13,7 +13,8 @@ Layout (format ``simreal-model``, version 1)::
     /load_points, /load_directions (optional)
     /meta                   attrs (JSON): material, boundary_conditions, loads, rigid_parameters, provenance
 
-Loading validates everything and raises :class:`ModelFileError` with the reason; a reader may ask for
+Every non-empty dataset carries a Fletcher-32 checksum per chunk. Loading validates everything and raises
+:class:`ModelFileError` with the reason (a checksum that does not match is one); a reader may ask for
 some fields only and for the first ``n_modes`` modes only (read by slicing, not loaded then cut).
 """
 
@@ -51,29 +52,29 @@ def save_model(model: ReducedModel, path: str | Path) -> str:
         f.attrs.update(format=FORMAT, format_version=FORMAT_VERSION, name=model.name, description=model.description,
                        created=time.strftime("%Y-%m-%dT%H:%M:%S%z"), simreal_version=__version__)
         g = f.create_group("mesh")
-        g.create_dataset("points", data=np.asarray(model.points, np.float64), compression="gzip")
-        c = g.create_dataset("cells", data=np.asarray(model.cells, np.int64), compression="gzip")
+        _dataset(g, "points", np.asarray(model.points, np.float64), compression="gzip")
+        c = _dataset(g, "cells", np.asarray(model.cells, np.int64), compression="gzip")
         c.attrs["cell_type"] = model.cell_type
-        g.create_dataset("surface", data=np.asarray(model.surface, np.int64).reshape(-1, 3), compression="gzip")
+        _dataset(g, "surface", np.asarray(model.surface, np.int64).reshape(-1, 3), compression="gzip")
         ga = f.create_group("axes")
         for i, a in enumerate(model.axes):
-            d = ga.create_dataset(a.name, data=a.values)
+            d = _dataset(ga, a.name, a.values)
             d.attrs.update(unit=a.unit, kind=a.kind, interpolation=a.interpolation, description=a.description, order=i)
         gf = f.create_group("fields")
         for name, fld in model.fields.items():
             h = gf.create_group(name)
-            s = h.create_dataset("space", data=np.asarray(fld.space, np.float64), compression="gzip",
-                                 chunks=(1,) + fld.space.shape[1:])
+            s = _dataset(h, "space", np.asarray(fld.space, np.float64), compression="gzip",
+                         chunks=(1,) + fld.space.shape[1:])
             s.attrs.update(unit=fld.unit, components=json.dumps(list(fld.components)))
             hp = h.create_group("params")
             for a, p in zip(fld.axes, fld.params):
-                hp.create_dataset(a.name, data=np.asarray(p, np.float64))
+                _dataset(hp, a.name, np.asarray(p, np.float64))
             if fld.error_vs_modes is not None:
-                h.create_dataset("error_vs_modes", data=np.asarray(fld.error_vs_modes, np.float64))
+                _dataset(h, "error_vs_modes", np.asarray(fld.error_vs_modes, np.float64))
         if model.load_points is not None:
-            f.create_dataset("load_points", data=np.asarray(model.load_points, np.int64))
+            _dataset(f, "load_points", np.asarray(model.load_points, np.int64))
         if model.load_directions is not None:
-            f.create_dataset("load_directions", data=np.asarray(model.load_directions, np.float64))
+            _dataset(f, "load_directions", np.asarray(model.load_directions, np.float64))
         m = f.create_group("meta")
         for key in ("material", "boundary_conditions", "loads", "rigid_parameters", "provenance"):
             m.attrs[key] = json.dumps(getattr(model, key), default=_json_default)
@@ -81,6 +82,12 @@ def save_model(model: ReducedModel, path: str | Path) -> str:
     model.path = str(path)
     model.model_id = model_id(path, model.name)
     return model.model_id
+
+
+def _dataset(g: h5py.Group, name: str, data: Any, **kw: Any) -> h5py.Dataset:
+    """A dataset with a Fletcher-32 checksum on each chunk (HDF5 checks it on every read): a flipped bit in stored
+    numbers is a read error, not a silently wrong mode. HDF5 cannot chunk an empty array, so that one has none."""
+    return g.create_dataset(name, data=data, fletcher32=bool(np.size(data)), **kw)
 
 
 def _json_default(o: object) -> object:

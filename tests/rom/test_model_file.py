@@ -115,6 +115,25 @@ def test_damaged_and_foreign_files_are_rejected(built, tmp_path):
         load_model(tmp_path / "absent.h5")
 
 
+def test_a_bit_flip_in_stored_numbers_is_caught_by_the_checksum(built, tmp_path):
+    """One byte changed inside a dataset's stored chunk (a disk or copy error the HDF5 structure does not notice)
+    is a clear error, never a silently wrong mode."""
+    _, path = built
+    for name in ("fields/displacement/params/s", "fields/displacement/space", "mesh/points"):
+        flipped = tmp_path / f"flip_{name.replace('/', '_')}.h5"
+        shutil.copy(path, flipped)
+        with h5py.File(flipped, "r") as f:
+            ds = f[name]
+            assert ds.fletcher32
+            chunk = ds.id.get_chunk_info(0)
+            at = chunk.byte_offset + chunk.size // 2
+        raw = bytearray(flipped.read_bytes())
+        raw[at] ^= 0x10
+        flipped.write_bytes(bytes(raw))
+        with pytest.raises(ModelFileError, match=f"cannot read '/{name}'"):
+            load_model(flipped)
+
+
 def test_an_absurd_declared_size_is_refused_before_allocating(built, tmp_path):
     """A header that declares 3 GiB of mode values the file does not hold (HDF5 would fill them in)."""
     import time
