@@ -310,8 +310,9 @@ The rules that make it evidence:
   camera frame moved by about 5 cm and 10 degrees rms; the registration's pose error against the truth is in
   each row (`python -m benchmarks.family --seeds 0-9 --registration` measures that step alone:
   `benchmarks/results/family_registration.md`, run on the code of stop 25, before the slide pin below; the
-  held-out rows carry the current registration's error for every scene). The guess is the one number in a scene file computed from the truth (in
-  the first camera frame, through the rendered trajectory): 5 cm / 10 degrees off, it only picks the basin.
+  held-out rows carry the current registration's error for every scene). The guess is the one number in a scene
+  file computed from the truth (in the first camera frame, through the rendered trajectory): 5 cm / 10 degrees
+  off, it only picks the basin.
 
 Where we stand (the tables below). The defaults are the dense measurement with the static surroundings
 (`tracking.measurements: dense`, `dense_surroundings_px: 32`, `docs/tracking.md`) ending in a search of the cost

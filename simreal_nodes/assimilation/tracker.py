@@ -62,6 +62,9 @@ class TrackerConfig:
     min_deformation_px: float = 0.3  # below this improvement over "no deformation": nothing measurable
     # > 0: also fit a translation of the whole object (bounded), absorbing camera-pose drift
     object_shift_m: float = 0.0
+    # measurements 'dots': > 0: the object is at rest in the first so many frames its dots are measured in; its pose
+    # is corrected from them (rigidly, no deformation) and held (a pose measured by hand, a few mm and a degree off)
+    rest_frames: int = 0
     global_samples: int = 32  # coarse search over the tracked parameters when the warm start fits badly (0: off)
     dense: DenseSettings = field(default_factory=DenseSettings)  # measurements 'dense'
     # measurements 'dense': a deformation is seen when it lowers the photometric residual by this fraction
@@ -133,6 +136,8 @@ class DeformableTracker:
         self.outlier_ids = np.zeros(0, np.int64)  # map points the last fit rejected (their image tracks slid)
         self._rms_ref: float | None = None  # running residual RMS of good fits: what "fits badly" is measured against
         self._frames = 0  # frames solved (a periodic global restart every 30th)
+        self._rest_obs: list[tuple[np.ndarray, np.ndarray, np.ndarray]] | None = [] if self.cfg.rest_frames else None
+        self.rest_correction: dict[str, Any] | None = None  # what the rest alignment did (cfg.rest_frames)
         self._outline: tuple[np.ndarray, lm.Displacement] | None = None  # screen_region's nodes and their view
         self.dense: DenseAligner | None = None
         if self.cfg.measurements == "dense":
@@ -346,6 +351,13 @@ class DeformableTracker:
                 est.state, est.reason = EstimateState.LOST, "measurements 'dots' need the image"
                 return est
             meas, found = self._dot_measurements(image_bgr, T_cw)
+            if self._rest_obs is not None and meas is not None and len(meas[0]) >= self.cfg.min_measurements:
+                self._rest_obs.append((G.transform(G.inv(self.T_map_obj), meas[0]), meas[1], T_cw))
+                if len(self._rest_obs) >= self.cfg.rest_frames:
+                    self._align_at_rest()
+                    meas, found = self._dot_measurements(image_bgr, T_cw)
+                if self.rest_correction:
+                    est.debug["rest_correction"] = self.rest_correction
         if meas is None or len(meas[0]) < self.cfg.min_measurements:
             n = 0 if meas is None else len(meas[0])
             est.state = EstimateState.LOST
@@ -515,6 +527,47 @@ class DeformableTracker:
         res2 = lm.solve(p, best, lo, hi, k, self.cfg.max_iterations)
         return res2 if res2.cost < res.cost else res
 
+    def _align_at_rest(self, max_deg: float = 5.0, max_m: float = 0.03) -> None:
+        """The object's pose from the frames collected at rest (``cfg.rest_frames``): the small rigid motion of the
+        undeformed object, about its dots' centroid, that best reprojects them (Huber), with a weak prior (2 degrees,
+        5 mm) for the directions the dots cannot see (the roll about a row of dots). Applied once, then held; refused
+        (the pose kept) when it fits no better than 1.5 x Huber or is larger than a hand-measured pose is off."""
+        from scipy.optimize import least_squares
+
+        obs, self._rest_obs = self._rest_obs or [], None
+        Xo = np.concatenate([o[0] for o in obs])
+        uv = np.concatenate([o[1] for o in obs])
+        T_co = [o[2] @ self.T_map_obj for o in obs]
+        c = Xo.mean(axis=0)
+        sizes = [len(o[0]) for o in obs]
+        prior = np.r_[np.full(3, 1 / np.deg2rad(2.0)), np.full(3, 1 / 0.005)]
+
+        def moved(p: np.ndarray) -> np.ndarray:
+            return G.make_T(G.exp_so3(p[:3]), c + p[3:]) @ G.make_T(t=-c)
+
+        def residuals(p: np.ndarray) -> np.ndarray:
+            D = moved(p)
+            r, k = [], 0
+            for T, n in zip(T_co, sizes):
+                pred, _z = _project(T @ D, Xo[k:k + n], self.K)
+                r.append((pred - uv[k:k + n]).ravel())
+                k += n
+            out: np.ndarray = np.r_[np.concatenate(r), prior * p]
+            return out
+
+        r0 = residuals(np.zeros(6))[:-6].reshape(-1, 2)
+        sol = least_squares(residuals, np.zeros(6), loss="huber", f_scale=self.cfg.huber_px, x_scale=1 / prior)
+        r1 = sol.fun[:-6].reshape(-1, 2)
+        def rms(r: np.ndarray) -> float:
+            return float(np.sqrt(np.mean(np.minimum(np.linalg.norm(r, axis=1), 3 * self.cfg.huber_px) ** 2)))
+
+        deg, m = float(np.rad2deg(np.linalg.norm(sol.x[:3]))), float(np.linalg.norm(sol.x[3:]))
+        info = {"frames": len(obs), "rms_before_px": rms(r0), "rms_after_px": rms(r1), "deg": deg, "mm": 1e3 * m}
+        ok = bool(sol.success) and info["rms_after_px"] <= 1.5 * self.cfg.huber_px and deg <= max_deg and m <= max_m
+        if ok:
+            self.T_map_obj = self.T_map_obj @ moved(sol.x)
+        self.rest_correction = {**info, "applied": ok}
+
     def _rest_rms(self, X: np.ndarray, uvm: np.ndarray, T_cw: np.ndarray) -> float:
         """Residual of the undeformed object (moved by the best object shift when that is estimated)."""
         sh = self.cfg.object_shift_m
@@ -588,7 +641,7 @@ def tracker_config(obj: dict[str, Any], **overrides: Any) -> TrackerConfig:
                         max_iterations=t["max_iterations"], constant_frames=t["constant_frames"],
                         constant_std_frac=t["constant_std_frac"],
                         min_measurements=t["min_measurements"], max_points=t["points"], anchor=t["anchor"],
-                        object_shift_m=t["object_shift_m"],
+                        object_shift_m=t["object_shift_m"], rest_frames=t["rest_frames"],
                         dense=DenseSettings(step_px=t["dense_step_px"], rigid=t["dense_rigid"],
                                           static_ring_px=t["dense_surroundings_px"], refine=t["dense_refine"],
                                           camera_first=t["dense_camera_first"],

@@ -128,6 +128,10 @@ TRACKING = Record({
                              "absorbs camera-pose drift against the map; for objects whose unmoving parts stay in "
                              "view (a beam's supports), not for a turning part (it absorbs the rotation)",
                              lo=0, hi=0.1, default=0.0),
+    "rest_frames": Number("measurements 'dots': > 0 when the object is at rest in the first so many frames its dots "
+                          "are seen in: its pose is corrected from them (a small rigid motion, then held): absorbs a "
+                          "pose measured by hand a few mm and a degree off. 0: the pose is taken as given",
+                          integer=True, lo=0, hi=300, default=0),
     "anchor": Enum(("ray", "foot"), "where a map point sits on its model triangle: where its pixel's viewing ray "
                    "crosses it (ray) or the mapped point's foot on it (foot; keeps the depth error's tangential part)",
                    default="ray"),

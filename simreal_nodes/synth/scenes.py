@@ -9,6 +9,7 @@ user would know (camera topics, marker layout, where a virtual object is placed)
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -17,9 +18,11 @@ import numpy as np
 from simreal_nodes import geometry as G
 from simreal_nodes.camera import CameraModel
 from simreal_nodes.collision.contact import ContactTracker, surface_samples
+from simreal_nodes.physics import materials
 from simreal_nodes.render.gl import Mesh, Renderer
 from simreal_nodes.rom.model import ReducedModel
 from simreal_nodes.synth import world as W
+from simreal_nodes.synth.truth import BeamLoadTruth, beam_load_truth
 
 
 @dataclass
@@ -151,18 +154,34 @@ _CACHE: dict = {}
 
 
 def aluminium_beam(width=640, height=480, duration=6.0, fps=30.0, positions=(0.12, 0.24, 0.36, 0.48, 0.30, 0.18),
-                   name="aluminium_beam") -> SynthScene:
+                   name="aluminium_beam", physics: str = "model") -> SynthScene:
+    """``physics``: "model" renders the beam with the reduced model the tracker fits (a unit-test scene, zero model
+    error); "truth" renders it from an independent full-order solve (:func:`aluminium_truth`), shows the bar at
+    rest for a second first and writes its pose in the scene file as a user measures it (a few mm and a degree off),
+    to be corrected from the frames at rest (``tracking.rest_frames``)."""
     positions = list(positions)
+    independent = physics == "truth"
+    if physics not in ("model", "truth"):
+        raise ValueError(f"physics must be 'model' or 'truth', got '{physics}'")
+    # the truth scene first shows the bar at rest (the weight is put on after t_free), as an experiment starts: a
+    # cantilever's bending looks like a turn about its clamp, and a view at rest is what tells the two apart
+    t_free = 1.0 if independent else 0.0
+    duration += t_free
 
     def s_of_t(t):
-        return float(W.holds(np.array([t]), positions, hold_s=0.6, move_s=0.35)[0])
+        return float(W.holds(np.array([max(t - t_free, 0.0)]), positions, hold_s=0.6, move_s=0.35)[0])
 
     def build(sc, r, models):
         m = models["beam"]
         add_environment(r, center=(0.25, 0.05), seed=1)
         V, F = W.box((0.08, 0.1, BEAM_ORIGIN[2] + 0.03), (-0.04, 0.02, (BEAM_ORIGIN[2] + 0.03) / 2))
         r.add(Mesh("clamp", V, F, mode="texture", texture=W.texture("plate"), tex_scale=5.0, smooth=False))
-        r.add(deformable_mesh(m, "beam", "aluminium", 6.0, G.make_T(t=BEAM_ORIGIN)))
+        if independent:
+            tr = sc.state["truth"] = aluminium_truth()
+            r.add(Mesh("beam", tr.points.copy(), tr.surface, mode="texture", texture=W.texture("aluminium"),
+                       tex_scale=6.0, ref=tr.points.copy(), smooth=False, pose=G.make_T(t=BEAM_ORIGIN)))
+        else:
+            r.add(deformable_mesh(m, "beam", "aluminium", 6.0, G.make_T(t=BEAM_ORIGIN)))
         for mid, (x, y) in MARKERS.items():
             Vq, Fq, UV = W.quad(MARKER_SIZE, MARKER_SIZE)
             r.add(Mesh(f"marker{mid}", Vq, Fq, mode="uv", ref=UV, texture=W.aruco_image(mid), unlit=True,
@@ -177,18 +196,27 @@ def aluminium_beam(width=640, height=480, duration=6.0, fps=30.0, positions=(0.1
     def update(sc, r, t):
         m = sc.state["models"]["beam"]
         s = s_of_t(t)
-        P = m.deformed_points([s])
-        r.update("beam", vertices=P)
         T_wo = G.make_T(t=BEAM_ORIGIN)
         dots = sc.state["dots_ref"]
-        dd = dots + _interp_disp(m, [s], dots)
+        top = np.array([[s, 0.02, m.points[:, 2].max()]])
+        if independent:
+            tr = sc.state["truth"]
+            loaded = t >= t_free
+            on_face = dots * [1, 0, 1]  # the sticker moves with the face point it is glued on
+            r.update("beam", vertices=tr.deformed_points(s) if loaded else tr.points)
+            dd = dots + (tr.at(s, on_face) if loaded else 0.0)
+            wt = top + tr.at(s, top)
+            r.meshes["weight"].visible = loaded
+        else:
+            r.update("beam", vertices=m.deformed_points([s]))
+            dd = dots + _interp_disp(m, [s], dots)
+            wt = top + _interp_disp(m, [s], top)
         for k, p in enumerate(dd):
             # a disk on the front face (normal -y), slightly in front of it
             r.update(f"dot{k}", pose=T_wo @ G.make_T(G.rot_axis("x", np.pi / 2), p))
-        top = np.array([[s, 0.02, m.points[:, 2].max()]])
-        wt = top + _interp_disp(m, [s], top)
         r.update("weight", pose=T_wo @ G.make_T(t=wt[0]))
-        return Truth(params={"beam": _truth_params(m, [s])}, object_poses={"beam": sc.T_map_world() @ T_wo})
+        values = [s] if t >= t_free else [float("nan")]
+        return Truth(params={"beam": _truth_params(m, values)}, object_poses={"beam": sc.T_map_world() @ T_wo})
 
     def cam_pose(t):
         return W.arc_trajectory(np.array([t]), [0.21, 0.03, 0.05], 0.45, 0.48, np.deg2rad(-108), np.deg2rad(-76),
@@ -196,20 +224,26 @@ def aluminium_beam(width=640, height=480, duration=6.0, fps=30.0, positions=(0.1
 
     def yaml(sc):
         m_dots = sc.state["dots_ref"]
+        T_obj = G.make_T(t=BEAM_ORIGIN)
+        tracking = {"enabled": True, "measurements": "dots", "huber_px": 1.5, "modes": 19}
+        if independent:  # the pose as a user measures it with a ruler and a square, corrected at rest
+            T_obj = user_measured(T_obj, seed=41)
+            tracking = {**tracking, "rest_frames": 10}
         return {
             "simreal_scene": 1, "name": sc.name,
             "description": "Aluminium cantilever with a moving point load, fiducial markers and glued blue dots "
-                           "(thesis §4.5.1).",
+                           "(thesis §4.5.1)" + (", rendered from an independent full-order solve; the beam's pose "
+                                               "measured by hand (a few mm and a degree off)." if independent else "."),
             "camera": _camera_yaml(sc),
             "localization": {"mode": "markers", "markers": {
                 "dictionary": "DICT_4X4_50", "size_m": MARKER_BLACK,
                 "poses": {mid: [x, y, 0.0008, 0, 0, 0, 1] for mid, (x, y) in MARKERS.items()}}},
             "objects": [{
                 "id": "beam", "model": "spec:aluminium_beam",
-                "anchor": {"kind": "pose", "pose": _pose7(G.make_T(t=BEAM_ORIGIN))},
+                "anchor": {"kind": "pose", "pose": _pose7(T_obj)},
                 "parameters": {"s": {"mode": "tracked", "initial": 0.24}},
-                "tracking": {"enabled": True, "measurements": "dots", "huber_px": 1.5, "modes": 19,
-                             "dots": [[round(float(v), 6) for v in p] for p in m_dots], "dot_color": [0.1, 0.25, 0.95]},
+                "tracking": {**tracking, "dots": [[round(float(v), 6) for v in p] for p in m_dots],
+                             "dot_color": [0.1, 0.25, 0.95]},
                 "overlay": {"field": "displacement", "magnify": 10.0},
             }],
             "overlay": {"enabled": True},
@@ -220,14 +254,55 @@ def aluminium_beam(width=640, height=480, duration=6.0, fps=30.0, positions=(0.1
                       cam_pose, yaml, map_is_world=True)
 
 
+def user_measured(T: np.ndarray, seed: int, mm: float = 2.0, deg: float = 0.6) -> np.ndarray:
+    """A pose as a user measures it by hand: ``mm`` and ``deg`` rms off per axis (seeded), about the object frame."""
+    rng = np.random.default_rng([16, seed])
+    e_t, e_r = rng.normal(0.0, mm * 1e-3, 3), rng.normal(0.0, np.deg2rad(deg), 3)
+    R = G.rot_axis("x", e_r[0]) @ G.rot_axis("y", e_r[1]) @ G.rot_axis("z", e_r[2])
+    return G.make_T(R @ T[:3, :3], T[:3, 3] + e_t)
+
+
+def user_guess(T: np.ndarray, seed: int) -> np.ndarray:
+    """A rough guess by eye for ``anchor: registration`` (as the scene family draws it: ~5 cm, ~10 degrees rms)."""
+    return user_measured(T, seed, mm=30.0, deg=6.0)
+
+
+@functools.cache
+def aluminium_truth() -> BeamLoadTruth:
+    """The aluminium bar of :func:`aluminium_beam` (spec ``aluminium_beam``: 500 x 40 x 8 mm, E 69 GPa, nu 0.334,
+    clamped at x = 0) under its 5 kg weight as a 50 N pressure over the weight's 22 mm footprint (a disk of the same
+    area), full-order P2 tetrahedra on twice the model's grid along the bar (the model: P2 hexahedra, a nodal force)."""
+    return beam_load_truth(0.5, 0.04, 0.008, materials.make_material("linear_elastic", 69.0e9, 0.334),
+                           [{"region": "xmin", "kind": "clamped"}], 50.0, 0.022 / np.sqrt(np.pi), (0.0, 0.48),
+                           step=0.0025, cells=(100, 6, 2))
+
+
+@functools.cache
+def foam_truth() -> BeamLoadTruth:
+    """The foam beam of :func:`foam_beam` (spec ``foam_beam``: 797.5 x 200 x 105 mm, Saint Venant-Kirchhoff E 0.11
+    N/mm2, nu 0.2, pinned on the left 40 mm, sliding on the right 40 mm) under its 15 N lead disk of 80 mm:
+    full-order P2 tetrahedra 80 x 6 x 3 (a node at each strip's 40 mm end; within 1 % of the converged linear
+    deflection; the model: P2 hexahedra 40 x 4 x 2, a nodal load patch), Newton at each position, every 10 mm over
+    the scene's range."""
+    sup = [{"region": {"face": "zmin", "box": [[0.0, 0.04], None, None]}, "kind": "pinned"},
+           {"region": {"face": "zmin", "box": [[0.7575, 0.7975], None, None]}, "kind": "sliding", "component": "z"}]
+    return beam_load_truth(0.7975, 0.2, 0.105, materials.make_material("saint_venant_kirchhoff", 1.1e5, 0.2), sup,
+                           15.0, 0.04, (0.15, 0.65), step=0.01, cells=(80, 6, 3))
+
+
 # ------------------------------------------------------------------------------------------------
 # Foam beam with texture (§4.5.2)
 
 FOAM_ORIGIN = np.array([0.0, 0.0, 0.15])
 
 
-def foam_beam(width=640, height=480, duration=8.0, fps=30.0) -> SynthScene:
+def foam_beam(width=640, height=480, duration=8.0, fps=30.0, physics: str = "model") -> SynthScene:
+    """``physics``: "model" renders the beam with the reduced model (a unit-test scene); "truth" from an independent
+    full-order solve (:func:`foam_truth`), the beam placed by registration from a guess by eye, tracking defaults."""
     positions = [0.2, 0.4, 0.6, 0.3, 0.5]
+    independent = physics == "truth"
+    if physics not in ("model", "truth"):
+        raise ValueError(f"physics must be 'model' or 'truth', got '{physics}'")
     t_free = 1.5  # the camera maps the unloaded scene first (thesis: scanning before deformation)
 
     def s_of_t(t):
@@ -239,7 +314,12 @@ def foam_beam(width=640, height=480, duration=8.0, fps=30.0) -> SynthScene:
         for name, x0, x1 in (("support_left", -0.02, 0.05), ("support_right", 0.7475, 0.8175)):
             V, F = W.box((x1 - x0, 0.26, FOAM_ORIGIN[2]), ((x0 + x1) / 2, 0.1, FOAM_ORIGIN[2] / 2))
             r.add(Mesh(name, V, F, mode="texture", texture=W.texture("plate"), tex_scale=4.0, smooth=False))
-        r.add(deformable_mesh(m, "beam", "foam", 3.0, G.make_T(t=FOAM_ORIGIN)))
+        if independent:
+            tr = sc.state["truth"] = foam_truth()
+            r.add(Mesh("beam", tr.points.copy(), tr.surface, mode="texture", texture=W.texture("foam"),
+                       tex_scale=3.0, ref=tr.points.copy(), smooth=False, pose=G.make_T(t=FOAM_ORIGIN)))
+        else:
+            r.add(deformable_mesh(m, "beam", "foam", 3.0, G.make_T(t=FOAM_ORIGIN)))
         V, F = W.cylinder(0.04, 0.02, 32)
         r.add(Mesh("disk", V, F, mode="flat", tint=(0.35, 0.35, 0.38), smooth=False, visible=False))
 
@@ -248,10 +328,15 @@ def foam_beam(width=640, height=480, duration=8.0, fps=30.0) -> SynthScene:
         T_wo = G.make_T(t=FOAM_ORIGIN)
         loaded = t >= t_free
         s = s_of_t(t)
-        r.update("beam", vertices=m.deformed_points([s]) if loaded else m.points)
-        r.meshes["disk"].visible = loaded
         top = np.array([[s, 0.1, m.points[:, 2].max()]])
-        r.update("disk", pose=T_wo @ G.make_T(t=(top + _interp_disp(m, [s], top))[0]))
+        if independent:
+            tr = sc.state["truth"]
+            r.update("beam", vertices=tr.deformed_points(s) if loaded else tr.points)
+            r.update("disk", pose=T_wo @ G.make_T(t=(top + tr.at(s, top))[0]))
+        else:
+            r.update("beam", vertices=m.deformed_points([s]) if loaded else m.points)
+            r.update("disk", pose=T_wo @ G.make_T(t=(top + _interp_disp(m, [s], top))[0]))
+        r.meshes["disk"].visible = loaded
         truth = Truth(object_poses={"beam": sc.T_map_world() @ T_wo})
         truth.params["beam"] = _truth_params(m, [s]) if loaded else (["s"], ["m"], [float("nan")])
         return truth
@@ -262,24 +347,33 @@ def foam_beam(width=640, height=480, duration=8.0, fps=30.0) -> SynthScene:
 
     def yaml(sc):
         T_map_obj = sc.T_map_world() @ G.make_T(t=FOAM_ORIGIN)
+        anchor = {"kind": "pose", "pose": _pose7(T_map_obj)}
+        # a long beam whose supports stay in view: its shift against the drifting map is observable
+        tracking = {"enabled": True, "measurements": "map_points", "huber_px": 2.0, "modes": 19,
+                    "object_shift_m": 0.01}
+        if independent:  # placed by registration from a guess by eye (the one number computed from the truth); defaults
+            anchor = {"kind": "registration",
+                      "guess": _pose7(sc.T_map_world() @ user_guess(G.make_T(t=FOAM_ORIGIN), seed=42))}
+            tracking = {"enabled": True, "modes": 19}
         return {
-            "simreal_scene": 1, "name": "foam_beam",
-            "description": "Hyperelastic foam beam tracked through its own texture, 15 N lead disk (thesis §4.5.2).",
+            "simreal_scene": 1, "name": sc.name,
+            "description": "Hyperelastic foam beam tracked through its own texture, 15 N lead disk (thesis §4.5.2)"
+                           + (", rendered from an independent full-order solve, placed by registration." if independent
+                              else "."),
             "camera": _camera_yaml(sc),
             "localization": {"mode": "rgbd" if sc.depth else "mono", "features": 1500},
             "objects": [{
                 "id": "beam", "model": "spec:foam_beam",
-                "anchor": {"kind": "pose", "pose": _pose7(T_map_obj)},
+                "anchor": anchor,
                 "parameters": {"s": {"mode": "tracked", "initial": 0.4}},
-                # a long beam whose supports stay in view: its shift against the drifting map is observable
-                "tracking": {"enabled": True, "measurements": "map_points", "huber_px": 2.0, "modes": 19,
-                             "object_shift_m": 0.01},
+                "tracking": tracking,
                 "overlay": {"field": "displacement"},
             }],
             "overlay": {"enabled": True},
         }
 
-    return SynthScene("foam_beam", "Foam beam (SVK) under a lead disk at s, textured, hand-held arc",
+    return SynthScene("foam_beam_truth" if independent else "foam_beam",
+                      "Foam beam (SVK) under a lead disk at s, textured, hand-held arc",
                       default_camera(width, height), fps, duration, {"beam": "foam_beam"}, build, update, cam_pose,
                       yaml, depth=True)
 
@@ -599,6 +693,9 @@ SCENES: dict[str, Callable[..., SynthScene]] = {
     "aluminium_beam_clamp": lambda **kw: aluminium_beam(positions=(0.0, 0.02, 0.05, 0.08, 0.12),
                                                         name="aluminium_beam_clamp", **{"duration": 5.0, **kw}),
     "foam_beam": foam_beam,
+    # the same set-ups rendered from independent full-order physics (no inverse crime), defaults, pose not given
+    "aluminium_beam_truth": lambda **kw: aluminium_beam(name="aluminium_beam_truth", physics="truth", **kw),
+    "foam_beam_truth": lambda **kw: foam_beam(physics="truth", **kw),
     "virtual_boot_lever": virtual_boot_lever,
     "joint_boot": joint_boot,
     "crossed_beams_probe": crossed_beams_probe,

@@ -13,6 +13,8 @@ differs from the model's in every discretisation choice:
 For a linear material the stiffness is factorised once and the solution tabulated at load positions ``step``
 apart; between two tabulated positions it is interpolated linearly — superposition: the exact solution for the
 load shared between the two footprints, a smoothing far below the footprint's own size when ``step`` is small.
+A hyperelastic material (the foam beam's Saint Venant-Kirchhoff) is solved by Newton at each tabulated position,
+the weight sliding from one to the next.
 
 :func:`model_error` then measures how far the reduced model is from this truth — the error a perfect tracker
 would still make — so that every tracking error can be reported beside the model error of its scene.
@@ -54,6 +56,8 @@ class BeamLoadTruth:
 
     def scaled(self, factor: float) -> BeamLoadTruth:
         """The same truth for a load ``factor`` times larger (linear material: superposition)."""
+        if not self.info.get("linear", True):
+            raise ValueError("a nonlinear truth does not scale with its load: solve it for the load wanted")
         out = BeamLoadTruth(self.points, self.surface, self.tets, self.s, self.U * factor, self.description,
                             {**self.info, "scaled": factor})
         out._embeds, out._mesh = self._embeds, self._mesh
@@ -95,16 +99,20 @@ class BeamLoadTruth:
 def beam_load_truth(length: float, width: float, height: float, material: materials.Material, supports: list[dict],
                     force: float, footprint_radius: float, s_range: tuple[float, float], step: float = 0.0025,
                     cells: tuple[int, int, int] | None = None, order: int = 2,
-                    direction: tuple[float, float, float] = (0.0, 0.0, -1.0)) -> BeamLoadTruth:
-    """Tabulate the full-order linear-elastic solution of a beam loaded by a weight of ``force`` newtons resting
-    on a disk of ``footprint_radius`` centred on the top centreline at x = s, for s over ``s_range``.
+                    direction: tuple[float, float, float] = (0.0, 0.0, -1.0), load_steps: int = 4) -> BeamLoadTruth:
+    """Tabulate the full-order solution of a beam loaded by a weight of ``force`` newtons resting on a disk of
+    ``footprint_radius`` centred on the top centreline at x = s, for s over ``s_range``.
+
+    A linear-elastic material is one factorisation and a solve per position. A hyperelastic one (Saint
+    Venant-Kirchhoff, neo-Hookean) is Newton with load stepping to the first position, then continuation: the
+    weight slides from each tabulated position to the next, each solve started from the last (the weight moves
+    slowly: a sequence of static equilibria, the path a quasi-static experiment follows).
 
     ``supports``: as in model specs ({region, kind[, component]}). ``cells``: tetrahedral grid (default: about
     4 elements through the smaller cross-section side, and elements no longer than twice that size along the beam,
     capped so a scene's truth stays under ~30 000 dofs; tests/synth/test_truth.py bounds its error against
     Euler-Bernoulli). ``order``: 2 (P2, the default) or 1."""
-    if not isinstance(material, materials.LinearElastic):
-        raise FemError("beam_load_truth tabulates a linear solution; use a linear_elastic material")
+    linear = isinstance(material, materials.LinearElastic)
     if cells is None:  # 3 quadratic elements through the thinner side, about square in section, <= 2:1 along the beam
         h = min(width, height) / 3
         cells = (int(np.clip(np.ceil(length / (2 * h)), 8, 90)), int(np.clip(round(width / h), 2, 8)),
@@ -118,19 +126,29 @@ def beam_load_truth(length: float, width: float, height: float, material: materi
     dirv = dirv / np.linalg.norm(dirv)
     F = np.stack([solid.patch_load({"face": "zmax"}, (s, width / 2, height), footprint_radius, force * dirv)
                   for s in s_tab], axis=1)  # (N, n_s)
-    K = solid.stiffness()
-    free = solid.free
-    lu = spla.splu(K[free][:, free].tocsc(), permc_spec="MMD_AT_PLUS_A")  # symmetric: ~1/3 less fill than COLAMD
     X = np.zeros((solid.N, n_s))
-    X[free] = lu.solve(F[free] / material.E)  # the stiffness is assembled in units of E (fem.Solid)
+    if linear:
+        K = solid.stiffness()
+        free = solid.free
+        lu = spla.splu(K[free][:, free].tocsc(), permc_spec="MMD_AT_PLUS_A")  # symmetric: ~1/3 less fill than COLAMD
+        X[free] = lu.solve(F[free] / material.E)  # the stiffness is assembled in units of E (fem.Solid)
+    else:
+        X[:, 0], _ = solid.solve(F[:, 0], steps=load_steps)
+        path: list[np.ndarray] = []
+        if n_s > 1:
+            solid.solve_states([(F[:, k], np.zeros(solid.N)) for k in range(1, n_s)], u0=X[:, 0], path=path)
+        for k, u in enumerate(path, start=1):
+            X[:, k] = u
     if not np.all(np.isfinite(X)):
         raise FemError("the truth solve returned NaN/inf")
     U = np.stack([solid.vertex_displacement(X[:, k]) for k in range(n_s)])
-    desc = (f"full-order P{order} tetrahedra {cells[0]}x{cells[1]}x{cells[2]} cells ({solid.N} dofs), weight "
+    desc = (f"full-order P{order} tetrahedra {cells[0]}x{cells[1]}x{cells[2]} cells ({solid.N} dofs), "
+            f"{material.law}, weight "
             f"{force:g} N on a {2e3 * footprint_radius:.0f} mm disk, "
             f"tabulated every {1e3 * (s_tab[1] - s_tab[0]):.2f} mm")
     return BeamLoadTruth(mesh.p.T.copy(), meshes.boundary_triangles(mesh), mesh.t.T.copy(), s_tab, U, desc,
-                         {"cells": list(cells), "order": order, "dofs": int(solid.N), "n_s": int(n_s)})
+                         {"cells": list(cells), "order": order, "dofs": int(solid.N), "n_s": int(n_s),
+                          "linear": linear})
 
 
 @dataclass

@@ -35,6 +35,25 @@ def test_cantilever_matches_euler_bernoulli(cantilever):
         assert tip_deflection(cantilever, a) == pytest.approx(eb, rel=0.03)
 
 
+def test_a_hyperelastic_truth_follows_the_weight_and_bends_like_the_linear_one_when_the_load_is_small(cantilever):
+    """Saint Venant-Kirchhoff by Newton at each position (the weight sliding along): at a deflection of 1/400 of the
+    length it is the linear solution (0.5 %); at a deflection of a tenth of the length it is not (stiffening and
+    the follower's geometry change it by more than 1 %), and it refuses to be scaled like a linear truth."""
+    def svk(force):
+        m = materials.make_material("saint_venant_kirchhoff", E, 0.3)
+        return beam_load_truth(L, W, H, m, [{"region": "xmin", "kind": "clamped"}], force, 0.006, (0.3, 0.39),
+                               step=0.045, cells=(30, 2, 2))
+
+    small = svk(F)
+    assert small.info["linear"] is False and len(small.s) >= 3
+    assert tip_deflection(small, 0.39) == pytest.approx(tip_deflection(cantilever, 0.39), rel=0.005)
+    large = svk(F * 40)  # tip about 40 mm, a tenth of the length
+    lin = 40 * tip_deflection(cantilever, 0.39)
+    assert abs(tip_deflection(large, 0.39) / lin - 1) > 0.01
+    with pytest.raises(ValueError, match="does not scale"):
+        small.scaled(2.0)
+
+
 def test_interpolates_linearly_between_tabulated_positions(cantilever):
     s0, s1 = cantilever.s[3], cantilever.s[4]
     mid = cantilever.displacement(0.5 * (s0 + s1))
