@@ -144,7 +144,8 @@ def rows_float32() -> list[dict]:
 
 COLS = [("sweep", "sweep", "{}"), ("value", "value", "{:g}"), ("element", "element / law", "{}"),
         ("dofs", "dofs", "{}"), ("deflection", "deflection (m)", "{:.4g}"), ("error_pct", "error (%)", "{:+.3g}"),
-        ("newton", "Newton iterations", "{}"), ("ms", "time (ms)", "{:.3g}"), ("warning", "warning", "{}"),
+        ("newton", "Newton iterations", "{}"), ("ms", "time (ms)", "{:.3g}"), ("ms64", "float64 time (ms)", "{:.3g}"),
+        ("warning", "warning", "{}"),
         ("failure", "failure", "{}")]
 
 

@@ -35,7 +35,7 @@ CASES = [
      "(`rest_frames: 10`)", {}),
     ("aluminium_beam_truth", 640, 480, 30.0, "knob: pose as given (`rest_frames: 0`)", {"rest_frames": 0}),
     ("aluminium_beam_truth", 640, 480, 30.0, "knob: the project's default measurement (`measurements: dense`)",
-     {"measurements": "dense"}),
+     {"measurements": "dense", "rest_frames": 0}),
     ("foam_beam_truth", 640, 480, 30.0, "the scene file: the defaults (dense), registration", {}),
     ("foam_beam_truth", 1280, 720, 15.0, "the scene file: the defaults (dense), registration", {}),
 ]

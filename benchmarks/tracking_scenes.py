@@ -167,11 +167,16 @@ each scene's model error beside its result.
   (at each position the weight rests at, |mean estimate - position|; the median over the six positions) 1.9 mm
   against the thesis's 2.2 mm at the same positions (the thesis does not state its camera resolution; ours is
   640 x 480 at 0.45-0.65 m). What stays of the pose error (0.8 deg) is the roll about the row of dots, which
-  does not move them. The rest correction fits the undeformed bar's small rigid motion (Huber, a weak prior of 2
-  deg / 5 mm for the directions the dots cannot see) and is refused when it fits no better than 1.5 x Huber or is
-  larger than 5 deg / 3 cm; it assumes the bar is at rest in those frames (off by default: a user who starts the
-  recording unloaded turns it on). The project's default measurement, dense, cannot read this bar: its surface
-  is plain metal, and every loaded frame is flagged 'no measurable deformation' (0 % OK) rather than reported.
+  does not move them. The rest correction fits the undeformed bar's small rigid motion over the first
+  `rest_frames` frames with a camera pose (Huber, a weak prior of 2 deg / 5 mm for the directions the dots cannot
+  see; the estimate is 'initializing' meanwhile) and is refused, with its reason, when it does not lower the
+  residual or leaves it above 1.5 x Huber, when it is larger than 5 deg / 3 cm, and when the frames were not at
+  rest: a bent cantilever fits a rigid turn to a fraction of a pixel (0.35 px in the unit test), so the same
+  frames are fitted with the deformation free too, and a fit under half the rigid residual (above 0.2 px) refuses
+  it. Off by default: a user who starts the recording unloaded turns it on. The corrected pose lives in the
+  tracker; the overlay and collision nodes still place the object at the scene file's pose. The project's default
+  measurement, dense, cannot read this bar: its surface is plain metal, and every loaded frame is flagged 'no
+  measurable deformation' (0 % OK) rather than reported.
 - Not yet on independent physics: the joint boot (its rows below are rendered by its own model).
 
 How a frame is measured (thesis ch. 4, `vision/slam/deformable.py`, `assimilation/tracker.py`):

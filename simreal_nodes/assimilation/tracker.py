@@ -62,8 +62,8 @@ class TrackerConfig:
     min_deformation_px: float = 0.3  # below this improvement over "no deformation": nothing measurable
     # > 0: also fit a translation of the whole object (bounded), absorbing camera-pose drift
     object_shift_m: float = 0.0
-    # measurements 'dots': > 0: the object is at rest in the first so many frames its dots are measured in; its pose
-    # is corrected from them (rigidly, no deformation) and held (a pose measured by hand, a few mm and a degree off)
+    # measurements 'dots' / 'homography': > 0: the object is at rest in the first so many frames with a camera pose; its
+    # pose is corrected from its dots there (rigidly) and held (a pose measured by hand, a few mm and a degree off)
     rest_frames: int = 0
     global_samples: int = 32  # coarse search over the tracked parameters when the warm start fits badly (0: off)
     dense: DenseSettings = field(default_factory=DenseSettings)  # measurements 'dense'
@@ -136,7 +136,10 @@ class DeformableTracker:
         self.outlier_ids = np.zeros(0, np.int64)  # map points the last fit rejected (their image tracks slid)
         self._rms_ref: float | None = None  # running residual RMS of good fits: what "fits badly" is measured against
         self._frames = 0  # frames solved (a periodic global restart every 30th)
-        self._rest_obs: list[tuple[np.ndarray, np.ndarray, np.ndarray]] | None = [] if self.cfg.rest_frames else None
+        # cfg.rest_frames: (object-frame dots, their pixels, T_cw, nodes, weights) of the frames at rest, and how many
+        # frames with a camera pose have passed since the first (the window is the first rest_frames of them)
+        self._rest_obs: list[tuple[np.ndarray, ...]] | None = [] if self.cfg.rest_frames else None
+        self._rest_seen = 0
         self.rest_correction: dict[str, Any] | None = None  # what the rest alignment did (cfg.rest_frames)
         self._outline: tuple[np.ndarray, lm.Displacement] | None = None  # screen_region's nodes and their view
         self.dense: DenseAligner | None = None
@@ -351,13 +354,20 @@ class DeformableTracker:
                 est.state, est.reason = EstimateState.LOST, "measurements 'dots' need the image"
                 return est
             meas, found = self._dot_measurements(image_bgr, T_cw)
-            if self._rest_obs is not None and meas is not None and len(meas[0]) >= self.cfg.min_measurements:
-                self._rest_obs.append((G.transform(G.inv(self.T_map_obj), meas[0]), meas[1], T_cw))
-                if len(self._rest_obs) >= self.cfg.rest_frames:
-                    self._align_at_rest()
-                    meas, found = self._dot_measurements(image_bgr, T_cw)
-                if self.rest_correction:
-                    est.debug["rest_correction"] = self.rest_correction
+            if self._rest_obs is not None:  # the first rest_frames frames: the pose is measured, nothing else
+                self._rest_seen += 1
+                if meas is not None and len(meas[0]) >= self.cfg.min_measurements:
+                    X, uvm, nodes, w = meas[:4]
+                    self._rest_obs.append((G.transform(G.inv(self.T_map_obj), X), uvm, T_cw, nodes, w))
+                if self._rest_seen < self.cfg.rest_frames:
+                    est.state = EstimateState.INITIALIZING
+                    est.reason = (f"measuring the object's pose at rest ({self._rest_seen} of {self.cfg.rest_frames}"
+                                  f" frames, {len(self._rest_obs)} with its dots)")
+                    return est
+                self._align_at_rest()
+                meas, found = self._dot_measurements(image_bgr, T_cw)
+            if self.rest_correction:
+                est.debug["rest_correction"] = self.rest_correction
         if meas is None or len(meas[0]) < self.cfg.min_measurements:
             n = 0 if meas is None else len(meas[0])
             est.state = EstimateState.LOST
@@ -527,14 +537,24 @@ class DeformableTracker:
         res2 = lm.solve(p, best, lo, hi, k, self.cfg.max_iterations)
         return res2 if res2.cost < res.cost else res
 
-    def _align_at_rest(self, max_deg: float = 5.0, max_m: float = 0.03) -> None:
+    def _align_at_rest(self, max_deg: float = 5.0, max_m: float = 0.03, bent_ratio: float = 0.5,
+                       bent_px: float = 0.2) -> None:
         """The object's pose from the frames collected at rest (``cfg.rest_frames``): the small rigid motion of the
         undeformed object, about its dots' centroid, that best reprojects them (Huber), with a weak prior (2 degrees,
-        5 mm) for the directions the dots cannot see (the roll about a row of dots). Applied once, then held; refused
-        (the pose kept) when it fits no better than 1.5 x Huber or is larger than a hand-measured pose is off."""
+        5 mm) for the directions the dots cannot see (the roll about a row of dots). Applied once, then held.
+
+        Refused (the pose kept, the reason in :attr:`rest_correction`) when fewer than 3 frames saw the dots, when
+        it does not lower the residual or leaves it above 1.5 x Huber, when it is larger than a hand-measured pose
+        is off, and when the object was not at rest: a bent cantilever fits a rigid turn to a fraction of a pixel,
+        so the same frames are fitted with the model's deformation free too, and a residual under ``bent_ratio`` of
+        the rigid one (the rigid one above ``bent_px``, what dot centroids reach at rest) says they were loaded."""
         from scipy.optimize import least_squares
 
         obs, self._rest_obs = self._rest_obs or [], None
+        if len(obs) < 3:
+            self.rest_correction = {"frames": len(obs), "applied": False,
+                                    "reason": f"the dots were seen in {len(obs)} of the first {self._rest_seen} frames"}
+            return
         Xo = np.concatenate([o[0] for o in obs])
         uv = np.concatenate([o[1] for o in obs])
         T_co = [o[2] @ self.T_map_obj for o in obs]
@@ -562,11 +582,47 @@ class DeformableTracker:
             return float(np.sqrt(np.mean(np.minimum(np.linalg.norm(r, axis=1), 3 * self.cfg.huber_px) ** 2)))
 
         deg, m = float(np.rad2deg(np.linalg.norm(sol.x[:3]))), float(np.linalg.norm(sol.x[3:]))
-        info = {"frames": len(obs), "rms_before_px": rms(r0), "rms_after_px": rms(r1), "deg": deg, "mm": 1e3 * m}
-        ok = bool(sol.success) and info["rms_after_px"] <= 1.5 * self.cfg.huber_px and deg <= max_deg and m <= max_m
-        if ok:
-            self.T_map_obj = self.T_map_obj @ moved(sol.x)
-        self.rest_correction = {**info, "applied": ok}
+        info: dict[str, Any] = {"frames": len(obs), "rms_before_px": rms(r0), "rms_after_px": rms(r1), "deg": deg,
+                                "mm": 1e3 * m}
+        T_new = self.T_map_obj @ moved(sol.x)
+        # the same frames with the model's deformation free as well: a loaded object fits it far better
+        n_mu = len(self.model.axes)
+        lo, hi = self._free_bounds()
+
+        def residuals_bent(x: np.ndarray) -> np.ndarray:
+            D, mu = moved(x[:6]), x[6:]
+            r = []
+            for (Xo_f, uv_f, _T, nodes_f, w_f), T in zip(obs, T_co):
+                dX, _J = self._disp_fn(nodes_f, w_f)(mu)
+                r.append((_project(T @ D, Xo_f + dX, self.K)[0] - uv_f).ravel())
+            out: np.ndarray = np.r_[np.concatenate(r), prior * x[:6]]
+            return out
+
+        best = None
+        for start in (lo[:n_mu], 0.5 * (lo[:n_mu] + hi[:n_mu]), hi[:n_mu]):
+            b = least_squares(residuals_bent, np.r_[sol.x, start], loss="huber", f_scale=self.cfg.huber_px,
+                              x_scale=np.r_[1 / prior, np.maximum(hi[:n_mu] - lo[:n_mu], 1e-9)],
+                              bounds=(np.r_[np.full(6, -np.inf), lo[:n_mu] - 1e-12],
+                                      np.r_[np.full(6, np.inf), hi[:n_mu] + 1e-12]))
+            best = b if best is None or b.cost < best.cost else best
+        assert best is not None
+        rms_bent = rms(best.fun[:-6].reshape(-1, 2))
+        rigid_last = info["rms_after_px"]
+        info["rms_deformed_px"] = rms_bent
+        why = ("the solve failed" if not sol.success else
+               "it does not lower the residual" if info["rms_after_px"] > info["rms_before_px"] else
+               f"the residual stays above {1.5 * self.cfg.huber_px:.2f} px"
+               if info["rms_after_px"] > 1.5 * self.cfg.huber_px else
+               f"it is larger than {max_deg:g} deg / {1e3 * max_m:g} mm" if deg > max_deg or m > max_m else
+               f"the object was not at rest (with its deformation the frames fit to {rms_bent:.2f} px, as a rigid "
+               f"body to {rigid_last:.2f} px)" if rigid_last > bent_px and rms_bent < bent_ratio * rigid_last
+               else "")
+        if not why:
+            self.T_map_obj = T_new
+            # what was fitted under the old pose starts afresh
+            self.shift[:] = 0.0
+            self._rms_ref, self._const_samples, self._was_deforming, self.deforming_frames = None, [], False, 0
+        self.rest_correction = {**info, "applied": not why, "reason": why}
 
     def _rest_rms(self, X: np.ndarray, uvm: np.ndarray, T_cw: np.ndarray) -> float:
         """Residual of the undeformed object (moved by the best object shift when that is estimated)."""

@@ -128,9 +128,10 @@ TRACKING = Record({
                              "absorbs camera-pose drift against the map; for objects whose unmoving parts stay in "
                              "view (a beam's supports), not for a turning part (it absorbs the rotation)",
                              lo=0, hi=0.1, default=0.0),
-    "rest_frames": Number("measurements 'dots': > 0 when the object is at rest in the first so many frames its dots "
-                          "are seen in: its pose is corrected from them (a small rigid motion, then held): absorbs a "
-                          "pose measured by hand a few mm and a degree off. 0: the pose is taken as given",
+    "rest_frames": Number("measurements 'dots' or 'homography': > 0 when the object is at rest in the first so many "
+                          "frames with a camera pose: its pose is corrected from its dots in them (a small rigid "
+                          "motion, then held; refused, with the reason, when the frames show a deformation): absorbs "
+                          "a pose measured by hand a few mm and a degree off. 0: the pose is taken as given",
                           integer=True, lo=0, hi=300, default=0),
     "anchor": Enum(("ray", "foot"), "where a map point sits on its model triangle: where its pixel's viewing ray "
                    "crosses it (ray) or the mapped point's foot on it (foot; keeps the depth error's tangential part)",
@@ -238,6 +239,10 @@ def _cross_checks(scene: dict, ctx: Context) -> None:
         if o["anchor"]["kind"] == "registration" and o["anchor"]["guess"] is None:
             raise SceneError(f"{src}: objects[{i}].anchor.guess: required for kind 'registration' (the object frame "
                              "in the first camera frame, judged by eye); found nothing")
+        if o["tracking"]["rest_frames"] > 0 and o["tracking"]["measurements"] not in ("dots", "homography"):
+            raise SceneError(f"{src}: objects[{i}].tracking.rest_frames: the pose is corrected at rest from dots "
+                             f"(measurements 'dots' or 'homography'); found measurements "
+                             f"'{o['tracking']['measurements']}' (set rest_frames: 0)")
         _resolve_model_ref(o, i, src)
         # a spec's model is not built yet: its parameter names are checked by build_spec_models
         _check_parameters(o, i, src, None if o["_model_spec"] else _model_header(o, i, src))

@@ -255,7 +255,8 @@ def aluminium_beam(width=640, height=480, duration=6.0, fps=30.0, positions=(0.1
 
 
 def user_measured(T: np.ndarray, seed: int, mm: float = 2.0, deg: float = 0.6) -> np.ndarray:
-    """A pose as a user measures it by hand: ``mm`` and ``deg`` rms off per axis (seeded), about the object frame."""
+    """A pose as a user measures it by hand: ``mm`` and ``deg`` rms off per axis (seeded); the rotation error turns
+    the object about the world axes through its origin."""
     rng = np.random.default_rng([16, seed])
     e_t, e_r = rng.normal(0.0, mm * 1e-3, 3), rng.normal(0.0, np.deg2rad(deg), 3)
     R = G.rot_axis("x", e_r[0]) @ G.rot_axis("y", e_r[1]) @ G.rot_axis("z", e_r[2])

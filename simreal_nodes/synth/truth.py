@@ -135,9 +135,10 @@ def beam_load_truth(length: float, width: float, height: float, material: materi
     else:
         X[:, 0], _ = solid.solve(F[:, 0], steps=load_steps)
         path: list[np.ndarray] = []
-        if n_s > 1:
-            solid.solve_states([(F[:, k], np.zeros(solid.N)) for k in range(1, n_s)], u0=X[:, 0], path=path)
-        for k, u in enumerate(path, start=1):
+        if n_s > 1:  # from the equilibrium at the first position (its state first: a sub-step then lies between two
+            # positions, never on a partly lifted weight), the weight slides on
+            solid.solve_states([(F[:, k], np.zeros(solid.N)) for k in range(n_s)], u0=X[:, 0], path=path)
+        for k, u in enumerate(path[1:], start=1):
             X[:, k] = u
     if not np.all(np.isfinite(X)):
         raise FemError("the truth solve returned NaN/inf")

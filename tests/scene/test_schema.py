@@ -39,6 +39,8 @@ def test_minimal_scene_gets_defaults_and_starts_only_ingest(tmp_path):
     (BASE + "objects:\n  - {id: beam, model: no_such_model.h5}\n",
      r"objects\[0\].model: file not found: .*no_such_model.h5"),
     (BASE + "objects:\n  - {id: beam}\n", r"objects\[0\].model: required key is missing"),
+    (BASE + "objects:\n  - {id: beam, model: spec:aluminium_beam, tracking: {rest_frames: 10}}\n",
+     r"objects\[0\].tracking.rest_frames: the pose is corrected at rest from dots .*found measurements 'dense'"),
     (BASE.replace("static_pose: [0, 0, 0, 0, 0, 0, 1]", "static_pose: [0, 0, 0]"),
      r"localization.static_pose: expected a pose"),
     (BASE + "localization: {mode: rgbd}\n", r"duplicate|camera.depth: required"),
