@@ -25,7 +25,8 @@ import numpy as np
 
 
 class LockingWarning(UserWarning):
-    """Nearly incompressible material on low-order elements: expect volumetric locking."""
+    """Nearly incompressible material on low-order elements (volumetric locking), or a beam on linear elements
+    (shear locking in bending): expect displacements too small."""
 
 
 # --- tensor helpers on (3, 3, ...) arrays ---------------------------------------------------
