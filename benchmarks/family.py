@@ -69,23 +69,9 @@ def run_scene(seed: int, width: int = 640, height: int = 480, preloaded: bool = 
     doc["objects"][0]["tracking"].update(tracking or {})
     scene = build_spec_models(validate_scene(doc, sc.name, "."))
     pipe = Pipeline(scene, seq["cam"])
-    truth, est, states, reasons, step_ms, cam_err, solve_ms, tracker_ms = [], [], [], [], [], [], [], []
-    for i in range(len(seq["rgb"])):
-        bgr = np.ascontiguousarray(seq["rgb"][i][:, :, ::-1])
-        t1 = time.perf_counter()
-        T_wc, out = pipe.step(bgr, int(i * 1e9 / FPS), seq["depth"][i])
-        if T_wc is not None:  # the camera's position error in the map frame (both start at the first camera frame)
-            cam_err.append(float(np.linalg.norm(T_wc[:3, 3] - seq["T"][i][:3, 3])))
-        step_ms.append(1e3 * (time.perf_counter() - t1))
-        if T_wc is not None:
-            tracker_ms.append(pipe.tracker_ms)
-        e = out["beam"]
-        if e.solve_ms > 0:
-            solve_ms.append(e.solve_ms)
-        truth.append(seq["truth"][i].params["beam"][2][0])
-        est.append(float(e.values[0]))
-        states.append(int(e.state))
-        reasons.append(e.reason)
+    run = track(pipe, seq, FPS)
+    truth, est, states, reasons = run["truth"], run["est"], run["states"], run["reasons"]
+    step_ms, cam_err, solve_ms, tracker_ms = run["step_ms"], run["cam_err"], run["solve_ms"], run["tracker_ms"]
     truth_a, est_a, states_a = np.array(truth), np.array(est), np.array(states)
     loaded = np.isfinite(truth_a)
     err = 100 * np.abs(est_a[loaded] - truth_a[loaded]) / d.span
@@ -110,6 +96,31 @@ def run_scene(seed: int, width: int = 640, height: int = 480, preloaded: bool = 
         "curve": {"truth": [None if not np.isfinite(v) else float(v) for v in truth_a], "est": est_a.tolist()},
     }
     return row
+
+
+def track(pipe: Pipeline, seq: dict, fps: float, oid: str = "beam") -> dict[str, list]:
+    """Every frame of a rendered sequence through the offline pipeline: per frame the truth and estimate of the
+    object's first parameter, its state and reason, the step's time; the tracker's own time and the camera's
+    position error (map frame: both start at the first camera frame) where the camera was localized; the solve's
+    time where one ran."""
+    run: dict[str, list] = {k: [] for k in ("truth", "est", "states", "reasons", "step_ms", "cam_err", "solve_ms",
+                                            "tracker_ms")}
+    for i in range(len(seq["rgb"])):
+        bgr = np.ascontiguousarray(seq["rgb"][i][:, :, ::-1])
+        t1 = time.perf_counter()
+        T_wc, out = pipe.step(bgr, int(i * 1e9 / fps), seq["depth"][i])
+        run["step_ms"].append(1e3 * (time.perf_counter() - t1))
+        if T_wc is not None:
+            run["cam_err"].append(float(np.linalg.norm(T_wc[:3, 3] - seq["T"][i][:3, 3])))
+            run["tracker_ms"].append(pipe.tracker_ms)
+        e = out[oid]
+        if e.solve_ms > 0:
+            run["solve_ms"].append(e.solve_ms)
+        run["truth"].append(seq["truth"][i].params[oid][2][0])
+        run["est"].append(float(e.values[0]))
+        run["states"].append(int(e.state))
+        run["reasons"].append(e.reason)
+    return run
 
 
 def registration_error(pipe: Pipeline, seq: dict) -> dict:

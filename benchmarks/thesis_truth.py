@@ -21,6 +21,7 @@ import time
 import numpy as np
 
 from benchmarks.common import save
+from benchmarks.family import track
 from simreal_nodes import geometry as G
 from simreal_nodes.assimilation.offline import Pipeline
 from simreal_nodes.scene.schema import build_spec_models, validate_scene
@@ -78,19 +79,9 @@ def run_case(name: str, w: int, h: int, fps: float, tracking: dict, frames: int 
     doc["objects"][0]["tracking"].update(tracking)
     scene = build_spec_models(validate_scene(doc, sc.name, "."))
     pipe = Pipeline(scene, seq["cam"])
-    truth, est, states, step_ms, tracker_ms, reasons = [], [], [], [], [], []
-    for i in range(len(seq["rgb"])):
-        bgr = np.ascontiguousarray(seq["rgb"][i][:, :, ::-1])
-        t1 = time.perf_counter()
-        T_wc, out = pipe.step(bgr, int(i * 1e9 / fps), seq["depth"][i])
-        step_ms.append(1e3 * (time.perf_counter() - t1))
-        if T_wc is not None:
-            tracker_ms.append(pipe.tracker_ms)
-        e = out["beam"]
-        truth.append(seq["truth"][i].params["beam"][2][0])
-        est.append(float(e.values[0]))
-        states.append(int(e.state))
-        reasons.append(e.reason)
+    run = track(pipe, seq, fps)
+    truth, est, states, reasons = run["truth"], run["est"], run["states"], run["reasons"]
+    step_ms, tracker_ms = run["step_ms"], run["tracker_ms"]
     truth_a, est_a, states_a = np.array(truth), np.array(est), np.array(states)
     loaded = np.isfinite(truth_a)
     err = np.abs(est_a[loaded] - truth_a[loaded])

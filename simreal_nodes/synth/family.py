@@ -36,7 +36,15 @@ from simreal_nodes.render.gl import Mesh, Renderer
 from simreal_nodes.rom.build import cache_dir
 from simreal_nodes.rom.model import ReducedModel
 from simreal_nodes.synth import world as W
-from simreal_nodes.synth.scenes import SynthScene, Truth, _camera_yaml, _pose7, add_environment, default_camera
+from simreal_nodes.synth.scenes import (
+    SynthScene,
+    Truth,
+    _camera_yaml,
+    _pose7,
+    add_environment,
+    default_camera,
+    truth_mesh,
+)
 from simreal_nodes.synth.truth import BeamLoadTruth, beam_load_truth
 
 DEV_SEEDS = range(0, 50)
@@ -285,8 +293,7 @@ def family_scene(seed: int, width: int = 640, height: int = 480, fps: float = 15
                        pose=T_wo))
         tile = 0.25  # metres covered by one texture image
         tex = speckle_texture(d.speckle_contrast, d.seed, radius_px=d.speckle_mm / 2e3 / tile * 512)
-        r.add(Mesh("beam", tr.points.copy(), tr.surface, mode="texture", texture=tex, tex_scale=1.0 / tile,
-                   ref=tr.points.copy(), smooth=False, pose=T_wo))
+        r.add(truth_mesh(tr, "beam", tex, 1.0 / tile, T_wo))
         Vw, Fw = W.cylinder(d.footprint, max(0.01, 2 * d.footprint), 24)
         r.add(Mesh("weight", Vw + [0, 0, max(0.01, 2 * d.footprint) / 2], Fw, mode="flat", tint=(0.3, 0.3, 0.33),
                    smooth=False, visible=False))

@@ -98,6 +98,14 @@ def deformable_mesh(model: ReducedModel, name: str, texture: str, tex_scale: flo
                 tex_scale=tex_scale, ref=model.points.copy(), smooth=smooth, pose=np.asarray(pose, dtype=np.float64))
 
 
+def truth_mesh(truth: BeamLoadTruth, name: str, texture: str | np.ndarray, tex_scale: float, pose) -> Mesh:
+    """The renderer's mesh of an independent full-order truth (its boundary, textured in its reference shape);
+    ``texture``: a world texture's name or an RGB image."""
+    tex = W.texture(texture) if isinstance(texture, str) else texture
+    return Mesh(name, truth.points.copy(), truth.surface, mode="texture", texture=tex, tex_scale=tex_scale,
+                ref=truth.points.copy(), smooth=False, pose=np.asarray(pose, dtype=np.float64))
+
+
 def _truth_params(model: ReducedModel, values) -> tuple:
     return ([a.name for a in model.axes], [a.unit for a in model.axes], [float(v) for v in values])
 
@@ -177,9 +185,8 @@ def aluminium_beam(width=640, height=480, duration=6.0, fps=30.0, positions=(0.1
         V, F = W.box((0.08, 0.1, BEAM_ORIGIN[2] + 0.03), (-0.04, 0.02, (BEAM_ORIGIN[2] + 0.03) / 2))
         r.add(Mesh("clamp", V, F, mode="texture", texture=W.texture("plate"), tex_scale=5.0, smooth=False))
         if independent:
-            tr = sc.state["truth"] = aluminium_truth()
-            r.add(Mesh("beam", tr.points.copy(), tr.surface, mode="texture", texture=W.texture("aluminium"),
-                       tex_scale=6.0, ref=tr.points.copy(), smooth=False, pose=G.make_T(t=BEAM_ORIGIN)))
+            sc.state["truth"] = aluminium_truth()
+            r.add(truth_mesh(sc.state["truth"], "beam", "aluminium", 6.0, G.make_T(t=BEAM_ORIGIN)))
         else:
             r.add(deformable_mesh(m, "beam", "aluminium", 6.0, G.make_T(t=BEAM_ORIGIN)))
         for mid, (x, y) in MARKERS.items():
@@ -316,9 +323,8 @@ def foam_beam(width=640, height=480, duration=8.0, fps=30.0, physics: str = "mod
             V, F = W.box((x1 - x0, 0.26, FOAM_ORIGIN[2]), ((x0 + x1) / 2, 0.1, FOAM_ORIGIN[2] / 2))
             r.add(Mesh(name, V, F, mode="texture", texture=W.texture("plate"), tex_scale=4.0, smooth=False))
         if independent:
-            tr = sc.state["truth"] = foam_truth()
-            r.add(Mesh("beam", tr.points.copy(), tr.surface, mode="texture", texture=W.texture("foam"),
-                       tex_scale=3.0, ref=tr.points.copy(), smooth=False, pose=G.make_T(t=FOAM_ORIGIN)))
+            sc.state["truth"] = foam_truth()
+            r.add(truth_mesh(sc.state["truth"], "beam", "foam", 3.0, G.make_T(t=FOAM_ORIGIN)))
         else:
             r.add(deformable_mesh(m, "beam", "foam", 3.0, G.make_T(t=FOAM_ORIGIN)))
         V, F = W.cylinder(0.04, 0.02, 32)
