@@ -31,14 +31,23 @@ class WindowStats:
         return np.asarray(self._buf)
 
 
+# an input older than this (or stamped more than a second ahead) is not on this clock: a replayed recording keeps
+# its stamps from the day it was recorded, and "now minus stamp" is then the recording's age, not a latency
+AGE_LIMIT_MS = (-1e3, 6e4)
+
+
 class StageMetrics:
-    """Per-node statistics: input rate, processing latency, end-to-end age, drops, errors."""
+    """Per-node statistics: input rate, processing latency, end-to-end age, drops, errors.
+
+    ``age_ms``: now minus the input's stamp, kept only while the stamps are on this clock (``AGE_LIMIT_MS``); a
+    replayed recording's frames are counted in ``off_clock`` instead and the age reads "n/a"."""
 
     def __init__(self, window: int = 300, clock=time.monotonic):
         self.clock = clock
         self._arrivals: deque[float] = deque(maxlen=window)
         self.processing_ms = WindowStats(window)
         self.age_ms = WindowStats(window)
+        self.off_clock = 0
         self.processed = 0
         self._last_done = clock()
         self.dropped = 0
@@ -58,7 +67,10 @@ class StageMetrics:
         ms = (self.clock() - t_start) * 1e3
         self.processing_ms.add(ms)
         if age_ms is not None:
-            self.age_ms.add(age_ms)
+            if AGE_LIMIT_MS[0] <= age_ms <= AGE_LIMIT_MS[1]:
+                self.age_ms.add(age_ms)
+            else:
+                self.off_clock += 1
         self.processed += 1
         self._last_done = self.clock()
         return ms
@@ -94,7 +106,9 @@ class StageMetrics:
             "rate_hz": f"{self.rate_hz():.2f}",
             "processing_ms_p50": f"{self.processing_ms.percentile(50):.2f}",
             "processing_ms_p95": f"{self.processing_ms.percentile(95):.2f}",
-            "age_ms_p50": f"{self.age_ms.percentile(50):.2f}",
+            "age_ms_p50": (f"{self.age_ms.percentile(50):.2f}" if len(self.age_ms)
+                           else "n/a (input stamps not on this clock: a replayed recording?)" if self.off_clock
+                           else "nan"),
             "processed": str(self.processed),
             "dropped": str(self.dropped),
             "skipped": str(self.skipped),

@@ -28,3 +28,15 @@ def test_skips_are_counted_apart_from_drops_and_stalls_are_measured():
     assert (d["processed"], d["skipped"], d["dropped"]) == ("1", "1", "1")
     assert d["last_skip_reason"] == "a newer frame was ready" and d["last_drop_reason"] == "malformed image"
     assert m.seconds_since_done() == 4.0
+
+
+def test_a_replayed_recordings_stamps_give_no_age():
+    """'now minus stamp' of a bag recorded long ago is the recording's age (issue 18 measured 95 billion ms in
+    /diagnostics): such frames are counted off the clock and the age reads n/a; live stamps give the latency."""
+    c = Clock()
+    m = StageMetrics(clock=c)
+    m.done(m.arrived(), age_ms=9.5e10)
+    assert m.as_dict()["age_ms_p50"].startswith("n/a") and m.off_clock == 1
+    m.done(m.arrived(), age_ms=12.0)
+    m.done(m.arrived(), age_ms=14.0)
+    assert m.as_dict()["age_ms_p50"] == "13.00"

@@ -32,12 +32,16 @@ def test_probe_pushes_crossed_beams_through_the_graph(tmp_path):
     for t in ("/simreal/objects/beam_a/contact", "/simreal/objects/beam_b/contact",
               "/simreal/objects/beam_a/parameters", "/simreal/overlay/image_raw"):
         assert counts[t] == n, t
+    # the truth is the full-order contact solve (synth.contact_truth: the Signorini problem of the probe and the two
+    # linear-elastic beams on their own finer mesh), not Alg. 5.1: contact means a true contact force
     a = compare_contacts(read_contacts(out, "/simreal/objects/beam_a/contact"),
                          read_contacts(bag, "/ground_truth/objects/beam_a/contact"))
     print(f"beam_a: {a}")
-    assert a.contact_agreement >= 0.8  # measured 0.91 (the depth sees the probe's near side a little late)
-    # measured 0.2-0.36: pseudo-time lags while the noisy distance hovers at delta
-    assert a.pseudo_time_median_abs <= 0.4
+    # measured 0.83 (an estimator that always says "free" agrees on 0.49): the depth sees the probe's near side, so
+    # the contact starts and ends a few frames off the true touch
+    assert a.contact_agreement >= 0.75
+    # load scale (the linear beam's load over its 15 N) against the true force over 15 N: measured 0.13
+    assert a.pseudo_time_median_abs <= 0.3
     # the contact point found from depth is the true one or a neighbour on the load grid
     est = read_contacts(out, "/simreal/objects/beam_a/contact")
     tru = read_contacts(bag, "/ground_truth/objects/beam_a/contact")
@@ -49,16 +53,16 @@ def test_probe_pushes_crossed_beams_through_the_graph(tmp_path):
     both = [s for s in est if est[s][1] >= 0 and tru[s][1] >= 0]
     assert len(both) > n // 3
     dist = np.array([np.linalg.norm(P[est[s][1]] - P[tru[s][1]]) for s in both])
-    assert np.median(dist) < 0.03, np.median(dist)  # measured 28 mm: the diagonal neighbour on the 20 mm load grid
+    print(f"beam_a load point: median {1e3 * np.median(dist):.1f} mm from the truth's")
+    assert np.median(dist) < 0.03, np.median(dist)  # measured 10 mm: the neighbour on the 10 mm load grid
     # the lower beam, pushed by the upper one (virtual-virtual contact): found in contact when the truth is, and
-    # agreeing on the state in most frames (measured 0.77 agreement, 0.80 of the true contact frames found;
-    # without the push it would agree only on the 61 frames of no contact, 0.64, and find none)
+    # agreeing on the state in most frames (measured 0.83 agreement, always-"free" 0.625; 36 true contact frames)
     tru_b = read_contacts(bag, "/ground_truth/objects/beam_b/contact")
     est_b = read_contacts(out, "/simreal/objects/beam_b/contact")
     b = compare_contacts(est_b, tru_b)
     print(f"beam_b: {b}")
     pressed_b = [s for s in tru_b if tru_b[s][0]]
-    assert b.contact_agreement >= 0.7 and b.true_contact_frames > 20
+    assert b.contact_agreement >= 0.75 and b.true_contact_frames > 20
     assert sum(est_b[s][0] for s in pressed_b) >= 0.7 * len(pressed_b)
     # the overlay shows the deformation: |u| colours above the colour map's zero end appear on the beams while
     # pressed, none before the press (the undeformed beams are drawn in the zero colour)
