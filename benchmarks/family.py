@@ -130,14 +130,14 @@ def registration_error(pipe: Pipeline, seq: dict) -> dict:
     reg = pipe.objects.registrations.get("beam")
     if reg is None:
         return {"registration_mm": float("nan"), "registration_max_mm": float("nan"),
-                "registration_deg": float("nan"), "registration_fitness": 0.0}
+                "registration_deg": float("nan"), "registration_fitness": 0.0, "slide_spread_mm": float("nan")}
     T_true = seq["truth"][0].object_poses["beam"]
     D = G.inv(T_true) @ reg.T_map_obj
     X = pipe.objects.models["beam"].points
     return {"registration_mm": float(1e3 * np.linalg.norm(D[:3, 3])),
             "registration_max_mm": float(1e3 * np.linalg.norm(X @ D[:3, :3].T + D[:3, 3] - X, axis=1).max()),
             "registration_deg": float(np.rad2deg(np.arccos(np.clip((np.trace(D[:3, :3]) - 1) / 2, -1.0, 1.0)))),
-            "registration_fitness": float(reg.fitness)}
+            "registration_fitness": float(reg.fitness), "slide_spread_mm": 1e3 * float(reg.slide_spread)}
 
 
 def run_registration(seed: int, width: int = 640, height: int = 480) -> dict:

@@ -237,7 +237,9 @@ class RegistrationConfig:
     ``inlier_dist``) or above ``max_rmse`` (point-to-plane residual of those inliers; the depth noise of a
     structured-light sensor at 1.5 m is about 4 mm). ``slide_ratio``: a direction whose share of the matched
     normals' scatter is under this (against the strongest) is one the fit can slide along (:func:`_pin_slide`); it
-    is moved only where a slide would cover ``slide_cover`` more of the model's faces turned to the cameras."""
+    is moved only where a slide would cover ``slide_cover`` more of the model's faces turned to the cameras. A fit
+    that could slide over more than ``max_slide_spread`` at about the same cover (:func:`slide_spread`; at most
+    28 mm on development seeds 0-99) is refused: the data do not pin it."""
 
     frames: int = 3
     every: int = 4
@@ -254,6 +256,7 @@ class RegistrationConfig:
     max_range: float = 4.0
     slide_ratio: float = 0.05
     slide_cover: float = 0.01
+    max_slide_spread: float = 0.06
 
 
 @dataclass
@@ -268,6 +271,7 @@ class Registration:
     rmse: float
     points: int
     plane: np.ndarray | None
+    slide_spread: float = 0.0  # metres the fit could slide along a weakly held axis at about the same cover
 
 
 def depth_cloud(cam: CameraModel, depth: np.ndarray, T_wc: np.ndarray, stride: int = 2,
@@ -391,11 +395,17 @@ def register_rgbd(cloud: np.ndarray, model: ReducedModel, guess: np.ndarray, cam
     T = icp(_cloud(P), best[1], (0.012, 0.006, 0.004))
     T = _pin_slide(P, T, S, N, cams, cfg)
     fitness, rmse, hits = _quality(P, T, S, N, cams, cfg.inlier_dist)
-    out = Registration(G.inv(T), fitness, rmse, hits, plane)
+    out = Registration(G.inv(T), fitness, rmse, hits, plane, slide_spread(P, T, S, N, cams, cfg))
     if fitness < cfg.min_fitness or rmse > cfg.max_rmse:
         raise RegistrationError(f"registration refused: {100 * fitness:.0f} % of the model surface facing the "
                                 f"camera is matched (at least {100 * cfg.min_fitness:.0f} % needed), residual "
                                 f"{1e3 * rmse:.1f} mm (at most {1e3 * cfg.max_rmse:.1f} mm)", out)
+    if out.slide_spread > cfg.max_slide_spread:
+        what = ("beyond the searched range" if not np.isfinite(out.slide_spread)
+                else f"over {1e3 * out.slide_spread:.0f} mm")
+        raise RegistrationError(f"registration refused: the fit can slide along the object's axis {what} at about "
+                                f"the same cover (at most {1e3 * cfg.max_slide_spread:.0f} mm): its ends are not "
+                                "seen well enough to place it; show the camera an end of the object", out)
     return out
 
 
@@ -409,15 +419,35 @@ def _pin_slide(P: np.ndarray, T: np.ndarray, S: np.ndarray, N: np.ndarray, cams:
     the model neither sticks out past the object's end nor leaves it bare), the model is moved to the middle of
     the best cover. Within ``slide_cover`` the ICP's fit stands (the cover has a plateau a few millimetres wide,
     and moving a good fit to its middle cost 1-3 mm on development seeds). T: map -> object; returns T."""
+    sl = _slide_cover(P, T, S, N, cams, cfg)
+    if sl is None:
+        return T
+    axis, shifts, cover = sl
+    here = cover[np.argmin(np.abs(shifts))]
+    if here >= cover.max() - cfg.slide_cover:  # the fit covers its faces about as well as any slide would
+        return T
+    top = np.flatnonzero(cover >= cover.max() - 1e-9)
+    run = top[np.cumsum(np.r_[0, np.diff(top) > 1]) == 0]  # the first plateau of best cover
+    dx = float(np.mean(shifts[run]))  # its middle
+    # the model moves by dx along the axis: object-frame points move by -dx
+    out: np.ndarray = G.make_T(t=-dx * axis) @ T
+    return out
+
+
+def _slide_cover(P: np.ndarray, T: np.ndarray, S: np.ndarray, N: np.ndarray, cams: np.ndarray,
+                 cfg: RegistrationConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """(axis, shifts, cover) along the direction the matched normals leave weak, or None when every direction is
+    held: the share of the model's faces turned to the cameras that have a measured point within
+    ``inlier_dist`` with the model slid by each shift (object frame, +-margin/2 in 1 mm steps)."""
     P_obj = P @ T[:3, :3].T + T[:3, 3]
     d, j = cast(tuple[np.ndarray, np.ndarray], cKDTree(S).query(P_obj, distance_upper_bound=cfg.inlier_dist))
     hit = np.isfinite(d)
     if hit.sum() < 50:
-        return T
+        return None
     n = N[j[hit]]
     w, V = np.linalg.eigh(n.T @ n)
     if w[0] > cfg.slide_ratio * w[2]:
-        return T
+        return None
     axis = V[:, 0]
     cams_obj = cams @ T[:3, :3].T + T[:3, 3]
     facing = np.zeros(len(S), bool)
@@ -428,15 +458,23 @@ def _pin_slide(P: np.ndarray, T: np.ndarray, S: np.ndarray, N: np.ndarray, cams:
     shifts = np.arange(-cfg.margin / 2, cfg.margin / 2 + 1e-9, 0.001)
     cover = np.array([np.mean(np.isfinite(tree.query(Sf + dx * axis, distance_upper_bound=cfg.inlier_dist)[0]))
                       for dx in shifts])
-    here = cover[np.argmin(np.abs(shifts))]
-    if here >= cover.max() - cfg.slide_cover:  # the fit covers its faces about as well as any slide would
-        return T
-    top = np.flatnonzero(cover >= cover.max() - 1e-9)
-    run = top[np.cumsum(np.r_[0, np.diff(top) > 1]) == 0]  # the first plateau of best cover
-    dx = float(np.mean(shifts[run]))  # its middle
-    # the model moves by dx along the axis: object-frame points move by -dx
-    out: np.ndarray = G.make_T(t=-dx * axis) @ T
-    return out
+    return axis, shifts, cover
+
+
+def slide_spread(P: np.ndarray, T: np.ndarray, S: np.ndarray, N: np.ndarray, cams: np.ndarray,
+                 cfg: RegistrationConfig) -> float:
+    """How far (metres) the fit T could slide along a weakly held direction and still cover the model's faces
+    turned to the cameras within ``slide_cover`` of the best: the extent of the shifts that do (0 when every
+    direction is held by the matched normals; infinite when a shift at the end of the search, +-margin/2, covers
+    about as well: the slide may go on beyond it)."""
+    sl = _slide_cover(P, T, S, N, cams, cfg)
+    if sl is None:
+        return 0.0
+    _, shifts, cover = sl
+    near = cover >= cover.max() - cfg.slide_cover
+    if near[0] or near[-1]:  # about as good at the end of the search: the slide may go on beyond it
+        return float("inf")
+    return float(shifts[near].max() - shifts[near].min())
 
 
 def _icp_upright(P: np.ndarray, tree: cKDTree, N: np.ndarray, T: np.ndarray, centre: np.ndarray,
