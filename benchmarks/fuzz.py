@@ -11,6 +11,10 @@ deleted, re-shaped, re-typed, turned into a group, filled with NaN / inf / absur
 a scene node deleted, renamed, or given a value of another type). Every input is case ``i`` of a target drawn from
 ``numpy.random.default_rng([seed, target, i])``, so any one is reproduced alone (:func:`make_input`).
 
+Model files carry the SHA-256 of their contents in a user block (``rom/model_file.py``): structural mutations are
+re-stamped (a writer's bug, consistent with its checksum: the loader's validation is tested), byte mutations are
+not (corruption after writing: the checksum refuses them before libhdf5 reads a byte).
+
 Per input the loader (``read_header`` then ``load_model``; ``load_scene``) either accepts it, rejects it with the
 project's own error (:class:`~simreal_nodes.errors.SimrealError`: one line meant for a user) or crashes (any other
 exception: a traceback), or hangs (over ``--hang-s``). Cases run in worker processes with a 4 GiB address-space
@@ -236,7 +240,15 @@ def make_input(target: str, seed: int, case: int, seed_files: dict, workdir: Pat
     structural = rng.random() < 0.5
     if target == "model" and structural:
         path.write_bytes(content)
-        return path, f"{name}: {_h5_structural(rng, path)}"
+        what = _h5_structural(rng, path)
+        # an edit through HDF5 models a writer's bug or another version, not corruption: the file is consistent
+        # with its checksum, so the loader's own validation is what is tested (byte mutations below are left
+        # unstamped: corruption after writing, which the checksum refuses before libhdf5 reads a byte)
+        from simreal_nodes.rom.model_file import stamp_checksum
+
+        with contextlib.suppress(Exception):
+            stamp_checksum(path)
+        return path, f"{name}: {what}"
     if target == "scene" and structural:
         out, what = _scene_structural(rng, content)
         path.write_bytes(out)
@@ -400,8 +412,10 @@ def main(argv: list[str] | None = None) -> None:
         lines += ["", f"**{target}: the most frequent rejections** (of {len(m['rejected'])} distinct)", ""]
         lines += [f"- {n} x {msg}" for msg, n in m["rejected"][:15]] + [""]
     notes = (f"`python -m benchmarks.fuzz --cases {a.cases} --seed {a.seed}` ({time.time() - t0:.0f} s). "
-             "Accepted inputs are mostly mutations the loader cannot tell from valid content (a flipped bit inside "
-             "a stored number, a scene value changed to another valid one).\n\n" + "\n".join(lines))
+             "Accepted inputs are mutations the loader cannot tell from valid content: for model files, edits "
+             "through HDF5 that leave a valid model (an attribute it does not read, a value changed to another valid "
+             "one) and bytes changed in the user block's padding after the checksum; for scenes, a value changed to "
+             "another valid one.\n\n" + "\n".join(lines))
     save("fuzz", rows, COLUMNS, "Hostile input to the model-file and scene loaders", notes,
          extra={"seed": a.seed, "cases_per_loader": a.cases,
                 "messages": {t: {k: v[:100] for k, v in m.items()} for t, m in messages.items()},

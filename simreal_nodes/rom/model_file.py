@@ -13,9 +13,13 @@ Layout (format ``simreal-model``, version 1)::
     /load_points, /load_directions (optional)
     /meta                   attrs (JSON): material, boundary_conditions, loads, rigid_parameters, provenance
 
-Every non-empty dataset carries a Fletcher-32 checksum per chunk. Loading validates everything and raises
-:class:`ModelFileError` with the reason (a checksum that does not match is one); a reader may ask for
-some fields only and for the first ``n_modes`` modes only (read by slicing, not loaded then cut).
+The file's first 512 bytes are an HDF5 user block holding the SHA-256 of the rest of the file
+(``simreal-model sha256 <hex>``): a reader checks it before handing a byte to the HDF5 library, so a corrupt file
+(a flipped bit, a zeroed block, a truncation) is one clear error instead of whatever libhdf5 makes of it -- on
+zeroed metadata blocks that was a hang (``benchmarks/fuzz.py``). Files written before the user block load as
+before. Every non-empty dataset also carries a Fletcher-32 checksum per chunk. Loading validates everything and
+raises :class:`ModelFileError` with the reason; a reader may ask for some fields only and for the first
+``n_modes`` modes only (read by slicing, not loaded then cut).
 """
 
 from __future__ import annotations
@@ -41,6 +45,9 @@ FORMAT = "simreal-model"
 FORMAT_VERSION = 1
 CELL_TYPES = {"tet4": 4, "hex8": 8, "tri3": 3, "quad4": 4}
 MAX_EXPANSION = 100  # a dataset over 64 MiB may declare at most this times the bytes the file stores of it
+USERBLOCK = 512
+CHECKSUM_TAG = b"simreal-model sha256 "
+HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
 
 
 def save_model(model: ReducedModel, path: str | Path) -> str:
@@ -48,7 +55,7 @@ def save_model(model: ReducedModel, path: str | Path) -> str:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_suffix(f"{path.suffix}.{os.getpid()}.partial")  # two processes may build the same model
-    with h5py.File(tmp, "w") as f:
+    with h5py.File(tmp, "w", userblock_size=USERBLOCK) as f:
         f.attrs.update(format=FORMAT, format_version=FORMAT_VERSION, name=model.name, description=model.description,
                        created=time.strftime("%Y-%m-%dT%H:%M:%S%z"), simreal_version=__version__)
         g = f.create_group("mesh")
@@ -78,6 +85,7 @@ def save_model(model: ReducedModel, path: str | Path) -> str:
         m = f.create_group("meta")
         for key in ("material", "boundary_conditions", "loads", "rigid_parameters", "provenance"):
             m.attrs[key] = json.dumps(getattr(model, key), default=_json_default)
+    stamp_checksum(tmp)
     tmp.replace(path)  # never leave a half-written model under the real name
     model.path = str(path)
     model.model_id = model_id(path, model.name)
@@ -106,9 +114,51 @@ def model_id(path: str | Path, name: str) -> str:
     return f"{name}@{h.hexdigest()[:12]}"
 
 
+def _sha256_after_userblock(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        fh.seek(USERBLOCK)
+        for chunk in iter(lambda: fh.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def stamp_checksum(path: str | Path) -> None:
+    """Write the SHA-256 of everything after the user block into the user block (a file written with one)."""
+    path = Path(path)
+    with open(path, "rb") as fh:
+        head = fh.read(USERBLOCK + len(HDF5_SIGNATURE))
+    if head[USERBLOCK:] != HDF5_SIGNATURE:
+        raise ModelFileError(f"{path} has no {USERBLOCK}-byte user block to hold its checksum")
+    tag = CHECKSUM_TAG + _sha256_after_userblock(path).encode() + b"\n"
+    with open(path, "r+b") as fh:
+        fh.write(tag.ljust(USERBLOCK, b"\0"))
+
+
+def verify_checksum(path: str | Path) -> bool:
+    """True when the file's user block holds a SHA-256 that matches the rest of it; False for a file written
+    before the user block (HDF5 signature at byte 0); :class:`ModelFileError` for anything else -- a mismatch, a
+    damaged user block, a file too short to hold one."""
+    path = Path(path)
+    with open(path, "rb") as fh:
+        head = fh.read(USERBLOCK + len(HDF5_SIGNATURE))
+    if head.startswith(HDF5_SIGNATURE):
+        return False
+    if not head.startswith(CHECKSUM_TAG):
+        if head[USERBLOCK:] == HDF5_SIGNATURE:
+            raise ModelFileError(f"{path}: its checksum block is damaged (corrupt file?)")
+        raise ModelFileError(f"{path} is not a readable HDF5 file (truncated or corrupt?): no HDF5 signature")
+    stored = head[len(CHECKSUM_TAG):len(CHECKSUM_TAG) + 64].decode("ascii", errors="replace")
+    if stored != _sha256_after_userblock(path):
+        raise ModelFileError(f"{path}: its contents do not match the SHA-256 stored when it was written "
+                             "(corrupt, truncated or modified since; rebuild it)")
+    return True
+
+
 def _open(path: Path) -> h5py.File:
     if not path.exists():
         raise ModelFileError(f"model file not found: {path}")
+    verify_checksum(path)
     try:
         f = h5py.File(path, "r")
     except OSError as e:

@@ -9,7 +9,7 @@ import pytest
 
 from simreal_nodes.errors import ModelFileError
 from simreal_nodes.rom.build import build_model, load_spec
-from simreal_nodes.rom.model_file import load_model, read_header, save_model
+from simreal_nodes.rom.model_file import load_model, read_header, save_model, stamp_checksum
 
 SPEC = """
 simreal_model_spec: 1
@@ -82,7 +82,7 @@ def test_damaged_and_foreign_files_are_rejected(built, tmp_path):
     _, path = built
     trunc = tmp_path / "trunc.h5"
     trunc.write_bytes(path.read_bytes()[: path.stat().st_size // 2])
-    with pytest.raises(ModelFileError, match="truncated or corrupt"):
+    with pytest.raises(ModelFileError, match="corrupt, truncated"):
         load_model(trunc)
     junk = tmp_path / "junk.h5"
     junk.write_bytes(b"\x89HDF\r\n\x1a\n" + b"\x00" * 500)
@@ -97,18 +97,21 @@ def test_damaged_and_foreign_files_are_rejected(built, tmp_path):
     shutil.copy(path, broken)
     with h5py.File(broken, "a") as f:
         del f["fields/displacement/params/s"]
+    stamp_checksum(broken)  # a writer's bug, not corruption: the file is consistent with its checksum
     with pytest.raises(ModelFileError, match="missing 'params/s'"):
         load_model(broken)
     newer = tmp_path / "newer.h5"
     shutil.copy(path, newer)
     with h5py.File(newer, "a") as f:
         f.attrs["format_version"] = 99
+    stamp_checksum(newer)
     with pytest.raises(ModelFileError, match="version 99"):
         load_model(newer)
     nan = tmp_path / "nan.h5"
     shutil.copy(path, nan)
     with h5py.File(nan, "a") as f:
         f["fields/displacement/space"][0, 0, 0] = np.nan
+    stamp_checksum(nan)
     with pytest.raises(ModelFileError, match="NaN"):
         load_model(nan)
     with pytest.raises(ModelFileError, match="not found"):
@@ -130,8 +133,50 @@ def test_a_bit_flip_in_stored_numbers_is_caught_by_the_checksum(built, tmp_path)
         raw = bytearray(flipped.read_bytes())
         raw[at] ^= 0x10
         flipped.write_bytes(bytes(raw))
+        with pytest.raises(ModelFileError, match="do not match the SHA-256"):  # the whole file's checksum first
+            load_model(flipped)
+        stamp_checksum(flipped)  # the same flip before the file was stamped: the chunk's Fletcher-32 catches it
         with pytest.raises(ModelFileError, match=f"cannot read '/{name}'"):
             load_model(flipped)
+
+
+def test_a_zeroed_block_is_refused_before_hdf5_reads_it(built, tmp_path):
+    """Zeroed metadata blocks made libhdf5 loop (21 hangs in 5 000 fuzzed files, benchmarks/fuzz.py): the SHA-256
+    in the user block is checked before a byte reaches the library. A damaged user block is refused too."""
+    import time
+
+    _, path = built
+    raw = bytearray(path.read_bytes())
+    assert raw.startswith(b"simreal-model sha256 ")
+    for start in (600, 2048, len(raw) // 2):
+        z = tmp_path / f"zero_{start}.h5"
+        bad = bytearray(raw)
+        bad[start:start + 512] = b"\0" * 512
+        z.write_bytes(bytes(bad))
+        t0 = time.perf_counter()
+        with pytest.raises(ModelFileError, match="do not match the SHA-256"):
+            load_model(z)
+        assert time.perf_counter() - t0 < 2.0
+    head = tmp_path / "head.h5"
+    bad = bytearray(raw)
+    bad[0:8] = b"\0" * 8
+    head.write_bytes(bytes(bad))
+    with pytest.raises(ModelFileError, match="checksum block is damaged"):
+        load_model(head)
+
+
+def test_a_file_written_before_the_checksum_block_still_loads(built, tmp_path, monkeypatch):
+    from simreal_nodes.rom import model_file
+
+    m, _ = built
+    monkeypatch.setattr(model_file, "USERBLOCK", 0)
+    monkeypatch.setattr(model_file, "stamp_checksum", lambda p: None)
+    old = tmp_path / "old.h5"
+    save_model(m, old)
+    monkeypatch.undo()
+    assert old.read_bytes().startswith(b"\x89HDF")
+    assert not model_file.verify_checksum(old)
+    assert load_model(old).n_nodes == m.n_nodes
 
 
 def test_an_absurd_declared_size_is_refused_before_allocating(built, tmp_path):
@@ -145,6 +190,7 @@ def test_an_absurd_declared_size_is_refused_before_allocating(built, tmp_path):
     with h5py.File(huge, "a") as f:
         del f["fields/displacement/space"]
         f.create_dataset("fields/displacement/space", shape=(2**26, 2, 3), dtype=np.float64, chunks=(1, 2, 3))
+    stamp_checksum(huge)
     tracemalloc.start()
     t0 = time.perf_counter()
     with pytest.raises(ModelFileError, match=r"'/fields/displacement/space' declares shape \(67108864, 2, 3\) "
