@@ -244,7 +244,7 @@ parameters. Over development seeds 12-49, on the same code otherwise: 84 % -> 95
 2.5 % -> 1.2 %, seed 12 2.6 % -> 0.8 % (`docs/family.md`). In the same diagnosis the camera's error epsilon,
 fitted in one solve with the object, still took part of the bending; measured first on the surroundings alone and
 then held (`tracking.dense_camera_first`) it took seed 12 to 0.5 %, but over seeds 12-49 it did worse than the
-joint fit (87 % of scenes within 2 %, p90 2.4 %, run before registration's slide pin): a knob, off by default.
+joint fit (87 % of scenes within 2 %, p90 2.4 %; rerun with registration's slide pin, the same): a knob, off.
 Whether a deformation is seen: the same fit with zero
 displacement, at the half-resolution level, must be worse by 5 % and the fitted deformation must move the image by
 more than 0.3 px.
