@@ -51,6 +51,7 @@ def run(seq, scene, step: int) -> dict:
     objs = [o for o in scene["objects"] if o["collision"]["enabled"]]
     models = {o["id"]: load_model(o["model"], fields=["displacement"]) for o in objs}
     cs = ContactScene(objs, models, decimation=step)
+    surface = {oid: surface_nodes(m) for oid, m in models.items()}
     keys = ("est", "tru", "cp", "force", "surf", "floor", "phantom", "size")
     stats: dict[str, dict[str, list]] = {oid: {k: [] for k in keys} for oid in OBJECTS}
     times, npts = [], []
@@ -74,7 +75,7 @@ def run(seq, scene, step: int) -> dict:
                 est_xy = m.points[m.load_points[st.load_point], :2]
                 s["cp"].append(1e3 * float(np.linalg.norm(est_xy - np.asarray(vals[:2]))))
                 s["force"].append(abs(st.pseudo_time * F - vals[2] * F))
-            sn = surface_nodes(m)
+            sn = surface[oid]
             u_est = tr.displacement(nodes=sn)
             if tt.in_contact:
                 u_true = truth.displacements[oid][sn]

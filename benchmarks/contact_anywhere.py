@@ -112,8 +112,8 @@ def main():
             ("anywhere_force_pct", "anywhere, F/15 N (%)", "{:.2f}"), ("anywhere_force_max_pct", "max", "{:.2f}"),
             ("snap_fit_pct", "snap, fitted (%)", "{:.2f}"), ("snap_fit_max_pct", "max", "{:.2f}"),
             ("anywhere_fit_pct", "anywhere, fitted (%)", "{:.2f}"), ("anywhere_fit_max_pct", "max", "{:.2f}")]
-    notes = ("Surface RMS error of the reduced model against the full-order contact truth (" + body.info.get(
-        "description", f"P2 tetrahedra 60x6x4, {body.info['dofs']} dofs") + f"), sphere r = {1e3 * RADIUS:.0f} mm "
+    notes = ("Surface RMS error of the reduced model against the full-order contact truth (P2 tetrahedra 60x6x4, "
+             f"{body.info['dofs']} dofs), sphere r = {1e3 * RADIUS:.0f} mm "
              f"pressing {1e3 * PRESS:.0f} mm; median and max over the positions of each row; the per-position "
              "rows are in the JSON. 'snap': the nearest load point; 'anywhere': the true force centroid in the "
              "reduced space; load scale from the true force or fitted to the true displacement.")

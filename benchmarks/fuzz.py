@@ -244,9 +244,10 @@ def make_input(target: str, seed: int, case: int, seed_files: dict, workdir: Pat
         # an edit through HDF5 models a writer's bug or another version, not corruption: the file is consistent
         # with its checksum, so the loader's own validation is what is tested (byte mutations below are left
         # unstamped: corruption after writing, which the checksum refuses before libhdf5 reads a byte)
+        from simreal_nodes.errors import ModelFileError
         from simreal_nodes.rom.model_file import stamp_checksum
 
-        with contextlib.suppress(Exception):
+        with contextlib.suppress(ModelFileError):  # a seed file without a user block stays as it is
             stamp_checksum(path)
         return path, f"{name}: {what}"
     if target == "scene" and structural:

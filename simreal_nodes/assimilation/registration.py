@@ -449,11 +449,7 @@ def _slide_cover(P: np.ndarray, T: np.ndarray, S: np.ndarray, N: np.ndarray, cam
     if w[0] > cfg.slide_ratio * w[2]:
         return None
     axis = V[:, 0]
-    cams_obj = cams @ T[:3, :3].T + T[:3, 3]
-    facing = np.zeros(len(S), bool)
-    for c in cams_obj:
-        facing |= np.einsum("ij,ij->i", N, c - S) > 0
-    Sf = S[facing]
+    Sf = S[_facing(S, N, cams @ T[:3, :3].T + T[:3, 3])]
     tree = cKDTree(P_obj)
     shifts = np.arange(-cfg.margin / 2, cfg.margin / 2 + 1e-9, 0.001)
     cover = np.array([np.mean(np.isfinite(tree.query(Sf + dx * axis, distance_upper_bound=cfg.inlier_dist)[0]))
@@ -526,15 +522,20 @@ def _n_samples(model: ReducedModel, spacing: float) -> int:
     return int(np.clip(area / spacing ** 2, 5000, 100_000))
 
 
+def _facing(S: np.ndarray, N: np.ndarray, cams_obj: np.ndarray) -> np.ndarray:
+    """Which model samples S (normals N) face at least one camera (positions in the object frame)."""
+    facing = np.zeros(len(S), bool)
+    for c in cams_obj:
+        facing |= np.einsum("ij,ij->i", N, c - S) > 0
+    return facing
+
+
 def _quality(P: np.ndarray, T: np.ndarray, S: np.ndarray, N: np.ndarray, cams: np.ndarray,
              dist: float) -> tuple[float, float, int]:
     """(share of the model samples facing a camera with a measured point within ``dist``, point-to-plane RMS of the
     measured points within ``dist`` of a sample, their count) for measured points P (map) under T (map -> object)."""
     P_obj = P @ T[:3, :3].T + T[:3, 3]
-    cams_obj = cams @ T[:3, :3].T + T[:3, 3]
-    facing = np.zeros(len(S), bool)
-    for c in cams_obj:
-        facing |= np.einsum("ij,ij->i", N, c - S) > 0
+    facing = _facing(S, N, cams @ T[:3, :3].T + T[:3, 3])
     d_model, _ = cKDTree(P_obj).query(S[facing], distance_upper_bound=dist)
     fitness = float(np.mean(np.isfinite(d_model))) if facing.any() else 0.0
     d_pts, j = cast(tuple[np.ndarray, np.ndarray], cKDTree(S).query(P_obj, distance_upper_bound=dist))

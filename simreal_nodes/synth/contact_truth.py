@@ -43,20 +43,18 @@ from simreal_nodes.physics import fem, materials, meshes
 class CondensedBody:
     """A linear-elastic body condensed on a set of candidate contact nodes (object frame of the body).
 
-    ``cand``: (n_c, 3) reference positions of the candidate nodes; ``dirs``: (n_c, 3) the unit direction each
-    candidate's force acts along; ``X``: (n_obs * 3, n_c) displacement of the observed nodes ``obs`` (n_obs, 3)
+    ``cand``: (n_c, 3) reference positions of the candidate nodes, each loaded along the condensation's direction;
+    ``X``: (n_obs * 3, n_c) displacement of the observed nodes ``obs`` (n_obs, 3)
     per newton at each candidate; ``C``: (n_c, n_c) the compliance between candidates along their directions."""
 
     cand: np.ndarray
-    dirs: np.ndarray
     obs: np.ndarray
     X: np.ndarray
     C: np.ndarray
-    description: str = ""
     info: dict = field(default_factory=dict)
 
     def displacement(self, forces: np.ndarray) -> np.ndarray:
-        """(n_obs, 3) displacement of the observed nodes under candidate forces (n_c,) newtons along ``dirs``."""
+        """(n_obs, 3) displacement of the observed nodes under candidate forces (n_c,) newtons."""
         return (self.X @ np.asarray(forces, dtype=np.float64)).reshape(-1, 3)
 
 
@@ -101,8 +99,8 @@ def condense(solid: fem.Solid, cand_select, direction, obs: np.ndarray, tol: flo
         Uc[:, js] = U[rows_c]
     C = np.einsum("c,icj->ij", n, Uc.reshape(len(ci), 3, len(ci)))
     C = 0.5 * (C + C.T)  # Maxwell-Betti: symmetric up to round-off
-    return CondensedBody(nodes[ci], np.tile(n, (len(ci), 1)), np.asarray(obs, dtype=np.float64).reshape(-1, 3), X,
-                         C, info={"dofs": int(solid.N), "candidates": len(ci)})
+    return CondensedBody(nodes[ci], np.asarray(obs, dtype=np.float64).reshape(-1, 3), X, C,
+                         info={"dofs": int(solid.N), "candidates": len(ci)})
 
 
 def solve_lcp(M: np.ndarray, g0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
