@@ -252,9 +252,11 @@ Map points on the object are still linked, so the localization leaves them out o
 `tracking.dense_step_px` (sample spacing, 1.5 px), `tracking.dense_rigid` (the rigid correction, on) and
 `tracking.dense_surroundings_px` (the ring's width, 32 px; 0: the object alone), `tracking.dense_refine` (on) and
 `tracking.dense_camera_first` (off); their trades are measured on
-development seeds in `docs/family.md`'s knob tables. What it assumes:
-the object is at rest in the reference view (a scene loaded from its first frame is the self-confirming case below,
-not solved). Numbers: `docs/family.md` (the scene family, dense by default, the sparse mode beside it).
+development seeds in `docs/family.md`'s knob tables. The object's state in the reference view: read from its depth
+where there is a depth image (`tracking.reference: depth`, the default, `assimilation/depth_state.py`: the model's
+deformed surface fitted to the depth cloud and compared with the rest shape), else taken to be the rest shape; a
+scene loaded from its first frame is measured in `docs/family.md` ("loaded from the first frame"). Numbers:
+`docs/family.md` (the scene family, dense by default, the sparse mode beside it).
 
 Why mapping goes on by default: with the map frozen, the camera leaves the mapped views and its pose error grows
 to centimetres, which the tracker reads as deformation (the 'frozen' rows below: boot theta error 5x larger and

@@ -29,9 +29,10 @@ enter the same robust cost. They cannot deform, so the camera's error is no long
 (the object moves by rho + epsilon): not fitted when the registration measured the placement from the same depth,
 measured at rest and then held otherwise.
 
-The template is taken once, in the first frame with a camera pose that shows enough of the object: the object is
-taken to be at rest there (zero displacement). That is the one assumption of this measurement; a scene whose
-object is loaded from its first frame needs the reference state from elsewhere (see the tracker's docs).
+The template is taken once, in the first frame with a camera pose that shows enough of the object, in the state
+the object is in there: at rest (zero displacement) unless that state was measured otherwise. With a depth image
+the tracker measures it from the object's shape (:mod:`.depth_state`): a scene loaded from its first frame then
+has its deformation in the template, not taken for the rest shape.
 """
 
 from __future__ import annotations
@@ -282,19 +283,26 @@ class DenseAligner:
         ok[sel[Xc[ok, 2] > zbuf[key] + tol]] = False
         return ok
 
-    def set_reference(self, gray: NDArray[np.generic], T_cw: Array, depth: NDArray[np.generic] | None = None) -> bool:
-        """Take this image as the template (the object at rest). False when too little of it is visible.
-        ``depth`` (metres, registered to the image): the static surroundings' template as well (see
-        :attr:`DenseSettings.static_ring_px`)."""
+    def set_reference(self, gray: NDArray[np.generic], T_cw: Array, depth: NDArray[np.generic] | None = None,
+                      mu_ref: Array | None = None) -> bool:
+        """Take this image as the template. False when too little of it is visible. ``depth`` (metres, registered
+        to the image): the static surroundings' template as well (see :attr:`DenseSettings.static_ring_px`).
+        ``mu_ref``: the object's state in this image (measured elsewhere, e.g. from its depth:
+        :mod:`.depth_state`); None: at rest. Each sample keeps its material point (rest position x_k) and takes
+        its template intensity where the deformed object puts it, x_k + u_k(mu_ref)."""
         Xc = G.transform(T_cw @ self.T_mo, np.asarray(self.model.points, np.float64))
         z = float(np.median(Xc[:, 2][Xc[:, 2] > 0])) if np.any(Xc[:, 2] > 0) else 1.0
         smp = sample_surface(self.model, self.s.step_px * z / float(self.K[0, 0]), self.s.max_samples)
-        vis = self.visible(T_cw, G.transform(self.T_mo, smp.x), smp.normal @ self.T_mo[:3, :3].T)
+        x_ref = smp.x
+        if mu_ref is not None:
+            x_ref = smp.x + self.model.deformation_view(smp.nodes, self.n_modes, smp.weights).field.evaluate(
+                np.asarray(mu_ref, np.float64))
+        vis = self.visible(T_cw, G.transform(self.T_mo, x_ref), smp.normal @ self.T_mo[:3, :3].T)
         idx = np.flatnonzero(vis)
         self.levels, self.static = [], []
         if len(idx) < self.s.min_samples:
             return False
-        uv = self.cam.project(G.transform(T_cw @ self.T_mo, smp.x[idx]), distort=False)
+        uv = self.cam.project(G.transform(T_cw @ self.T_mo, x_ref[idx]), distort=False)
         pyr = pyramid(self.ideal(gray), self.s.levels)
         for lvl, img in enumerate(pyr):
             pick = np.arange(0, len(idx), 4**lvl)  # coarser levels: fewer samples, the same spread

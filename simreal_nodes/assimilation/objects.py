@@ -20,6 +20,7 @@ from simreal_nodes.assimilation.registration import (
     RegistrationConfig,
     RegistrationError,
     depth_cloud,
+    register_loaded,
     register_rgbd,
 )
 from simreal_nodes.assimilation.tracker import DeformableTracker, Estimate, deformable_feedback, tracker_config
@@ -64,6 +65,10 @@ class ObjectTrackers:
             assert self.cam is not None, "ObjectTrackers.set_camera comes first"
             tr = DeformableTracker(self.models[o["id"]], self._pose(o), o["parameters"], self.cam,
                                    tracker_config(o, **self.cfg_overrides))
+            reg = self.registrations.get(o["id"])
+            if reg is not None and reg.state is not None and tr.cfg.reference == "depth":
+                tr.reference_state = reg.state.copy()
+                tr.values[:len(reg.state)] = reg.state
             self.trackers[o["id"]] = tr
         return tr
 
@@ -112,8 +117,16 @@ class ObjectTrackers:
         cloud = np.vstack([depth_cloud(self.cam, d, T, cfg.stride, cfg.max_range) for d, T in views])
         cams = np.array([T[:3, 3] for _, T in views])
         views.clear()
+        model = self.models[oid]
+        guess = G.pose7_to_matrix(o["anchor"]["guess"])
         try:
-            reg = register_rgbd(cloud, self.models[oid], G.pose7_to_matrix(o["anchor"]["guess"]), cams, cfg)
+            if o["tracking"]["reference"] == "depth":
+                # the object may be loaded while it is registered: its deformation fitted with its pose
+                lo, hi = self._tracker(o)._free_bounds()
+                n_mu = len(model.axes)
+                reg = register_loaded(cloud, model, guess, cams, lo[:n_mu], hi[:n_mu], cfg)
+            else:
+                reg = register_rgbd(cloud, model, guess, cams, cfg)
         except RegistrationError as e:
             return f"waiting for registration: {e.args[0]}"
         self.registrations[oid] = reg
@@ -123,9 +136,11 @@ class ObjectTrackers:
     @property
     def needs_depth(self) -> bool:
         """Whether depth is still read: a registered object waits for its depth views, or a dense tracker for its
-        reference view (the surroundings' depth); afterwards depth is not read."""
+        reference view (the surroundings' depth), a sparse one for the state it starts from; afterwards depth is not
+        read."""
         return any(o["anchor"]["kind"] == "registration" and o["id"] not in self.registrations for o in self.objects) \
             or any(tr.dense is not None and not tr.dense.has_template for tr in self.trackers.values()) \
+            or any(tr.needs_depth for tr in self.trackers.values()) \
             or any(o["tracking"]["measurements"] == "dense" and o["id"] not in self.trackers for o in self.objects)
 
     def focus(self, T_wc: np.ndarray | None) -> list[tuple[int, np.ndarray]]:

@@ -15,13 +15,14 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, cast
 
 import numpy as np
 from scipy.spatial import cKDTree
 
 from simreal_nodes import geometry as G
+from simreal_nodes.assimilation.depth_state import DepthStateConfig, fit_state
 from simreal_nodes.camera import CameraModel
 from simreal_nodes.errors import SimrealError
 from simreal_nodes.rom.model import ReducedModel
@@ -272,6 +273,10 @@ class Registration:
     points: int
     plane: np.ndarray | None
     slide_spread: float = 0.0  # metres the fit could slide along a weakly held axis at about the same cover
+    # :func:`register_loaded`: the model state (mu) the depth showed the object deformed in (None: at rest), and
+    # what the depth fit found
+    state: np.ndarray | None = None
+    state_reason: str = ""
 
 
 def depth_cloud(cam: CameraModel, depth: np.ndarray, T_wc: np.ndarray, stride: int = 2,
@@ -406,6 +411,73 @@ def register_rgbd(cloud: np.ndarray, model: ReducedModel, guess: np.ndarray, cam
         raise RegistrationError(f"registration refused: the fit can slide along the object's axis {what} at about "
                                 f"the same cover (at most {1e3 * cfg.max_slide_spread:.0f} mm): its ends are not "
                                 "seen well enough to place it; show the camera an end of the object", out)
+    return out
+
+
+def register_loaded(cloud: np.ndarray, model: ReducedModel, guess: np.ndarray, cam_centres: np.ndarray,
+                    lo: np.ndarray, hi: np.ndarray, cfg: RegistrationConfig | None = None,
+                    state_cfg: DepthStateConfig | None = None, seed: int = 0) -> Registration:
+    """:func:`register_rgbd`, then the model's deformation fitted to the same cloud (:func:`.depth_state.fit_state`,
+    mu within ``lo`` / ``hi``): an object loaded while it is registered does not fit its rest shape (a bent
+    beam's rigid fit is tilted to split the difference, or refused on its residual). Where the depth shows a
+    deformation, the deformed fit replaces the rigid one: its pose (levelled onto the support plane, then a
+    translation and a turn about the up axis with the deformation), judged again on the deformed surface with the
+    same thresholds, and its state in :attr:`Registration.state`. Otherwise the rigid fit stands as it was."""
+    cfg = cfg or RegistrationConfig()
+    try:
+        reg, failed = register_rgbd(cloud, model, guess, cam_centres, cfg, seed), None
+    except RegistrationError as e:
+        if len(e.args) < 2 or not isinstance(e.args[1], Registration):
+            raise
+        reg, failed = e.args[1], e
+    T0 = reg.T_map_obj if reg.plane is None else _level(reg.T_map_obj, reg.plane[:3], model.points.mean(axis=0))
+    st = fit_state(cloud, model, T0, lo, hi, cfg=state_cfg)
+    if not st.deformed:
+        if failed is not None:
+            raise failed
+        return replace(reg, state_reason=st.reason)
+    assert st.mu is not None
+    u = model.deformation_view().field.evaluate(st.mu)
+    S, N = sample_surface(model.points + u, model.surface, _n_samples(model, 0.0025), seed)
+    cams = np.asarray(cam_centres, dtype=np.float64).reshape(-1, 3)
+    P = _object_points(cloud, st.T_map_obj, model.points + u, float(model.points[:, 2].min()), reg.plane, cfg)
+    T = G.inv(st.T_map_obj)
+    fitness, rmse, hits = _quality(P, T, S, N, cams, cfg.inlier_dist)
+    out = Registration(st.T_map_obj, fitness, rmse, hits, reg.plane, slide_spread(P, T, S, N, cams, cfg),
+                       st.mu.copy(), st.reason)
+    if fitness < cfg.min_fitness or rmse > cfg.max_rmse or out.slide_spread > cfg.max_slide_spread:
+        raise RegistrationError(f"registration refused (deformed fit: {st.reason}): {100 * fitness:.0f} % of the "
+                                f"model surface facing the camera matched, residual {1e3 * rmse:.1f} mm, slide "
+                                f"spread {1e3 * out.slide_spread:.0f} mm", out)
+    return out
+
+
+def _level(T_map_obj: np.ndarray, up: np.ndarray, centre: np.ndarray) -> np.ndarray:
+    """The pose turned about the model's ``centre`` (object frame) so that its z axis is ``up`` (map frame)."""
+    z = T_map_obj[:3, 2]
+    axis = np.cross(z, up)
+    angle = float(np.arctan2(np.linalg.norm(axis), np.dot(z, up)))
+    if angle < 1e-12:
+        return T_map_obj
+    R = G.exp_so3(axis / np.linalg.norm(axis) * angle)
+    c = G.transform(T_map_obj, centre[None])[0]
+    out: np.ndarray = G.make_T(R, c - R @ c) @ T_map_obj
+    return out
+
+
+def _object_points(cloud: np.ndarray, T_map_obj: np.ndarray, V: np.ndarray, z_under: float,
+                   plane: np.ndarray | None, cfg: RegistrationConfig) -> np.ndarray:
+    """The fused cloud (map frame) as :func:`register_rgbd` judges it: on the ``voxel`` grid, off the support
+    plane, within ``margin`` of the box of V (object frame) and above the contact band over the rest shape's
+    underside ``z_under`` (where the supports meet it)."""
+    P = _down(np.asarray(cloud, dtype=np.float64), cfg.voxel)
+    if plane is not None:
+        P = P[P @ plane[:3] + plane[3] > cfg.floor_clear]
+    Q = G.transform(G.inv(T_map_obj), P)
+    lo, hi = V.min(axis=0) - cfg.margin, V.max(axis=0) + cfg.margin
+    keep = np.all((lo < Q) & (hi > Q), axis=1)
+    keep &= Q[:, 2] > z_under + cfg.contact_band
+    out: np.ndarray = P[keep]
     return out
 
 

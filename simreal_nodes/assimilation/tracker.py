@@ -21,7 +21,8 @@ from scipy.spatial import cKDTree
 from simreal_nodes import geometry as G
 from simreal_nodes.assimilation import lm
 from simreal_nodes.assimilation.dense import DenseAligner, DenseResult, DenseSettings
-from simreal_nodes.assimilation.registration import link, ray_weights, surface_nodes
+from simreal_nodes.assimilation.depth_state import DepthStateConfig, fit_state
+from simreal_nodes.assimilation.registration import depth_cloud, link, ray_weights, surface_nodes
 from simreal_nodes.camera import CameraModel
 from simreal_nodes.rom.model import ReducedModel
 from simreal_nodes.rom.state import ALPHA_Z, ModelState, StateLayout
@@ -69,6 +70,10 @@ class TrackerConfig:
     dense: DenseSettings = field(default_factory=DenseSettings)  # measurements 'dense'
     # measurements 'dense': a deformation is seen when it lowers the photometric residual by this fraction
     dense_min_gain: float = 0.05
+    # the state in the reference view: "depth" (fitted to the depth image where there is one, :mod:`.depth_state`)
+    # or "rest"
+    reference: str = "depth"
+    depth_state: DepthStateConfig = field(default_factory=DepthStateConfig)
 
 
 @dataclass
@@ -143,6 +148,10 @@ class DeformableTracker:
         self.rest_correction: dict[str, Any] | None = None  # what the rest alignment did (cfg.rest_frames)
         self._outline: tuple[np.ndarray, lm.Displacement] | None = None  # screen_region's nodes and their view
         self.dense: DenseAligner | None = None
+        self.reference_state: np.ndarray | None = None  # mu a registration's depth fit found (None: at rest)
+        # sparse measurements: whether the object's state was read from a depth image yet (see needs_depth)
+        self._reference_read = self.cfg.reference != "depth" or self.cfg.measurements != "map_points"
+        self._reference_tries = 0
         if self.cfg.measurements == "dense":
             if self.rigid_z:
                 raise ValueError("measurements 'dense' do not estimate alpha_z: use map_points for this object")
@@ -343,6 +352,7 @@ class DeformableTracker:
         if self.dense is not None:
             return self._update_dense(est, T_wc, ids, P_map, uv, image_bgr, depth)
         if self.cfg.measurements == "map_points":
+            self._read_reference(est, T_wc, depth)
             if ids is None or len(ids) == 0 or P_map is None or uv is None:
                 est.state, est.reason = EstimateState.LOST, "no measurements: no map points observed on the object"
                 return est
@@ -470,11 +480,15 @@ class DeformableTracker:
         gray = cv2.cvtColor(image_bgr, cv2.COLOR_BGR2GRAY) if image_bgr.ndim == 3 else image_bgr
         T_cw = G.inv(T_wc)
         if not self.dense.has_template:
-            if self.dense.set_reference(gray, T_cw, depth):
+            mu_ref, state, _ = self.reference_from_depth(T_wc, depth)
+            if self.dense.set_reference(gray, T_cw, depth, mu_ref):
                 n_s = len(self.dense.static[0].X) if self.dense.static else 0
-                est.reason = ("reference view taken for dense measurement (the object is taken to be at rest "
-                              f"in it; {len(self.dense.levels[0].x)} surface samples, {n_s} of its static "
-                              "surroundings)")
+                if mu_ref is not None:
+                    self.values[:len(mu_ref)] = mu_ref  # the next frame starts there
+                est.values = self.values.copy()
+                est.reason = (f"reference view taken for dense measurement (the object {state} in it; "
+                              f"{len(self.dense.levels[0].x)} surface samples, {n_s} of its static surroundings)")
+                est.debug["reference_state"] = state
             else:
                 est.state, est.reason = EstimateState.LOST, "the object is not in view: no reference view yet"
             return est
@@ -499,6 +513,52 @@ class DeformableTracker:
         return self._conclude(est, res.mu, bool(deforming),
                               f"photometric residual {fit:.2f} vs {res.rest_rms:.2f} undeformed, "
                               f"motion {res.motion_px:.2f} px")
+
+    def reference_from_depth(self, T_wc: np.ndarray, depth: np.ndarray | None
+                             ) -> tuple[np.ndarray | None, str, bool]:
+        """The object's state (mu) in the reference view, how it was judged, and whether the depth saw the object:
+        fitted to this frame's depth (:func:`.depth_state.fit_state`, the rigid part a nuisance: the pose is not
+        changed) where ``cfg.reference`` is "depth" and there is a depth image; failing that,
+        :attr:`reference_state` (a registration's fit); None: at rest."""
+        if self.cfg.reference != "depth":
+            return None, "taken to be at rest", False
+        if depth is not None:
+            lo, hi = self._free_bounds()
+            n_mu = len(self.model.axes)
+            cloud = depth_cloud(self.cam, np.asarray(depth), T_wc, stride=2)
+            st = fit_state(cloud, self.model, self.T_map_obj, lo[:n_mu], hi[:n_mu], self.values[:n_mu],
+                           self.cfg.depth_state, self.cfg.n_modes or None)
+            if st.mu is not None:
+                return st.mu, "deformed as its depth shows, " + ", ".join(
+                    f"{nm} {v:.4g}" for nm, v in zip(self.names, st.mu)) + f" ({st.reason})", True
+            if np.isfinite(st.cost):
+                return None, f"at rest as its depth shows ({st.reason})", True
+        if self.reference_state is not None:
+            return self.reference_state.copy(), "deformed as the registration's depth fit showed", False
+        return None, "taken to be at rest (no depth fit)", False
+
+    @property
+    def needs_depth(self) -> bool:
+        """Sparse measurements with ``reference: depth``: the object's state is read from the first depth image
+        that shows it (points first seen on a loaded object are then linked where they are)."""
+        return not self._reference_read
+
+    def _read_reference(self, est: Estimate, T_wc: np.ndarray, depth: np.ndarray | None) -> None:
+        """Sparse measurements: the state the depth shows the object in, once (see :attr:`needs_depth`); a
+        deformation found there is the start of the estimate and counts as seen (new map points are linked on
+        the deformed surface)."""
+        if self._reference_read or depth is None:
+            return
+        mu, state, seen = self.reference_from_depth(T_wc, depth)
+        self._reference_tries += 1
+        if not seen and mu is None and self._reference_tries < 15:
+            return  # the object not in this depth image: the next one (15 at most: each costs a fit)
+        self._reference_read = True
+        est.debug["reference_state"] = state
+        if mu is not None:
+            self.values[:len(mu)] = mu
+            est.values = self.values.copy()
+            self._was_deforming = True
 
     def _fits_badly(self, res: lm.Result, n: int) -> bool:
         """The warm-started fit may sit in the wrong basin: its residual jumped above the running level of good
@@ -698,6 +758,7 @@ def tracker_config(obj: dict[str, Any], **overrides: Any) -> TrackerConfig:
                         constant_std_frac=t["constant_std_frac"],
                         min_measurements=t["min_measurements"], max_points=t["points"], anchor=t["anchor"],
                         object_shift_m=t["object_shift_m"], rest_frames=t["rest_frames"],
+                        reference=t["reference"],
                         dense=DenseSettings(step_px=t["dense_step_px"], rigid=t["dense_rigid"],
                                           static_ring_px=t["dense_surroundings_px"], refine=t["dense_refine"],
                                           camera_first=t["dense_camera_first"],

@@ -115,6 +115,10 @@ TRACKING = Record({
     "dense_camera_first": Bool("measurements 'dense' with the surroundings: measure the camera's error on them "
                                "alone, then fit the object with it held (off, the default: one joint fit)",
                                default=False),
+    "reference": Enum(("depth", "rest"), "the object's state in the view that later ones are compared with (the "
+                      "dense reference view, a registered object's fit): read from the depth image where there is "
+                      "one (the model's deformed surface fitted to it; a scene loaded from its first frame), or "
+                      "taken to be the rest shape", default="depth"),
     "huber_px": Number("Huber threshold of the robust loss, pixels", lo=0, lo_open=True, default=2.0),
     "modes": Number("number of PGD modes used (0 = all)", integer=True, lo=0, default=0),
     "max_iterations": Number("Levenberg-Marquardt iterations per frame", integer=True, lo=1, hi=500, default=20),
