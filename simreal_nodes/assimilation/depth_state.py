@@ -187,6 +187,7 @@ class _Problem:
             w = np.where(q < 1.0, (1.0 - q) ** 2, 0.0)
             H = Jf.T @ (Jf * w[:, None])
             g = Jf.T @ (w * rr)
+            damp = np.maximum(np.diag(H).copy(), 1e-12)  # before the spring: it must not damp the free directions
             if cfg.rigid and self.hold is not None:  # a stiff spring along the held direction
                 k = len(free)
                 stiff = 1e6 * max(float(np.trace(H)) / len(H), 1e-12)
@@ -196,7 +197,7 @@ class _Problem:
             improved = False
             for _try in range(5):
                 try:
-                    step = -np.linalg.solve(H + lam * np.diag(np.maximum(np.diag(H), 1e-12)), g)
+                    step = -np.linalg.solve(H + lam * np.diag(damp), g)
                 except np.linalg.LinAlgError:
                     lam *= 10
                     continue
@@ -298,7 +299,7 @@ def fit_state(cloud: Array, model: ReducedModel, T_map_obj: Array, lo: Array, hi
     mu, rig, cost = mu_start, zero, np.inf
     for r_start in ([zero, rig0] if cfg.rigid else [zero]):
         best_mu, best_c = mu_start, prob.cost(mu_start, r_start, thr)
-        if len(free):
+        if 0 < len(free) <= 3:  # more free parameters: Gauss-Newton from the start alone (the grid grows as 2^n)
             per = max(2, round(cfg.grid ** (1.0 / len(free))))
             axes = [np.linspace(lo[i], hi[i], per) for i in free]
             for cand in np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, len(free)):

@@ -120,11 +120,13 @@ class ObjectTrackers:
         model = self.models[oid]
         guess = G.pose7_to_matrix(o["anchor"]["guess"])
         try:
-            if o["tracking"]["reference"] == "depth":
+            tr = self._tracker(o)
+            if tr.cfg.reference == "depth":
                 # the object may be loaded while it is registered: its deformation fitted with its pose
-                lo, hi = self._tracker(o)._free_bounds()
+                lo, hi = tr._free_bounds()
                 n_mu = len(model.axes)
-                reg = register_loaded(cloud, model, guess, cams, lo[:n_mu], hi[:n_mu], cfg)
+                reg = register_loaded(cloud, model, guess, cams, lo[:n_mu], hi[:n_mu], cfg,
+                                      n_modes=tr.cfg.n_modes or None)
             else:
                 reg = register_rgbd(cloud, model, guess, cams, cfg)
         except RegistrationError as e:

@@ -416,7 +416,8 @@ def register_rgbd(cloud: np.ndarray, model: ReducedModel, guess: np.ndarray, cam
 
 def register_loaded(cloud: np.ndarray, model: ReducedModel, guess: np.ndarray, cam_centres: np.ndarray,
                     lo: np.ndarray, hi: np.ndarray, cfg: RegistrationConfig | None = None,
-                    state_cfg: DepthStateConfig | None = None, seed: int = 0) -> Registration:
+                    state_cfg: DepthStateConfig | None = None, seed: int = 0,
+                    n_modes: int | None = None) -> Registration:
     """:func:`register_rgbd`, then the model's deformation fitted to the same cloud (:func:`.depth_state.fit_state`,
     mu within ``lo`` / ``hi``): an object loaded while it is registered does not fit its rest shape (a bent
     beam's rigid fit is tilted to split the difference, or refused on its residual). Where the depth shows a
@@ -431,13 +432,13 @@ def register_loaded(cloud: np.ndarray, model: ReducedModel, guess: np.ndarray, c
             raise
         reg, failed = e.args[1], e
     T0 = reg.T_map_obj if reg.plane is None else _level(reg.T_map_obj, reg.plane[:3], model.points.mean(axis=0))
-    st = fit_state(cloud, model, T0, lo, hi, cfg=state_cfg)
+    st = fit_state(cloud, model, T0, lo, hi, cfg=state_cfg, n_modes=n_modes)
     if not st.deformed:
         if failed is not None:
             raise failed
         return replace(reg, state_reason=st.reason)
     assert st.mu is not None
-    u = model.deformation_view().field.evaluate(st.mu)
+    u = model.deformation_view(None, n_modes).field.evaluate(st.mu)
     S, N = sample_surface(model.points + u, model.surface, _n_samples(model, 0.0025), seed)
     cams = np.asarray(cam_centres, dtype=np.float64).reshape(-1, 3)
     P = _object_points(cloud, st.T_map_obj, model.points + u, float(model.points[:, 2].min()), reg.plane, cfg)
@@ -457,7 +458,7 @@ def _level(T_map_obj: np.ndarray, up: np.ndarray, centre: np.ndarray) -> np.ndar
     z = T_map_obj[:3, 2]
     axis = np.cross(z, up)
     angle = float(np.arctan2(np.linalg.norm(axis), np.dot(z, up)))
-    if angle < 1e-12:
+    if np.linalg.norm(axis) < 1e-12:  # already up, or upside down (the callers keep ``up`` on the guess's side)
         return T_map_obj
     R = G.exp_so3(axis / np.linalg.norm(axis) * angle)
     c = G.transform(T_map_obj, centre[None])[0]

@@ -129,6 +129,7 @@ class DeformableTracker:
             elif self.names[i] == ALPHA_Z:
                 self.values[i] = 0.0
         self.frozen = np.array([m == "fixed" for m in self.mode])
+        self._initial = self.values.copy()  # the scene's start values
         self._const_samples: list[np.ndarray] = []
         self._was_deforming = False  # constants move only once deformation makes them observable
         self.cand_nodes = surface_nodes(model)
@@ -485,6 +486,8 @@ class DeformableTracker:
                 n_s = len(self.dense.static[0].X) if self.dense.static else 0
                 if mu_ref is not None:
                     self.values[:len(mu_ref)] = mu_ref  # the next frame starts there
+                elif self.reference_state is not None:  # the registration saw a load this frame does not show
+                    self.values[:] = self._initial
                 est.values = self.values.copy()
                 est.reason = (f"reference view taken for dense measurement (the object {state} in it; "
                               f"{len(self.dense.levels[0].x)} surface samples, {n_s} of its static surroundings)")
@@ -557,8 +560,10 @@ class DeformableTracker:
         est.debug["reference_state"] = state
         if mu is not None:
             self.values[:len(mu)] = mu
-            est.values = self.values.copy()
             self._was_deforming = True
+        elif self.reference_state is not None:  # the registration saw a load this depth image does not show
+            self.values[:] = self._initial
+        est.values = self.values.copy()
 
     def _fits_badly(self, res: lm.Result, n: int) -> bool:
         """The warm-started fit may sit in the wrong basin: its residual jumped above the running level of good

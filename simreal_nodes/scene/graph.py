@@ -75,10 +75,14 @@ def tracker_inputs(scene: dict) -> tuple[str, ...]:
 
 def tracker_reads_depth(scene: dict) -> bool:
     """Whether the tracker node takes the depth image (optional in its frame): an object placed by registration
-    (its depth views), or dense measurements on an RGB-D camera (the static surroundings of the reference view)."""
+    (its depth views), or dense measurements on an RGB-D camera (the static surroundings of the reference view), or
+    sparse ones with ``tracking.reference: depth`` (the state they start from)."""
     tracked = [o for o in scene["objects"] if o["tracking"]["enabled"]]
     return any(o["anchor"]["kind"] == "registration" for o in tracked) or (
-        scene["camera"]["depth"] is not None and any(o["tracking"]["measurements"] == "dense" for o in tracked))
+        scene["camera"]["depth"] is not None and any(
+            o["tracking"]["measurements"] == "dense"
+            or (o["tracking"]["measurements"] == "map_points" and o["tracking"]["reference"] == "depth")
+            for o in tracked))
 
 
 def required_nodes(scene: dict, lossless: bool = False) -> list[NodeSpec]:

@@ -19,6 +19,8 @@ from simreal_nodes.assimilation.registration import (
     register_loaded,
     register_rgbd,
 )
+from simreal_nodes.assimilation.tracker import DeformableTracker, TrackerConfig
+from simreal_nodes.scene.graph import tracker_reads_depth
 from simreal_nodes.scene.schema import build_spec_models, validate_scene
 from simreal_nodes.synth.sequence import sequence
 
@@ -120,4 +122,33 @@ def test_the_dense_reference_view_carries_the_deformation(loaded, reference):
         assert "deformed as its depth shows" in ref[0]
         assert abs(tr.values[0] - s["s"]) / s["draw"].span < 0.03, (tr.values, s["s"])
     else:
-        assert "taken to be at rest" in ref[0]
+        assert "the object taken to be at rest in it" in ref[0], ref[0]
+        assert tr.values[0] == pytest.approx(float(np.mean(s["draw"].s_range)))  # the scene's initial value
+
+
+@pytest.mark.parametrize("preloaded", [True, False])
+def test_a_sparse_tracker_starts_from_the_state_its_depth_shows(loaded, unloaded, preloaded):
+    s = loaded if preloaded else unloaded
+    seq = s["seq"]
+    start = 0.5 * (s["lo"][0] + s["hi"][0])
+    tr = DeformableTracker(s["model"], _off(s["truth"]), {"s": {"mode": "tracked", "initial": start}}, seq["cam"],
+                           TrackerConfig(measurements="map_points"))
+    assert tr.needs_depth
+    est = tr.update(seq["T"][0], depth=seq["depth"][0])  # no map points yet: lost, but the state is read
+    assert not tr.needs_depth
+    if preloaded:
+        assert "deformed as its depth shows" in est.debug["reference_state"]
+        assert abs(tr.values[0] - s["s"]) / s["draw"].span < 0.03, (tr.values, s["s"])
+    else:
+        assert est.debug["reference_state"].startswith("at rest as its depth shows")
+        assert tr.values[0] == start
+
+
+def test_the_tracker_node_takes_depth_for_a_sparse_reference(loaded):
+    doc = copy.deepcopy(loaded["doc"])
+    doc["objects"][0]["tracking"]["measurements"] = "map_points"
+    doc["objects"][0]["anchor"] = {"kind": "pose", "pose": G.matrix_to_pose7(loaded["truth"]).tolist()}
+    scene = validate_scene(doc, "family_sparse", ".")
+    assert tracker_reads_depth(scene)
+    doc["objects"][0]["tracking"]["reference"] = "rest"
+    assert not tracker_reads_depth(validate_scene(doc, "family_sparse", "."))
