@@ -394,7 +394,8 @@ compared with the rest shape fitted the same way. The registration fits the defo
 starts from that state. Its two thresholds (the deformed fit must lower the robust cost by 1 % and move the
 surface by 0.5 mm) were chosen on the first frames of development seeds 0-49, loaded and unloaded: unloaded beams
 gain at most +0.6 %, loaded ones at least +1.3 % but one (a load next to a clamp, 0.3 mm of motion); the depth
-alone reads the load position within 0.52 % of its range at the median there (p90 3.1 %). On development seeds
+alone reads the load position within 0.52 % of its range at the median there (p90 3.1 %; that sweep ran before the
+crop took the box of the model's shapes and before the weak axis was held). On development seeds
 0-19: median of the per-scene medians 0.81 % (p90 2.3 %, 85 % of scenes within 2 %), registration 0.6 mm and
 0.05 degrees at the median. On held-out seeds 1000-1029 (run once, after the thresholds were fixed): median of the
 per-scene medians 1.49 % (p90 5.6 %, 37 % of scenes within 1 %, 73 % within 2 %; two supports 1.0 % and 86 % within
