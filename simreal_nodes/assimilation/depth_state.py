@@ -35,11 +35,10 @@ from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
 from simreal_nodes import geometry as G
-from simreal_nodes.assimilation.dense import sample_surface
+from simreal_nodes.assimilation.dense import TUKEY, sample_surface
 from simreal_nodes.rom.model import DeformationView, ReducedModel
 
 Array = NDArray[np.float64]
-TUKEY = 4.685
 N_RIGID = 4  # delta (3), psi
 
 
