@@ -441,6 +441,13 @@ class DeformableTracker:
         says how it was judged), the observability check and the constants."""
         est.deforming = deforming
         self._was_deforming = est.deforming
+        # a constant this frame cannot see keeps its value: an undeformed frame, or one whose constant has a standard
+        # deviation over 5 % of its range (alpha_z of a barely bent boot). Left free, it wanders along the flat cost
+        # and the load's first frames find it in another basin (the lever turning the other way)
+        std = np.sqrt(np.clip(np.diag(est.cov), 0, None))
+        blind = (np.array([m == "constant" for m in self.mode]) & ~self.frozen
+                 & ((not deforming) | (std > 0.05 * (self.hi - self.lo))))
+        x = np.where(blind, self.values, x)
         self.values = x.copy()
         if not est.deforming:
             # barely anything to see (load absent, or near the clamp where the images hardly see its effect):
@@ -581,6 +588,9 @@ class DeformableTracker:
         from the best sample if it beats the warm start's result; keep the lower cost."""
         free = np.flatnonzero(hi > lo)
         free = free[free < len(self.values)]  # not the object shift: it stays at the warm start's value
+        if self._const_samples:  # constants already seen well (Fig. 4.19) are not searched again: a frame that lost
+            # most of its measurements would otherwise pick another basin for them (alpha_z turned by 45 deg)
+            free = free[np.array([self.mode[i] != "constant" for i in free], dtype=bool)]
         if len(free) == 0:
             return res
         per_axis = max(2, round(self.cfg.global_samples ** (1.0 / len(free))))

@@ -240,3 +240,27 @@ def test_a_hand_measured_pose_is_corrected_from_frames_at_rest(rest_frames, load
     else:
         assert tr.rest_correction is None
         assert err_s > 0.05 * SPAN, "without the correction the turn reads as a load (the test can fail)"
+
+
+def test_a_constant_keeps_its_value_in_frames_that_cannot_see_it():
+    """alpha_z of the boot (a constant) moves only in a deformed frame whose fit pins it (std under 5 % of its
+    range): an undeformed frame or a barely bent boot leaves it where it was (it had wandered to the mirror basin
+    at rest on a second view of the boot on independent physics), while the tracked theta takes the fit's value."""
+    from simreal_nodes.assimilation.tracker import Estimate
+    from simreal_nodes.synth.scenes import default_camera
+
+    model = load_model(cached_model("joint_boot"), fields=["displacement"])
+    params = {"theta": {"mode": "tracked", "initial": 0.2}, "alpha_z": {"mode": "constant", "initial": 0.0}}
+    tr = DeformableTracker(model, np.eye(4), params, default_camera(640, 480))
+    assert tr.names == ["theta", "alpha_z"]
+
+    def conclude(x, deforming, alpha_std):
+        est = Estimate(tr.names, tr.units, np.array(x), tr.frozen.copy(), np.diag([1e-8, alpha_std ** 2]))
+        return tr._conclude(est, np.array(x), deforming, "test")
+
+    conclude([0.3, 1.0], False, 1e-3)  # at rest: nothing about alpha
+    assert tr.values.tolist() == [0.3, 0.0]
+    conclude([0.05, 2.0], True, 2.0)  # bent a little: alpha's std is 32 % of its range
+    assert tr.values.tolist() == [0.05, 0.0]
+    conclude([0.4, 0.6], True, 0.01)  # bent enough to see how the boot is turned
+    assert tr.values.tolist() == [0.4, 0.6]
