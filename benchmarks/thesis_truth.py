@@ -239,6 +239,9 @@ def _thesis_at(name: str, pos: dict[float, float]) -> float:
     return float(np.median([THESIS_TABLE_4_1[round(1e3 * s)] for s in pos if round(1e3 * s) in THESIS_TABLE_4_1]))
 
 
+# the run's own columns, shared by the beams' and the boot's tables
+RUN_COLS = [("ok_pct", "OK (%)", "{:.0f}"), ("step_ms_p50", "step (ms)", "{:.0f}"),
+            ("tracker_ms_p50", "tracker (ms)", "{:.0f}"), ("reason", "most common reason when not OK", "{}")]
 COLS = [("scene", "scene", "{}"), ("resolution", "resolution", "{}"), ("fps", "fps", "{:.0f}"),
         ("measurements", "measurements", "{}"), ("placed_by", "placed by", "{}"),
         ("pose_mm", "pose error as given/registered (mm)", "{:.1f}"), ("pose_deg", "(deg)", "{:.2f}"),
@@ -251,9 +254,7 @@ COLS = [("scene", "scene", "{}"), ("resolution", "resolution", "{}"), ("fps", "f
         ("thesis_same_positions_mm", "thesis, same positions (mm)", "{:.1f}"),
         ("model_bias_median_pct_span", "model bias (% span)", "{:.2f}"),
         ("model_rel_l2_median_pct", "model error |u| (%)", "{:.1f}"),
-        ("ok_pct", "OK (%)", "{:.0f}"), ("step_ms_p50", "step (ms)", "{:.0f}"),
-        ("tracker_ms_p50", "tracker (ms)", "{:.0f}"),
-        ("reason", "most common reason when not OK", "{}")]
+        *RUN_COLS]
 
 
 def main() -> None:
@@ -324,8 +325,7 @@ BOOT_COLS = [("knob", "setting", "{}"), ("scene", "scene", "{}"), ("resolution",
              ("model_bias_max_deg", "max (deg)", "{:.2f}"),
              ("model_rel_l2_median_pct", "model error |u|, median (%)", "{:.1f}"),
              ("model_rel_l2_max_pct", "max (%)", "{:.1f}"), ("model_node_max_mm", "worst node (mm)", "{:.1f}"),
-             ("ok_pct", "OK (%)", "{:.0f}"), ("step_ms_p50", "step (ms)", "{:.0f}"),
-             ("tracker_ms_p50", "tracker (ms)", "{:.0f}"), ("reason", "most common reason when not OK", "{}")]
+             *RUN_COLS]
 
 
 def write_boot(rows: list[dict]) -> None:

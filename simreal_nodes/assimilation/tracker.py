@@ -459,7 +459,6 @@ class DeformableTracker:
             return est
         self.deforming_frames += 1
         est.state = EstimateState.OK
-        std = np.sqrt(np.clip(np.diag(est.cov), 0, None))
         weak = [(nm, s, h - l) for nm, s, l, h, fr in zip(self.names, std, self.lo, self.hi, self.frozen)
                 if not fr and s > 0.05 * (h - l)]
         if weak:
