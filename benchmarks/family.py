@@ -8,6 +8,7 @@ independent full-order truth (never the tracked model), with held-out seeds that
     python -m benchmarks.family --seeds 0-9 --registration  # the registration step alone: results/family_registration.*
     python -m benchmarks.family --seeds 0-9 --measurements map_points  # the sparse mode beside: *_map_points.*
     python -m benchmarks.family --seeds 0-4 --tracking dense_step_px=3  # a knob's trade: *_dense_step_px_3.*
+    python -m benchmarks.family --seeds 0-9 --sensor stereo  # a stereo pair instead of RGB-D: *_stereo.*
     ... --jobs 2                             # scenes in 2 processes (one core each)
 
 Per scene: the load-position error over the loaded frames (median, p90, mean, in % of the load's range), the share
@@ -53,13 +54,18 @@ def parse_seeds(text: str) -> list[int]:
     return out
 
 
+def scene_name(seed: int, preloaded: bool = False, sensor: str = "rgbd") -> str:
+    """The family scene's name for :func:`~simreal_nodes.synth.makebag.make_scene`."""
+    return f"family-{seed}" + ("-preloaded" if preloaded else "") + ("-stereo" if sensor == "stereo" else "")
+
+
 def run_scene(seed: int, width: int = 640, height: int = 480, preloaded: bool = False,
-              measurements: str | None = None, tracking: dict | None = None) -> dict:
+              measurements: str | None = None, tracking: dict | None = None, sensor: str = "rgbd") -> dict:
     """One scene through the offline pipeline; ``measurements`` overrides the scene's ``tracking.measurements``,
-    ``tracking`` any other key of its ``tracking`` block (a knob's trade)."""
+    ``tracking`` any other key of its ``tracking`` block (a knob's trade); ``sensor``: ``rgbd`` or ``stereo``."""
     t0 = time.perf_counter()
-    name = f"family-{seed}" + ("-preloaded" if preloaded else "")
-    seq = sequence.__wrapped__(name, width, height, fps=FPS)  # not cached: one scene in memory at a time
+    seq = sequence.__wrapped__(scene_name(seed, preloaded, sensor), width, height, fps=FPS,
+                               stereo=sensor == "stereo")  # not cached: one scene in memory at a time
     t_render = time.perf_counter() - t0
     sc = seq["scene"]
     d = sc.state["draw"]
@@ -68,7 +74,7 @@ def run_scene(seed: int, width: int = 640, height: int = 480, preloaded: bool = 
         doc["objects"][0]["tracking"]["measurements"] = measurements
     doc["objects"][0]["tracking"].update(tracking or {})
     scene = build_spec_models(validate_scene(doc, sc.name, "."))
-    pipe = Pipeline(scene, seq["cam"])
+    pipe = Pipeline(scene, seq["cam"], baseline=sc.stereo_baseline)
     run = track(pipe, seq, FPS)
     truth, est, states, reasons = run["truth"], run["est"], run["states"], run["reasons"]
     step_ms, cam_err, solve_ms, tracker_ms = run["step_ms"], run["cam_err"], run["solve_ms"], run["tracker_ms"]
@@ -79,7 +85,7 @@ def run_scene(seed: int, width: int = 640, height: int = 480, preloaded: bool = 
     why = collections.Counter(r for r, s in zip(np.array(reasons)[loaded], states_a[loaded])
                               if s != EstimateState.OK and r)
     row = {
-        "seed": seed, "measurements": scene["objects"][0]["tracking"]["measurements"],
+        "seed": seed, "measurements": scene["objects"][0]["tracking"]["measurements"], "sensor": sensor,
         "support": d.support, "slenderness": round(d.slenderness, 1), "peak_px": round(d.peak_px, 1),
         "contrast": round(d.speckle_contrast, 3), "distance_m": round(d.distance, 2),
         "loaded_frames": int(loaded.sum()),
@@ -108,7 +114,7 @@ def track(pipe: Pipeline, seq: dict, fps: float, oid: str = "beam") -> dict[str,
     for i in range(len(seq["rgb"])):
         bgr = np.ascontiguousarray(seq["rgb"][i][:, :, ::-1])
         t1 = time.perf_counter()
-        T_wc, out = pipe.step(bgr, int(i * 1e9 / fps), seq["depth"][i])
+        T_wc, out = pipe.step(bgr, int(i * 1e9 / fps), *_depth_or_pair(seq, i))
         run["step_ms"].append(1e3 * (time.perf_counter() - t1))
         if T_wc is not None:
             run["cam_err"].append(float(np.linalg.norm(T_wc[:3, 3] - seq["T"][i][:3, 3])))
@@ -121,6 +127,13 @@ def track(pipe: Pipeline, seq: dict, fps: float, oid: str = "beam") -> dict[str,
         run["states"].append(int(e.state))
         run["reasons"].append(e.reason)
     return run
+
+
+def _depth_or_pair(seq: dict, i: int) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """Frame i's depth image (RGB-D) or right image (stereo: the rendered depth, the truth, is not passed)."""
+    if seq["scene"].stereo_baseline:
+        return None, seq["right"][i]
+    return seq["depth"][i], None
 
 
 def registration_error(pipe: Pipeline, seq: dict) -> dict:
@@ -140,18 +153,20 @@ def registration_error(pipe: Pipeline, seq: dict) -> dict:
             "registration_fitness": float(reg.fitness), "slide_spread_mm": 1e3 * float(reg.slide_spread)}
 
 
-def run_registration(seed: int, width: int = 640, height: int = 480) -> dict:
+def run_registration(seed: int, width: int = 640, height: int = 480, sensor: str = "rgbd") -> dict:
     """The registration step alone: the scene's first frames (as many as :class:`RegistrationConfig` collects)
-    through the pipeline (RGB-D SLAM poses, the scene file's guess), until the beam is placed."""
+    through the pipeline (RGB-D or stereo SLAM poses, the scene file's guess), until the beam is placed."""
     cfg = RegistrationConfig()
-    seq = sequence.__wrapped__(f"family-{seed}", width, height, fps=FPS, frames=cfg.frames * cfg.every + 2)
+    seq = sequence.__wrapped__(scene_name(seed, sensor=sensor), width, height, fps=FPS,
+                               frames=cfg.frames * cfg.every + 2, stereo=sensor == "stereo")
     sc = seq["scene"]
     yaml_doc = sc.scene_yaml(sc)
     scene = build_spec_models(validate_scene(copy.deepcopy(yaml_doc), sc.name, "."))
-    pipe = Pipeline(scene, seq["cam"])
+    pipe = Pipeline(scene, seq["cam"], baseline=sc.stereo_baseline)
     t0, reason, frame = time.perf_counter(), "", -1
     for i in range(len(seq["rgb"])):
-        _, out = pipe.step(np.ascontiguousarray(seq["rgb"][i][:, :, ::-1]), int(i * 1e9 / FPS), seq["depth"][i])
+        _, out = pipe.step(np.ascontiguousarray(seq["rgb"][i][:, :, ::-1]), int(i * 1e9 / FPS),
+                           *_depth_or_pair(seq, i))
         reason = out["beam"].reason
         if "beam" in pipe.objects.registrations:
             frame = i
@@ -177,18 +192,19 @@ REG_COLS = [("seed", "seed", "{}"), ("support", "support", "{}"), ("length_mm", 
             ("seconds", "time (s)", "{}"), ("reason", "refused because", "{}")]
 
 
-def write_registration(rows: list[dict], label: str) -> None:
+def write_registration(rows: list[dict], label: str, suffix: str = "") -> None:
     mm = np.array([r["registration_mm"] for r in rows])
     deg = np.array([r["registration_deg"] for r in rows])
     worst = np.array([r["registration_max_mm"] for r in rows])
-    notes = (f"{label}: the registration step alone (`anchor: registration`) on each scene's first frames, RGB-D "
-             "SLAM poses, the scene file's guess (about 5 cm and 10 degrees rms off). Median error "
+    sensor = "stereo SLAM poses and SGBM depth" if suffix == "_stereo" else "RGB-D SLAM poses"
+    notes = (f"{label}: the registration step alone (`anchor: registration`) on each scene's first frames, {sensor}, "
+             "the scene file's guess (about 5 cm and 10 degrees rms off). Median error "
              f"{np.nanmedian(mm):.2f} mm, {np.nanmedian(deg):.2f} deg (target <= 3 mm, <= 0.5 deg), largest node "
              f"displacement {np.nanmedian(worst):.2f} mm at the median; "
              f"{int(np.isnan(mm).sum())} of {len(rows)} scenes refused. Error: the object frame's origin (the beam's "
              "clamped corner), the largest displacement of a model node and the rotation angle, against the true pose "
              "in the map frame.")
-    save("family_registration", rows, REG_COLS, "Registration of the beam on the scene family", notes,
+    save("family_registration" + suffix, rows, REG_COLS, "Registration of the beam on the scene family", notes,
          extra={"summary": {"median_mm": float(np.nanmedian(mm)), "median_deg": float(np.nanmedian(deg)),
                             "median_max_mm": float(np.nanmedian(worst)),
                             "refused": int(np.isnan(mm).sum()), "label": label}})
@@ -221,14 +237,15 @@ def write(rows: list[dict], label: str, name: str = "family", measured_on: dict 
     """The table, plot and JSON of a run; ``measured_on``: the machine line of the run being rewritten (``--report``)
     rather than this one."""
     s = summary(rows)
-    notes = (f"{label}: {s['scenes']} scenes at 640x480, {FPS:.0f} fps, RGB-D SLAM + PGD tracker with the defaults. "
+    slam = "stereo SLAM (SGBM depth for the registration and reference view)" if "stereo" in label else "RGB-D SLAM"
+    notes = (f"{label}: {s['scenes']} scenes at 640x480, {FPS:.0f} fps, {slam} + PGD tracker with the defaults. "
              f"Over scenes: median of the per-scene median error {s['median_of_medians_pct']:.2f} % of the load range, "
              f"p90 {s['p90_of_medians_pct']:.2f} %, {s['within_1pct']:.0f} % of scenes within 1 %, "
              f"{s['within_2pct']:.0f} % within 2 % (targets: < 1 %, < 3 %, >= 90 % within 2 %). The model bias is "
              "the load-position error the reduced model alone makes (its least-squares best fit to the truth's surface "
              "displacement); model error |u| its relative displacement error; camera ATE the RMS camera position "
-             "error of the RGB-D SLAM (no alignment: both maps start at the first camera frame). The beam is placed by "
-             "registration from a guess by eye; its pose error (median "
+             f"error of the {slam.split(' (')[0]} (no alignment: both maps start at the first camera frame). The "
+             "beam is placed by registration from a guess by eye; its pose error (median "
              f"{s['median_registration_mm']:.1f} mm, {s['median_registration_deg']:.2f} deg) is in each row. "
              "Errors are over the loaded frames "
              "(the first 1.5 s map the unloaded scene unless the label says the load is on from the first frame).")
@@ -426,6 +443,8 @@ def main() -> None:
                     help="override the scenes' tracking.measurements (results name gets the suffix)")
     ap.add_argument("--tracking", action="append", default=[], metavar="KEY=VALUE",
                     help="override a key of the scenes' tracking block (YAML value; results name gets the suffix)")
+    ap.add_argument("--sensor", choices=("rgbd", "stereo"), default="rgbd",
+                    help="the camera the family is seen through (stereo: results name gets the suffix _stereo)")
     ap.add_argument("--jobs", type=int, default=1, help="scenes run in parallel processes (one core each)")
     ap.add_argument("--resume", action="store_true",
                     help="keep the rows of a results JSON with the same label (a run that was cut off on the same "
@@ -435,13 +454,16 @@ def main() -> None:
     if a.registration:
         reg_rows = []
         for seed in seeds:
-            reg_rows.append(run_registration(seed))
+            reg_rows.append(run_registration(seed, sensor=a.sensor))
             print(reg_rows[-1], flush=True)
-            write_registration(reg_rows, f"seeds {a.seeds}")
+            write_registration(reg_rows, f"seeds {a.seeds}" + (", stereo pair" if a.sensor == "stereo" else ""),
+                               "_stereo" if a.sensor == "stereo" else "")
         return
     held_out = all(s >= HELD_OUT_SEEDS.start for s in seeds)
     name = ("family_preloaded" + ("_heldout" if held_out else "")) if a.preloaded else \
         ("family" if held_out else "family_dev")
+    if a.sensor == "stereo":
+        name += "_stereo"
     if a.measurements:
         name += f"_{a.measurements}"
     pairs = [t.partition("=")[::2] for t in a.tracking]
@@ -455,6 +477,7 @@ def main() -> None:
         return
     label = ("held-out seeds" if held_out else "development seeds") + f" {a.seeds}"
     label += ", load on from the first frame" if a.preloaded else ""
+    label += ", stereo pair (SGBM depth)" if a.sensor == "stereo" else ""
     label += f", measurements {a.measurements}" if a.measurements else ""
     label += "".join(f", tracking.{k}: {v}" for k, v in knobs.items())
     rows: list[dict] = []
@@ -470,7 +493,8 @@ def main() -> None:
     if a.jobs > 1:  # the spawned workers inherit it before numpy loads its BLAS
         for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
             os.environ[var] = "1"
-    job = functools.partial(run_scene, preloaded=a.preloaded, measurements=a.measurements, tracking=knobs)
+    job = functools.partial(run_scene, preloaded=a.preloaded, measurements=a.measurements, tracking=knobs,
+                            sensor=a.sensor)
     with multiprocessing.get_context("spawn").Pool(a.jobs, initializer=_one_thread) if a.jobs > 1 else \
             contextlib.nullcontext() as pool:
         results = pool.imap(job, seeds) if pool is not None else map(job, seeds)

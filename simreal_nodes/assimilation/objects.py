@@ -16,6 +16,7 @@ import numpy as np
 
 from simreal_nodes import geometry as G
 from simreal_nodes.assimilation.registration import (
+    DepthViews,
     Registration,
     RegistrationConfig,
     RegistrationError,
@@ -49,6 +50,7 @@ class ObjectTrackers:
         self.registrations: dict[str, Registration] = {}
         self._views: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
         self._posed: dict[str, int] = {}  # frames with a camera pose seen while waiting for the registration
+        self.depth_baseline: float | None = None  # the depth is SGBM on a stereo pair of this baseline (None: RGB-D)
 
     def set_camera(self, cam: CameraModel) -> None:
         """New intrinsics: every tracker starts again (built now, not on the first frame: that frame would wait);
@@ -115,7 +117,7 @@ class ObjectTrackers:
         if len(views) < cfg.frames:
             return f"waiting for registration ({len(views)} of {cfg.frames} depth views)"
         cloud = np.vstack([depth_cloud(self.cam, d, T, cfg.stride, cfg.max_range) for d, T in views])
-        cams = np.array([T[:3, 3] for _, T in views])
+        cams = DepthViews(np.array([T for _, T in views]), self.cam, self.depth_baseline)
         views.clear()
         model = self.models[oid]
         guess = G.pose7_to_matrix(o["anchor"]["guess"])

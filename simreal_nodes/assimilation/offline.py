@@ -3,7 +3,8 @@ chain them (used by tests and benchmarks; the nodes add only message conversion 
 
 ``scene``: a validated scene dict (``load_scene`` / ``validate_scene``) whose ``spec:NAME`` models are built
 (``build_spec_models``: validation only names their cache files), unless ``models`` gives them; frames: BGR
-images (+ depth for RGB-D, + right grey image for stereo) with stamps. Returns one :class:`Estimate` per frame.
+images (+ depth for RGB-D, + right grey image for stereo: the trackers' depth is then SGBM on the pair, made only in
+the frames where they read depth) with stamps. Returns one :class:`Estimate` per frame.
 """
 
 from __future__ import annotations
@@ -16,11 +17,13 @@ import numpy as np
 
 from simreal_nodes.assimilation.localizer import make_localizer
 from simreal_nodes.assimilation.objects import ObjectTrackers
+from simreal_nodes.assimilation.registration import RegistrationConfig
 from simreal_nodes.assimilation.tracker import Estimate
 from simreal_nodes.camera import CameraModel
 from simreal_nodes.rom.model import ReducedModel
 from simreal_nodes.rom.model_file import load_model
 from simreal_nodes.vision.slam.config import SlamConfig
+from simreal_nodes.vision.stereo import stereo_depth
 
 
 class Pipeline:
@@ -40,12 +43,16 @@ class Pipeline:
         self.mode = loc["mode"]
         self.freeze_map = bool(loc.get("freeze_map_on_deformation", False))
         self.cam = cam
+        self.baseline = baseline
+        self.min_depth = float(scene["camera"].get("stereo_min_depth_m", 0.4))
         self.loc = make_localizer(loc, cam, baseline, slam_config=slam_config)
         tracked = [o for o in scene["objects"] if o["tracking"]["enabled"]]
         models = {o["id"]: (models or {}).get(o["id"]) or load_model(o["model"], fields=["displacement"])
                   for o in tracked}
-        self.objects = ObjectTrackers(tracked, models, **cfg_overrides)
+        self.objects = ObjectTrackers(tracked, models, RegistrationConfig.for_camera(scene["camera"]), **cfg_overrides)
         self.objects.set_camera(cam)
+        if self.mode == "stereo" and not scene["camera"].get("depth"):
+            self.objects.depth_baseline = baseline  # the trackers' depth is SGBM on the pair (see step)
         self.trackers = self.objects.trackers
         self.tracker_ms = 0.0  # the last step's deformable-tracking work (update, focus, feedback): the tracker node's
 
@@ -58,6 +65,8 @@ class Pipeline:
         if T_wc is not None and len(r.obs_ids):
             ids, P, uv = np.asarray(r.obs_ids), np.asarray(r.obs_pos), np.asarray(r.obs_uv)
         t0 = time.perf_counter()
+        if depth is None and right is not None and self.baseline and self.objects.needs_depth:
+            depth = stereo_depth(gray, right, self.cam.fx, self.baseline, self.min_depth)  # as the tracker node does
         out = self.objects.update(T_wc, ids, P, uv, bgr, depth)
         # the objects' image regions for the next frame's features (a frame late, like the feedback; the camera
         # moves little in a frame and the polygons are hulls of the whole surface)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 from simreal_nodes.cli.progress import TqdmProgress
+from simreal_nodes.errors import SimrealError
 
 
 def cmd_check_scene(a: argparse.Namespace) -> int:
@@ -26,7 +27,12 @@ def cmd_make_bag(a: argparse.Namespace) -> int:
     w, h = (int(x) for x in a.resolution.lower().split("x"))
     progress = TqdmProgress() if not a.quiet else None
     try:
-        name = f"family-{a.seed}" if a.scene == "family" else a.scene  # the family's scene is drawn from the seed
+        name = a.scene
+        if a.scene == "family":  # the family's scene is drawn from the seed
+            name = f"family-{a.seed}" + ("-stereo" if a.sensor == "stereo" else "")
+        elif a.sensor != "rgbd":
+            raise SimrealError(f"--sensor {a.sensor}: only the 'family' scenes are drawn for another camera; "
+                               f"'{a.scene}' has its own")
         info = make_bag(name, a.output, w, h, a.duration, a.fps, a.storage, a.seed, a.scene_out, a.ssaa, progress,
                         image_format=a.image_format, jpeg_quality=a.jpeg_quality)
     finally:
@@ -56,6 +62,8 @@ def add_make_bag(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--storage", choices=("mcap", "sqlite3"), default="mcap")
     s.add_argument("--seed", type=int, default=0, help="noise seed; for 'family' also the scene drawn (development "
                    "seeds 0-49 for tuning, held-out 1000-1099 for reporting)")
+    s.add_argument("--sensor", choices=("rgbd", "stereo"), default="rgbd",
+                   help="'family' only: the camera it is seen through (stereo: a rectified pair, no depth topic)")
     s.add_argument("--ssaa", type=int, default=2, help="supersampling factor (anti-aliasing)")
     s.add_argument("--scene-out", help="also write the scene YAML that runs the graph on this bag")
     s.add_argument("--image-format", choices=("raw", "jpeg", "png"), default="raw",

@@ -74,15 +74,24 @@ def tracker_inputs(scene: dict) -> tuple[str, ...]:
 
 
 def tracker_reads_depth(scene: dict) -> bool:
-    """Whether the tracker node takes the depth image (optional in its frame): an object placed by registration
-    (its depth views), or dense measurements on an RGB-D camera (the static surroundings of the reference view), or
-    sparse ones with ``tracking.reference: depth`` (the state they start from)."""
+    """Whether the tracker node takes depth (optional in its frame; the depth image of an RGB-D camera, or the
+    stereo pair it matches itself, see :func:`tracker_stereo_depth`): an object placed by registration (its depth
+    views), or dense measurements (the static surroundings of the reference view), or sparse ones with
+    ``tracking.reference: depth`` (the state they start from), the last two where the camera gives depth."""
     tracked = [o for o in scene["objects"] if o["tracking"]["enabled"]]
+    cam = scene["camera"]
     return any(o["anchor"]["kind"] == "registration" for o in tracked) or (
-        scene["camera"]["depth"] is not None and any(
+        (cam["depth"] is not None or cam["right_image"] is not None) and any(
             o["tracking"]["measurements"] == "dense"
             or (o["tracking"]["measurements"] == "map_points" and o["tracking"]["reference"] == "depth")
             for o in tracked))
+
+
+def tracker_stereo_depth(scene: dict) -> bool:
+    """Whether the tracker node makes its depth from the stereo pair (SGBM, ``camera.stereo_min_depth_m``): it
+    reads depth and the camera has no depth image but a right one."""
+    cam = scene["camera"]
+    return tracker_reads_depth(scene) and cam["depth"] is None and cam["right_image"] is not None
 
 
 def required_nodes(scene: dict, lossless: bool = False) -> list[NodeSpec]:
@@ -118,8 +127,10 @@ def required_nodes(scene: dict, lossless: bool = False) -> list[NodeSpec]:
     if tracked:
         nodes.append(NodeSpec(
             "tracker", dict(common),
-            [LOC_OBS if k == "obs" else CAM_IMAGE for k in tracker_inputs(scene)] + [CAM_INFO]
-            + ([CAM_DEPTH] if any(o["anchor"]["kind"] == "registration" for o in tracked) else []),
+            list(dict.fromkeys([LOC_OBS if k == "obs" else CAM_IMAGE for k in tracker_inputs(scene)] + [CAM_INFO]
+                               + ([CAM_DEPTH] if depth and tracker_reads_depth(scene) else [])
+                               + ([CAM_IMAGE, CAM_RIGHT_IMAGE, CAM_RIGHT_INFO] if tracker_stereo_depth(scene)
+                                  else []))),
             {**{params_topic(o["id"]): "simreal_msgs/msg/ModelParameters" for o in tracked},
              TRACKER_STATUS: "simreal_msgs/msg/TrackingStatus",
              **({LOC_DEFORMABLE: "sensor_msgs/msg/PointCloud2", LOC_FOCUS: "geometry_msgs/msg/PolygonInstanceStamped"}

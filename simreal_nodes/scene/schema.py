@@ -44,6 +44,8 @@ CAMERA = Record({
     "depth": Topic("depth image (16UC1 mm or 32FC1 m), registered to the colour image", nullable=True),
     "right_image": Topic("right image of a rectified-or-not stereo pair", nullable=True),
     "right_camera_info": Topic("CameraInfo of the right camera", nullable=True),
+    "stereo_min_depth_m": Number("stereo: the nearest depth the dense matching (SGBM) searches, metres; a nearer "
+                                 "limit widens the disparity range and costs time", lo=0.05, default=0.4),
     "calibration": FilePath("ROS calibration YAML that overrides CameraInfo", nullable=True),
     "undistort": Bool("undistort images in the ingest node", default=False),
     "compressed": Bool("images arrive as sensor_msgs/CompressedImage on <image>/compressed (image_transport)",
@@ -235,11 +237,11 @@ def _cross_checks(scene: dict, ctx: Context) -> None:
                 o["id"] in p["collision"]["pushes"] for p in scene["objects"]):
             raise SceneError(f"{src}: objects[{i}].collision.enabled: collision needs camera.depth or a stereo pair "
                              "(or another object that pushes it); found neither")
-        if o["anchor"]["kind"] == "registration" and loc["mode"] != "rgbd":
-            # registration works on depth images (assimilation.registration.register_rgbd); a monocular or stereo
-            # map's sparse points alone do not place a model to millimetres
-            raise SceneError(f"{src}: objects[{i}].anchor.kind: 'registration' needs the depth images of "
-                             f"localization.mode 'rgbd'; found mode '{loc['mode']}' (give kind 'pose')")
+        if o["anchor"]["kind"] == "registration" and loc["mode"] not in ("rgbd", "stereo"):
+            # registration works on depth images (assimilation.registration.register_rgbd: RGB-D, or SGBM on a
+            # stereo pair); a monocular map's sparse points alone do not place a model to millimetres
+            raise SceneError(f"{src}: objects[{i}].anchor.kind: 'registration' needs depth images (localization.mode "
+                             f"'rgbd' or 'stereo'); found mode '{loc['mode']}' (give kind 'pose')")
         if o["anchor"]["kind"] == "registration" and o["anchor"]["guess"] is None:
             raise SceneError(f"{src}: objects[{i}].anchor.guess: required for kind 'registration' (the object frame "
                              "in the first camera frame, judged by eye); found nothing")

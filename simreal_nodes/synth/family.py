@@ -17,6 +17,10 @@ The scene file does not give the object pose: it asks for ``anchor: registration
 guess as a user gives it by eye ("about a metre in front of the first view, clamp on the left"): the true pose in
 the first camera frame moved by a drawn error of about 5 cm and 10 degrees rms (:attr:`FamilyDraw.guess_error`), far
 more than the millimetres the registration is scored at, so no precise truth reaches the scene file.
+
+``sensor="stereo"`` renders the same scene through a rectified stereo pair (baseline :data:`STEREO_BASELINE`, the
+right camera blurred along its own path) instead of an RGB-D camera: the SLAM runs in stereo mode and the trackers'
+depth (registration, reference view) is SGBM on the pair.
 """
 
 from __future__ import annotations
@@ -251,11 +255,18 @@ def speckle_texture(contrast: float, seed: int, size: int = 512, dots: int = 260
     return (np.clip(img[..., None] * tint, 0, 1) * 255).astype(np.uint8)
 
 
+STEREO_BASELINE = 0.12  # metres, a common stereo camera's (e.g. ZED 2)
+
+
 def family_scene(seed: int, width: int = 640, height: int = 480, fps: float = 15.0,
-                 duration: float | None = None, t_free: float = T_FREE) -> SynthScene:
+                 duration: float | None = None, t_free: float = T_FREE, sensor: str = "rgbd") -> SynthScene:
     """One scene of the family (see the module docstring). Frame rate 15 fps like the issue's recording.
     ``t_free``: seconds of unloaded mapping before the load is placed (0: loaded from the first frame, so every
-    map point is first seen on the deformed object — the case where links could carry an estimate's error)."""
+    map point is first seen on the deformed object — the case where links could carry an estimate's error).
+    ``sensor``: ``rgbd`` or ``stereo`` (the same draw seen through a stereo pair)."""
+    if sensor not in ("rgbd", "stereo"):
+        raise ValueError(f"family sensor: expected 'rgbd' or 'stereo'; found '{sensor}'")
+    stereo = sensor == "stereo"
     cam = default_camera(width, height)
     d = scaled_force(draw(seed, width, height), max(cam.fx, cam.fy))
     if duration:
@@ -325,17 +336,21 @@ def family_scene(seed: int, width: int = 640, height: int = 480, fps: float = 15
         err = np.asarray(d.guess_error)
         R_err = G.rot_axis("x", err[3]) @ G.rot_axis("y", err[4]) @ G.rot_axis("z", err[5])
         T_user = G.make_T(R_err @ T_wo[:3, :3], T_wo[:3, 3] + err[:3])  # the user's guess, world frame
+        guess = sc.T_map_world() @ T_user
+        camera = _camera_yaml(sc)
+        if stereo:  # the nearest depth to match: half the distance the user guesses the object at
+            camera["stereo_min_depth_m"] = round(max(0.2, 0.5 * float(np.linalg.norm(guess[:3, 3]))), 2)
         return {
             "simreal_scene": 1, "name": sc.name,
             "description": (f"Family scene {d.seed} ({d.support}, L/h {d.slenderness:.0f}, peak {d.peak_px:.1f} px, "
                             f"speckle contrast {d.speckle_contrast:.2f}); object placed by registration from a "
                             f"guess by eye (off by {1e3 * np.linalg.norm(err[:3]):.0f} mm, "
                             f"{np.rad2deg(np.linalg.norm(err[3:])):.0f} deg)."),
-            "camera": _camera_yaml(sc),
-            "localization": {"mode": "rgbd", "features": 1500},
+            "camera": camera,
+            "localization": {"mode": sensor, "features": 1500},
             "objects": [{
                 "id": "beam", "model": "spec:" + str(spec_path(d)),
-                "anchor": {"kind": "registration", "guess": _pose7(sc.T_map_world() @ T_user)},
+                "anchor": {"kind": "registration", "guess": _pose7(guess)},
                 "parameters": {"s": {"mode": "tracked", "initial": float(np.mean(d.s_range))}},
                 "tracking": {"enabled": True, "measurements": "dense"},
                 "overlay": {"field": "displacement"},
@@ -343,9 +358,10 @@ def family_scene(seed: int, width: int = 640, height: int = 480, fps: float = 15
             "overlay": {"enabled": True},
         }
 
-    sc = SynthScene(f"family_{seed}", f"family scene {seed}", cam, fps, d.duration, {"beam": str(spec_path(d))},
-                    build, update, cam_pose, scene_yaml, depth=True, pixel_sigma=d.pixel_sigma,
-                    blur_subframes=d.blur_subframes)
+    sc = SynthScene(f"family_{seed}" + ("_stereo" if stereo else ""), f"family scene {seed}" + (
+                    " (stereo)" if stereo else ""), cam, fps, d.duration, {"beam": str(spec_path(d))},
+                    build, update, cam_pose, scene_yaml, depth=not stereo, pixel_sigma=d.pixel_sigma,
+                    blur_subframes=d.blur_subframes, stereo_baseline=STEREO_BASELINE if stereo else None)
     sc.state["draw"] = d
     return sc
 

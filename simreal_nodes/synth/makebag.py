@@ -101,11 +101,11 @@ class MsgFactory:
 
 def make_scene(name: str, width: int = 640, height: int = 480, duration: float | None = None,
                fps: float = 30.0) -> SynthScene:
-    family = re.fullmatch(r"family[-_](\d+)(-preloaded)?", name)  # one scene of the scene family (synth.family)
-    if family:  # "-preloaded": the load is on from the first frame
+    family = re.fullmatch(r"family[-_](\d+)(-preloaded)?(-stereo)?", name)  # one scene of the family (synth.family)
+    if family:  # "-preloaded": the load is on from the first frame; "-stereo": a stereo pair instead of RGB-D
         from simreal_nodes.synth.family import T_FREE, family_scene
         return family_scene(int(family[1]), width, height, fps=fps, duration=duration,
-                            t_free=0.0 if family[2] else T_FREE)
+                            t_free=0.0 if family[2] else T_FREE, sensor="stereo" if family[3] else "rgbd")
     if name not in SCENES:
         from simreal_nodes.errors import SimrealError
         raise SimrealError(f"unknown scene '{name}' (known: {', '.join(SCENES)})")
@@ -115,15 +115,19 @@ def make_scene(name: str, width: int = 640, height: int = 480, duration: float |
     return SCENES[name](**kw)
 
 
-def render_frame(scene: SynthScene, r: Renderer, t: float, T: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def render_frame(scene: SynthScene, r: Renderer, t: float, T: np.ndarray,
+                 T_offset: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Colour and depth at time t from camera pose T; with ``scene.blur_subframes`` > 1 the colour is the mean of
-    renders along the camera's path over half a frame period (motion blur of a 1/(2 fps) exposure)."""
-    rgb, depth = r.render(T)
+    renders along the camera's path over half a frame period (motion blur of a 1/(2 fps) exposure). ``T_offset``:
+    a camera rigidly mounted on the moving one (a stereo pair's right camera, in the left camera's frame); ``T`` is
+    then the left camera's pose, and the right camera blurs along its own path."""
+    off = np.eye(4) if T_offset is None else T_offset
+    rgb, depth = r.render(T @ off)
     n = scene.blur_subframes
     if n > 1:
         acc = rgb.astype(np.float32)
         for k in range(1, n):
-            acc += r.render(scene.camera_pose(t + 0.5 * k / (n * scene.fps)))[0]
+            acc += r.render(scene.camera_pose(t + 0.5 * k / (n * scene.fps)) @ off)[0]
         rgb = np.clip(acc / n + 0.5, 0, 255).astype(np.uint8)
     return rgb, depth
 
@@ -185,8 +189,7 @@ def make_bag(name: str, out: str | Path, width: int = 640, height: int = 480, du
                         "sensor_msgs/msg/Image")
             if scene.stereo_baseline:
                 b = scene.stereo_baseline
-                T_right = T @ G.make_T(t=[b, 0, 0])
-                rgb_r, _ = r.render(T_right)
+                rgb_r, _ = render_frame(scene, r, t, T, G.make_T(t=[b, 0, 0]))
                 rgb_r = W.pixel_noise(rgb_r, scene.pixel_sigma, rng)
                 P = np.zeros((3, 4))
                 P[:, :3] = cam.K

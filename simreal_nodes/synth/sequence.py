@@ -46,7 +46,7 @@ def sequence(name: str, width=640, height=480, duration=None, fps=30.0, stereo=F
         dn = W.kinect_depth(d, rng) if sc.depth else d
         out["depth"].append(np.where(dn > 0, dn, np.nan).astype(np.float32))
         if stereo and sc.stereo_baseline:
-            rr, _ = r.render(T @ G.make_T(t=[sc.stereo_baseline, 0, 0]))
+            rr, _ = render_frame(sc, r, t, T, G.make_T(t=[sc.stereo_baseline, 0, 0]))
             out["right"].append(cv2.cvtColor(W.pixel_noise(rr, sc.pixel_sigma, rng), cv2.COLOR_RGB2GRAY))
         out["T"].append(T_mw @ T)
         out["truth"].append(truth)

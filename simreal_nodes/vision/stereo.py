@@ -60,13 +60,23 @@ def sparse_stereo_depth(f, right: np.ndarray, extractor, cam: CameraModel, basel
     return z
 
 
-def sgbm_disparity(left: np.ndarray, right: np.ndarray, num_disparities: int = 128, block: int = 5) -> np.ndarray:
-    """Dense disparity (pixels, float32; NaN invalid) of a rectified pair with OpenCV's semi-global matching."""
+def sgbm_disparity(left: np.ndarray, right: np.ndarray, num_disparities: int = 128, block: int = 5,
+                   full_width: bool = False) -> np.ndarray:
+    """Dense disparity (pixels, float32; NaN invalid) of a rectified pair with OpenCV's semi-global matching.
+
+    OpenCV leaves the leftmost ``num_disparities`` columns without a disparity. ``full_width``: both images are
+    padded on the left by that many columns first, so that a pixel there gets the disparities whose match lies
+    inside the right image (those up to its column; larger ones are invalid)."""
     if left.ndim == 3:
         left = cv2.cvtColor(left, cv2.COLOR_BGR2GRAY)
     if right.ndim == 3:
         right = cv2.cvtColor(right, cv2.COLOR_BGR2GRAY)
     nd = int(np.ceil(num_disparities / 16) * 16)
+    if full_width:
+        pad = [cv2.copyMakeBorder(im, 0, 0, nd, 0, cv2.BORDER_CONSTANT, value=0) for im in (left, right)]
+        d = sgbm_disparity(pad[0], pad[1], nd, block)[:, nd:]
+        d[d > np.arange(d.shape[1], dtype=np.float32)] = np.nan  # matched into the padding
+        return d
     # opencv's stubs list only cv2.StereoSGBM.create; StereoSGBM_create is its run-time alias
     sgbm = cv2.StereoSGBM_create(  # type: ignore[attr-defined]
         minDisparity=0, numDisparities=nd, blockSize=block, P1=8 * block * block,
@@ -83,3 +93,21 @@ def disparity_to_depth(disp: np.ndarray, fx: float, baseline: float) -> np.ndarr
         z = fx * baseline / disp
     z[~np.isfinite(z) | (z <= 0)] = np.nan
     return z.astype(np.float32)
+
+
+def disparities_for(fx: float, baseline: float, min_depth: float) -> int:
+    """SGBM's disparity range (a multiple of 16) that reaches down to ``min_depth`` metres: d = f T / Z. Its cost
+    grows with the range, so the range is no wider than the scene needs."""
+    if not (fx > 0 and baseline > 0 and min_depth > 0):
+        raise ValueError(f"stereo depth needs fx, baseline and min_depth > 0 (got {fx:g}, {baseline:g}, {min_depth:g})")
+    return int(np.clip(np.ceil(fx * baseline / min_depth / 16), 1, 32)) * 16
+
+
+def stereo_depth(left: np.ndarray, right: np.ndarray, fx: float, baseline: float, min_depth: float) -> np.ndarray:
+    """Dense depth (metres, float32, NaN invalid) of a rectified pair: SGBM over the disparities that reach
+    ``min_depth`` (:func:`disparities_for`) over the full image width, then Z = f T / d. What a depth image is to
+    the trackers' registration and reference view when the camera is a stereo pair."""
+    if left.shape[:2] != right.shape[:2]:
+        raise ValueError(f"stereo pair of different sizes: left {left.shape[:2]}, right {right.shape[:2]}")
+    d = sgbm_disparity(left, right, disparities_for(fx, baseline, min_depth), full_width=True)
+    return disparity_to_depth(d, fx, baseline)

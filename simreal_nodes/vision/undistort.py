@@ -57,6 +57,7 @@ class IngestCamera:
         self.calibration = calibration
         self.cam: CameraModel | None = calibration
         self.right: CameraModel | None = None
+        self.right_P: np.ndarray | None = None  # the right camera's projection: its P[0, 3] = -fx * baseline
         self.info_error = ""  # why the last CameraInfo was unusable ('' = it was not)
         self._und: Undistorter | None = None
 
@@ -85,8 +86,10 @@ class IngestCamera:
         try:
             self.right = CameraModel.from_camera_info(msg)
         except CameraInfoError as e:
-            self.right = None
+            self.right = self.right_P = None
             return str(e)
+        P = np.asarray(msg.p, dtype=np.float64)
+        self.right_P = P.reshape(3, 4) if P.size == 12 and np.all(np.isfinite(P)) else None
         return ""
 
     @property

@@ -1,5 +1,5 @@
-"""``anchor: registration`` is accepted where the nodes can honour it (an RGB-D map and a rough guess) and refused
-with its reason elsewhere."""
+"""``anchor: registration`` is accepted where the nodes can honour it (depth from an RGB-D camera or a stereo pair,
+and a rough guess) and refused with its reason elsewhere."""
 
 import pytest
 
@@ -9,9 +9,12 @@ from simreal_nodes.scene.schema import validate_scene
 GUESS = [0.0, 0.1, 1.2, 0.7, 0.0, 0.0, 0.7]
 
 
+STEREO_CAMERA = {"right_image": "/camera/right/image_raw", "right_camera_info": "/camera/right/camera_info"}
+
+
 def _doc(anchor: dict, mode: str = "rgbd") -> dict:
     return {"simreal_scene": 1, "name": "reg", "localization": {"mode": mode},
-            "camera": {"depth": "/camera/depth/image_raw"},
+            "camera": STEREO_CAMERA if mode == "stereo" else {"depth": "/camera/depth/image_raw"},
             "objects": [{"id": "beam", "model": "spec:aluminium_beam", "anchor": anchor,
                          "tracking": {"enabled": True}}]}
 
@@ -25,8 +28,19 @@ def test_registration_anchor_is_accepted_with_a_guess_on_an_rgbd_map():
 def test_registration_anchor_needs_a_guess_and_depth():
     with pytest.raises(SceneError, match=r"objects\[0\]\.anchor\.guess: required for kind 'registration'"):
         validate_scene(_doc({"kind": "registration"}), "reg", ".")
-    with pytest.raises(SceneError, match=r"objects\[0\]\.anchor\.kind: 'registration' needs the depth images"):
+    with pytest.raises(SceneError, match=r"objects\[0\]\.anchor\.kind: 'registration' needs depth images "
+                                         r"\(localization.mode 'rgbd' or 'stereo'\); found mode 'mono'"):
         validate_scene(_doc({"kind": "registration", "guess": GUESS}, mode="mono"), "reg", ".")
+
+
+def test_registration_anchor_is_accepted_on_a_stereo_pair_whose_tracker_reads_both_images():
+    from simreal_nodes.scene import graph
+
+    s = validate_scene(_doc({"kind": "registration", "guess": GUESS}, mode="stereo"), "reg", ".")
+    assert s["camera"]["stereo_min_depth_m"] == pytest.approx(0.4)
+    tracker = {n.name: n for n in graph.required_nodes(s)}["tracker"]
+    assert graph.CAM_DEPTH not in tracker.inputs
+    assert {graph.CAM_IMAGE, graph.CAM_RIGHT_IMAGE, graph.CAM_RIGHT_INFO} <= set(tracker.inputs)
 
 
 def test_pose_anchor_needs_no_guess():
@@ -35,9 +49,17 @@ def test_pose_anchor_needs_no_guess():
 
 
 def test_a_registering_tracker_subscribes_to_depth():
+    """The graph lists depth among the tracker's inputs exactly when the node subscribes to it: a registration, or
+    a reference state read from depth; a posed sparse tracker with the rest shape as its reference reads none."""
     from simreal_nodes.scene import graph
 
-    for anchor, wants in (({"kind": "registration", "guess": GUESS}, True), ({"kind": "pose"}, False)):
-        s = validate_scene(_doc(anchor), "reg", ".")
+    sparse_rest = {"enabled": True, "measurements": "map_points", "reference": "rest"}
+    for anchor, tracking, wants in (({"kind": "registration", "guess": GUESS}, sparse_rest, True),
+                                    ({"kind": "pose"}, sparse_rest, False),
+                                    ({"kind": "pose"}, {**sparse_rest, "reference": "depth"}, True),
+                                    ({"kind": "pose"}, {"enabled": True, "measurements": "dense"}, True)):
+        doc = _doc(anchor)
+        doc["objects"][0]["tracking"] = tracking
+        s = validate_scene(doc, "reg", ".")
         nodes = {n.name: n for n in graph.required_nodes(s)}
-        assert (graph.CAM_DEPTH in nodes["tracker"].inputs) == wants
+        assert (graph.CAM_DEPTH in nodes["tracker"].inputs) == wants == graph.tracker_reads_depth(s), (anchor, tracking)

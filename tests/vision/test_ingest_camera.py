@@ -4,6 +4,7 @@ the image (bilinear) and the depth (nearest neighbour) against a distorted camer
 from types import SimpleNamespace
 
 import numpy as np
+import pytest
 
 from simreal_nodes.camera import CameraModel
 from simreal_nodes.io import images
@@ -87,3 +88,18 @@ def test_file_frames():
     assert ic.file_frame(Frame(0, 0, image=img)).startswith("no intrinsics for 64x48 frames")
     assert ic.file_frame(Frame(0, 0, image=img, camera_info=_info(DIST))) == ""
     assert ic.cam is not None and ic.out_camera is not ic.cam  # the bag's distorted camera, undistorted
+
+
+def test_the_right_camera_keeps_its_baseline_in_p():
+    """The ingest node republishes the right CameraInfo from the model it checked; the stereo baseline lives only in
+    its projection P (P[0, 3] = -fx * b), which must reach the localization and tracker nodes unchanged."""
+    from simreal_nodes.vision.stereo import baseline_from_projection
+
+    ic = IngestCamera(undistort=False)
+    info = _info(PINHOLE)
+    P = np.array(info.p, dtype=np.float64).reshape(3, 4)
+    P[0, 3] = -60.0 * 0.12
+    info.p = P.ravel().tolist()
+    assert ic.right_info(info) == ""
+    assert ic.right_P is not None and baseline_from_projection(ic.right_P) == pytest.approx(0.12)
+    assert ic.right_info(SimpleNamespace(**{**vars(info), "k": [0.0] * 9})) != "" and ic.right_P is None

@@ -102,7 +102,10 @@ class IngestNode(SimrealNode):
             msg.header.frame_id = self.camera_frame
         if kind != "depth":
             cam = self.core.right if kind == "right" else self.core.out_camera
-            self.pub_info[kind].publish(camera_info_msg(cam, msg.header.stamp, msg.header.frame_id))
+            info = camera_info_msg(cam, msg.header.stamp, msg.header.frame_id)
+            if kind == "right" and self.core.right_P is not None:  # the baseline lives in P: pass it on unchanged
+                info.p = [float(x) for x in self.core.right_P.ravel()]
+            self.pub_info[kind].publish(info)
         self.pubs[kind].publish(msg)
         if t0 is not None:
             self.metrics.done(t0, self.age_ms(msg.header.stamp))

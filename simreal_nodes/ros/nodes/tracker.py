@@ -7,10 +7,11 @@ and, for glued-dot measurements, the image of the same stamp, runs the ROS-free
 (if the scene's ``localization.freeze_map_on_deformation``) it asks the localization node to stop mapping
 (parameter ``localization_service``: a name relative to the tracker's namespace, so a graph launched in a
 namespace reaches its own localization node; remappable like any service name). An object with
-``anchor: registration`` is placed from the depth images (taken while it waits for them); dense measurements on
-an RGB-D camera read the depth of their reference view. After every frame it tells the localization which map
-points lie on the object, where the current estimate predicts them and which the fit rejected
-(``/simreal/localization/deformable_points``, PointCloud2 x, y, z, id, drop in the map frame) and where each
+``anchor: registration`` is placed from the depth images (taken while it waits for them); dense measurements read
+the depth of their reference view. On a stereo camera the node makes that depth itself, by SGBM on the rectified
+pair (``camera.stereo_min_depth_m``), and only in the frames where depth is still read. After every frame it tells
+the localization which map points lie on the object, where the current estimate predicts them and which the fit
+rejected (``/simreal/localization/deformable_points``, PointCloud2 x, y, z, id, drop in the map frame) and where each
 object projects in the image (``/simreal/localization/focus``, PolygonInstanceStamped, id = the object's index).
 """
 
@@ -24,6 +25,7 @@ from std_srvs.srv import SetBool
 
 from simreal_nodes import geometry as G
 from simreal_nodes.assimilation.objects import ObjectTrackers
+from simreal_nodes.assimilation.registration import RegistrationConfig
 from simreal_nodes.assimilation.tracker import Estimate
 from simreal_nodes.errors import ImageFormatError
 from simreal_nodes.io import images
@@ -51,11 +53,18 @@ class TrackerNode(SimrealNode):
             models[o["id"]] = load_model(o["model"], fields=["displacement"])
             self.get_logger().info(f"object {o['id']}: {models[o['id']].summary().splitlines()[0]}")
         overrides = {k: v for k, v in (("huber_px", huber), ("n_modes", modes)) if v}  # 0: the scene's
-        self.core = ObjectTrackers(self.objects, models, **overrides)
+        self.core = ObjectTrackers(self.objects, models, RegistrationConfig.for_camera(self.scene["camera"]),
+                                   **overrides)
         keys = graph.tracker_inputs(self.scene)
         self.need_image = any(o["tracking"]["measurements"] in graph.IMAGE_MEASUREMENTS for o in self.objects)
         reads_depth = graph.tracker_reads_depth(self.scene)
-        self.sync = StampSync(keys, ("depth",) if reads_depth else (), wait=2)
+        self.stereo = graph.tracker_stereo_depth(self.scene)
+        self.baseline = None
+        self.min_depth = float(self.scene["camera"]["stereo_min_depth_m"])
+        optional = ()
+        if reads_depth:
+            optional = (("right",) + (() if "image" in keys else ("image",))) if self.stereo else ("depth",)
+        self.sync = StampSync(keys, optional, wait=2)
         q = data_qos(self.lossless)
         self.pubs = {o["id"]: self.create_publisher(ModelParameters, graph.params_topic(o["id"]), reliable_qos(50))
                      for o in self.objects}
@@ -70,8 +79,13 @@ class TrackerNode(SimrealNode):
         if "image" in keys:
             self.create_subscription(Image, graph.CAM_IMAGE, lambda m: self.on_input("image", m),
                                      q if "obs" in keys else trigger)
-        if reads_depth:
+        if reads_depth and not self.stereo:
             self.create_subscription(Image, graph.CAM_DEPTH, lambda m: self.on_input("depth", m), q)
+        if self.stereo:
+            if "image" not in keys:
+                self.create_subscription(Image, graph.CAM_IMAGE, lambda m: self.on_input("image", m), q)
+            self.create_subscription(Image, graph.CAM_RIGHT_IMAGE, lambda m: self.on_input("right", m), q)
+            self.create_subscription(CameraInfo, graph.CAM_RIGHT_INFO, self.on_right_info, q)
         service = self.param("localization_service", "localization/set_localization_only",
                              "the localization node's SetBool freezing its map; relative: in this node's namespace",
                              read_only=True)
@@ -86,6 +100,23 @@ class TrackerNode(SimrealNode):
             return
         if self.core.cam is None or not np.allclose(cam.K, self.core.cam.K):
             self.core.set_camera(cam)
+
+    @guarded
+    def on_right_info(self, msg: CameraInfo) -> None:
+        self.baseline = self.core.depth_baseline = self.stereo_baseline(msg, self.baseline)
+
+    def _depth(self, frame: dict) -> np.ndarray | None:
+        """The frame's depth (metres) where the trackers still read it: the RGB-D image, or SGBM on the pair."""
+        if not self.core.needs_depth:
+            return None
+        if not self.stereo:
+            return images.depth_metres_of(frame["depth"]) if "depth" in frame else None
+        if "image" not in frame or "right" not in frame or self.baseline is None or self.core.cam is None:
+            return None
+        from simreal_nodes.vision.stereo import stereo_depth
+
+        return stereo_depth(images.bgr8_of(frame["image"]), images.bgr8_of(frame["right"]), self.core.cam.fx,
+                            self.baseline, self.min_depth)
 
     @guarded
     def process(self, frame: dict) -> None:
@@ -108,8 +139,8 @@ class TrackerNode(SimrealNode):
         bgr = depth = None
         try:
             bgr = images.bgr8_of(frame["image"]) if "image" in frame and self.need_image else None
-            depth = images.depth_metres_of(frame["depth"]) if "depth" in frame and self.core.needs_depth else None
-        except ImageFormatError as e:
+            depth = self._depth(frame)
+        except (ImageFormatError, ValueError) as e:
             self.drop(head.stamp, f"malformed image: {e}")
             return
         estimates = self.core.update(T_wc, ids, P, uv, bgr, depth)
