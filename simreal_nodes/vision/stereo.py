@@ -51,6 +51,8 @@ def sparse_stereo_depth(f, right: np.ndarray, extractor, cam: CameraModel, basel
     d = hamming(f.desc[left], fr.desc[cand])
     good = d <= max_hamming
     left, disp, d = left[good], disp[good], d[good]
+    if len(left) == 0:  # candidates on the rows, none alike enough (a blank or unrelated right image)
+        return z
     srt = np.lexsort((d, left))
     left, disp = left[srt], disp[srt]
     first = np.r_[True, left[1:] != left[:-1]]
