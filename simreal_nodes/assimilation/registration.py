@@ -310,7 +310,8 @@ class DepthViews:
         return np.asarray(self.T_wc, dtype=np.float64).reshape(-1, 4, 4)[:, :3, 3]
 
     def measurable(self, X: np.ndarray) -> np.ndarray:
-        """Which map points X (N, 3) some view could measure."""
+        """Which map points X (N, 3) some view could measure (pinhole projection with K: the lens distortion, a
+        few pixels at the image border, is left out)."""
         K, w, h = self.cam.K, self.cam.width, self.cam.height
         out = np.zeros(len(X), bool)
         for T in np.asarray(self.T_wc, dtype=np.float64).reshape(-1, 4, 4):
@@ -394,6 +395,8 @@ def register_rgbd(cloud: np.ndarray, model: ReducedModel, guess: np.ndarray, cam
     import open3d as o3d
 
     cfg = cfg or RegistrationConfig()
+    if cfg.fine not in ("full", "upright"):
+        raise ValueError(f"RegistrationConfig.fine: expected 'full' or 'upright'; found '{cfg.fine}'")
     reg = o3d.pipelines.registration
     o3d.utility.random.seed(seed)
     guess = np.asarray(guess, dtype=np.float64)

@@ -102,6 +102,8 @@ def test_the_full_fine_stage_rolls_a_thin_beam_on_stereo_depth(stereo3):
     deg = {fine: _error(register_rgbd(cloud, s["model"], s["guess"], cams, RegistrationConfig(fine=fine)).T_map_obj,
                         s["truth"])[1] for fine in ("full", "upright")}
     assert deg["upright"] < 0.5 and deg["full"] > deg["upright"] + 0.5, deg
+    with pytest.raises(ValueError, match="fine"):
+        register_rgbd(cloud, s["model"], s["guess"], cams, RegistrationConfig(fine="4dof"))
 
 
 def test_a_beam_whose_end_no_view_measures_is_refused_not_placed_off():
