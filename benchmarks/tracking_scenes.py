@@ -248,7 +248,8 @@ back-projected with that view's depth, enter the same robust cost with their own
 camera's error epsilon moves the surroundings and the object alike; the object's own placement error is not
 refitted on top when the registration measured it from the same depth (it is measured at rest and held
 otherwise). On development seeds 0-11, 27, 31, 44 and 46 this took large-load cantilevers that had failed (seed
-10: 18 % -> 0.1 %, seed 46: 24 % -> 0.2 %) to a fraction of a percent. Without depth (mono, stereo) the correction
+10: 18 % -> 0.1 %, seed 46: 24 % -> 0.2 %) to a fraction of a percent. A stereo pair's depth is SGBM on the pair
+(made in the frames that read depth: docs/family.md, "Through a stereo pair"). Without depth (mono) the correction
 is the object's alone: once a frame at rest has measured it, deformed fits stay within 0.1 deg / 3 mm of it.
 A further step came from a development cantilever (seed 12: faint speckle, 6.6 px peak) that read 2.6 % with a
 steady bias towards less bending, which stayed with the true camera poses and without shading (a diagnosis with

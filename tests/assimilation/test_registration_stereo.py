@@ -89,6 +89,7 @@ def test_the_pipeline_registers_the_beam_from_the_stereo_pair(stereo3):
     mm, deg = _error(pipe.objects.registrations["beam"].T_map_obj, s["truth"])
     assert mm < 6.0 and deg < 0.5, (mm, deg)  # RGB-D on the same scene: under 2 mm (test_registration_rgbd)
     assert not pipe.objects.needs_depth  # registered and the reference view taken: no more SGBM
+    assert pipe.trackers["beam"].dense.static  # the static surroundings of the reference view, from the SGBM depth
 
 
 def test_the_full_fine_stage_rolls_a_thin_beam_on_stereo_depth(stereo3):
