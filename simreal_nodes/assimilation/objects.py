@@ -28,6 +28,7 @@ from simreal_nodes.assimilation.tracker import DeformableTracker, Estimate, defo
 from simreal_nodes.camera import CameraModel
 from simreal_nodes.rom.model import ReducedModel
 from simreal_nodes.states import EstimateState
+from simreal_nodes.vision.stereo import stereo_depth
 
 
 class ObjectTrackers:
@@ -51,6 +52,7 @@ class ObjectTrackers:
         self._views: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
         self._posed: dict[str, int] = {}  # frames with a camera pose seen while waiting for the registration
         self.depth_baseline: float | None = None  # the depth is SGBM on a stereo pair of this baseline (None: RGB-D)
+        self.stereo_min_depth = 0.4  # metres: the nearest depth SGBM searches (the scene's camera.stereo_min_depth_m)
 
     def set_camera(self, cam: CameraModel) -> None:
         """New intrinsics: every tracker starts again (built now, not on the first frame: that frame would wait);
@@ -136,6 +138,14 @@ class ObjectTrackers:
         self.registrations[oid] = reg
         self.trackers.pop(oid, None)  # built again at the registered pose
         return ""
+
+    def depth_of_pair(self, left: np.ndarray, right: np.ndarray) -> np.ndarray | None:
+        """The trackers' depth from a rectified stereo pair (:func:`~simreal_nodes.vision.stereo.stereo_depth`),
+        made only in a frame where depth is still read (:attr:`needs_depth`); None there, or while the baseline
+        (:attr:`depth_baseline`) or the camera is not known yet."""
+        if not self.depth_baseline or self.cam is None or not self.needs_depth:
+            return None
+        return stereo_depth(left, right, self.cam.fx, self.depth_baseline, self.stereo_min_depth)
 
     @property
     def needs_depth(self) -> bool:

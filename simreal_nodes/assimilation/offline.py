@@ -23,7 +23,6 @@ from simreal_nodes.camera import CameraModel
 from simreal_nodes.rom.model import ReducedModel
 from simreal_nodes.rom.model_file import load_model
 from simreal_nodes.vision.slam.config import SlamConfig
-from simreal_nodes.vision.stereo import stereo_depth
 
 
 class Pipeline:
@@ -43,16 +42,15 @@ class Pipeline:
         self.mode = loc["mode"]
         self.freeze_map = bool(loc.get("freeze_map_on_deformation", False))
         self.cam = cam
-        self.baseline = baseline
-        self.min_depth = float(scene["camera"].get("stereo_min_depth_m", 0.4))
         self.loc = make_localizer(loc, cam, baseline, slam_config=slam_config)
         tracked = [o for o in scene["objects"] if o["tracking"]["enabled"]]
         models = {o["id"]: (models or {}).get(o["id"]) or load_model(o["model"], fields=["displacement"])
                   for o in tracked}
         self.objects = ObjectTrackers(tracked, models, RegistrationConfig.for_camera(scene["camera"]), **cfg_overrides)
         self.objects.set_camera(cam)
-        if self.mode == "stereo" and not scene["camera"].get("depth"):
-            self.objects.depth_baseline = baseline  # the trackers' depth is SGBM on the pair (see step)
+        if self.mode == "stereo" and not scene["camera"].get("depth"):  # the trackers' depth: SGBM on the pair
+            self.objects.depth_baseline = baseline
+            self.objects.stereo_min_depth = float(scene["camera"]["stereo_min_depth_m"])
         self.trackers = self.objects.trackers
         self.tracker_ms = 0.0  # the last step's deformable-tracking work (update, focus, feedback): the tracker node's
 
@@ -65,8 +63,8 @@ class Pipeline:
         if T_wc is not None and len(r.obs_ids):
             ids, P, uv = np.asarray(r.obs_ids), np.asarray(r.obs_pos), np.asarray(r.obs_uv)
         t0 = time.perf_counter()
-        if depth is None and right is not None and self.baseline and self.objects.needs_depth:
-            depth = stereo_depth(gray, right, self.cam.fx, self.baseline, self.min_depth)  # as the tracker node does
+        if depth is None and right is not None:
+            depth = self.objects.depth_of_pair(gray, right)
         out = self.objects.update(T_wc, ids, P, uv, bgr, depth)
         # the objects' image regions for the next frame's features (a frame late, like the feedback; the camera
         # moves little in a frame and the polygons are hulls of the whole surface)

@@ -59,8 +59,7 @@ class TrackerNode(SimrealNode):
         self.need_image = any(o["tracking"]["measurements"] in graph.IMAGE_MEASUREMENTS for o in self.objects)
         reads_depth = graph.tracker_reads_depth(self.scene)
         self.stereo = graph.tracker_stereo_depth(self.scene)
-        self.baseline = None
-        self.min_depth = float(self.scene["camera"]["stereo_min_depth_m"])
+        self.core.stereo_min_depth = float(self.scene["camera"]["stereo_min_depth_m"])
         optional = ()
         if reads_depth:
             optional = (("right",) + (() if "image" in keys else ("image",))) if self.stereo else ("depth",)
@@ -103,7 +102,7 @@ class TrackerNode(SimrealNode):
 
     @guarded
     def on_right_info(self, msg: CameraInfo) -> None:
-        self.baseline = self.core.depth_baseline = self.stereo_baseline(msg, self.baseline)
+        self.core.depth_baseline = self.stereo_baseline(msg, self.core.depth_baseline)
 
     def _depth(self, frame: dict) -> np.ndarray | None:
         """The frame's depth (metres) where the trackers still read it: the RGB-D image, or SGBM on the pair."""
@@ -111,12 +110,9 @@ class TrackerNode(SimrealNode):
             return None
         if not self.stereo:
             return images.depth_metres_of(frame["depth"]) if "depth" in frame else None
-        if "image" not in frame or "right" not in frame or self.baseline is None or self.core.cam is None:
+        if "image" not in frame or "right" not in frame:
             return None
-        from simreal_nodes.vision.stereo import stereo_depth
-
-        return stereo_depth(images.bgr8_of(frame["image"]), images.bgr8_of(frame["right"]), self.core.cam.fx,
-                            self.baseline, self.min_depth)
+        return self.core.depth_of_pair(images.bgr8_of(frame["image"]), images.bgr8_of(frame["right"]))
 
     @guarded
     def process(self, frame: dict) -> None:
