@@ -1,21 +1,25 @@
-"""Hostile input to the model-file and scene loaders (issue 20): seeded random mutations of valid files, and what
-each loader makes of them.
+"""Hostile input to the model-file, scene and bag loaders (issue 20): seeded random mutations of valid files, and
+what each loader makes of them.
 
-    ./run bench fuzz                                   # 50 000 inputs per loader (the issue asks 100 000 in all)
+    ./run bench fuzz                                   # 50 000 inputs per loader
     python -m benchmarks.fuzz --cases 2000 --seed 1    # fewer, another draw
 
 Seeds: a small model built by the real builder (``beam_pgd``, written by ``save_model``) and the committed sample
 scenes plus one scene that names that model file. Mutations: byte-level (bit flips, overwritten runs, zeroed blocks,
 truncation; scene text also gets YAML punctuation, deleted and repeated lines) and structural (an HDF5 object
 deleted, re-shaped, re-typed, turned into a group, filled with NaN / inf / absurd values, declared absurdly large;
-a scene node deleted, renamed, or given a value of another type). Every input is case ``i`` of a target drawn from
-``numpy.random.default_rng([seed, target, i])``, so any one is reproduced alone (:func:`make_input`).
+a scene node deleted, renamed, or given a value of another type; a bag's message type renamed to one no type
+store knows). The bag seed is the first messages of a committed sample (JPEG images, CameraInfo, truth poses and
+simreal parameters), a folder with its mcap file and metadata.yaml; either file is mutated. Every input is case
+``i`` of a target drawn from ``numpy.random.default_rng([seed, target, i])``, so any one is reproduced alone
+(:func:`make_input`).
 
 Model files carry the SHA-256 of their contents in a user block (``rom/model_file.py``): structural mutations are
 re-stamped (a writer's bug, consistent with its checksum: the loader's validation is tested), byte mutations are
 not (corruption after writing: the checksum refuses them before libhdf5 reads a byte).
 
-Per input the loader (``read_header`` then ``load_model``; ``load_scene``) either accepts it, rejects it with the
+Per input the loader (``read_header`` then ``load_model``; ``load_scene``; ``read_bag`` and ``decode`` of every
+message) either accepts it (a bag: or reads it with the damage reported), rejects it with the
 project's own error (:class:`~simreal_nodes.errors.SimrealError`: one line meant for a user) or crashes (any other
 exception: a traceback), or hangs (over ``--hang-s``). Cases run in worker processes with a 4 GiB address-space
 limit, so a file that declares an absurd size ends as a MemoryError (a crash: the size was not checked before
@@ -31,6 +35,7 @@ import json
 import os
 import re
 import resource
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -43,8 +48,9 @@ import numpy as np
 import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
-TARGETS = ("model", "scene")
+TARGETS = ("model", "scene", "bag")
 MEMORY_LIMIT = 4 << 30
+BAG_MESSAGES = 24  # the bag seed: this many messages of the aluminium beam sample (4 frames)
 TINY_SPEC = """
 simreal_model_spec: 1
 name: fuzz_beam
@@ -85,7 +91,19 @@ def seeds(workdir: Path) -> dict[str, list[tuple[str, bytes]]]:
                         "parameters": {"s": {"mode": "tracked"}},
                         "collision": {"enabled": True, "threshold_m": 0.005}}]}
     scenes.append(("model_file_scene", yaml.safe_dump(own).encode()))
-    return {"model": [("fuzz_beam", model.read_bytes())], "scene": scenes}
+    bag = workdir / "seed_bag"
+    if not bag.exists():  # the first messages of a committed sample: JPEG images, CameraInfo, truth, simreal types
+        from simreal_nodes.io import bags
+
+        src, _scene = sample("aluminium_beam_320x240")
+        with bags.BagWriter(bag) as w:
+            for k, m in enumerate(bags.read_bag(src)):
+                if k >= BAG_MESSAGES:
+                    break
+                w.write_raw(m.topic, m.log_time_ns, m.raw, m.msgtype)
+    mcap = next(bag.glob("*.mcap"))
+    return {"model": [("fuzz_beam", model.read_bytes())], "scene": scenes,
+            "bag": [(mcap.name, mcap.read_bytes()), ("metadata.yaml", (bag / "metadata.yaml").read_bytes())]}
 
 
 # ------------------------------------------------------------------------------------------------
@@ -235,6 +253,8 @@ def _scene_text(rng, b: bytearray) -> str:
 def make_input(target: str, seed: int, case: int, seed_files: dict, workdir: Path) -> tuple[Path, str]:
     """Write input ``case`` of ``target`` (reproducible from ``seed`` alone); returns (its path, what was done)."""
     rng = np.random.default_rng([seed, TARGETS.index(target), case])
+    if target == "bag":
+        return _bag_input(rng, case, seed_files, workdir)
     name, content = seed_files[target][int(rng.integers(len(seed_files[target])))]
     path = workdir / (f"case_{target}_{case}" + (".h5" if target == "model" else ".yaml"))
     structural = rng.random() < 0.5
@@ -261,7 +281,45 @@ def make_input(target: str, seed: int, case: int, seed_files: dict, workdir: Pat
     return path, f"{name}: {what}"
 
 
-def _load(target: str, path: Path) -> None:
+def _bag_input(rng, case: int, seed_files: dict, workdir: Path) -> tuple[Path, str]:
+    """A bag folder: its mcap file (most often) or its metadata.yaml mutated byte-wise, or a message type renamed to
+    one no type store knows (same length, so the file stays well-formed)."""
+    (mcap_name, mcap), (_, meta) = seed_files["bag"]
+    path = workdir / f"case_bag_{case}"
+    path.mkdir(exist_ok=True)
+    m, y = bytearray(mcap), bytearray(meta)
+    r = rng.random()
+    if r < 0.15:
+        what = "metadata " + BYTE_MUTATIONS[int(rng.integers(len(BYTE_MUTATIONS)))](rng, y)
+    elif r < 0.25:
+        old = (b"sensor_msgs/msg/CameraInfo", b"sensor_msgs/msg/CompressedImage", b"simreal_msgs/msg/ModelParameters",
+               b"geometry_msgs/msg/PoseStamped")[int(rng.integers(4))]
+        new = old[:-1] + b"Z"
+        m, y = bytearray(bytes(m).replace(old, new)), bytearray(bytes(y).replace(old, new))
+        what = f"unknown type {new.decode()}"
+    else:
+        what = BYTE_MUTATIONS[int(rng.integers(len(BYTE_MUTATIONS)))](rng, m)
+    (path / mcap_name).write_bytes(bytes(m))  # the name metadata.yaml gives
+    (path / "metadata.yaml").write_bytes(bytes(y))
+    return path, f"sample_bag: {what}"
+
+
+def _remove(path: Path) -> None:
+    if path.is_dir():
+        shutil.rmtree(path, ignore_errors=True)
+    else:
+        path.unlink(missing_ok=True)
+
+
+def _load(target: str, path: Path) -> str:
+    """Load the input as a user would; returns '' or, for a bag read with damage reported, the first problem."""
+    if target == "bag":
+        from simreal_nodes.io import bags
+
+        report = bags.BagReport()
+        for m in bags.read_bag(path, report):
+            bags.decode(m)  # what `simreal eval-*` and the tools do with every message
+        return report.summary().splitlines()[1].strip() if report.problems else ""
     if target == "model":
         from simreal_nodes.rom.model_file import load_model, read_header
 
@@ -271,6 +329,7 @@ def _load(target: str, path: Path) -> None:
         from simreal_nodes.scene.schema import load_scene
 
         load_scene(path)
+    return ""
 
 
 def blank(msg: str, path: Path) -> str:
@@ -288,8 +347,8 @@ def run_case(target: str, seed: int, case: int, seed_files: dict, workdir: Path)
     rec = {"target": target, "case": case, "mutation": what.split(": ", 1)[1].split(" ")[0], "what": what}
     t0 = time.perf_counter()
     try:
-        _load(target, path)
-        rec["outcome"] = "accepted"
+        note = _load(target, path)
+        rec.update(outcome="flagged", message=blank(note, path)) if note else rec.update(outcome="accepted")
     except SimrealError as e:
         rec.update(outcome="rejected", error=type(e).__name__, message=blank(str(e), path))
     except Exception as e:  # noqa: BLE001 - the point: anything else is a crash, recorded with where it came from
@@ -298,7 +357,7 @@ def run_case(target: str, seed: int, case: int, seed_files: dict, workdir: Path)
         rec.update(outcome="crash", error=type(e).__name__, message=blank(str(e), path),
                    site=f"{frame.filename.replace(str(ROOT) + os.sep, '')}:{frame.lineno}")
     rec["ms"] = 1e3 * (time.perf_counter() - t0)
-    path.unlink(missing_ok=True)
+    _remove(path)
     return rec
 
 
@@ -347,7 +406,7 @@ def run(target: str, seed: int, cases: int, workdir: Path, hang_s: float = 10.0)
             why = {"outcome": "hang", "error": "hang", "message": f"no answer in {hang_s:.0f} s"} if hung else \
                 {"outcome": "crash", "error": f"process exit {p.returncode}", "message": err.read_text()[-240:]}
             path, what = make_input(target, seed, case, seeds(workdir), workdir)  # what the input was
-            path.unlink()
+            _remove(path)
             out.append({"target": target, "case": case, "mutation": what.split(": ", 1)[1].split(" ")[0],
                         "what": what, "ms": 0.0, "site": "worker", **why})
             first += len(got) + 1
@@ -369,7 +428,7 @@ def summary(records: list[dict]) -> tuple[list[dict], dict]:
             rs = recs if g == "all" else [r for r in recs if r["mutation"] == g]
             c = Counter(r["outcome"] for r in rs)
             rows.append({"target": target, "mutation": g, "inputs": len(rs), "accepted": c["accepted"],
-                         "rejected": c["rejected"], "crashes": c["crash"], "hangs": c["hang"],
+                         "flagged": c["flagged"], "rejected": c["rejected"], "crashes": c["crash"], "hangs": c["hang"],
                          "messages": len({r["message"] for r in rs if r["outcome"] == "rejected"}),
                          "max_ms": max(r["ms"] for r in rs)})
         bad = [r for r in recs if r["outcome"] in ("crash", "hang")]
@@ -377,18 +436,21 @@ def summary(records: list[dict]) -> tuple[list[dict], dict]:
         example = {f"{r['error']} at {r['site']}": (r["message"], r["case"]) for r in bad}
         messages[target] = {
             "rejected": Counter(r["message"] for r in recs if r["outcome"] == "rejected").most_common(),
+            "flagged": Counter(r["message"] for r in recs if r["outcome"] == "flagged").most_common(),
             "crashes": [(site, n, *example[site]) for site, n in sites.most_common()]}
     return rows, messages
 
 
 COLUMNS = [("target", "loader", "{}"), ("mutation", "mutation", "{}"), ("inputs", "inputs", "{}"),
-           ("accepted", "accepted", "{}"), ("rejected", "rejected (clear error)", "{}"), ("crashes", "crashes", "{}"),
+           ("accepted", "accepted", "{}"), ("flagged", "read, damage reported", "{}"),
+           ("rejected", "rejected (clear error)", "{}"), ("crashes", "crashes", "{}"),
            ("hangs", "hangs", "{}"), ("messages", "distinct messages", "{}"), ("max_ms", "slowest (ms)", "{:.0f}")]
 
 
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--cases", type=int, default=50000, help="inputs per loader")
+    ap.add_argument("--cases", type=int, default=50000, help="inputs per loader (model files, scenes)")
+    ap.add_argument("--bag-cases", type=int, default=20000, help="inputs into the bag reader (slower per input)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--hang-s", type=float, default=10.0, help="an input slower than this is a hang")
     ap.add_argument("--worker", choices=TARGETS, help=argparse.SUPPRESS)
@@ -403,7 +465,8 @@ def main(argv: list[str] | None = None) -> None:
 
     t0 = time.time()
     with tempfile.TemporaryDirectory(prefix="simreal-fuzz-") as d:
-        records = [r for t in TARGETS for r in run(t, a.seed, a.cases, Path(d), a.hang_s)]
+        records = [r for t in TARGETS for r in run(t, a.seed, a.bag_cases if t == "bag" else a.cases, Path(d),
+                                                      a.hang_s)]
     rows, messages = summary(records)
     lines = []
     for target, m in messages.items():
@@ -412,13 +475,21 @@ def main(argv: list[str] | None = None) -> None:
         lines += [f"- {n} x {site}: `{msg[:160]}` (case {case})" for site, n, msg, case in m["crashes"]] or ["- none"]
         lines += ["", f"**{target}: the most frequent rejections** (of {len(m['rejected'])} distinct)", ""]
         lines += [f"- {n} x {msg}" for msg, n in m["rejected"][:15]] + [""]
-    notes = (f"`python -m benchmarks.fuzz --cases {a.cases} --seed {a.seed}` ({time.time() - t0:.0f} s). "
+        if m["flagged"]:
+            lines += [f"**{target}: read, with the damage reported** (the most frequent of {len(m['flagged'])} "
+                      "distinct first problems)", ""]
+            lines += [f"- {n} x {msg}" for msg, n in m["flagged"][:10]] + [""]
+    notes = (f"`python -m benchmarks.fuzz --cases {a.cases} --bag-cases {a.bag_cases} --seed {a.seed}` "
+             f"({time.time() - t0:.0f} s). "
              "Accepted inputs are mutations the loader cannot tell from valid content: for model files, edits "
              "through HDF5 that leave a valid model (an attribute it does not read, a value changed to another valid "
              "one) and bytes changed in the user block's padding after the checksum; for scenes, a value changed to "
-             "another valid one.\n\n" + "\n".join(lines))
-    save("fuzz", rows, COLUMNS, "Hostile input to the model-file and scene loaders", notes,
-         extra={"seed": a.seed, "cases_per_loader": a.cases,
+             "another valid one; for bags, bytes changed inside a message's payload that still decodes, or in a part "
+             "of the file the reader does not need. A bag 'read, damage reported' yields the messages it could "
+             "read (salvaged up to the damage) and its report names the damage or the undecodable messages, as "
+             "`simreal bag-info` and a replay print it.\n\n" + "\n".join(lines))
+    save("fuzz", rows, COLUMNS, "Hostile input to the model-file, scene and bag loaders", notes,
+         extra={"seed": a.seed, "cases_per_loader": a.cases, "bag_cases": a.bag_cases,
                 "messages": {t: {k: v[:100] for k, v in m.items()} for t, m in messages.items()},
                 "crash_cases": [r for r in records if r["outcome"] in ("crash", "hang")][:200]})
 

@@ -15,6 +15,7 @@ import yaml
 from simreal_nodes.errors import CameraInfoError
 
 DISTORTION_MODELS = ("plumb_bob", "rational_polynomial", "equidistant", "none", "")
+MAX_IMAGE_SIDE = 16384  # pixels: above any camera the graph serves (and OpenGL's usual texture limit)
 
 
 @dataclass
@@ -53,6 +54,9 @@ class CameraModel:
     def validate(self) -> None:
         if self.width <= 0 or self.height <= 0:
             raise CameraInfoError(f"camera image size {self.width}x{self.height} is not positive")
+        if max(self.width, self.height) > MAX_IMAGE_SIDE:
+            raise CameraInfoError(f"camera image size {self.width}x{self.height} is over {MAX_IMAGE_SIDE} pixels a "
+                                  "side (a damaged CameraInfo?)")
         K = self.K
         if not np.all(np.isfinite(K)):
             raise CameraInfoError("camera matrix K has NaN or inf entries")

@@ -5,6 +5,14 @@ There is no ros2 launch on PyPI, so this is a small process supervisor: each nod
 (the module of its ``simreal-NAME`` entry in pyproject.toml's ``[project.scripts]``, :func:`node_modules`), its
 output is prefixed with its name, a node that exits unexpectedly is reported and restarted (up to ``respawn``
 times), and SIGINT / SIGTERM stop every node cleanly (SIGINT, then SIGTERM, then SIGKILL).
+
+With ``standby`` on (the CLI's default for live use), each node has a standby process: the same command, started
+:data:`STANDBY_DELAY_S` after the node, that has done its imports and brought up its DDS participant and then
+waits (:func:`simreal_nodes.ros.node.run_node`). A node that exits is replaced by its standby, which only has to
+build the node and match its endpoints; a new standby follows after the delay (not at once: on 2 cores its
+imports would slow the node it stands behind while that one recovers). Without a standby the restart is cold:
+a new process, its imports, and a new participant that the others must discover
+(``./run bench respawn`` measures both).
 """
 
 from __future__ import annotations
@@ -76,6 +84,13 @@ def ros_environment(base: dict | None = None, discovery_range: str | None = None
     return env
 
 
+STANDBY_ENV = "SIMREAL_STANDBY"  # "1" in a standby process's environment
+LAUNCHER_PID_ENV = "SIMREAL_LAUNCHER_PID"  # a node ends when the process of this pid (its launcher) does
+PROMOTE = "go"  # the line written to a standby's stdin to make it the node
+STANDBY_DELAY_S = 5.0  # a standby starts this long after the node it stands behind (start or restart)
+WATCH_PERIOD_S = 0.05  # how often the launcher looks for exited nodes
+
+
 @dataclass
 class _Proc:
     spec: NodeSpec
@@ -83,6 +98,9 @@ class _Proc:
     popen: subprocess.Popen[bytes] | None = None
     restarts: int = 0
     exit_codes: list[int] = field(default_factory=list)
+    standby: subprocess.Popen[bytes] | None = None
+    standby_due: float | None = None  # time.monotonic() at which to start the next standby
+    standby_failures: int = 0
 
 
 class Launcher:
@@ -95,10 +113,11 @@ class Launcher:
 
     def __init__(self, nodes: list[NodeSpec], remaps: dict[str, str] | None = None, respawn: int = 2,
                  env: dict | None = None, echo=print, log_dir: str | Path | None = None, namespace: str = "",
-                 discovery_range: str | None = None):
+                 discovery_range: str | None = None, standby: bool = False):
         self.nodes = nodes
         self.remaps = remaps or {}
         self.respawn = respawn
+        self.standby = standby and respawn > 0
         self.env = ros_environment(env, discovery_range)
         self.echo = echo
         self._tmp = tempfile.TemporaryDirectory(prefix="simreal-launch-")
@@ -133,11 +152,37 @@ class Launcher:
         return self
 
     def _spawn(self, p: _Proc) -> None:
-        log = open(self.log_dir / f"{p.spec.name}.log", "ab")  # noqa: SIM115 - the pump thread owns and closes it
-        p.popen = subprocess.Popen(p.cmd, env=self.env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                                   stdin=subprocess.DEVNULL, start_new_session=True)
-        threading.Thread(target=self._pump, args=(p, p.popen, log), daemon=True).start()
+        p.popen = self._popen(p, standby=False)
         self.echo(f"[launch] started {p.spec.name} (pid {p.popen.pid})")
+        self._schedule_standby(p)
+
+    def _popen(self, p: _Proc, standby: bool) -> subprocess.Popen[bytes]:
+        log = open(self.log_dir / f"{p.spec.name}.log", "ab")  # noqa: SIM115 - the pump thread owns and closes it
+        env = self.env | {LAUNCHER_PID_ENV: str(os.getpid())} | ({STANDBY_ENV: "1"} if standby else {})
+        popen = subprocess.Popen(p.cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                                 stdin=subprocess.PIPE if standby else subprocess.DEVNULL, start_new_session=True)
+        threading.Thread(target=self._pump, args=(p, popen, log), daemon=True).start()
+        return popen
+
+    def _schedule_standby(self, p: _Proc) -> None:
+        if self.standby and p.standby is None and p.restarts < self.respawn and p.standby_failures < 2:
+            p.standby_due = time.monotonic() + STANDBY_DELAY_S
+
+    def _promote(self, p: _Proc) -> bool:
+        """Make ``p``'s standby the node (False: there is none alive, or it cannot be told)."""
+        sb, p.standby = p.standby, None
+        if sb is None or sb.poll() is not None:
+            return False
+        try:
+            assert sb.stdin is not None  # standbys are started with stdin=PIPE
+            sb.stdin.write(PROMOTE.encode() + b"\n")
+            sb.stdin.flush()
+        except OSError:
+            return False
+        p.popen = sb
+        self.echo(f"[launch] started {p.spec.name} (pid {sb.pid}) from its standby")
+        self._schedule_standby(p)
+        return True
 
     def _pump(self, p: _Proc, popen: subprocess.Popen[bytes], log: IO[bytes]) -> None:
         assert popen.stdout is not None  # started with stdout=PIPE
@@ -149,23 +194,54 @@ class Launcher:
 
     def _watch(self) -> None:
         while not self._stopping:
-            time.sleep(0.2)
+            time.sleep(WATCH_PERIOD_S)
             with self._lock:
                 if self._stopping:
                     return
-                for p in self.procs:
-                    rc = p.popen.poll() if p.popen else None
-                    if rc is None:
-                        continue
-                    p.exit_codes.append(rc)
-                    if p.restarts < self.respawn:
-                        p.restarts += 1
-                        self.echo(f"[launch] {p.spec.name} exited with code {rc}; restarting "
-                                  f"({p.restarts}/{self.respawn}), log: {self.log_dir / (p.spec.name + '.log')}")
-                        self._spawn(p)
-                    else:
-                        self.echo(f"[launch] {p.spec.name} exited with code {rc}; not restarting")
-                        p.popen = None
+                try:
+                    self._watch_once()
+                except Exception as e:  # noqa: BLE001 - the watcher outlives a failing echo or spawn
+                    print(f"[launch] watcher: {type(e).__name__}: {e}", file=sys.stderr, flush=True)
+
+    def _watch_once(self) -> None:
+        for p in self.procs:
+            self._watch_standby(p)
+            rc = p.popen.poll() if p.popen else None
+            if rc is None:
+                continue
+            p.exit_codes.append(rc)
+            if p.restarts < self.respawn:
+                p.restarts += 1
+                self.echo(f"[launch] {p.spec.name} exited with code {rc}; restarting "
+                          f"({p.restarts}/{self.respawn}), log: {self.log_dir / (p.spec.name + '.log')}")
+                if not self._promote(p):
+                    self._spawn(p)
+            else:
+                self.echo(f"[launch] {p.spec.name} exited with code {rc}; not restarting")
+                p.popen = None
+                self._end_standby(p)
+
+    def _watch_standby(self, p: _Proc) -> None:
+        """Start a standby when it is due; notice one that ended before it was needed (it is not replaced
+        after two such ends: the node's restarts are then cold)."""
+        if p.standby is not None and p.standby.poll() is not None:
+            p.standby_failures += 1
+            self.echo(f"[launch] the standby for {p.spec.name} exited with code {p.standby.returncode}")
+            p.standby = None
+            self._schedule_standby(p)
+        if p.standby_due is not None and time.monotonic() >= p.standby_due and p.popen is not None:
+            p.standby_due = None
+            p.standby = self._popen(p, standby=True)
+            self.echo(f"[launch] standby for {p.spec.name} started (pid {p.standby.pid})")
+
+    @staticmethod
+    def _end_standby(p: _Proc) -> subprocess.Popen[bytes] | None:
+        """Tell ``p``'s standby to end (EOF on its stdin); returns it to be waited for."""
+        sb, p.standby, p.standby_due = p.standby, None, None
+        if sb is not None and sb.stdin is not None:
+            with contextlib.suppress(OSError):
+                sb.stdin.close()
+        return sb
 
     def cpu_seconds(self) -> dict[str, float]:
         """CPU time (user + system) used so far by each running node and the processes it started (Linux
@@ -201,21 +277,24 @@ class Launcher:
         return {p.spec.name: p.popen is not None and p.popen.poll() is None for p in self.procs}
 
     def stop(self, timeout: float = 8.0) -> dict[str, int | None]:
-        """SIGINT every node, wait, then SIGTERM, then SIGKILL. Returns exit codes."""
+        """SIGINT every node, wait, then SIGTERM, then SIGKILL; end the standbys. Returns the nodes' exit codes."""
         with self._lock:
             self._stopping = True
         # the processes themselves: with _stopping set, _watch no longer replaces or clears any p.popen
         live = [p.popen for p in self.procs if p.popen is not None and p.popen.poll() is None]
+        # standbys end at the EOF of their stdin: they are signalled only from SIGTERM on, if they have not
+        standbys = [sb for sb in map(self._end_standby, self.procs) if sb is not None and sb.poll() is None]
         for sig, wait in ((signal.SIGINT, timeout), (signal.SIGTERM, 3.0), (signal.SIGKILL, 2.0)):
-            for popen in live:
+            for popen in live + (standbys if sig != signal.SIGINT else []):
                 if popen.poll() is None:
                     with contextlib.suppress(ProcessLookupError):
                         popen.send_signal(sig)
             t_end = time.monotonic() + wait
-            while time.monotonic() < t_end and any(popen.poll() is None for popen in live):
+            while time.monotonic() < t_end and any(popen.poll() is None for popen in live + standbys):
                 time.sleep(0.05)
             live = [popen for popen in live if popen.poll() is None]
-            if not live:
+            standbys = [popen for popen in standbys if popen.poll() is None]
+            if not live and not standbys:
                 break
         codes = {p.spec.name: (p.popen.returncode if p.popen else (p.exit_codes[-1] if p.exit_codes else None))
                  for p in self.procs}

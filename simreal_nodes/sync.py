@@ -99,7 +99,12 @@ class StampSync:
 
     def _report(self, s: int, fr: dict, why: str) -> None:
         missing = [k for k in self.required if k not in fr]
-        self._dropped.append((s, f"{why} (missing {', '.join(missing) or 'nothing'})"))
+        if missing:
+            self._dropped.append((s, f"{why} (missing {', '.join(missing)})"))
+        else:  # complete, still waiting for optional inputs when over max_pending newer frames came
+            waiting = [k for k in self.optional if k not in fr and k not in fr.get("_gave_up", ())]
+            self._dropped.append((s, f"frame held for {', '.join(waiting) or 'newer frames'} and over "
+                                     f"{self.max_pending} frames pending"))
 
     def _drop_all(self, why: str) -> None:
         for s in list(self._frames):

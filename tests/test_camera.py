@@ -21,6 +21,9 @@ def test_zero_camera_info_is_rejected_clearly():
         CameraModel.from_camera_info(Info(640, 480, [1, 2, 3, 4]))
     with pytest.raises(CameraInfoError, match="distortion model"):
         CameraModel.from_camera_info(Info(640, 480, [500, 0, 320, 0, 500, 240, 0, 0, 1], model="fisheye9"))
+    # found by the graph fuzz (benchmarks/fuzz_graph.py): the overlay allocated by the declared width
+    with pytest.raises(CameraInfoError, match="over 16384 pixels a side"):
+        CameraModel.from_camera_info(Info(2 ** 32 - 1, 480, [500, 0, 320, 0, 500, 240, 0, 0, 1]))
 
 
 def test_project_backproject_and_yaml(tmp_path):

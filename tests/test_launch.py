@@ -39,3 +39,73 @@ def test_node_processes_discover_on_localhost_unless_widened(tmp_path, user, opt
 def test_unknown_discovery_range_is_refused(tmp_path):
     with pytest.raises(SimrealError, match="DDS discovery range: expected one of LOCALHOST, SUBNET"):
         Launcher([NodeSpec("ingest")], env={}, discovery_range="WORLD", log_dir=tmp_path)
+
+
+# A stand-in for a node's process: a standby says it is ready and waits for the promotion line; a node (or a
+# promoted standby) says so and runs until it is signalled.
+FAKE_NODE = """
+import os, sys, time
+if os.environ.get("SIMREAL_STANDBY") == "1":
+    print("standby ready", flush=True)
+    line = sys.stdin.readline()
+    if line.strip() != "go":
+        print("standby ends", flush=True)
+        sys.exit(0)
+print(f"node up in {os.getpid()}", flush=True)
+while True:
+    time.sleep(0.05)
+"""
+
+
+def wait_for(cond, timeout: float = 20.0) -> None:
+    t_end = time.monotonic() + timeout
+    while not cond():
+        assert time.monotonic() < t_end, "timed out"
+        time.sleep(0.02)
+
+
+def test_a_node_that_exits_is_replaced_by_its_standby(tmp_path, monkeypatch):
+    import simreal_nodes.launch as launch
+
+    monkeypatch.setattr(launch, "STANDBY_DELAY_S", 0.3)
+    lines: list[str] = []
+    launcher = Launcher([NodeSpec("ingest")], respawn=2, env={"PATH": "/usr/bin:/bin"}, echo=lines.append,
+                        log_dir=tmp_path / "log", standby=True)
+    launcher.procs[0].cmd = [sys.executable, "-c", FAKE_NODE]
+    p = launcher.procs[0]
+    with launcher:
+        wait_for(lambda: "[ingest] standby ready" in lines)
+        first, standby = p.popen, p.standby
+        assert first is not None and standby is not None and standby.pid != first.pid
+        first.kill()
+        wait_for(lambda: p.popen is not first)
+        assert p.popen is standby  # promoted, not a new process
+        assert f"[launch] started ingest (pid {standby.pid}) from its standby" in lines
+        wait_for(lambda: f"[ingest] node up in {standby.pid}" in lines)
+        wait_for(lambda: p.standby is not None)  # the next standby follows after the delay
+        second = p.standby
+        assert second.pid not in (first.pid, standby.pid)
+        wait_for(lambda: lines.count("[ingest] standby ready") == 2)
+        assert p.restarts == 1
+    assert standby.poll() is not None and second.poll() == 0  # the standby ended at the EOF of its stdin
+    assert "[ingest] standby ends" in lines
+
+
+def test_without_standby_a_restart_is_a_new_process(tmp_path):
+    lines: list[str] = []
+    launcher = Launcher([NodeSpec("ingest")], respawn=1, env={"PATH": "/usr/bin:/bin"}, echo=lines.append,
+                        log_dir=tmp_path / "log", standby=False)
+    launcher.procs[0].cmd = [sys.executable, "-c", FAKE_NODE]
+    p = launcher.procs[0]
+    with launcher:
+        wait_for(lambda: any(x.startswith("[ingest] node up") for x in lines))
+        first = p.popen
+        assert first is not None and p.standby is None
+        first.kill()
+        wait_for(lambda: p.popen is not first and p.popen is not None)
+        assert p.standby is None and not any("from its standby" in x or "standby for" in x for x in lines)
+        wait_for(lambda: p.popen.poll() is None and sum(x.startswith("[ingest] node up") for x in lines) == 2)
+        p.popen.kill()  # respawn=1: the second exit is the last
+        wait_for(lambda: p.popen is None)
+    assert lines[-1].startswith("[launch] ingest exited with code -9; not restarting") or \
+        any("not restarting" in x for x in lines)

@@ -80,3 +80,12 @@ def test_stamps_jumping_back_restart_the_synchronizer():
     assert stamps(s.add("image", big, "a")) == [big]
     assert stamps(s.add("image", 1, "looped")) == [1]
     assert s.late == 0
+
+
+def test_a_complete_frame_dropped_while_it_waits_says_what_it_waited_for():
+    from simreal_nodes.sync import StampSync
+
+    sync = StampSync(("image",), ("depth",), wait=5, max_pending=2)
+    for s in (1, 2, 3):
+        assert sync.add("image", s, object()) == []
+    assert sync.pop_dropped() == [(1, "frame held for depth and over 2 frames pending")]

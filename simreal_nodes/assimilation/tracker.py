@@ -54,6 +54,10 @@ class TrackerConfig:
     constant_std_frac: float = 0.0025
     min_measurements: int = 6
     link_dist: float = 0.01  # metres from the model surface for a map point to belong to the object
+    # a map point not observed in this many frames is forgotten (its link, or that it is static); seen again, it is
+    # linked anew. Bounds the links to what the map still shows: the SLAM culls points and makes new ones, and over
+    # 10 000 frames of the joint boot the tracker grew by 2.4 MB per 1000 frames without it (benchmarks/soak.py)
+    link_ttl_frames: int = 450
     snap_to_surface: bool = True  # measure a linked point at its foot on the model surface, not at its mapped position
     anchor: str = "ray"  # where on its triangle a linked point sits: "ray" (the observed pixel's viewing ray) | "foot"
     max_points: int = 0  # 0: all
@@ -136,6 +140,8 @@ class DeformableTracker:
         # map point id -> its link (nodes, weights, rest position, position as mapped, mu it was mapped in, ray)
         self.links: dict[int, Link] = {}
         self.static: set[int] = set()
+        self._last_seen: dict[int, int] = {}  # map point id (linked or static) -> the _seen_frames count it was seen at
+        self._seen_frames = 0
         self._alpha_linked: float | None = None
         self.deforming_frames = 0
         self._dot_links: tuple[np.ndarray, np.ndarray] | None = None
@@ -297,7 +303,23 @@ class DeformableTracker:
         good = np.all(np.isfinite(P), axis=1) & np.all(np.isfinite(q), axis=1)
         ids, P, q = np.asarray(ids)[good], P[good], q[good]
         self.link_points(ids, P, rays=self.viewing_rays(T_wc, q))
+        self._forget_unseen(ids)
         return ids, P, q
+
+    def _forget_unseen(self, ids: np.ndarray) -> None:
+        """Note this frame's observed map points; every ``link_ttl_frames // 4`` frames, forget the links (and the
+        static verdicts) of points not observed for ``link_ttl_frames`` frames."""
+        self._seen_frames += 1
+        now = self._seen_frames
+        self._last_seen.update((int(i), now) for i in ids)
+        ttl = self.cfg.link_ttl_frames
+        if ttl <= 0 or now % max(ttl // 4, 1):
+            return
+        old = [pid for pid, t in self._last_seen.items() if now - t > ttl]
+        for pid in old:
+            del self._last_seen[pid]
+            self.links.pop(pid, None)
+            self.static.discard(pid)
 
     # -- measurements ------------------------------------------------------------------------------------------
     def _map_point_measurements(self, ids: np.ndarray, P_map: np.ndarray, uv: np.ndarray) -> Measurements | None:

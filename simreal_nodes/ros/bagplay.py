@@ -52,6 +52,7 @@ class Recorder:
         self._subs: dict[str, Subscription | None] = {}  # None: waiting for a publisher
         self._pending: dict[str, str] = {}  # topics waiting for a publisher (to match its QoS)
         self.counts: dict[str, int] = defaultdict(int)
+        self.failed = ""  # why recording stopped (a write failed), or ''
         for t, ty in (topics or {}).items():
             self.add(t, ty)
         node.create_timer(0.2, self._subscribe_pending)
@@ -89,7 +90,13 @@ class Recorder:
             return
 
         def cb(raw: bytes, topic=topic):
-            self.writer.write_raw(topic, self.node.get_clock().now().nanoseconds, raw)
+            if self.failed:
+                return
+            try:
+                self.writer.write_raw(topic, self.node.get_clock().now().nanoseconds, raw)
+            except OSError as e:  # disk full, file too large, device gone: stop recording, keep what is written
+                self._fail(e)
+                return
             self.counts[topic] += 1
 
         self._subs[topic] = self.node.create_subscription(cls, topic, cb, self._qos_for(topic), raw=True)
@@ -103,8 +110,24 @@ class Recorder:
             if topic not in self._subs and types:
                 self.add(topic, types[0])
 
+    def _fail(self, e: OSError) -> None:
+        self.failed = (f"recording to {self.writer.path} stopped after {self.writer.count} messages: "
+                       f"{e.strerror or e} (the messages already on disk stay readable: `simreal bag-info` "
+                       "salvages them)")
+        self.node.get_logger().error(self.failed)
+        for sub in self._subs.values():
+            if sub is not None:
+                self.node.destroy_subscription(sub)
+        self._subs = dict.fromkeys(self._subs)
+
     def close(self) -> None:
-        self.writer.close()
+        """Close the bag. After a failed write (or when the summary cannot be written either) the file ends
+        without its index: the reader salvages it record by record up to that point."""
+        try:
+            self.writer.close()
+        except OSError as e:
+            if not self.failed:
+                self._fail(e)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -123,6 +146,7 @@ class PlayStats:
     play_s: float = 0.0  # first publication to the last one (real time) or the last frame's end (lossless)
     published_stamps: list[int] = field(default_factory=list)
     cpu_s: dict[str, float] = field(default_factory=dict)  # CPU seconds per process while playing
+    record_error: str = ""  # why the recording stopped early ('' when it did not)
 
     def summary(self) -> str:
         fps = self.frames_published / self.play_s if self.play_s > 0 else 0.0

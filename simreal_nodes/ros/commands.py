@@ -46,9 +46,12 @@ def _share_node_environment() -> None:
 
 def replay(bag: str, scene_file: str, rate: float = 1.0, lossless: bool = False, record: str | None = None,
            storage: str = "mcap", launch: bool = True, frame_timeout_s: float = 30.0, ready_timeout_s: float = 90.0,
-           metrics_json: str | None = None, echo=print, extra_params: dict | None = None, namespace: str = ""):
+           metrics_json: str | None = None, echo=print, extra_params: dict | None = None, namespace: str = "",
+           standby: bool | None = None):
     """Replay ``bag`` into the graph of ``scene_file``; returns (PlayStats, BagReport, recorder counts).
-    ``namespace``: the nodes' namespace (:class:`~simreal_nodes.launch.Launcher`)."""
+    ``namespace``: the nodes' namespace; ``standby``: a standby process per node (:class:`~simreal_nodes.launch.
+    Launcher`), by default in a live replay and not in a lossless one (a node that exits there is a fault to see,
+    and time does not press)."""
     scene = load_scene(scene_file)
     if launch:
         build_spec_models(scene)  # before the nodes start: they find the built spec:NAME models in the cache
@@ -73,7 +76,9 @@ def replay(bag: str, scene_file: str, rate: float = 1.0, lossless: bool = False,
     inputs = {t: topics[t] for t in wanted if t and t in topics}
     hold_for = tuple(t for t in (cam["depth"], right, cam["right_camera_info"]) if t and t in topics)
 
-    launcher = Launcher(nodes, echo=echo, namespace=namespace) if launch else None
+    if standby is None:
+        standby = not lossless
+    launcher = Launcher(nodes, echo=echo, namespace=namespace, standby=standby) if launch else None
     _share_node_environment()
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     node = Node("simreal_player")
@@ -116,6 +121,10 @@ def replay(bag: str, scene_file: str, rate: float = 1.0, lossless: bool = False,
     if recorder:
         echo(f"[replay] recorded {recorder.writer.count} messages to {record}: " +
              ", ".join(f"{t} {n}" for t, n in sorted(recorder.counts.items())))
+        if recorder.failed:
+            echo(f"[replay] error: {recorder.failed}")
+            if stats is not None:
+                stats.record_error = recorder.failed
     if metrics_json and stats:
         Path(metrics_json).write_text(json.dumps({"play": stats.as_dict(), "bag_problems": report.problems}, indent=2))
     return stats, report, (dict(recorder.counts) if recorder else {})
@@ -138,7 +147,7 @@ def record(out: str, topics: list[str] | None = None, storage: str = "mcap", ech
             pending = set(topics or [])
             t_end = time.monotonic() + duration_s if duration_s else None
             echo(f"[record] recording {'all topics' if not topics else ', '.join(topics)} to {out}; Ctrl-C stops")
-            while not stop.event.is_set() and (t_end is None or time.monotonic() < t_end):
+            while not stop.event.is_set() and (t_end is None or time.monotonic() < t_end) and not rec.failed:
                 ex.spin_once(timeout_sec=0.1)
                 if pending:
                     for t, types in node.get_topic_names_and_types():
@@ -151,4 +160,6 @@ def record(out: str, topics: list[str] | None = None, storage: str = "mcap", ech
         node.destroy_node()
         rclpy.shutdown()
     echo(f"[record] wrote {rec.writer.count if rec else 0} messages to {out}")
+    if rec and rec.failed:
+        raise SimrealError(rec.failed)
     return dict(rec.counts) if rec else {}

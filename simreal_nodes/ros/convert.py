@@ -185,10 +185,12 @@ def observation_arrays(obs: FeatureObservations) -> tuple[np.ndarray | None, np.
     """(T_map_camera or None, point ids (N,), map points (N, 3), pixels (N, 2)) of a FeatureObservations;
     ValueError when the three lists disagree in length."""
     ids = np.asarray(obs.point_ids, dtype=np.int64)
-    P = np.asarray(obs.points_xyz, dtype=np.float64).reshape(-1, 3)
-    uv = np.asarray(obs.pixels_uv, dtype=np.float64).reshape(-1, 2)
-    if len(P) != len(ids) or len(uv) != len(ids):
-        raise ValueError(f"malformed observations ({len(ids)} ids, {len(P)} points, {len(uv)} pixels)")
+    P = np.asarray(obs.points_xyz, dtype=np.float64)
+    uv = np.asarray(obs.pixels_uv, dtype=np.float64)
+    if len(P) != 3 * len(ids) or len(uv) != 2 * len(ids):
+        raise ValueError(f"malformed observations ({len(ids)} ids, {len(P)} point coordinates, {len(uv)} pixel "
+                         "coordinates: expected 3 and 2 per id)")
+    P, uv = P.reshape(-1, 3), uv.reshape(-1, 2)
     return observation_pose(obs), ids, P, uv
 
 

@@ -7,8 +7,10 @@ node keeps running.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import os
+import sys
 import time
 import traceback
 from collections.abc import Callable
@@ -21,6 +23,7 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from std_msgs.msg import Header
 
+from simreal_nodes.launch import LAUNCHER_PID_ENV, PROMOTE, STANDBY_ENV
 from simreal_nodes.metrics import StageMetrics
 from simreal_nodes.ros.convert import ns_to_stamp, stamp_ns
 from simreal_nodes.ros.qos import reliable_qos
@@ -209,14 +212,59 @@ def _stamp_of(args):
     return None
 
 
+def _standby_until_promoted() -> Node | None:
+    """A standby process (``SIMREAL_STANDBY=1``, :class:`~simreal_nodes.launch.Launcher`): its imports are done and
+    its DDS participant is up, held by a hidden placeholder node, before it is needed. It then waits for the
+    launcher's :data:`PROMOTE` line on stdin; on EOF (the launcher stopped it, or died) the process ends.
+
+    Why the participant: a new participant is found by the running ones only after the announcements cross
+    (0.4-0.9 s on 2 cores with five running participants, more while the graph is busy); endpoints created in a
+    participant that is already matched are matched within tens of milliseconds. The placeholder does not take
+    the node's name or namespace (``use_global_arguments=False``) and serves nothing; it lives until the node
+    exists, because the participant goes with the context's last node."""
+    placeholder = Node(f"_simreal_standby_{os.getpid()}", use_global_arguments=False,
+                       start_parameter_services=False, enable_rosout=False)
+    print(f"standby ready (pid {os.getpid()})", flush=True)
+    line = sys.stdin.readline()
+    if line.strip() != PROMOTE:
+        placeholder.destroy_node()
+        return None
+    return placeholder
+
+
+def _end_with_launcher() -> bool:
+    """A node started by the launcher gets SIGTERM when the launcher dies (Linux ``PR_SET_PDEATHSIG``), so that a
+    launcher killed with ``kill -9`` leaves no node publishing behind it (they run in their own sessions, out of
+    reach of the terminal's Ctrl-C). False when the launcher is already gone."""
+    launcher = os.environ.get(LAUNCHER_PID_ENV)
+    if not launcher or not launcher.isdigit() or not sys.platform.startswith("linux"):
+        return True
+    import ctypes
+    import signal
+
+    pr_set_pdeathsig = 1
+    with contextlib.suppress(OSError, AttributeError):
+        ctypes.CDLL(None, use_errno=True).prctl(pr_set_pdeathsig, int(signal.SIGTERM), 0, 0, 0)
+    return os.getppid() == int(launcher)  # it died before the line above: no signal will come
+
+
 def run_node(node_cls, args=None) -> int:
     """main() body for every node: one process, one SingleThreadedExecutor, clean shutdown."""
+    if not _end_with_launcher():
+        return 0
     rclpy.init(args=args)
     node = None
     profile_dir = os.environ.get("SIMREAL_PROFILE_DIR")  # development: a cProfile of each node's spin
     prof = None
     try:
+        placeholder = None
+        if os.environ.get(STANDBY_ENV) == "1":
+            placeholder = _standby_until_promoted()
+            if placeholder is None:
+                return 0
         node = node_cls()
+        if placeholder is not None:
+            placeholder.destroy_node()
         ex = SingleThreadedExecutor()
         ex.add_node(node)
         if profile_dir:

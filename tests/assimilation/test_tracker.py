@@ -264,3 +264,26 @@ def test_a_constant_keeps_its_value_in_frames_that_cannot_see_it():
     assert tr.values.tolist() == [0.05, 0.0]
     conclude([0.4, 0.6], True, 0.01)  # bent enough to see how the boot is turned
     assert tr.values.tolist() == [0.4, 0.6]
+
+
+def test_map_points_unseen_for_long_are_forgotten(beam):
+    """The links are bounded by what the map still shows (a 10 000-frame soak grew the tracker without this): a
+    point not observed for link_ttl_frames frames loses its link (or its static verdict); seen again, it is linked
+    anew."""
+    seq, scene = beam
+    cam = seq["cam"]
+    T_wc = Pipeline(scene, cam).loc.step(seq["gray"][60], 0).T_wc
+    tr = _tracker(scene, cam, measurements="map_points", link_ttl_frames=8)
+    o = scene["objects"][0]
+    T_mo = G.pose7_to_matrix(o["anchor"]["pose"])
+    on = G.transform(T_mo, tr.model.points[tr.cand_nodes[:20]].astype(np.float64))  # on the beam's surface
+    off = on + np.array([0.0, 0.0, 0.5])  # half a metre away: static
+    uv_on, uv_off = cam.project(G.transform(G.inv(T_wc), on)), cam.project(G.transform(G.inv(T_wc), off))
+    tr.update(T_wc, np.arange(20), on, uv_on)
+    tr.update(T_wc, np.arange(100, 120), off, uv_off)
+    assert set(tr.links) == set(range(20)) and tr.static == set(range(100, 120))
+    for _ in range(12):  # only the first ten on-object points go on being seen
+        tr.update(T_wc, np.arange(10), on[:10], uv_on[:10])
+    assert set(tr.links) == set(range(10)) and not tr.static
+    tr.update(T_wc, np.arange(20), on, uv_on)
+    assert set(tr.links) == set(range(20))  # linked anew

@@ -66,3 +66,86 @@ def test_launch_rejects_a_bad_scene_with_one_line(tmp_path):
     assert r.returncode == 2
     assert "localization.mode: expected one of" in r.stderr and "found 'orbslam'" in r.stderr
     assert "Traceback" not in r.stderr
+
+
+def test_a_killed_tracker_is_replaced_by_its_standby_mid_replay(tmp_path, monkeypatch):
+    """kill -9 of the tracker during a live replay: the launcher promotes its standby process, which builds the
+    node in its already discovered participant and publishes estimates again before the replay ends."""
+    import os
+    import threading
+
+    import simreal_nodes.launch as launch
+    from simreal_nodes.io import bags
+    from simreal_nodes.ros import bagplay
+    from simreal_nodes.ros.commands import replay
+    from simreal_nodes.synth.samples import render_sample, sample
+
+    pytest.importorskip("simreal_msgs.msg", reason="simreal_msgs is built by ./run setup")
+    monkeypatch.setattr(launch, "STANDBY_DELAY_S", 0.2)
+    name = "aluminium_beam_320x240"
+    bag, scene = sample(name)
+    if not bag.is_dir():
+        render_sample(name, tmp_path)
+        bag, scene = tmp_path / name, tmp_path / f"{name}.yaml"
+    lines: list[str] = []
+    ready, playing, killed = threading.Event(), threading.Event(), {}
+
+    def echo(line: str) -> None:
+        lines.append(line)
+        if line.startswith("[tracker] standby ready"):
+            ready.set()
+        if line.startswith("[launch] started tracker (pid "):
+            killed.setdefault("pids", []).append(int(line.split("(pid ")[1].split(")")[0]))
+
+    def killer() -> None:
+        if playing.wait(60) and ready.wait(30):
+            time.sleep(0.5)
+            killed["t"] = time.time()
+            os.kill(killed["pids"][-1], signal.SIGKILL)
+
+    original = bagplay.Player.play
+
+    def play(self, *a, **kw):
+        playing.set()
+        return original(self, *a, **kw)
+
+    monkeypatch.setattr(bagplay.Player, "play", play)
+    th = threading.Thread(target=killer, daemon=True)
+    th.start()
+    out = tmp_path / "rec"
+    replay(str(bag), str(scene), rate=0.25, record=str(out), echo=echo, standby=True)  # 2 s of frames over 8 s
+    th.join(5)
+    text = "\n".join(lines)
+    assert "t" in killed, text
+    assert "[launch] tracker exited with code -9; restarting (1/2)" in text
+    promoted = [x for x in lines if x.startswith("[launch] started tracker") and x.endswith("from its standby")]
+    assert len(promoted) == 1, text
+    after = [m for m in bags.read_bag(out, topics=["/simreal/objects/beam/parameters"])
+             if m.log_time_ns * 1e-9 > killed["t"]]
+    assert len(after) > 5, text  # estimates again, from the promoted process
+
+
+def test_nodes_end_when_their_launcher_is_killed(tmp_path):
+    """`kill -9` of `simreal launch` itself: its nodes (in their own sessions, out of the terminal's reach) get
+    SIGTERM from the kernel and end, instead of publishing on with nobody to stop them."""
+    f = tmp_path / "scene.yaml"
+    f.write_text(textwrap.dedent(SCENE))
+    env = ros_environment() | {"ROS_LOG_DIR": str(tmp_path / "logs")}
+    p = subprocess.Popen([sys.executable, "-m", "simreal_nodes.cli", "launch", str(f), "--no-standby"], env=env,
+                         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    kids = []
+    try:
+        t_end = time.monotonic() + 20
+        while time.monotonic() < t_end and not kids:
+            kids = node_children(p)
+            time.sleep(0.2)
+        assert kids, "no node started"
+        time.sleep(2.0)  # the node is up (past its start)
+        p.kill()
+        p.wait(10)
+        _gone, alive = psutil.wait_procs(kids, timeout=15)
+        assert not alive, [k.cmdline() for k in alive]
+    finally:
+        for k in kids:
+            if k.is_running():
+                k.kill()

@@ -45,3 +45,16 @@ def test_focus_polygon_round_trips():
     assert m.header.frame_id == "camera_optical" and m.header.stamp.sec == 7
     index, back = focus_polygon(m)
     assert index == 2 and np.allclose(back, poly, atol=1e-4)
+
+
+def test_observations_whose_lists_disagree_are_refused_with_their_lengths():
+    from simreal_msgs.msg import FeatureObservations
+
+    from simreal_nodes.ros.convert import observation_arrays
+
+    obs = FeatureObservations(point_ids=[1, 2], points_xyz=[0.0] * 6, pixels_uv=[0.0] * 4)
+    _T, _ids, P, uv = observation_arrays(obs)
+    assert P.shape == (2, 3) and uv.shape == (2, 2)
+    obs.points_xyz = [0.0] * 7  # found by the graph fuzz: numpy's "cannot reshape" reached the user before
+    with pytest.raises(ValueError, match=r"2 ids, 7 point coordinates, 4 pixel coordinates"):
+        observation_arrays(obs)

@@ -73,3 +73,73 @@ def test_malformed_images_and_zero_camera_info_are_dropped_with_reasons(tmp_path
     diags = recorded(tmp_path / "out_zero", "/diagnostics")
     msgs = [s.message for d in diags for s in d.status if s.name == "simreal/ingest"]
     assert any("CameraInfo" in m for m in msgs)
+
+
+def test_sigint_during_a_lossless_replay_closes_a_readable_record(tmp_path, scene):
+    """Ctrl-C in the middle of `simreal replay --lossless --record`: the player stops at the next frame, the nodes
+    stop, and the record holds every output written so far, readable, with no damage."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from simreal_nodes.launch import ros_environment
+
+    n = 800
+    write_camera_bag(tmp_path / "in", n=n, w=160, h=120, depth=True)
+    out = tmp_path / "out"
+    env = ros_environment() | {"ROS_LOG_DIR": str(tmp_path / "logs")}
+    p = subprocess.Popen([sys.executable, "-m", "simreal_nodes.cli", "replay", str(tmp_path / "in"), "--scene", scene,
+                          "--lossless", "--record", str(out)], env=env, stdout=subprocess.PIPE,
+                         stderr=subprocess.STDOUT, text=True)
+    try:
+        t_end = time.monotonic() + 90
+        while time.monotonic() < t_end and p.poll() is None and \
+                sum(f.stat().st_size for f in out.glob("*") if f.is_file()) < 2_000_000:
+            time.sleep(0.05)  # until the record holds some frames
+        assert p.poll() is None, "the replay ended before the signal"
+        p.send_signal(signal.SIGINT)
+        text, _ = p.communicate(timeout=60)
+    finally:
+        if p.poll() is None:
+            p.kill()
+    assert p.returncode == 0, text
+    assert "[replay] stopped by signal" in text
+    report = bags.BagReport()
+    images = [m for m in bags.read_bag(out, report) if m.topic == "/simreal/camera/image"]
+    assert report.problems == 0, report.summary()
+    assert 0 < len(images) < n, (len(images), text[-2000:])
+
+
+def test_a_record_that_runs_out_of_space_stops_with_a_clear_error_and_stays_readable(tmp_path, scene):
+    """The disk fills while recording (here: a file-size limit, which fails the write the same way): the replay says
+    so in one line and exits 1, the nodes are unharmed, and what was written before reads back (salvaged)."""
+    import resource
+    import signal
+    import subprocess
+    import sys
+
+    from simreal_nodes.launch import ros_environment
+
+    write_camera_bag(tmp_path / "in", n=150, w=320, h=240, depth=True)  # 55 MB of outputs
+    out = tmp_path / "out"
+    limit = 40 << 20  # over Fast DDS's 32 MB shared-memory segment (a file too), under the record
+
+    def small_files():  # in the child: writes past the limit fail with EFBIG instead of killing it (SIGXFSZ)
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+
+    env = ros_environment() | {"ROS_LOG_DIR": str(tmp_path / "logs")}
+    r = subprocess.run([sys.executable, "-m", "simreal_nodes.cli", "replay", str(tmp_path / "in"), "--scene", scene,
+                        "--lossless", "--record", str(out)], env=env, capture_output=True, text=True, timeout=180,
+                       preexec_fn=small_files)
+    text = r.stdout + r.stderr
+    assert r.returncode == 1, text
+    assert "[replay] error: recording to" in text and "File too large" in text, text[-3000:]
+    assert "Traceback" not in text, text[-3000:]
+    assert "published 150 frames" in text  # the replay went on to its end
+    assert "SHM Transport" not in text  # the nodes' transport was not hit by the limit
+    report = bags.BagReport()
+    images = [m for m in bags.read_bag(out, report) if m.topic == "/simreal/camera/image"]
+    assert images and report.salvaged, report.summary()
+    assert sum(f.stat().st_size for f in out.glob("*")) <= limit
