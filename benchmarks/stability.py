@@ -149,7 +149,18 @@ COLS = [("sweep", "sweep", "{}"), ("value", "value", "{:g}"), ("element", "eleme
         ("failure", "failure", "{}")]
 
 
+def write_doc() -> None:
+    """docs/stability.md: the INTRO below and the results file's table."""
+    body = (RESULTS / "stability.md").read_text().replace("](stability.png)", "](../benchmarks/results/stability.png)")
+    (Path(__file__).resolve().parents[1] / "docs" / "stability.md").write_text(INTRO + "\n" + body.split("\n", 1)[1])
+
+
 def main() -> None:
+    import sys
+
+    if "--doc" in sys.argv[1:]:  # the document again from the last results (its text changed, not the numbers)
+        write_doc()
+        return
     rows = rows_poisson() + rows_slenderness() + rows_modulus() + rows_hyperelastic() + rows_float32()
     for r in rows:
         print({k: r.get(k) for k in ("sweep", "value", "element", "error_pct", "ms", "warning", "failure")},
@@ -179,8 +190,7 @@ def main() -> None:
              "Warning: what `physics/materials.py` tells the user before solving (locking). Time: the solve alone "
              "(2-core CPU).")
     save("stability", rows, COLS, "Numerical stability at the extremes: elements, materials, precision", notes, plot)
-    body = (RESULTS / "stability.md").read_text().replace("](stability.png)", "](../benchmarks/results/stability.png)")
-    (Path(__file__).resolve().parents[1] / "docs" / "stability.md").write_text(INTRO + "\n" + body.split("\n", 1)[1])
+    write_doc()
 
 
 INTRO = """# Numerical stability at the extremes
@@ -213,10 +223,32 @@ What it shows, for someone choosing a model spec's mesh (`mesh: {cells, element,
 - **float32.** A PGD model's displacement evaluated in single precision differs from double by 3e-5 % of its
   largest displacement with 19 modes: float32 would be safe for the overlay's evaluation.
 
-Not yet in this document (issue 20 keeps them open): PGD / POD mode counts against the point where added modes
-stop helping (`benchmarks/results/rom_models.md` has the error against modes per model), the LM normal
-equations' conditioning (`benchmarks/results/tracker_lm.md` has error against modes, points and Huber), camera
-grazing angles and distance, depth noise and holes, image noise and blur as sweeps of their own.
+**Depth noise and holes against the registration** (`./run bench depth_quality`,
+`benchmarks/results/depth_quality.md`). It uses development seeds 0-9 of the RGB-D scene family at 640x480. Each
+scene's first frames are registered with its depth made worse in one way, for the SLAM and the registration alike:
+
+| depth made worse by | position error, median (max) | angle error, median |
+|---|---|---|
+| nothing | 0.50 mm (1.31 mm) | 0.15 deg |
+| noise: 2 mm at 1 m (sigma grows with z^2) | 0.43 mm (1.31 mm) | 0.16 deg |
+| noise: 5 mm at 1 m | 1.17 mm (2.93 mm) | 0.67 deg |
+| noise: 10 mm at 1 m | 3.14 mm (12.3 mm) | 3.3 deg |
+| noise: 20 mm at 1 m | 15.0 mm (27.3 mm) | 2.0 deg |
+| holes: 50 % of the pixels, in 8x8 blocks | 0.68 mm (3.72 mm) | 0.13 deg |
+
+- **Holes:** up to 50 % cost little.
+- **Noise:** up to 2 mm at 1 m, about a Kinect-class camera, it changes nothing.
+- **At 5 mm the angle leaves its 0.5-degree target.** From 10 mm at 1 m the registration accepts poses several mm
+  and degrees off without saying so: all 10 scenes at 10 mm, and 9 of 10 at 20 mm (one was refused). A camera that
+  noisy needs the fit's quality to flag the pose, which it does not yet do.
+
+Not yet in this document (issue 20 keeps them open):
+- PGD / POD mode counts against the point where added modes stop helping (`benchmarks/results/rom_models.md` has
+  the error against modes per model);
+- the LM normal equations' conditioning (`benchmarks/results/tracker_lm.md` has the error against modes, points
+  and Huber);
+- camera grazing angles and distance;
+- image noise and blur, as sweeps of their own.
 """
 
 
