@@ -1,7 +1,7 @@
 """Hostile input to the model-file, scene and bag loaders (issue 20): seeded random mutations of valid files, and
 what each loader makes of them.
 
-    ./run bench fuzz                                   # 50 000 inputs per loader
+    ./run bench fuzz                                   # 50 000 model files, 50 000 scenes, 20 000 bags
     python -m benchmarks.fuzz --cases 2000 --seed 1    # fewer, another draw
 
 Seeds: a small model built by the real builder (``beam_pgd``, written by ``save_model``) and the committed sample

@@ -537,7 +537,9 @@ def main() -> None:
     save("fuzz_graph", rows, cols, "Hostile messages into the live node graph",
          "`python -m benchmarks.fuzz_graph` (see its docstring): per graph, seeded hostile messages on every topic "
          "its nodes subscribe to, a valid frame after every 50; the nodes run without respawn, so an exit stays "
-         "counted. 'unexpected': an exception the node's guard caught (an input that should have met a clear "
+         "counted. The count is of messages published (at 600 a second); a node busy with one takes the newest "
+         "next, so not every message reaches its callback: the frames rejected and finished are what the nodes "
+         "handled. 'unexpected': an exception the node's guard caught (an input that should have met a clear "
          "rejection); 'hang': no valid frame finished by the node after the fuzz. The rejections' reasons, most "
          "frequent first (12 per node at most):\n" + "\n".join(lines), None, extra={"runs": runs})
 

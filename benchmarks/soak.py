@@ -66,7 +66,11 @@ def run(n_frames: int, fps: float) -> dict:
     stop = threading.Event()
     published = [0]
 
+    restarts: list[str] = []
+
     def echo(line: str) -> None:
+        if line.startswith("[launch]") and " exited with code " in line:
+            restarts.append(line)  # a crash: the RSS series of that node then mixes two processes
         m = STARTED.match(line)
         if m:
             pids[m.group(1)] = int(m.group(2))
@@ -102,7 +106,7 @@ def run(n_frames: int, fps: float) -> dict:
         bagplay.Player._publish_image = original
         stop.set()
         th.join(5)
-    return {"frames": n_frames, "fps": fps, "stats": stats.as_dict(), "rss": rss,
+    return {"frames": n_frames, "fps": fps, "stats": stats.as_dict(), "rss": rss, "exits": restarts,
             "latency_ms": {n: list(v) for n, v in stats.latency_ms.items()}}
 
 
@@ -166,8 +170,9 @@ def main() -> None:
          f"`python -m benchmarks.soak --frames {r['frames']}` (see its docstring): the joint boot sample played "
          f"forward and backward at {r['fps']:.0f} fps, live. Frames published {st['frames_published']}, finished "
          f"by every node {st['frames_completed']} ({st.get('fps_through', float('nan')):.1f} fps through), the rest "
-         "skipped as live load shedding. RSS sampled every 2 s; latency from the player's publication to each "
-         "node's report.", plot, extra={"run": r})
+         f"skipped as live load shedding. Node exits during the run: {len(r.get('exits', [])) or 'none'}. RSS "
+         "sampled every 2 s; latency from the player's publication to each node's report. The launcher's standby "
+         "processes (the live default) are not in the RSS columns.", plot, extra={"run": r})
 
 
 if __name__ == "__main__":

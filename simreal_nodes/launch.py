@@ -128,6 +128,8 @@ class Launcher:
         self.log_dir.mkdir(parents=True, exist_ok=True)
         self.procs: list[_Proc] = []
         self._stopping = False
+        self._stopped = threading.Event()
+        self._pumps: list[threading.Thread] = []
         self._lock = threading.Lock()
         modules = node_modules()
         for spec in nodes:
@@ -161,12 +163,16 @@ class Launcher:
         env = self.env | {LAUNCHER_PID_ENV: str(os.getpid())} | ({STANDBY_ENV: "1"} if standby else {})
         popen = subprocess.Popen(p.cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                                  stdin=subprocess.PIPE if standby else subprocess.DEVNULL, start_new_session=True)
-        threading.Thread(target=self._pump, args=(p, popen, log), daemon=True).start()
+        pump = threading.Thread(target=self._pump, args=(p, popen, log), daemon=True)
+        pump.start()
+        self._pumps.append(pump)
         return popen
 
     def _schedule_standby(self, p: _Proc) -> None:
+        """The next standby of ``p`` after :data:`STANDBY_DELAY_S`, one second apart from node to node (their
+        imports would otherwise all run at once, on cores the graph is using)."""
         if self.standby and p.standby is None and p.restarts < self.respawn and p.standby_failures < 2:
-            p.standby_due = time.monotonic() + STANDBY_DELAY_S
+            p.standby_due = time.monotonic() + STANDBY_DELAY_S + 1.0 * self.procs.index(p)
 
     def _promote(self, p: _Proc) -> bool:
         """Make ``p``'s standby the node (False: there is none alive, or it cannot be told)."""
@@ -197,11 +203,14 @@ class Launcher:
             time.sleep(WATCH_PERIOD_S)
             with self._lock:
                 if self._stopping:
-                    return
+                    break
                 try:
                     self._watch_once()
                 except Exception as e:  # noqa: BLE001 - the watcher outlives a failing echo or spawn
                     print(f"[launch] watcher: {type(e).__name__}: {e}", file=sys.stderr, flush=True)
+        # the processes this thread started get SIGTERM when it ends (PR_SET_PDEATHSIG is per thread): it ends only
+        # after stop() has ended them in its own order (SIGINT first)
+        self._stopped.wait()
 
     def _watch_once(self) -> None:
         for p in self.procs:
@@ -298,6 +307,9 @@ class Launcher:
                 break
         codes = {p.spec.name: (p.popen.returncode if p.popen else (p.exit_codes[-1] if p.exit_codes else None))
                  for p in self.procs}
+        self._stopped.set()
+        for pump in self._pumps:  # the last lines of output reach the log and the echo
+            pump.join(timeout=2.0)
         self._tmp.cleanup()
         return codes
 

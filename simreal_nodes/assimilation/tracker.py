@@ -56,7 +56,10 @@ class TrackerConfig:
     link_dist: float = 0.01  # metres from the model surface for a map point to belong to the object
     # a map point not observed in this many frames is forgotten (its link, or that it is static); seen again, it is
     # linked anew. Bounds the links to what the map still shows: the SLAM culls points and makes new ones, and over
-    # 10 000 frames of the joint boot the tracker grew by 2.4 MB per 1000 frames without it (benchmarks/soak.py)
+    # 10 000 frames of the joint boot the tracker grew by 2.4 MB per 1000 frames without it (benchmarks/soak.py).
+    # The price, for an object out of view longer than this: a point of it seen again votes once for the camera
+    # pose before it is flagged deformable again, and its new link is made in the current estimate from where the
+    # map last had it (0: never forget)
     link_ttl_frames: int = 450
     snap_to_surface: bool = True  # measure a linked point at its foot on the model surface, not at its mapped position
     anchor: str = "ray"  # where on its triangle a linked point sits: "ray" (the observed pixel's viewing ray) | "foot"

@@ -75,7 +75,7 @@ class Recorder:
 
     def add(self, topic: str, msgtype: str) -> None:
         """Record ``topic``; the subscription waits for a publisher so that its QoS can match."""
-        if topic in self._subs or topic in self.exclude:
+        if topic in self._subs or topic in self.exclude or self.failed:
             return
         if not self.node.get_publishers_info_by_topic(topic):
             self._pending[topic] = msgtype

@@ -131,16 +131,23 @@ def test_nodes_end_when_their_launcher_is_killed(tmp_path):
     f = tmp_path / "scene.yaml"
     f.write_text(textwrap.dedent(SCENE))
     env = ros_environment() | {"ROS_LOG_DIR": str(tmp_path / "logs")}
+    import threading
+
     p = subprocess.Popen([sys.executable, "-m", "simreal_nodes.cli", "launch", str(f), "--no-standby"], env=env,
-                         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    up = threading.Event()
+
+    def read() -> None:
+        for line in p.stdout:
+            if line.startswith("[ingest]") and "camera ingest from" in line:
+                up.set()  # the node is built: past run_node's start, where it asked for the signal
+
+    threading.Thread(target=read, daemon=True).start()
     kids = []
     try:
-        t_end = time.monotonic() + 20
-        while time.monotonic() < t_end and not kids:
-            kids = node_children(p)
-            time.sleep(0.2)
-        assert kids, "no node started"
-        time.sleep(2.0)  # the node is up (past its start)
+        assert up.wait(30), "the node did not come up"
+        kids = node_children(p)
+        assert kids, "no node process"
         p.kill()
         p.wait(10)
         _gone, alive = psutil.wait_procs(kids, timeout=15)
