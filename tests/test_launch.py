@@ -57,6 +57,15 @@ while True:
 """
 
 
+def fake_launcher(tmp_path, respawn: int, standby: bool) -> tuple[Launcher, list[str]]:
+    """A launcher of one node whose command is FAKE_NODE; the lines it echoes."""
+    lines: list[str] = []
+    launcher = Launcher([NodeSpec("ingest")], respawn=respawn, env={"PATH": "/usr/bin:/bin"}, echo=lines.append,
+                        log_dir=tmp_path / "log", standby=standby)
+    launcher.procs[0].cmd = [sys.executable, "-c", FAKE_NODE]
+    return launcher, lines
+
+
 def wait_for(cond, timeout: float = 20.0) -> None:
     t_end = time.monotonic() + timeout
     while not cond():
@@ -68,10 +77,7 @@ def test_a_node_that_exits_is_replaced_by_its_standby(tmp_path, monkeypatch):
     import simreal_nodes.launch as launch
 
     monkeypatch.setattr(launch, "STANDBY_DELAY_S", 0.3)
-    lines: list[str] = []
-    launcher = Launcher([NodeSpec("ingest")], respawn=2, env={"PATH": "/usr/bin:/bin"}, echo=lines.append,
-                        log_dir=tmp_path / "log", standby=True)
-    launcher.procs[0].cmd = [sys.executable, "-c", FAKE_NODE]
+    launcher, lines = fake_launcher(tmp_path, respawn=2, standby=True)
     p = launcher.procs[0]
     with launcher:
         wait_for(lambda: "[ingest] standby ready" in lines)
@@ -92,10 +98,7 @@ def test_a_node_that_exits_is_replaced_by_its_standby(tmp_path, monkeypatch):
 
 
 def test_without_standby_a_restart_is_a_new_process(tmp_path):
-    lines: list[str] = []
-    launcher = Launcher([NodeSpec("ingest")], respawn=1, env={"PATH": "/usr/bin:/bin"}, echo=lines.append,
-                        log_dir=tmp_path / "log", standby=False)
-    launcher.procs[0].cmd = [sys.executable, "-c", FAKE_NODE]
+    launcher, lines = fake_launcher(tmp_path, respawn=1, standby=False)
     p = launcher.procs[0]
     with launcher:
         wait_for(lambda: any(x.startswith("[ingest] node up") for x in lines))
