@@ -60,12 +60,15 @@ def scene_name(seed: int, preloaded: bool = False, sensor: str = "rgbd") -> str:
 
 
 def run_scene(seed: int, width: int = 640, height: int = 480, preloaded: bool = False,
-              measurements: str | None = None, tracking: dict | None = None, sensor: str = "rgbd") -> dict:
+              measurements: str | None = None, tracking: dict | None = None, sensor: str = "rgbd",
+              seq: dict | None = None) -> dict:
     """One scene through the offline pipeline; ``measurements`` overrides the scene's ``tracking.measurements``,
-    ``tracking`` any other key of its ``tracking`` block (a knob's trade); ``sensor``: ``rgbd`` or ``stereo``."""
+    ``tracking`` any other key of its ``tracking`` block (a knob's trade); ``sensor``: ``rgbd`` or ``stereo``;
+    ``seq``: the scene's frames already rendered (and perhaps made worse: ``benchmarks/camera_quality.py``)."""
     t0 = time.perf_counter()
-    seq = sequence.__wrapped__(scene_name(seed, preloaded, sensor), width, height, fps=FPS,
-                               stereo=sensor == "stereo")  # not cached: one scene in memory at a time
+    if seq is None:
+        seq = sequence.__wrapped__(scene_name(seed, preloaded, sensor), width, height, fps=FPS,
+                                   stereo=sensor == "stereo")  # not cached: one scene in memory at a time
     t_render = time.perf_counter() - t0
     sc = seq["scene"]
     d = sc.state["draw"]
@@ -97,6 +100,9 @@ def run_scene(seed: int, width: int = 640, height: int = 480, preloaded: bool = 
         "camera_ate_mm": float(1e3 * np.sqrt(np.mean(np.square(cam_err)))) if cam_err else float("nan"),
         "camera_tracked_pct": float(100 * len(cam_err) / len(seq["rgb"])),
         "reason": why.most_common(1)[0][0] if why else "",
+        # why the object was not placed or followed, where something said so: the last refusal or lost camera
+        # (the waiting count, "(1 of 3 depth views)", says only that it is waiting)
+        "refusal": next((r for r in reversed(run["reasons"]) if "refused" in r or "no camera pose" in r), ""),
         **registration_error(pipe, seq),
         **scene_model_error(sc, pipe.objects.models["beam"]),
         "curve": {"truth": [None if not np.isfinite(v) else float(v) for v in truth_a], "est": est_a.tolist()},
@@ -143,14 +149,16 @@ def registration_error(pipe: Pipeline, seq: dict) -> dict:
     reg = pipe.objects.registrations.get("beam")
     if reg is None:
         return {"registration_mm": float("nan"), "registration_max_mm": float("nan"),
-                "registration_deg": float("nan"), "registration_fitness": 0.0, "slide_spread_mm": float("nan")}
+                "registration_deg": float("nan"), "registration_fitness": 0.0, "slide_spread_mm": float("nan"),
+                "registration_noise_mm": float("nan"), "registration_doubt": ""}
     T_true = seq["truth"][0].object_poses["beam"]
     D = G.inv(T_true) @ reg.T_map_obj
     X = pipe.objects.models["beam"].points
     return {"registration_mm": float(1e3 * np.linalg.norm(D[:3, 3])),
             "registration_max_mm": float(1e3 * np.linalg.norm(X @ D[:3, :3].T + D[:3, 3] - X, axis=1).max()),
             "registration_deg": float(np.rad2deg(np.arccos(np.clip((np.trace(D[:3, :3]) - 1) / 2, -1.0, 1.0)))),
-            "registration_fitness": float(reg.fitness), "slide_spread_mm": 1e3 * float(reg.slide_spread)}
+            "registration_fitness": float(reg.fitness), "slide_spread_mm": 1e3 * float(reg.slide_spread),
+            "registration_noise_mm": 1e3 * float(reg.noise), "registration_doubt": reg.doubt}
 
 
 def run_registration(seed: int, width: int = 640, height: int = 480, sensor: str = "rgbd") -> dict:

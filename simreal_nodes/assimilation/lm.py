@@ -148,10 +148,21 @@ def solve_generic(model: MeasurementModel, obs: Vector, x0: ArrayLike, lo: Vecto
     Converged when a step is below ``tol`` x the parameter range or below 5 % of the parameter's standard
     deviation (the steps IRLS takes around Huber's kink then only trade measurements between its two
     branches), or when the decrease of the cost the linearisation promises (gᵀδ) or achieves is below
-    ``cost_tol`` x the cost."""
+    ``cost_tol`` x the cost.
+
+    The normal equations are formed in units of each parameter's range (z = x / (hi - lo); a parameter whose
+    bounds are equal keeps its own unit): Marquardt's damping is scale-free anyway, but its floor for a column
+    with no derivative, the covariance's rank cut-off and the standard deviations are not, and in SI units a
+    Young's modulus (1e10 Pa) beside a position (0.5 m) has a squared Jacobian 1e20 times smaller: it was damped
+    as if unseen and reported as if exactly known (`benchmarks/lm_conditioning.py`). The covariance is
+    s^2 (H + eps I)^-1 in those units, eps = 1e-10 x mean(diag H): a direction the images do not see gets a huge
+    variance (flagged downstream) instead of the zero that a pseudo-inverse gives it. A parameter pinned by equal
+    bounds is given, not estimated: its variance is zero."""
     x = np.clip(np.asarray(x0, dtype=np.float64), lo, hi)
     n = len(x)
     sig = np.ones(len(obs)) if sigma is None else np.asarray(sigma, dtype=np.float64)
+    width = np.abs(np.asarray(hi, dtype=np.float64) - np.asarray(lo, dtype=np.float64))
+    unit = np.where(width > 0, width, 1.0)  # x = unit * z
 
     isig = 1.0 / sig
 
@@ -165,7 +176,7 @@ def solve_generic(model: MeasurementModel, obs: Vector, x0: ArrayLike, lo: Vecto
         rn = np.sqrt(r[:, 0] ** 2 + r[:, 1] ** 2)
         w = np.where(rn > huber, huber / np.maximum(rn, 1e-300), 1.0) * valid
         c = np.where(rn <= huber, rn * rn, 2 * huber * rn - huber * huber)
-        return r, J * isig[:, None, None], w, valid, float(c[valid].sum())
+        return r, J * isig[:, None, None] * unit, w, valid, float(c[valid].sum())
 
     r, J, w, valid, cost = evaluate(x)
     lam = lam0
@@ -179,22 +190,22 @@ def solve_generic(model: MeasurementModel, obs: Vector, x0: ArrayLike, lo: Vecto
         H = Jf.T @ (Jf * wf[:, None])
         g = Jf.T @ (wf * r.ravel())
         D = np.maximum(np.diag(H), 1e-12 * max(float(np.trace(H)), 1e-300))
-        try:  # the parameters' standard deviations at this iterate
+        try:  # the parameters' standard deviations at this iterate (x units)
             s2 = cost / max(2 * int(valid.sum()) - n, 1)
-            sd = np.sqrt(np.clip(s2 * np.diag(np.linalg.inv(H + 1e-12 * np.diag(D))), 0.0, None))
+            sd = unit * np.sqrt(np.clip(s2 * np.diag(np.linalg.inv(H + 1e-12 * np.diag(D))), 0.0, None))
         except np.linalg.LinAlgError:
             sd = np.zeros(n)
         accepted = False
         for _ in range(8):
             try:
-                step = np.linalg.solve(H + lam * np.diag(D), g)
+                step = unit * np.linalg.solve(H + lam * np.diag(D), g)
             except np.linalg.LinAlgError:
                 lam *= 10
                 continue
             xn = np.clip(x + step, lo, hi)
             dx = np.abs(xn - x)
             if (np.all(dx <= tol * span) or np.all(dx <= 0.05 * sd)
-                    or float(g @ (xn - x)) <= cost_tol * max(cost, 1e-300)):
+                    or float(g @ ((xn - x) / unit)) <= cost_tol * max(cost, 1e-300)):
                 converged = True  # the step is below resolution, blocked by the bounds, or promises nothing
                 break
             rn_, Jn, wn, vn, cn = evaluate(xn)
@@ -215,6 +226,14 @@ def solve_generic(model: MeasurementModel, obs: Vector, x0: ArrayLike, lo: Vecto
     inl = valid & (rnorm <= 3 * huber)
     dof = max(2 * int(inl.sum()) - n, 1)
     s2 = float(np.sum(r[inl] ** 2)) / dof if inl.any() else float("nan")
-    cov = np.asarray(np.linalg.pinv(H) * s2 if np.all(np.isfinite(H)) else np.full((n, n), np.inf), dtype=np.float64)
+    if np.all(np.isfinite(H)):
+        cov = np.zeros((n, n))  # a parameter pinned by equal bounds is given, not estimated: no variance
+        f = np.flatnonzero(width > 0)
+        if len(f):
+            Hf = H[np.ix_(f, f)]
+            eps = 1e-10 * max(float(np.trace(Hf)) / len(f), 1e-300)
+            cov[np.ix_(f, f)] = np.linalg.inv(Hf + eps * np.eye(len(f))) * s2 * np.outer(unit[f], unit[f])
+    else:
+        cov = np.full((n, n), np.inf)
     rms = float(np.sqrt(np.mean(np.sum((r[inl] * sig[inl, None]) ** 2, axis=1)))) if inl.any() else float("nan")
     return Result(x, cov, rms, int(inl.sum()), it, converged, r, cost)

@@ -98,7 +98,12 @@ class ObjectTrackers:
                                         np.full((len(tr.values),) * 2, np.nan), state=EstimateState.LOST,
                                         reason=waiting)
             else:
-                out[o["id"]] = self._tracker(o).update(T_wc, ids, P, uv, bgr, depth)
+                est = out[o["id"]] = self._tracker(o).update(T_wc, ids, P, uv, bgr, depth)
+                reg = self.registrations.get(o["id"])
+                if reg is not None and reg.doubt and est.state == EstimateState.OK:
+                    # placed on depth too noisy to trust the pose to millimetres: every estimate says so
+                    est.state = EstimateState.LOW_CONFIDENCE
+                    est.reason = reg.doubt
         return out
 
     def _register(self, o: dict[str, Any], T_wc: np.ndarray | None, depth: np.ndarray | None) -> str:

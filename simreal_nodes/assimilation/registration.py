@@ -240,9 +240,12 @@ class RegistrationConfig:
     normals' scatter is under this (against the strongest) is one the fit can slide along (:func:`_pin_slide`); it
     is moved only where a slide would cover ``slide_cover`` more of the model's faces turned to the cameras. A fit
     that could slide over more than ``max_slide_spread`` at about the same cover (:func:`slide_spread`; at most
-    28 mm on development seeds 0-99) is refused: the data do not pin it. ``fine``: the fine stage's freedom,
-    ``full`` (6 degrees) or ``upright`` (translation and a turn about the up axis, roll and pitch from the support
-    plane, where one was found; see :meth:`for_camera`)."""
+    28 mm on development seeds 0-99) is refused: the data do not pin it. A fit on depth that scatters more than
+    ``max_noise`` about it (:func:`_noise`) is kept but doubted (:attr:`Registration.doubt`; its estimates are
+    flagged): chosen on development seeds 0-9 with their depth made noisier (`./run bench depth_quality`), 3.5 mm
+    flags 14 of the 17 fits more than 3 mm or 2 degrees off and 4 of the 72 within them. ``fine``: the fine stage's
+    freedom, ``full`` (6 degrees) or ``upright`` (translation and a turn about the up axis, roll and pitch from the
+    support plane, where one was found; see :meth:`for_camera`)."""
 
     frames: int = 3
     every: int = 4
@@ -256,6 +259,7 @@ class RegistrationConfig:
     inlier_dist: float = 0.006
     min_fitness: float = 0.5
     max_rmse: float = 0.004
+    max_noise: float = 0.0035
     max_range: float = 4.0
     slide_ratio: float = 0.05
     slide_cover: float = 0.01
@@ -290,6 +294,11 @@ class Registration:
     # what the depth fit found
     state: np.ndarray | None = None
     state_reason: str = ""
+    # the depth's noise about the fitted surface (metres: a robust sigma of the point-to-plane residuals within
+    # 3 x inlier_dist, :func:`_noise`), and why the pose is doubted ('' when it is not): a fit accepted on depth
+    # noisier than ``max_noise`` (docs/stability.md), whose estimates are flagged low-confidence
+    noise: float = 0.0
+    doubt: str = ""
 
 
 @dataclass(frozen=True)
@@ -468,7 +477,8 @@ def register_rgbd(cloud: np.ndarray, model: ReducedModel, guess: np.ndarray, cam
         T = icp(_cloud(P), best[1], (0.012, 0.006, 0.004))
     T = _pin_slide(P, T, S, N, cams, cfg)
     fitness, rmse, hits = _quality(P, T, S, N, cams, cfg.inlier_dist)
-    out = Registration(G.inv(T), fitness, rmse, hits, plane, slide_spread(P, T, S, N, cams, cfg))
+    out = _judged(Registration(G.inv(T), fitness, rmse, hits, plane, slide_spread(P, T, S, N, cams, cfg)),
+                  P, T, S, N, cfg)
     if fitness < cfg.min_fitness or rmse > cfg.max_rmse:
         raise RegistrationError(f"registration refused: {100 * fitness:.0f} % of the model surface facing the "
                                 f"camera is matched (at least {100 * cfg.min_fitness:.0f} % needed), residual "
@@ -512,8 +522,8 @@ def register_loaded(cloud: np.ndarray, model: ReducedModel, guess: np.ndarray, c
     P = _object_points(cloud, st.T_map_obj, model.points + u, float(model.points[:, 2].min()), reg.plane, cfg)
     T = G.inv(st.T_map_obj)
     fitness, rmse, hits = _quality(P, T, S, N, cams, cfg.inlier_dist)
-    out = Registration(st.T_map_obj, fitness, rmse, hits, reg.plane, slide_spread(P, T, S, N, cams, cfg),
-                       st.mu.copy(), st.reason)
+    out = _judged(Registration(st.T_map_obj, fitness, rmse, hits, reg.plane, slide_spread(P, T, S, N, cams, cfg),
+                               st.mu.copy(), st.reason), P, T, S, N, cfg)
     if fitness < cfg.min_fitness or rmse > cfg.max_rmse or out.slide_spread > cfg.max_slide_spread:
         raise RegistrationError(f"registration refused (deformed fit: {st.reason}): {100 * fitness:.0f} % of the "
                                 f"model surface facing the camera matched, residual {1e3 * rmse:.1f} mm, slide "
@@ -686,6 +696,32 @@ def _facing(S: np.ndarray, N: np.ndarray, cams_obj: np.ndarray) -> np.ndarray:
     for c in cams_obj:
         facing |= np.einsum("ij,ij->i", N, c - S) > 0
     return facing
+
+
+def _noise(P: np.ndarray, T: np.ndarray, S: np.ndarray, N: np.ndarray, band: float) -> float:
+    """The depth's noise about the fitted surface: 1.4826 x the median absolute deviation of the point-to-plane
+    residuals of the measured points P (map) within ``band`` of a model sample, under T (map -> object). The fit's
+    own residual (:func:`_quality`) counts only points within the inlier distance, so it cannot grow past about
+    60 % of that distance however noisy the depth: it does not see noise. This wider band does, up to about
+    half its width."""
+    P_obj = P @ T[:3, :3].T + T[:3, 3]
+    d, j = cast(tuple[np.ndarray, np.ndarray], cKDTree(S).query(P_obj, distance_upper_bound=band))
+    hit = np.isfinite(d)
+    if hit.sum() < 10:
+        return float("inf")
+    r = np.einsum("ij,ij->i", P_obj[hit] - S[j[hit]], N[j[hit]])
+    return float(1.4826 * np.median(np.abs(r - np.median(r))))
+
+
+def _judged(out: Registration, P: np.ndarray, T: np.ndarray, S: np.ndarray, N: np.ndarray,
+            cfg: RegistrationConfig) -> Registration:
+    """``out`` with the depth's noise measured and, above ``max_noise``, its doubt stated."""
+    noise = _noise(P, T, S, N, 3 * cfg.inlier_dist)
+    doubt = ""
+    if noise > cfg.max_noise:
+        doubt = (f"registered on noisy depth: the points scatter {1e3 * noise:.1f} mm about the fitted surface "
+                 f"(over {1e3 * cfg.max_noise:.1f} mm), so the pose may be millimetres and degrees off")
+    return replace(out, noise=noise, doubt=doubt)
 
 
 def _quality(P: np.ndarray, T: np.ndarray, S: np.ndarray, N: np.ndarray, cams: DepthViews | _Centres,

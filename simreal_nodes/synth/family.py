@@ -259,11 +259,16 @@ STEREO_BASELINE = 0.12  # metres, a common stereo camera's (e.g. ZED 2)
 
 
 def family_scene(seed: int, width: int = 640, height: int = 480, fps: float = 15.0,
-                 duration: float | None = None, t_free: float = T_FREE, sensor: str = "rgbd") -> SynthScene:
+                 duration: float | None = None, t_free: float = T_FREE, sensor: str = "rgbd",
+                 view: dict | None = None) -> SynthScene:
     """One scene of the family (see the module docstring). Frame rate 15 fps like the issue's recording.
     ``t_free``: seconds of unloaded mapping before the load is placed (0: loaded from the first frame, so every
     map point is first seen on the deformed object — the case where links could carry an estimate's error).
-    ``sensor``: ``rgbd`` or ``stereo`` (the same draw seen through a stereo pair)."""
+    ``sensor``: ``rgbd`` or ``stereo`` (the same draw seen through a stereo pair).
+    ``view``: the camera placed elsewhere than drawn, for sweeps of the viewpoint (the physical scene, its load
+    included, is unchanged): ``distance`` (metres to the beam's centre), ``elevation_deg`` (above the floor),
+    ``azimuth_deg`` (the arc's middle turned this far from the beam's front-face normal, towards its free end),
+    ``arc_deg`` (the arc's width)."""
     if sensor not in ("rgbd", "stereo"):
         raise ValueError(f"family sensor: expected 'rgbd' or 'stereo'; found '{sensor}'")
     stereo = sensor == "stereo"
@@ -271,6 +276,14 @@ def family_scene(seed: int, width: int = 640, height: int = 480, fps: float = 15
     d = scaled_force(draw(seed, width, height), max(cam.fx, cam.fy))
     if duration:
         d = FamilyDraw(**{**asdict(d), "duration": float(duration), "positions": d.positions})
+    view = dict(view or {})
+    unknown = set(view) - {"distance", "elevation_deg", "azimuth_deg", "arc_deg"}
+    if unknown:
+        raise ValueError(f"family view: unknown keys {sorted(unknown)} (distance, elevation_deg, azimuth_deg, arc_deg)")
+    if {"distance", "elevation_deg", "arc_deg"} & set(view):  # the camera moved after the load was scaled: same physics
+        d = FamilyDraw(**{**asdict(d), "distance": float(view.get("distance", d.distance)),
+                          "cam_elevation_deg": float(view.get("elevation_deg", d.cam_elevation_deg)),
+                          "arc_deg": float(view.get("arc_deg", d.arc_deg)), "positions": d.positions})
     yaw = np.deg2rad(d.yaw_deg)
     origin = np.array([0.0, 0.0, 0.12])
     T_wo = G.make_T(G.rot_axis("z", yaw), origin)
@@ -325,7 +338,7 @@ def family_scene(seed: int, width: int = 640, height: int = 480, fps: float = 15
 
     target = T_wo[:3, :3] @ np.array([d.length / 2, d.width / 2, d.height / 2]) + origin
     el = np.deg2rad(d.cam_elevation_deg)
-    az_mid = yaw - np.pi / 2  # the camera looks at the beam's front face (y = 0 side)
+    az_mid = yaw - np.pi / 2 + np.deg2rad(float(view.get("azimuth_deg", 0.0)))  # looks at the front face (y = 0)
     az0, az1 = az_mid - np.deg2rad(d.arc_deg) / 2, az_mid + np.deg2rad(d.arc_deg) / 2
 
     def cam_pose(t: float) -> np.ndarray:

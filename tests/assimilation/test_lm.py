@@ -130,3 +130,53 @@ def test_prediction_is_the_projected_model_state() -> None:
     Xc = Xw @ p.T_cw[:3, :3].T + p.T_cw[:3, 3]
     q = Xc @ p.K.T
     np.testing.assert_allclose(uv, q[:, :2] / q[:, 2:], rtol=1e-12)
+
+
+def _linear(scales, noise=0.3, seed=3, n=200):
+    """obs = A (x / scales): a linear model whose unknowns are in very different units (a position in metres, a
+    Young's modulus in pascals). ``scales``: each unknown's typical size; equal columns make a direction unseen."""
+    rng = np.random.default_rng(seed)
+    A = rng.normal(size=(n, 2, len(scales)))
+    if len(scales) == 3:
+        A[:, :, 2] = A[:, :, 1]  # the third unknown moves the pixels exactly as the second does
+    J = A / np.asarray(scales, dtype=np.float64)
+
+    def model(x):
+        return np.einsum("nck,k->nc", J, x), J, np.ones(n, bool)
+    return model, J, rng
+
+
+def test_unknowns_in_very_different_units_are_all_estimated_and_their_variance_is_honest():
+    """A position (0-0.5 m) beside a modulus (5e10-9e10 Pa): both recovered from a start 10 % of each range off,
+    and the standard deviations match the scatter over noisy solves. In SI units the modulus's squared Jacobian is
+    1e20 times smaller: before the normal equations were scaled by the ranges it never moved and its variance was
+    reported as zero (benchmarks/lm_conditioning.py)."""
+    lo, hi = np.array([0.0, 5e10]), np.array([0.5, 9e10])
+    model, J, rng = _linear([0.05, 4e9])
+    x_true = np.array([0.21, 7.3e10])
+    ests, sds = [], []
+    for _ in range(30):
+        obs = np.einsum("nck,k->nc", J, x_true) + rng.normal(0, 0.3, (len(J), 2))
+        r = lm.solve_generic(model, obs, x_true + 0.1 * (hi - lo), lo, hi, huber=1e9)
+        ests.append(r.x)
+        sds.append(np.sqrt(np.diag(r.cov)))
+    ests, sds = np.array(ests), np.array(sds)
+    assert np.all(np.abs(ests.mean(axis=0) - x_true) < 0.01 * (hi - lo))
+    scatter = ests.std(axis=0)
+    assert np.all(sds.mean(axis=0) > 0.6 * scatter) and np.all(sds.mean(axis=0) < 1.6 * scatter)
+
+
+def test_an_unseen_direction_gets_a_huge_variance_and_a_pinned_parameter_none():
+    lo, hi = np.array([0.0, 5e10, 5e10]), np.array([0.5, 9e10, 9e10])
+    model, J, rng = _linear([0.05, 4e9, 4e9])
+    x_true = np.array([0.21, 7.0e10, 7.0e10])
+    obs = np.einsum("nck,k->nc", J, x_true) + rng.normal(0, 0.3, (len(J), 2))
+    r = lm.solve_generic(model, obs, x_true, lo, hi, huber=1e9)
+    sd = np.sqrt(np.diag(r.cov))
+    assert sd[0] < 0.01 * 0.5
+    assert np.all(sd[1:] > 10 * (hi - lo)[1:])  # only their sum is seen: each alone is unknown
+    lo2, hi2 = lo.copy(), hi.copy()
+    lo2[2] = hi2[2] = 7.0e10  # pinned: given, not estimated
+    r = lm.solve_generic(model, obs, x_true, lo2, hi2, huber=1e9)
+    sd = np.sqrt(np.diag(r.cov))
+    assert sd[2] == 0 and sd[1] < 0.01 * (hi - lo)[1]

@@ -111,3 +111,32 @@ def test_ray_weights_keep_the_old_weights_for_rays_that_miss_or_graze():
     assert np.allclose(w[0], [0.6, 0.2, 0.2])
     assert np.allclose(w[1:], old[1:])
     assert np.allclose(ray_weights(o, -D[:1], tri[:1], old[:1]), old[:1])  # behind the camera
+
+
+def test_the_depth_noise_about_a_fit_is_measured_where_the_fit_residual_cannot_see_it():
+    """Points scattered about a plane with sigma 1, 3 and 12 mm: the fit's own residual (inliers within 6 mm) stays
+    under 3.5 mm however large the noise; :func:`_noise` follows it, and above ``max_noise`` the registration is
+    kept but doubted (its estimates are flagged: ObjectTrackers.update)."""
+    from simreal_nodes.assimilation.registration import (
+        Registration,
+        RegistrationConfig,
+        _Centres,
+        _judged,
+        _noise,
+        _quality,
+    )
+
+    rng = np.random.default_rng(0)
+    g = np.linspace(0.0, 0.3, 120)
+    S = np.c_[np.repeat(g, len(g)), np.tile(g, len(g)), np.zeros(len(g) ** 2)]
+    N = np.tile([0.0, 0.0, 1.0], (len(S), 1))
+    cfg = RegistrationConfig()
+    T = np.eye(4)
+    for sigma in (0.001, 0.003, 0.012):
+        P = S[::3] + np.c_[np.zeros((len(S[::3]), 2)), rng.normal(0.0, sigma, len(S[::3]))]
+        _, rmse, _ = _quality(P, T, S, N, _Centres(np.array([[0.15, 0.15, 1.0]])), cfg.inlier_dist)
+        noise = _noise(P, T, S, N, 3 * cfg.inlier_dist)
+        assert rmse < 0.0035
+        assert noise == pytest.approx(sigma, rel=0.15 if sigma < 0.01 else 0.35)
+        out = _judged(Registration(T, 1.0, rmse, len(P), None), P, T, S, N, cfg)
+        assert bool(out.doubt) == (sigma > cfg.max_noise), (sigma, out.noise)

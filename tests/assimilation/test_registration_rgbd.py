@@ -49,6 +49,39 @@ def test_registration_places_the_beam_from_a_rough_guess(scene3):
     mm, deg = _error(reg.T_map_obj, s["truth"])
     assert mm < 2.0 and deg < 0.5, (mm, deg)
     assert reg.fitness > 0.9 and reg.rmse < 0.003 and reg.plane is not None
+    assert reg.doubt == "" and reg.noise < CFG.max_noise, reg.noise
+
+
+def test_a_fit_on_very_noisy_depth_is_kept_but_doubted_and_its_estimates_flagged(scene3):
+    """Depth noise of 20 mm at 1 m (growing with z^2; benchmarks/depth_quality.py): the fit's own residual cannot
+    see it (inliers within 6 mm), the scatter about the fit does; the registration is kept and doubted, and an
+    estimate that would be OK is reported low-confidence with the doubt as its reason."""
+    from dataclasses import replace
+
+    from simreal_nodes.assimilation.tracker import Estimate
+
+    s, seq = scene3, scene3["seq"]
+    rng = np.random.default_rng(5)
+    noisy = [seq["depth"][i] + rng.normal(0, 1, seq["depth"][i].shape).astype(np.float32) * 0.02
+             * seq["depth"][i] ** 2 for i in VIEWS]
+    cloud = np.vstack([depth_cloud(seq["cam"], d, seq["T"][i], CFG.stride) for d, i in zip(noisy, VIEWS)])
+    reg = register_rgbd(cloud, s["model"], s["guess"], s["cams"], CFG)
+    assert reg.rmse < CFG.max_rmse  # the old check passes it
+    assert reg.noise > CFG.max_noise and reg.doubt.startswith("registered on noisy depth"), reg.noise
+    scene = build_spec_models(validate_scene(copy.deepcopy(s["doc"]), "family_3", "."))
+    objs = ObjectTrackers(scene["objects"], {"beam": s["model"]}, registration=CFG)
+    objs.set_camera(seq["cam"])
+    objs.registrations["beam"] = reg
+    tr = objs._tracker(scene["objects"][0])
+    for state in (EstimateState.OK, EstimateState.LOST):
+        ok = Estimate(tr.names, tr.units, tr.values.copy(), tr.frozen.copy(), np.zeros((1, 1)), state=state,
+                      reason="" if state == EstimateState.OK else "lost")
+        tr.update = lambda *a, ok=ok, **k: replace(ok)  # the tracker's own judgement, as it would give it
+        est = objs.update(seq["T"][8])["beam"]
+        if state == EstimateState.OK:
+            assert est.state == EstimateState.LOW_CONFIDENCE and est.reason == reg.doubt
+        else:
+            assert est.state == EstimateState.LOST and est.reason == "lost"
 
 
 def test_a_fit_without_the_object_is_refused(scene3):

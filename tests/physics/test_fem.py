@@ -137,3 +137,23 @@ def test_material_stress_and_tangent_are_derivatives(law):
     np.testing.assert_allclose(m.P(F), Pfd, atol=1e-7)
     np.testing.assert_allclose(m.dP(F, H), (m.P(F + eps * H) - m.P(F - eps * H)) / (2 * eps), atol=1e-6)
     np.testing.assert_allclose(m.P(np.repeat(np.eye(3)[:, :, None], 2, axis=2)), 0, atol=1e-12)
+
+
+def test_uniaxial_compression_against_the_analytic_laws_and_svk_past_its_limit_point():
+    """A cube on three sliding supports under a dead nominal traction (homogeneous uniaxial stress). Neo-Hookean at
+    30 % compression and SVK at 0.15 E match their closed forms (benchmarks/hyperelastic.py derives them); SVK
+    past E / (3 sqrt 3) has no equilibrium, and Newton says so instead of returning a shape."""
+    from benchmarks.hyperelastic import cube, nh_stretch, nh_to_load, svk_stretch
+
+    p = nh_to_load(0.7)
+    assert nh_stretch(-p) == pytest.approx(0.7, abs=1e-9)
+    r = cube("neo_hookean", -p, steps=2)
+    assert r["stretch"] == pytest.approx(0.7, abs=1e-6) and r["spread"] < 1e-9
+    r = cube("saint_venant_kirchhoff", -0.15, steps=2)
+    assert r["stretch"] == pytest.approx(svk_stretch(-0.15), abs=1e-6)
+    assert np.isnan(svk_stretch(-0.2))
+    mesh = meshes.box(0.02, 0.02, 0.02, (1, 1, 1), "hex")
+    s = fem.Solid(mesh, mat.make_material("saint_venant_kirchhoff", 1e6, 0.3), 2,
+                  [{"region": f"{ax}min", "kind": "sliding", "component": k} for k, ax in enumerate("xyz")])
+    with pytest.raises(FemError, match="Newton did not converge"):
+        s.solve(s.traction("xmax", (-0.25e6, 0.0, 0.0)), steps=2, min_step=1e-2)

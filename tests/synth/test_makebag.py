@@ -82,3 +82,19 @@ def test_synthetic_bag_replays_through_the_graph(probe_bag, tmp_path):
     stats, _rep, counts = replay(str(path), str(scene), lossless=True, record=str(tmp_path / "out"),
                                  echo=lambda *_: None)
     assert stats.frames_completed == info["frames"] and counts["/simreal/camera/image"] == info["frames"]
+
+
+def test_family_scene_names_move_the_camera_and_leave_the_physics():
+    """`family-N-d..-el..-az..-arc..` (benchmarks/camera_quality.py's sweeps): the camera's distance, elevation,
+    arc and azimuth change; the beam, its load (scaled once, at the drawn distance) and the seed do not."""
+    from simreal_nodes.synth.makebag import make_scene
+
+    base = make_scene("family-4", 640, 480, 6.0, 15.0)
+    moved = make_scene("family-4-d2.5-el60-az45-arc20", 640, 480, 6.0, 15.0)
+    d0, d1 = base.state["draw"], moved.state["draw"]
+    assert (d1.distance, d1.cam_elevation_deg, d1.arc_deg) == (2.5, 60.0, 20.0)
+    assert (d1.force, d1.length, d1.E, d1.positions) == (d0.force, d0.length, d0.E, d0.positions)
+    eye0, eye1 = base.camera_pose(0.0)[:3, 3], moved.camera_pose(0.0)[:3, 3]
+    assert np.linalg.norm(eye1 - eye0) > 1.0
+    with pytest.raises(Exception, match="unknown scene"):
+        make_scene("family-4-d", 640, 480, 6.0, 15.0)
