@@ -177,7 +177,8 @@ def main() -> None:
     save("camera_quality", rows, cols, "The camera at the extremes: image noise, blur, distance, viewing angle",
          f"`python -m benchmarks.camera_quality --seeds {seeds_txt[0]}-{seeds_txt[-1]}` (see its docstring): "
          f"development seeds {', '.join(map(str, seeds_txt))} of the RGB-D scene family at 640x480, {DURATION:g} s "
-         "each; one setting changed at a time; medians over the scenes. 'placed': scenes the registration placed "
+         "each; one setting changed at a time; medians over the scenes, except 'loaded frames OK', their mean. "
+         "'placed': scenes the registration placed "
          "the object in. The load error is over the loaded frames whatever the tracker's state; 'OK' is the share "
          "of those frames it reported as a measured estimate.", plot, extra={"runs": runs})
 

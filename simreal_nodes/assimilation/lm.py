@@ -157,12 +157,16 @@ def solve_generic(model: MeasurementModel, obs: Vector, x0: ArrayLike, lo: Vecto
     as if unseen and reported as if exactly known (`benchmarks/lm_conditioning.py`). The covariance is
     s^2 (H + eps I)^-1 in those units, eps = 1e-10 x mean(diag H): a direction the images do not see gets a huge
     variance (flagged downstream) instead of the zero that a pseudo-inverse gives it. A parameter pinned by equal
-    bounds is given, not estimated: its variance is zero."""
+    bounds is given, not estimated: the step and the variance are over the free parameters only, and a pinned one's
+    covariance is NaN (as :mod:`.dense` reports it). A free parameter whose standard deviation exceeds its range
+    (the images do not see it) does not end the solve by the 5 %-of-sd test, only by the others."""
     x = np.clip(np.asarray(x0, dtype=np.float64), lo, hi)
     n = len(x)
     sig = np.ones(len(obs)) if sigma is None else np.asarray(sigma, dtype=np.float64)
     width = np.abs(np.asarray(hi, dtype=np.float64) - np.asarray(lo, dtype=np.float64))
-    unit = np.where(width > 0, width, 1.0)  # x = unit * z
+    fi = np.flatnonzero(width > 0)  # the free parameters: the others are pinned by equal bounds
+    unit = np.where(np.isfinite(width) & (width > 0), width, 1.0)  # x = unit * z (an unbounded one: its own unit)
+    uf = unit[fi]
 
     isig = 1.0 / sig
 
@@ -178,34 +182,41 @@ def solve_generic(model: MeasurementModel, obs: Vector, x0: ArrayLike, lo: Vecto
         c = np.where(rn <= huber, rn * rn, 2 * huber * rn - huber * huber)
         return r, J * isig[:, None, None] * unit, w, valid, float(c[valid].sum())
 
+    def normal(J: Vector, w: Vector, r: Vector) -> tuple[Vector, Vector]:
+        """J^T W J and J^T W r over the free parameters (range units)."""
+        Jf = J.reshape(-1, n)[:, fi]
+        wf = np.repeat(w, 2)
+        return Jf.T @ (Jf * wf[:, None]), Jf.T @ (wf * r.ravel())
+
     r, J, w, valid, cost = evaluate(x)
     lam = lam0
     it = 0
-    converged = False
-    span = np.abs(hi - lo) + 1e-300
+    converged = len(fi) == 0  # nothing to estimate
     while it < max_iter and not converged:
         it += 1
-        Jf = J.reshape(-1, n)
-        wf = np.repeat(w, 2)
-        H = Jf.T @ (Jf * wf[:, None])
-        g = Jf.T @ (wf * r.ravel())
+        H, g = normal(J, w, r)
         D = np.maximum(np.diag(H), 1e-12 * max(float(np.trace(H)), 1e-300))
-        try:  # the parameters' standard deviations at this iterate (x units)
-            s2 = cost / max(2 * int(valid.sum()) - n, 1)
-            sd = unit * np.sqrt(np.clip(s2 * np.diag(np.linalg.inv(H + 1e-12 * np.diag(D))), 0.0, None))
+        try:  # the free parameters' standard deviations at this iterate (x units)
+            s2 = cost / max(2 * int(valid.sum()) - len(fi), 1)
+            sd = uf * np.sqrt(np.clip(s2 * np.diag(np.linalg.inv(H + 1e-12 * np.diag(D))), 0.0, None))
         except np.linalg.LinAlgError:
-            sd = np.zeros(n)
+            sd = np.zeros(len(fi))
+        # a parameter the images do not see (sd over its range) stops on the resolution test only: its huge sd
+        # would otherwise end the solve before the combination they do see is fitted
+        seen = sd < np.where(np.isfinite(width[fi]), width[fi], np.inf)
         accepted = False
         for _ in range(8):
             try:
-                step = unit * np.linalg.solve(H + lam * np.diag(D), g)
+                step = np.zeros(n)
+                step[fi] = uf * np.linalg.solve(H + lam * np.diag(D), g)
             except np.linalg.LinAlgError:
                 lam *= 10
                 continue
             xn = np.clip(x + step, lo, hi)
-            dx = np.abs(xn - x)
-            if (np.all(dx <= tol * span) or np.all(dx <= 0.05 * sd)
-                    or float(g @ ((xn - x) / unit)) <= cost_tol * max(cost, 1e-300)):
+            dx = np.abs(xn - x)[fi]
+            small = dx <= tol * uf
+            if (np.all(small) or np.all(np.where(seen, dx <= 0.05 * sd, small))
+                    or float(g @ ((xn - x)[fi] / uf)) <= cost_tol * max(cost, 1e-300)):
                 converged = True  # the step is below resolution, blocked by the bounds, or promises nothing
                 break
             rn_, Jn, wn, vn, cn = evaluate(xn)
@@ -219,21 +230,18 @@ def solve_generic(model: MeasurementModel, obs: Vector, x0: ArrayLike, lo: Vecto
             lam *= 10
         if not accepted:
             converged = True
-    Jf = J.reshape(-1, n)
-    wf = np.repeat(w, 2)
-    H = Jf.T @ (Jf * wf[:, None])
     rnorm = np.linalg.norm(r, axis=1)
     inl = valid & (rnorm <= 3 * huber)
-    dof = max(2 * int(inl.sum()) - n, 1)
+    dof = max(2 * int(inl.sum()) - len(fi), 1)
     s2 = float(np.sum(r[inl] ** 2)) / dof if inl.any() else float("nan")
-    if np.all(np.isfinite(H)):
-        cov = np.zeros((n, n))  # a parameter pinned by equal bounds is given, not estimated: no variance
-        f = np.flatnonzero(width > 0)
-        if len(f):
-            Hf = H[np.ix_(f, f)]
-            eps = 1e-10 * max(float(np.trace(Hf)) / len(f), 1e-300)
-            cov[np.ix_(f, f)] = np.linalg.inv(Hf + eps * np.eye(len(f))) * s2 * np.outer(unit[f], unit[f])
-    else:
-        cov = np.full((n, n), np.inf)
+    # a parameter pinned by equal bounds is given, not estimated: NaN, as the dense solver reports it
+    cov = np.full((n, n), np.nan)
+    if len(fi):
+        H, _ = normal(J, w, r)
+        scale = float(np.trace(H)) / len(fi)
+        if np.all(np.isfinite(H)) and scale > 0:
+            cov[np.ix_(fi, fi)] = np.linalg.inv(H + 1e-10 * scale * np.eye(len(fi))) * s2 * np.outer(uf, uf)
+        else:  # nothing seen at all
+            cov[np.ix_(fi, fi)] = np.inf
     rms = float(np.sqrt(np.mean(np.sum((r[inl] * sig[inl, None]) ** 2, axis=1)))) if inl.any() else float("nan")
     return Result(x, cov, rms, int(inl.sum()), it, converged, r, cost)
