@@ -33,6 +33,7 @@ from benchmarks.family import parse_seeds
 from simreal_nodes.rom.build import cached_model
 from simreal_nodes.rom.model_file import load_model
 from simreal_nodes.synth.family import default_camera, draw, scaled_force, spec_path, truth_for
+from simreal_nodes.synth.truth import model_error
 
 MODES = [1, 2, 3, 4, 5, 6, 8, 10, 12, 15, 19]
 
@@ -47,21 +48,15 @@ def seed_rows(seed: int) -> list[dict]:
     nodes = np.unique(np.asarray(model.surface).ravel())
     emb = truth.embed(model.points[nodes])
     keep = [k for k in range(0, len(truth.s), 2) if ax.contains(float(truth.s[k]))]
-    s_true = truth.s[keep]
     UT = np.stack([np.einsum("nk,nkc->nc", emb[1], truth.U[k][emb[0]]).ravel() for k in keep])  # (P, 3n)
-    grid = np.linspace(*ax.range, 4001)  # the best fit's resolution: 1/4000 of the range
     span = d.span
     snaps = np.stack([fld.evaluate([g], nodes=nodes).ravel() for g in ax.values])  # (n_s, 3n), all modes
     _, _, Vt = np.linalg.svd(snaps, full_matrices=False)
     rows = []
     for n in [m for m in MODES if m <= fld.n_modes]:
-        view = fld.view(nodes, n)
-        table = np.stack([view.evaluate([g]).ravel() for g in grid])
-        rel, bias = [], []
-        for s, ut in zip(s_true, UT):
-            um = view.evaluate([float(s)]).ravel()
-            rel.append(np.linalg.norm(um - ut) / max(np.linalg.norm(ut), 1e-300))
-            bias.append(abs(grid[int(np.argmin(np.sum((table - ut) ** 2, axis=1)))] - s) / span * 100)
+        # every second tabulated position; the best fit's resolution 1/4000 of the range
+        err = model_error(model, truth, n_fit=4001, every=2, n_modes=n)
+        rel, bias = err.rel_l2, np.abs(err.bias) / span * 100
         B = Vt[:n]
         pod = [np.linalg.norm(ut - (ut @ B.T) @ B) / max(np.linalg.norm(ut), 1e-300) for ut in UT]
         big = fld.view(np.resize(np.arange(model.n_nodes), 1000), n)

@@ -248,8 +248,9 @@ class ModelError:
 
 
 def model_error(model: ReducedModel, truth: BeamLoadTruth, axis: str = "s", n_fit: int = 401,
-                every: int = 4) -> ModelError:
-    """Compare a one-parameter load-position model with the truth at every ``every``-th tabulated position.
+                every: int = 4, n_modes: int | None = None) -> ModelError:
+    """Compare a one-parameter load-position model with the truth at every ``every``-th tabulated position, with
+    all its modes or the first ``n_modes`` (the best fit searched on ``n_fit`` positions over the axis).
 
     Both are expressed in the same object frame; the truth is interpolated at the model's surface nodes."""
     ax = model.axis(axis)
@@ -258,7 +259,7 @@ def model_error(model: ReducedModel, truth: BeamLoadTruth, axis: str = "s", n_fi
     nodes = np.unique(np.asarray(model.surface).ravel()) if len(model.surface) else np.arange(model.n_nodes)
     emb = truth.embed(model.points[nodes])
     grid = np.linspace(*ax.range, n_fit)
-    view = model.field("displacement").view(nodes)
+    view = model.field("displacement").view(nodes, n_modes)
     table = np.stack([view.evaluate([g]).ravel() for g in grid])  # (n_fit, 3 n)
     s_out, rel, best = [], [], []
     for k in range(0, len(truth.s), every):
