@@ -94,6 +94,9 @@ def run_scene(seed: int, width: int = 640, height: int = 480, preloaded: bool = 
         "loaded_frames": int(loaded.sum()),
         "ok_pct": float(100 * ok.mean()), "median_err_pct": float(np.median(err)),
         "p90_err_pct": float(np.percentile(err, 90)), "mean_err_pct": float(np.mean(err)),
+        # the frames the tracker vouched for: a large error here is a silent failure
+        "ok_median_err_pct": float(np.median(err[ok])) if ok.any() else float("nan"),
+        "ok_p90_err_pct": float(np.percentile(err[ok], 90)) if ok.any() else float("nan"),
         "step_ms_p50": float(np.median(step_ms)), "render_s": round(t_render, 1),
         "solve_ms_p50": float(np.median(solve_ms)) if solve_ms else float("nan"),
         "tracker_ms_p50": float(np.median(tracker_ms)) if tracker_ms else float("nan"),
@@ -161,11 +164,11 @@ def registration_error(pipe: Pipeline, seq: dict) -> dict:
             "registration_noise_mm": 1e3 * float(reg.noise), "registration_doubt": reg.doubt}
 
 
-def run_registration(seed: int, width: int = 640, height: int = 480, sensor: str = "rgbd") -> dict:
+def run_registration(seed: int, width: int = 640, height: int = 480, sensor: str = "rgbd", view: str = "") -> dict:
     """The registration step alone: the scene's first frames (as many as :class:`RegistrationConfig` collects)
     through the pipeline (RGB-D or stereo SLAM poses, the scene file's guess), until the beam is placed."""
     cfg = RegistrationConfig()
-    seq = sequence.__wrapped__(scene_name(seed, sensor=sensor), width, height, fps=FPS,
+    seq = sequence.__wrapped__(scene_name(seed, sensor=sensor) + view, width, height, fps=FPS,
                                frames=cfg.frames * cfg.every + 2, stereo=sensor == "stereo")
     sc = seq["scene"]
     yaml_doc = sc.scene_yaml(sc)

@@ -100,10 +100,11 @@ class ObjectTrackers:
             else:
                 est = out[o["id"]] = self._tracker(o).update(T_wc, ids, P, uv, bgr, depth)
                 reg = self.registrations.get(o["id"])
-                if reg is not None and reg.doubt and est.state == EstimateState.OK:
-                    # placed on depth too noisy to trust the pose to millimetres: every estimate says so
+                if reg is not None and reg.doubt and est.state in (EstimateState.OK, EstimateState.LOW_CONFIDENCE):
+                    # placed on depth too noisy, or with its ends too little seen, to trust the pose to millimetres:
+                    # every estimate says so, first (a doubt about this frame's fit follows it)
+                    est.reason = reg.doubt if est.state == EstimateState.OK else f"{reg.doubt}; {est.reason}"
                     est.state = EstimateState.LOW_CONFIDENCE
-                    est.reason = reg.doubt
         return out
 
     def _register(self, o: dict[str, Any], T_wc: np.ndarray | None, depth: np.ndarray | None) -> str:

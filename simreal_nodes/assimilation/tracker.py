@@ -544,9 +544,16 @@ class DeformableTracker:
             # at rest before any load was seen: the placement error as the images see it (later frames judged
             # undeformed may carry a small load the rigid fit would absorb)
             self.dense.hold_rest()
-        return self._conclude(est, res.mu, bool(deforming),
-                              f"photometric residual {fit:.2f} vs {res.rest_rms:.2f} undeformed, "
-                              f"motion {res.motion_px:.2f} px")
+        est = self._conclude(est, res.mu, bool(deforming),
+                             f"photometric residual {fit:.2f} vs {res.rest_rms:.2f} undeformed, "
+                             f"motion {res.motion_px:.2f} px")
+        gap = float(res.debug.get("camera_gap_sigma", float("nan")))
+        if est.state == EstimateState.OK and gap > self.cfg.dense.max_camera_gap:
+            est.state = EstimateState.LOW_CONFIDENCE
+            est.reason = (f"the static surroundings alone put the camera {gap:.1f} sigma from the joint fit's (at most "
+                          f"{self.cfg.dense.max_camera_gap:g}): the fit traded the camera's error against the "
+                          "object's deformation (a view along the floor?)")
+        return est
 
     def reference_from_depth(self, T_wc: np.ndarray, depth: np.ndarray | None
                              ) -> tuple[np.ndarray | None, str, bool]:
@@ -801,6 +808,7 @@ def tracker_config(obj: dict[str, Any], **overrides: Any) -> TrackerConfig:
                         dense=DenseSettings(step_px=t["dense_step_px"], rigid=t["dense_rigid"],
                                           static_ring_px=t["dense_surroundings_px"], refine=t["dense_refine"],
                                           camera_first=t["dense_camera_first"],
+                                          camera_check=t["dense_camera_check"],
                                           placement_measured=obj["anchor"]["kind"] == "registration"),
                         dots=np.asarray(t["dots"]) if t["dots"] else None, dot_color=tuple(t["dot_color"]))
     return replace(cfg, **overrides)

@@ -117,6 +117,10 @@ TRACKING = Record({
     "dense_camera_first": Bool("measurements 'dense' with the surroundings: measure the camera's error on them "
                                "alone, then fit the object with it held (off, the default: one joint fit)",
                                default=False),
+    "dense_camera_check": Bool("measurements 'dense' with the surroundings: refit the camera's error on them "
+                               "alone after the joint fit and flag the estimate low-confidence where they disagree "
+                               "(the fit traded the camera against the deformation; one more small fit per frame)",
+                               default=True),
     "reference": Enum(("depth", "rest"), "the object's state in the view that later ones are compared with (the "
                       "dense reference view, a registered object's fit): read from the depth image where there is "
                       "one (the model's deformed surface fitted to it; a scene loaded from its first frame), or "
