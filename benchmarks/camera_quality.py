@@ -115,7 +115,7 @@ def summarise(runs: list[dict]) -> list[dict]:
                 "ok_pct": float(np.mean([r["ok_pct"] for r in rr])),
                 # the worst scene's median error over the frames called OK (a silent failure when large)
                 "ok_err_pct": float(np.nanmax(ok_err)) if np.isfinite(ok_err).any() else float("nan"),
-                "reason": " / ".join(reasons)[:240],
+                "reason": " / ".join(reasons)[:400],
                 "step_ms_p50": float(np.median([r["step_ms_p50"] for r in rr])),
             })
     return rows

@@ -166,7 +166,9 @@ def registration_error(pipe: Pipeline, seq: dict) -> dict:
 
 def run_registration(seed: int, width: int = 640, height: int = 480, sensor: str = "rgbd", view: str = "") -> dict:
     """The registration step alone: the scene's first frames (as many as :class:`RegistrationConfig` collects)
-    through the pipeline (RGB-D or stereo SLAM poses, the scene file's guess), until the beam is placed."""
+    through the pipeline (RGB-D or stereo SLAM poses, the scene file's guess), until the beam is placed. ``view``:
+    a camera override appended to the scene name (``-d0.5``, ``-el5``: :func:`~simreal_nodes.synth.family`'s
+    scene names; benchmarks/camera_quality.py)."""
     cfg = RegistrationConfig()
     seq = sequence.__wrapped__(scene_name(seed, sensor=sensor) + view, width, height, fps=FPS,
                                frames=cfg.frames * cfg.every + 2, stereo=sensor == "stereo")

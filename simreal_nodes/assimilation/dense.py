@@ -98,11 +98,14 @@ class DenseSettings:
     # and report how far (Mahalanobis, in the correction's prior sigmas) they move it (DenseResult.debug
     # 'camera_gap_sigma'); the tracker flags a fit whose gap exceeds max_camera_gap: the joint fit traded the
     # camera's error against the object's deformation (a camera 5 degrees above the floor, development seed 1: 8.7 %
-    # of the span off, every frame OK before). 1.0 was chosen on development seeds 0-5 as drawn and seeds 0-1 from
-    # 2 m and at 5, 65 and 80 degrees elevation: good views stay under 0.65 but for one at 2 m (3.0 at most, a
-    # third of its frames over 1), the failing view's bad frames are all over 1. It costs one more fit, on the
+    # of the span off, every frame OK before). 1.0 was chosen on development seeds 0-5 as drawn, seed 0 from 2 m
+    # and at 65 degrees of elevation, seed 1 from 2 m and at 5 and 80 degrees: the good views stay under 0.65 but
+    # for seed 1 at 2 m (3.0 at most, a third of its frames over 1); the failing view's bad frames are all over 1
+    # (median 3.9). It costs one more fit, on the
     # surroundings alone, per frame: the tracker's time on development seed 3 went from 66 to 81 ms per
-    # frame (False: `tracking.dense_camera_check`); it changes no estimate, only its state
+    # frame (False: `tracking.dense_camera_check`); it changes no estimate, only its state. A frame whose
+    # surroundings are too few for a fit of their own (under min_samples / 4^level at every level) is not checked
+    # (the gap is NaN)
     camera_check: bool = True
     max_camera_gap: float = 1.0
 
@@ -832,14 +835,6 @@ class DenseAligner:
         assert f.mu is not None
         if self.s.refine and len(rows) >= self.s.min_samples and np.isfinite(sigma):
             f.mu = self._refine(finest, pyr[finest], rows, f, T_cw, lo, hi, sigma)
-        cam_gap = float("nan")
-        if use_s and not cam_first and self.s.camera_check:
-            # the surroundings alone, from the joint fit's camera: where they want the camera elsewhere, the joint
-            # fit has traded the camera's error against the object's deformation
-            probe = f.copy()
-            # coarse to fine (from the finest level alone it missed a 10 mm disagreement: tests/assimilation)
-            if self._fit_camera(pyr, grads, probe, T_cw):
-                cam_gap = float(np.linalg.norm((probe.cam - f.cam) / wide))
         n_mu = len(mu0)
         res = DenseResult(f.mu.copy(), np.full((n_mu, n_mu), np.nan), sigma, float("nan"), len(rows),
                           int(np.sum(np.abs(r[np.isfinite(r)]) <= TUKEY * sigma)), 0.0, f.iterations)
@@ -848,6 +843,14 @@ class DenseAligner:
             return res
         self.rigid, self.cam_corr, self.photo, self.photo_s = f.rigid.copy(), f.cam.copy(), f.photo.copy(), \
             f.photo_s.copy()
+        cam_gap = float("nan")
+        if use_s and not cam_first and self.s.camera_check:
+            # the surroundings alone, from the joint fit's camera: where they want the camera elsewhere, the joint
+            # fit has traded the camera's error against the object's deformation
+            probe = f.copy()
+            # coarse to fine (from the finest level alone it missed a 10 mm disagreement: tests/assimilation)
+            if self._fit_camera(pyr, grads, probe, T_cw):
+                cam_gap = float(np.linalg.norm((probe.cam - f.cam) / wide))
         fi = np.flatnonzero(free)
         if len(fi) and H.shape[0] >= len(fi):
             with contextlib.suppress(np.linalg.LinAlgError):

@@ -238,18 +238,18 @@ class RegistrationConfig:
     ``inlier_dist``) or above ``max_rmse`` (point-to-plane residual of those inliers; the depth noise of a
     structured-light sensor at 1.5 m is about 4 mm). ``slide_ratio``: a direction whose share of the matched
     normals' scatter is under this (against the strongest) is one the fit can slide along (:func:`_pin_slide`); it
-    is moved only where a slide would cover ``slide_cover`` more of the model's faces turned to the cameras. A fit
-    that could slide over more than ``max_slide_spread`` at about the same cover (:func:`slide_spread`; at most
-    28 mm on development seeds 0-99) is refused: the data do not pin it. One that could slide over more than
-    ``max_slide_share`` of the model's extent along that direction (:func:`slide_share`) is kept but doubted: a
-    position along it (a load's) may be off by half the slide. 5 % was chosen on development seeds 0-29 and seeds
-    0-9 with the camera at 0.5 and 0.7 m: accepted fits reach 4.6 % (0.2 mm off), the one fit placed 44 mm off
-    along its beam (seed 1 at 0.5 m) 7.3 %. A fit on depth that scatters more than
-    ``max_noise`` about it (:func:`_noise`) is kept but doubted (:attr:`Registration.doubt`; its estimates are
-    flagged): chosen on development seeds 0-9 with their depth made noisier (`./run bench depth_quality`), 3.5 mm
-    flags 14 of the 17 fits more than 3 mm or 2 degrees off and 4 of the 72 within them. ``fine``: the fine stage's
-    freedom, ``full`` (6 degrees) or ``upright`` (translation and a turn about the up axis, roll and pitch from the
-    support plane, where one was found; see :meth:`for_camera`)."""
+    is moved only where a slide would cover ``slide_cover`` more of the model's faces turned to the cameras. A fit that
+    could slide over more than ``max_slide_spread`` at about the same cover (:func:`slide_spread`; at most 28 mm on
+    development seeds 0-99) is refused: the data do not pin it. One that could slide over more than ``max_slide_share``
+    of the model's extent along that direction (:func:`slide_share`) is kept but doubted: a position along it (a load's)
+    may be off by half the slide. 5 % was chosen on development seeds 0-29 and seeds 0-9 with the camera at 0.5 and 0.7
+    m: accepted fits reach 4.6 % (0.2 mm off), the one fit placed 45 mm off along its beam (seed 1 at 0.5 m) 7.3 % (43
+    mm and 7.1 % where the whole scene ran, docs/stability.md). A fit on depth that scatters more than ``max_noise``
+    about it (:func:`_noise`) is kept but doubted (:attr:`Registration.doubt`; its estimates are flagged): chosen on
+    development seeds 0-9 with their depth made noisier (`./run bench depth_quality`), 3.5 mm flags 14 of the 17 fits
+    more than 3 mm or 2 degrees off and 4 of the 72 within them. ``fine``: the fine stage's freedom, ``full`` (6
+    degrees) or ``upright`` (translation and a turn about the up axis, roll and pitch from the support plane, where one
+    was found; see :meth:`for_camera`)."""
 
     frames: int = 3
     every: int = 4
@@ -303,7 +303,8 @@ class Registration:
     state_reason: str = ""
     # the depth's noise about the fitted surface (metres: a robust sigma of the point-to-plane residuals within
     # 3 x inlier_dist, :func:`_noise`), and why the pose is doubted ('' when it is not): a fit accepted on depth
-    # noisier than ``max_noise`` (docs/stability.md), whose estimates are flagged low-confidence
+    # noisier than ``max_noise``, or one that can slide over more than ``max_slide_share`` of the object along its
+    # axis (docs/stability.md); its estimates are flagged low-confidence
     noise: float = 0.0
     doubt: str = ""
 
@@ -733,7 +734,8 @@ def _noise(P: np.ndarray, T: np.ndarray, S: np.ndarray, N: np.ndarray, band: flo
 
 def _judged(out: Registration, P: np.ndarray, T: np.ndarray, S: np.ndarray, N: np.ndarray,
             cfg: RegistrationConfig) -> Registration:
-    """``out`` with the depth's noise measured and, above ``max_noise``, its doubt stated."""
+    """``out`` with the depth's noise measured and its doubts stated: noise above ``max_noise``, a slide over more
+    than ``max_slide_share`` of the object (:func:`slide_share`)."""
     noise = _noise(P, T, S, N, 3 * cfg.inlier_dist)
     doubts = []
     if noise > cfg.max_noise:

@@ -548,11 +548,12 @@ class DeformableTracker:
                              f"photometric residual {fit:.2f} vs {res.rest_rms:.2f} undeformed, "
                              f"motion {res.motion_px:.2f} px")
         gap = float(res.debug.get("camera_gap_sigma", float("nan")))
-        if est.state == EstimateState.OK and gap > self.cfg.dense.max_camera_gap:
+        if est.state in (EstimateState.OK, EstimateState.LOW_CONFIDENCE) and gap > self.cfg.dense.max_camera_gap:
+            why = (f"the static surroundings alone put the camera {gap:.1f} sigma from the joint fit's (at most "
+                   f"{self.cfg.dense.max_camera_gap:g}): the fit traded the camera's error against the object's "
+                   "deformation (a view along the floor?)")
+            est.reason = why if est.state == EstimateState.OK else f"{est.reason}; {why}"
             est.state = EstimateState.LOW_CONFIDENCE
-            est.reason = (f"the static surroundings alone put the camera {gap:.1f} sigma from the joint fit's (at most "
-                          f"{self.cfg.dense.max_camera_gap:g}): the fit traded the camera's error against the "
-                          "object's deformation (a view along the floor?)")
         return est
 
     def reference_from_depth(self, T_wc: np.ndarray, depth: np.ndarray | None

@@ -274,7 +274,6 @@ def test_surroundings_that_disagree_with_the_object_about_the_camera_are_reporte
                     .debug["camera_gap_sigma"])
 
 
-
 def test_the_tracker_reports_a_fit_whose_camera_the_surroundings_dispute(model):
     """The tracker's side of the check: an estimate it would call OK is reported low-confidence, saying why, when
     the aligner's camera gap exceeds the limit; under it the estimate stays OK."""
