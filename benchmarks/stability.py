@@ -352,9 +352,9 @@ As drawn, the load position's error is 0.35 % of the span.
   surface facing the camera is matched, and at least 50 % is needed. The object waits, flagged, and is never
   reported OK. At 10 m, past the simulated depth camera's 6 m, the RGB-D SLAM never starts.
 - **Close, at 0.5 m** the beam overfills the view and its ends are barely seen. One scene is refused. The other was
-  placed 43 mm off along its axis and tracked 8.9 % off with every frame OK, a silent failure before the check below. The
-  registration's slide check had let it through: it could slide 45 mm at about the same cover, under the 60 mm
-  refusal. Now a fit that can slide over more than 5 % of the object's length is kept but doubted
+  placed 43 mm off along its axis and tracked 8.9 % off with every frame OK, a silent failure before the check
+  below. The registration's slide check had let it through: it could slide 45 mm at about the same cover, under the
+  60 mm refusal. Now a fit that can slide over more than 5 % of the object's length is kept but doubted
   (`RegistrationConfig.max_slide_share`; 8 % on stereo depth, whose smoothed ends let good fits slide further),
   and every estimate of the object says so. This one slides 7.1 % of its length. The 5 % comes from the
   registration alone on development seeds 0-29, and on seeds 0-9 from 0.5 m and 0.7 m: accepted fits slide at most
