@@ -185,6 +185,16 @@ def render_on_background(tex: np.ndarray, bg: np.ndarray, T_wc: np.ndarray, shif
     return np.clip(img, 0, 255).astype(np.uint8), depth
 
 
+def shifted_over_background() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The shifted plate over its static background: the reference view (image, depth), a second view with the
+    plate shifted by 0.6 of its range, and that view's camera pose given 1.5 mm off."""
+    tex, bg = texture(1.0), texture(1.0, seed=5)
+    T1 = pose(0.03)
+    img0, depth0 = render_on_background(tex, bg, pose(), 0.0)
+    img1, _ = render_on_background(tex, bg, T1, 0.6 * STRETCH)
+    return img0, depth0, img1, G.make_T(t=[0.0015, 0.0, 0.0]) @ T1
+
+
 @pytest.mark.parametrize("camera_first", [True, False])
 def test_surroundings_tell_the_cameras_error_from_a_deformation_that_looks_rigid(camera_first):
     """The camera pose given is 1.5 mm off. On the object alone, that error and a deformation shaped like a rigid
@@ -192,11 +202,7 @@ def test_surroundings_tell_the_cameras_error_from_a_deformation_that_looks_rigid
     depth from the reference view) the error is measured there and the load comes out right, whether the
     surroundings measure it first and alone (the default) or in one fit with the object."""
     model = shift_model()
-    tex, bg = texture(1.0), texture(1.0, seed=5)
-    T1 = pose(0.03)
-    img0, depth0 = render_on_background(tex, bg, pose(), 0.0)
-    img1, _ = render_on_background(tex, bg, T1, 0.6 * STRETCH)
-    T_err = G.make_T(t=[0.0015, 0.0, 0.0]) @ T1
+    img0, depth0, img1, T_err = shifted_over_background()
     errs = {}
     for ring in (32.0, 0.0):
         al = _aligner(model, static_ring_px=ring, placement_measured=True, camera_first=camera_first)
@@ -252,11 +258,7 @@ def test_surroundings_that_disagree_with_the_object_about_the_camera_are_reporte
     camera against the deformation looks like: a camera 5 degrees above the floor, docs/stability.md) the load is
     pushed to its bound and the gap exceeds the tracker's limit, which reports the estimate low-confidence."""
     model = shift_model()
-    tex, bg = texture(1.0), texture(1.0, seed=5)
-    T1 = pose(0.03)
-    img0, depth0 = render_on_background(tex, bg, pose(), 0.0)
-    img1, _ = render_on_background(tex, bg, T1, 0.6 * STRETCH)
-    T_err = G.make_T(t=[0.0015, 0.0, 0.0]) @ T1
+    img0, depth0, img1, T_err = shifted_over_background()
     limit = DenseSettings().max_camera_gap
     for off in (0.0, 0.01):
         al = _aligner(model, static_ring_px=32.0, placement_measured=True)
