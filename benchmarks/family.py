@@ -297,6 +297,10 @@ TABLES = (("family", "Held-out seeds (the accuracy this project reports)"),
            "(`--tracking dense_refine=false`: the defaults of stop 25, with the slide pin)"),
           ("family_dev_dense_camera_first_true", "Knob: the camera's error from the surroundings first, then held "
            "(`--tracking dense_camera_first=true`; rerun with the slide pin in stop 29)"),
+          ("family_dev_camera_check_0_5", "Development seeds 0-5 with the defaults (stop 35: the check of the camera "
+           "against the surroundings alone on), beside the knob below"),
+          ("family_dev_dense_camera_check_false", "Knob: no check of the camera against the surroundings alone "
+           "(`--tracking dense_camera_check=false`, seeds 0-5): the same estimates, fewer flags, less time"),
           ("family_dev_stop25", "Development seeds 0-11, 27, 31, 44, 46 on the code of stop 25 (before the search "
            "of the cost; kept as the baseline of the knob tables below, which ran on the same code)"),
           ("family_dev_map_points", "Development seeds 0-9, sparse measurements (`--measurements map_points`) "

@@ -358,7 +358,7 @@ As drawn, the load position's error is 0.35 % of the span.
   (`RegistrationConfig.max_slide_share`; 8 % on stereo depth, whose smoothed ends let good fits slide further),
   and every estimate of the object says so. This one slides 7.1 % of its length. The 5 % comes from the
   registration alone on development seeds 0-29, and on seeds 0-9 from 0.5 m and 0.7 m: accepted fits slide at most
-  4.6 % (one 0.2 mm off).
+  4.6 % (one 0.2 mm off) (`python -m benchmarks.flag_calibration --registration`).
 - **Azimuth:** turning the 20-degree arc up to 45 degrees from the front face helps (0.15 %). At 65 degrees one
   scene's camera loses its pose in half its frames, and its load error is 22 %, with 30 % of its frames OK (those
   at 0.14 %). At 80 degrees that scene's SLAM never starts, while the other scene still tracks at 0.24 %.
@@ -377,8 +377,8 @@ As drawn, the load position's error is 0.35 % of the span.
     the estimate is reported low-confidence (`tracking.dense_camera_check`, on). 1 was chosen on development
     seeds 0-5 as drawn, seed 0 from 2 m and at 65 degrees of elevation, and seed 1 from 2 m and at 5 and 80
     degrees. The good views there stay under 0.65 sigma, except seed 1 at 2 m (up to 3.0). On the failing view
-    every bad frame is over 1 (median 3.9). Seed 0 at 5 degrees, a good view not in that set, has 13 % of its
-    frames over 1 in this table.
+    every bad frame is over 1 (median 3.9; `python -m benchmarks.flag_calibration --camera`). Seed 0 at 5
+    degrees, a good view not in that set, has 13 % of its frames over 1 in this table.
   - **What it costs.** Time: the tracker went from 66 to 81 ms per frame on development seed 3, measured alone
     (`dense_camera_check: false` against true). False alarms: in this table some frames of scenes tracked within
     0.3-1.3 % (their medians) are now flagged: seed 1 from 2 m 36 % of its frames, with 4 px of blur 31 %, with

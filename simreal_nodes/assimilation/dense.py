@@ -101,7 +101,7 @@ class DenseSettings:
     # of the span off, every frame OK before). 1.0 was chosen on development seeds 0-5 as drawn, seed 0 from 2 m
     # and at 65 degrees of elevation, seed 1 from 2 m and at 5 and 80 degrees: the good views stay under 0.65 but
     # for seed 1 at 2 m (3.0 at most, a third of its frames over 1); the failing view's bad frames are all over 1
-    # (median 3.9). It costs one more fit, on the
+    # (median 3.9; benchmarks/flag_calibration.py). It costs one more fit, on the
     # surroundings alone, per frame: the tracker's time on development seed 3 went from 66 to 81 ms per
     # frame (False: `tracking.dense_camera_check`); it changes no estimate, only its state. A frame whose
     # surroundings are too few for a fit of their own (under min_samples / 4^level at every level) is not checked

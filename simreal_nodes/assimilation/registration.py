@@ -244,12 +244,12 @@ class RegistrationConfig:
     of the model's extent along that direction (:func:`slide_share`) is kept but doubted: a position along it (a load's)
     may be off by half the slide. 5 % was chosen on development seeds 0-29 and seeds 0-9 with the camera at 0.5 and 0.7
     m: accepted fits reach 4.6 % (0.2 mm off), the one fit placed 45 mm off along its beam (seed 1 at 0.5 m) 7.3 % (43
-    mm and 7.1 % where the whole scene ran, docs/stability.md). A fit on depth that scatters more than ``max_noise``
-    about it (:func:`_noise`) is kept but doubted (:attr:`Registration.doubt`; its estimates are flagged): chosen on
-    development seeds 0-9 with their depth made noisier (`./run bench depth_quality`), 3.5 mm flags 14 of the 17 fits
-    more than 3 mm or 2 degrees off and 4 of the 72 within them. ``fine``: the fine stage's freedom, ``full`` (6
-    degrees) or ``upright`` (translation and a turn about the up axis, roll and pitch from the support plane, where one
-    was found; see :meth:`for_camera`)."""
+    mm and 7.1 % where the whole scene ran, docs/stability.md; benchmarks/flag_calibration.py). A fit on depth that
+    scatters more than ``max_noise`` about it (:func:`_noise`) is kept but doubted (:attr:`Registration.doubt`; its
+    estimates are flagged): chosen on development seeds 0-9 with their depth made noisier (`./run bench depth_quality`),
+    3.5 mm flags 14 of the 17 fits more than 3 mm or 2 degrees off and 4 of the 72 within them. ``fine``: the fine
+    stage's freedom, ``full`` (6 degrees) or ``upright`` (translation and a turn about the up axis, roll and pitch from
+    the support plane, where one was found; see :meth:`for_camera`)."""
 
     frames: int = 3
     every: int = 4

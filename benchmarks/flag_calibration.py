@@ -1,0 +1,139 @@
+"""Where the two low-confidence flags of issue 20's camera sweep were set (development seeds only):
+
+- ``--registration``: the registration step alone on development scenes of the family, as drawn and with the
+  camera at 0.5 and 0.7 m: its error and the share of the beam's length it could slide at about the same cover
+  (:func:`~simreal_nodes.assimilation.registration.slide_share`; doubted past ``max_slide_share``);
+- ``--camera``: per frame of development scenes (6 s each, as drawn and from other views), the gap between the
+  dense fit's camera correction and the one the static surroundings alone give, in prior sigmas
+  (``camera_gap_sigma``; flagged past ``DenseSettings.max_camera_gap``), beside the frame's load error.
+
+    ./run bench flag_calibration                      # both, on the sets the thresholds were chosen on
+    python -m benchmarks.flag_calibration --registration --plan "1:-d0.5"   # one registration
+    python -m benchmarks.flag_calibration --camera --plan "1:-el5"          # one scene's frames
+
+A plan is comma-separated SEED:SUFFIX (scene-name suffixes of the family: '' as drawn, -d0.5 the camera at 0.5 m,
+-el5 at 5 degrees of elevation).
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+
+import numpy as np
+
+from benchmarks.common import save
+from benchmarks.family import FPS, _depth_or_pair, run_registration, scene_name
+from simreal_nodes.assimilation.offline import Pipeline
+from simreal_nodes.scene.schema import build_spec_models, validate_scene
+from simreal_nodes.synth.sequence import sequence
+
+DURATION = 6.0  # seconds per scene in the camera sweep (as benchmarks/camera_quality.py)
+# the sets the thresholds were chosen on (stop 35): seeds 0-29 as drawn, seeds 0-9 from 0.5 m and 0.7 m; seeds 0-5
+# as drawn and five other views of seeds 0 and 1
+REGISTRATION_PLAN = ",".join([f"{s}:" for s in range(30)] + [f"{s}:{v}" for v in ("-d0.5", "-d0.7") for s in range(10)])
+CAMERA_PLAN = "0:,1:,2:,3:,4:,5:,0:-d2,0:-el65,1:-d2,1:-el5,1:-el80"
+
+
+def parse_plan(plan: str) -> list[tuple[int, str]]:
+    out = [(int(x.split(":")[0]), x.split(":", 1)[1]) for x in plan.split(",") if x]
+    assert all(s < 50 for s, _ in out), "development seeds only (0-49)"
+    return out
+
+
+def registration_rows(specs: list[tuple[int, str]]) -> list[dict]:
+    rows = []
+    for seed, view in specs:
+        r = run_registration(seed, view=view)
+        rows.append({"seed": seed, "view": view or "as drawn", "length_mm": r["length_mm"],
+                     "registration_mm": r["registration_mm"], "slide_spread_mm": r["slide_spread_mm"],
+                     "slide_share_pct": 100 * r["slide_spread_mm"] / r["length_mm"],
+                     "doubt": r["registration_doubt"], "reason": r["reason"]})
+        print(rows[-1], flush=True)
+    return rows
+
+
+def camera_rows(specs: list[tuple[int, str]]) -> list[dict]:
+    rows = []
+    for seed, view in specs:
+        seq = sequence.__wrapped__(scene_name(seed) + view, 640, 480, duration=DURATION, fps=FPS)
+        sc = seq["scene"]
+        span = sc.state["draw"].span
+        scene = build_spec_models(validate_scene(copy.deepcopy(sc.scene_yaml(sc)), sc.name, "."))
+        pipe = Pipeline(scene, seq["cam"], baseline=sc.stereo_baseline)
+        gaps, errs = [], []
+        for i in range(len(seq["rgb"])):
+            _, out = pipe.step(np.ascontiguousarray(seq["rgb"][i][:, :, ::-1]), int(i * 1e9 / FPS),
+                               *_depth_or_pair(seq, i))
+            e, truth = out["beam"], seq["truth"][i].params["beam"][2][0]
+            gap = float(e.debug.get("camera_gap_sigma", np.nan))
+            if np.isfinite(truth) and np.isfinite(gap):
+                gaps.append(gap)
+                errs.append(100 * abs(float(e.values[0]) - truth) / span)
+        g, err = np.array(gaps), np.array(errs)
+        rows.append({"seed": seed, "view": view or "as drawn", "frames": len(g),
+                     "gap_median": float(np.median(g)), "gap_p90": float(np.percentile(g, 90)),
+                     "gap_max": float(g.max()), "err_median_pct": float(np.median(err)),
+                     "frames_over_2pct": int((err > 2).sum()), "caught_over_1": int(((err > 2) & (g > 1)).sum()),
+                     "good_over_1": int(((err <= 2) & (g > 1)).sum())})
+        print(rows[-1], flush=True)
+    return rows
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--registration", action="store_true")
+    ap.add_argument("--camera", action="store_true")
+    ap.add_argument("--plan", help="SEED:SUFFIX,... (default: the set each threshold was chosen on)")
+    a = ap.parse_args()
+    if not (a.registration or a.camera):
+        a.registration = a.camera = True
+    if a.registration:
+        rows = registration_rows(parse_plan(a.plan or REGISTRATION_PLAN))
+        save("flag_calibration_registration", rows,
+             [("seed", "seed", "{}"), ("view", "view", "{}"), ("length_mm", "length (mm)", "{}"),
+              ("registration_mm", "registration error (mm)", "{:.1f}"),
+              ("slide_spread_mm", "slide spread (mm)", "{:.0f}"), ("slide_share_pct", "share of length (%)",
+                                                                    "{:.1f}"),
+              ("doubt", "doubt", "{}"), ("reason", "not placed because", "{}")],
+             "Registration: how far a fit can slide along the beam (development seeds)",
+             "`python -m benchmarks.flag_calibration --registration` (see its docstring). A fit is doubted past "
+             "RegistrationConfig.max_slide_share of its length.",
+             lambda plt: _plot_share(plt, rows))
+    if a.camera:
+        rows = camera_rows(parse_plan(a.plan or CAMERA_PLAN))
+        save("flag_calibration_camera", rows,
+             [("seed", "seed", "{}"), ("view", "view", "{}"), ("frames", "loaded frames", "{}"),
+              ("gap_median", "gap median (sigma)", "{:.2f}"), ("gap_p90", "p90", "{:.2f}"),
+              ("gap_max", "max", "{:.2f}"), ("err_median_pct", "load error median (% span)", "{:.2f}"),
+              ("frames_over_2pct", "frames > 2 % off", "{}"), ("caught_over_1", "of those, gap > 1", "{}"),
+              ("good_over_1", "frames <= 2 % with gap > 1", "{}")],
+             "Dense fit: the camera's gap to the surroundings alone, per frame (development seeds)",
+             "`python -m benchmarks.flag_calibration --camera` (see its docstring). A frame is flagged past "
+             "DenseSettings.max_camera_gap sigma.", lambda plt: _plot_gap(plt, rows))
+
+
+def _plot_share(plt, rows: list[dict]):
+    fig, ax = plt.subplots(figsize=(5, 3.4))
+    x = [r["slide_share_pct"] for r in rows]
+    y = [r["registration_mm"] for r in rows]
+    ax.plot(x, y, "o")
+    ax.set_xlabel("slide spread, % of the beam's length")
+    ax.set_ylabel("registration error (mm)")
+    ax.set_yscale("log")
+    fig.tight_layout()
+    return fig
+
+
+def _plot_gap(plt, rows: list[dict]):
+    fig, ax = plt.subplots(figsize=(5, 3.4))
+    ax.plot([r["gap_max"] for r in rows], [r["err_median_pct"] for r in rows], "o")
+    ax.axvline(1.0, color="grey", lw=0.8)
+    ax.set_xlabel("largest camera gap over the run (sigma)")
+    ax.set_ylabel("load error median (% span)")
+    fig.tight_layout()
+    return fig
+
+
+if __name__ == "__main__":
+    main()
