@@ -301,8 +301,8 @@ TABLES = (("family", "Held-out seeds (the accuracy this project reports)"),
            "against the surroundings alone on), beside the knob below"),
           ("family_dev_dense_camera_check_false", "Knob: no check of the camera against the surroundings alone "
            "(`--tracking dense_camera_check=false`, seeds 0-5): the same estimates and, on these scenes, the same "
-           "states; its tracker times are not comparable with the table above (this run shared the 2 cores with two other "
-           "jobs): measured alone, the check costs 66 -> 81 ms per frame on seed 3 (docs/stability.md)"),
+           "states; its tracker times are not comparable with the table above (this run shared the 2 cores with "
+           "two other jobs): measured alone, the check costs 66 -> 81 ms per frame on seed 3 (docs/stability.md)"),
           ("family_dev_stop25", "Development seeds 0-11, 27, 31, 44, 46 on the code of stop 25 (before the search "
            "of the cost; kept as the baseline of the knob tables below, which ran on the same code)"),
           ("family_dev_map_points", "Development seeds 0-9, sparse measurements (`--measurements map_points`) "
