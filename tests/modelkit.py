@@ -61,3 +61,25 @@ def beam_model(n_modes: int = 6, length: float = 0.5) -> ReducedModel:
     tri = np.asarray(tris, np.int64)
     return ReducedModel("beam", P, tri, "tri3", axes, {"displacement": fld}, tri, "test beam",
                         {"law": "linear_elastic"})
+
+
+def plate_load_model(n: int = 6, size: float = 0.1, depth: float = 0.01) -> ReducedModel:
+    """Linear model over the load's position on the plate, axes (s_x, s_y) as the crossed beam's PGD has: the load at
+    grid node g makes a bump -depth exp(-(r / 0.25 size)^2) e_z around g; one separated mode per node, its parameter
+    modes the indicators of g's grid position, interpolated linearly (between nodes: the bilinear blend of the four
+    neighbouring bumps). Every node is a load point."""
+    P, tris = plate_points(n, size)
+    xs = np.linspace(0, size, n)
+    k = len(P)
+    space = np.zeros((k, k, 3))
+    gx, gy = np.zeros((k, n)), np.zeros((k, n))
+    for g in range(k):
+        r = np.linalg.norm(P - P[g], axis=1)
+        space[g, :, 2] = -depth * np.exp(-(r / (0.25 * size)) ** 2)
+        gx[g, g // n] = 1.0
+        gy[g, g % n] = 1.0
+    axes = [Axis("s_x", xs, "m", interpolation="linear"), Axis("s_y", xs, "m", interpolation="linear")]
+    fld = SeparatedField("displacement", space, [gx, gy], axes, "m", ["x", "y", "z"])
+    return ReducedModel("plate_load", P, tris, "tri3", axes, {"displacement": fld}, tris, "test plate, load anywhere",
+                        {"law": "linear_elastic"}, load_points=np.arange(k),
+                        load_directions=np.tile([0, 0, -1.0], (k, 1)))

@@ -67,7 +67,8 @@ class ContactScene:
         for o in self.objects:
             c = o["collision"]
             self.trackers[o["id"]] = ContactTracker(models[o["id"]], G.pose7_to_matrix(o["anchor"]["pose"]),
-                                                    threshold=c["threshold_m"], step=c["step"])
+                                                    threshold=c["threshold_m"], step=c["step"],
+                                                    anywhere=bool(c.get("anywhere", False)))
 
     def step(self, depth: np.ndarray, cam: CameraModel, T_wc: np.ndarray | None) -> list[ObjectContact]:
         """Advance every object by one frame: ``depth`` in metres (registered to ``cam``), ``T_wc`` the camera pose

@@ -160,6 +160,8 @@ COLLISION = Record({
     "pushes": ListOf(Str(**IDENT), "ids of objects this object can press when deformed (virtual-virtual contact)",
                      default=[]),
     "max_depth_m": Number("ignore depth beyond this, metres", lo=0, lo_open=True, default=5.0),
+    "anywhere": Bool("the load sits where the real object touches, between the model's load points (models with "
+                     "load-position axes: the linear beams), instead of at the nearest load point", default=False),
 })
 
 OBJECT_OVERLAY = Record({

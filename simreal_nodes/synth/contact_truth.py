@@ -32,6 +32,7 @@ from typing import cast
 import numpy as np
 import scipy.linalg as sla
 import scipy.optimize as so
+import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from scipy.spatial import cKDTree
 
@@ -253,3 +254,331 @@ def crossed_beams_truth(model, press_point, T_ab: np.ndarray, radius: float, cel
                         f"({solid.N} dofs), {mat.law}, frictionless node-to-surface contact: "
                         f"{len(probe)} probe nodes, {len(pairs)} node pairs between the beams")
     return prob
+
+
+# ------------------------------------------------------------------------------------------------
+# Large strain: a rigid sphere pressing a hyperelastic body (the bunny and dragon probe scenes, thesis §5.4.2-3)
+
+
+def embedding_matrix(solid: fem.Solid, points: np.ndarray) -> sp.csr_matrix:
+    """(3 n, N) sparse map from the solid's dofs to the displacement of ``points`` (n, 3) embedded in its
+    tetrahedra (barycentric weights; a point outside the mesh moves like the nearest tetrahedron's face)."""
+    if solid.order != 1 or solid.dim != 3:
+        raise FemError("embedding needs a 3D solid with linear tetrahedra")
+    P = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    tets, w = meshes.embed_points(solid.mesh, P)
+    n = len(P)
+    rows = (3 * np.arange(n)[:, None, None] + np.arange(3)[None, None, :]).repeat(4, axis=1)  # (n, 4, 3)
+    dofs = solid.basis.nodal_dofs[:, tets]  # (3, n, 4)
+    cols = np.moveaxis(dofs, 0, -1)  # (n, 4, 3)
+    vals = np.broadcast_to(w[:, :, None], (n, 4, 3))
+    return sp.coo_matrix((vals.ravel(), (rows.ravel(), cols.ravel())), shape=(3 * n, solid.N)).tocsr()
+
+
+@dataclass
+class SphereState:
+    """One solved probe position: the solid's dofs ``u``, the contact force on each sample (newtons, along its
+    sphere normal, (n, 3)), their total, the force-weighted centroid of the touching samples (reference
+    positions, body frame), and the deepest remaining penetration of a sample into the sphere (metres; the
+    penalty's error)."""
+
+    u: np.ndarray
+    forces: np.ndarray
+    total: np.ndarray
+    centroid: np.ndarray
+    penetration: float
+    newton: int
+
+
+class SphereOnSolid:
+    """A rigid sphere of ``radius`` pressing a hyperelastic :class:`~simreal_nodes.physics.fem.Solid` (large
+    strain: the solid's own law, e.g. neo-Hookean), frictionless.
+
+    The body's surface is given by ``samples`` (n, 3), points spread over its real surface (the scan) and
+    embedded in the tetrahedra (:func:`embedding_matrix`: ``x_i = X_i + (W u)_i``). Each sample inside the sphere
+    (gap ``g_i = |x_i - c| - R < 0``) is pushed out along ``n_i = (x_i - c) / |x_i - c|`` by the penalty
+    ``k (-g_i)``: the total potential ``W_int(u) + sum_i k/2 <-g_i>^2`` is minimised by Newton (consistent tangent
+    ``k (n n' + g/|x-c| (I - n n'))`` per active sample). ``k`` is set from the penalty pressure ``beta E / h``
+    (``h``: the mesh size) on each sample's share of the surface, so a sample sinks about ``p h / (beta E)``
+    into the sphere under a contact pressure ``p``; :attr:`SphereState.penetration` reports it."""
+
+    def __init__(self, solid: fem.Solid, samples: np.ndarray, radius: float, spacing: float, h: float,
+                 beta: float = 1000.0):
+        self.solid = solid
+        self.X = np.asarray(samples, dtype=np.float64).reshape(-1, 3)
+        self.R = float(radius)
+        self.W = embedding_matrix(solid, self.X)
+        self.Wt = self.W.T.tocsr()
+        self.k = float(beta * solid.material.E * spacing ** 2 / h)
+        self.E = float(solid.material.E)
+        self.description = ""
+
+    def _contact(self, u: np.ndarray, c: np.ndarray):
+        x = self.X + (self.W @ u).reshape(-1, 3)
+        d = x - c
+        r = np.linalg.norm(d, axis=1)
+        g = r - self.R
+        act = np.flatnonzero(g < 0)
+        n = d[act] / np.maximum(r[act], 1e-15)[:, None]
+        return act, g[act], n, r[act]
+
+    def forces(self, u: np.ndarray, center) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Per-sample contact forces (n, 3) newtons, the active samples and their gaps."""
+        act, g, n, _ = self._contact(u, np.asarray(center, dtype=np.float64))
+        f = np.zeros_like(self.X)
+        f[act] = (-self.k * g)[:, None] * n
+        return f, act, g
+
+    def _residual(self, u, c):
+        f, act, g = self.forces(u, c)
+        return self.solid.internal_force(u) - (self.Wt @ f.ravel()) / self.E, f, act, g
+
+    def _tangent(self, u, c, act, g):
+        _, _, n, r = self._contact(u, c)
+        blocks = self.k * (n[:, :, None] * n[:, None, :]
+                           + (g / r)[:, None, None] * (np.eye(3)[None] - n[:, :, None] * n[:, None, :]))
+        rows = (3 * act[:, None] + np.arange(3)[None, :])
+        Wa = self.W[rows.ravel()]
+        B = sp.block_diag(list(blocks), format="csr") if len(act) else sp.csr_matrix((0, 0))
+        Kc = (Wa.T @ B @ Wa) / self.E if len(act) else sp.csr_matrix((self.solid.N, self.solid.N))
+        return (self.solid.tangent(u) + Kc).tocsr()
+
+    def solve(self, center, u0: np.ndarray | None = None, tol: float = 1e-8, max_iter: int = 30) -> SphereState:
+        """Equilibrium with the sphere at ``center`` (body frame), Newton from ``u0`` (the previous probe
+        position's solution: the path is followed in small steps by :meth:`solve_path`)."""
+        c = np.asarray(center, dtype=np.float64)
+        s = self.solid
+        u = np.zeros(s.N) if u0 is None else np.array(u0, dtype=np.float64)
+        free = s.free
+        prev = np.inf
+        for it in range(max_iter + 1):
+            r, f, act, g = self._residual(u, c)
+            # relative to the contact force, never below 0.1 mN (at the first touch the force is round-off)
+            ref = max(float(np.linalg.norm(f)), 1e-4) / self.E
+            rn = float(np.linalg.norm(r[free]))
+            res = rn / ref
+            if not np.isfinite(res):
+                break
+            if len(act) == 0 and rn < 1e-14:
+                return self._state(u, c, it)
+            # converged; or stalled at round-off (a stiff body's internal force carries a floor of E-unit round-off)
+            if len(act) and (res < tol or (res < np.sqrt(tol) and rn > 0.5 * prev)):
+                return self._state(u, c, it)
+            prev = rn
+            if it == max_iter:
+                break
+            K = self._tangent(u, c, act, g)
+            du = np.zeros(s.N)
+            du[free] = spla.spsolve(K[free][:, free].tocsc(), -r[free])
+            if not np.all(np.isfinite(du)):
+                break
+            # backtracking: keep the elements positive and the residual falling
+            alpha, base = 1.0, float(np.linalg.norm(r[free]))
+            for _ in range(10):
+                trial = u + alpha * du
+                if s.min_jacobian(trial) > 0 and np.linalg.norm(self._residual(trial, c)[0][free]) < base:
+                    break
+                alpha *= 0.5
+            u = trial
+        raise FemError(f"the sphere contact did not converge at {np.round(c, 5).tolist()} (residual {res:.2e})")
+
+    def _state(self, u, c, its) -> SphereState:
+        f, _, g = self.forces(u, c)
+        mag = np.linalg.norm(f, axis=1)
+        cen = (mag @ self.X) / mag.sum() if mag.sum() > 0 else np.full(3, np.nan)
+        return SphereState(u, f, f.sum(axis=0), cen, float(-g.min()) if len(g) else 0.0, its)
+
+    def first_touch(self, start, direction) -> float:
+        """How far along ``direction`` from ``start`` the sphere's centre goes before touching the undeformed
+        samples (metres; -inf when its path misses them all)."""
+        n = np.asarray(direction, dtype=np.float64)
+        n = n / np.linalg.norm(n)
+        Y = self.X - np.asarray(start, dtype=np.float64)
+        t = Y @ n
+        r2 = np.sum(Y ** 2, axis=1) - t ** 2
+        hit = r2 < self.R ** 2
+        return float(np.min(t[hit] - np.sqrt(self.R ** 2 - r2[hit]))) if np.any(hit) else -np.inf
+
+    def solve_path(self, start, direction, travels) -> list[SphereState]:
+        """Follow the sphere's centre ``start + s direction`` over increasing ``travels`` s (metres), each
+        solve starting from the last; a step that fails is halved (at most 6 times)."""
+        n = np.asarray(direction, dtype=np.float64)
+        n = n / np.linalg.norm(n)
+        start = np.asarray(start, dtype=np.float64)
+        out: list[SphereState] = []
+        u = np.zeros(self.solid.N)
+        u_last, s_last = u, None  # the solution before u: a secant predictor along the stroke
+        pos = float(travels[0]) if len(travels) else 0.0
+        for s_t in (float(v) for v in travels):
+            span = s_t - pos
+            step = span
+            st = None
+            while st is None or pos < s_t - 1e-15:
+                tgt = min(pos + step, s_t) if span > 0 else s_t
+                guess = u
+                if s_last is not None and pos > s_last:
+                    guess = u + (u - u_last) * (tgt - pos) / (pos - s_last)
+                try:
+                    try:
+                        st = self.solve(start + n * tgt, guess)
+                    except FemError:
+                        if guess is u:
+                            raise
+                        st = self.solve(start + n * tgt, u)
+                except FemError:
+                    step *= 0.5
+                    if step < span / 64 or span <= 0:
+                        raise
+                    continue
+                u_last, s_last = u, pos
+                u, pos = st.u, tgt
+                step = 2 * step
+            out.append(st)
+        return out
+
+
+@dataclass
+class ProbePath:
+    """The full-order truth along one straight probe stroke: the sphere's centre at ``start + s direction``
+    (body frame) for the solved travels ``s`` (metres, increasing; the first touches the undeformed surface with
+    no force). Per travel: the total contact force (3,) on the body, the force centroid (reference surface,
+    body frame), the deepest penetration, the displacement of the observed points (the reduced model's nodes) and
+    their von Mises stress (Pa: the truth mesh's nodal, L2-projected values interpolated there). Between solved
+    travels everything is interpolated linearly (:meth:`at`); ``info`` holds the mesh, the penalty, the Newton
+    counts and the measured interpolation error."""
+
+    start: np.ndarray
+    direction: np.ndarray
+    travels: np.ndarray
+    total: np.ndarray
+    centroid: np.ndarray
+    penetration: np.ndarray
+    displacement: np.ndarray
+    von_mises: np.ndarray
+    info: dict = field(default_factory=dict)
+
+    def at(self, s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(total force (3,), centroid (3,), displacement (n_obs, 3), von Mises stress (n_obs,) Pa) with the
+        sphere's centre at travel ``s``; before the first touch: no force, no deformation (centroid NaN)."""
+        tr = self.travels
+        if s <= tr[0]:
+            return (np.zeros(3), np.full(3, np.nan), np.zeros_like(self.displacement[0]),
+                    np.zeros_like(self.von_mises[0]))
+        j = int(np.clip(np.searchsorted(tr, s) - 1, 0, len(tr) - 2))
+        w = float(np.clip((s - tr[j]) / (tr[j + 1] - tr[j]), 0.0, 1.0))
+        cen = self.centroid[j + 1] if j == 0 else (1 - w) * self.centroid[j] + w * self.centroid[j + 1]
+        return ((1 - w) * self.total[j] + w * self.total[j + 1], cen,
+                (1 - w) * self.displacement[j] + w * self.displacement[j + 1],
+                (1 - w) * self.von_mises[j] + w * self.von_mises[j + 1])
+
+
+def scan_solid(model, base_fraction: float, h: float) -> tuple[fem.Solid, np.ndarray, np.ndarray]:
+    """The full-order body of a scanned probe model (bunny, dragon): the scan surface the model carries (its
+    nodes from ``provenance['volume_nodes']`` on) meshed anew with linear tetrahedra of size ``h`` (the model's
+    own voxel mesh is not used), its material law, clamped below ``base_fraction`` of its height like the model.
+    Returns (solid, scan vertices, scan triangles)."""
+    nv = int(model.provenance.get("volume_nodes", 0))
+    if nv <= 0 or nv >= len(model.points):
+        raise FemError("the model carries no scan surface (provenance 'volume_nodes'): not a probe_nipgd model")
+    V = np.asarray(model.points[nv:], dtype=np.float64)
+    F = np.asarray(model.surface, dtype=np.int64) - nv
+    H = float(np.ptp(V[:, 2]))
+    mesh = meshes.voxel_tet_mesh(V, F, h)
+    mat = materials.make_material(model.material["law"], model.material["E"], model.material["nu"])
+    zmin = float(V[:, 2].min())
+    solid = fem.Solid(mesh, mat, 1, [fem.Support(fem.Region(box=[None, None, [None, zmin + base_fraction * H]]))])
+    return solid, V, F
+
+
+def triangle_samples(V: np.ndarray, F: np.ndarray, spacing: float) -> np.ndarray:
+    """Points over triangles (V, F) at most about ``spacing`` apart: each triangle's vertices and a barycentric
+    lattice of n = ceil(longest edge / spacing) steps per edge (the truth's own sampler: it shares no code with
+    the estimator's)."""
+    A, B, C = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
+    edge = np.max(np.stack([np.linalg.norm(B - A, axis=1), np.linalg.norm(C - B, axis=1),
+                            np.linalg.norm(A - C, axis=1)]), axis=0)
+    steps = np.maximum(np.ceil(edge / spacing).astype(np.int64), 1)
+    out = [V[np.unique(F)]]
+    for n in np.unique(steps):
+        if n < 2:
+            continue
+        i, j = np.meshgrid(np.arange(n + 1), np.arange(n + 1), indexing="ij")
+        keep = i + j <= n
+        a, b = (i[keep] / n)[None, :, None], (j[keep] / n)[None, :, None]
+        sel = steps == n
+        out.append((a * A[sel][:, None] + b * B[sel][:, None] + (1 - a - b) * C[sel][:, None]).reshape(-1, 3))
+    return np.unique(np.round(np.concatenate(out), 12), axis=0)
+
+
+def _near_samples(V, F, start, n, reach, radius, spacing):
+    def seg_dist(P):
+        t = np.clip((P - start) @ n, 0.0, reach)
+        return np.linalg.norm(P - start - t[:, None] * n[None, :], axis=1)
+
+    tri_c = V[F].mean(axis=1)
+    tri_r = np.max(np.linalg.norm(V[F] - tri_c[:, None], axis=2), axis=1)
+    near = F[seg_dist(tri_c) < radius + tri_r + 2 * spacing]
+    S = triangle_samples(V, near, spacing)
+    return S[seg_dist(S) < radius + spacing]
+
+
+def probe_path_truth(model, load_point: int, press: float, radius: float, base_fraction: float, h: float,
+                     spacing: float = 1.5e-3, n_travels: int = 16, beta: float = 1000.0,
+                     solid_cache: dict | None = None, at: tuple[np.ndarray, np.ndarray] | None = None) -> ProbePath:
+    """The truth of a probe pressing the scanned body along the model's load direction at ``load_point``: the
+    sphere's centre moves along ``d`` (the load direction, into the body) as ``X_node + d (s - radius)``; it first
+    touches the undeformed scan surface at travel ``s0`` (``info['first_touch_m']``: the model's load point is a
+    node of its voxel mesh, off the scan by up to a cell) and presses ``press`` metres past it (the probe scenes'
+    stroke, ``synth.scenes._probe_path``). Solved at ``n_travels`` travels from ``s0`` to ``s0 + press``
+    (spaced as (j/J)^1.5: denser at the touch, where the force grows fastest), plus two travels between solved
+    ones, solved exactly and compared with the interpolation (``info['interp_err_pct']``).
+
+    ``at``: (point, direction) in the object frame in place of the load point's node and load direction: a probe
+    anywhere on the body (``load_point`` then only names it in messages)."""
+    import time
+
+    t0 = time.perf_counter()
+    key = (model.model_id, round(h, 9), round(base_fraction, 9))
+    if solid_cache is not None and key in solid_cache:
+        solid, V, F, W_obs = solid_cache[key]
+    else:
+        solid, V, F = scan_solid(model, base_fraction, h)
+        W_obs = embedding_matrix(solid, model.points)
+        if solid_cache is not None:
+            solid_cache[key] = (solid, V, F, W_obs)
+    if at is None:
+        X = np.asarray(model.points[int(model.load_points[load_point])], dtype=np.float64)
+        d = np.asarray(model.load_directions[load_point], dtype=np.float64)
+    else:
+        X, d = (np.asarray(v, dtype=np.float64).ravel() for v in at)
+    d = d / np.linalg.norm(d)
+    start = X - d * radius
+    S = _near_samples(V, F, start - d * 2 * radius, d, press + 3 * radius, radius, spacing)
+    prob = SphereOnSolid(solid, S, radius, spacing, h, beta)
+    s0 = prob.first_touch(start, d)
+    if not np.isfinite(s0):
+        raise FemError(f"the probe's stroke at load point {load_point} never touches the scan surface")
+    J = int(n_travels)
+    travels = s0 + press * (np.arange(J + 1) / J) ** 1.5
+    states = prob.solve_path(start, d, travels)
+    disp = np.stack([(W_obs @ st.u).reshape(-1, 3) for st in states])
+    W_scalar = W_obs[0::3][:, 0::3]  # the same weights on the vertices (P1 dofs are interleaved per vertex)
+    vm = np.stack([W_scalar @ solid.stress(st.u)["von_mises"] for st in states])
+    path = ProbePath(start, d, travels, np.stack([st.total for st in states]),
+                     np.stack([st.centroid for st in states]), np.array([st.penetration for st in states]), disp,
+                     vm)
+    # the interpolation's own error, at the middle of the first and of the last interval
+    errs = []
+    for j in (1, J - 1):
+        s_mid = 0.5 * (travels[j] + travels[j + 1])
+        exact = prob.solve(start + d * s_mid, states[j].u)
+        u_ex = (W_obs @ exact.u).reshape(-1, 3)
+        u_in = path.at(s_mid)[2]
+        errs.append(100 * float(np.sqrt(np.mean(np.sum((u_in - u_ex) ** 2, axis=1))
+                                        / max(np.mean(np.sum(u_ex ** 2, axis=1)), 1e-30))))
+    path.info = {"dofs": int(solid.N), "h_m": float(h), "samples": len(S), "penalty_N_per_m": prob.k,
+                 "newton": [int(st.newton) for st in states], "first_touch_m": float(s0),
+                 "interp_err_pct": errs, "max_penetration_mm": 1e3 * float(path.penetration.max()),
+                 "peak_force_N": float(np.linalg.norm(path.total[-1])), "seconds": time.perf_counter() - t0,
+                 "law": solid.material.law}
+    return path

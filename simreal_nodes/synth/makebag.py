@@ -152,6 +152,7 @@ def make_bag(name: str, out: str | Path, width: int = 640, height: int = 480, du
     models = load_models(scene, progress)
     scene.state["models"] = models
     if "prepare" in scene.state:
+        scene.state["progress"] = progress  # a full-order truth solved in prepare reports through it
         scene.state["prepare"](scene, models)
     cam = scene.camera
     r = Renderer(cam, ssaa=ssaa)

@@ -34,6 +34,7 @@ class Truth:
     # full-order solve observed there: the crossed-beams probe)
     displacements: dict = field(default_factory=dict)
     object_poses: dict = field(default_factory=dict)  # object id -> T_map_object
+    von_mises: dict = field(default_factory=dict)  # object id -> (n_model_nodes,) true von Mises stress, Pa
 
 
 @dataclass
@@ -541,18 +542,13 @@ def _probe_mesh(r: Renderer, radius: float):
     r.add(Mesh("probe", V, F, mode="texture", texture=W.texture("probe"), tex_scale=25.0))
 
 
-def _probe_path(t, contacts, T_wo, model, radius, presses, approach=0.06, seg=(0.8, 0.8, 0.6, 0.8)):
-    """Probe centre (world) and axis direction: approach a load point along its load direction, press in
-    (by ``presses[k]`` past the undeformed surface), hold, retract; then the next contact."""
+def _probe_stroke(t, n_contacts, presses, approach=0.06, seg=(0.8, 0.8, 0.6, 0.8)) -> tuple[int, float]:
+    """Which contact the probe is at (k) and its depth past the surface (metres; negative: still away): approach
+    along the load direction, press in by ``presses[k]``, hold, retract; then the next contact."""
     period = sum(seg)
-    k = min(int(t // period), len(contacts) - 1)
+    k = min(int(t // period), n_contacts - 1)
     tl = t - k * period
-    lp = contacts[k]
     press = presses[k]
-    node = model.load_points[lp]
-    d_obj = model.load_directions[lp] / np.linalg.norm(model.load_directions[lp])
-    p_surf = G.transform(T_wo, model.points[node][None])[0]
-    d = T_wo[:3, :3] @ d_obj  # the force pushes along d (into the object)
     a, b, c, e = seg
     if tl < a:
         depth = -approach + approach * (0.5 - 0.5 * np.cos(np.pi * tl / a))
@@ -562,25 +558,42 @@ def _probe_path(t, contacts, T_wo, model, radius, presses, approach=0.06, seg=(0
         depth = press
     else:
         depth = press - (press + approach) * (0.5 - 0.5 * np.cos(np.pi * min((tl - a - b - c) / e, 1.0)))
+    return k, float(depth)
+
+
+def _probe_path(t, contacts, T_wo, model, radius, presses, approach=0.06, seg=(0.8, 0.8, 0.6, 0.8), offsets=None):
+    """Probe centre (world) and axis direction (:func:`_probe_stroke`). The surface the depth counts from is the
+    load point's node moved ``offsets[k]`` metres along the load direction (the scanned objects: where the
+    probe first touches the scan surface, which the model's voxel node is off by up to a cell)."""
+    k, depth = _probe_stroke(t, len(contacts), presses, approach, seg)
+    lp = contacts[k]
+    node = model.load_points[lp]
+    d_obj = model.load_directions[lp] / np.linalg.norm(model.load_directions[lp])
+    p_obj = model.points[node] + (0.0 if offsets is None else offsets[k]) * d_obj
+    p_surf = G.transform(T_wo, p_obj[None])[0]
+    d = T_wo[:3, :3] @ d_obj  # the force pushes along d (into the object)
     center = p_surf + d * (depth - radius)
     return center, d
 
 
-def _probe_scene(kind: str, width, height, duration, fps, stereo: bool) -> SynthScene:
+# the scanned bodies' strokes: the load points the probe presses. The held-out pair was fixed before any result of the
+# full-order truth was seen and is never used to choose anything (benchmarks/probe_scenes.py reports it apart)
+PROBE_CONTACTS: dict[str, list[int | None]] = {"bunny": [3, 9], "dragon": [2, 7], "crossed_beams": [None]}
+PROBE_CONTACTS_HELDOUT: dict[str, list[int | None]] = {"bunny": [6, 13], "dragon": [5, 12]}
+
+
+def _probe_scene(kind: str, width, height, duration, fps, stereo: bool, heldout: bool = False) -> SynthScene:
     spec = {"bunny": "bunny", "dragon": "dragon", "crossed_beams": "crossed_beams"}[kind]
     radius = 0.012
-    contacts = {"bunny": [3, 9], "dragon": [2, 7], "crossed_beams": [None]}[kind]
+    contacts = list((PROBE_CONTACTS_HELDOUT if heldout else PROBE_CONTACTS)[kind])
     origin = np.array([0.35, 0.15, 0.0])
 
     def build(sc, r, models):
         add_environment(r, center=(0.35, 0.15), seed=4)
         _probe_mesh(r, radius)
-        m = models["object"]
         if kind == "crossed_beams":
             V, F = W.box((0.06, 0.08, 0.24), (origin[0] - 0.03, origin[1] + 0.015, 0.12))
             r.add(Mesh("clamp_a", V, F, mode="texture", texture=W.texture("plate"), tex_scale=5.0, smooth=False))
-        if kind != "crossed_beams":
-            sc.state["tracker"] = ContactTracker(m, sc.state["T_wo"], threshold=sc.state["delta"], step=0.04)
 
     def prepare(sc, models):
         m = models["object"]
@@ -619,36 +632,37 @@ def _probe_scene(kind: str, width, height, duration, fps, stereo: bool) -> Synth
         if kind == "crossed_beams":  # the truth: a full-order contact solve of the probe on beam a, a on beam b
             T_ab = np.linalg.inv(sc.state["T_wo"]) @ sc.state["T_wo_b"]
             sc.state["fe"] = _crossed_beams_fe(m, m.points[m.load_points[contacts[0]]], T_ab, radius)
+        else:  # the truth: a full-order large-strain contact solve of the probe on the scanned body, per stroke
+            paths, progress = [], sc.state.get("progress")
+            for i, (lp, press) in enumerate(zip(contacts, presses)):
+                if progress:
+                    progress("truth", i, len(contacts), f"full-order contact solve of stroke {i} (minutes the first "
+                                                         "time; kept in cache/truth)")
+                paths.append(scan_probe_truth(m, spec, lp, press, radius))
+            sc.state["fe_paths"] = paths
+            # the stroke's depth counts from where the probe first touches the scan surface
+            sc.state["offsets"] = [float(p.info["first_touch_m"]) for p in paths]
 
     def update(sc, r, t):
         m = sc.state["models"]["object"]
         T_wo = sc.state["T_wo"]
-        center, d = _probe_path(t, contacts, T_wo, m, radius, sc.state["presses"], seg=(0.7, 0.9, 0.6, 0.8))
+        seg = (0.7, 0.9, 0.6, 0.8)
+        center, d = _probe_path(t, contacts, T_wo, m, radius, sc.state["presses"], seg=seg,
+                                offsets=sc.state.get("offsets"))
         # probe axis points back against the push direction
         z = -d
         x = np.cross(z, [0, 0, 1.0]) if abs(z[2]) < 0.95 else np.cross(z, [1.0, 0, 0])
         x /= np.linalg.norm(x)
         R = np.stack([x, np.cross(z, x), z], axis=1)
         r.update("probe", pose=G.make_T(R, center))
-        truth = Truth()
         T_map = sc.T_map_world()
         if kind == "crossed_beams":
             # ground truth: the full-order contact solve (synth.contact_truth), independent of the reduced model
             # and of Alg. 5.1; the estimators see the noisy, decimated depth image of the probe
             return _crossed_beams_truth(sc, m, center, radius, T_map)
-        # bunny, dragon: no full-order contact truth yet (large-strain neo-Hookean contact, issue 21); their
-        # reference is Alg. 5.1 on what a perfect depth sensor sees of the probe (its surface points that face the
-        # camera: no noise, no holes, no decimation) -- a reference of the algorithm, not of the physics
-        Vs, _ = W.sphere(radius, 24)
-        cam_c = cam_pose(t)[:3, 3]
-        probe_pts = center + Vs[np.einsum("ij,ij->i", Vs, cam_c - (center + Vs)) > 0]
-        tr = sc.state["tracker"]
-        st = tr.update(probe_pts)
-        truth.object_poses["object"] = T_map @ T_wo
-        truth.contacts["object"] = _copy_state(st)
-        truth.params["object"] = (tr.parameter_names(), tr.load_states.layout.units,
-                                  [float(v) for v in tr.parameters()])
-        return truth
+        # bunny, dragon: the full-order neo-Hookean contact solve along the stroke (synth.contact_truth)
+        k, depth = _probe_stroke(t, len(contacts), sc.state["presses"], seg=seg)
+        return _scan_probe_truth(sc, m, contacts[k], sc.state["fe_paths"][k], depth, T_map)
 
     target = origin + [0.1, 0.0, 0.12] if kind == "crossed_beams" else origin + [0, 0, 0.07]
 
@@ -680,7 +694,7 @@ def _probe_scene(kind: str, width, height, duration, fps, stereo: bool) -> Synth
             "overlay": {"enabled": True, "occlusion": True},
         }
 
-    name = f"{kind}_probe" + ("_stereo" if stereo else "")
+    name = f"{kind}_probe" + ("_stereo" if stereo else "") + ("_heldout" if heldout else "")
     sc = SynthScene(name, f"Probe touching the virtual {kind}", default_camera(width, height), fps, duration,
                     {"object": spec}, build, update, cam_pose, yaml, depth=not stereo,
                     stereo_baseline=0.12 if stereo else None)
@@ -752,10 +766,74 @@ def _crossed_beams_truth(sc, m, center_world, radius, T_map) -> Truth:
     return truth
 
 
-def _copy_state(st):
-    from dataclasses import replace
+TRUTH_MESH_FACTOR = 0.6  # the scanned bodies' truth mesh: this fraction of the model's cell size (finer)
 
-    return replace(st)
+
+def scan_probe_truth(model, spec_name: str, load_point: int, press: float, radius: float):
+    """The full-order truth of one probe stroke on a scanned model (:func:`synth.contact_truth.probe_path_truth`),
+    kept on disk (``cache/truth``) keyed on the model, the stroke, the truth's settings and the truth code itself:
+    minutes to solve, milliseconds to load. A cache file that does not load cleanly is solved again."""
+    import hashlib
+    import json
+
+    from simreal_nodes.rom.build import builder_version, cache_dir, load_spec, source_digest
+    from simreal_nodes.synth import contact_truth as ct
+
+    spec = load_spec(f"{spec_name}.yaml")
+    nv = int(model.provenance.get("volume_nodes", 0))
+    h = float(spec["mesh"]["cell_size"]) * float(np.ptp(model.points[nv:, 2])) * TRUTH_MESH_FACTOR
+    base = float(spec["base_fraction"])
+    from pathlib import Path
+
+    code = source_digest(Path(ct.__file__).resolve().parents[2], ct.__name__)
+    key = json.dumps([model.model_id, int(load_point), round(float(press), 12), radius, round(h, 12), base, code,
+                      builder_version()])
+    f = cache_dir().parent / "truth" / f"{spec_name}-lp{load_point}-{hashlib.sha256(key.encode()).hexdigest()[:16]}.npz"
+    names = ("start", "direction", "travels", "total", "centroid", "penetration", "displacement", "von_mises")
+    if f.is_file():
+        try:
+            with np.load(f, allow_pickle=False) as z:
+                a = {n: np.array(z[n]) for n in names}
+                path = ct.ProbePath(a["start"], a["direction"], a["travels"], a["total"], a["centroid"],
+                                    a["penetration"], a["displacement"], a["von_mises"], json.loads(str(z["info"])))
+            if path.displacement.shape[1:] == (len(model.points), 3) and path.total.shape == (len(path.travels), 3) \
+                    and path.von_mises.shape == path.displacement.shape[:2]:
+                return path
+        except (OSError, ValueError, KeyError):
+            pass
+    path = ct.probe_path_truth(model, load_point, press, radius, base, h, solid_cache=_FE_CACHE)
+    f.parent.mkdir(parents=True, exist_ok=True)
+    tmp = f.with_suffix(".tmp.npz")
+    np.savez_compressed(tmp, **{n: getattr(path, n) for n in names}, info=json.dumps(path.info))
+    tmp.replace(f)
+    for old in f.parent.glob(f"{spec_name}-lp{load_point}-*.npz"):  # earlier code's or model's truths of the stroke
+        if old != f:
+            old.unlink(missing_ok=True)
+    return path
+
+
+def _scan_probe_truth(sc, m, load_point: int, path, depth: float, T_map) -> Truth:
+    """One frame of a scanned probe scene's truth: the stroke's full-order solve at the probe's depth (in contact
+    when its force exceeds 1 mN; the load point is the model's nearest to the force centroid, the pseudo-time the
+    force over the model's load, the contact point the centroid displaced with the surface)."""
+    s = float(path.info["first_touch_m"]) + depth
+    total, cen, disp, vm = path.at(s)
+    F = float(np.linalg.norm(total))
+    T_wo = sc.state["T_wo"]
+    point = cen
+    if F > 1e-3:
+        k = int(np.argmin(np.linalg.norm(m.points - cen, axis=1)))
+        point = cen + disp[k]
+    st = _fe_contact_state(m, cen, F, T_map @ T_wo, point, max(-depth, 0.0))
+    truth = Truth()
+    truth.contacts["object"] = st
+    truth.object_poses["object"] = T_map @ T_wo
+    truth.displacements["object"] = disp
+    truth.von_mises["object"] = vm
+    tau = F / float(m.loads.get("force_N", 1.0))
+    truth.params["object"] = (["load_point", "pseudo_time"], ["", ""],
+                              [float(st.load_point if F > 1e-3 else load_point), tau])
+    return truth
 
 
 def bunny_probe(width=640, height=480, duration=6.0, fps=30.0) -> SynthScene:
@@ -768,6 +846,18 @@ def bunny_probe_stereo(width=640, height=480, duration=6.0, fps=30.0) -> SynthSc
 
 def dragon_probe(width=640, height=480, duration=6.0, fps=30.0) -> SynthScene:
     return _probe_scene("dragon", width, height, duration, fps, stereo=False)
+
+
+def dragon_probe_stereo(width=640, height=480, duration=6.0, fps=30.0) -> SynthScene:
+    return _probe_scene("dragon", width, height, duration, fps, stereo=True)
+
+
+def bunny_probe_heldout(width=640, height=480, duration=6.0, fps=30.0) -> SynthScene:
+    return _probe_scene("bunny", width, height, duration, fps, stereo=False, heldout=True)
+
+
+def dragon_probe_heldout(width=640, height=480, duration=6.0, fps=30.0) -> SynthScene:
+    return _probe_scene("dragon", width, height, duration, fps, stereo=False, heldout=True)
 
 
 def crossed_beams_probe(width=640, height=480, duration=3.2, fps=30.0) -> SynthScene:
@@ -828,4 +918,7 @@ SCENES: dict[str, Callable[..., SynthScene]] = {
     "bunny_probe": bunny_probe,
     "bunny_probe_stereo": bunny_probe_stereo,
     "dragon_probe": dragon_probe,
+    "dragon_probe_stereo": dragon_probe_stereo,
+    "bunny_probe_heldout": bunny_probe_heldout,
+    "dragon_probe_heldout": dragon_probe_heldout,
 }

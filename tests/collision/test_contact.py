@@ -9,7 +9,7 @@ import pytest
 from simreal_nodes import geometry as G
 from simreal_nodes.collision.contact import ContactTracker
 from simreal_nodes.states import ContactPhase
-from tests.modelkit import probe_model
+from tests.modelkit import plate_load_model, probe_model
 
 T_WO = G.make_T(t=[1.0, 2.0, 0.5])
 
@@ -103,3 +103,107 @@ def test_model_without_load_points_is_rejected():
     m.load_points = None
     with pytest.raises(ValueError, match="no load points"):
         ContactTracker(m, T_WO)
+
+
+def test_a_load_point_far_more_compliant_than_the_rest_leaves_them_all_searchable():
+    """The bunny: an ear tip moves 67 mm under the load that moves the body under 1 mm. Every load point that moves
+    visibly (over a thousandth of the object's size) is searched; the old rule (a share of the largest) had left
+    11 of the bunny's 16 out, so no contact with its body was ever found."""
+    m = probe_model(depth=0.001)
+    m.fields["displacement"].space[0] *= 100.0  # one load point 100 times more compliant (0.1 m: an ear)
+    tr = ContactTracker(m, T_WO, threshold=0.005, step=0.25)
+    assert len(tr.active) == len(m.load_points)
+    node_w = G.transform(T_WO, m.points[14][None])[0]
+    assert tr.update(_probe(node_w, 0.003)).state == ContactPhase.CONTACT
+
+
+def test_a_load_point_inside_the_drawn_surface_is_touched_on_the_surface():
+    """A scanned body's load points are nodes of its volume mesh, inside (or outside) the scan that is drawn and
+    touched. The distance is measured to the surface node nearest the load point: a probe 3 mm above the surface
+    (9 mm above the volume node) is in contact with a 5 mm threshold."""
+    from simreal_nodes.rom.model import ReducedModel
+    from simreal_nodes.rom.separated import Axis, SeparatedField
+    from tests.modelkit import plate_points
+
+    Ps, tris = plate_points(6, 0.1)
+    k = len(Ps)
+    P = np.vstack([Ps, Ps - [0, 0, 0.006]])  # the surface, and 6 mm under it the volume nodes that carry the loads
+    space = np.zeros((k, 2 * k, 3))
+    for i in range(k):
+        r = np.linalg.norm(Ps - Ps[i], axis=1)
+        space[i, :k, 2] = space[i, k:, 2] = -0.001 * np.exp(-(r / 0.025) ** 2)
+    tau = np.linspace(0, 1, 11)
+    axes = [Axis("load_point", np.arange(k, dtype=np.float64), "", "discrete", "linear"), Axis("pseudo_time", tau, "")]
+    fld = SeparatedField("displacement", space, [np.eye(k), np.tile(tau, (k, 1))], axes, "m", ["x", "y", "z"])
+    m = ReducedModel("slab", P, tris, "tri3", axes, {"displacement": fld}, tris, "test slab", {"law": "neo_hookean"},
+                     load_points=k + np.arange(k), load_directions=np.tile([0, 0, -1.0], (k, 1)))
+    tr = ContactTracker(m, T_WO, threshold=0.005, step=0.25)
+    assert np.array_equal(tr.contact_nodes, np.arange(k))
+    surface_w = G.transform(T_WO, Ps[14][None])[0]
+    st = tr.update(_probe(surface_w, 0.003))
+    assert st.state == ContactPhase.CONTACT and st.load_point == 14 and st.node == k + 14
+
+
+def _sphere_points(center, radius, n=2000, seed=5):
+    rng = np.random.default_rng(seed)
+    v = rng.normal(size=(n, 3))
+    return np.asarray(center) + radius * v / np.linalg.norm(v, axis=1, keepdims=True)
+
+
+def test_contact_anywhere_puts_the_load_between_the_load_points():
+    """A probe between two load points: snapped, the load sits at one of them; anywhere, at the probe (within a
+    millimetre), and the deformation is the model's own interpolation there (half of each neighbour's bump)."""
+    m = plate_load_model()  # load points every 20 mm
+    target = np.array([0.03, 0.05, 0.0])  # midway between the nodes at x = 20 and 40 mm
+    radius = 0.005
+    probe = G.transform(T_WO, _sphere_points(target + [0, 0, radius + 0.002], radius))
+    snap = ContactTracker(m, T_WO, threshold=0.012, step=0.5)  # the nearest load points are 10.8 mm from it
+    anyw = ContactTracker(m, T_WO, threshold=0.012, step=0.5, anywhere=True)
+    s1, s2 = snap.update(probe), anyw.update(probe)
+    assert s1.in_contact and s2.in_contact
+    mu_snap = snap.model_state().mu
+    assert min(abs(mu_snap[0] - 0.02), abs(mu_snap[0] - 0.04)) < 1e-12  # a load point's position
+    mu_any = anyw.model_state().mu
+    assert mu_any == pytest.approx([0.03, 0.05], abs=1e-3)
+    assert np.linalg.norm(np.asarray(s2.position)[:2] - target[:2]) < 1e-3
+    u = anyw.displacement()
+    assert np.isfinite(u).all() and u[:, 2].min() < 0
+    # the model's interpolation: bilinear blend of the 4 neighbouring bumps, at load scale 0.5
+    blend = np.zeros_like(u)
+    wx = (mu_any[0] - 0.02) / 0.02
+    wy = (mu_any[1] - 0.04) / 0.02
+    for (ix, iy), w in (((1, 2), (1 - wx) * (1 - wy)), ((2, 2), wx * (1 - wy)), ((1, 3), (1 - wx) * wy),
+                        ((2, 3), wx * wy)):
+        r = np.linalg.norm(m.points - m.points[ix * 6 + iy], axis=1)
+        blend[:, 2] += w * -0.01 * np.exp(-(r / 0.025) ** 2)
+    assert u == pytest.approx(0.5 * blend, abs=1e-9)
+    # the contact keeps its position while held, and forgets it once released
+    anyw.update(probe + [0.01, 0, 0])
+    assert anyw.state.position == s2.position
+    for _ in range(3):
+        anyw.update(probe + [0, 0, 0.2])
+    assert anyw.state.load_point == -1 and not np.isfinite(anyw.state.position).any()
+
+
+def test_contact_anywhere_refuses_a_model_with_discrete_load_points():
+    with pytest.raises(ValueError, match="discrete"):
+        ContactTracker(probe_model(), T_WO, anywhere=True)
+
+
+def test_a_held_contact_stays_in_contact_while_the_pseudo_time_oscillates():
+    """A probe pressed in and held: Alg. 5.1's pseudo-time settles into stepping up and down by one step about where
+    the surface follows the probe; those down-steps are still the contact (one step back brings the surface within
+    delta again), not a release. Moving the probe away is."""
+    m = probe_model(depth=0.01)  # 1 mm of surface motion per 0.1 of pseudo-time at the node
+    tr = ContactTracker(m, T_WO, threshold=0.004, step=0.1)
+    node_w = G.transform(T_WO, m.points[14][None])[0]
+    states, taus = [], []
+    for _ in range(14):
+        st = tr.update(_probe(node_w, -0.0025))  # 2.5 mm into the undeformed surface
+        states.append(st.state)
+        taus.append(st.pseudo_time)
+    assert max(taus) == pytest.approx(0.7)
+    assert sorted(taus[-2:]) == pytest.approx([0.6, 0.7]) and sorted(taus[-4:-2]) == pytest.approx([0.6, 0.7])
+    assert states == [ContactPhase.CONTACT] * 14
+    away = [tr.update(_probe(node_w, 0.05)).state for _ in range(3)]
+    assert away == [ContactPhase.RELEASING] * 3

@@ -8,7 +8,7 @@ from simreal_nodes import geometry as G
 from simreal_nodes.camera import CameraModel
 from simreal_nodes.collision.scene import ContactScene, pusher_order
 from simreal_nodes.states import ContactPhase
-from tests.modelkit import probe_model
+from tests.modelkit import plate_load_model, probe_model
 
 CAM = CameraModel.from_intrinsics(64, 48, 100.0, 100.0, 32.0, 24.0)
 # looking straight down from 0.3 m above the plates' node 14 (0.04, 0.04): camera z = -world z, camera y = -world y
@@ -80,3 +80,20 @@ def test_decimation_override():
     scene.decimation = 4  # every 4th pixel: the 3x3 patch at rows/cols 23..25 keeps (24, 32) only
     up, _ = scene.step(_probe_depth(0.002), CAM, T_WC)
     assert up.state.points_used == 1 and up.state.state == ContactPhase.CONTACT
+
+
+def test_collision_anywhere_reaches_the_tracker_and_is_refused_for_discrete_load_points():
+    """`collision.anywhere` from the scene file: a linear model's tracker places the load at the probe, a probe
+    model's scene is refused with a reason instead of silently snapping."""
+    obj = _obj("plate", 0.0)
+    obj["collision"].update(anywhere=True, threshold_m=0.012)
+    scene = ContactScene([obj], {"plate": plate_load_model()})  # load points every 20 mm
+    assert scene.trackers["plate"].anywhere
+    d = np.full((CAM.height, CAM.width), np.nan, np.float32)
+    d[23:26, 34:37] = 0.3 - 0.002  # a probe tip 2 mm above (48.9, 40) mm: columns 34-36 are 6-12 mm right of 32
+    (c,) = scene.step(d, CAM, T_WC)
+    assert c.state.in_contact and c.state.load_point == 14  # the nearest load point, (40, 40) mm
+    x = 0.04 + 3 * 0.298 / 100.0
+    assert scene.trackers["plate"].model_state().mu == pytest.approx([x, 0.04], abs=1e-3)
+    with pytest.raises(ValueError, match="discrete"):
+        ContactScene([obj], {"plate": probe_model()})

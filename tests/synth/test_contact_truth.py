@@ -76,3 +76,66 @@ def test_a_pressed_beam_pressing_another_shares_the_load_only_once_the_gap_close
     # a alone (no b) would need less force for the same press: b holds it up
     alone = CT.SphereOnBodies(prob.a, prob.probe, R, (0, 0, -1)).solve(c0 - [0, 0, 0.007])
     assert alone.total["a"] < big.total["a"]
+
+
+# -- large strain: a rigid sphere pressing a hyperelastic body by penalty and Newton (the bunny, dragon truth) --
+
+
+def _p1_beam(law: str):
+    """The cantilever on linear tetrahedra (the scanned bodies' truth element), its top-face nodes under the probe
+    as the contact samples (they embed exactly: a vertex's weights are (1, 0, 0, 0))."""
+    solid = CT.beam_solid(L, W, H, materials.make_material(law, E, NU), CLAMP, (30, 3, 2), order=1)
+    c = np.array([0.28, W / 3, H])  # over a node
+    X = solid.mesh.p.T
+    top = (np.abs(X[:, 2] - H) < 1e-9) & (np.hypot(X[:, 0] - c[0], X[:, 1] - c[1]) < R)
+    return solid, c, X[top]
+
+
+def test_the_penalty_newton_solve_agrees_with_the_exact_complementarity_solve_in_small_strain():
+    """The same P1 body, the same probe, pressed 1 mm: the penalty/Newton path (SphereOnSolid, linear material)
+    and the exact LCP (SphereOnBodies) need the same force and bend the tip alike. They measure the gap
+    differently (the sphere's normal against the push direction), which costs well under 1 % here."""
+    solid, c, S = _p1_beam("linear_elastic")
+    tip = np.array([[L, W / 3, 0.0]])  # a node of the 30 x 3 x 2 grid
+    body = CT.condense(solid, lambda Y: np.isin(np.arange(len(Y)), np.flatnonzero(
+        np.isclose(Y[:, None, :], S[None]).all(axis=2).any(axis=1))), (0, 0, -1), tip)
+    lcp = CT.SphereOnBodies(body, np.arange(len(body.cand)), R, (0, 0, -1)).solve(c + [0, 0, R - 0.001])
+    pen = CT.SphereOnSolid(solid, S, R, spacing=0.01, h=0.01)
+    st = pen.solve(c + [0, 0, R - 0.001])
+    assert np.linalg.norm(st.total) == pytest.approx(lcp.total["a"], rel=0.01)
+    assert lcp.total["a"] > 0.1  # newtons: in contact
+    assert st.total[2] < 0 and abs(st.total[2]) > 0.999 * np.linalg.norm(st.total)  # pushes the body down
+    u_tip = (CT.embedding_matrix(solid, tip) @ st.u).reshape(-1, 3)
+    assert u_tip[0, 2] == pytest.approx(lcp.displacement["a"][0, 2], rel=0.01)
+    assert st.penetration < 1e-3 * 0.001  # the penalty's error: under a thousandth of the press
+
+
+def test_neo_hookean_in_small_strain_needs_the_linear_force_and_nothing_touches_before_the_sphere_arrives():
+    """At 0.3 mm the neo-Hookean body is the linear one within 1 %; a millimetre before touching, no force."""
+    forces = {}
+    for law in ("linear_elastic", "neo_hookean"):
+        solid, c, S = _p1_beam(law)
+        pen = CT.SphereOnSolid(solid, S, R, spacing=0.01, h=0.01)
+        assert pen.first_touch(c + [0, 0, R + 0.002], (0, 0, -1)) == pytest.approx(0.002, abs=1e-12)
+        path = pen.solve_path(c + [0, 0, R + 0.001], (0, 0, -1), [0.0, 0.0008, 0.0013])
+        assert np.linalg.norm(path[0].total) == 0.0 and path[0].penetration == 0.0
+        forces[law] = np.linalg.norm(path[-1].total)
+        assert np.linalg.norm(path[1].total) < forces[law]  # more press, more force
+    assert forces["neo_hookean"] == pytest.approx(forces["linear_elastic"], rel=0.01)
+
+
+def test_a_probe_path_interpolates_between_solved_travels_and_is_free_before_the_touch():
+    n_obs = 2
+    path = CT.ProbePath(np.zeros(3), np.array([0, 0, -1.0]), np.array([0.001, 0.002, 0.004]),
+                        np.array([[0, 0, 0], [0, 0, -1.0], [0, 0, -3.0]]),
+                        np.array([[np.nan] * 3, [0, 0, 1.0], [0, 0, 2.0]]), np.zeros(3),
+                        np.array([np.zeros((n_obs, 3)), np.ones((n_obs, 3)), 3 * np.ones((n_obs, 3))]),
+                        np.array([np.zeros(n_obs), np.ones(n_obs), 3 * np.ones(n_obs)]))
+    f, cen, u, vm = path.at(0.0005)
+    assert not f.any() and np.isnan(cen).all() and not u.any() and not vm.any()
+    f, cen, u, vm = path.at(0.003)  # half-way between the second and third travel
+    assert f[2] == pytest.approx(-2.0) and cen[2] == pytest.approx(1.5) and u[0, 0] == pytest.approx(2.0)
+    assert vm[1] == pytest.approx(2.0)
+    f, cen, _, _ = path.at(0.0015)  # first interval: the force grows from zero, the centroid is the first touch's
+    assert f[2] == pytest.approx(-0.5) and cen[2] == pytest.approx(1.0)
+    assert path.at(0.01)[0][2] == pytest.approx(-3.0)  # past the last travel: held at the last solution
