@@ -7,7 +7,9 @@ Per frame:
     d_min, node <- min over contact nodes of the distance to the nearest point   (KD-tree)
     if d_min < delta and tau < tau_max:  tau += step  (the node is fixed while tau > 0: one contact at a
                                                        time, superposition does not hold for non-linear laws)
-    elif tau > tau_min:                  tau -= step
+    elif tau > tau_min:                  tau -= step  (reported CONTACT while one step back brings the surface
+                                                       within delta again: held, the pseudo-time oscillating by one
+                                                       step where the surface follows the point; else RELEASING)
 
 The contact nodes are the model's precomputed load points on its *surface*, at their *deformed* positions, so a
 virtual surface pushed by a finger moves away from it and the pseudo-time settles where the surface follows the
