@@ -200,7 +200,7 @@ def main(argv=None):
              f"pressing {1e3 * PRESS:.0f} mm; median and max over the positions of each row; the per-position "
              "rows are in the JSON. 'snap': the nearest load point; 'anywhere': the true force centroid in the "
              "reduced space; \"tracker's position\": where `ContactTracker(anywhere=True)` puts the load from the "
-             "probe's surface points 2 mm above the beam (what the collision node does with `collision.anywhere`); "
+             "whole probe sphere's points 2 mm above the beam (a camera sees less: `collision.md`'s anywhere rows); "
              "load scale from the true force or fitted to the true displacement."
              "\n\n## Load grid density (the beam's off-grid positions)\n\n" + markdown_table(grid, gcols) + "\n\n"
              "The model's parameter modes sampled every 2nd, 4th, 8th load position along x (what a coarser load "

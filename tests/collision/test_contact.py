@@ -207,3 +207,12 @@ def test_a_held_contact_stays_in_contact_while_the_pseudo_time_oscillates():
     assert states == [ContactPhase.CONTACT] * 14
     away = [tr.update(_probe(node_w, 0.05)).state for _ in range(3)]
     assert away == [ContactPhase.RELEASING] * 3
+
+
+def test_a_stiff_object_keeps_its_load_points_searchable():
+    """Every load point moving under 1e-3 of the object's size (the support rule) must not leave none to search."""
+    m = probe_model(depth=1e-5)  # 0.01 mm at most on a 0.1 m plate
+    tr = ContactTracker(m, T_WO, threshold=0.005)
+    assert len(tr.active) == len(m.load_points)
+    node_w = G.transform(T_WO, m.points[14][None])[0]
+    assert tr.update(_probe(node_w, 0.002)).state == ContactPhase.CONTACT
