@@ -51,9 +51,8 @@ BUNNY_POINTS = 4  # probes between the bunny's load points
 PAIR_FORCE = 6.0  # newtons on each probe of a pair (the model's load: 15 N)
 N_PAIRS = 8  # two-contact cases: pairs of off-grid positions 40 mm apart or more
 THIN = (1, 2, 4, 8)  # the load grid along x: every load position, every 2nd, 4th, 8th
-TAUS = np.linspace(0.0, 1.0, 101)
 # the bunny's pseudo-times: also fine near 0 (a probe 0.5 mm past the scan can take under 1 % of the model's 4 N)
-TAUS_FINE = np.unique(np.r_[TAUS, np.geomspace(1e-4, 0.05, 80)])
+TAUS_FINE = np.unique(np.r_[np.linspace(0.0, 1.0, 101), np.geomspace(1e-4, 0.05, 80)])
 XS = (0.10, 0.15, 0.20, 0.25, 0.28)  # on the 10 mm load grid
 OFFSETS = {"on the grid": (0.0, 0.0), "half a step in x": (0.005, 0.0), "half a step in y": (0.0, 0.005),
            "half a step in x and y": (0.005, 0.005)}
@@ -97,7 +96,7 @@ def main(argv=None):
         center = np.array([xy[0], xy[1], H + RADIUS - PRESS])
         r = prob.solve(center)
         u_true = r.displacement["a"][sn]
-        size = float(np.sqrt(np.mean(np.sum(u_true ** 2, axis=1))))
+        size = _rms(u_true)
         cen = r.centroid["a"][:2]
         k = int(np.argmin(np.linalg.norm(lp_xy - cen, axis=1)))
         # the tracker's own position: Alg. 5.1 with contact anywhere, fed the probe's surface as the depth sees it
@@ -113,7 +112,7 @@ def main(argv=None):
             u1 = m.deformation(ModelState(np.asarray(mu, dtype=np.float64), load_scale=1.0), nodes=sn)
             tau_fit = float(np.sum(u1 * u_true) / np.sum(u1 * u1))
             for how, tau in (("force", r.total["a"] / F_model), ("fit", tau_fit)):
-                e = float(np.sqrt(np.mean(np.sum((tau * u1 - u_true) ** 2, axis=1))))
+                e = _rms(tau * u1 - u_true)
                 row[f"{name}_{how}_mm"] = 1e3 * e
                 row[f"{name}_{how}_pct"] = 100 * e / size
         rows.append(row)
@@ -258,13 +257,12 @@ def grid_density(m, sn, off) -> list[dict]:
         res: dict[str, dict[str, list[float]]] = {"snap": {"force": [], "fit": []},
                                                   "anywhere": {"force": [], "fit": []}}
         for _, r, u_true, cen in off:
-            size = float(np.sqrt(np.mean(np.sum(u_true ** 2, axis=1))))
+            size = _rms(u_true)
             for name, mu in (("snap", g[int(np.argmin(np.linalg.norm(g - cen, axis=1)))]), ("anywhere", cen)):
                 u1 = f.evaluate(mu)
                 for how, tau in (("force", r.total["a"] / F_model), ("fit", float(np.sum(u1 * u_true) /
                                                                                   np.sum(u1 * u1)))):
-                    res[name][how].append(100 * float(np.sqrt(np.mean(np.sum((tau * u1 - u_true) ** 2, axis=1))))
-                                          / size)
+                    res[name][how].append(100 * _rms(tau * u1 - u_true) / size)
         for name in ("snap", "anywhere"):
             out.append(dict(grid_mm=1e3 * float(np.median(np.diff(xs[keep]))), method=name, positions=len(off),
                             force_pct=float(np.median(res[name]["force"])),
