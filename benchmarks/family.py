@@ -9,6 +9,7 @@ independent full-order truth (never the tracked model), with held-out seeds that
     python -m benchmarks.family --seeds 0-9 --measurements map_points  # the sparse mode beside: *_map_points.*
     python -m benchmarks.family --seeds 0-4 --tracking dense_step_px=3  # a knob's trade: *_dense_step_px_3.*
     python -m benchmarks.family --seeds 0-9 --sensor stereo  # a stereo pair instead of RGB-D: *_stereo.*
+    python -m benchmarks.family --object plate --seeds 0-9   # plates, a load anywhere (s_x, s_y): family_plate*
     ... --jobs 2                             # scenes in 2 processes (one core each)
 
 Per scene: the load-position error over the loaded frames (median, p90, mean, in % of the load's range), the share
@@ -54,20 +55,23 @@ def parse_seeds(text: str) -> list[int]:
     return out
 
 
-def scene_name(seed: int, preloaded: bool = False, sensor: str = "rgbd") -> str:
+def scene_name(seed: int, preloaded: bool = False, sensor: str = "rgbd", object: str = "beam") -> str:
     """The family scene's name for :func:`~simreal_nodes.synth.makebag.make_scene`."""
-    return f"family-{seed}" + ("-preloaded" if preloaded else "") + ("-stereo" if sensor == "stereo" else "")
+    return (("family-plate-" if object == "plate" else "family-") + str(seed) + ("-preloaded" if preloaded else "")
+            + ("-stereo" if sensor == "stereo" else ""))
 
 
 def run_scene(seed: int, width: int = 640, height: int = 480, preloaded: bool = False,
               measurements: str | None = None, tracking: dict | None = None, sensor: str = "rgbd",
-              seq: dict | None = None) -> dict:
+              seq: dict | None = None, object: str = "beam") -> dict:
     """One scene through the offline pipeline; ``measurements`` overrides the scene's ``tracking.measurements``,
     ``tracking`` any other key of its ``tracking`` block (a knob's trade); ``sensor``: ``rgbd`` or ``stereo``;
-    ``seq``: the scene's frames already rendered (and perhaps made worse: ``benchmarks/camera_quality.py``)."""
+    ``seq``: the scene's frames already rendered (and perhaps made worse: ``benchmarks/camera_quality.py``);
+    ``object``: ``beam`` or ``plate`` (two load parameters: a frame's error is the larger of the two, each in % of
+    its own range; each axis's median beside)."""
     t0 = time.perf_counter()
     if seq is None:
-        seq = sequence.__wrapped__(scene_name(seed, preloaded, sensor), width, height, fps=FPS,
+        seq = sequence.__wrapped__(scene_name(seed, preloaded, sensor, object), width, height, fps=FPS,
                                    stereo=sensor == "stereo")  # not cached: one scene in memory at a time
     t_render = time.perf_counter() - t0
     sc = seq["scene"]
@@ -83,12 +87,16 @@ def run_scene(seed: int, width: int = 640, height: int = 480, preloaded: bool = 
     step_ms, cam_err, solve_ms, tracker_ms = run["step_ms"], run["cam_err"], run["solve_ms"], run["tracker_ms"]
     truth_a, est_a, states_a = np.array(truth), np.array(est), np.array(states)
     loaded = np.isfinite(truth_a)
-    err = 100 * np.abs(est_a[loaded] - truth_a[loaded]) / d.span
+    tv, ev = np.array(run["truth_all"]), np.array(run["est_all"])  # (frames, parameters)
+    axis_err = 100 * np.abs(ev[loaded] - tv[loaded]) / np.asarray(d.spans)
+    err = axis_err.max(axis=1)
     ok = states_a[loaded] == EstimateState.OK
     why = collections.Counter(r for r, s in zip(np.array(reasons)[loaded], states_a[loaded])
                               if s != EstimateState.OK and r)
     row = {
         "seed": seed, "measurements": scene["objects"][0]["tracking"]["measurements"], "sensor": sensor,
+        "object": d.object, "parameters": d.parameters,
+        "axis_median_err_pct": [float(v) for v in np.median(axis_err, axis=0)],
         "support": d.support, "slenderness": round(d.slenderness, 1), "peak_px": round(d.peak_px, 1),
         "contrast": round(d.speckle_contrast, 3), "distance_m": round(d.distance, 2),
         "loaded_frames": int(loaded.sum()),
@@ -108,18 +116,20 @@ def run_scene(seed: int, width: int = 640, height: int = 480, preloaded: bool = 
         "refusal": next((r for r in reversed(run["reasons"]) if "refused" in r or "no camera pose" in r), ""),
         **registration_error(pipe, seq),
         **scene_model_error(sc, pipe.objects.models["beam"]),
-        "curve": {"truth": [None if not np.isfinite(v) else float(v) for v in truth_a], "est": est_a.tolist()},
+        "curve": {"truth": [None if not np.isfinite(v) else float(v) for v in truth_a], "est": est_a.tolist(),
+                  **({"truth_y": [None if not np.isfinite(v) else float(v) for v in tv[:, 1]],
+                      "est_y": ev[:, 1].tolist()} if tv.shape[1] > 1 else {})},
     }
     return row
 
 
 def track(pipe: Pipeline, seq: dict, fps: float, oid: str = "beam") -> dict[str, list]:
     """Every frame of a rendered sequence through the offline pipeline: per frame the truth and estimate of the
-    object's first parameter, its state and reason, the step's time; the tracker's own time and the camera's
-    position error (map frame: both start at the first camera frame) where the camera was localized; the solve's
-    time where one ran."""
+    object's first parameter (``truth_all``, ``est_all``: of every parameter the truth gives), its state and
+    reason, the step's time; the tracker's own time and the camera's position error (map frame: both start at the
+    first camera frame) where the camera was localized; the solve's time where one ran."""
     run: dict[str, list] = {k: [] for k in ("truth", "est", "states", "reasons", "step_ms", "cam_err", "solve_ms",
-                                            "tracker_ms")}
+                                            "tracker_ms", "truth_all", "est_all")}
     for i in range(len(seq["rgb"])):
         bgr = np.ascontiguousarray(seq["rgb"][i][:, :, ::-1])
         t1 = time.perf_counter()
@@ -131,8 +141,11 @@ def track(pipe: Pipeline, seq: dict, fps: float, oid: str = "beam") -> dict[str,
         e = out[oid]
         if e.solve_ms > 0:
             run["solve_ms"].append(e.solve_ms)
-        run["truth"].append(seq["truth"][i].params[oid][2][0])
+        tp = seq["truth"][i].params[oid][2]
+        run["truth"].append(tp[0])
         run["est"].append(float(e.values[0]))
+        run["truth_all"].append([float(v) for v in tp])
+        run["est_all"].append([float(v) for v in e.values[:len(tp)]])
         run["states"].append(int(e.state))
         run["reasons"].append(e.reason)
     return run
@@ -258,16 +271,21 @@ def write(rows: list[dict], label: str, name: str = "family", measured_on: dict 
              "the load-position error the reduced model alone makes (its least-squares best fit to the truth's surface "
              "displacement); model error |u| its relative displacement error; camera ATE the RMS camera position "
              f"error of the {slam.split(' (')[0]} (no alignment: both maps start at the first camera frame). The "
-             "beam is placed by registration from a guess by eye; its pose error (median "
+             "object is placed by registration from a guess by eye; its pose error (median "
              f"{s['median_registration_mm']:.1f} mm, {s['median_registration_deg']:.2f} deg) is in each row. "
              "Errors are over the loaded frames "
              "(the first 1.5 s map the unloaded scene unless the label says the load is on from the first frame).")
+    if any(r.get("object") == "plate" for r in rows):
+        notes += (" Plates: two load parameters (s_x, s_y); a frame's error is the larger of the two, each in % of its "
+                  "own range; 'per axis' gives each axis's median over the loaded frames.")
 
     def plot(plt):
         fig, ax = plt.subplots(1, 2, figsize=(10, 3.6))
         med = [r["median_err_pct"] for r in rows]
-        for support, marker in (("cantilever", "^"), ("two_support", "o")):
+        for support, marker in (("cantilever", "^"), ("two_support", "o"), ("clamped_ends", "s")):
             sel = [r for r in rows if r["support"] == support]
+            if not sel:
+                continue
             ax[0].scatter([r["peak_px"] for r in sel], [r["median_err_pct"] for r in sel], marker=marker,
                           c=[r["contrast"] for r in sel], cmap="viridis", vmin=0, vmax=1, label=support)
         ax[0].legend(fontsize=8)
@@ -285,7 +303,13 @@ def write(rows: list[dict], label: str, name: str = "family", measured_on: dict 
         return fig
 
     table_rows = [{k: v for k, v in r.items() if k != "curve"} for r in rows]
-    save(name, table_rows, COLS, "Deformable tracking on the scene family (independent physics)", notes, plot,
+    cols = COLS
+    if any(r.get("object") == "plate" for r in rows):  # each axis's median beside the frame-wise larger one
+        for r in table_rows:
+            r["axis_txt"] = " / ".join(f"{v:.2f}" for v in r.get("axis_median_err_pct", []))
+        k = next(i for i, c in enumerate(COLS) if c[0] == "median_err_pct") + 1
+        cols = [*COLS[:k], ("axis_txt", "per axis: s_x / s_y (%)", "{}"), *COLS[k:]]
+    save(name, table_rows, cols, "Deformable tracking on the scene family (independent physics)", notes, plot,
          extra={"summary": s, "label": label, "curves": {r["seed"]: r["curve"] for r in rows},
                 **({"machine": measured_on} if measured_on else {})})
     write_doc()
@@ -293,6 +317,10 @@ def write(rows: list[dict], label: str, name: str = "family", measured_on: dict 
 
 TABLES = (("family", "Held-out seeds (the accuracy this project reports)"),
           ("family_dev", "Development seeds 12-49 (the only ones defaults may be chosen on)"),
+          ("family_plate", "Plates, held-out seeds (`--object plate`: a load anywhere on the top face, s_x and s_y)"),
+          ("family_plate_dev", "Plates, development seeds (`--object plate --seeds 0-9`)"),
+          ("family_plate_dev_dense_rigid_false", "Plates, knob: no rigid correction (`--object plate --seeds 7 "
+           "--tracking dense_rigid=false`), on the development plate whose s_y was worst"),
           ("family_dev_dense_refine_false", "Knob: no search of the cost after Gauss-Newton "
            "(`--tracking dense_refine=false`: the defaults of stop 25, with the slide pin)"),
           ("family_dev_dense_camera_first_true", "Knob: the camera's error from the surroundings first, then held "
@@ -516,6 +544,9 @@ def main() -> None:
                     help="override a key of the scenes' tracking block (YAML value; results name gets the suffix)")
     ap.add_argument("--sensor", choices=("rgbd", "stereo"), default="rgbd",
                     help="the camera the family is seen through (stereo: results name gets the suffix _stereo)")
+    ap.add_argument("--object", choices=("beam", "plate"), default="beam",
+                    help="the family's beams, or its plates (a load anywhere on the top face: results "
+                         "family_plate*)")
     ap.add_argument("--out", help="results name (default: from the seeds and options, e.g. family_dev_stereo)")
     ap.add_argument("--jobs", type=int, default=1, help="scenes run in parallel processes (one core each)")
     ap.add_argument("--resume", action="store_true",
@@ -532,8 +563,9 @@ def main() -> None:
                                "_stereo" if a.sensor == "stereo" else "")
         return
     held_out = all(s >= HELD_OUT_SEEDS.start for s in seeds)
-    name = ("family_preloaded" + ("_heldout" if held_out else "")) if a.preloaded else \
-        ("family" if held_out else "family_dev")
+    stem = "family_plate" if a.object == "plate" else "family"
+    name = (stem + "_preloaded" + ("_heldout" if held_out else "")) if a.preloaded else \
+        (stem if held_out else stem + "_dev")
     if a.sensor == "stereo":
         name += "_stereo"
     if a.measurements:
@@ -549,6 +581,7 @@ def main() -> None:
         write(rows, doc.get("label", ""), name, measured_on=doc.get("machine"))
         return
     label = ("held-out seeds" if held_out else "development seeds") + f" {a.seeds}"
+    label += ", plates" if a.object == "plate" else ""
     label += ", load on from the first frame" if a.preloaded else ""
     label += ", stereo pair (SGBM depth)" if a.sensor == "stereo" else ""
     label += f", measurements {a.measurements}" if a.measurements else ""
@@ -567,7 +600,7 @@ def main() -> None:
         for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
             os.environ[var] = "1"
     job = functools.partial(run_scene, preloaded=a.preloaded, measurements=a.measurements, tracking=knobs,
-                            sensor=a.sensor)
+                            sensor=a.sensor, object=a.object)
     with multiprocessing.get_context("spawn").Pool(a.jobs, initializer=_one_thread) if a.jobs > 1 else \
             contextlib.nullcontext() as pool:
         results = pool.imap(job, seeds) if pool is not None else map(job, seeds)

@@ -29,10 +29,11 @@ def cmd_make_bag(a: argparse.Namespace) -> int:
     try:
         name = a.scene
         if a.scene == "family":  # the family's scene is drawn from the seed
-            name = f"family-{a.seed}" + ("-stereo" if a.sensor == "stereo" else "")
-        elif a.sensor != "rgbd":
-            raise SimrealError(f"--sensor {a.sensor}: only the 'family' scenes are drawn for another camera; "
-                               f"'{a.scene}' has its own")
+            name = ("family-plate-" if a.object == "plate" else "family-") + str(a.seed) + (
+                "-stereo" if a.sensor == "stereo" else "")
+        elif a.sensor != "rgbd" or a.object != "beam":
+            raise SimrealError(f"--sensor {a.sensor} --object {a.object}: only the 'family' scenes are drawn for "
+                               f"another camera or object; '{a.scene}' has its own")
         info = make_bag(name, a.output, w, h, a.duration, a.fps, a.storage, a.seed, a.scene_out, a.ssaa, progress,
                         image_format=a.image_format, jpeg_quality=a.jpeg_quality)
     finally:
@@ -64,6 +65,8 @@ def add_make_bag(sub: argparse._SubParsersAction) -> None:
                    "seeds 0-49 for tuning, held-out 1000-1099 for reporting)")
     s.add_argument("--sensor", choices=("rgbd", "stereo"), default="rgbd",
                    help="'family' only: the camera it is seen through (stereo: a rectified pair, no depth topic)")
+    s.add_argument("--object", choices=("beam", "plate"), default="beam",
+                   help="'family' only: a beam loaded along its top (s), or a plate loaded anywhere on it (s_x, s_y)")
     s.add_argument("--ssaa", type=int, default=2, help="supersampling factor (anti-aliasing)")
     s.add_argument("--scene-out", help="also write the scene YAML that runs the graph on this bag")
     s.add_argument("--image-format", choices=("raw", "jpeg", "png"), default="raw",

@@ -3,7 +3,10 @@
 ``family_scene(seed)`` draws one loaded-beam scene: supports (cantilever or two supports), dimensions and
 slenderness, material, the load's size (set by the peak image motion it causes, 2 to 40 px), the surface texture
 (contrast from faint to painted speckle, speckle size), background clutter and its contrast, lighting, image noise
-and motion blur, camera distance, arc and speed. Two rules make it evidence rather than a rehearsal:
+and motion blur, camera distance, arc and speed. ``family_scene(seed, object="plate")`` draws a plate instead
+(:func:`draw_plate`, its own random stream, so the beams' draws are unchanged): clamped along one end or bolted on
+two blocks, a weight anywhere on its top face, two load parameters (s_x, s_y), its truth
+:func:`~simreal_nodes.synth.truth.plate_load_truth`. Two rules make it evidence rather than a rehearsal:
 
 - **Seeds are split.** Defaults and thresholds may be chosen on the development seeds (:data:`DEV_SEEDS`, 0-49)
   only; accuracy is reported on the held-out seeds (:data:`HELD_OUT_SEEDS`, 1000-1099) that nothing was tuned on.
@@ -49,7 +52,7 @@ from simreal_nodes.synth.scenes import (
     default_camera,
     truth_mesh,
 )
-from simreal_nodes.synth.truth import BeamLoadTruth, beam_load_truth
+from simreal_nodes.synth.truth import BeamLoadTruth, PlateLoadTruth, beam_load_truth, plate_load_truth
 
 DEV_SEEDS = range(0, 50)
 HELD_OUT_SEEDS = range(1000, 1100)
@@ -58,7 +61,8 @@ T_FREE = 1.5  # s: the camera maps the unloaded scene first (thesis: scanning be
 
 @dataclass(frozen=True)
 class FamilyDraw:
-    """Everything drawn from one seed (SI units). ``positions``: load positions along the loadable span, metres."""
+    """Everything drawn from one seed (SI units). ``positions``: load positions along the loadable span, metres (a
+    plate's: (s_x, s_y) pairs on its top face)."""
 
     seed: int
     support: str  # cantilever | two_support
@@ -70,7 +74,7 @@ class FamilyDraw:
     peak_px: float  # largest image motion of the beam surface the load causes, pixels
     force: float  # newtons: set from peak_px at the drawn camera distance
     footprint: float  # radius of the weight's footprint, metres
-    positions: tuple[float, ...]
+    positions: tuple  # floats (a beam's s) or (s_x, s_y) pairs (a plate's)
     s_range: tuple[float, float]  # where the load may sit (the model's load axis covers it)
     speckle_contrast: float  # 0 (plain) .. 1 (painted black on white)
     speckle_mm: float  # speckle diameter on the surface
@@ -88,6 +92,8 @@ class FamilyDraw:
     guess_error: tuple[float, ...]  # the user's guess of the pose, its error: dx, dy, dz (m), rx, ry, rz (rad)
     width_px: int = 640
     height_px: int = 480
+    object: str = "beam"  # beam (the load along the top centreline, s) | plate (anywhere on the top face, s_x, s_y)
+    y_range: tuple[float, ...] = ()  # a plate's: where the load may sit across (s_y)
 
     @property
     def slenderness(self) -> float:
@@ -95,12 +101,21 @@ class FamilyDraw:
 
     @property
     def beam(self) -> Beam:
-        return Beam(self.support, self.length, self.width, self.height)
+        return Beam(self.support, self.length, self.width, self.height, self.object)
 
     @property
     def span(self) -> float:
-        """The range of the load parameter (what errors are quoted against)."""
+        """The range of the (first) load parameter (what errors are quoted against)."""
         return self.s_range[1] - self.s_range[0]
+
+    @property
+    def spans(self) -> tuple[float, ...]:
+        """The range of each load parameter: (s) for a beam, (s_x, s_y) for a plate."""
+        return (self.span,) if self.object == "beam" else (self.span, self.y_range[1] - self.y_range[0])
+
+    @property
+    def parameters(self) -> list[str]:
+        return ["s"] if self.object == "beam" else ["s_x", "s_y"]
 
     def summary(self) -> dict:
         d = asdict(self)
@@ -146,24 +161,82 @@ def draw(seed: int, width_px: int = 640, height_px: int = 480) -> FamilyDraw:
         guess_error=tuple(float(x) for x in np.r_[err_t, err_r]), width_px=width_px, height_px=height_px)
 
 
+PLATE_SEED_STREAM = 2  # the plates' draws come from their own random stream: the beams' draws stay as they were
+
+
+def draw_plate(seed: int, width_px: int = 640, height_px: int = 480) -> FamilyDraw:
+    """Draw one plate scene: a plate (a quarter to 0.6 m long, 0.4-1 times as wide, length 12-40 times its
+    thickness) clamped along one end (a shelf) or bolted on two blocks at both ends, loaded by a weight anywhere on
+    its top face, two load parameters (s_x, s_y). Everything else (material, load size, texture, clutter, light,
+    noise, camera) is drawn from the beams' ranges. The load ranges end on nodes of the model's grid."""
+    rng = np.random.default_rng([20_26_16, PLATE_SEED_STREAM, int(seed)])
+    support = "cantilever" if rng.random() < 0.5 else "clamped_ends"
+    length = float(rng.uniform(0.25, 0.6))
+    width = length * float(rng.uniform(0.4, 1.0))
+    height = max(length / _log_uniform(rng, 12.0, 40.0), 0.004)
+    E = _log_uniform(rng, 1e6, 7e10)
+    nu = float(rng.uniform(0.0, 0.45))
+    peak_px = _log_uniform(rng, 2.0, 40.0)
+    footprint = float(np.clip(min(length, width) * rng.uniform(0.05, 0.1), 0.006, 0.025))
+    nx, ny, _ = model_cells(Beam(support, length, width, height, "plate"))
+    dx, dy = length / nx, width / ny
+    footprint = max(footprint, 0.6 * dx)  # the truth's disk covers some of its top facets (cells dx long)
+    x_hi = length - footprint if support == "cantilever" else 0.85 * length
+    s_range = (float(np.ceil(0.15 * length / dx - 1e-9) * dx), float(np.floor(x_hi / dx + 1e-9) * dx))
+    y_range = (float(np.ceil(0.15 * width / dy - 1e-9) * dy), float(np.floor(0.85 * width / dy + 1e-9) * dy))
+    n_pos = int(rng.integers(4, 7))
+    px = rng.uniform(s_range[0] + 0.05 * (s_range[1] - s_range[0]), s_range[1] - 0.02 * (s_range[1] - s_range[0]),
+                     n_pos)
+    py = rng.uniform(y_range[0] + 0.02 * (y_range[1] - y_range[0]), y_range[1] - 0.02 * (y_range[1] - y_range[0]),
+                     n_pos)
+    distance = float(np.clip(max(length, width) * rng.uniform(1.3, 2.2), 0.5, 1.8))
+    light = rng.normal(size=3)
+    light[2] = -abs(light[2]) - 0.5
+    unit = light / np.linalg.norm(light)
+    err_t = rng.normal(0.0, 0.03, 3)
+    err_r = rng.normal(0.0, np.deg2rad(6.0), 3)
+    return FamilyDraw(
+        seed=int(seed), support=support, length=length, width=width, height=height, E=E, nu=nu,
+        peak_px=peak_px, force=1.0, footprint=footprint,
+        positions=tuple((float(a), float(b)) for a, b in zip(px, py)), s_range=s_range,
+        speckle_contrast=_log_uniform(rng, 0.04, 1.0), speckle_mm=float(rng.uniform(1.5, 6.0)),
+        clutter=int(rng.integers(0, 12)), clutter_contrast=float(rng.uniform(0.2, 1.0)),
+        ambient=float(rng.uniform(0.35, 0.75)), light=(float(unit[0]), float(unit[1]), float(unit[2])),
+        pixel_sigma=float(rng.uniform(0.5, 3.0)), blur_subframes=int(rng.integers(1, 4)),
+        distance=distance, arc_deg=float(rng.uniform(20.0, 70.0)), cam_elevation_deg=float(rng.uniform(25.0, 55.0)),
+        duration=float(rng.uniform(6.0, 9.0)), yaw_deg=float(rng.uniform(-25.0, 25.0)),
+        guess_error=tuple(float(x) for x in np.r_[err_t, err_r]), width_px=width_px, height_px=height_px,
+        object="plate", y_range=y_range)
+
+
 class Beam(NamedTuple):
-    """What the supports and both discretisations depend on: the beam's support kind and dimensions (metres)."""
+    """What the supports and both discretisations depend on: the support kind and dimensions (metres), and
+    whether the object is a beam (loaded along its centreline) or a plate (loaded anywhere on its top face)."""
 
     support: str
     length: float
     width: float
     height: float
+    object: str = "beam"
 
 
 def model_cells(d: Beam) -> tuple[int, int, int]:
-    """The tracked model's hexahedral grid: about two elements per beam height along it (24..60)."""
+    """The tracked model's hexahedral grid: for a beam about two elements per beam height along it (24..60); for a
+    plate about one per thickness along (16..30), as square across, one through the thickness (quadratic)."""
+    if d.object == "plate":
+        nx = int(np.clip(round(d.length / d.height), 16, 30))
+        return nx, int(np.clip(round(nx * d.width / d.length), 8, 30)), 1
     return int(np.clip(round(d.length / d.height * 2), 24, 60)), (2 if d.width / d.height < 2 else 4), 2
 
 
 def truth_cells(d: Beam) -> tuple[int, int, int]:
     """The truth's tetrahedral grid: a whole multiple of the model's along the beam (so a support strip ends on a
     node of both: the same continuum problem, discretised independently), >= 3 elements through the thinner side
-    of the section, at most ~100 along."""
+    of the section, at most ~100 along. A plate's: P2 tetrahedra on the model's x spacing (the supports' strips end
+    on nodes of both), 1.5 times as many cells across, two layers through the thickness."""
+    if d.object == "plate":
+        nx, ny, _ = model_cells(d)
+        return nx, round(1.5 * ny), 2
     nx_m = model_cells(d)[0]
     h = min(d.width, d.height) / 3
     k = max(1, min(int(np.ceil(d.length / (2 * h) / nx_m)), 100 // nx_m))
@@ -177,6 +250,9 @@ def supports(d: Beam) -> list[dict]:
         return [{"region": "xmin", "kind": "clamped"}]
     dx = d.length / model_cells(d)[0]
     strip = max(1, round(min(0.05 * d.length, 0.04) / dx)) * dx
+    if d.support == "clamped_ends":  # a plate bolted on two blocks: both end strips clamped
+        return [{"region": {"face": "zmin", "box": [[0.0, strip], None, None]}, "kind": "clamped"},
+                {"region": {"face": "zmin", "box": [[d.length - strip, d.length], None, None]}, "kind": "clamped"}]
     return [{"region": {"face": "zmin", "box": [[0.0, strip], None, None]}, "kind": "pinned"},
             {"region": {"face": "zmin", "box": [[d.length - strip, d.length], None, None]}, "kind": "sliding",
              "component": "z"}]
@@ -188,6 +264,21 @@ def model_spec(d: FamilyDraw) -> dict:
     """The reduced model a user would build for this set-up: a beam_pgd with the known weight (hexahedra, a nodal
     force at the centreline vertices), covering the load's range. Built once per scene into the model cache."""
     nx, ny, nz = model_cells(d.beam)
+    if d.object == "plate":
+        return {
+            "simreal_model_spec": 1, "name": f"family_plate_{d.seed}", "kind": "beam_pgd",
+            "description": f"family plate {d.seed}: {d.support} plate {1e3 * d.length:.0f} x {1e3 * d.width:.0f} x "
+                           f"{1e3 * d.height:.1f} mm, {d.force:.4g} N weight anywhere on the top face",
+            "material": {"law": "linear_elastic", "E": float(d.E), "nu": float(d.nu)},
+            "geometry": {"length": float(d.length), "width": float(d.width), "height": float(d.height)},
+            "mesh": {"cells": [nx, ny, nz], "element": "hex", "order": 2},
+            "supports": supports(d.beam),
+            "load": {"force": float(d.force), "direction": [0, 0, -1], "where": "top_face",
+                     "x_range": [float(d.s_range[0]), float(d.s_range[1])],
+                     "y_range": [float(d.y_range[0]), float(d.y_range[1])]},
+            "pgd": {"max_modes": 60, "tol": 1e-6},  # a load anywhere converges slower than along a line
+            "validation_every": 9,
+        }
     return {
         "simreal_model_spec": 1, "name": f"family_{d.seed}", "kind": "beam_pgd",
         "description": f"family scene {d.seed}: {d.support} beam {1e3 * d.length:.0f} x {1e3 * d.width:.1f} x "
@@ -207,7 +298,8 @@ def spec_path(d: FamilyDraw) -> Path:
     """Write the scene's model spec into the cache (named by its content) and return its path."""
     text = yaml.safe_dump(model_spec(d), sort_keys=False)
     h = hashlib.sha256(text.encode()).hexdigest()[:10]
-    p = cache_dir().parent / "family" / f"family_{d.seed}_{h}.yaml"
+    stem = "family_plate" if d.object == "plate" else "family"
+    p = cache_dir().parent / "family" / f"{stem}_{d.seed}_{h}.yaml"
     if not p.exists():
         p.parent.mkdir(parents=True, exist_ok=True)
         p.write_text(f"# family scene {d.seed} (simreal.synth.family)\n" + text)
@@ -215,7 +307,10 @@ def spec_path(d: FamilyDraw) -> Path:
 
 
 def truth_for(d: FamilyDraw) -> BeamLoadTruth:
-    """The independent full-order truth of the drawn beam, for its weight (the 1 N solution scaled)."""
+    """The independent full-order truth of the drawn beam or plate, for its weight (the 1 N solution scaled)."""
+    if d.object == "plate":
+        return _unit_plate_truth(d.length, d.width, d.height, d.E, d.nu, d.support, d.footprint, d.s_range,
+                                 d.y_range).scaled(d.force)
     return _unit_truth(d.length, d.width, d.height, d.E, d.nu, d.support, d.footprint, d.s_range).scaled(d.force)
 
 
@@ -226,6 +321,16 @@ def _unit_truth(length: float, width: float, height: float, E: float, nu: float,
     return beam_load_truth(length, width, height, materials.make_material("linear_elastic", E, nu), supports(beam),
                            1.0, footprint, s_range, step=max((s_range[1] - s_range[0]) / 48, 0.002),
                            cells=truth_cells(beam))
+
+
+@functools.lru_cache(maxsize=2)
+def _unit_plate_truth(length: float, width: float, height: float, E: float, nu: float, support: str,
+                      footprint: float, x_range: tuple[float, float], y_range: tuple[float, float]) -> PlateLoadTruth:
+    plate = Beam(support, length, width, height, "plate")
+    short = min(x_range[1] - x_range[0], y_range[1] - y_range[0])
+    step = float(np.clip(2 * footprint, short / 30, short / 12))  # about the weight's diameter apart
+    return plate_load_truth(length, width, height, materials.make_material("linear_elastic", E, nu),
+                            supports(plate), 1.0, footprint, x_range, y_range, truth_cells(plate), step)
 
 
 def scaled_force(d: FamilyDraw, cam_f: float) -> FamilyDraw:
@@ -260,7 +365,7 @@ STEREO_BASELINE = 0.12  # metres, a common stereo camera's (e.g. ZED 2)
 
 def family_scene(seed: int, width: int = 640, height: int = 480, fps: float = 15.0,
                  duration: float | None = None, t_free: float = T_FREE, sensor: str = "rgbd",
-                 view: dict | None = None) -> SynthScene:
+                 view: dict | None = None, object: str = "beam") -> SynthScene:
     """One scene of the family (see the module docstring). Frame rate 15 fps like the issue's recording.
     ``t_free``: seconds of unloaded mapping before the load is placed (0: loaded from the first frame, so every
     map point is first seen on the deformed object — the case where links could carry an estimate's error).
@@ -268,12 +373,15 @@ def family_scene(seed: int, width: int = 640, height: int = 480, fps: float = 15
     ``view``: the camera placed elsewhere than drawn, for sweeps of the viewpoint (the physical scene, its load
     included, is unchanged): ``distance`` (metres to the beam's centre), ``elevation_deg`` (above the floor),
     ``azimuth_deg`` (the arc's middle turned this far from the beam's front-face normal, towards its free end),
-    ``arc_deg`` (the arc's width)."""
+    ``arc_deg`` (the arc's width). ``object``: ``beam`` (the seed drawn by :func:`draw`) or ``plate``
+    (:func:`draw_plate`)."""
+    if object not in ("beam", "plate"):
+        raise ValueError(f"family object: expected 'beam' or 'plate'; found '{object}'")
     if sensor not in ("rgbd", "stereo"):
         raise ValueError(f"family sensor: expected 'rgbd' or 'stereo'; found '{sensor}'")
     stereo = sensor == "stereo"
     cam = default_camera(width, height)
-    d = scaled_force(draw(seed, width, height), max(cam.fx, cam.fy))
+    d = scaled_force((draw_plate if object == "plate" else draw)(seed, width, height), max(cam.fx, cam.fy))
     if duration:
         d = FamilyDraw(**{**asdict(d), "duration": float(duration), "positions": d.positions})
     view = dict(view or {})
@@ -290,8 +398,11 @@ def family_scene(seed: int, width: int = 640, height: int = 480, fps: float = 15
     hold = max((d.duration - t_free) / len(d.positions) * 0.7, 0.3)
     move = max((d.duration - t_free) / len(d.positions) * 0.3, 0.2)
 
-    def s_of_t(t: float) -> float:
-        return float(W.holds(np.array([max(t - t_free, 0.0)]), d.positions, hold_s=hold, move_s=move)[0])
+    plate = d.object == "plate"
+
+    def s_of_t(t: float):
+        s = W.holds(np.array([max(t - t_free, 0.0)]), d.positions, hold_s=hold, move_s=move)[0]
+        return (float(s[0]), float(s[1])) if plate else float(s)
 
     def build(sc: SynthScene, r: Renderer, models: dict) -> None:
         tr = truth_for(d)
@@ -330,10 +441,11 @@ def family_scene(seed: int, width: int = 640, height: int = 480, fps: float = 15
         s = s_of_t(t)
         r.update("beam", vertices=tr.deformed_points(s) if loaded else tr.points)
         r.meshes["weight"].visible = loaded
-        top = np.array([[s, d.width / 2, d.height]])
+        top = np.array([[*s, d.height]]) if plate else np.array([[s, d.width / 2, d.height]])
         r.update("weight", pose=T_wo @ G.make_T(t=(top + tr.at(s, top))[0]))
         truth = Truth(object_poses={"beam": sc.T_map_world() @ T_wo})
-        truth.params["beam"] = (["s"], ["m"], [s if loaded else float("nan")])
+        values = list(s) if plate else [s]
+        truth.params["beam"] = (d.parameters, ["m"] * len(values), [v if loaded else float("nan") for v in values])
         return truth
 
     target = T_wo[:3, :3] @ np.array([d.length / 2, d.width / 2, d.height / 2]) + origin
@@ -355,7 +467,8 @@ def family_scene(seed: int, width: int = 640, height: int = 480, fps: float = 15
             camera["stereo_min_depth_m"] = round(max(0.2, 0.5 * float(np.linalg.norm(guess[:3, 3]))), 2)
         return {
             "simreal_scene": 1, "name": sc.name,
-            "description": (f"Family scene {d.seed} ({d.support}, L/h {d.slenderness:.0f}, peak {d.peak_px:.1f} px, "
+            "description": (f"Family {'plate' if plate else 'scene'} {d.seed} ({d.support}, L/h {d.slenderness:.0f}, "
+                            f"peak {d.peak_px:.1f} px, "
                             f"speckle contrast {d.speckle_contrast:.2f}); object placed by registration from a "
                             f"guess by eye (off by {1e3 * np.linalg.norm(err[:3]):.0f} mm, "
                             f"{np.rad2deg(np.linalg.norm(err[3:])):.0f} deg)."),
@@ -364,14 +477,17 @@ def family_scene(seed: int, width: int = 640, height: int = 480, fps: float = 15
             "objects": [{
                 "id": "beam", "model": "spec:" + str(spec_path(d)),
                 "anchor": {"kind": "registration", "guess": _pose7(guess)},
-                "parameters": {"s": {"mode": "tracked", "initial": float(np.mean(d.s_range))}},
+                "parameters": ({"s": {"mode": "tracked", "initial": float(np.mean(d.s_range))}} if not plate else
+                               {"s_x": {"mode": "tracked", "initial": float(np.mean(d.s_range))},
+                                "s_y": {"mode": "tracked", "initial": float(np.mean(d.y_range))}}),
                 "tracking": {"enabled": True, "measurements": "dense"},
                 "overlay": {"field": "displacement"},
             }],
             "overlay": {"enabled": True},
         }
 
-    sc = SynthScene(f"family_{seed}" + ("_stereo" if stereo else ""), f"family scene {seed}" + (
+    stem = "family_plate" if plate else "family"
+    sc = SynthScene(f"{stem}_{seed}" + ("_stereo" if stereo else ""), f"{stem.replace('_', ' ')} {seed}" + (
                     " (stereo)" if stereo else ""), cam, fps, d.duration, {"beam": str(spec_path(d))},
                     build, update, cam_pose, scene_yaml, depth=not stereo, pixel_sigma=d.pixel_sigma,
                     blur_subframes=d.blur_subframes, stereo_baseline=STEREO_BASELINE if stereo else None)
@@ -380,8 +496,11 @@ def family_scene(seed: int, width: int = 640, height: int = 480, fps: float = 15
 
 
 def scene_model_error(sc: SynthScene, model: ReducedModel) -> dict:
-    """The scene's model error (see :func:`~simreal_nodes.synth.truth.model_error`), as % of the load span."""
-    from simreal_nodes.synth.truth import model_error
+    """The scene's model error (see :func:`~simreal_nodes.synth.truth.model_error`), as % of the load span (a
+    plate's: :func:`~simreal_nodes.synth.truth.plate_model_error`, the larger of the two axes' biases)."""
+    from simreal_nodes.synth.truth import model_error, plate_model_error
 
     d: FamilyDraw = sc.state["draw"]
+    if d.object == "plate":
+        return plate_model_error(model, truth_for(d))  # type: ignore[arg-type]
     return model_error(model, truth_for(d)).summary(d.span)

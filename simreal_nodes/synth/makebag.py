@@ -101,18 +101,19 @@ class MsgFactory:
 
 def make_scene(name: str, width: int = 640, height: int = 480, duration: float | None = None,
                fps: float = 30.0) -> SynthScene:
-    # one scene of the family (synth.family). "-preloaded": the load is on from the first frame; "-stereo": a stereo
-    # pair instead of RGB-D; "-d2.5", "-el60", "-az45", "-arc20": the camera's distance (m), elevation, azimuth and
-    # arc (deg) changed
+    # one scene of the family (synth.family; "family-plate-N": a plate's). "-preloaded": the load is on from the
+    # first frame; "-stereo": a stereo pair instead of RGB-D; "-d2.5", "-el60", "-az45", "-arc20": the camera's
+    # distance (m), elevation, azimuth and arc (deg) changed
     num = r"(\d+(?:\.\d+)?)"
-    family = re.fullmatch(rf"family[-_](\d+)(-preloaded)?(-stereo)?(?:-d{num})?(?:-el{num})?(?:-az(-?\d+(?:\.\d+)?))?"
-                          rf"(?:-arc{num})?", name)
+    family = re.fullmatch(rf"family[-_](plate[-_])?(\d+)(-preloaded)?(-stereo)?(?:-d{num})?(?:-el{num})?"
+                          rf"(?:-az(-?\d+(?:\.\d+)?))?(?:-arc{num})?", name)
     if family:
         from simreal_nodes.synth.family import T_FREE, family_scene
         keys = ("distance", "elevation_deg", "azimuth_deg", "arc_deg")
-        view = {k: float(v) for k, v in zip(keys, family.groups()[3:]) if v is not None}
-        return family_scene(int(family[1]), width, height, fps=fps, duration=duration,
-                            t_free=0.0 if family[2] else T_FREE, sensor="stereo" if family[3] else "rgbd", view=view)
+        view = {k: float(v) for k, v in zip(keys, family.groups()[4:]) if v is not None}
+        return family_scene(int(family[2]), width, height, fps=fps, duration=duration,
+                            t_free=0.0 if family[3] else T_FREE, sensor="stereo" if family[4] else "rgbd", view=view,
+                            object="plate" if family[1] else "beam")
     if name not in SCENES:
         from simreal_nodes.errors import SimrealError
         raise SimrealError(f"unknown scene '{name}' (known: {', '.join(SCENES)})")

@@ -14,7 +14,8 @@ For a linear material the stiffness is factorised once and the solution tabulate
 apart; between two tabulated positions it is interpolated linearly — superposition: the exact solution for the
 load shared between the two footprints, a smoothing far below the footprint's own size when ``step`` is small.
 A hyperelastic material (the foam beam's Saint Venant-Kirchhoff) is solved by Newton at each tabulated position,
-the weight sliding from one to the next.
+the weight sliding from one to the next. A plate (:func:`plate_load_truth`) is tabulated the same way over a
+rectangle of positions on its top face and interpolated bilinearly.
 
 :func:`model_error` then measures how far the reduced model is from this truth — the error a perfect tracker
 would still make — so that every tracking error can be reported beside the model error of its scene.
@@ -153,6 +154,82 @@ def beam_load_truth(length: float, width: float, height: float, material: materi
 
 
 @dataclass
+class PlateLoadTruth(BeamLoadTruth):
+    """Full-order displacement of a plate for a load anywhere on its top face, at ``(s_x, s_y)`` (object frame as
+    :class:`BeamLoadTruth`). ``s`` and ``sy`` are the tabulated positions along x and y, ``U`` is
+    (n_x, n_y, n, 3); between tabulated positions the solution is interpolated bilinearly (superposition: the load
+    shared between the four neighbouring footprints)."""
+
+    sy: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+    def displacement(self, s) -> np.ndarray:
+        """(n, 3) vertex displacement for the load at ``s = (s_x, s_y)`` (clipped to the tabulated rectangle)."""
+        sx, sy = (float(v) for v in np.asarray(s, dtype=np.float64).ravel()[:2])
+        i, wx = _bracket(self.s, sx)
+        j, wy = _bracket(self.sy, sy)
+        out = (1 - wx) * (1 - wy) * self.U[i, j]
+        if wx:
+            out = out + wx * (1 - wy) * self.U[i + 1, j]
+        if wy:
+            out = out + (1 - wx) * wy * self.U[i, j + 1]
+        if wx and wy:
+            out = out + wx * wy * self.U[i + 1, j + 1]
+        return out
+
+    def scaled(self, factor: float) -> PlateLoadTruth:
+        out = PlateLoadTruth(self.points, self.surface, self.tets, self.s, self.U * factor, self.description,
+                             {**self.info, "scaled": factor}, self.sy)
+        out._embeds, out._mesh = self._embeds, self._mesh
+        return out
+
+
+def _bracket(tab: np.ndarray, s: float) -> tuple[int, float]:
+    """Index k and weight w of ``s`` between tab[k] and tab[k + 1] (clipped; w = 0 on a tabulated value)."""
+    if len(tab) == 1:
+        return 0, 0.0
+    x = float(np.clip(s, tab[0], tab[-1]))
+    k = int(np.clip(np.searchsorted(tab, x, side="right") - 1, 0, len(tab) - 2))
+    w = (x - tab[k]) / (tab[k + 1] - tab[k])
+    return (k + 1, 0.0) if w >= 1.0 else (k, float(w))
+
+
+def plate_load_truth(length: float, width: float, height: float, material: materials.Material,
+                     supports: list[dict], force: float, footprint_radius: float, x_range: tuple[float, float],
+                     y_range: tuple[float, float], cells: tuple[int, int, int], step: float,
+                     order: int = 2) -> PlateLoadTruth:
+    """Tabulate the full-order solution of a plate (a box of ``length`` x ``width`` x ``height``) loaded by a weight
+    of ``force`` newtons on a disk of ``footprint_radius`` centred at (s_x, s_y) on its top face, over the rectangle
+    ``x_range`` x ``y_range``, about ``step`` apart in both directions: one factorisation of the stiffness (linear
+    material only) and one solve per position, ``cells`` tetrahedral cells of order ``order``."""
+    if not isinstance(material, materials.LinearElastic):
+        raise ValueError("plate_load_truth tabulates a linear material (superposition between positions)")
+    mesh = meshes.box(length, width, height, cells, "tet")
+    solid = fem.Solid(mesh, material, order, supports)
+    sx = np.linspace(x_range[0], x_range[1], max(2, int(np.ceil((x_range[1] - x_range[0]) / step)) + 1))
+    sy = np.linspace(y_range[0], y_range[1], max(2, int(np.ceil((y_range[1] - y_range[0]) / step)) + 1))
+    K = solid.stiffness()
+    free = solid.free
+    lu = spla.splu(K[free][:, free].tocsc(), permc_spec="MMD_AT_PLUS_A")
+    n_v = mesh.p.shape[1]
+    U = np.zeros((len(sx), len(sy), n_v, 3))
+    X = np.zeros((solid.N, len(sy)))
+    for i, x in enumerate(sx):  # one row of positions at a time: the loads of a row fit in memory
+        F = np.stack([solid.patch_load({"face": "zmax"}, (x, y, height), footprint_radius, (0.0, 0.0, -force))
+                      for y in sy], axis=1)
+        X[free] = lu.solve(F[free] / material.E)  # the stiffness is assembled in units of E (fem.Solid)
+        for j in range(len(sy)):
+            U[i, j] = solid.vertex_displacement(X[:, j])
+    if not np.all(np.isfinite(U)):
+        raise FemError("the truth solve returned NaN/inf")
+    desc = (f"full-order P{order} tetrahedra {cells[0]}x{cells[1]}x{cells[2]} cells ({solid.N} dofs), "
+            f"{material.law}, weight {force:g} N on a {2e3 * footprint_radius:.0f} mm disk anywhere on the top face, "
+            f"tabulated on {len(sx)} x {len(sy)} positions")
+    return PlateLoadTruth(mesh.p.T.copy(), meshes.boundary_triangles(mesh), mesh.t.T.copy(), sx, U, desc,
+                          {"cells": list(cells), "order": order, "dofs": int(solid.N), "n_s": int(len(sx) * len(sy)),
+                           "linear": True}, sy)
+
+
+@dataclass
 class LeverTruth:
     """Full-order displacement of the joint boot for its lever turned by ``theta`` (object frame: the boot's axis
     is z, its bottom ring at z = 0; the lever pivots about ``axis`` through ``pivot``)."""
@@ -273,3 +350,44 @@ def model_error(model: ReducedModel, truth: BeamLoadTruth, axis: str = "s", n_fi
         j = int(np.argmin(np.sum((table - ut) ** 2, axis=1)))
         best.append(grid[j])
     return ModelError(np.asarray(s_out), np.asarray(rel), np.asarray(best))
+
+
+def plate_model_error(model: ReducedModel, truth: PlateLoadTruth, every: int = 3, n_fit: int = 41) -> dict:
+    """:func:`model_error` for a two-parameter load-position model (s_x, s_y) against a plate's truth, at every
+    ``every``-th tabulated position in each direction: the relative L2 error over the model's surface nodes and the
+    bias of the best fit (a grid of ``n_fit`` x ``n_fit`` positions, then least squares from its best), each axis
+    in % of its range; a position's bias is the larger of its two."""
+    from scipy.optimize import least_squares
+
+    if [a.name for a in model.axes] != ["s_x", "s_y"]:
+        raise ValueError(f"plate_model_error compares (s_x, s_y) models; '{model.name}' has "
+                         f"{[a.name for a in model.axes]}")
+    ax, ay = model.axes
+    spans = np.array([ax.range[1] - ax.range[0], ay.range[1] - ay.range[0]])
+    nodes = np.unique(np.asarray(model.surface).ravel()) if len(model.surface) else np.arange(model.n_nodes)
+    emb = truth.embed(model.points[nodes])
+    view = model.field("displacement").view(nodes)
+    gx, gy = np.linspace(*ax.range, n_fit), np.linspace(*ay.range, n_fit)
+    grid = np.stack(np.meshgrid(gx, gy, indexing="ij"), axis=-1).reshape(-1, 2)
+    table = np.stack([view.evaluate(list(g)).ravel() for g in grid])
+    rel, bias = [], []
+    for i in range(0, len(truth.s), every):
+        for j in range(0, len(truth.sy), every):
+            s = np.array([truth.s[i], truth.sy[j]])
+            if not (ax.contains(float(s[0])) and ay.contains(float(s[1]))):
+                continue
+            ut = np.einsum("nk,nkc->nc", emb[1], truth.U[i, j][emb[0]]).ravel()
+            rel.append(float(np.linalg.norm(view.evaluate(list(s)).ravel() - ut)) / max(float(np.linalg.norm(ut)),
+                                                                                         1e-300))
+            g0 = grid[int(np.argmin(np.sum((table - ut) ** 2, axis=1)))]
+            def misfit(m: np.ndarray, target: np.ndarray = ut) -> np.ndarray:
+                return view.evaluate(list(m)).ravel() - target
+
+            fit = least_squares(misfit, g0,
+                                bounds=([ax.range[0], ay.range[0]], [ax.range[1], ay.range[1]]), x_scale=spans)
+            bias.append(float(np.max(np.abs(fit.x - s) / spans)))
+    if not rel:
+        raise ValueError("no tabulated truth position lies inside the model's load range")
+    r, b = 100 * np.asarray(rel), 100 * np.asarray(bias)
+    return {"model_rel_l2_median_pct": float(np.median(r)), "model_rel_l2_max_pct": float(np.max(r)),
+            "model_bias_median_pct_span": float(np.median(b)), "model_bias_max_pct_span": float(np.max(b))}
