@@ -237,15 +237,23 @@ need ORB keypoints on the object, and a faint surface gets none. The dense mode 
 at every pixel it covers, the idea of digital image correlation carried through the reduced model: points are
 sampled on the model surface about 1.5 px apart in a reference view (the first frame with a camera pose and the
 object in view, taken to be at rest); in each new image the residual of sample k is
-`I(pi(T_cw X_k(theta))) - (a I_ref,k + b)` with `X_k = c + R(omega) (T_map_obj (x_k + u_k(mu)) - c) + t`, where
+`I(pi(T_cw X_k(theta))) - (a I_ref,k + b + I_ref,k (n_k(mu) - n_k,ref) . g)` with
+`X_k = c + R(omega) (T_map_obj (x_k + u_k(mu)) - c) + t`, where
 u_k(mu) is the PGD displacement interpolated in the sample's surface triangle (Eq. 4.10's link, dense). Gauss-Newton
 with Levenberg damping over a 3-level pyramid, the Jacobian through the PGD sensitivities du/dmu (Eq. 4.11 with
 image gradients in place of the reprojection's), Tukey's biweight on the intensity residual (scale from the median
 absolute deviation: the load's dark edges have gradients fifty times a faint speckle's and would pull under Huber),
 a coarse search over mu at the coarsest level every frame (a load that jumps lands in another basin), visibility by
-a coarse depth buffer of the samples. Nuisances: an affine brightness (a, b) and a small rigid correction (omega, t)
-(camera drift, placement error). A rigid motion of the object looks much like a cantilever's bending and took its
-blame on the development scenes, so with a depth image (RGB-D) the correction is measured where nothing can bend:
+a coarse depth buffer of the samples. Nuisances: an affine brightness (a, b), the shading change g of a matte
+surface whose normal n_k turns as it deforms (under ambient light and one distant light, a turn dn changes the
+brightness by about I_ref dn.g; the normals smooth across each face of the model's surface, as a renderer shades it;
+`tracking.dense_shading`, on) and a small rigid correction (omega, t) (camera drift, placement error). Without the
+shading term a faint plate's twist showed mostly as shading, and the fit put the load across the plate 8-18 mm off
+(development plate seed 7: 7.6 % -> 2.5 %; `docs/family.md`, "Plates"); it costs 40-50 % more time per solve
+(three more iterations, the normals) and changes the beams' accuracy by nothing measurable on the development
+family (the tables of this document ran before it and were not rerun). A rigid motion of the object looks much like
+a cantilever's bending and took its blame on the development scenes, so with a depth image (RGB-D) the correction
+is measured where nothing can bend:
 the static surroundings, a ring 32 px wide around the object's outline in the reference view (4 px off it),
 back-projected with that view's depth, enter the same robust cost with their own brightness. The
 camera's error epsilon moves the surroundings and the object alike; the object's own placement error is not
@@ -273,8 +281,8 @@ displacement, at the half-resolution level, must be worse by 5 % and the fitted 
 more than 0.3 px.
 Map points on the object are still linked, so the localization leaves them out of the camera pose. Scene keys:
 `tracking.dense_step_px` (sample spacing, 1.5 px), `tracking.dense_rigid` (the rigid correction, on) and
-`tracking.dense_surroundings_px` (the ring's width, 32 px; 0: the object alone), `tracking.dense_refine` (on) and
-`tracking.dense_camera_first` (off); their trades are measured on
+`tracking.dense_surroundings_px` (the ring's width, 32 px; 0: the object alone), `tracking.dense_refine` (on),
+`tracking.dense_shading` (on) and `tracking.dense_camera_first` (off); their trades are measured on
 development seeds in `docs/family.md`'s knob tables. The object's state in the reference view: read from its depth
 where there is a depth image (`tracking.reference: depth`, the default, `assimilation/depth_state.py`: the model's
 deformed surface fitted to the depth cloud and compared with the rest shape), else taken to be the rest shape; a

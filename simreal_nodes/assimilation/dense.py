@@ -7,12 +7,19 @@ reference view; their intensities in that view are the template. In a new image 
 deformed by mu puts it,
 
     X_k(theta) = c + R(omega) (T_map_obj (x_k + u_k(mu)) - c) + t                  (map frame)
-    r_k(theta) = I(pi(T_cw X_k)) - (a I_ref,k + b),     theta = (mu, omega, t, a, b),
+    r_k(theta) = I(pi(T_cw X_k)) - (a I_ref,k + b + I_ref,k (n_k(mu) - n_k,ref) . g),   theta = (mu, omega, t, a, b, g),
 
 with u_k(mu) = sum_i w_ki u(x_i, mu) interpolated in the surface triangle (Eq. 4.10's link, dense), pi the
 camera, (omega, t) a small rigid correction of the object about its centre c (it absorbs the camera pose's drift
-and the hand-measured anchor's error: a few mm, which is a pixel or two, as large as a faint deflection) and
-(a, b) an affine brightness change. Gauss-Newton with Levenberg damping on Tukey's biweight cost of r (scale from
+and the hand-measured anchor's error: a few mm, which is a pixel or two, as large as a faint deflection), (a, b)
+an affine brightness change and g the shading change of a matte (Lambertian) surface whose normal turns as it
+deforms: a surface point of albedo rho under ambient light and one distant light l shows rho (k_a + k_d n.l), so
+a turn of its normal by dn changes its brightness by about I_ref k_d dn.l / (k_a + k_d n_ref.l) = I_ref dn.g (g
+unknown, the same for the whole surface; n_k(mu) the deformed surface's normal at the sample, smooth across each
+face of the model as a renderer shades it: :class:`SmoothNormals`). Without
+it a faint texture's bending shows mostly as a change of shading, which no rigid or affine term explains and the
+fit took for a deformation elsewhere (development plate seed 7: its load's position across the plate 14 % of its
+range off). Gauss-Newton with Levenberg damping on Tukey's biweight cost of r (scale from
 the median absolute residual, so an occluder such as the load itself counts nothing), the Jacobian through the PGD
 sensitivities du/dmu (Eq. 4.11 with image gradients in place of the reprojection's), coarse to fine over an
 image pyramid. mu stays in its box (projected steps, as :func:`lm.solve`); weak Gaussian priors hold the rigid
@@ -39,6 +46,7 @@ from __future__ import annotations
 
 import contextlib
 from dataclasses import dataclass, field
+from typing import Any
 
 import cv2
 import numpy as np
@@ -52,7 +60,6 @@ Array = NDArray[np.float64]
 Grad = tuple[NDArray[np.float32], NDArray[np.float32]]  # d image / du, d image / dv
 N_RIGID = 6  # omega (3), t (3)
 TUKEY = 4.685  # biweight threshold in robust standard deviations (95 % efficiency under Gaussian noise)
-N_PHOTO = 2  # a, b
 
 
 @dataclass
@@ -108,6 +115,11 @@ class DenseSettings:
     # (the gap is NaN)
     camera_check: bool = True
     max_camera_gap: float = 1.0
+    # the shading change of the deforming surface (g in the module docstring; False: the affine brightness alone)
+    # and the 1-sigma of g's prior about zero (brightness fraction per unit change of the normal: k_d / k_a is at
+    # most a few for a matte surface; the prior only holds the component along the normal, which no turn sees)
+    shading: bool = True
+    prior_shading: float = 1.0
 
 
 @dataclass
@@ -119,6 +131,7 @@ class SurfaceSamples:
     nodes: NDArray[np.int64]  # (N, 3)
     weights: Array  # (N, 3)
     normal: Array  # (N, 3) unit; orientation not assumed (visibility uses |cos| and a depth buffer)
+    face: NDArray[np.int64]  # (N,) the sample's triangle in model.surface
 
 
 def sample_surface(model: ReducedModel, spacing: float, max_samples: int, seed: int = 0) -> SurfaceSamples:
@@ -137,7 +150,7 @@ def sample_surface(model: ReducedModel, spacing: float, max_samples: int, seed: 
     w = np.c_[1 - r1, r1 * (1 - r2), r1 * r2]
     x = w[:, :1] * A[tri] + w[:, 1:2] * B[tri] + w[:, 2:] * C[tri]
     n = cr[tri] / np.maximum(np.linalg.norm(cr[tri], axis=1, keepdims=True), 1e-300)
-    return SurfaceSamples(x, F[tri], w, n)
+    return SurfaceSamples(x, F[tri], w, n, tri)
 
 
 def pyramid(gray: NDArray[np.generic], levels: int) -> list[NDArray[np.float32]]:
@@ -165,6 +178,110 @@ def bilinear(img: NDArray[np.float32], uv: Array) -> NDArray[np.float32]:
     return np.asarray(v, np.float32).reshape(-1)
 
 
+def _unit(v: Array) -> Array:
+    out: Array = v / np.maximum(np.linalg.norm(v, axis=1, keepdims=True), 1e-300)
+    return out
+
+
+@dataclass
+class SmoothNormals:
+    """The normals of a deforming surface at sample points, smooth across the triangles of one face of the
+    object (as a renderer shades a curved surface), not across its edges: at each corner of a sample's triangle,
+    the area-weighted sum of the normals of the triangles around that corner that lie within the crease angle of
+    the sample's own, oriented alike; at the sample, the corners' normals blended by its barycentric weights
+    (not normalised again: on a smooth face the blend's length differs from 1 by the square of the angle between
+    the corners' normals, and the shading uses only its change since the reference view, where the same holds).
+
+    ``nodes`` are the surface nodes involved, ``tris`` (T, 3) the triangles around the samples' corners (indices
+    into ``nodes``), ``blend`` a sparse (3 F, T) matrix of +-1 (F: the samples' distinct triangles) that sums
+    their raw cross products into each (triangle, corner) normal, ``slot`` (M,) a sample's triangle among the F."""
+
+    nodes: NDArray[np.int64]
+    rest: Array  # (C, 3) rest positions of ``nodes``
+    view: DeformationView
+    tris: NDArray[np.int64]
+    blend: Any
+    slot: NDArray[np.int64]
+    weights: Array  # (M, 3)
+    corner_ref: Array  # (3 F, 3) the corners' normals in the reference view's state (set by :meth:`set_reference`)
+    # the last two corners() (a solve asks again for the mu it accepted)
+    cache: dict[bytes, Array] = field(default_factory=dict, repr=False)
+
+    @classmethod
+    def build(cls, model: ReducedModel, face: NDArray[np.int64], weights: Array, towards: Array,
+              n_modes: int | None, crease_deg: float = 45.0) -> SmoothNormals:
+        """For samples on triangles ``face`` (indices into model.surface) with barycentric ``weights``; each
+        sample's triangle is oriented to face ``towards`` (M, 3): a point on the side it is seen from."""
+        from scipy.sparse import csr_matrix
+
+        V, F = np.asarray(model.points, np.float64), np.asarray(model.surface, np.int64)
+        uniq, slot = np.unique(face, return_inverse=True)
+        cross = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+        unit = _unit(cross)
+        # the orientation of each distinct sample triangle: towards the side it was seen from (mean over samples)
+        centre = V[F[uniq]].mean(axis=1)
+        look = np.zeros((len(uniq), 3))
+        np.add.at(look, slot, towards - centre[slot])
+        sign_f = np.where(np.sum(unit[uniq] * look, axis=1) < 0, -1.0, 1.0)
+        # the triangles around each node
+        order = np.argsort(F.ravel(), kind="stable")
+        tri_of = order // 3
+        starts = np.searchsorted(F.ravel()[order], np.arange(len(V) + 1))
+        cos_crease = np.cos(np.deg2rad(crease_deg))
+        rows, cols, vals = [], [], []
+        for k, f in enumerate(uniq):
+            nf = unit[f] * sign_f[k]
+            for c in range(3):
+                around = tri_of[starts[F[f, c]]:starts[F[f, c] + 1]]
+                dots = unit[around] @ nf
+                keep = np.abs(dots) >= cos_crease
+                rows.append(np.full(int(keep.sum()), 3 * k + c))
+                cols.append(around[keep])
+                vals.append(np.sign(dots[keep]))
+        r, t, v = np.concatenate(rows), np.concatenate(cols), np.concatenate(vals)
+        used, t_local = np.unique(t, return_inverse=True)
+        nodes, tri_local = np.unique(F[used], return_inverse=True)
+        blend = csr_matrix((v, (r, t_local)), shape=(3 * len(uniq), len(used)))
+        out = cls(nodes, V[nodes], model.deformation_view(nodes, n_modes), tri_local.reshape(-1, 3).astype(np.int64),
+                  blend, slot.astype(np.int64), np.asarray(weights, np.float64), np.zeros((3 * len(uniq), 3)))
+        out.set_reference(None)
+        return out
+
+    def corners(self, mu: Array | None) -> Array:
+        """The unit normals (3 F, 3) (object frame) at the samples' triangles' corners of the surface deformed by
+        ``mu`` (None: the rest shape)."""
+        key = b"" if mu is None else np.asarray(mu, np.float64).tobytes()
+        cache = self.cache
+        if key in cache:
+            return cache[key]
+        X = self.rest if mu is None else self.rest + self.view.field.evaluate(mu)
+        t = self.tris
+        out = _unit(np.asarray(self.blend @ np.cross(X[t[:, 1]] - X[t[:, 0]], X[t[:, 2]] - X[t[:, 0]])))
+        if len(cache) >= 2:
+            cache.pop(next(iter(cache)))
+        cache[key] = out
+        return out
+
+    def set_reference(self, mu: Array | None) -> None:
+        self.corner_ref = self.corners(mu).copy()
+
+    def blend_rows(self, per_corner: Array, rows: NDArray[np.int64] | None = None) -> Array:
+        """A per-corner quantity (3 F, ...) at the samples ``rows`` (None: all), by their barycentric weights."""
+        sl = self.slot if rows is None else self.slot[rows]
+        w = self.weights if rows is None else self.weights[rows]
+        if per_corner.ndim == 2:
+            w = w[:, :, None]
+        out: Array = w[:, 0] * per_corner[3 * sl] + w[:, 1] * per_corner[3 * sl + 1] + w[:, 2] * per_corner[3 * sl + 2]
+        return out
+
+    def at(self, mu: Array | None, rows: NDArray[np.int64] | None = None) -> Array:
+        """The normals (M, 3) of the samples ``rows`` (None: all) of the surface deformed by ``mu``."""
+        return self.blend_rows(self.corners(mu), rows)
+
+    def change(self, mu: Array | None, rows: NDArray[np.int64] | None = None) -> Array:
+        """n(mu) - n_ref (M, 3) at the samples ``rows`` (None: all)."""
+        return self.blend_rows(self.corners(mu) - self.corner_ref, rows)
+
 
 @dataclass
 class Level:
@@ -175,6 +292,8 @@ class Level:
     normal: Array  # (M, 3) object frame
     view: DeformationView
     values: NDArray[np.float64]  # (M,) reference intensities at this level
+    # the samples' normals as the object deforms (the shading; object frame, turned towards the reference camera)
+    normals: SmoothNormals
 
 
 @dataclass
@@ -249,9 +368,11 @@ class DenseAligner:
         self.cam_corr = np.zeros(N_RIGID)  # epsilon of the last fit
         self.rest_rigid = np.zeros(N_RIGID)  # the same for the zero-displacement fit
         self.rest_cam = np.zeros(N_RIGID)
-        self.photo = np.array([1.0, 0.0])
+        # the object's brightness (a, b[, g]: 3 more with the shading) and the surroundings' (a_s, b_s)
+        self.n_photo = 5 if self.s.shading else 2
+        self.photo = self._photo0()
         self.photo_s = np.array([1.0, 0.0])
-        self.rest_photo = np.array([1.0, 0.0])
+        self.rest_photo = self._photo0()
         self.rest_photo_s = np.array([1.0, 0.0])
         self.held: Array | None = None  # rho measured at rest (see :meth:`hold_rest`)
         self.c = G.transform(self.T_mo, np.asarray(model.points, np.float64).mean(axis=0, keepdims=True))[0]
@@ -260,6 +381,10 @@ class DenseAligner:
         if cam.has_distortion:
             self._maps = cv2.initUndistortRectifyMap(cam.K, cam.cv_dist(), None, cam.K, (cam.width, cam.height),
                                                      cv2.CV_32FC1)
+
+    def _photo0(self) -> Array:
+        out: Array = np.r_[1.0, np.zeros(self.n_photo - 1)]
+        return out
 
     def ideal(self, gray: NDArray[np.generic], nearest: bool = False) -> NDArray[np.float32]:
         """The image as the pinhole camera of the same K would see it (float32); ``nearest`` for a depth image
@@ -318,21 +443,26 @@ class DenseAligner:
             return False
         uv = self.cam.project(G.transform(T_cw @ self.T_mo, x_ref[idx]), distort=False)
         pyr = pyramid(self.ideal(gray), self.s.levels)
+        eye = G.transform(G.inv(T_cw @ self.T_mo), np.zeros((1, 3)))[0]  # the reference camera, object frame
         for lvl, img in enumerate(pyr):
             pick = np.arange(0, len(idx), 4**lvl)  # coarser levels: fewer samples, the same spread
             v = bilinear(img, _at_level(uv[pick], lvl)).astype(np.float64)
             good = np.isfinite(v)
             sel = idx[pick][good]
+            normals = SmoothNormals.build(self.model, smp.face[sel], smp.weights[sel],
+                                          np.broadcast_to(eye, (len(sel), 3)), self.n_modes)
+            normals.set_reference(None if mu_ref is None else np.asarray(mu_ref, np.float64))
             self.levels.append(Level(smp.x[sel], smp.normal[sel],
                                      self.model.deformation_view(smp.nodes[sel], self.n_modes, smp.weights[sel]),
-                                     v[good]))
+                                     v[good], normals))
         if depth is not None and self.s.rigid and self.s.static_ring_px > 0:
             self.static = self._surroundings(pyr, T_cw, uv, depth, int(self.s.static_share * len(idx)))
         self.rigid[:] = 0.0
         self.cam_corr[:] = 0.0
         self.rest_rigid[:] = 0.0
         self.rest_cam[:] = 0.0
-        self.photo[:] = self.photo_s[:] = self.rest_photo[:] = self.rest_photo_s[:] = (1.0, 0.0)
+        self.photo, self.rest_photo = self._photo0(), self._photo0()
+        self.photo_s[:] = self.rest_photo_s[:] = (1.0, 0.0)
         self.held = None
         return True
 
@@ -460,12 +590,40 @@ class DenseAligner:
         sel: NDArray[np.int64] = np.flatnonzero(ok)[~inside]
         return sel
 
+    # -- brightness -----------------------------------------------------------------------------------------
+    def _normal_change(self, L: Level, rows: NDArray[np.int64], mu: Array | None) -> Array:
+        """n_k(mu) - n_k,ref (N, 3, object frame) of the samples ``rows``: how far each one's surface triangle
+        has turned since the reference view (``mu`` None: the rest shape)."""
+        return L.normals.change(mu, rows)
+
+    def _brightness_basis(self, L: Level, rows: NDArray[np.int64], mu: Array | None) -> Array:
+        """The columns the object's brightness parameters multiply (N, n_photo): I_ref, 1 and, with the
+        shading, I_ref (n(mu) - n_ref); the predicted intensity is this times ``photo``."""
+        ref = L.values[rows]
+        cols = [ref, np.ones(len(rows))]
+        if self.n_photo > 2:
+            cols.append(ref[:, None] * self._normal_change(L, rows, mu))
+        return np.column_stack(cols)
+
+    def _predicted(self, L: Level, rows: NDArray[np.int64], mu: Array | None, photo: Array) -> Array:
+        """a I_ref + b (+ I_ref (n(mu) - n_ref) . g): the shading as one number per triangle corner, blended."""
+        ref = L.values[rows]
+        out: Array = photo[0] * ref + photo[1]
+        if self.n_photo > 2:
+            dn = L.normals.corners(mu) - L.normals.corner_ref
+            out = out + ref * L.normals.blend_rows(dn @ photo[2:], rows)
+        return out
+
+    def _shading_prior(self) -> float:
+        """The weight of g's Gaussian prior (0 without the shading)."""
+        return 1.0 / self.s.prior_shading**2 if self.n_photo > 2 else 0.0
+
     # -- the solve ------------------------------------------------------------------------------------------
     def _residuals(self, lvl: int, img: NDArray[np.float32], rows: NDArray[np.int64], f: _Fit,
                    T_cw: Array) -> Array:
         L = self.levels[lvl]
         uv, _ = self._geometry(L, rows, f.mu, f.total, T_cw, jac=False)
-        r: Array = bilinear(img, _at_level(uv, lvl)).astype(np.float64) - (f.photo[0] * L.values[rows] + f.photo[1])
+        r: Array = bilinear(img, _at_level(uv, lvl)).astype(np.float64) - self._predicted(L, rows, f.mu, f.photo)
         return r
 
     def _static_residuals(self, lvl: int, img: NDArray[np.float32], rows: NDArray[np.int64], f: _Fit,
@@ -528,7 +686,8 @@ class DenseAligner:
             oks = np.isfinite(rs)
             c += self._rho(rs[oks], TUKEY) * counts[1] / max(int(oks.sum()), 1)
         pw, px = self._priors(f)
-        return float(c) + 0.5 * float(np.sum(pw * px * px))
+        return float(c) + 0.5 * float(np.sum(pw * px * px)) + 0.5 * self._shading_prior() * float(
+            np.sum(f.photo[2:] ** 2))
 
     def _solve_level(self, lvl: int, pyr: list[NDArray[np.float32]], grads: list[Grad],
                      f: _Fit, T_cw: Array, lo: Array, hi: Array) -> tuple[Array, Array, float, NDArray[np.int64]]:
@@ -553,7 +712,10 @@ class DenseAligner:
             assert Jg is not None
             q = _at_level(uv, lvl)
             img, (gx, gy) = pyr[lvl], grads[lvl]
-            r = bilinear(img, q).astype(np.float64) - (f.photo[0] * L.values[rows] + f.photo[1])
+            # the shading's normals at this iteration's mu (their own change with mu is left out of the Jacobian:
+            # the cost the steps are accepted on has it)
+            B = self._brightness_basis(L, rows, f.mu)
+            r = bilinear(img, q).astype(np.float64) - B @ f.photo
             ok = np.isfinite(r)
             if ok.sum() < self.s.min_samples // max(1, 4**lvl) or ok.sum() < 10:
                 break
@@ -567,7 +729,7 @@ class DenseAligner:
                 cols.append(Jr)
             if self.s.rigid and f.cam_free:
                 cols.append(Jr)
-            cols.append(np.stack([-L.values[rows][ok], -np.ones(ok.sum())], axis=1))
+            cols.append(-B[ok])
             J = np.concatenate(cols, axis=1) / sigma
             res = rr / sigma
             sigma_s, n_s = 1.0, 0
@@ -599,6 +761,10 @@ class DenseAligner:
             if len(pw):
                 H[n_f:n_f + len(pw), n_f:n_f + len(pw)] += np.diag(pw)
                 grad[n_f:n_f + len(pw)] += pw * px
+            if self.n_photo > 2:  # g's prior: its columns follow a and b
+                gs0 = n_f + len(pw) + 2
+                H[gs0:gs0 + 3, gs0:gs0 + 3] += self._shading_prior() * np.eye(3)
+                grad[gs0:gs0 + 3] += self._shading_prior() * f.photo[2:]
             counts = (int(ok.sum()), n_s)
             sig = (sigma, sigma_s)
             s_fit = srows if n_s >= 10 else srows[:0]  # the surroundings' rows that entered this iteration
@@ -607,7 +773,7 @@ class DenseAligner:
             for _try in range(4):
                 A = H + lam * np.diag(np.maximum(np.diag(H), 1e-9))
                 try:
-                    step = -np.linalg.solve(A, grad)
+                    step = -np.asarray(np.linalg.solve(A, grad), np.float64)
                 except np.linalg.LinAlgError:
                     lam *= 10
                     continue
@@ -710,34 +876,37 @@ class DenseAligner:
             wide = self._wide()
             out.cam = np.clip(out.cam + step[k:k + 6], -3 * wide, 3 * wide)
             k += 6
-        out.photo = out.photo + step[k:k + 2]
+        out.photo = out.photo + step[k:k + self.n_photo]
         if use_s:
-            out.photo_s = out.photo_s + step[k + 2:k + 4]
+            out.photo_s = out.photo_s + step[k + self.n_photo:k + self.n_photo + 2]
         return out
 
     def _profile_cost(self, lvl: int, img: NDArray[np.float32], rows: NDArray[np.int64], f: _Fit, mu: Array,
                       T_cw: Array, sigma: float) -> float:
-        """The level's robust cost of the object's samples at ``mu`` with the brightness (a, b) at its best for
-        that mu (Tukey-weighted least squares, two passes) and the rigid parts as fitted: the profile of the cost
-        over mu."""
+        """The level's robust cost of the object's samples at ``mu`` with the brightness (a, b and the shading g)
+        at its best for that mu (Tukey-weighted least squares with g's prior, two passes) and the rigid parts as
+        fitted: the profile of the cost over mu."""
         L = self.levels[lvl]
         uv, _ = self._geometry(L, rows, mu, f.total, T_cw, jac=False)
         v = bilinear(img, _at_level(uv, lvl)).astype(np.float64)
         ok = np.isfinite(v)
         if ok.sum() < 10:
             return float("inf")
-        v, ref = v[ok], L.values[rows][ok]
-        a, b = f.photo
+        v, B = v[ok], self._brightness_basis(L, rows[ok], mu)
+        prior = np.zeros(self.n_photo)
+        prior[2:] = self._shading_prior() * sigma**2  # in intensity units, as the residuals below
+        p = f.photo.copy()
         for _ in range(2):
-            w = self._weights((v - a * ref - b) / sigma, TUKEY)
-            sw = float(w.sum())
-            if sw <= 0:
+            w = self._weights((v - B @ p) / sigma, TUKEY)
+            if float(w.sum()) <= 0:
                 return float("inf")
-            mr, mv = float(w @ ref) / sw, float(w @ v) / sw
-            var = float(w @ (ref - mr) ** 2)
-            a = float(w @ ((ref - mr) * (v - mv))) / var if var > 0 else 1.0
-            b = mv - a * mr
-        return self._rho((v - a * ref - b) / sigma, TUKEY) / len(v)
+            A = B.T @ (B * w[:, None]) + np.diag(prior)
+            try:
+                p = np.asarray(np.linalg.solve(A, B.T @ (w * v)), np.float64)
+            except np.linalg.LinAlgError:
+                p = np.r_[1.0, float(w @ v) / float(w.sum()), np.zeros(self.n_photo - 2)]
+        cost = self._rho((v - B @ p) / sigma, TUKEY) + 0.5 * self._shading_prior() * float(np.sum(p[2:] ** 2))
+        return cost / len(v)
 
     def _refine(self, lvl: int, img: NDArray[np.float32], rows: NDArray[np.int64], f: _Fit, T_cw: Array,
                 lo: Array, hi: Array, sigma: float) -> Array:
@@ -862,7 +1031,8 @@ class DenseAligner:
         res.motion_px = float(np.percentile(mv[np.isfinite(mv)], 90)) if np.isfinite(mv).any() else 0.0
         res.debug.update(rigid_rot_deg=float(np.rad2deg(np.linalg.norm(f.rigid[:3]))),
                          rigid_trans_mm=float(1e3 * np.linalg.norm(f.rigid[3:])), gain=float(f.photo[0]),
-                         bias=float(f.photo[1]), static_samples=float(len(self.static[0].X) if use_s else 0),
+                         bias=float(f.photo[1]), shading=float(np.linalg.norm(f.photo[2:])),
+                         static_samples=float(len(self.static[0].X) if use_s else 0),
                          camera_rot_deg=float(np.rad2deg(np.linalg.norm(f.cam[:3]))),
                          camera_trans_mm=float(1e3 * np.linalg.norm(f.cam[3:])),
                          camera_gap_sigma=cam_gap)

@@ -809,7 +809,7 @@ def tracker_config(obj: dict[str, Any], **overrides: Any) -> TrackerConfig:
                         dense=DenseSettings(step_px=t["dense_step_px"], rigid=t["dense_rigid"],
                                           static_ring_px=t["dense_surroundings_px"], refine=t["dense_refine"],
                                           camera_first=t["dense_camera_first"],
-                                          camera_check=t["dense_camera_check"],
+                                          camera_check=t["dense_camera_check"], shading=t["dense_shading"],
                                           placement_measured=obj["anchor"]["kind"] == "registration"),
                         dots=np.asarray(t["dots"]) if t["dots"] else None, dot_color=tuple(t["dot_color"]))
     return replace(cfg, **overrides)

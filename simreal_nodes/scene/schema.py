@@ -114,6 +114,9 @@ TRACKING = Record({
     "dense_refine": Bool("measurements 'dense': after Gauss-Newton, search the cost over each free parameter "
                          "about the solution at full resolution (on a faint texture Gauss-Newton stops short; "
                          "slower)", default=True),
+    "dense_shading": Bool("measurements 'dense': model the change of shading as the surface turns (a matte "
+                          "surface under one distant light: three brightness parameters more; off: an affine "
+                          "brightness change alone)", default=True),
     "dense_camera_first": Bool("measurements 'dense' with the surroundings: measure the camera's error on them "
                                "alone, then fit the object with it held (off, the default: one joint fit)",
                                default=False),
