@@ -434,7 +434,9 @@ largest changes 1014 1.31 % -> 0.56 %, 1011 1.55 % -> 1.81 %, 1020 0.44 % -> 0.2
 within 2 %), on cantilevers 0.53 % (92 %). The scenes at or over 2 %: 1003 (2.4 %) and 1065 (2.5 %), loads under 3 px
 on faint speckles; 1070 (2.0 %), flagged on every frame (its registration can slide 17 mm, 5.1 %); 1081, never
 placed (below). The tracker takes 148 ms per frame at the median of the rows (109 ms in stop 35's run: the shading
-term's 40-50 %, docs/tracking.md). The rest of this paragraph and the next is the history of the earlier runs.
+term's 40-50 %, docs/tracking.md). The other beam tables below (development 12-49, the load on from the first
+frame, the stereo pair, the older knobs) ran before the shading term and were not rerun. The rest of this paragraph
+and the next is the history of the earlier runs.
 
 On the 100 held-out seeds with the defaults before stop 38: median of the per-scene medians 0.51 % of the load
 range (target < 1 %: met), p90 1.55 % (target < 3 %: met), 75 % of scenes within 1 % and 96 % within 2 % (target
