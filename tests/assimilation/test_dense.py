@@ -376,3 +376,33 @@ def test_smooth_normals_follow_a_bending_surface():
     assert np.all(n[:, 2] > 0)  # turned towards the side it was seen from
     assert np.max(np.linalg.norm(n - exact, axis=1)) < 0.003  # the slope changes by 0.01 across a cell
     assert np.max(np.linalg.norm(sn.at(None) - [0, 0, 1], axis=1)) < 1e-12
+
+
+def test_smooth_normals_do_not_smooth_across_an_edge_and_face_the_camera():
+    """A cube whose triangles are wound either way (each face's two apart): samples on its top and on a side keep
+    their own face's normal (the neighbouring faces meet at 90 degrees, beyond the crease angle), turned towards the
+    camera that sees them, and no turn where nothing deforms."""
+    from simreal_nodes.assimilation.dense import SmoothNormals
+
+    V = np.array([[x, y, z] for x in (0.0, 1.0) for y in (0.0, 1.0) for z in (0.0, 1.0)])
+    idx = {tuple(v): i for i, v in enumerate(V.astype(int).tolist())}
+    quads = {"x0": [(0, 0, 0), (0, 1, 0), (0, 1, 1), (0, 0, 1)], "x1": [(1, 0, 0), (1, 1, 0), (1, 1, 1), (1, 0, 1)],
+             "y0": [(0, 0, 0), (1, 0, 0), (1, 0, 1), (0, 0, 1)], "y1": [(0, 1, 0), (1, 1, 0), (1, 1, 1), (0, 1, 1)],
+             "z0": [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)], "z1": [(0, 0, 1), (1, 0, 1), (1, 1, 1), (0, 1, 1)]}
+    F = []
+    for k, q in enumerate(quads.values()):
+        a, b, c, d = (idx[p] for p in q)
+        F += [[a, b, c], [a, d, c]] if k % 2 else [[a, c, b], [a, c, d]]  # each face's two triangles wound apart
+    F = np.asarray(F, np.int64)
+    space = np.zeros((1, 8, 3))
+    s = np.linspace(0, 1, 3)
+    axes = [Axis("s", s, "")]
+    fld = SeparatedField("displacement", space, [np.ones((1, 3))], axes, "m", ["x", "y", "z"])
+    cube = ReducedModel("cube", V, F, "tri3", axes, {"displacement": fld}, F, "cube", {"law": "linear_elastic"})
+    top = [10, 11]  # the z1 face's two triangles
+    side = [2, 3]  # x1
+    face = np.array(top + side, np.int64)
+    w = np.full((4, 3), 1.0 / 3.0)
+    sn = SmoothNormals.build(cube, face, w, np.tile([3.0, 2.0, 4.0], (4, 1)), None)
+    np.testing.assert_allclose(sn.at(None), [[0, 0, 1], [0, 0, 1], [1, 0, 0], [1, 0, 0]], atol=1e-12)
+    np.testing.assert_allclose(sn.change(np.array([0.5])), 0.0, atol=1e-12)
