@@ -591,18 +591,13 @@ class DenseAligner:
         return sel
 
     # -- brightness -----------------------------------------------------------------------------------------
-    def _normal_change(self, L: Level, rows: NDArray[np.int64], mu: Array | None) -> Array:
-        """n_k(mu) - n_k,ref (N, 3, object frame) of the samples ``rows``: how far each one's surface triangle
-        has turned since the reference view (``mu`` None: the rest shape)."""
-        return L.normals.change(mu, rows)
-
     def _brightness_basis(self, L: Level, rows: NDArray[np.int64], mu: Array | None) -> Array:
         """The columns the object's brightness parameters multiply (N, n_photo): I_ref, 1 and, with the
         shading, I_ref (n(mu) - n_ref); the predicted intensity is this times ``photo``."""
         ref = L.values[rows]
         cols = [ref, np.ones(len(rows))]
         if self.n_photo > 2:
-            cols.append(ref[:, None] * self._normal_change(L, rows, mu))
+            cols.append(ref[:, None] * L.normals.change(mu, rows))
         return np.column_stack(cols)
 
     def _predicted(self, L: Level, rows: NDArray[np.int64], mu: Array | None, photo: Array) -> Array:

@@ -19,16 +19,21 @@ SIZE = 0.2
 STRETCH = 0.004  # metres at the far edge for s = 1: u_x = STRETCH s (x / SIZE)^2
 
 
-def stretch_model(n: int = 11) -> ReducedModel:
-    """u(x; s) = s * (STRETCH (x / SIZE)^2, 0, 0) on a square plate (z = 0), s in [0, 1]."""
+def quadratic_model(component: int, amplitude: float, name: str, description: str, n: int = 11) -> ReducedModel:
+    """u(x; s) = s * amplitude (x / SIZE)^2 along ``component`` on a square plate (z = 0), s in [0, 1]."""
     P, tris = plate_points(n, SIZE)
     space = np.zeros((1, len(P), 3))
-    space[0, :, 0] = STRETCH * (P[:, 0] / SIZE) ** 2
+    space[0, :, component] = amplitude * (P[:, 0] / SIZE) ** 2
     s = np.linspace(0, 1, 11)
     axes = [Axis("s", s, "")]
     fld = SeparatedField("displacement", space, [s[None, :]], axes, "m", ["x", "y", "z"])
-    return ReducedModel("plate", P, tris, "tri3", axes, {"displacement": fld}, tris, "stretched plate",
+    return ReducedModel(name, P, tris, "tri3", axes, {"displacement": fld}, tris, description,
                         {"law": "linear_elastic"})
+
+
+def stretch_model(n: int = 11) -> ReducedModel:
+    """u(x; s) = s * (STRETCH (x / SIZE)^2, 0, 0) on a square plate (z = 0), s in [0, 1]."""
+    return quadratic_model(0, STRETCH, "plate", "stretched plate", n)
 
 
 CAM = CameraModel.from_intrinsics(320, 240, 300.0, 300.0, 159.5, 119.5)
@@ -307,14 +312,7 @@ LIGHT = np.array([-0.8, 0.0, 0.6])
 
 def bend_model(n: int = 11) -> ReducedModel:
     """u(x; s) = s * (0, 0, BEND (x / SIZE)^2) on the square plate: it bends out of its plane, its normal turns."""
-    P, tris = plate_points(n, SIZE)
-    space = np.zeros((1, len(P), 3))
-    space[0, :, 2] = BEND * (P[:, 0] / SIZE) ** 2
-    s = np.linspace(0, 1, 11)
-    axes = [Axis("s", s, "")]
-    fld = SeparatedField("displacement", space, [s[None, :]], axes, "m", ["x", "y", "z"])
-    return ReducedModel("bent", P, tris, "tri3", axes, {"displacement": fld}, tris, "bent plate",
-                        {"law": "linear_elastic"})
+    return quadratic_model(2, BEND, "bent", "bent plate", n)
 
 
 def render_lit(tex: np.ndarray, T_wc: np.ndarray, s: float, noise: float, seed: int) -> np.ndarray:
