@@ -251,7 +251,13 @@ brightness by about I_ref dn.g; the normals smooth across each face of the model
 shading term a faint plate's twist showed mostly as shading, and the fit put the load across the plate 8-18 mm off
 (development plate seed 7: 7.6 % -> 2.5 %; `docs/family.md`, "Plates"); it costs 40-50 % more time per solve
 (three more iterations, the normals) and changes the beams' accuracy by nothing measurable on the development
-family (the tables of this document ran before it and were not rerun). A rigid motion of the object looks much like
+family (the tables of this document ran before it and were not rerun). g belongs to the light and the object, the
+same in every frame: what each frame the tracker judged sound measured of it (its information with the frame's
+other unknowns marginalised out, a Schur complement) is fused over about 50 such frames into the next frames' prior
+(`tracking.dense_shading_frames`, 50; 0: each frame alone), so that a barely bent frame cannot pass its deformation
+off as shading (`docs/family.md`, "Plates"). Frames the tracker did not judge sound are left out: the frames before
+a load is placed, fitted with a load the model cannot leave out, measured g with a large, wrong confidence and held
+it there for dozens of frames (development plate seed 2: 0.4 % -> 2.9 % when every frame was fused). A rigid motion of the object looks much like
 a cantilever's bending and took its blame on the development scenes, so with a depth image (RGB-D) the correction
 is measured where nothing can bend:
 the static surroundings, a ring 32 px wide around the object's outline in the reference view (4 px off it),

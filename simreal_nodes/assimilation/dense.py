@@ -120,6 +120,12 @@ class DenseSettings:
     # most a few for a matte surface; the prior only holds the component along the normal, which no turn sees)
     shading: bool = True
     prior_shading: float = 1.0
+    # g is a property of the light and the object, the same in every frame: what each frame measures of it (its
+    # information with every other unknown of that frame marginalised out) is fused over about this many frames
+    # that the tracker judged sound (exponential forgetting, 1 - 1/n per accepted frame; :meth:`accept_shading`)
+    # into the next frames' prior, so that a frame whose deformation is barely seen cannot pass its signal off as
+    # shading; 0: each frame's g alone, under the prior above
+    shading_frames: int = 50
 
 
 @dataclass
@@ -375,6 +381,10 @@ class DenseAligner:
         self.rest_photo = self._photo0()
         self.rest_photo_s = np.array([1.0, 0.0])
         self.held: Array | None = None  # rho measured at rest (see :meth:`hold_rest`)
+        # g's information and information-weighted sum fused over frames (:attr:`DenseSettings.shading_frames`)
+        self.g_info = np.zeros((3, 3))
+        self.g_eta = np.zeros(3)
+        self.g_frame: tuple[Array, Array] | None = None  # the last solve's (information, its sum), not yet fused
         self.c = G.transform(self.T_mo, np.asarray(model.points, np.float64).mean(axis=0, keepdims=True))[0]
         # images are undistorted once per frame (one remap) so that the hot loop projects with the pinhole alone
         self._maps = None
@@ -464,6 +474,8 @@ class DenseAligner:
         self.photo, self.rest_photo = self._photo0(), self._photo0()
         self.photo_s[:] = self.rest_photo_s[:] = (1.0, 0.0)
         self.held = None
+        self.g_info[:], self.g_eta[:] = 0.0, 0.0
+        self.g_frame = None
         return True
 
     def _footprint(self, uv: Array, shape: tuple[int, int], grow_px: float) -> NDArray[np.bool_]:
@@ -609,9 +621,53 @@ class DenseAligner:
             out = out + ref * L.normals.blend_rows(dn @ photo[2:], rows)
         return out
 
-    def _shading_prior(self) -> float:
-        """The weight of g's Gaussian prior (0 without the shading)."""
-        return 1.0 / self.s.prior_shading**2 if self.n_photo > 2 else 0.0
+    def _g_prior(self) -> tuple[Array, Array]:
+        """g's Gaussian prior (precision (3, 3), mean (3,)): about zero with 1-sigma ``prior_shading``, and with
+        ``shading_frames`` what the earlier frames measured of g added to it (zero precision without the
+        shading)."""
+        if self.n_photo <= 2:
+            return np.zeros((3, 3)), np.zeros(3)
+        P = np.eye(3) / self.s.prior_shading**2 + self.g_info
+        m = np.asarray(np.linalg.solve(P, self.g_eta), np.float64)
+        return P, m
+
+    def _g_prior_cost(self, g: Array) -> float:
+        """0.5 (g - m)^T P (g - m): g's prior in the units of the normalised residuals' cost."""
+        P, m = self._g_prior()
+        d = np.asarray(g, np.float64) - m
+        return 0.5 * float(d @ P @ d)
+
+    def _measure_shading(self, H: Array, g0: int, g: Array) -> None:
+        """What this frame measured of g (:attr:`g_frame`, fused by :meth:`accept_shading`): g's block of the
+        frame's normal matrix (``H``, its g columns from ``g0``, the prior included) with every other unknown
+        marginalised out (a Schur complement: a frame whose g trades against its deformation measures little of
+        it), less the prior, and the data's own estimate recovered from the posterior ``g``."""
+        self.g_frame = None
+        if self.s.shading_frames <= 0 or self.n_photo <= 2 or H.shape[0] < g0 + 3 or not np.all(np.isfinite(H)):
+            return
+        idx = np.r_[g0:g0 + 3]
+        rest = np.setdiff1d(np.arange(H.shape[0]), idx)
+        C = H[np.ix_(idx, idx)]
+        if len(rest):
+            B = H[np.ix_(rest, idx)]
+            C = C - B.T @ (np.linalg.pinv(H[np.ix_(rest, rest)], hermitian=True) @ B)
+        P, m = self._g_prior()
+        info = 0.5 * ((C - P) + (C - P).T)
+        w, V = np.linalg.eigh(info)
+        info = (V * np.maximum(w, 0.0)) @ V.T  # the marginal's numerical noise: never negative information
+        # the posterior (P + I) g = P m + I g_data, and P m is the fused sum itself
+        self.g_frame = (info, (P + info) @ np.asarray(g, np.float64) - P @ m)
+
+    def accept_shading(self) -> None:
+        """Fuse the last solve's measurement of g into the next frames' prior (the caller judged that fit sound:
+        a frame fitted with a load the model does not see yet, or a rejected one, would pin g where it is wrong);
+        the earlier frames' information forgets 1/n per accepted frame."""
+        if self.g_frame is None:
+            return
+        keep = 1.0 - 1.0 / max(self.s.shading_frames, 1)
+        self.g_info = keep * self.g_info + self.g_frame[0]
+        self.g_eta = keep * self.g_eta + self.g_frame[1]
+        self.g_frame = None
 
     # -- the solve ------------------------------------------------------------------------------------------
     def _residuals(self, lvl: int, img: NDArray[np.float32], rows: NDArray[np.int64], f: _Fit,
@@ -681,8 +737,8 @@ class DenseAligner:
             oks = np.isfinite(rs)
             c += self._rho(rs[oks], TUKEY) * counts[1] / max(int(oks.sum()), 1)
         pw, px = self._priors(f)
-        return float(c) + 0.5 * float(np.sum(pw * px * px)) + 0.5 * self._shading_prior() * float(
-            np.sum(f.photo[2:] ** 2))
+        return float(c) + 0.5 * float(np.sum(pw * px * px)) + (self._g_prior_cost(f.photo[2:]) if self.n_photo > 2
+                                                                else 0.0)
 
     def _solve_level(self, lvl: int, pyr: list[NDArray[np.float32]], grads: list[Grad],
                      f: _Fit, T_cw: Array, lo: Array, hi: Array) -> tuple[Array, Array, float, NDArray[np.int64]]:
@@ -758,8 +814,9 @@ class DenseAligner:
                 grad[n_f:n_f + len(pw)] += pw * px
             if self.n_photo > 2:  # g's prior: its columns follow a and b
                 gs0 = n_f + len(pw) + 2
-                H[gs0:gs0 + 3, gs0:gs0 + 3] += self._shading_prior() * np.eye(3)
-                grad[gs0:gs0 + 3] += self._shading_prior() * f.photo[2:]
+                Pg, mg = self._g_prior()
+                H[gs0:gs0 + 3, gs0:gs0 + 3] += Pg
+                grad[gs0:gs0 + 3] += Pg @ (f.photo[2:] - mg)
             counts = (int(ok.sum()), n_s)
             sig = (sigma, sigma_s)
             s_fit = srows if n_s >= 10 else srows[:0]  # the surroundings' rows that entered this iteration
@@ -888,19 +945,23 @@ class DenseAligner:
         if ok.sum() < 10:
             return float("inf")
         v, B = v[ok], self._brightness_basis(L, rows[ok], mu)
-        prior = np.zeros(self.n_photo)
-        prior[2:] = self._shading_prior() * sigma**2  # in intensity units, as the residuals below
+        prior = np.zeros((self.n_photo, self.n_photo))
+        pull = np.zeros(self.n_photo)
+        if self.n_photo > 2:  # g's prior in intensity units, as the residuals below
+            Pg, mg = self._g_prior()
+            prior[2:, 2:] = Pg * sigma**2
+            pull[2:] = prior[2:, 2:] @ mg
         p = f.photo.copy()
         for _ in range(2):
             w = self._weights((v - B @ p) / sigma, TUKEY)
             if float(w.sum()) <= 0:
                 return float("inf")
-            A = B.T @ (B * w[:, None]) + np.diag(prior)
+            A = B.T @ (B * w[:, None]) + prior
             try:
-                p = np.asarray(np.linalg.solve(A, B.T @ (w * v)), np.float64)
+                p = np.asarray(np.linalg.solve(A, B.T @ (w * v) + pull), np.float64)
             except np.linalg.LinAlgError:
                 p = np.r_[1.0, float(w @ v) / float(w.sum()), np.zeros(self.n_photo - 2)]
-        cost = self._rho((v - B @ p) / sigma, TUKEY) + 0.5 * self._shading_prior() * float(np.sum(p[2:] ** 2))
+        cost = self._rho((v - B @ p) / sigma, TUKEY) + (self._g_prior_cost(p[2:]) if self.n_photo > 2 else 0.0)
         return cost / len(v)
 
     def _refine(self, lvl: int, img: NDArray[np.float32], rows: NDArray[np.int64], f: _Fit, T_cw: Array,
@@ -974,6 +1035,7 @@ class DenseAligner:
               with_rest: bool = True) -> DenseResult:
         """Fit mu (within [lo, hi]; a parameter with lo == hi stays put) and the nuisances to this image."""
         T_cw = np.asarray(T_cw, np.float64)
+        self.g_frame = None
         pyr = pyramid(self.ideal(gray), len(self.levels))
         # central differences: [-1, 0, 1] / 2
         grads = [(np.asarray(cv2.Sobel(p, cv2.CV_32F, 1, 0, ksize=1, scale=0.5), np.float32),
@@ -1007,6 +1069,8 @@ class DenseAligner:
             return res
         self.rigid, self.cam_corr, self.photo, self.photo_s = f.rigid.copy(), f.cam.copy(), f.photo.copy(), \
             f.photo_s.copy()
+        # the g columns follow the free mu, the rigid parts' free ones and (a, b), as in _solve_level
+        self._measure_shading(H, int(np.sum(f.free)) + len(self._priors(f)[0]) + 2, f.photo[2:])
         cam_gap = float("nan")
         if use_s and not cam_first and self.s.camera_check:
             # the surroundings alone, from the joint fit's camera: where they want the camera elsewhere, the joint

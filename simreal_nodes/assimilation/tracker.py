@@ -554,6 +554,8 @@ class DeformableTracker:
                    "deformation (a view along the floor?)")
             est.reason = why if est.state == EstimateState.OK else f"{est.reason}; {why}"
             est.state = EstimateState.LOW_CONFIDENCE
+        if est.state == EstimateState.OK:  # a sound fit's shading joins the next frames' prior (shading_frames)
+            self.dense.accept_shading()
         return est
 
     def reference_from_depth(self, T_wc: np.ndarray, depth: np.ndarray | None
@@ -810,6 +812,7 @@ def tracker_config(obj: dict[str, Any], **overrides: Any) -> TrackerConfig:
                                           static_ring_px=t["dense_surroundings_px"], refine=t["dense_refine"],
                                           camera_first=t["dense_camera_first"],
                                           camera_check=t["dense_camera_check"], shading=t["dense_shading"],
+                                          shading_frames=t["dense_shading_frames"],
                                           placement_measured=obj["anchor"]["kind"] == "registration"),
                         dots=np.asarray(t["dots"]) if t["dots"] else None, dot_color=tuple(t["dot_color"]))
     return replace(cfg, **overrides)

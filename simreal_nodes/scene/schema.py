@@ -117,6 +117,10 @@ TRACKING = Record({
     "dense_shading": Bool("measurements 'dense': model the change of shading as the surface turns (a matte "
                           "surface under one distant light: three brightness parameters more; off: an affine "
                           "brightness change alone)", default=True),
+    "dense_shading_frames": Number("measurements 'dense' with the shading: fuse what each frame measures of the "
+                                   "shading (a property of the light, the same in every frame) over about this "
+                                   "many frames the tracker judged sound into the next frames' prior (about 3 s at "
+                                   "15 fps); 0: each frame alone", integer=True, lo=0, hi=100000, default=50),
     "dense_camera_first": Bool("measurements 'dense' with the surroundings: measure the camera's error on them "
                                "alone, then fit the object with it held (off, the default: one joint fit)",
                                default=False),
