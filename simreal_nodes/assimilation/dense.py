@@ -641,19 +641,24 @@ class DenseAligner:
         """What this frame measured of g (:attr:`g_frame`, fused by :meth:`accept_shading`): g's block of the
         frame's normal matrix (``H``, its g columns from ``g0``, the prior included) with every other unknown
         marginalised out (a Schur complement: a frame whose g trades against its deformation measures little of
-        it), less the prior, and the data's own estimate recovered from the posterior ``g``."""
+        it), less the prior, and that information times the data's own estimate, recovered from the posterior
+        ``g`` (exact where Gauss-Newton converged; nothing is kept from a frame with a non-finite H or g)."""
         self.g_frame = None
-        if self.s.shading_frames <= 0 or self.n_photo <= 2 or H.shape[0] < g0 + 3 or not np.all(np.isfinite(H)):
+        if self.s.shading_frames <= 0 or self.n_photo <= 2 or H.shape[0] < g0 + 3 or not np.all(np.isfinite(H)) \
+                or not np.all(np.isfinite(g)):
             return
         idx = np.r_[g0:g0 + 3]
         rest = np.setdiff1d(np.arange(H.shape[0]), idx)
         C = H[np.ix_(idx, idx)]
-        if len(rest):
-            B = H[np.ix_(rest, idx)]
-            C = C - B.T @ (np.linalg.pinv(H[np.ix_(rest, rest)], hermitian=True) @ B)
         P, m = self._g_prior()
-        info = 0.5 * ((C - P) + (C - P).T)
-        w, V = np.linalg.eigh(info)
+        try:
+            if len(rest):
+                B = H[np.ix_(rest, idx)]
+                C = C - B.T @ (np.linalg.pinv(H[np.ix_(rest, rest)], hermitian=True) @ B)
+            info = 0.5 * ((C - P) + (C - P).T)
+            w, V = np.linalg.eigh(info)
+        except np.linalg.LinAlgError:
+            return
         info = (V * np.maximum(w, 0.0)) @ V.T  # the marginal's numerical noise: never negative information
         # the posterior (P + I) g = P m + I g_data, and P m is the fused sum itself
         self.g_frame = (info, (P + info) @ np.asarray(g, np.float64) - P @ m)
@@ -743,10 +748,11 @@ class DenseAligner:
     def _solve_level(self, lvl: int, pyr: list[NDArray[np.float32]], grads: list[Grad],
                      f: _Fit, T_cw: Array, lo: Array, hi: Array) -> tuple[Array, Array, float, NDArray[np.int64]]:
         """Levenberg-damped Gauss-Newton at one level; returns (J^T W J of the residuals normalised by their
-        scale, the object's final residuals, its scale sigma, its rows).
+        scale plus the priors' precisions, at the last linearisation; the object's final residuals, its scale
+        sigma, its rows).
 
         Unknowns, in this order: the free mu, rho (where free), epsilon (where the surroundings are used), the
-        object's brightness (a, b), the surroundings' brightness (where used)."""
+        object's brightness (a, b[, g]), the surroundings' brightness (where used)."""
         L = self.levels[lvl]
         rows = self._visible_rows(L, f.mu, f.total, T_cw)
         srows = self._static_rows(lvl, f, T_cw, rows)
@@ -947,10 +953,11 @@ class DenseAligner:
         v, B = v[ok], self._brightness_basis(L, rows[ok], mu)
         prior = np.zeros((self.n_photo, self.n_photo))
         pull = np.zeros(self.n_photo)
+        g_mean = np.zeros(self.n_photo - 2)
         if self.n_photo > 2:  # g's prior in intensity units, as the residuals below
-            Pg, mg = self._g_prior()
+            Pg, g_mean = self._g_prior()
             prior[2:, 2:] = Pg * sigma**2
-            pull[2:] = prior[2:, 2:] @ mg
+            pull[2:] = prior[2:, 2:] @ g_mean
         p = f.photo.copy()
         for _ in range(2):
             w = self._weights((v - B @ p) / sigma, TUKEY)
@@ -960,7 +967,7 @@ class DenseAligner:
             try:
                 p = np.asarray(np.linalg.solve(A, B.T @ (w * v) + pull), np.float64)
             except np.linalg.LinAlgError:
-                p = np.r_[1.0, float(w @ v) / float(w.sum()), np.zeros(self.n_photo - 2)]
+                p = np.r_[1.0, float(w @ v) / float(w.sum()), g_mean]
         cost = self._rho((v - B @ p) / sigma, TUKEY) + (self._g_prior_cost(p[2:]) if self.n_photo > 2 else 0.0)
         return cost / len(v)
 
