@@ -257,7 +257,8 @@ other unknowns marginalised out, a Schur complement) is fused over about 50 such
 (`tracking.dense_shading_frames`, 50; 0: each frame alone), so that a barely bent frame cannot pass its deformation
 off as shading (`docs/family.md`, "Plates"). Frames the tracker did not judge sound are left out: the frames before
 a load is placed, fitted with a load the model cannot leave out, measured g with a large, wrong confidence and held
-it there for dozens of frames (development plate seed 2: 0.4 % -> 2.9 % when every frame was fused). A rigid motion of the object looks much like
+it there for dozens of frames (development plate seed 2: 0.4 % -> 2.9 % when every frame was fused).
+A rigid motion of the object looks much like
 a cantilever's bending and took its blame on the development scenes, so with a depth image (RGB-D) the correction
 is measured where nothing can bend:
 the static surroundings, a ring 32 px wide around the object's outline in the reference view (4 px off it),
