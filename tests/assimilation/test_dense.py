@@ -432,3 +432,24 @@ def test_the_shading_fused_over_frames_holds_a_barely_bent_frame():
     g_true = 0.7 * LIGHT / (0.3 + 0.7 * LIGHT[2])
     assert errs[20] < 0.035 < 0.05 < errs[0], errs
     assert abs(g[20][0] - g_true[0]) < 0.15 * abs(g_true[0]), (g[20], g_true)
+
+
+def test_the_tracker_fuses_the_shading_of_sound_frames_only():
+    """A sound frame's measurement of g enters the next frames' prior; a flagged frame (pure noise) measures some g
+    as well, which must not (the tracker calls accept_shading on OK frames only)."""
+    model = bend_model()
+    tex = texture(0.05, seed=3)
+    bgr = lambda img: cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)  # noqa: E731
+    tr = DeformableTracker(model, np.eye(4), {"s": {"mode": "tracked", "initial": 0.3}}, CAM,
+                           TrackerConfig(measurements="dense"))
+    tr.update(pose(), image_bgr=bgr(render_lit(tex, pose(), 0.0, 0.0, seed=1)))
+    assert tr.dense is not None and tr.dense.s.shading_frames > 0  # on by default
+    e = tr.update(pose(0.03), image_bgr=bgr(render_lit(tex, pose(0.03), 0.6, 0.0, seed=2)))
+    assert e.state == EstimateState.OK, e.reason
+    assert tr.dense.g_info[0, 0] > 0
+    fused = tr.dense.g_info.copy(), tr.dense.g_eta.copy()
+    noise = np.random.default_rng(0).integers(0, 255, (CAM.height, CAM.width, 3)).astype(np.uint8)
+    e = tr.update(pose(0.03), image_bgr=noise)
+    assert e.state == EstimateState.LOW_CONFIDENCE
+    assert tr.dense.g_frame is not None and tr.dense.g_frame[0].any()  # it measured something ...
+    assert np.array_equal(tr.dense.g_info, fused[0]) and np.array_equal(tr.dense.g_eta, fused[1])  # ... not fused
