@@ -632,10 +632,18 @@ class DenseAligner:
         return P, m
 
     def _g_prior_cost(self, g: Array) -> float:
-        """0.5 (g - m)^T P (g - m): g's prior in the units of the normalised residuals' cost."""
+        """0.5 (g - m)^T P (g - m): g's prior in the units of the normalised residuals' cost (0 without the
+        shading)."""
+        if self.n_photo <= 2:
+            return 0.0
         P, m = self._g_prior()
         d = np.asarray(g, np.float64) - m
         return 0.5 * float(d @ P @ d)
+
+    def _g_column(self, f: _Fit) -> int:
+        """The first of g's columns among a fit's unknowns (:meth:`_solve_level`'s order): after the free mu, the
+        rigid parts' free ones and (a, b)."""
+        return (0 if f.mu is None else int(np.sum(f.free))) + len(self._priors(f)[0]) + 2
 
     def _measure_shading(self, H: Array, g0: int, g: Array) -> None:
         """What this frame measured of g (:attr:`g_frame`, fused by :meth:`accept_shading`): g's block of the
@@ -742,8 +750,7 @@ class DenseAligner:
             oks = np.isfinite(rs)
             c += self._rho(rs[oks], TUKEY) * counts[1] / max(int(oks.sum()), 1)
         pw, px = self._priors(f)
-        return float(c) + 0.5 * float(np.sum(pw * px * px)) + (self._g_prior_cost(f.photo[2:]) if self.n_photo > 2
-                                                                else 0.0)
+        return float(c) + 0.5 * float(np.sum(pw * px * px)) + self._g_prior_cost(f.photo[2:])
 
     def _solve_level(self, lvl: int, pyr: list[NDArray[np.float32]], grads: list[Grad],
                      f: _Fit, T_cw: Array, lo: Array, hi: Array) -> tuple[Array, Array, float, NDArray[np.int64]]:
@@ -819,7 +826,7 @@ class DenseAligner:
                 H[n_f:n_f + len(pw), n_f:n_f + len(pw)] += np.diag(pw)
                 grad[n_f:n_f + len(pw)] += pw * px
             if self.n_photo > 2:  # g's prior: its columns follow a and b
-                gs0 = n_f + len(pw) + 2
+                gs0 = self._g_column(f)
                 Pg, mg = self._g_prior()
                 H[gs0:gs0 + 3, gs0:gs0 + 3] += Pg
                 grad[gs0:gs0 + 3] += Pg @ (f.photo[2:] - mg)
@@ -968,7 +975,7 @@ class DenseAligner:
                 p = np.asarray(np.linalg.solve(A, B.T @ (w * v) + pull), np.float64)
             except np.linalg.LinAlgError:
                 p = np.r_[1.0, float(w @ v) / float(w.sum()), g_mean]
-        cost = self._rho((v - B @ p) / sigma, TUKEY) + (self._g_prior_cost(p[2:]) if self.n_photo > 2 else 0.0)
+        cost = self._rho((v - B @ p) / sigma, TUKEY) + self._g_prior_cost(p[2:])
         return cost / len(v)
 
     def _refine(self, lvl: int, img: NDArray[np.float32], rows: NDArray[np.int64], f: _Fit, T_cw: Array,
@@ -1076,8 +1083,7 @@ class DenseAligner:
             return res
         self.rigid, self.cam_corr, self.photo, self.photo_s = f.rigid.copy(), f.cam.copy(), f.photo.copy(), \
             f.photo_s.copy()
-        # the g columns follow the free mu, the rigid parts' free ones and (a, b), as in _solve_level
-        self._measure_shading(H, int(np.sum(f.free)) + len(self._priors(f)[0]) + 2, f.photo[2:])
+        self._measure_shading(H, self._g_column(f), f.photo[2:])
         cam_gap = float("nan")
         if use_s and not cam_first and self.s.camera_check:
             # the surroundings alone, from the joint fit's camera: where they want the camera elsewhere, the joint
