@@ -8,6 +8,7 @@
     simreal check-scene SCENE.yaml               validate a scene file
     simreal calibrate IMAGES... --board 9x6 --square 0.025 -o calib.yaml
     simreal build-model SPEC.yaml -o MODEL.h5    build a reduced-order model
+    simreal build-aero-db SPEC.yaml -o DB.h5     build the CFD database of car flows (OpenFOAM, Dask)
     simreal make-bag SCENE -o BAG                render a synthetic scene with ground truth
     simreal eval-trajectory EST --truth REF      ATE / RPE of a camera trajectory
     simreal eval-tracking OUT_BAG --truth BAG    parameter errors (thesis Table 4.1 layout)
@@ -33,7 +34,7 @@ from simreal_nodes.errors import SimrealError
 COMMANDS: list[Callable[[argparse._SubParsersAction], None]] = [
     graph.add_launch, graph.add_replay, graph.add_record, graph.add_bag_info, scene.add_check_scene,
     camera.add_calibrate, demo.add_demo, evaluate.add_eval_tracking, evaluate.add_eval_trajectory, scene.add_make_bag,
-    models.add_build_model, models.add_model_info,
+    models.add_build_model, models.add_model_info, models.add_build_aero_db,
 ]
 
 

@@ -1,0 +1,237 @@
+"""Capturing a car's shape from a SLAM map (thesis §6.3.2, §6.4.1, Alg. 6.1), down to its presence vector.
+
+Alg. 6.1, step by step (``capture_car``), on the map's points (any pose; any scale for a monocular map):
+
+1. ``densityPointCulling``: points with fewer than ``min_neighbours`` others within ``density_radius`` x the
+   median distance to the ``min_neighbours``-th neighbour are dropped (Open3D's radius outlier removal):
+   triangulation noise goes, a sparser but regular floor stays;
+2. ``geometryAnalysis`` / ``centroidPointCulling``: the centroid, then the points farther from it than 95 % of all
+   are dropped (the thesis's choice: no tuned distance);
+3. ``planeEstimationRANSAC`` / ``floorRemoving``: the largest plane (Open3D RANSAC, seeded) is the floor; its points
+   and everything under it go; its normal, pointing to the car, is gravity's opposite;
+4. ``PrincipalComponentAnalysis``: the principal axis of the remaining points projected on the floor is the car's
+   length;
+5. ``noiseRemoving``: along each of the car's three axes, the histogram of positions; only the contiguous run of
+   populated bins holding most points is kept (the thesis's "histogram of positions");
+6. ``boxAdjustment`` and the similarity ``[S, R, T]``: the box of the points in the car's axes (0.5-99.5
+   percentiles) gives the car frame of :mod:`simreal_nodes.aero.grid` (nose at ``x = 0``, centre plane ``y = 0``,
+   floor ``z = 0``); the scale is 1 for a metric map (RGB-D, stereo) or ``length_m`` / box length for a monocular
+   one (the user says how long the car is: the only way to fix a monocular map's scale here);
+7. the alpha shape of the points (``alpha_m`` metres in the car frame: over half the body's thickness, or a shell of
+   surface points leaves the interior hollow; 0.8-1.7 m gave the same overlap on development cars), after closing
+   the underside the camera never sees by a cap at the lowest seen height (the sills): its surface from Open3D (for drawing and occlusion), and the
+   presence function on the grid from its interior, the Delaunay tetrahedra of circumradius under alpha (the
+   alpha complex, scipy): a point is in the car when it lies in one of them. (Ray-parity occupancy on Open3D's
+   alpha shape mesh needs a watertight surface, which an alpha shape of a noisy map is not.)
+
+The car's front is ambiguous after step 4 (which end of the principal axis?); ``choose_front`` (e.g. the end
+whose presence vector lies closer to the database's cars) decides; without it the nose is the lower end.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.spatial import Delaunay, cKDTree
+
+from simreal_nodes.aero.grid import AeroGrid
+
+
+@dataclass(frozen=True)
+class CaptureSettings:
+    density_radius: float = 3.0  # x the median distance to the min_neighbours-th neighbour
+    min_neighbours: int = 4
+    centroid_keep: float = 0.95
+    floor_tolerance: float = 1.0  # RANSAC inlier distance, x median spacing
+    floor_iterations: int = 2000
+    noise_bins: int = 60
+    alpha_m: float = 1.0  # alpha (m, in the car frame): over half the body's thickness, or the interior stays hollow
+    length_m: float | None = None  # the car's length, for a map without metric scale
+    seed: int = 0
+
+
+@dataclass
+class CaptureResult:
+    presence: np.ndarray  # (D,) on the grid
+    points: np.ndarray  # (n, 3) the kept points in the car frame (metres)
+    vertices: np.ndarray  # the alpha shape, car frame
+    triangles: np.ndarray
+    scale: float  # x_car = scale * R @ x_map + t
+    rotation: np.ndarray
+    translation: np.ndarray
+    box: np.ndarray  # (3,) length, width, height (m)
+    kept: dict[str, int] = field(default_factory=dict)  # points left after each step
+    seconds: dict[str, float] = field(default_factory=dict)
+
+
+def _spacing(p: np.ndarray) -> float:
+    d, _ = cKDTree(p).query(p, k=2)
+    return float(np.median(d[:, 1]))
+
+
+def circumradii(tets: np.ndarray) -> np.ndarray:
+    """Circumradius of each tetrahedron (m, 4, 3); inf for a flat one."""
+    a = tets[:, 0]
+    A = 2.0 * (tets[:, 1:] - a[:, None, :])
+    rhs = np.einsum("mkj,mkj->mk", tets[:, 1:], tets[:, 1:]) - np.einsum("mj,mj->m", a, a)[:, None]
+    det = np.linalg.det(A)
+    ok = np.abs(det) > 1e-12 * np.max(np.abs(A), axis=(1, 2)) ** 3
+    centre = np.zeros_like(a)
+    centre[ok] = np.linalg.solve(A[ok], rhs[ok][..., None])[..., 0]
+    r = np.linalg.norm(centre - a, axis=1)
+    r[~ok] = np.inf
+    return r
+
+
+def _main_run(values: np.ndarray, bins: int) -> np.ndarray:
+    """Mask of the values in the contiguous run of populated histogram bins that holds the most points."""
+    counts, edges = np.histogram(values, bins=bins)
+    best, best_n, start = (0, 0), -1, None
+    for k in range(bins + 1):
+        filled = k < bins and counts[k] > 0
+        if filled and start is None:
+            start = k
+        if not filled and start is not None:
+            n = int(counts[start:k].sum())
+            if n > best_n:
+                best, best_n = (start, k), n
+            start = None
+    lo, hi = edges[best[0]], edges[best[1]]
+    return (values >= lo) & (values <= hi)
+
+
+def capture_car(cloud: np.ndarray, grid: AeroGrid, settings: CaptureSettings = CaptureSettings(),
+                choose_front: Callable[[np.ndarray, np.ndarray], int] | None = None) -> CaptureResult:
+    """Alg. 6.1 on a SLAM map ``cloud`` (n, 3); see the module's docstring. Raises ``ValueError`` with the step's
+    name when too little is left to go on."""
+    import open3d as o3d
+
+    s = settings
+    times: dict[str, float] = {}
+    kept: dict[str, int] = {}
+    t = time.perf_counter()
+    p = np.asarray(cloud, float).reshape(-1, 3)
+    p = p[np.all(np.isfinite(p), axis=1)]
+    kept["input"] = len(p)
+    if len(p) < 50:
+        raise ValueError(f"capture: {len(p)} finite map points; at least 50 are needed")
+    h = _spacing(p)
+    dk, _ = cKDTree(p).query(p, k=s.min_neighbours + 1)
+    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(p))
+    _, idx = pcd.remove_radius_outlier(nb_points=s.min_neighbours,
+                                       radius=s.density_radius * float(np.median(dk[:, -1])))
+    p = p[np.asarray(idx, int)]
+    kept["density"] = len(p)
+    times["density"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    c = p.mean(axis=0)
+    r = np.linalg.norm(p - c, axis=1)
+    p = p[r <= np.quantile(r, s.centroid_keep)]
+    kept["centroid"] = len(p)
+    times["centroid"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    o3d.utility.random.seed(s.seed)
+    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(p))
+    plane, inl = pcd.segment_plane(distance_threshold=s.floor_tolerance * h, ransac_n=3,
+                                   num_iterations=s.floor_iterations)
+    n = np.asarray(plane[:3], float)
+    d0 = float(plane[3]) / np.linalg.norm(n)
+    n /= np.linalg.norm(n)
+    off = np.ones(len(p), bool)
+    off[np.asarray(inl, int)] = False
+    height = p @ n + d0
+    if off.sum() < 30:
+        raise ValueError(f"capture: {int(off.sum())} points off the floor plane; the map holds no car")
+    if np.median(height[off]) < 0:
+        n, d0, height = -n, -d0, -height
+    p = p[off & (height > s.floor_tolerance * h)]
+    kept["floor"] = len(p)
+    if len(p) < 30:
+        raise ValueError(f"capture: {len(p)} points above the floor; the map holds no car")
+    times["floor"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    q = p - np.outer(p @ n + d0, n)  # on the floor
+    q0 = q.mean(axis=0)
+    w, V = np.linalg.eigh(np.cov((q - q0).T))
+    a = V[:, np.argmax(w)]
+    a -= (a @ n) * n
+    a /= np.linalg.norm(a)
+    b = np.cross(n, a)
+    R = np.stack([a, b, n])  # rows: the car's x (length), y (width), z (up)
+    local = (p - q0) @ R.T
+    local[:, 2] = p @ n + d0
+    times["pca"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    keep = np.ones(len(local), bool)
+    for k in range(3):
+        keep &= _main_run(local[:, k], s.noise_bins)
+    local = local[keep]
+    kept["noise"] = len(local)
+    lo = np.quantile(local, 0.005, axis=0)
+    hi = np.quantile(local, 0.995, axis=0)
+    length = float(hi[0] - lo[0])
+    scale = s.length_m / length if s.length_m else 1.0
+    centre = np.array([lo[0], 0.5 * (lo[1] + hi[1]), 0.0])
+    car_pts = (local - centre) * scale
+    box = np.array([length, hi[1] - lo[1], hi[2]]) * scale
+    times["box"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    lowest = float(np.quantile(car_pts[:, 2], 0.02))
+    hh = _spacing(car_pts)
+    # close the unseen underside at the sills' height: the footprint's points dropped to the lowest seen height
+    foot = car_pts[car_pts[:, 2] < lowest + 0.25 * (box[2] - lowest)].copy()
+    xs = np.arange(car_pts[:, 0].min(), car_pts[:, 0].max(), hh)
+    cap = []
+    for x0 in xs:
+        sel = np.abs(foot[:, 0] - x0) < hh
+        if sel.sum() >= 2:
+            y0, y1 = foot[sel, 1].min(), foot[sel, 1].max()
+            ys = np.arange(y0, y1 + 1e-9, hh)
+            cap.append(np.column_stack([np.full(len(ys), x0), ys, np.full(len(ys), lowest)]))
+    closed = np.vstack([car_pts] + cap)
+    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(closed))
+    mesh = o3d.geometry.TriangleMesh.create_from_point_cloud_alpha_shape(pcd, s.alpha_m)
+    verts, tris = np.asarray(mesh.vertices), np.asarray(mesh.triangles)
+    times["alpha_shape"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+
+    def mirror(flip: bool) -> tuple[np.ndarray, np.ndarray]:
+        """The half turn about the vertical that puts the other end at x = 0 (D, e: x' = D x + e)."""
+        if not flip:
+            return np.eye(3), np.zeros(3)
+        return np.diag([-1.0, -1.0, 1.0]), np.array([box[0], 0.0, 0.0])
+
+    # the alpha shape's interior: the Delaunay tetrahedra of circumradius under alpha (the alpha complex)
+    dt = Delaunay(closed)
+    kept_tet = circumradii(closed[dt.simplices]) < s.alpha_m
+    pts = grid.points()
+
+    def presence(flip: bool) -> np.ndarray:
+        D, e = mirror(flip)
+        simplex = dt.find_simplex((pts - e) @ D)  # D is its own inverse
+        return ((simplex >= 0) & kept_tet[np.maximum(simplex, 0)]).astype(np.float64)
+
+    phi = [presence(False), presence(True)]
+    if choose_front is not None:
+        flip = bool(choose_front(phi[0], phi[1]))
+    else:  # without a database: the nose is the end whose top is lower (a hood, not a tailgate)
+        third = box[0] / 3.0
+        front = car_pts[car_pts[:, 0] < third, 2]
+        rear = car_pts[car_pts[:, 0] > box[0] - third, 2]
+        flip = bool(np.quantile(front, 0.9) > np.quantile(rear, 0.9))
+    D, e = mirror(flip)
+    times["presence"] = time.perf_counter() - t
+    # the map -> car similarity: x_car = scale * D (R x + k) + e
+    k = -(R @ q0) + np.array([0.0, 0.0, float(n @ q0) + d0]) - centre
+    return CaptureResult(presence=phi[int(flip)], points=car_pts @ D.T + e, vertices=verts @ D.T + e,
+                         triangles=tris, scale=scale, rotation=D @ R, translation=scale * (D @ k) + e, box=box,
+                         kept=kept, seconds=times)
