@@ -30,7 +30,7 @@ LAYERS: list[set[str]] = [
     {"__init__", "errors", "geometry", "camera", "spec", "states", "sync", "metrics"},
     {"physics", "io"},
     {"rom", "vision"},
-    {"assimilation", "collision", "render"},
+    {"assimilation", "collision", "render", "aero"},
     {"synth", "scene"},
     {"launch"},
     {"ros"},

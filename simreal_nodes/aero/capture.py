@@ -19,9 +19,9 @@ Alg. 6.1, step by step (``capture_car``), on the map's points (any pose; any sca
    one (the user says how long the car is: the only way to fix a monocular map's scale here);
 7. the alpha shape of the points (``alpha_m`` metres in the car frame: over half the body's thickness, or a shell of
    surface points leaves the interior hollow; 0.8-1.7 m gave the same overlap on development cars), after closing
-   the underside the camera never sees by a cap at the lowest seen height (the sills): its surface from Open3D (for drawing and occlusion), and the
-   presence function on the grid from its interior, the Delaunay tetrahedra of circumradius under alpha (the
-   alpha complex, scipy): a point is in the car when it lies in one of them. (Ray-parity occupancy on Open3D's
+   the underside the camera never sees by a cap at the lowest seen height (the sills): its surface from Open3D (for
+   drawing and occlusion), and the presence function on the grid from its interior, the Delaunay tetrahedra of
+   circumradius under alpha (the alpha complex, scipy): a point is in the car when it lies in one of them. (Ray-parity occupancy on Open3D's
    alpha shape mesh needs a watertight surface, which an alpha shape of a noisy map is not.)
 
 The car's front is ambiguous after step 4 (which end of the principal axis?); ``choose_front`` (e.g. the end
@@ -68,7 +68,7 @@ class CaptureResult:
 
 
 def _spacing(p: np.ndarray) -> float:
-    d, _ = cKDTree(p).query(p, k=2)
+    d = np.asarray(cKDTree(p).query(p, k=2)[0])
     return float(np.median(d[:, 1]))
 
 
@@ -119,7 +119,7 @@ def capture_car(cloud: np.ndarray, grid: AeroGrid, settings: CaptureSettings = C
     if len(p) < 50:
         raise ValueError(f"capture: {len(p)} finite map points; at least 50 are needed")
     h = _spacing(p)
-    dk, _ = cKDTree(p).query(p, k=s.min_neighbours + 1)
+    dk = np.asarray(cKDTree(p).query(p, k=s.min_neighbours + 1)[0])
     pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(p))
     _, idx = pcd.remove_radius_outlier(nb_points=s.min_neighbours,
                                        radius=s.density_radius * float(np.median(dk[:, -1])))
@@ -198,7 +198,8 @@ def capture_car(cloud: np.ndarray, grid: AeroGrid, settings: CaptureSettings = C
             cap.append(np.column_stack([np.full(len(ys), x0), ys, np.full(len(ys), lowest)]))
     closed = np.vstack([car_pts] + cap)
     pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(closed))
-    mesh = o3d.geometry.TriangleMesh.create_from_point_cloud_alpha_shape(pcd, s.alpha_m)
+    with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):  # "invalid tetra" per sliver
+        mesh = o3d.geometry.TriangleMesh.create_from_point_cloud_alpha_shape(pcd, s.alpha_m)
     verts, tris = np.asarray(mesh.vertices), np.asarray(mesh.triangles)
     times["alpha_shape"] = time.perf_counter() - t
 

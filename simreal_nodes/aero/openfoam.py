@@ -90,6 +90,9 @@ def foam_env() -> dict[str, str]:
                          check=True).stdout
     env = dict(item.split("=", 1) for item in out.decode().split("\0") if "=" in item)
     env["OMPI_MCA_plm"] = "isolated"  # serial runs; never look for other hosts
+    # A Dask worker sets MALLOC_TRIM_THRESHOLD_=65536 for itself; inherited, it made simpleFoam return memory to
+    # the kernel at every step and run half as fast (0.52 against 0.22 s an iteration on a car, measured).
+    env.pop("MALLOC_TRIM_THRESHOLD_", None)
     return env
 
 

@@ -71,7 +71,8 @@ def trace(field: FlowField, seeds: np.ndarray, step: float = 0.05, n_steps: int 
 def tubes(lines: list[np.ndarray], radius: float = 0.015, sides: int = 6,
           lut: np.ndarray | None = None, vmax: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Tubes around the lines: vertices (n, 3), triangles (m, 3), colours (n, 3) in [0, 1] from the speed through a
-    256-entry colour table (``lut``, uint8 (256, 3); grey ramp without one)."""
+    256-entry colour table (``lut``, (256, 3) in [0, 1], e.g. ``render.overlay.colormap_lut``; a grey ramp without
+    one), 0 to ``vmax`` (the fastest point of the lines by default)."""
     verts, tris, cols = [], [], []
     base = 0
     top = vmax if vmax is not None else max((float(np.nanmax(ln[:, 3])) for ln in lines), default=1.0)
@@ -88,7 +89,7 @@ def tubes(lines: list[np.ndarray], radius: float = 0.015, sides: int = 6,
                                          + np.sin(ang)[None, :, None] * n2[:, None, :])
         verts.append(ring.reshape(-1, 3))
         u = np.clip(sp / max(top, 1e-9), 0.0, 1.0)
-        c = (lut[(u * 255).astype(int)] / 255.0) if lut is not None else np.repeat(u[:, None], 3, axis=1)
+        c = lut[(u * 255).astype(int)] if lut is not None else np.repeat(u[:, None], 3, axis=1)
         cols.append(np.repeat(c, sides, axis=0))
         k = np.arange(len(P) - 1)[:, None] * sides + base
         j = np.arange(sides)[None, :]

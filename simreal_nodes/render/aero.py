@@ -1,0 +1,51 @@
+"""The flow drawn over the video (thesis §6.4.2, Fig. 6.10a): streamlines as tubes coloured by speed, hidden where
+the car's reconstructed body is in front of them (occlusion culling).
+
+Per frame: the body's depth from the camera (one depth-only pass of its surface), then the streamlines composited
+over the image with that depth as the occluder (:meth:`simreal_nodes.render.gl.Renderer.composite`'s real-depth
+test). Geometry is given in the world (map) frame: the caller maps the car frame into it with the capture's
+similarity (:func:`car_to_world`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from simreal_nodes.camera import CameraModel
+from simreal_nodes.render.gl import Mesh, Renderer
+from simreal_nodes.render.overlay import colormap_lut
+
+
+def car_to_world(points_car: np.ndarray, scale: float, rotation: np.ndarray, translation: np.ndarray) -> np.ndarray:
+    """Invert the capture's similarity ``x_car = scale * R x + t``: car-frame points into the map frame."""
+    return ((np.asarray(points_car, float) - translation) @ np.asarray(rotation)) / scale
+
+
+class FlowOverlay:
+    """Streamline tubes over camera images, occluded by the car's body."""
+
+    def __init__(self, cam: CameraModel, body_vertices: np.ndarray, body_triangles: np.ndarray,
+                 tube_vertices: np.ndarray, tube_triangles: np.ndarray, tube_colors: np.ndarray,
+                 occlusion: bool = True) -> None:
+        self.renderer = Renderer(cam)
+        self.occlusion = occlusion
+        self.renderer.add(Mesh("aero_body", np.asarray(body_vertices, float), np.asarray(body_triangles),
+                               smooth=False))
+        self.renderer.add(Mesh("aero_streamlines", np.asarray(tube_vertices, float), np.asarray(tube_triangles),
+                               mode="vertex", colors=np.asarray(tube_colors, float), smooth=True, unlit=True))
+
+    def draw(self, image_bgr: np.ndarray, T_world_cam: np.ndarray) -> np.ndarray:
+        """The image with the streamlines drawn (BGR uint8 in, BGR uint8 out)."""
+        depth = None
+        if self.occlusion:
+            _, depth = self.renderer.render(T_world_cam, names=["aero_body"])  # 0 where no body: no occluder
+        return self.renderer.composite(T_world_cam, image_bgr, names=["aero_streamlines"], real_depth=depth,
+                                       bgr=True)
+
+    def release(self) -> None:
+        self.renderer.release()
+
+
+def speed_lut(name: str = "turbo") -> np.ndarray:
+    """The colour table for speeds ((256, 3) RGB in [0, 1])."""
+    return colormap_lut(name)
