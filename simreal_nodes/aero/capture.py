@@ -21,8 +21,9 @@ Alg. 6.1, step by step (``capture_car``), on the map's points (any pose; any sca
    surface points leaves the interior hollow; 0.8-1.7 m gave the same overlap on development cars), after closing
    the underside the camera never sees by a cap at the lowest seen height (the sills): its surface from Open3D (for
    drawing and occlusion), and the presence function on the grid from its interior, the Delaunay tetrahedra of
-   circumradius under alpha (the alpha complex, scipy): a point is in the car when it lies in one of them. (Ray-parity occupancy on Open3D's
-   alpha shape mesh needs a watertight surface, which an alpha shape of a noisy map is not.)
+   circumradius under alpha (the alpha complex, scipy): a point is in the car when it lies in one of them.
+   (Ray-parity occupancy on Open3D's alpha shape mesh needs a watertight surface, which an alpha shape of a noisy
+   map is not.)
 
 The car's front is ambiguous after step 4 (which end of the principal axis?); ``choose_front`` (e.g. the end
 whose presence vector lies closer to the database's cars) decides; without it the nose is the lower end.
