@@ -139,7 +139,7 @@ def main(argv: list[str] | None = None) -> None:
                   f"{cap_rows[-1]['err_pct']:.2f} %, {t1 - t0:.2f} s", flush=True)
 
     # --- AR output: the first held-out car, captured, its Eq. 6.4 flow as streamlines over a rendered video -------
-    from simreal_nodes.aero.streamlines import FlowField, seed_rake, trace, tubes
+    from simreal_nodes.aero.streamlines import FlowField, section, seed_rake, trace, tubes
     from simreal_nodes.camera import CameraModel
     from simreal_nodes.geometry import look_at
     from simreal_nodes.render.aero import FlowOverlay, car_to_world, speed_lut
@@ -158,6 +158,9 @@ def main(argv: list[str] | None = None) -> None:
     to_world = lambda x: car_to_world(x, cap0.scale, cap0.rotation, cap0.translation)  # noqa: E731
     cam = CameraModel.from_intrinsics(640, 480, 525.0, 525.0, 319.5, 239.5)
     overlay = FlowOverlay(cam, to_world(cap0.vertices), cap0.triangles, to_world(TV), TT, TC)
+    SV, ST, SC = section(db.grid, np.linalg.norm(v0, axis=1), axis=1, index=0, lut=speed_lut(), vmin=0.0,
+                         vmax=1.4 * uinf[0], keep=cap0.presence == 0)  # |v| on the symmetry plane (Fig. 6.10b)
+    overlay.add_layer("aero_section", to_world(SV), ST, SC, visible=False)
     # the "video": the true car rendered by the overlay's own renderer (one OpenGL context in the process)
     video = overlay.renderer
     tv, tf = car0.surface()
@@ -176,8 +179,12 @@ def main(argv: list[str] | None = None) -> None:
         t1 = time.perf_counter()
         out = overlay.draw(bgr, T_wc)
         draw_ms.append(1e3 * (time.perf_counter() - t1))
-        if k in (0, 15):
+        if k == 0:
             frames.append(out[..., ::-1])
+        if k == 15:
+            overlay.show("aero_section")
+            frames.append(overlay.draw(bgr, T_wc)[..., ::-1])
+            overlay.show("aero_streamlines")
     overlay.release()
     ar = {"car": car0.name, "lines": len(lines), "tube_triangles": len(TT), "trace_s": t_trace,
           "draw_ms_p50": float(np.median(draw_ms[1:])), "draw_ms_p95": float(np.percentile(draw_ms[1:], 95)),
@@ -213,7 +220,7 @@ def main(argv: list[str] | None = None) -> None:
             a_.imshow(fr)
             a_.set_axis_off()
             a_.set_title(f"{car0.name}, captured: Eq. 6.4 streamlines hidden behind the captured body"
-                         if j == 0 else "another view")
+                         if j == 0 else "|v| on the symmetry plane (cf. Fig. 6.10b)")
         colours = {"large": "tab:blue", "sport": "tab:red", "old": "tab:green", "various": "tab:orange"}
         for g, c in colours.items():
             m = np.array([x == g for x in groups])

@@ -107,3 +107,28 @@ def seed_rake(x: float, y_range: tuple[float, float], z_range: tuple[float, floa
     """A rectangular rake of seeds upstream of the car (a plane ``x`` = const)."""
     yy, zz = np.meshgrid(np.linspace(*y_range, ny), np.linspace(*z_range, nz), indexing="ij")
     return np.column_stack([np.full(yy.size, x), yy.ravel(), zz.ravel()])
+
+
+def section(grid: AeroGrid, values: np.ndarray, axis: int, index: int, lut: np.ndarray, vmin: float, vmax: float,
+            keep: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A plane of the grid (``axis`` 0/1/2 held at its ``index``-th value) as coloured quads, one per cell between
+    four grid points (thesis Fig. 6.10b: velocity or pressure contours). ``values``: (D,) on the grid; ``keep``:
+    (D,) bool, the points that may be drawn (e.g. outside the car); a quad is drawn when its four corners are kept.
+    Returns vertices, triangles and colours ((n, 3) in [0, 1] through ``lut`` from ``vmin``..``vmax``)."""
+    shape = grid.shape
+    vals = np.asarray(values, float).reshape(shape)
+    ok = np.ones(shape, bool) if keep is None else np.asarray(keep, bool).reshape(shape)
+    P = grid.points().reshape(*shape, 3)
+    sl = [slice(None)] * 3
+    sl[axis] = slice(index, index + 1)
+    t = tuple(sl)
+    p2, v2, k2 = (np.squeeze(a[t], axis=axis) for a in (P, vals, ok))
+    n0, n1 = v2.shape
+    ij = np.arange(n0 * n1).reshape(n0, n1)
+    a, b, c, d = ij[:-1, :-1], ij[1:, :-1], ij[1:, 1:], ij[:-1, 1:]
+    k = k2.ravel()
+    quad = k[a] & k[b] & k[c] & k[d]
+    tris = np.concatenate([np.stack([a[quad], b[quad], c[quad]], 1), np.stack([a[quad], c[quad], d[quad]], 1)])
+    u = np.clip((v2.ravel() - vmin) / max(vmax - vmin, 1e-12), 0.0, 1.0)
+    colours = lut[np.nan_to_num(u * 255.0, nan=0.0).astype(int)]
+    return p2.reshape(-1, 3), tris.astype(np.int64), colours

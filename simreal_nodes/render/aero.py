@@ -29,18 +29,33 @@ class FlowOverlay:
                  occlusion: bool = True) -> None:
         self.renderer = Renderer(cam)
         self.occlusion = occlusion
+        self.layers: list[str] = []
         self.renderer.add(Mesh("aero_body", np.asarray(body_vertices, float), np.asarray(body_triangles),
                                smooth=False))
-        self.renderer.add(Mesh("aero_streamlines", np.asarray(tube_vertices, float), np.asarray(tube_triangles),
-                               mode="vertex", colors=np.asarray(tube_colors, float), smooth=True, unlit=True))
+        self.add_layer("aero_streamlines", tube_vertices, tube_triangles, tube_colors)
+
+    def add_layer(self, name: str, vertices: np.ndarray, triangles: np.ndarray, colors: np.ndarray,
+                  visible: bool = True) -> None:
+        """Another coloured surface drawn with the streamlines (e.g. a contour plane, ``aero.streamlines.section``),
+        in the world frame; ``show`` switches layers on and off."""
+        self.renderer.add(Mesh(name, np.asarray(vertices, float), np.asarray(triangles), mode="vertex",
+                               colors=np.asarray(colors, float), smooth=True, unlit=True))
+        self.layers.append(name)
+        if not visible:
+            self.renderer.meshes[name].visible = False
+
+    def show(self, *names: str) -> None:
+        """Draw only these layers."""
+        for n in self.layers:
+            self.renderer.meshes[n].visible = n in names
 
     def draw(self, image_bgr: np.ndarray, T_world_cam: np.ndarray) -> np.ndarray:
         """The image with the streamlines drawn (BGR uint8 in, BGR uint8 out)."""
         depth = None
         if self.occlusion:
             _, depth = self.renderer.render(T_world_cam, names=["aero_body"])  # 0 where no body: no occluder
-        return self.renderer.composite(T_world_cam, image_bgr, names=["aero_streamlines"], real_depth=depth,
-                                       bgr=True)
+        names = [n for n in self.layers if self.renderer.meshes[n].visible]
+        return self.renderer.composite(T_world_cam, image_bgr, names=names, real_depth=depth, bgr=True)
 
     def release(self) -> None:
         self.renderer.release()

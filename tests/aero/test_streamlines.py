@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from simreal_nodes.aero.grid import AeroGrid
-from simreal_nodes.aero.streamlines import FlowField, seed_rake, trace, tubes
+from simreal_nodes.aero.streamlines import FlowField, section, seed_rake, trace, tubes
 
 GRID = AeroGrid(lo=(-2.0, 0.0, 0.0), hi=(2.0, 2.0, 2.0), shape=(40, 20, 20))
 
@@ -47,3 +47,16 @@ def test_a_line_stops_at_the_body_and_tubes_are_closed_rings() -> None:
     assert np.allclose(np.linalg.norm(V.reshape(len(ln), 5, 3) - ln[:, None, :3], axis=2), 0.01)
     with pytest.raises(ValueError):
         FlowField(GRID, np.zeros((10, 3)))
+
+
+def test_a_section_is_the_grid_plane_coloured_by_value_without_the_body() -> None:
+    P = GRID.points()
+    lut = np.linspace(0.0, 1.0, 256)[:, None].repeat(3, axis=1)
+    keep = np.linalg.norm(P - [0.0, 0.0, 1.0], axis=1) > 0.4
+    V, T, C = section(GRID, P[:, 0], axis=1, index=0, lut=lut, vmin=-2.0, vmax=2.0, keep=keep)
+    assert V.shape == (40 * 20, 3) and np.allclose(V[:, 1], GRID.axes()[1][0])
+    assert np.allclose(C[:, 0], np.floor((V[:, 0] + 2.0) / 4.0 * 255.0) / 255.0, atol=1 / 255)  # colour = x
+    full = 2 * 39 * 19
+    assert 0.8 * full < len(T) < full  # the quads with a corner in the sphere are left out
+    centre = T[np.all(np.abs(V[T][:, :, [0, 2]] - [0.0, 1.0]).max(axis=2) < 0.2, axis=1)]
+    assert len(centre) == 0
