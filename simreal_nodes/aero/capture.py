@@ -2,9 +2,9 @@
 
 Alg. 6.1, step by step (``capture_car``), on the map's points (any pose; any scale for a monocular map):
 
-1. ``densityPointCulling``: points with fewer than ``min_neighbours`` others within ``density_radius`` x the
-   median distance to the ``min_neighbours``-th neighbour are dropped (Open3D's radius outlier removal):
-   triangulation noise goes, a sparser but regular floor stays;
+1. ``densityPointCulling``: points with fewer than ``min_neighbours`` points (themselves included) within
+   ``density_radius`` x the median distance to the ``min_neighbours``-th neighbour are dropped (Open3D's radius
+   outlier removal): triangulation noise goes, a sparser but regular floor stays;
 2. ``geometryAnalysis`` / ``centroidPointCulling``: the centroid, then the points farther from it than 95 % of all
    are dropped (the thesis's choice: no tuned distance);
 3. ``planeEstimationRANSAC`` / ``floorRemoving``: the largest plane (Open3D RANSAC, seeded) is the floor; its points

@@ -53,6 +53,14 @@ class CarShape:
             raise ValueError(f"car {self.name}: needs length, width > 0 and height > clearance >= 0")
         if min(self.profile_z) <= self.clearance or max(self.profile_z) > self.height + 1e-9:
             raise ValueError(f"car {self.name}: the roof line must stay between the clearance and the height")
+        numbers = (self.length, self.width, self.height, self.clearance, self.plan_power, self.section_power,
+                   self.belt, self.tumblehome, *self.profile_x, *self.profile_z)
+        if not all(np.isfinite(numbers)):
+            raise ValueError(f"car {self.name}: a parameter is not finite")
+        if self.plan_power <= 0 or self.section_power <= 0 or not (0.0 <= self.tumblehome < 1.0):
+            raise ValueError(f"car {self.name}: powers must be positive and the tumblehome in [0, 1)")
+        if not (self.clearance <= self.belt < self.height):
+            raise ValueError(f"car {self.name}: the belt line must lie between the clearance and the height")
 
     # --- the body's outline -------------------------------------------------------------------------------------
     def _ends(self, x: np.ndarray) -> np.ndarray:

@@ -13,18 +13,22 @@ Layout (format ``simreal-aero-db``, version 1)::
     /held_out           (n_cars,) uint8: 1 for the cars kept out of the manifold (truth for the error analysis)
     /presence           (n_cars, D) uint8: Eq. 6.1 on the grid
     /in_fluid           (n_cars, D) uint8: the grid point was in the CFD mesh
-    /velocity/mean      (3 D,) float32;  /velocity/modes (r, 3 D) float32;  /velocity/coeffs (n_cars, r) float64
+    /velocity/mean      (3 D,) float32;  /velocity/modes (r, 3 D) float32;  /velocity/coeffs (n_database, r)
+    /velocity/held_out_raw   (n_held_out, 3 D) float32: the held-out cars' fields as solved (no POD)
     /pressure/...       the same for the kinematic pressure (0 inside the body)
     /cd, /cl, /iterations, /converged, /cells, /seconds     per car
 
-The fields are stored as their POD (thin SVD of the centred snapshots), truncated where the relative Frobenius error
-of the snapshots falls under ``pod_tolerance`` (the spec's, 1e-3 by default): the stored error is stated in the
-file's attributes. Like model files, the first 512 bytes hold the SHA-256 of the rest, checked before libhdf5 reads.
-Nothing online runs CFD: the tracker side only loads this file.
+The database cars' fields are stored as their POD (thin SVD of the centred snapshots of the database cars only),
+truncated where the relative Frobenius error of the centred snapshots (the car-to-car variation) falls under
+``pod_tolerance`` (the spec's); the achieved errors, of the variation and of the whole fields, are in the file's
+attributes. The held-out cars' fields are stored as solved. Like model files, the first 512 bytes hold the SHA-256
+of the rest, checked before libhdf5 reads (a file without it is refused). Nothing online runs CFD: the online side
+only loads this file.
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import shutil
@@ -115,12 +119,42 @@ def load_aero_spec(path_or_name: str | Path) -> AeroSpec:
         raise ValueError(f"aero spec {p}: per_group >= 1 and held-out groups among {GROUPS}")
     if spec.cfd.turbulence not in ("laminar", "kOmegaSST") or spec.cfd.ground not in ("moving", "slip"):
         raise ValueError(f"aero spec {p}: cfd.turbulence laminar|kOmegaSST, cfd.ground moving|slip")
+    c = spec.cfd
+    if len(c.domain_min) != 3 or len(c.domain_max) != 3:
+        raise ValueError(f"aero spec {p}: cfd.domain_min and domain_max take three numbers")
+    positive = {"speed": c.speed, "nu": c.nu, "background": c.background, "iterations": c.iterations,
+                "residual": c.residual, "length": c.length, "turbulence_length": c.turbulence_length}
+    bad_values = [k for k, v in positive.items() if not (np.isfinite(v) and v > 0)]
+    if bad_values:
+        raise ValueError(f"aero spec {p}: cfd.{', cfd.'.join(bad_values)} must be positive")
+    lo, hi = np.asarray(c.domain_min, float), np.asarray(c.domain_max, float)
+    if np.any(np.asarray(grid.lo) < lo) or np.any(np.asarray(grid.hi) > hi):
+        raise ValueError(f"aero spec {p}: the grid {grid.lo}..{grid.hi} must lie inside the CFD domain "
+                         f"{c.domain_min}..{c.domain_max} (a point outside it would read as solid)")
+    if spec.held_out_groups and spec.held_out_seed == spec.seed:
+        raise ValueError(f"aero spec {p}: held_out.seed equals cars.seed: the held-out cars would be database cars")
     return spec
 
 
 # --- one car ------------------------------------------------------------------------------------------------------
 RESULT_KEYS = ("velocity", "pressure", "in_fluid", "presence", "cd", "cl", "iterations", "converged", "cells",
-               "seconds", "residuals")
+               "seconds", "residuals", "key")
+
+
+def result_key(car: dict[str, Any], cfd: dict[str, Any], grid: dict[str, Any]) -> str:
+    """What one result depends on (the car, the CFD settings, the grid), hashed: a result is reused only when this
+    matches (a changed seed, setting or grid in the same work folder solves again)."""
+    blob = json.dumps({"car": car, "cfd": {k: v for k, v in cfd.items() if k != "extra"}, "grid": grid},
+                      sort_keys=True, default=list)
+    return hashlib.sha256(blob.encode()).hexdigest()
+
+
+def _result_matches(path: Path, key: str) -> bool:
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            return all(k in z for k in RESULT_KEYS) and str(z["key"]) == key
+    except (OSError, ValueError, KeyError):
+        return False
 
 
 def solve_car(car: dict[str, Any], cfd: dict[str, Any], grid: dict[str, Any], work: str,
@@ -129,13 +163,9 @@ def solve_car(car: dict[str, Any], cfd: dict[str, Any], grid: dict[str, Any], wo
     A result already there is kept (the sweep resumes). The case folder is removed after (``keep_case`` keeps it)."""
     shape = car_from_dict(car)
     out = Path(work) / f"{shape.name}.npz"
-    if out.is_file():
-        try:
-            with np.load(out, allow_pickle=False) as z:
-                if all(k in z for k in RESULT_KEYS):
-                    return str(out)
-        except (OSError, ValueError):
-            pass
+    key = result_key(car, cfd, grid)
+    if out.is_file() and _result_matches(out, key):
+        return str(out)
     kw: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in cfd.items()}
     settings = CfdSettings(**kw)
     g = AeroGrid(lo=tuple(grid["lo"]), hi=tuple(grid["hi"]), shape=tuple(grid["shape"]))
@@ -150,7 +180,7 @@ def solve_car(car: dict[str, Any], cfd: dict[str, Any], grid: dict[str, Any], wo
     np.savez_compressed(tmp, velocity=r.velocity.astype(np.float32), pressure=r.pressure.astype(np.float32),
                         in_fluid=r.in_fluid, presence=g.presence(shape).astype(np.uint8), cd=r.cd, cl=r.cl,
                         iterations=r.iterations, converged=r.converged, cells=r.n_cells, seconds=r.seconds,
-                        residuals=json.dumps(r.residuals))
+                        residuals=json.dumps(r.residuals), key=key)
     tmp.replace(out)
     if not keep_case:
         for d in case.iterdir():
@@ -163,8 +193,9 @@ def solve_car(car: dict[str, Any], cfd: dict[str, Any], grid: dict[str, Any], wo
 def run_sweep(spec: AeroSpec, work: str | Path, jobs: int = 2, scheduler: str | None = None,
               report: Callable[[int, int, str, str], None] | None = None) -> list[Path]:
     """Solve every car of ``spec`` not yet in ``work``, ``jobs`` at a time on a local Dask cluster (or on the
-    cluster at ``scheduler``). ``report(done, total, name, line)`` is called as each car ends. A failed car is
-    reported and left out; the others go on."""
+    cluster at ``scheduler``; its workers must see ``work`` at the same path: a shared file system).
+    ``report(done, total, name, line)`` is called as each car ends. A failed car is reported and left out; the
+    others go on."""
     from dask.distributed import Client, LocalCluster, as_completed
 
     work = Path(work).resolve()
@@ -194,8 +225,8 @@ def run_sweep(spec: AeroSpec, work: str | Path, jobs: int = 2, scheduler: str | 
                     line = (f"Cd {float(z['cd']):.3f}, {int(z['iterations'])} iterations, "
                             f"{'converged' if bool(z['converged']) else 'NOT converged'}, {int(z['cells'])} cells, "
                             f"{float(z['seconds']):.0f} s")
-            except (CfdError, OSError, ValueError) as exc:
-                line = f"FAILED: {exc}"
+            except Exception as exc:  # noqa: BLE001 -- one car's failure (a solver, a killed worker) is reported
+                line = f"FAILED: {type(exc).__name__}: {exc}"
             if report:
                 report(k, len(cars), name, line)
         return done
@@ -205,26 +236,32 @@ def run_sweep(spec: AeroSpec, work: str | Path, jobs: int = 2, scheduler: str | 
             cluster.close()
 
 
-def _pod(snapshots: np.ndarray, tol: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
-    """Mean, modes (r, n) and coefficients (m, r) of the centred snapshots (m, n), truncated at relative Frobenius
-    error ``tol``; returns the achieved error too."""
+def _pod(snapshots: np.ndarray, tol: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, float]:
+    """Mean, modes (r, n) and coefficients (m, r) of the centred snapshots (m, n), truncated where the relative
+    Frobenius error of the *centred* snapshots (the car-to-car variation Eq. 6.4 interpolates, not the free stream
+    every car shares) falls under ``tol``. Returns also the achieved errors, of the centred and of the whole
+    snapshots."""
     mean = snapshots.mean(axis=0)
     X = snapshots - mean
     U, s, Vt = np.linalg.svd(X, full_matrices=False)
-    total = float(np.sum(snapshots.astype(np.float64) ** 2))
+    varied = float(np.sum(s ** 2))
     tail = np.concatenate([np.cumsum((s ** 2)[::-1])[::-1][1:], [0.0]])  # energy left out after keeping r+1 modes
-    err = np.sqrt(tail / max(total, 1e-300))
+    err = np.sqrt(tail / max(varied, 1e-300))
     r = int(np.argmax(err <= tol)) + 1 if np.any(err <= tol) else len(s)
-    return mean, Vt[:r], U[:, :r] * s[:r], float(err[r - 1])
+    whole = float(np.sqrt(tail[r - 1] / max(float(np.sum(snapshots ** 2)), 1e-300)))
+    return mean, Vt[:r], U[:, :r] * s[:r], float(err[r - 1]), whole
 
 
 def assemble(spec: AeroSpec, work: str | Path, out: str | Path) -> Path:
     """Write the database file from the sweep's results (every car of the spec must be there)."""
     work, out = Path(work), Path(out)
     cars = spec.cars()
-    missing = [c.name for c in cars if not (work / f"{c.name}.npz").is_file()]
+    cfd = asdict(spec.cfd)
+    cfd.pop("extra", None)
+    grid = spec.grid.to_dict()
+    missing = [c.name for c in cars if not _result_matches(work / f"{c.name}.npz", result_key(c.to_dict(), cfd, grid))]
     if missing:
-        raise CfdError(f"{len(missing)} cars have no CFD result in {work}: {', '.join(missing[:8])}"
+        raise CfdError(f"{len(missing)} cars have no CFD result for this spec in {work}: {', '.join(missing[:8])}"
                        f"{' ...' if len(missing) > 8 else ''}; rerun the sweep (it resumes)")
     D = spec.grid.size
     vel = np.zeros((len(cars), 3 * D), np.float64)
@@ -244,8 +281,6 @@ def assemble(spec: AeroSpec, work: str | Path, out: str | Path) -> Path:
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = out.with_suffix(f"{out.suffix}.{os.getpid()}.partial")
     with h5py.File(tmp, "w", userblock_size=USERBLOCK) as f:
-        cfd = asdict(spec.cfd)
-        cfd.pop("extra", None)
         f.attrs.update(format=FORMAT, format_version=FORMAT_VERSION, name=spec.name, description=spec.description,
                        created=time.strftime("%Y-%m-%dT%H:%M:%S%z"), simreal_version=__version__,
                        spec=json.dumps(spec.raw), grid=json.dumps(spec.grid.to_dict()), cfd=json.dumps(cfd))
@@ -256,13 +291,17 @@ def assemble(spec: AeroSpec, work: str | Path, out: str | Path) -> Path:
         kw: dict[str, Any] = {"compression": "gzip", "fletcher32": True}
         f.create_dataset("presence", data=presence, chunks=(1, D), **kw)
         f.create_dataset("in_fluid", data=in_fluid, chunks=(1, D), **kw)
+        dbi = held == 0
         for name, X in (("velocity", vel), ("pressure", pre)):
-            mean, modes, coeffs, err = _pod(X, spec.pod_tolerance)
+            # the POD of the database's cars only: a held-out car shapes nothing stored for the others
+            mean, modes, coeffs, err, whole = _pod(X[dbi], spec.pod_tolerance)
             h = f.create_group(name)
             h.attrs["pod_error"] = err
+            h.attrs["pod_error_whole"] = whole
             h.create_dataset("mean", data=mean.astype(np.float32), **kw)
             h.create_dataset("modes", data=modes.astype(np.float32), chunks=(1, modes.shape[1]), **kw)
             h.create_dataset("coeffs", data=coeffs, **kw)
+            h.create_dataset("held_out_raw", data=X[~dbi].astype(np.float32), **kw)  # the truth, not truncated
         for k, vals in scal.items():
             f.create_dataset(k, data=np.asarray(vals))
     stamp_checksum(tmp)
@@ -303,7 +342,9 @@ def load_database(path: str | Path) -> AeroDatabase:
     path = Path(path)
     if not path.is_file():
         raise ModelFileError(f"{path}: no such aero database")
-    verify_checksum(path)
+    if not verify_checksum(path):
+        raise ModelFileError(f"{path}: no checksum user block (every {FORMAT} file carries one): not a database "
+                             "written by simreal build-aero-db, or its first bytes were overwritten")
     try:
         with h5py.File(path, "r") as f:
             if f.attrs.get("format") != FORMAT:
@@ -324,15 +365,21 @@ def load_database(path: str | Path) -> AeroDatabase:
                     raise ModelFileError(f"{path}: {key} has shape {f[key].shape}, expected {shp}")
             fields = {}
             pod_error = {}
+            held = f["held_out"][()].astype(bool)
+            n_db = int((~held).sum())
             for name, width in (("velocity", 3 * D), ("pressure", D)):
-                modes, coeffs = f[f"{name}/modes"], f[f"{name}/coeffs"]
+                modes, coeffs, raw = f[f"{name}/modes"], f[f"{name}/coeffs"], f[f"{name}/held_out_raw"]
                 r = modes.shape[0]
-                if modes.shape != (r, width) or coeffs.shape != (n, r):
-                    raise ModelFileError(f"{path}: {name} POD of shapes {modes.shape}, {coeffs.shape}")
-                fields[name] = (f[f"{name}/mean"][()] + coeffs[()] @ modes[()]).astype(np.float32)
+                if modes.shape != (r, width) or coeffs.shape != (n_db, r) or raw.shape != (n - n_db, width):
+                    raise ModelFileError(f"{path}: {name} of shapes {modes.shape}, {coeffs.shape}, {raw.shape}")
+                full = np.empty((n, width), np.float32)
+                full[~held] = f[f"{name}/mean"][()] + coeffs[()] @ modes[()]
+                full[held] = raw[()]
+                fields[name] = full
                 pod_error[name] = float(f[name].attrs.get("pod_error", np.nan))
+                pod_error[f"{name}_whole"] = float(f[name].attrs.get("pod_error_whole", np.nan))
             db = AeroDatabase(name=str(f.attrs["name"]), grid=grid, cfd=json.loads(f.attrs["cfd"]), cars=cars,
-                              held_out=f["held_out"][()].astype(bool), presence=f["presence"][()].astype(np.float64),
+                              held_out=held, presence=f["presence"][()].astype(np.float64),
                               in_fluid=f["in_fluid"][()].astype(bool), velocity=fields["velocity"].reshape(n, D, 3),
                               pressure=fields["pressure"], cd=f["cd"][()], cl=f["cl"][()],
                               converged=f["converged"][()].astype(bool), pod_error=pod_error)

@@ -7,16 +7,22 @@ The thesis computed its database with commercial CFD (§6.2.3); we use OpenFOAM 
 * the ground ``z = 0`` is a wall moving with the flow (a car on a road seen from the car) or a slip plane (a body in
   free stream, the validation case);
 * a hexahedral background mesh refined twice by boxes (the sampling grid's box, a box close to the body) and at the
-  body's surface, then snapped to it (snappyHexMesh); no prism layers: at the thesis's Reynolds number (about 9000 on
-  the car's length) the boundary layer is some 0.2 m thick and is resolved by the surface cells;
-* laminar steady SIMPLE (simpleFoam with ``simulationType laminar``), second order (``linearUpwind``) convection;
+  body's surface, then snapped to it (snappyHexMesh); no prism layers (at the thesis's Reynolds number, about 9000
+  on the car's length, the boundary layer is some 0.2 m thick: several surface cells);
+* steady SIMPLE (simpleFoam), second order (``linearUpwind``) convection, laminar or k-omega SST (wall functions on
+  the body and the moving ground: ``kqRWallFunction``, ``omegaWallFunction``, ``nutkWallFunction``). SST's inflow:
+  intensity 1 %, length scale ``turbulence_length`` x ``length``; with the defaults (0.1 x 4.5 m at Re 9000) the
+  inflow's eddy viscosity is about 6 nu (k / omega), inside the 1-10 usually set for external flows but, at so low
+  a Reynolds number, a free stream about 7 times as viscous as nu alone (``aero_validation`` measures the effect);
 * the body's drag and lift coefficients from OpenFOAM's ``forceCoeffs`` and the velocity and pressure interpolated by
   OpenFOAM's own ``sets`` sampling (``cellPoint``) at the grid's points. A point that lies in the body is not in
   the mesh: its velocity is zero (no slip) and its pressure NaN.
 
 A steady solution is what the thesis's interpolation needs (one field per car); at Re 9000 the true wake sheds
-vortices, so the steady solve's residuals stall above a tight tolerance: each run reports its final residuals
-and whether they met ``settings.residual``. Nothing here is imported by an online node (the database is offline).
+vortices (a laminar steady solve of a bluff body does not converge there: the cube in ``aero_validation``); each run
+reports its final residuals and whether they met ``settings.residual``. Re 9000 at 10 m/s over 4.5 m means
+nu = 0.005 m^2/s, some 330 times air's: the thesis's Reynolds number, not air at road speed. Nothing here is
+imported by an online node (the database is offline).
 """
 
 from __future__ import annotations
@@ -57,7 +63,8 @@ class CfdSettings:
     residual: float = 1e-4  # initial residual of p and U at which the solve stops
     ground: str = "moving"  # "moving": a wall at the inflow speed; "slip": free stream
     turbulence: str = "laminar"  # or "kOmegaSST" (steady RANS, inflow intensity 1 %)
-    length: float = 4.5  # m, reference length of the body (the turbulence's inflow length scale is 10 % of it)
+    length: float = 4.5  # m, reference length of the body
+    turbulence_length: float = 0.1  # the inflow turbulence's length scale, a fraction of ``length``
     extra: dict[str, str] = field(default_factory=dict)  # not used by the writer; recorded with results
 
     def reynolds(self, length: float) -> float:
@@ -215,7 +222,7 @@ def write_case(case: str | Path, vertices: np.ndarray, faces: np.ndarray, points
     elif s.turbulence == "kOmegaSST":
         model = "simulationType RAS;\nRAS { RASModel kOmegaSST; turbulence on; printCoeffs off; }\n"
         k = 1.5 * (0.01 * s.speed) ** 2
-        omega = k ** 0.5 / (0.09 ** 0.25 * 0.1 * s.length)
+        omega = k ** 0.5 / (0.09 ** 0.25 * s.turbulence_length * s.length)
         for name, dim, val, wall in (("k", "[0 2 -2 0 0 0 0]", k, "kqRWallFunction"),
                                      ("omega", "[0 0 -1 0 0 0 0]", omega, "omegaWallFunction"),
                                      ("nut", "[0 2 -1 0 0 0 0]", 0.0, "nutkWallFunction")):
@@ -305,7 +312,9 @@ def _read_coeffs(case: Path) -> tuple[float, float]:
     if not header or not last:
         raise CfdError(f"unreadable force coefficients in {files[-1]}")
     row = dict(zip(header, (float(v) for v in last)))
-    return row.get("Cd", float("nan")), row.get("Cl", float("nan"))
+    if "Cd" not in row or not np.isfinite(row["Cd"]):
+        raise CfdError(f"no finite drag coefficient in {files[-1]} (columns {header}): did the body patch get faces?")
+    return row["Cd"], row.get("Cl", float("nan"))
 
 
 def _read_sets(case: Path, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -26,8 +26,10 @@ class FlowOverlay:
 
     def __init__(self, cam: CameraModel, body_vertices: np.ndarray, body_triangles: np.ndarray,
                  tube_vertices: np.ndarray, tube_triangles: np.ndarray, tube_colors: np.ndarray,
-                 occlusion: bool = True) -> None:
-        self.renderer = Renderer(cam)
+                 occlusion: bool = True, world_scale: float = 1.0) -> None:
+        """``world_scale``: map units per metre (a monocular map's scale: 1 / the capture's ``scale``), so that the
+        near and far planes (5 cm, 20 m) hold in the map's units."""
+        self.renderer = Renderer(cam, near=0.05 * world_scale, far=20.0 * world_scale)
         self.occlusion = occlusion
         self.layers: list[str] = []
         self.renderer.add(Mesh("aero_body", np.asarray(body_vertices, float), np.asarray(body_triangles),

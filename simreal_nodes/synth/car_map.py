@@ -18,8 +18,8 @@ from simreal_nodes.aero.cars import CarShape
 
 @dataclass
 class CarMap:
-    cloud: np.ndarray  # (n, 3) map frame
-    scale: float  # truth: x_car = (R (x - t)) / scale ... see to_car
+    cloud: np.ndarray  # (n, 3) map frame: x_map = scale * R x_car + translation
+    scale: float
     rotation: np.ndarray
     translation: np.ndarray
 

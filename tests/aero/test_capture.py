@@ -9,6 +9,7 @@ import pytest
 from simreal_nodes.aero.capture import CaptureSettings, capture_car
 from simreal_nodes.aero.cars import car_family
 from simreal_nodes.aero.grid import THESIS_GRID
+from simreal_nodes.render.aero import car_to_world
 from simreal_nodes.synth.car_map import simulate_map
 
 GRID = THESIS_GRID
@@ -22,6 +23,9 @@ def test_frame_size_and_presence_are_recovered(metric: bool) -> None:
     body = m.cloud[:200]
     est = r.scale * body @ r.rotation.T + r.translation
     assert np.median(np.linalg.norm(est - m.to_car(body), axis=1)) < 0.06  # metres, in the car frame
+    # the overlay's inverse takes the car frame back to the map (what draws the flow where the car is)
+    back = car_to_world(m.to_car(body), r.scale, r.rotation, r.translation)
+    assert np.median(np.linalg.norm(back - body, axis=1)) < 0.06 * m.scale
     assert r.box == pytest.approx([car.length, car.width, car.height], rel=0.04)
     truth = GRID.presence(car) > 0
     got = r.presence > 0

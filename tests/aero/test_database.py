@@ -5,15 +5,19 @@ round-trips, and Eq. 6.4 predicts a held-out car's flow. Skipped with the reason
 from __future__ import annotations
 
 import os
+import shutil
+from dataclasses import replace
 from pathlib import Path
 
+import h5py
 import numpy as np
 import pytest
 
 from simreal_nodes.aero.database import AeroDatabase, assemble, load_aero_spec, load_database, run_sweep
 from simreal_nodes.aero.manifold import ShapeManifold
-from simreal_nodes.aero.openfoam import openfoam_available
+from simreal_nodes.aero.openfoam import CfdError, openfoam_available
 from simreal_nodes.errors import ModelFileError
+from simreal_nodes.rom.model_file import stamp_checksum
 
 pytestmark = pytest.mark.skipif(not openfoam_available(), reason="OpenFOAM is not installed (./run setup installs "
                                 "Debian's openfoam)")
@@ -66,18 +70,43 @@ def test_eq_6_4_predicts_a_held_out_car_better_than_the_database_mean(built) -> 
 def test_the_sweep_resumes_and_a_damaged_file_is_refused(built, tmp_path) -> None:
     root, out, _ = built
     spec = load_aero_spec("aero_cars_small.yaml")
-    stamps = {p.name: p.stat().st_mtime_ns for p in (root / "work").glob("*.npz")}
-    run_sweep(spec, root / "work", jobs=1)
-    assert {p.name: p.stat().st_mtime_ns for p in (root / "work").glob("*.npz")} == stamps  # nothing re-solved
+    work = tmp_path / "work"
+    shutil.copytree(root / "work", work)
+    stamps = {p.name: p.stat().st_mtime_ns for p in work.glob("*.npz")}
+    run_sweep(spec, work, jobs=1)
+    assert {p.name: p.stat().st_mtime_ns for p in work.glob("*.npz")} == stamps  # nothing re-solved
+    # a result of other settings is not this spec's: assembling refuses it (the sweep would solve it again)
+    other = replace(spec, cfd=replace(spec.cfd, iterations=spec.cfd.iterations + 1))
+    with pytest.raises(CfdError, match="no CFD result for this spec"):
+        assemble(other, work, tmp_path / "other.h5")
+    os.remove(work / "old_00.npz")
+    with pytest.raises(CfdError, match="no CFD result"):
+        assemble(spec, work, tmp_path / "db.h5")
+    # a flipped byte, a file without the checksum block, a dataset of the wrong shape (checksum re-stamped)
     data = bytearray(out.read_bytes())
     data[len(data) // 2] ^= 0xFF
-    bad = tmp_path / "bad.h5"
-    bad.write_bytes(bytes(data))
+    (tmp_path / "bad.h5").write_bytes(bytes(data))
     with pytest.raises(ModelFileError):
-        load_database(bad)
+        load_database(tmp_path / "bad.h5")
+    with h5py.File(out, "r") as src, h5py.File(tmp_path / "plain.h5", "w") as dst:
+        for k, v in src.attrs.items():
+            dst.attrs[k] = v
+    with pytest.raises(ModelFileError, match="no checksum"):
+        load_database(tmp_path / "plain.h5")
+    shaped = tmp_path / "shaped.h5"
+    shutil.copy(out, shaped)
+    with h5py.File(shaped, "r+") as f:
+        del f["cd"]
+        f.create_dataset("cd", data=np.zeros(3))
+    stamp_checksum(shaped)
+    with pytest.raises(ModelFileError, match="cd has shape"):
+        load_database(shaped)
     (tmp_path / "spec.yaml").write_text("name: x\ncfd: {speed: 10, warp: 9}\n")
     with pytest.raises(ValueError, match="unknown cfd keys"):
         load_aero_spec(tmp_path / "spec.yaml")
-    os.remove(root / "work" / "old_00.npz")
-    with pytest.raises(Exception, match="no CFD result"):
-        assemble(spec, root / "work", tmp_path / "db.h5")
+    (tmp_path / "spec.yaml").write_text("name: x\ncars: {seed: 3}\nheld_out: {seed: 3, groups: [sport]}\n")
+    with pytest.raises(ValueError, match="held-out cars would be database cars"):
+        load_aero_spec(tmp_path / "spec.yaml")
+    (tmp_path / "spec.yaml").write_text("name: x\ngrid: {lo: [-30, 0, 0]}\n")
+    with pytest.raises(ValueError, match="inside the CFD domain"):
+        load_aero_spec(tmp_path / "spec.yaml")

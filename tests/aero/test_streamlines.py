@@ -22,17 +22,23 @@ def test_uniform_flow_gives_straight_lines_of_the_set_length() -> None:
         assert np.allclose(ln[:, 3], np.linalg.norm([2.0, 0.0, 0.5]))
 
 
-def test_rigid_rotation_keeps_its_radius_across_the_symmetry_plane() -> None:
-    """v = (-(z - 1), 0, x) about the axis (0, y, 1): circles; the seed below the axis crosses y = 0 nowhere but
-    the field is evaluated on both sides of it (mirrored)."""
+def test_the_half_field_is_mirrored_across_the_symmetry_plane() -> None:
+    """v = (1, y, 0) stored on y >= 0 only: the mirror must give v_y = y on y < 0 too (the sign flipped and the rows
+    reversed), continuous through y = 0."""
     P = GRID.points()
-    v = np.column_stack([-(P[:, 2] - 1.0), np.zeros(len(P)), P[:, 0]])
-    f = FlowField(GRID, v)
-    q = np.array([[0.3, -0.4, 1.0], [0.3, 0.4, 1.0]])
-    assert np.allclose(f(q)[0], f(q)[1])  # v_y = 0: the mirror is the same field
+    f = FlowField(GRID, np.column_stack([np.ones(len(P)), P[:, 1], np.zeros(len(P))]))
+    q = np.array([[0.3, y, 1.0] for y in (-0.8, -0.31, -0.02, 0.0, 0.02, 0.31, 0.8)])
+    assert np.allclose(f(q), np.column_stack([np.ones(len(q)), q[:, 1], np.zeros(len(q))]), atol=1e-9)
+
+
+def test_rigid_rotation_keeps_its_radius() -> None:
+    """v = (-(z - 1), 0, x) about the axis (0, y, 1): circles (trilinear interpolation of a linear field is exact;
+    what is left is RK4's drift)."""
+    P = GRID.points()
+    f = FlowField(GRID, np.column_stack([-(P[:, 2] - 1.0), np.zeros(len(P)), P[:, 0]]))
     ln = trace(f, np.array([[0.5, -0.3, 1.0]]), step=0.02, n_steps=150)[0]
     r = np.hypot(ln[:, 0], ln[:, 2] - 1.0)
-    assert np.abs(r - 0.5).max() < 2e-3  # trilinear interpolation of a linear field is exact; RK4 drift only
+    assert np.abs(r - 0.5).max() < 2e-3
 
 
 def test_a_line_stops_at_the_body_and_tubes_are_closed_rings() -> None:

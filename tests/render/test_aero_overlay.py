@@ -28,7 +28,9 @@ def test_a_streamline_behind_the_body_is_hidden_and_one_in_front_is_drawn() -> N
         V, T, C = tubes([line], radius=0.05, lut=np.ones((256, 3)))
         ov = FlowOverlay(cam, *body, V, T, C)
         out = ov.draw(img, T_wc)
-        free = FlowOverlay(cam, *body, V, T, C, occlusion=False).draw(img, T_wc)
+        plain = FlowOverlay(cam, *body, V, T, C, occlusion=False)
+        free = plain.draw(img, T_wc)
+        plain.release()
         ov.release()
         row = np.flatnonzero(free[:, 160].max(axis=1) > 100)
         assert len(row) > 0  # without occlusion the line crosses the image's middle column
