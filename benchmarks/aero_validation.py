@@ -150,7 +150,8 @@ def main(argv: list[str] | None = None) -> None:
              f"against ten times less on the same car: Cd {inflow['cd_nut_ratio_6']:.4f} against "
              f"{inflow['cd_nut_ratio_0_6']:.4f}, velocity {inflow['velocity_rel_l2_pct']:.2f} % of |v| "
              f"({inflow['disturbance_rel_l2_pct']:.1f} % of the disturbance). Reference values: sphere Re 100 1.087 "
-             "(Johnson & Patel 1999); cube Re ~1e4 1.05 (Hoerner); sphere Re 9000 about 0.40 (standard drag curve). A laminar run that did not converge "
+             "(Johnson & Patel 1999); cube Re ~1e4 1.05 (Hoerner); sphere Re 9000 about 0.40 (standard drag "
+             "curve). A laminar run that did not converge "
              "reports the drag of its last iteration.")
     cols = [("case", "body", "{}"), ("Re", "Re", "{:.0f}"), ("model", "model", "{}"), ("level", "surface level", "{}"),
             ("cells", "cells", "{}"), ("iterations", "iterations", "{}"), ("converged", "converged", "{}"),
