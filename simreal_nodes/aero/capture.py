@@ -188,14 +188,16 @@ def capture_car(cloud: np.ndarray, grid: AeroGrid, settings: CaptureSettings = C
     lowest = float(np.quantile(car_pts[:, 2], 0.02))
     hh = _spacing(car_pts)
     # close the unseen underside at the sills' height: the footprint's points dropped to the lowest seen height
+    # (spaced a tenth of alpha, or the map's own spacing if coarser: closed for the alpha complex, few points)
     foot = car_pts[car_pts[:, 2] < lowest + 0.25 * (box[2] - lowest)].copy()
-    xs = np.arange(car_pts[:, 0].min(), car_pts[:, 0].max(), hh)
+    step = max(hh, 0.1 * s.alpha_m)
+    xs = np.arange(car_pts[:, 0].min(), car_pts[:, 0].max(), step)
     cap = []
     for x0 in xs:
-        sel = np.abs(foot[:, 0] - x0) < hh
+        sel = np.abs(foot[:, 0] - x0) < step
         if sel.sum() >= 2:
             y0, y1 = foot[sel, 1].min(), foot[sel, 1].max()
-            ys = np.arange(y0, y1 + 1e-9, hh)
+            ys = np.arange(y0, y1 + 1e-9, step)
             cap.append(np.column_stack([np.full(len(ys), x0), ys, np.full(len(ys), lowest)]))
     closed = np.vstack([car_pts] + cap)
     pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(closed))
@@ -216,11 +218,18 @@ def capture_car(cloud: np.ndarray, grid: AeroGrid, settings: CaptureSettings = C
     dt = Delaunay(closed)
     kept_tet = circumradii(closed[dt.simplices]) < s.alpha_m
     pts = grid.points()
+    # only grid points inside the box of the closed cloud can be in it (the box is its own image under the half turn)
+    lo_c, hi_c = closed.min(axis=0), closed.max(axis=0)
+    half_w = max(abs(lo_c[1]), abs(hi_c[1]))
+    near = np.flatnonzero((pts[:, 0] >= min(lo_c[0], box[0] - hi_c[0])) & (pts[:, 0] <= max(hi_c[0], box[0] - lo_c[0]))
+                          & (np.abs(pts[:, 1]) <= half_w) & (pts[:, 2] >= lo_c[2]) & (pts[:, 2] <= hi_c[2]))
 
     def presence(flip: bool) -> np.ndarray:
         D, e = mirror(flip)
-        simplex = dt.find_simplex((pts - e) @ D)  # D is its own inverse
-        return ((simplex >= 0) & kept_tet[np.maximum(simplex, 0)]).astype(np.float64)
+        simplex = dt.find_simplex((pts[near] - e) @ D)  # D is its own inverse
+        out = np.zeros(len(pts))
+        out[near] = (simplex >= 0) & kept_tet[np.maximum(simplex, 0)]
+        return out
 
     phi = [presence(False), presence(True)]
     if choose_front is not None:
