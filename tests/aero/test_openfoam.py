@@ -7,32 +7,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from simreal_nodes.aero.bodies import sphere_surface
 from simreal_nodes.aero.openfoam import CfdError, CfdSettings, openfoam_available, run_case, write_case
 
 pytestmark = pytest.mark.skipif(not openfoam_available(), reason="OpenFOAM is not installed (./run setup installs "
                                 "Debian's openfoam)")
 
 
-def sphere(d: float = 1.0, n_theta: int = 32, n_phi: int = 64) -> tuple[np.ndarray, np.ndarray]:
-    th = np.linspace(0.0, np.pi, n_theta + 1)[1:-1]
-    ph = np.linspace(0.0, 2.0 * np.pi, n_phi, endpoint=False)
-    T, P = np.meshgrid(th, ph, indexing="ij")
-    ring = 0.5 * d * np.stack([np.sin(T) * np.cos(P), np.sin(T) * np.sin(P), np.cos(T)], -1).reshape(-1, 3)
-    v = np.vstack([ring, [[0.0, 0.0, 0.5 * d]], [[0.0, 0.0, -0.5 * d]]])
-    j = np.arange(n_phi)
-    jn = (j + 1) % n_phi
-    f = []
-    for i in range(n_theta - 2):
-        a, b, a2, b2 = i * n_phi + j, i * n_phi + jn, (i + 1) * n_phi + j, (i + 1) * n_phi + jn
-        f += [np.stack([a, a2, b2], 1), np.stack([a, b2, b], 1)]
-    f.append(np.stack([np.full(n_phi, len(ring)), j, jn], 1))
-    last = (n_theta - 2) * n_phi
-    f.append(np.stack([np.full(n_phi, len(ring) + 1), last + jn, last + j], 1))
-    return v, np.vstack(f)
-
-
 def test_sphere_drag_at_re_100(tmp_path) -> None:
-    v, f = sphere()
+    v, f = sphere_surface()
     s = CfdSettings(speed=1.0, nu=0.01, domain_min=(-6.0, 0.0, -6.0), domain_max=(14.0, 6.0, 6.0), background=0.5,
                     box_level=1, near_level=2, surface_level=3, iterations=2000, residual=1e-5, ground="slip",
                     turbulence="laminar", length=1.0)
@@ -49,7 +32,7 @@ def test_sphere_drag_at_re_100(tmp_path) -> None:
 
 
 def test_a_failing_mesh_says_which_step_failed(tmp_path) -> None:
-    v, f = sphere()
+    v, f = sphere_surface()
     s = CfdSettings(speed=1.0, nu=0.01, iterations=5)
     pts = np.zeros((1, 3))
     case = write_case(tmp_path / "bad", v, f, pts, s, (np.zeros(3), np.ones(3)), (np.zeros(3), np.ones(3)), 1.0, 1.0)
