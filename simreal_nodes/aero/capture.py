@@ -50,6 +50,7 @@ class CaptureSettings:
     floor_iterations: int = 2000
     noise_bins: int = 60
     alpha_m: float = 1.0  # alpha (m, in the car frame): over half the body's thickness, or the interior stays hollow
+    cap_spacing: float = 0.1  # the underside's cap points, x alpha_m (never finer than the map; 0: the map's spacing)
     length_m: float | None = None  # the car's length, for a map without metric scale
     seed: int = 0
 
@@ -190,7 +191,7 @@ def capture_car(cloud: np.ndarray, grid: AeroGrid, settings: CaptureSettings = C
     # close the unseen underside at the sills' height: the footprint's points dropped to the lowest seen height
     # (spaced a tenth of alpha, or the map's own spacing if coarser: closed for the alpha complex, few points)
     foot = car_pts[car_pts[:, 2] < lowest + 0.25 * (box[2] - lowest)].copy()
-    step = max(hh, 0.1 * s.alpha_m)
+    step = max(hh, s.cap_spacing * s.alpha_m)
     xs = np.arange(car_pts[:, 0].min(), car_pts[:, 0].max(), step)
     cap = []
     for x0 in xs:
