@@ -298,8 +298,9 @@ def main(argv: list[str] | None = None) -> None:
               "(`synth/car_map.py`: 3000 points on the sides, ends and roof, 3000 on the floor, 1 cm noise, 3 % "
               "outliers, a random map pose; monocular maps at a random scale, fixed by the car's length) instead of "
               "their true shape; the error is over the true car's fluid points, the prediction zero inside the "
-              "captured car (a point the captured body wrongly covers counts its whole velocity as error). Not yet "
-              "from a rendered video through the SLAM (issue 19, item 4).\n\n" + markdown_table(cap_rows, cap_cols))
+              "captured car (a point the captured body wrongly covers counts its whole velocity as error). From a "
+              "rendered video through the project's SLAM instead: `aero_video.md`.\n\n"
+              + markdown_table(cap_rows, cap_cols))
     save(a.out, rows, cols, "Held-out cars: velocity by manifold interpolation (Eq. 6.4) against their own CFD",
          notes=notes, plot=plot, extra={"summary": summary})
 

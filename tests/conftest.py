@@ -29,3 +29,20 @@ def shared(*parts) -> Path:
 @pytest.fixture
 def shared_data():
     return shared
+
+
+@pytest.fixture(scope="session")
+def small_aero_db(tmp_path_factory) -> tuple[Path, Path, list[str]]:
+    """The small car family's aero database (``aero_cars_small.yaml``: 8 cars + 2 held out, coarse grid and mesh),
+    solved by OpenFOAM on a Dask local cluster once per test session (about a minute): (work folder, database file,
+    the sweep's report lines). Skipped with the reason where OpenFOAM is not installed."""
+    from simreal_nodes.aero.database import assemble, load_aero_spec, run_sweep
+    from simreal_nodes.aero.openfoam import openfoam_available
+
+    if not openfoam_available():
+        pytest.skip("OpenFOAM is not installed (./run setup installs Debian's openfoam)")
+    root = tmp_path_factory.mktemp("aero")
+    spec = load_aero_spec("aero_cars_small.yaml")
+    lines: list[str] = []
+    run_sweep(spec, root / "work", jobs=2, report=lambda k, n, name, line: lines.append(f"{name}: {line}"))
+    return root, assemble(spec, root / "work", root / "db.h5"), lines

@@ -7,16 +7,21 @@ Alg. 6.1, step by step (``capture_car``), on the map's points (any pose; any sca
    outlier removal): triangulation noise goes, a sparser but regular floor stays;
 2. ``geometryAnalysis`` / ``centroidPointCulling``: the centroid, then the points farther from it than 95 % of all
    are dropped (the thesis's choice: no tuned distance);
-3. ``planeEstimationRANSAC`` / ``floorRemoving``: the largest plane (Open3D RANSAC, seeded) is the floor; its points
-   and everything under it go; its normal, pointing to the car, is gravity's opposite;
+3. ``planeEstimationRANSAC`` / ``floorRemoving``: the largest plane (Open3D RANSAC, seeded), refined by least
+   squares on the band of points about it, is the floor; its points and everything under it go, and so do the points
+   less than ``floor_sigmas`` of the floor's noise above the floor's level where they stand (level and noise from
+   their 30 nearest points in the floor's band: a depth camera's floor 5 m away is several centimetres thick, 2 m
+   away one, and a SLAM map's floor bends with its drift); its normal, pointing to the car, is gravity's opposite;
 4. ``PrincipalComponentAnalysis``: the principal axis of the remaining points projected on the floor is the car's
    length;
 5. ``noiseRemoving``: along each of the car's three axes, the histogram of positions; only the contiguous run of
-   populated bins holding most points is kept (the thesis's "histogram of positions");
-6. ``boxAdjustment`` and the similarity ``[S, R, T]``: the box of the points in the car's axes (0.5-99.5
-   percentiles) gives the car frame of :mod:`simreal_nodes.aero.grid` (nose at ``x = 0``, centre plane ``y = 0``,
-   floor ``z = 0``); the scale is 1 for a metric map (RGB-D, stereo) or ``length_m`` / box length for a monocular
-   one (the user says how long the car is: the only way to fix a monocular map's scale here);
+   populated bins holding most points is kept (the thesis's "histogram of positions"; ``noise_min_share`` > 0
+   counts thinly filled bins as empty);
+6. ``boxAdjustment`` and the similarity ``[S, R, T]``: the length axis turned (within 30 degrees) to the box of
+   least area (PCA leans towards where a SLAM map holds more points); the box of the points in the car's axes
+   (0.5-99.5 percentiles) gives the car frame of :mod:`simreal_nodes.aero.grid` (nose at ``x = 0``, centre plane
+   ``y = 0``, floor ``z = 0``); the scale is 1 for a metric map (RGB-D, stereo) or ``length_m`` / box length for a
+   monocular one (the user says how long the car is: the only way to fix a monocular map's scale here);
 7. the alpha shape of the points (``alpha_m`` metres in the car frame: over half the body's thickness, or a shell of
    surface points leaves the interior hollow; 0.8-1.7 m gave the same overlap on development cars), after closing
    the underside the camera never sees by a cap at the lowest seen height (the sills): its surface from Open3D (for
@@ -31,6 +36,7 @@ whose presence vector lies closer to the database's cars) decides; without it th
 
 from __future__ import annotations
 
+import re
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -48,7 +54,9 @@ class CaptureSettings:
     centroid_keep: float = 0.95
     floor_tolerance: float = 1.0  # RANSAC inlier distance, x median spacing
     floor_iterations: int = 2000
+    floor_sigmas: float = 3.0  # points lower than this many of the floor's noise sigmas above it are the floor's
     noise_bins: int = 60
+    noise_min_share: float = 0.0  # a bin holding no more than this share of the mean non-empty bin counts as empty
     alpha_m: float = 1.0  # alpha (m, in the car frame): over half the body's thickness, or the interior stays hollow
     cap_spacing: float = 0.1  # the underside's cap points, x alpha_m (never finer than the map; 0: the map's spacing)
     length_m: float | None = None  # the car's length, for a map without metric scale
@@ -67,6 +75,7 @@ class CaptureResult:
     box: np.ndarray  # (3,) length, width, height (m)
     kept: dict[str, int] = field(default_factory=dict)  # points left after each step
     seconds: dict[str, float] = field(default_factory=dict)
+    floor_cut: float = 0.0  # the median height (map units) under which the kept points' neighbourhoods were floor
 
 
 def _spacing(p: np.ndarray) -> float:
@@ -88,12 +97,40 @@ def circumradii(tets: np.ndarray) -> np.ndarray:
     return r
 
 
-def _main_run(values: np.ndarray, bins: int) -> np.ndarray:
-    """Mask of the values in the contiguous run of populated histogram bins that holds the most points."""
+def _refine_plane(p: np.ndarray, n: np.ndarray, d0: float, tol: float, rounds: int = 3) -> tuple[np.ndarray, float]:
+    """The plane n.x + d0 = 0 fitted (SVD) to the points within 2.5 robust sigmas of it (never closer than ``tol``),
+    ``rounds`` times."""
+    for _ in range(rounds):
+        dist = p @ n + d0
+        near = np.abs(dist) < max(tol, 2.5 * 1.4826 * float(np.median(np.abs(dist[np.abs(dist) < 3 * tol]))))
+        if near.sum() < 3:
+            break
+        c = p[near].mean(axis=0)
+        n_new = np.linalg.svd(p[near] - c, full_matrices=False)[2][2]
+        n = n_new if n_new @ n > 0 else -n_new
+        d0 = -float(n @ c)
+    return n, d0
+
+
+def _box_angle(xy: np.ndarray, span_deg: float = 30.0, step_deg: float = 0.5) -> float:
+    """The turn (radians, within +-``span_deg``) of the axes that gives the points' box (1-99 % quantiles) the least
+    area."""
+    th = np.deg2rad(np.arange(-span_deg, span_deg + 1e-9, step_deg))
+    u = xy[:, :1] * np.cos(th) + xy[:, 1:] * np.sin(th)
+    v = xy[:, 1:] * np.cos(th) - xy[:, :1] * np.sin(th)
+    qu, qv = np.quantile(u, [0.01, 0.99], axis=0), np.quantile(v, [0.01, 0.99], axis=0)
+    return float(th[np.argmin((qu[1] - qu[0]) * (qv[1] - qv[0]))])
+
+
+def _main_run(values: np.ndarray, bins: int, min_share: float = 0.0) -> np.ndarray:
+    """Mask of the values in the contiguous run of populated histogram bins that holds the most points; a bin is
+    populated when it holds more than ``min_share`` of the mean count of the non-empty bins (stray points scattered
+    around the car fill bins thinly)."""
     counts, edges = np.histogram(values, bins=bins)
+    floor = min_share * float(counts[counts > 0].mean())
     best, best_n, start = (0, 0), -1, None
     for k in range(bins + 1):
-        filled = k < bins and counts[k] > 0
+        filled = k < bins and counts[k] > floor
         if filled and start is None:
             start = k
         if not filled and start is not None:
@@ -139,19 +176,41 @@ def capture_car(cloud: np.ndarray, grid: AeroGrid, settings: CaptureSettings = C
     t = time.perf_counter()
     o3d.utility.random.seed(s.seed)
     pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(p))
-    plane, inl = pcd.segment_plane(distance_threshold=s.floor_tolerance * h, ransac_n=3,
-                                   num_iterations=s.floor_iterations)
+    plane, _inl = pcd.segment_plane(distance_threshold=s.floor_tolerance * h, ransac_n=3,
+                                    num_iterations=s.floor_iterations)
     n = np.asarray(plane[:3], float)
-    d0 = float(plane[3]) / np.linalg.norm(n)
+    d0 = float(plane[3]) / float(np.linalg.norm(n))
     n /= np.linalg.norm(n)
-    off = np.ones(len(p), bool)
-    off[np.asarray(inl, int)] = False
+    # RANSAC's plane through three of the points, refined by least squares on the floor's band (a band of robust
+    # sigmas about the plane): on a thick floor the three-point plane tilts by a noise's worth, and which three
+    # RANSAC draws differs from call to call
+    n, d0 = _refine_plane(p, n, d0, s.floor_tolerance * h)
+    off = np.abs(p @ n + d0) > s.floor_tolerance * h
     height = p @ n + d0
     if off.sum() < 30:
         raise ValueError(f"capture: {int(off.sum())} points off the floor plane; the map holds no car")
-    if np.median(height[off]) < 0:
+    if np.quantile(height, 0.98) < -np.quantile(height, 0.02):  # the car stands farther above than noise reaches below
         n, d0, height = -n, -d0, -height
-    p = p[off & (height > s.floor_tolerance * h)]
+    # the floor's own level and thickness where each point stands: the median and robust spread of the heights of
+    # its 30 nearest floor-band points (in the plane). A depth camera's floor grows thicker with distance and a
+    # SLAM map's floor bends with its drift; the band is twice the cut of the global noise, which is measured from
+    # the points under the plane (nothing of the car lies there; their median is 0.6745 sigma for a normal noise)
+    under = height < 0
+    cut = np.full(len(p), s.floor_tolerance * h)
+    if under.sum() >= 30:
+        e1 = np.cross(n, [1.0, 0.0, 0.0] if abs(n[0]) < 0.9 else [0.0, 1.0, 0.0])
+        e1 /= np.linalg.norm(e1)
+        plane_xy = p @ np.stack([e1, np.cross(n, e1)]).T
+        band = np.abs(height) < 2.0 * s.floor_sigmas * float(np.median(-height[under])) / 0.6745
+        if band.sum() >= 30:
+            _, nn = cKDTree(plane_xy[band]).query(plane_xy, k=30)
+            hb = height[band][nn]
+            level = np.median(hb, axis=1)
+            sigma = 1.4826 * np.median(np.abs(hb - level[:, None]), axis=1)
+            cut = np.maximum(cut, level + s.floor_sigmas * sigma)
+    keep = off & (height > cut)
+    floor_cut = float(np.median(cut[keep])) if keep.any() else float(np.median(cut))
+    p = p[keep]
     kept["floor"] = len(p)
     if len(p) < 30:
         raise ValueError(f"capture: {len(p)} points above the floor; the map holds no car")
@@ -173,9 +232,18 @@ def capture_car(cloud: np.ndarray, grid: AeroGrid, settings: CaptureSettings = C
     t = time.perf_counter()
     keep = np.ones(len(local), bool)
     for k in range(3):
-        keep &= _main_run(local[:, k], s.noise_bins)
+        keep &= _main_run(local[:, k], s.noise_bins, s.noise_min_share)
     local = local[keep]
     kept["noise"] = len(local)
+    if len(local) < 30:
+        raise ValueError(f"capture: {len(local)} points left after the noise removal; the map holds no car")
+    # boxAdjustment: the length axis turned to the box of least area (PCA's axis leans towards where the map holds
+    # more points, one side or one end: a SLAM map is not uniform)
+    th = _box_angle(local[:, :2])
+    c_, s_ = np.cos(th), np.sin(th)
+    a, b = c_ * a + s_ * b, c_ * b - s_ * a
+    R = np.stack([a, b, n])
+    local[:, :2] = local[:, :2] @ np.array([[c_, -s_], [s_, c_]])
     lo = np.quantile(local, 0.005, axis=0)
     hi = np.quantile(local, 0.995, axis=0)
     length = float(hi[0] - lo[0])
@@ -203,7 +271,11 @@ def capture_car(cloud: np.ndarray, grid: AeroGrid, settings: CaptureSettings = C
     closed = np.vstack([car_pts] + cap)
     pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(closed))
     with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):  # "invalid tetra" per sliver
-        mesh = o3d.geometry.TriangleMesh.create_from_point_cloud_alpha_shape(pcd, s.alpha_m)
+        try:
+            mesh = o3d.geometry.TriangleMesh.create_from_point_cloud_alpha_shape(pcd, s.alpha_m)
+        except RuntimeError as err:  # Qhull refuses a degenerate set (flat, too few distinct points)
+            why = re.sub(r"\x1b\[[0-9;]*m", "", " ".join(str(err).split()))[:160]
+            raise ValueError(f"capture: the alpha shape of {len(closed)} points failed ({why})") from None
     verts, tris = np.asarray(mesh.vertices), np.asarray(mesh.triangles)
     times["alpha_shape"] = time.perf_counter() - t
 
@@ -246,4 +318,4 @@ def capture_car(cloud: np.ndarray, grid: AeroGrid, settings: CaptureSettings = C
     k = -(R @ q0) + np.array([0.0, 0.0, float(n @ q0) + d0]) - centre
     return CaptureResult(presence=phi[int(flip)], points=car_pts @ D.T + e, vertices=verts @ D.T + e,
                          triangles=tris, scale=scale, rotation=D @ R, translation=scale * (D @ k) + e, box=box,
-                         kept=kept, seconds=times)
+                         kept=kept, seconds=times, floor_cut=floor_cut)

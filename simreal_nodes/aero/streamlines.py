@@ -69,16 +69,20 @@ def trace(field: FlowField, seeds: np.ndarray, step: float = 0.05, n_steps: int 
 
 
 def tubes(lines: list[np.ndarray], radius: float = 0.015, sides: int = 6,
-          lut: np.ndarray | None = None, vmax: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+          lut: np.ndarray | None = None, vmax: float | None = None,
+          colors: list[np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Tubes around the lines: vertices (n, 3), triangles (m, 3), colours (n, 3) in [0, 1] from the speed through a
     256-entry colour table (``lut``, (256, 3) in [0, 1], e.g. ``render.overlay.colormap_lut``; a grey ramp without
-    one), 0 to ``vmax`` (the fastest point of the lines by default)."""
+    one), 0 to ``vmax`` (the fastest point of the lines by default). With ``colors`` (one (k, 3) array per line, as
+    a received marker carries them) the lines may be (k, 3) points and are coloured by them instead."""
     verts, tris, cols = [], [], []
     base = 0
-    top = vmax if vmax is not None else max((float(np.nanmax(ln[:, 3])) for ln in lines), default=1.0)
+    top = 1.0 if colors is not None else (
+        vmax if vmax is not None else max((float(np.nanmax(ln[:, 3])) for ln in lines), default=1.0))
     ang = np.linspace(0.0, 2.0 * np.pi, sides, endpoint=False)
-    for ln in lines:
-        P, sp = ln[:, :3], ln[:, 3]
+    for li, ln in enumerate(lines):
+        P = ln[:, :3]
+        sp = ln[:, 3] if colors is None else np.zeros(len(ln))
         t = np.gradient(P, axis=0)
         t /= np.maximum(np.linalg.norm(t, axis=1, keepdims=True), 1e-12)
         ref = np.where(np.abs(t[:, 2:3]) < 0.9, [[0.0, 0.0, 1.0]], [[1.0, 0.0, 0.0]])
@@ -89,7 +93,10 @@ def tubes(lines: list[np.ndarray], radius: float = 0.015, sides: int = 6,
                                          + np.sin(ang)[None, :, None] * n2[:, None, :])
         verts.append(ring.reshape(-1, 3))
         u = np.clip(sp / max(top, 1e-9), 0.0, 1.0)
-        c = lut[(u * 255).astype(int)] if lut is not None else np.repeat(u[:, None], 3, axis=1)
+        if colors is not None:
+            c = np.asarray(colors[li], float)[:, :3]
+        else:
+            c = lut[(u * 255).astype(int)] if lut is not None else np.repeat(u[:, None], 3, axis=1)
         cols.append(np.repeat(c, sides, axis=0))
         k = np.arange(len(P) - 1)[:, None] * sides + base
         j = np.arange(sides)[None, :]

@@ -54,8 +54,9 @@ def add_make_bag(sub: argparse._SubParsersAction) -> None:
     from simreal_nodes.synth.scenes import SCENES
 
     s = sub.add_parser("make-bag", help="render a synthetic seed scene with ground truth into a bag")
-    s.add_argument("scene", choices=[*sorted(SCENES), "family"],
-                   help="a seed scene, or 'family': one scene of the held-out family drawn from --seed")
+    s.add_argument("scene", choices=[*sorted(SCENES), "family", "car_aero", "car_aero-mono"],
+                   help="a seed scene, or 'family': one scene of the held-out family drawn from --seed, or 'car_aero': "
+                        "a held-out car of the aero database circled once (RGB-D; '-mono': colour only)")
     s.add_argument("-o", "--output", required=True)
     s.add_argument("--resolution", default="640x480")
     s.add_argument("--duration", type=float, help="seconds (default: the scene's)")

@@ -66,22 +66,25 @@ class CdrWriter:
         return bytes(self.buf)
 
 
+LINE_STRIP, TRIANGLE_LIST, ADD = 4, 11, 0
+
+
 @dataclass
 class TriangleListMarker:
-    """A visualization_msgs/Marker TRIANGLE_LIST with per-vertex colours (3 rows per triangle)."""
+    """A visualization_msgs/Marker TRIANGLE_LIST with per-vertex colours (3 rows per triangle); with ``kind``
+    LINE_STRIP a polyline of ``width`` (the marker's scale.x) through the points, coloured per point."""
 
     ns: str
     id: int
     pose: np.ndarray  # 4x4, the marker's frame in the header's frame
     points: np.ndarray  # (3 n_triangles, 3) metres
     colors: np.ndarray  # (3 n_triangles, 3 or 4) in 0..1
-
-
-TRIANGLE_LIST, ADD = 11, 0
+    kind: int = TRIANGLE_LIST
+    width: float = 1.0
 
 
 def marker_array_cdr(markers: list[TriangleListMarker], stamp_ns: int, frame_id: str) -> bytes:
-    """visualization_msgs/msg/MarkerArray of triangle-list markers, serialized."""
+    """visualization_msgs/msg/MarkerArray of triangle-list (or line-strip) markers, serialized."""
     from simreal_nodes.geometry import matrix_to_quat
 
     w = CdrWriter()
@@ -90,11 +93,11 @@ def marker_array_cdr(markers: list[TriangleListMarker], stamp_ns: int, frame_id:
         w.header(stamp_ns, frame_id)
         w.string(m.ns)
         w.i32(m.id)
-        w.i32(TRIANGLE_LIST)
+        w.i32(m.kind)
         w.i32(ADD)
         T = np.asarray(m.pose, dtype=np.float64)
         w.f64(*T[:3, 3], *matrix_to_quat(T[:3, :3]))  # pose: position, orientation (x, y, z, w)
-        w.f64(1.0, 1.0, 1.0)  # scale
+        w.f64(m.width if m.kind == LINE_STRIP else 1.0, 1.0, 1.0)  # scale (x: a line strip's width)
         w.f32(1.0, 1.0, 1.0, 1.0)  # colour (per-vertex colours are used)
         w.time(0)  # lifetime: forever
         w.boolean(False)  # frame_locked

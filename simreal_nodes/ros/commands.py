@@ -90,7 +90,7 @@ def replay(bag: str, scene_file: str, rate: float = 1.0, lossless: bool = False,
         with _StopFlag() as stop:
             if record:
                 recorder = Recorder(node, record, storage, topics=output_topics(nodes))
-            player = Player(node, ex, inputs, img, [n.name for n in nodes], lossless, rate,
+            player = Player(node, ex, inputs, img, [n.name for n in nodes if n.per_frame], lossless, rate,
                             frame_timeout_s, echo=echo)
             player.should_stop = stop.event.is_set
             player.node_inputs = {n.name: [t for t in n.inputs if t.startswith("/simreal/")] for n in nodes}

@@ -25,3 +25,6 @@ def reliable_qos(depth: int = 10) -> QoSProfile:
 
 
 TF_QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST, depth=100)
+# the aero node's flow: reliable and latched (transient local), so an overlay started later still gets the last one
+LATCHED_QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST, depth=1,
+                         durability=DurabilityPolicy.TRANSIENT_LOCAL)

@@ -22,7 +22,9 @@ LOC_MAP = "/simreal/localization/map"
 LOC_OBS = "/simreal/localization/observations"
 LOC_DEFORMABLE = "/simreal/localization/deformable_points"  # tracker -> localization: PointCloud2 x, y, z, id, drop
 LOC_FOCUS = "/simreal/localization/focus"  # tracker -> localization: an object's image region (PolygonInstanceStamped)
+LOC_CAPTURE = "/simreal/localization/capture_cloud"  # aero scenes: the map's points + keyframe depth (PointCloud2)
 TRACKER_STATUS = "/simreal/tracker/status"
+AERO_FLOW = "/simreal/aero/flow"  # the captured body and its streamlines, map frame (MarkerArray)
 OVERLAY_IMAGE = "/simreal/overlay/image_raw"
 OVERLAY_MARKERS = "/simreal/overlay/markers"
 PROGRESS = "/simreal/progress"
@@ -56,6 +58,7 @@ class NodeSpec:
     parameters: dict = field(default_factory=dict)
     inputs: list[str] = field(default_factory=list)
     outputs: dict[str, str] = field(default_factory=dict)  # topic -> message type
+    per_frame: bool = True  # reports progress for every camera frame (the lossless player waits for it)
 
 
 IMAGE_MEASUREMENTS = ("dots", "homography", "dense")  # tracking.measurements that read the image's pixels
@@ -113,6 +116,7 @@ def required_nodes(scene: dict, lossless: bool = False) -> list[NodeSpec]:
                              cam["right_camera_info"]) if t] if cam["source"] == "topic" else []
     nodes.append(NodeSpec("ingest", dict(common), ingest_in, ingest_out))
 
+    aero = scene.get("aero", {}).get("enabled", False)
     if loc["mode"] != "static":
         nodes.append(NodeSpec(
             "localization", dict(common),
@@ -121,7 +125,12 @@ def required_nodes(scene: dict, lossless: bool = False) -> list[NodeSpec]:
             + ([LOC_DEFORMABLE, LOC_FOCUS] if any(o["tracking"]["enabled"] for o in objs) else []),
             {POSE: "geometry_msgs/msg/PoseStamped", TF: "tf2_msgs/msg/TFMessage",
              LOC_STATUS: "simreal_msgs/msg/TrackingStatus", LOC_MAP: "sensor_msgs/msg/PointCloud2",
-             LOC_OBS: "simreal_msgs/msg/FeatureObservations"}))
+             LOC_OBS: "simreal_msgs/msg/FeatureObservations",
+             **({LOC_CAPTURE: "sensor_msgs/msg/PointCloud2"} if aero else {})}))
+    if aero:
+        # no camera frames: it captures when the localization's cloud has grown (so no per-frame progress)
+        nodes.append(NodeSpec("aero", dict(common), [LOC_CAPTURE], {AERO_FLOW: "visualization_msgs/msg/MarkerArray"},
+                              per_frame=False))
 
     tracked = [o for o in objs if o["tracking"]["enabled"]]
     if tracked:
@@ -149,6 +158,7 @@ def required_nodes(scene: dict, lossless: bool = False) -> list[NodeSpec]:
     if scene["overlay"]["enabled"]:
         ins = [CAM_IMAGE, CAM_INFO] + ([CAM_DEPTH] if depth else []) + ([LOC_OBS] if loc["mode"] != "static" else [])
         ins += [params_topic(o["id"]) for o in objs if o["tracking"]["enabled"] or o["collision"]["enabled"]]
+        ins += [AERO_FLOW] if aero else []
         nodes.append(NodeSpec("overlay", dict(common), ins,
                               {OVERLAY_IMAGE: "sensor_msgs/msg/Image",
                                OVERLAY_MARKERS: "visualization_msgs/msg/MarkerArray"}))

@@ -200,6 +200,26 @@ OVERLAY = Record({
     "colorbar": Bool("draw a colour bar with units", default=True),
 })
 
+AERO = Record({
+    "enabled": Bool("capture the car in the SLAM map and draw its flow from the database (thesis ch. 6): starts the "
+                    "aero node; needs a SLAM localization (mono, rgbd, stereo)", default=False),
+    "database": FilePath("aero database (HDF5) built offline by `simreal build-aero-db SPEC -o DB.h5`", nullable=True,
+                         must_exist=False),
+    "neighbours": Number("M: database cars in Eq. 6.4 (the benchmark's leave-one-out chose 15, benchmarks/results/"
+                         "aero.md)", integer=True, lo=2, hi=1000, default=15),
+    "length_m": Number("the car's length, metres: sets a monocular map's scale (required for localization mode "
+                       "'mono')", lo=0, lo_open=True, nullable=True),
+    "keyframe_depth": Bool("RGB-D / stereo: capture from the map points and every keyframe feature with a measured "
+                           "depth (off: the map points alone, a sparse car: benchmarks/results/aero_video.md)",
+                           default=True),
+    "min_points": Number("capture once the cloud holds this many points", integer=True, lo=50, default=2000),
+    "recapture_growth": Number("capture again when the cloud has grown by this fraction since the last capture (0: "
+                               "only once)", lo=0, default=0.2),
+    "alpha_m": Number("alpha of the car's alpha shape, metres (Alg. 6.1)", lo=0.05, hi=10, default=1.0),
+    "streamlines": Number("streamline seeds across the car (a rake of N x N*0.8 upstream of the nose)", integer=True,
+                          lo=1, hi=50, default=11),
+})
+
 SCENE = Record({
     "simreal_scene": Number("scene format version", integer=True, required=True),
     "name": Str("scene name", required=True, **IDENT),
@@ -212,6 +232,7 @@ SCENE = Record({
     "localization": LOCALIZATION,
     "objects": ListOf(OBJECT, "deformable objects", default=[]),
     "overlay": OVERLAY,
+    "aero": AERO,
     "ground_truth": Record({
         "topic_prefix": Str("prefix of ground-truth topics in synthetic bags (never read by estimators)",
                             default="/ground_truth"),
@@ -241,6 +262,17 @@ def _cross_checks(scene: dict, ctx: Context) -> None:
                          "'stereo'")
     if cam["source"] != "topic" and cam["path"] is None:
         raise SceneError(f"{src}: camera.path: required for camera.source '{cam['source']}'; found nothing")
+    aero = scene["aero"]
+    if aero["enabled"]:
+        if loc["mode"] not in ("mono", "rgbd", "stereo"):
+            raise SceneError(f"{src}: aero.enabled: the car is captured from a SLAM map (localization.mode mono, "
+                             f"rgbd or stereo); found mode '{loc['mode']}'")
+        if aero["database"] is None or not Path(aero["database"]).is_file():
+            raise SceneError(f"{src}: aero.database: the aero database file is needed and was not found"
+                             f"{': ' + aero['database'] if aero['database'] else ''} (build it offline: `simreal "
+                             "build-aero-db aero_cars.yaml -o DB.h5`, about 50 CPU-minutes on 2 cores)")
+        if loc["mode"] == "mono" and aero["length_m"] is None:
+            raise SceneError(f"{src}: aero.length_m: a monocular map has no scale; give the car's length in metres")
     for i, o in enumerate(scene["objects"]):
         for j, other in enumerate(o["collision"]["pushes"]):
             if other not in ids or other == o["id"]:

@@ -29,7 +29,10 @@ class CarMap:
 
 
 def simulate_map(car: CarShape, rng: np.random.Generator, n_car: int = 3000, n_floor: int = 3000,
-                 noise: float = 0.01, outliers: float = 0.03, metric: bool = True) -> CarMap:
+                 noise: float = 0.01, outliers: float = 0.03, metric: bool = True,
+                 floor_noise: float | None = None) -> CarMap:
+    """``noise``: the points' triangulation noise (m, each axis); ``floor_noise``: the floor's own (default the same:
+    a depth camera's floor a few metres away is thicker than the car's near side)."""
     v, f = car.surface()
     tri = v[f]
     nrm = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
@@ -45,8 +48,9 @@ def simulate_map(car: CarShape, rng: np.random.Generator, n_car: int = 3000, n_f
                              rng.uniform(-3.5, 3.5, 4 * n_floor), np.zeros(4 * n_floor)])
     below = car.inside(floor + np.array([0.0, 0.0, car.clearance + 0.01]))
     floor = floor[~below][:n_floor]
+    body = body + rng.normal(0.0, noise, body.shape)
+    floor = floor + rng.normal(0.0, noise if floor_noise is None else floor_noise, floor.shape)
     pts = np.vstack([body, floor])
-    pts += rng.normal(0.0, noise, pts.shape)
     n_out = int(outliers * len(pts))
     lo, hi = pts.min(axis=0) - 1.0, pts.max(axis=0) + 1.0
     pts = np.vstack([pts, rng.uniform(lo, hi, (n_out, 3))])

@@ -56,6 +56,8 @@ class SynthScene:
     blur_subframes: int = 1
     map_is_world: bool = False  # markers scenes: the map frame is the world frame
     state: dict = field(default_factory=dict)
+    render_kw: dict = field(default_factory=dict)  # the renderer's near / far planes and light, where not the default
+    depth_range_m: float = 6.0  # the depth camera's far limit
 
     def T_map_world(self) -> np.ndarray:
         """The map frame of the estimators: the world (markers) or the first camera frame (SLAM)."""

@@ -40,3 +40,15 @@ def test_a_map_without_a_car_is_refused() -> None:
         capture_car(floor, GRID)
     with pytest.raises(ValueError, match="at least 50"):
         capture_car(np.full((100, 3), np.nan), GRID)
+
+
+def test_a_thick_floor_is_taken_away_by_its_own_noise() -> None:
+    # a depth camera's floor a few metres away is centimetres thick (4 cm here); the car's points are sharper
+    car = car_family(1, seed=7)[0]
+    m = simulate_map(car, np.random.default_rng(4), floor_noise=0.04)
+    r = capture_car(m.cloud, GRID)
+    assert r.floor_cut > 0.08  # about 3 sigma of the floor, measured from the points under it
+    assert r.box == pytest.approx([car.length, car.width, car.height], rel=0.05)
+    # a cut at the points' spacing alone (floor_sigmas 0) leaves the floor's upper half around the car
+    r0 = capture_car(m.cloud, GRID, CaptureSettings(floor_sigmas=0.0))
+    assert r0.box[1] > 1.3 * car.width

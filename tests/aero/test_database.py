@@ -24,13 +24,9 @@ pytestmark = pytest.mark.skipif(not openfoam_available(), reason="OpenFOAM is no
 
 
 @pytest.fixture(scope="module")
-def built(tmp_path_factory) -> tuple[Path, Path, AeroDatabase]:
-    root = tmp_path_factory.mktemp("aero")
-    spec = load_aero_spec("aero_cars_small.yaml")
-    lines: list[str] = []
-    run_sweep(spec, root / "work", jobs=2, report=lambda k, n, name, line: lines.append(f"{name}: {line}"))
+def built(small_aero_db) -> tuple[Path, Path, AeroDatabase]:
+    root, out, lines = small_aero_db  # tests/conftest.py: the small family solved once per session
     assert len(lines) == 10 and not any("FAILED" in line for line in lines), lines
-    out = assemble(spec, root / "work", root / "db.h5")
     return root, out, load_database(out)
 
 

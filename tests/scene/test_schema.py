@@ -139,3 +139,40 @@ def test_build_spec_models_builds_then_checks_parameters(tmp_path, monkeypatch, 
         return
     o = build_spec_models(s)["objects"][0]
     assert Path(o["model"]).exists() and o["_model_header"]["axes"][0]["name"] == "s"
+
+
+AERO = """
+simreal_scene: 1
+name: car
+camera: {depth: /camera/depth/image_raw}
+localization: {mode: rgbd}
+aero: {enabled: true, database: db.h5}
+"""
+
+
+def test_an_aero_scene_starts_the_aero_node_and_wires_its_flow(tmp_path):
+    (tmp_path / "db.h5").write_bytes(b"")  # existence is what the scene checks; the node reads the file
+    s = load_scene(write(tmp_path, AERO))
+    nodes = {n.name: n for n in required_nodes(s)}
+    assert list(nodes) == ["ingest", "localization", "aero", "overlay"]
+    assert "/simreal/localization/capture_cloud" in nodes["localization"].outputs
+    assert nodes["aero"].inputs == ["/simreal/localization/capture_cloud"]
+    assert nodes["aero"].outputs == {"/simreal/aero/flow": "visualization_msgs/msg/MarkerArray"}
+    assert not nodes["aero"].per_frame and all(n.per_frame for k, n in nodes.items() if k != "aero")
+    assert "/simreal/aero/flow" in nodes["overlay"].inputs
+    # without aero, nothing of it: no node, no capture cloud
+    plain = load_scene(write(tmp_path, AERO.replace("enabled: true", "enabled: false")))
+    nodes = {n.name: n for n in required_nodes(plain)}
+    assert "aero" not in nodes and "/simreal/localization/capture_cloud" not in nodes["localization"].outputs
+
+
+@pytest.mark.parametrize("change,match", [
+    (("mode: rgbd", "mode: markers, markers: {poses: {0: [0, 0, 0, 0, 0, 0, 1]}}"), r"aero.enabled: .*SLAM map"),
+    (("database: db.h5", "database: missing.h5"), r"aero.database: .*not found.*build-aero-db"),
+    (("mode: rgbd", "mode: mono"), r"aero.length_m: a monocular map has no scale"),
+    (("enabled: true", "enabled: true, neighbours: 1"), r"aero.neighbours: expected"),
+])
+def test_aero_mistakes_are_named(tmp_path, change, match):
+    (tmp_path / "db.h5").write_bytes(b"")
+    with pytest.raises(SceneError, match=match):
+        load_scene(write(tmp_path, AERO.replace(*change)))

@@ -19,6 +19,7 @@ from std_msgs.msg import Header
 from std_srvs.srv import SetBool
 from tf2_msgs.msg import TFMessage
 
+from simreal_nodes.aero.slam_cloud import capture_cloud
 from simreal_nodes.assimilation.localizer import LiveLocalizer, Localization, status_text
 from simreal_nodes.errors import ImageFormatError
 from simreal_nodes.io import images
@@ -33,7 +34,12 @@ from simreal_nodes.sync import StampSync
 class LocalizationNode(SimrealNode):
     def __init__(self):
         super().__init__("localization")
-        loc = load_scene(self.scene_file)["localization"] if self.scene_file else {}
+        scene = load_scene(self.scene_file) if self.scene_file else {}
+        loc = scene.get("localization", {})
+        aero = scene.get("aero", {})
+        # aero scenes: the cloud the car is captured from (map points + keyframe depth), published with the map
+        self.capture = bool(aero.get("enabled", False))
+        self.capture_depth = bool(aero.get("keyframe_depth", True))
         self.mode = self.param("mode", loc.get("mode", "mono"), "markers | mono | rgbd | stereo", read_only=True)
         n_features = self.param("features", int(loc.get("features", 1000)), "ORB features per frame", read_only=True)
         scale = self.param("scale_factor", float(loc.get("scale_factor", 1.2)), "ORB pyramid factor", read_only=True)
@@ -54,6 +60,8 @@ class LocalizationNode(SimrealNode):
         self.pub_status = self.create_publisher(TrackingStatus, graph.LOC_STATUS, reliable_qos(10))
         self.pub_obs = self.create_publisher(FeatureObservations, graph.LOC_OBS, ordered)
         self.pub_map = self.create_publisher(PointCloud2, graph.LOC_MAP, reliable_qos(1))
+        self.pub_capture = (self.create_publisher(PointCloud2, graph.LOC_CAPTURE, reliable_qos(1)) if self.capture
+                            else None)
         self.sync = StampSync(("image",), {"rgbd": ("depth",), "stereo": ("right",)}.get(self.mode, ()), wait=2)
         self.create_subscription(CameraInfo, graph.CAM_INFO, self.on_info, q)
         depth = self.param("live_queue", 1 if self.mode in ("markers", "static") else 5,
@@ -139,10 +147,16 @@ class LocalizationNode(SimrealNode):
         index, poly = convert.focus_polygon(msg)
         self.live.set_focus(index, convert.stamp_ns(msg.header.stamp), poly)
 
+    @guarded
     def publish_map(self) -> None:
         P = self.live.map_points()
-        if P is not None:
-            self.pub_map.publish(convert.cloud_msg(P, Header(stamp=self.get_clock().now().to_msg()), self.map_frame))
+        if P is None:
+            return
+        head = Header(stamp=self.get_clock().now().to_msg())
+        self.pub_map.publish(convert.cloud_msg(P, head, self.map_frame))
+        if self.pub_capture is not None and self.live.map is not None and self.live.cam is not None:
+            cloud = capture_cloud(self.live.map, self.live.cam, keyframe_depth=self.capture_depth)
+            self.pub_capture.publish(convert.cloud_msg(cloud, head, self.map_frame))
 
     def close(self) -> None:
         if self.live.close(self.save_map):

@@ -17,14 +17,16 @@ from std_msgs.msg import Header
 from visualization_msgs.msg import MarkerArray
 
 from simreal_nodes import geometry as G
+from simreal_nodes.aero.streamlines import tubes
 from simreal_nodes.errors import ImageFormatError, SimrealError
 from simreal_nodes.io import images
 from simreal_nodes.io.cdr import marker_array_cdr
 from simreal_nodes.io.video import VideoSink
+from simreal_nodes.render.aero import FlowOverlay
 from simreal_nodes.render.scene import SceneOverlay, overlay_models
 from simreal_nodes.ros.convert import observation_pose, stamp_ns
 from simreal_nodes.ros.node import SimrealNode, guarded, parse_progress, run_node
-from simreal_nodes.ros.qos import data_qos, reliable_qos
+from simreal_nodes.ros.qos import LATCHED_QOS, data_qos, reliable_qos
 from simreal_nodes.scene import graph
 from simreal_nodes.scene.schema import load_scene
 from simreal_nodes.sync import StampSync
@@ -66,6 +68,11 @@ class OverlayNode(SimrealNode):
         for oid in self.param_objects:
             self.create_subscription(ModelParameters, graph.params_topic(oid),
                                      lambda m, oid=oid: self.on_input(f"p:{oid}", m), reliable_qos(50))
+        # aero scenes: the car's flow (the aero node's markers) drawn over the video, hidden behind its body
+        self.flow: FlowOverlay | None = None
+        self.flow_geometry: tuple | None = None
+        if self.scene["aero"]["enabled"]:
+            self.create_subscription(MarkerArray, graph.AERO_FLOW, self.on_flow, LATCHED_QOS)
         if self.lossless:  # live, a frame waits for its parameters until a newer one is complete: no need to
             # hear every node's per-frame report (an executor wake-up each, several per frame)
             self.create_subscription(Header, graph.PROGRESS, self.on_progress, reliable_qos(1000))
@@ -77,6 +84,34 @@ class OverlayNode(SimrealNode):
         cam = self.camera_model(msg)
         if cam is not None and self.core.set_camera(cam):
             self.get_logger().info(f"overlay renderer: {self.core.comp.renderer.gl_renderer}")
+
+    @guarded
+    def on_flow(self, msg: MarkerArray) -> None:
+        """A new flow from the aero node: its body and streamlines, drawn from the next frame on."""
+        body, lines, colors, width = None, [], [], 0.04
+        for m in msg.markers:
+            P = np.array([[p.x, p.y, p.z] for p in m.points], float).reshape(-1, 3)
+            if m.ns == "aero/body":
+                body = P
+            elif m.ns == "aero/streamlines" and len(P) >= 2:
+                lines.append(P)
+                colors.append(np.array([[c.r, c.g, c.b] for c in m.colors], float).reshape(-1, 3))
+                width = float(m.scale.x)
+        if body is None or len(body) < 3 or not lines:
+            self.set_status("warn", "aero flow without a body or streamlines: not drawn")
+            return
+        self.flow_geometry = (body, lines, colors, width)
+        if self.flow is not None:
+            self.flow.release()
+            self.flow = None
+
+    def _flow_layer(self) -> FlowOverlay | None:
+        """The flow's renderer, built at the first frame after a new flow (the camera is known then)."""
+        if self.flow is None and self.flow_geometry is not None and self.core.cam is not None:
+            body, lines, colors, width = self.flow_geometry
+            V, T, C = tubes(lines, radius=0.5 * width, sides=5, colors=colors)
+            self.flow = FlowOverlay(self.core.cam, body, np.arange(len(body)).reshape(-1, 3), V, T, C)
+        return self.flow
 
     def on_progress(self, h: Header) -> None:
         """Lossless: a producer that dropped a frame will not send its parameters: stop waiting for them."""
@@ -113,6 +148,9 @@ class OverlayNode(SimrealNode):
         except (ValueError, SimrealError) as e:  # an image of another size than CameraInfo says
             self.drop(head.stamp, f"cannot draw: {e}")
             return
+        flow = self._flow_layer() if T_wc is not None else None
+        if flow is not None and T_wc is not None:
+            out = flow.draw(out, T_wc)
         self._publish(out, head, states)
         for k, st in states.items():
             self.metrics.extra.update({f"{k}_modes": str(st.modes), f"{k}_error_px": f"{st.error_px:.3f}"})
@@ -140,6 +178,8 @@ class OverlayNode(SimrealNode):
             self.video.close()
             self.say(f"wrote {self.video.frames} frames to {self.video.path}")
         self.core.release()
+        if self.flow is not None:
+            self.flow.release()
 
 
 def main(args=None):

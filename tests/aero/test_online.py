@@ -1,0 +1,56 @@
+"""The online side (thesis §6.4) on the small database: a SLAM-like cloud of a held-out car in an arbitrary map pose
+in, its flow out in the map frame (captured body, streamlines around it, Eq. 6.4's drag), and as RViz markers."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from simreal_nodes.aero.capture import CaptureSettings
+from simreal_nodes.aero.database import load_database
+from simreal_nodes.aero.online import AeroEstimator, flow_markers
+from simreal_nodes.io.cdr import LINE_STRIP, TRIANGLE_LIST
+from simreal_nodes.render.aero import speed_lut
+from simreal_nodes.synth.car_map import simulate_map
+
+
+@pytest.fixture(scope="module")
+def db(small_aero_db):
+    return load_database(small_aero_db[1])
+
+
+@pytest.mark.parametrize("metric", [True, False])
+def test_the_flow_comes_out_in_the_map_frame_around_the_car(db, metric: bool) -> None:
+    i = next(k for k in db.held if db.cars[k].group == "sport")
+    car = db.cars[i]
+    m = simulate_map(car, np.random.default_rng(11), metric=metric)
+    est = AeroEstimator(db, neighbours=3, capture=CaptureSettings(length_m=None if metric else car.length))
+    res = est.estimate(m.cloud)
+    assert res.box_m == pytest.approx([car.length, car.width, car.height], rel=0.06)
+    assert len(res.neighbours) == 3 and res.weights.sum() == pytest.approx(1.0)
+    assert 0.8 * db.cd[db.database].min() < res.cd < 1.2 * db.cd[db.database].max()
+    # the body and the streamlines in the map frame: back in the true car frame, the body hugs the car's box and
+    # the lines run from upstream of the nose, downstream, around it
+    body = m.to_car(res.body_vertices)
+    assert np.all(body.min(axis=0) > [-0.3, -0.6 * car.width - 0.3, -0.3])
+    assert np.all(body.max(axis=0) < [car.length + 0.3, 0.6 * car.width + 0.3, car.height + 0.3])
+    lines = [m.to_car(ln) for ln in res.lines]
+    assert len(lines) >= 50
+    starts = np.array([ln[0] for ln in lines])
+    assert np.all(starts[:, 0] < -1.0)  # the rake, 1.5 m ahead of the nose
+    assert np.median([ln[-1, 0] - ln[0, 0] for ln in lines]) > car.length + 2.0  # carried past the car
+    speeds = np.concatenate(res.speeds)
+    assert np.median(speeds) == pytest.approx(10.0, rel=0.2)
+    marks = flow_markers(res, speed_lut())
+    assert marks[0].kind == TRIANGLE_LIST and len(marks[0].points) == 3 * len(res.body_triangles)
+    assert all(mk.kind == LINE_STRIP for mk in marks[1:]) and len(marks) == 1 + len(res.lines)
+    assert marks[1].width == pytest.approx(0.04 * m.scale, rel=0.03)  # a 4 cm tube in map units (scale estimated)
+
+
+def test_a_cloud_without_a_car_is_refused(db) -> None:
+    rng = np.random.default_rng(0)
+    floor = np.column_stack([rng.uniform(-5, 5, 3000), rng.uniform(-5, 5, 3000), rng.normal(0, 0.005, 3000)])
+    with pytest.raises(ValueError, match="no car"):
+        AeroEstimator(db, neighbours=3).estimate(floor)
+    with pytest.raises(ValueError, match="neighbours"):
+        AeroEstimator(db, neighbours=len(db.database))
