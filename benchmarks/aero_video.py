@@ -130,17 +130,16 @@ def main(argv: list[str] | None = None) -> None:
 
     def plot(plt):
         fig, ax = plt.subplots(1, 2, figsize=(10, 3.6))
+        names = list(dict.fromkeys(r["car"] for r in rows))
         for j, k in enumerate(("RGB-D", "RGB-D, map points only", "monocular")):
-            rr = [r for r in rows if r["sensor"] == k and "iou" in r]
-            x = np.arange(len(rr)) + 0.27 * j
-            ax[0].bar(x, [r["iou"] for r in rr], width=0.27, label=k)
-            if all("err_pct" in r for r in rr) and rr:
-                ax[1].bar(x, [r["err_pct"] for r in rr], width=0.27, label=f"{k}, captured from video")
+            at = {r["car"]: r for r in rows if r["sensor"] == k and "iou" in r}  # failed captures draw no bar
+            x = [names.index(c) + 0.27 * j for c in at]
+            ax[0].bar(x, [r["iou"] for r in at.values()], width=0.27, label=k)
+            if at and all("err_pct" in r for r in at.values()):
+                ax[1].bar(x, [r["err_pct"] for r in at.values()], width=0.27, label=f"{k}, captured from video")
         if a.cars == "heldout":
-            rr = [r for r in rows if r["sensor"] == "RGB-D" and r.get("err_true_shape_pct") is not None]
-            ax[1].plot(np.arange(len(rr)) + 0.27, [r["err_true_shape_pct"] for r in rr], "k_", ms=24,
-                       label="true shape")
-        names = [r["car"] for r in rows if r["sensor"] == "RGB-D"]
+            true = {r["car"]: r["err_true_shape_pct"] for r in rows if r.get("err_true_shape_pct") is not None}
+            ax[1].plot([names.index(c) + 0.27 for c in true], list(true.values()), "k_", ms=24, label="true shape")
         for x_ in ax:
             x_.set_xticks(np.arange(len(names)) + 0.27, names, rotation=20, fontsize=7)
             x_.legend(fontsize=7)

@@ -189,6 +189,9 @@ def capture_car(cloud: np.ndarray, grid: AeroGrid, settings: CaptureSettings = C
     height = p @ n + d0
     if off.sum() < 30:
         raise ValueError(f"capture: {int(off.sum())} points off the floor plane; the map holds no car")
+    # which side is up: the car reaches farther above the plane than the floor's noise reaches below it (a car
+    # under about 2 % of the points would leave this to the noise; a count of points clear of the band on each
+    # side was tried and flipped a development map whose far floor is thick)
     if np.quantile(height, 0.98) < -np.quantile(height, 0.02):  # the car stands farther above than noise reaches below
         n, d0, height = -n, -d0, -height
     # the floor's own level and thickness where each point stands: the median and robust spread of the heights of

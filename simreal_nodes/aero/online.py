@@ -20,6 +20,7 @@ from simreal_nodes.aero.capture import CaptureSettings, capture_car
 from simreal_nodes.aero.database import AeroDatabase
 from simreal_nodes.aero.manifold import ShapeManifold
 from simreal_nodes.aero.streamlines import FlowField, seed_rake, trace
+from simreal_nodes.render.aero import FLOW_TUBE_RADIUS_M
 
 
 def to_map(points_car: np.ndarray, scale: float, rotation: np.ndarray, translation: np.ndarray) -> np.ndarray:
@@ -120,7 +121,7 @@ class AeroEstimator:
             seconds={"capture": t1 - t0, "trace": t3 - t2})
 
 
-def flow_markers(res: FlowResult, lut: np.ndarray, tube_radius_m: float = 0.02,
+def flow_markers(res: FlowResult, lut: np.ndarray, tube_radius_m: float = FLOW_TUBE_RADIUS_M,
                  body_color=(0.55, 0.6, 0.65)) -> list:
     """The result as RViz markers (map frame): the captured body (TRIANGLE_LIST, ns ``aero/body``) and one
     LINE_STRIP per streamline (ns ``aero/streamlines``, width = the tube's diameter in map units, coloured by speed

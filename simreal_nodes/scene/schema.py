@@ -208,13 +208,13 @@ AERO = Record({
     "neighbours": Number("M: database cars in Eq. 6.4 (the benchmark's leave-one-out chose 15, benchmarks/results/"
                          "aero.md)", integer=True, lo=2, hi=1000, default=15),
     "length_m": Number("the car's length, metres: sets a monocular map's scale (required for localization mode "
-                       "'mono')", lo=0, lo_open=True, nullable=True),
+                       "'mono'; a metric map keeps its own)", lo=0, lo_open=True, nullable=True),
     "keyframe_depth": Bool("RGB-D / stereo: capture from the map points and every keyframe feature with a measured "
                            "depth (off: the map points alone, a sparse car: benchmarks/results/aero_video.md)",
                            default=True),
     "min_points": Number("capture once the cloud holds this many points", integer=True, lo=50, default=2000),
     "recapture_growth": Number("capture again when the cloud has grown by this fraction since the last capture (0: "
-                               "only once)", lo=0, default=0.2),
+                               "only once; a failed capture is tried again at 10 % growth)", lo=0, default=0.2),
     "alpha_m": Number("alpha of the car's alpha shape, metres (Alg. 6.1)", lo=0.05, hi=10, default=1.0),
     "streamlines": Number("streamline seeds across the car (a rake of N x N*0.8 upstream of the nose)", integer=True,
                           lo=1, hi=50, default=11),

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from simreal_nodes.aero.streamlines import tubes
 from simreal_nodes.camera import CameraModel
@@ -45,3 +46,24 @@ def test_car_to_world_inverts_the_capture_similarity() -> None:
     x = rng.normal(size=(10, 3))
     car = 2.5 * x @ R.T + np.array([1.0, -2.0, 0.5])
     assert np.allclose(car_to_world(car, 2.5, R, np.array([1.0, -2.0, 0.5])), x)
+
+
+def test_a_received_flow_is_checked_before_it_is_drawn() -> None:
+    from simreal_nodes.render.aero import flow_geometry
+
+    tri = np.zeros((3, 3))
+    line = np.array([[0.0, 0, 0], [1.0, 0, 0], [2.0, 0, 0]])
+    red = np.tile([1.0, 0, 0, 1], (3, 1))
+    body, lines, colors, width = flow_geometry([("aero/body", tri, [], 1.0), ("aero/streamlines", line, red, 0.04)])
+    assert body.shape == (3, 3) and len(lines) == 1 and colors[0].shape == (3, 3) and width == 0.04
+    bad = [
+        ([("aero/streamlines", line, red, 0.04)], "without a body"),
+        ([("aero/body", tri[:2], [], 1.0), ("aero/streamlines", line, red, 0.04)], "multiple of 3"),
+        ([("aero/body", tri, [], 1.0), ("aero/streamlines", line, red[:1], 0.04)], "1 colours for 3 points"),
+        ([("aero/body", tri, [], 1.0), ("aero/streamlines", line, [], 0.04)], "0 colours for 3 points"),
+        ([("aero/body", tri, [], 1.0), ("aero/streamlines", line, red, 0.0)], "width"),
+        ([("aero/body", tri + np.nan, [], 1.0), ("aero/streamlines", line, red, 0.04)], "non-finite"),
+    ]
+    for parts, match in bad:
+        with pytest.raises(ValueError, match=match):
+            flow_geometry(parts)

@@ -12,6 +12,7 @@ The database is loaded once at start; the node never runs CFD.
 
 from __future__ import annotations
 
+import numpy as np
 from sensor_msgs.msg import PointCloud2
 from visualization_msgs.msg import MarkerArray
 
@@ -26,6 +27,8 @@ from simreal_nodes.ros.qos import LATCHED_QOS, reliable_qos
 from simreal_nodes.scene import graph
 from simreal_nodes.scene.schema import load_scene
 
+RETRY_GROWTH = 0.1  # a failed capture is tried again once the cloud has grown by this fraction
+
 
 class AeroNode(SimrealNode):
     def __init__(self) -> None:
@@ -38,11 +41,14 @@ class AeroNode(SimrealNode):
         self.say(f"loading the aero database {a['database']}")
         db = load_database(a["database"])
         n = int(a["streamlines"])
-        self.core = AeroEstimator(db, int(a["neighbours"]),
-                                  CaptureSettings(alpha_m=float(a["alpha_m"]), length_m=a["length_m"]),
+        # a metric map keeps its scale: length_m is used for a monocular one only
+        length = a["length_m"] if self.scene["localization"]["mode"] == "mono" else None
+        capture = CaptureSettings(alpha_m=float(a["alpha_m"]), length_m=length)
+        self.core = AeroEstimator(db, int(a["neighbours"]), capture,
                                   RakeSettings(ny=n, nz=max(1, round(0.8 * n))))
         self.lut = speed_lut()
-        self.captured_at = 0  # cloud size at the last capture
+        self.captured_at = 0  # cloud size at the last successful capture (0: none yet)
+        self.tried_at = 0  # cloud size at the last attempt (a failed one is retried on a larger cloud)
         self.pub = self.create_publisher(MarkerArray, graph.AERO_FLOW, LATCHED_QOS)
         self.create_subscription(PointCloud2, graph.LOC_CAPTURE, self.on_cloud, reliable_qos(1))
         self.set_status("ok", f"database of {len(db.database)} cars loaded; waiting for the map")
@@ -50,17 +56,20 @@ class AeroNode(SimrealNode):
     @guarded
     def on_cloud(self, msg: PointCloud2) -> None:
         P = cloud_to_array(msg)
+        P = P[np.all(np.isfinite(P), axis=1)]
         n = len(P)
         if n < self.min_points:
             self.set_status("ok", f"waiting for the map: {n} of {self.min_points} points")
             return
         if self.captured_at and (self.growth <= 0 or n < (1.0 + self.growth) * self.captured_at):
-            return
+            return  # captured: again only when the map has grown enough (never with growth 0)
+        if self.tried_at and n < (1.0 + RETRY_GROWTH) * self.tried_at:
+            return  # the last attempt failed: again on a larger map, not on the same one every second
+        self.tried_at = n  # before the attempt: an unexpected error is not retried on the same cloud either
         t0 = self.metrics.arrived()
         try:
             res = self.core.estimate(P)
         except ValueError as e:  # too little left at one of Alg. 6.1's steps: try again on a larger map
-            self.captured_at = n
             self.set_status("warn", f"no car captured from {n} points: {e}")
             return
         self.captured_at = n

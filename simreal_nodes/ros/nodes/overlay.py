@@ -22,7 +22,7 @@ from simreal_nodes.errors import ImageFormatError, SimrealError
 from simreal_nodes.io import images
 from simreal_nodes.io.cdr import marker_array_cdr
 from simreal_nodes.io.video import VideoSink
-from simreal_nodes.render.aero import FlowOverlay
+from simreal_nodes.render.aero import FLOW_TUBE_RADIUS_M, FlowOverlay, flow_geometry
 from simreal_nodes.render.scene import SceneOverlay, overlay_models
 from simreal_nodes.ros.convert import observation_pose, stamp_ns
 from simreal_nodes.ros.node import SimrealNode, guarded, parse_progress, run_node
@@ -83,34 +83,39 @@ class OverlayNode(SimrealNode):
     def on_info(self, msg: CameraInfo) -> None:
         cam = self.camera_model(msg)
         if cam is not None and self.core.set_camera(cam):
+            self._drop_flow_layer()  # rebuilt for the new intrinsics at the next frame
             self.get_logger().info(f"overlay renderer: {self.core.comp.renderer.gl_renderer}")
 
     @guarded
     def on_flow(self, msg: MarkerArray) -> None:
-        """A new flow from the aero node: its body and streamlines, drawn from the next frame on."""
-        body, lines, colors, width = None, [], [], 0.04
-        for m in msg.markers:
-            P = np.array([[p.x, p.y, p.z] for p in m.points], float).reshape(-1, 3)
-            if m.ns == "aero/body":
-                body = P
-            elif m.ns == "aero/streamlines" and len(P) >= 2:
-                lines.append(P)
-                colors.append(np.array([[c.r, c.g, c.b] for c in m.colors], float).reshape(-1, 3))
-                width = float(m.scale.x)
-        if body is None or len(body) < 3 or not lines:
-            self.set_status("warn", "aero flow without a body or streamlines: not drawn")
+        """A new flow from the aero node: its body and streamlines, drawn from the next frame on (a malformed one is
+        refused with the reason; the previous flow stays)."""
+        parts = [(m.ns, [[p.x, p.y, p.z] for p in m.points], [[c.r, c.g, c.b, c.a] for c in m.colors], m.scale.x)
+                 for m in msg.markers]
+        try:
+            geometry = flow_geometry(parts)
+        except ValueError as e:
+            self.set_status("warn", f"aero flow not drawn: {e}")
             return
-        self.flow_geometry = (body, lines, colors, width)
+        self.flow_geometry = geometry
+        self._drop_flow_layer()
+
+    def _drop_flow_layer(self) -> None:
         if self.flow is not None:
             self.flow.release()
             self.flow = None
 
     def _flow_layer(self) -> FlowOverlay | None:
-        """The flow's renderer, built at the first frame after a new flow (the camera is known then)."""
+        """The flow's renderer, built at the first frame after a new flow or camera (the camera is known then)."""
         if self.flow is None and self.flow_geometry is not None and self.core.cam is not None:
             body, lines, colors, width = self.flow_geometry
-            V, T, C = tubes(lines, radius=0.5 * width, sides=5, colors=colors)
-            self.flow = FlowOverlay(self.core.cam, body, np.arange(len(body)).reshape(-1, 3), V, T, C)
+            try:
+                V, T, C = tubes(lines, radius=0.5 * width, sides=5, colors=colors)
+                self.flow = FlowOverlay(self.core.cam, body, np.arange(len(body)).reshape(-1, 3), V, T, C,
+                                        world_scale=width / (2.0 * FLOW_TUBE_RADIUS_M))
+            except (ValueError, SimrealError) as e:
+                self.flow_geometry = None  # not tried again on every frame
+                self.set_status("warn", f"aero flow not drawn: {e}")
         return self.flow
 
     def on_progress(self, h: Header) -> None:
