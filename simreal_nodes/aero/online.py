@@ -19,8 +19,8 @@ import numpy as np
 from simreal_nodes.aero.capture import CaptureSettings, capture_car
 from simreal_nodes.aero.database import AeroDatabase
 from simreal_nodes.aero.manifold import ShapeManifold
-from simreal_nodes.aero.streamlines import FlowField, seed_rake, trace
-from simreal_nodes.render.aero import FLOW_TUBE_RADIUS_M
+from simreal_nodes.aero.streamlines import FlowField, section, seed_rake, trace
+from simreal_nodes.render.aero import FLOW_TUBE_RADIUS_M, speed_lut
 
 
 def to_map(points_car: np.ndarray, scale: float, rotation: np.ndarray, translation: np.ndarray) -> np.ndarray:
@@ -46,6 +46,9 @@ class FlowResult:
     speed_inf: float  # the database's inflow speed (m/s)
     cloud_points: int
     seconds: dict[str, float] = field(default_factory=dict)
+    # the pressure coefficient on the symmetry plane outside the body (Fig. 6.10b), when asked: vertices (map frame),
+    # triangles, colours (through the colour table, Cp from -1 to 1)
+    section: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
     @property
     def map_units_per_metre(self) -> float:
@@ -70,20 +73,24 @@ class AeroEstimator:
     """The database, its manifold (``neighbours`` = M) and the capture settings; :meth:`estimate` per cloud."""
 
     def __init__(self, db: AeroDatabase, neighbours: int = 15, capture: CaptureSettings | None = None,
-                 rake: RakeSettings | None = None) -> None:
+                 rake: RakeSettings | None = None, section: bool = False) -> None:
+        """``section``: also Eq. 6.4's pressure, drawn as its coefficient on the symmetry plane."""
         self.db = db
+        self.section = section
         dbi = db.database
         if neighbours < 2 or neighbours > len(dbi) - 1:
             raise ValueError(f"aero: neighbours must be 2..{len(dbi) - 1} for a database of {len(dbi)} cars; "
                              f"found {neighbours}")
         self.Z = db.presence[dbi]
         self.V = db.velocity[dbi]
+        self.P = db.pressure[dbi]
         self.cd_db = db.cd[dbi]
         self.names = [db.cars[i].name for i in dbi]
         self.manifold = ShapeManifold(self.Z, n_neighbors=neighbours)
         self.capture = capture or CaptureSettings()
         self.rake = rake or RakeSettings()
         self.speed_inf = float(db.cfd.get("speed", 10.0))
+        self.lut = speed_lut()
 
     def _nearer_front(self, phi_a: np.ndarray, phi_b: np.ndarray) -> int:
         """Which reading of the principal axis is nose-first: the one whose shape lies nearer the database's cars."""
@@ -111,6 +118,13 @@ class AeroEstimator:
         t3 = time.perf_counter()
         lines = [ln[:: r.draw_every] for ln in lines if len(ln[:: r.draw_every]) >= 2]
         tm = (cap.scale, cap.rotation, cap.translation)
+        sec = None
+        if self.section:  # Eq. 6.4 on the kinematic pressure; Cp = p / (U^2 / 2) (the outlet's p is 0)
+            cp = (ShapeManifold.interpolate(self.P[:, :, None], nb)[:, 0] * (1.0 - cap.presence)
+                  / (0.5 * self.speed_inf ** 2))
+            SV, ST, SC = section(self.db.grid, cp, axis=1, index=0, lut=self.lut, vmin=-1.0, vmax=1.0,
+                                 keep=cap.presence == 0)
+            sec = (to_map(SV, *tm), ST, SC)
         return FlowResult(
             lines=[to_map(ln[:, :3], *tm) for ln in lines], speeds=[ln[:, 3].copy() for ln in lines],
             body_vertices=to_map(cap.vertices, *tm), body_triangles=np.asarray(cap.triangles),
@@ -118,7 +132,7 @@ class AeroEstimator:
             box_m=np.asarray(cap.box, float), neighbours=[self.names[j] for j in nb.indices],
             weights=np.asarray(nb.weights, float), cd=float(nb.weights @ self.cd_db[nb.indices]),
             speed_inf=self.speed_inf, cloud_points=len(cloud),
-            seconds={"capture": t1 - t0, "trace": t3 - t2})
+            seconds={"capture": t1 - t0, "trace": t3 - t2}, section=sec)
 
 
 def flow_markers(res: FlowResult, lut: np.ndarray, tube_radius_m: float = FLOW_TUBE_RADIUS_M,
@@ -131,6 +145,10 @@ def flow_markers(res: FlowResult, lut: np.ndarray, tube_radius_m: float = FLOW_T
     eye = np.eye(4)
     tri = np.asarray(res.body_triangles).ravel()
     out = [TriangleListMarker("aero/body", 0, eye, res.body_vertices[tri], np.tile(body_color, (len(tri), 1)))]
+    if res.section is not None:
+        SV, ST, SC = res.section
+        idx = np.asarray(ST).ravel()
+        out.append(TriangleListMarker("aero/section", 0, eye, SV[idx], SC[idx]))
     top = 1.4 * res.speed_inf
     for k, (P, sp) in enumerate(zip(res.lines, res.speeds)):
         u = np.clip(np.nan_to_num(sp / top), 0.0, 1.0)

@@ -66,20 +66,27 @@ class FlowOverlay:
 FLOW_TUBE_RADIUS_M = 0.02  # the streamlines' tubes, metres (a marker's line width is their diameter in map units)
 
 
-def flow_geometry(parts) -> tuple[np.ndarray, list[np.ndarray], list[np.ndarray], float]:
+def flow_geometry(parts) -> tuple[np.ndarray, list[np.ndarray], list[np.ndarray], float,
+                                  tuple[np.ndarray, np.ndarray] | None]:
     """A received flow's geometry, checked: ``parts`` are (namespace, points (k, 3), colours (k, 3 or 4), width) of
-    its markers (``aero/body``: a triangle list; ``aero/streamlines``: one line each). Returns (body vertices, three
-    per triangle; lines; their colours; line width). ValueError naming what is wrong (no body, a triangle list not
-    in threes, colours that do not match the points, a width that is not positive, non-finite values)."""
-    body, lines, colors, width = None, [], [], None
+    its markers (``aero/body``: a triangle list; ``aero/streamlines``: one line each; ``aero/section``, optional: a
+    coloured triangle list). Returns (body vertices, three per triangle; lines; their colours; line width; the
+    section's (vertices, colours) or None). ValueError naming what is wrong (no body, a triangle list not in threes,
+    colours that do not match the points, a width that is not positive, non-finite values)."""
+    body, lines, colors, width, sec = None, [], [], None, None
     for ns, P, C, w in parts:
         P = np.asarray(P, float).reshape(-1, 3)
         if not np.all(np.isfinite(P)):
             raise ValueError(f"flow marker '{ns}': non-finite points")
+        if ns in ("aero/body", "aero/section") and (len(P) < 3 or len(P) % 3):
+            raise ValueError(f"flow {ns[5:]}: {len(P)} points (a triangle list needs a multiple of 3)")
         if ns == "aero/body":
-            if len(P) < 3 or len(P) % 3:
-                raise ValueError(f"flow body: {len(P)} points (a triangle list needs a multiple of 3)")
             body = P
+        elif ns == "aero/section":
+            C = np.asarray(C, float).reshape(len(C), -1) if len(C) else np.zeros((0, 3))
+            if len(C) != len(P) or C.shape[1] not in (3, 4) or not np.all(np.isfinite(C)):
+                raise ValueError(f"flow section: {len(C)} colours for {len(P)} points")
+            sec = (P, np.clip(C[:, :3], 0.0, 1.0))
         elif ns == "aero/streamlines":
             C = np.asarray(C, float).reshape(len(C), -1) if len(C) else np.zeros((0, 3))
             if len(C) != len(P) or C.shape[1] not in (3, 4) or not np.all(np.isfinite(C)):
@@ -92,7 +99,7 @@ def flow_geometry(parts) -> tuple[np.ndarray, list[np.ndarray], list[np.ndarray]
                 width = float(w)
     if body is None or not lines or width is None:
         raise ValueError("flow without a body or streamlines")
-    return body, lines, colors, width
+    return body, lines, colors, width, sec
 
 
 def speed_lut(name: str = "turbo") -> np.ndarray:

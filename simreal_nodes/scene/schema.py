@@ -218,6 +218,8 @@ AERO = Record({
     "alpha_m": Number("alpha of the car's alpha shape, metres (Alg. 6.1)", lo=0.05, hi=10, default=1.0),
     "streamlines": Number("streamline seeds across the car (a rake of N x N*0.8 upstream of the nose)", integer=True,
                           lo=1, hi=50, default=11),
+    "section": Enum(("none", "pressure"), "also draw a contour plane: the pressure coefficient on the symmetry plane "
+                    "(thesis Fig. 6.10b), from Eq. 6.4 on the database's pressure", default="none"),
 })
 
 SCENE = Record({

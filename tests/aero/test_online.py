@@ -54,3 +54,21 @@ def test_a_cloud_without_a_car_is_refused(db) -> None:
         AeroEstimator(db, neighbours=3).estimate(floor)
     with pytest.raises(ValueError, match="neighbours"):
         AeroEstimator(db, neighbours=len(db.database))
+
+
+def test_the_pressure_section_is_eq_6_4_on_the_pressure(db) -> None:
+    """The contour plane (Fig. 6.10b): the pressure coefficient on the symmetry plane outside the body, placed in the
+    map frame, coloured, and sent as a marker only when asked."""
+    i = next(k for k in db.held if db.cars[k].group == "sport")
+    car = db.cars[i]
+    m = simulate_map(car, np.random.default_rng(11))
+    res = AeroEstimator(db, neighbours=3, section=True).estimate(m.cloud)
+    assert res.section is not None
+    SV, ST, SC = res.section
+    P = m.to_car(SV)
+    assert np.all(np.abs(P[:, 1]) < 0.5) and len(ST) > 100  # the plane next to y = 0
+    assert ST.max() < len(SV) and SC.shape == SV.shape and np.all((SC >= 0) & (SC <= 1))
+    marks = flow_markers(res, speed_lut())
+    sec = [mk for mk in marks if mk.ns == "aero/section"]
+    assert len(sec) == 1 and len(sec[0].points) == 3 * len(ST)
+    assert AeroEstimator(db, neighbours=3).estimate(m.cloud).section is None  # only when asked

@@ -54,8 +54,12 @@ def test_a_received_flow_is_checked_before_it_is_drawn() -> None:
     tri = np.zeros((3, 3))
     line = np.array([[0.0, 0, 0], [1.0, 0, 0], [2.0, 0, 0]])
     red = np.tile([1.0, 0, 0, 1], (3, 1))
-    body, lines, colors, width = flow_geometry([("aero/body", tri, [], 1.0), ("aero/streamlines", line, red, 0.04)])
-    assert body.shape == (3, 3) and len(lines) == 1 and colors[0].shape == (3, 3) and width == 0.04
+    body, lines, colors, width, sec = flow_geometry([("aero/body", tri, [], 1.0),
+                                                     ("aero/streamlines", line, red, 0.04)])
+    assert body.shape == (3, 3) and len(lines) == 1 and colors[0].shape == (3, 3) and width == 0.04 and sec is None
+    *_, sec = flow_geometry([("aero/body", tri, [], 1.0), ("aero/streamlines", line, red, 0.04),
+                             ("aero/section", tri, red, 1.0)])
+    assert sec is not None and sec[0].shape == (3, 3) and sec[1].shape == (3, 3)
     bad = [
         ([("aero/streamlines", line, red, 0.04)], "without a body"),
         ([("aero/body", tri[:2], [], 1.0), ("aero/streamlines", line, red, 0.04)], "multiple of 3"),
@@ -63,6 +67,8 @@ def test_a_received_flow_is_checked_before_it_is_drawn() -> None:
         ([("aero/body", tri, [], 1.0), ("aero/streamlines", line, [], 0.04)], "0 colours for 3 points"),
         ([("aero/body", tri, [], 1.0), ("aero/streamlines", line, red, 0.0)], "width"),
         ([("aero/body", tri + np.nan, [], 1.0), ("aero/streamlines", line, red, 0.04)], "non-finite"),
+        ([("aero/body", tri, [], 1.0), ("aero/streamlines", line, red, 0.04), ("aero/section", tri, [], 1.0)],
+         "section: 0 colours"),
     ]
     for parts, match in bad:
         with pytest.raises(ValueError, match=match):

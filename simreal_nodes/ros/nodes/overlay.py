@@ -108,11 +108,13 @@ class OverlayNode(SimrealNode):
     def _flow_layer(self) -> FlowOverlay | None:
         """The flow's renderer, built at the first frame after a new flow or camera (the camera is known then)."""
         if self.flow is None and self.flow_geometry is not None and self.core.cam is not None:
-            body, lines, colors, width = self.flow_geometry
+            body, lines, colors, width, sec = self.flow_geometry
             try:
                 V, T, C = tubes(lines, radius=0.5 * width, sides=5, colors=colors)
                 self.flow = FlowOverlay(self.core.cam, body, np.arange(len(body)).reshape(-1, 3), V, T, C,
                                         world_scale=width / (2.0 * FLOW_TUBE_RADIUS_M))
+                if sec is not None:  # the pressure section (Fig. 6.10b), drawn with the streamlines
+                    self.flow.add_layer("aero_section", sec[0], np.arange(len(sec[0])).reshape(-1, 3), sec[1])
             except (ValueError, SimrealError) as e:
                 self.flow_geometry = None  # not tried again on every frame
                 self.set_status("warn", f"aero flow not drawn: {e}")
