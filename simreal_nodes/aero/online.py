@@ -20,12 +20,7 @@ from simreal_nodes.aero.capture import CaptureSettings, capture_car
 from simreal_nodes.aero.database import AeroDatabase
 from simreal_nodes.aero.manifold import ShapeManifold
 from simreal_nodes.aero.streamlines import FlowField, section, seed_rake, trace
-from simreal_nodes.render.aero import FLOW_TUBE_RADIUS_M, speed_lut
-
-
-def to_map(points_car: np.ndarray, scale: float, rotation: np.ndarray, translation: np.ndarray) -> np.ndarray:
-    """Invert the capture's similarity ``x_car = scale * R x_map + t``."""
-    return ((np.asarray(points_car, float) - translation) @ np.asarray(rotation)) / scale
+from simreal_nodes.render.aero import FLOW_TUBE_RADIUS_M, car_to_world, speed_lut
 
 
 @dataclass
@@ -124,10 +119,10 @@ class AeroEstimator:
                   / (0.5 * self.speed_inf ** 2))
             SV, ST, SC = section(self.db.grid, cp, axis=1, index=0, lut=self.lut, vmin=-1.0, vmax=1.0,
                                  keep=cap.presence == 0)
-            sec = (to_map(SV, *tm), ST, SC)
+            sec = (car_to_world(SV, *tm), ST, SC)
         return FlowResult(
-            lines=[to_map(ln[:, :3], *tm) for ln in lines], speeds=[ln[:, 3].copy() for ln in lines],
-            body_vertices=to_map(cap.vertices, *tm), body_triangles=np.asarray(cap.triangles),
+            lines=[car_to_world(ln[:, :3], *tm) for ln in lines], speeds=[ln[:, 3].copy() for ln in lines],
+            body_vertices=car_to_world(cap.vertices, *tm), body_triangles=np.asarray(cap.triangles),
             scale=float(cap.scale), rotation=np.asarray(cap.rotation), translation=np.asarray(cap.translation),
             box_m=np.asarray(cap.box, float), neighbours=[self.names[j] for j in nb.indices],
             weights=np.asarray(nb.weights, float), cd=float(nb.weights @ self.cd_db[nb.indices]),
