@@ -87,6 +87,10 @@ def main(argv: list[str] | None = None) -> None:
     # --- held-out ------------------------------------------------------------------------------------------------
     man = ShapeManifold(Z, n_neighbors=M_best)
     mean_field = V.mean(axis=0)
+    P = db.pressure[dbi].astype(np.float64)
+    sym_plane = np.zeros(db.grid.shape, bool)
+    sym_plane[:, 0, :] = True  # the grid's first row across the car: its symmetry plane (as `section` draws it)
+    sym_plane = sym_plane.ravel()
     rows = []
     for i in held:
         car, t, fl = db.cars[i], db.velocity[i].astype(np.float64), fluid_of[i]
@@ -97,7 +101,21 @@ def main(argv: list[str] | None = None) -> None:
         v = ShapeManifold.interpolate(V, nb) * mask
         t2 = time.perf_counter()
         v_nn = V[nb.indices[0]] * mask
+        # the pressure by Eq. 6.4 (kinematic, the outlet's 0), as the coefficient Cp = p / (U^2 / 2) the section
+        # draws: RMS error over the fluid points and over the symmetry plane's (what `aero.section: pressure` shows)
+        q = 0.5 * float(uinf[0]) ** 2
+        cp_true = db.pressure[i].astype(np.float64) / q
+        cp_eq64 = ShapeManifold.interpolate(P[:, :, None], nb)[:, 0] * mask[:, 0] / q
+        cp_nn = P[nb.indices[0]].astype(np.float64) * mask[:, 0] / q
+        plane = fl & sym_plane
+
+        def rms(a: np.ndarray, where: np.ndarray) -> float:
+            return float(np.sqrt(np.mean(a[where] ** 2)))
+
         rows.append({
+            "cp_rms": rms(cp_eq64 - cp_true, fl), "cp_rms_plane": rms(cp_eq64 - cp_true, plane),
+            "cp_rms_plane_nearest": rms(cp_nn - cp_true, plane), "cp_range_plane": [
+                float(cp_true[plane].min()), float(cp_true[plane].max())],
             "car": car.name, "group": car.group, "M": M_best,
             "err_pct": 100 * rel(v, t, fl), "err_dist_pct": 100 * rel(v, t, fl, uinf),
             "nearest_pct": 100 * rel(v_nn, t, fl), "mean_pct": 100 * rel(mean_field * mask, t, fl),
@@ -166,7 +184,7 @@ def main(argv: list[str] | None = None) -> None:
     video = overlay.renderer
     tv, tf = car0.surface()
     video.add(Mesh("car", (cmap0.scale * tv) @ cmap0.rotation.T + cmap0.translation, tf, tint=(0.8, 0.2, 0.2)))
-    frames, draw_ms = [], []
+    frames, draw_ms, draw_section_ms = [], [], []
     centre = to_world(np.array([[0.5 * car0.length, 0.0, 0.6]]))[0]
     up = cap0.rotation[2] / cap0.scale
     up /= np.linalg.norm(up)
@@ -186,9 +204,17 @@ def main(argv: list[str] | None = None) -> None:
             overlay.show("aero_section")
             frames.append(overlay.draw(bgr, T_wc)[..., ::-1])
             overlay.show("aero_streamlines")
+        # the streamlines with the section plane (as the node draws `aero.section: pressure`)
+        overlay.show("aero_streamlines", "aero_section")
+        t1 = time.perf_counter()
+        overlay.draw(bgr, T_wc)
+        draw_section_ms.append(1e3 * (time.perf_counter() - t1))
+        overlay.show("aero_streamlines")
     overlay.release()
     ar = {"car": car0.name, "lines": len(lines), "tube_triangles": len(TT), "trace_s": t_trace,
           "draw_ms_p50": float(np.median(draw_ms[1:])), "draw_ms_p95": float(np.percentile(draw_ms[1:], 95)),
+          "section_triangles": len(ST), "draw_section_ms_p50": float(np.median(draw_section_ms[1:])),
+          "draw_section_ms_p95": float(np.percentile(draw_section_ms[1:], 95)),
           "resolution": "640x480"}
     print(f"AR overlay: {ar}", flush=True)
 
@@ -279,7 +305,9 @@ def main(argv: list[str] | None = None) -> None:
              f"{int(db.converged.sum())} of {len(db.cars)}. AR overlay ({ar['resolution']}, {ar['lines']} "
              f"streamlines, {ar['tube_triangles']} triangles, Mesa llvmpipe on the CPU): "
              f"{ar['draw_ms_p50']:.0f} ms a frame at the median ({ar['draw_ms_p95']:.0f} ms p95), tracing "
-             f"{ar['trace_s']:.2f} s once per car.\n\nLeave-one-out (development):\n\n"
+             f"{ar['trace_s']:.2f} s once per car; with the symmetry plane's section ({ar['section_triangles']} "
+             f"triangles) drawn too: {ar['draw_section_ms_p50']:.0f} ms ({ar['draw_section_ms_p95']:.0f} ms p95)."
+             "\n\nLeave-one-out (development):\n\n"
              + "\n".join(f"- M = {r['M']}: mean {r['mean_pct']:.3f} %, median {r['median_pct']:.3f} %, max "
                          f"{r['max_pct']:.3f} %" for r in loo_rows))
     cols = [("car", "held-out car", "{}"), ("group", "group", "{}"), ("M", "M", "{}"),
@@ -294,6 +322,16 @@ def main(argv: list[str] | None = None) -> None:
                 ("capture_s", "Alg. 6.1 + presence (s)", "{:.2f}"), ("neighbours", "neighbours", "{}")]
     from benchmarks.common import markdown_table
 
+    p_cols = [("car", "held-out car", "{}"), ("cp_range_plane", "Cp range on the plane (CFD)", "{}"),
+              ("cp_rms", "Cp RMS error, all fluid points", "{:.3f}"),
+              ("cp_rms_plane", "Cp RMS error, symmetry plane", "{:.3f}"),
+              ("cp_rms_plane_nearest", "same, nearest car alone", "{:.3f}")]
+    p_rows = [{**r, "cp_range_plane": f"{r['cp_range_plane'][0]:.2f} .. {r['cp_range_plane'][1]:.2f}"} for r in rows]
+    notes += ("\n\nThe **pressure** by Eq. 6.4 (the same weights on the database's kinematic pressure; what "
+              "`aero.section: pressure` draws), as the coefficient Cp = p / (U^2 / 2) against each held-out car's own "
+              "CFD, true shape, the prediction zero inside the car: RMS error over the fluid points and over the "
+              "symmetry plane's (the section drawn from Cp -1 to 1), beside the nearest database car's field alone.\n\n"
+              + markdown_table(p_rows, p_cols))
     notes += ("\n\nThe same held-out cars **captured** (Alg. 6.1, `aero/capture.py`) from a simulated sparse SLAM map "
               "(`synth/car_map.py`: 3000 points on the sides, ends and roof, 3000 on the floor, 1 cm noise, 3 % "
               "outliers, a random map pose; monocular maps at a random scale, fixed by the car's length) instead of "

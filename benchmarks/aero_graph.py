@@ -1,15 +1,15 @@
 """The car aerodynamics through the node graph (issue 19, item 5): `simreal make-bag car_aero` replayed into
 ingest -> localization (SLAM, capture cloud) -> aero -> overlay, each its own process over DDS.
 
-    ./run bench aero_graph        # about 4 min (+1 min to render the bag once, cache/bags/); needs the database
+    ./run bench aero_graph        # about 6 min (+1 min to render the bag once, cache/bags/); needs the database
 
 The scene: the first held-out car of `aero_cars.yaml` circled once in 24 s at 30 fps, 640 x 480, RGB-D (the same
-frames as `aero_video`'s first car). Two replays: lossless (every frame, in order) and real time at the bag's 30 fps.
-Reported: frames through the graph, when the first flow came (seconds of the recording), how many captures, the
-aero node's time per capture, the overlay's processing time per frame with the streamlines drawn (p50 / p95 from its
-diagnostics), and the last capture's velocity error against the car's own CFD: the localization node's last capture
-cloud (recorded) put through the same estimator as the node (`aero.online.AeroEstimator`), against the database's
-held-out field.
+frames as `aero_video`'s first car). Three replays: lossless (every frame, in order), real time at the bag's 30 fps,
+and real time capturing once (`aero.recapture_growth: 0`). Reported: frames through the graph, when the first flow
+came (seconds of the recording), how many captures, the aero node's time per capture, the overlay's processing time
+per frame with the streamlines drawn (p50 / p95 from its diagnostics), and the velocity error against the car's own
+CFD of the node's last capture (the recorded cloud it came from, matched by stamp) and of the localization node's
+last capture cloud, each put through the same estimator as the node (`aero.online.AeroEstimator`).
 """
 
 from __future__ import annotations
@@ -45,12 +45,22 @@ def main(argv: list[str] | None = None) -> None:
     est = AeroEstimator(db)
     fluid = (db.presence[held] == 0) & db.in_fluid[held]
     truth = db.velocity[held].astype(np.float64)
+    import yaml
+
     rows = []
-    for lossless in (True, False):
+    # (lossless, aero.recapture_growth: None keeps the scene's)
+    for lossless, growth in ((True, None), (False, None), (False, 0.0)):
         with tempfile.TemporaryDirectory() as tmp:
             run = Path(tmp) / "run"
+            scene_run = scene
+            if growth is not None:
+                doc = yaml.safe_load(scene.read_text())
+                doc["aero"]["recapture_growth"] = growth
+                scene_run = Path(tmp) / "scene.yaml"
+                scene_run.write_text(yaml.safe_dump(doc))
             t0 = time.monotonic()
-            stats, _report, _ = replay(str(BAG), str(scene), lossless=lossless, record=str(run), echo=lambda *a: None)
+            stats, _report, _ = replay(str(BAG), str(scene_run), lossless=lossless, record=str(run),
+                                       echo=lambda *a: None)
             wall = time.monotonic() - t0
             nodes = node_metrics(run)
             flow_msgs = list(bags.read_bag(run, topics=["/simreal/aero/flow"]))
@@ -69,18 +79,28 @@ def main(argv: list[str] | None = None) -> None:
                         ov_p50.append(float(kv["processing_ms_p50"]))
                         ov_p95.append(float(kv["processing_ms_p95"]))
             clouds = [bags.decode(m) for m in bags.read_bag(run, topics=["/simreal/localization/capture_cloud"])]
-            err = float("nan")
-            if clouds:
-                from simreal_nodes.ros.convert import cloud_to_array
+            from simreal_nodes.ros.convert import cloud_to_array
 
+            def error(cloud) -> float:
                 try:
-                    v = est.velocity(cloud_to_array(clouds[-1]))
-                    err = 100 * rel(v, truth, fluid)
+                    return 100 * rel(est.velocity(cloud_to_array(cloud)), truth, fluid)
                 except ValueError as e:
-                    print(f"last cloud: {e}", flush=True)
+                    print(f"cloud: {e}", flush=True)
+                    return float("nan")
+
+            err = error(clouds[-1]) if clouds else float("nan")
+            # the cloud the node's last flow came from: the flow carries its cloud's stamp (the last tracked frame's)
+            err_node = float("nan")
+            if flows and clouds:
+                st = flows[-1].markers[0].header.stamp
+                same = [c for c in clouds if (c.header.stamp.sec, c.header.stamp.nanosec) == (st.sec, st.nanosec)]
+                err_node = error(same[-1]) if same else float("nan")
         d = stats.as_dict()
         aero, ov = nodes.get("aero", {}), nodes.get("overlay", {})
-        row = {"mode": "lossless" if lossless else "real time (30 fps)", "frames": d["frames_published"],
+        mode = "lossless" if lossless else "real time (30 fps)"
+        if growth is not None:
+            mode += f", recapture_growth {growth:g}" + (" (capture once)" if growth == 0 else "")
+        row = {"mode": mode, "frames": d["frames_published"],
                "completed": d["frames_completed"], "wall_s": wall, "captures": len(flows),
                "first_flow_s": first_flow_s,
                "streamlines": sum(m.ns == "aero/streamlines" for m in flows[-1].markers) if flows else 0,
@@ -90,6 +110,7 @@ def main(argv: list[str] | None = None) -> None:
                # is then not the drawing's; reported lossless only
                "overlay_p50_ms": float(np.median(ov_p50)) if ov_p50 and lossless else None,
                "overlay_p95_ms": float(np.max(ov_p95)) if ov_p95 and lossless else None, "err_last_cloud_pct": err,
+               "err_node_pct": err_node, "node_cloud_points": aero.get("cloud_points"),
                "overlay_last": ov.get("message"),
                "box_m": aero.get("box_m"), "aero_status": aero.get("message")}
         rows.append(row)
@@ -100,13 +121,18 @@ def main(argv: list[str] | None = None) -> None:
             ("box_m", "captured box (m)", "{}"), ("capture_s", "Alg. 6.1 in the node (s)", "{}"),
             ("trace_s", "tracing (s)", "{}"), ("cd_eq64", "Cd (Eq. 6.4)", "{}"), ("cd_cfd", "Cd (CFD)", "{:.3f}"),
             ("overlay_p50_ms", "overlay p50 (ms)", "{:.1f}"), ("overlay_p95_ms", "overlay p95 (ms)", "{:.1f}"),
+            ("node_cloud_points", "node's last capture: cloud points", "{}"),
+            ("err_node_pct", "velocity error, node's last capture (%)", "{:.2f}"),
             ("err_last_cloud_pct", "velocity error, last cloud (%)", "{:.2f}")]
     notes = (f"Scene `car_aero` ({db.cars[held].name}, held out of the manifold), 640 x 480 RGB-D at 30 fps, 24 s. "
              "First flow: seconds of the recording (camera frames recorded before it / 30). Processing times from the "
              "nodes' /diagnostics: the aero node's last capture; the overlay's while it draws the flow (the median of "
              "its reports' p50 after the first flow, the largest of their p95; lossless only: live, most frames reach "
              "the overlay before their pose and pass through undrawn). The error: |v - v_cfd| / |v_cfd| over "
-             "the car's fluid grid points, the prediction zero inside the captured body (as in `aero.md`).")
+             "the car's fluid grid points, the prediction zero inside the captured body (as in `aero.md`), of the "
+             "cloud the node's last flow came from (matched by its stamp) and of the last cloud the localization "
+             "published (what a capture at the end would give), each captured again in this process by the node's "
+             "estimator. The third replay captures once (`aero.recapture_growth: 0`), at `aero.min_points`.")
     save("aero_graph", rows, cols, "Car aerodynamics through the node graph (scene car_aero)", notes=notes)
 
 

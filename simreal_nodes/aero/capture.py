@@ -2,6 +2,10 @@
 
 Alg. 6.1, step by step (``capture_car``), on the map's points (any pose; any scale for a monocular map):
 
+0. (not in the thesis, whose maps were sparse) a map of more than ``max_points`` points is thinned on a voxel grid
+   to that many (``thin``): an RGB-D capture cloud holds each surface point once for every keyframe that saw it
+   (about 72 000 points for a car circled once), which every later step pays for; the count, not an edge length,
+   is the setting, so a monocular map of any scale is thinned alike and the steps' cost is bounded;
 1. ``densityPointCulling``: points with fewer than ``min_neighbours`` points (themselves included) within
    ``density_radius`` x the median distance to the ``min_neighbours``-th neighbour are dropped (Open3D's radius
    outlier removal): triangulation noise goes, a sparser but regular floor stays;
@@ -12,6 +16,8 @@ Alg. 6.1, step by step (``capture_car``), on the map's points (any pose; any sca
    less than ``floor_sigmas`` of the floor's noise above the floor's level where they stand (level and noise from
    their 30 nearest points in the floor's band: a depth camera's floor 5 m away is several centimetres thick, 2 m
    away one, and a SLAM map's floor bends with its drift); its normal, pointing to the car, is gravity's opposite;
+   then step 1's density culling again on the points left (radius factor ``above_floor_density``): what the cut
+   leaves of the floor lies scattered around the car, sparser than the car's surface, and would widen the box;
 4. ``PrincipalComponentAnalysis``: the principal axis of the remaining points projected on the floor is the car's
    length;
 5. ``noiseRemoving``: along each of the car's three axes, the histogram of positions; only the contiguous run of
@@ -60,6 +66,11 @@ class CaptureSettings:
     alpha_m: float = 1.0  # alpha (m, in the car frame): over half the body's thickness, or the interior stays hollow
     cap_spacing: float = 0.1  # the underside's cap points, x alpha_m (never finer than the map; 0: the map's spacing)
     length_m: float | None = None  # the car's length, for a map without metric scale
+    # a larger map is first thinned to this many points on a voxel grid (None or 0: never); 5000 is a spacing of
+    # about 9 cm on the car-park captures (the grid's cells are 10 cm). Chosen on the development cars
+    # (benchmarks/results/aero_video_dev.md) with above_floor_density
+    max_points: int | None = 5000
+    above_floor_density: float = 2.5  # step 1 again on the points above the floor, with this radius factor (0: off)
     seed: int = 0
 
 
@@ -81,6 +92,40 @@ class CaptureResult:
 def _spacing(p: np.ndarray) -> float:
     d = np.asarray(cKDTree(p).query(p, k=2)[0])
     return float(np.median(d[:, 1]))
+
+
+def _density_cull(p: np.ndarray, min_neighbours: int, radius_factor: float) -> np.ndarray:
+    """The points with at least ``min_neighbours`` points (themselves included) within ``radius_factor`` x the median
+    distance to the ``min_neighbours``-th neighbour (Open3D's radius outlier removal)."""
+    import open3d as o3d
+
+    dk = np.asarray(cKDTree(p).query(p, k=min_neighbours + 1)[0])
+    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(p))
+    _, idx = pcd.remove_radius_outlier(nb_points=min_neighbours, radius=radius_factor * float(np.median(dk[:, -1])))
+    return p[np.asarray(idx, int)]
+
+
+def thin(p: np.ndarray, max_points: int) -> np.ndarray:
+    """At most ``max_points`` of ``p`` (and at least 90 % of that): the centroids of the occupied cells of a voxel
+    grid whose edge is found by a few secant steps on the count (a surface's occupied cells fall with the square of
+    the edge; scale free, the first edge comes from the cloud's extent). A dense map's redundancy goes (an RGB-D map
+    holds a surface point once for each keyframe that saw it) and its density evens out: near surfaces are sampled
+    no finer than far ones."""
+    import open3d as o3d
+
+    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(p))
+    lo, hi = np.quantile(p, [0.01, 0.99], axis=0)
+    extent = np.sort(hi - lo)[::-1]
+    edge = max(float(np.sqrt(extent[0] * extent[1] / max_points)), 1e-9)
+    best = None
+    for _ in range(12):
+        q = np.asarray(pcd.voxel_down_sample(edge).points)
+        if len(q) <= max_points and (best is None or len(q) > len(best)):
+            best = q
+        if 0.9 * max_points <= len(q) <= max_points:
+            break
+        edge *= float(np.clip(np.sqrt(len(q) / (0.95 * max_points)), 0.5, 2.0))
+    return best if best is not None else p[np.random.default_rng(0).choice(len(p), max_points, replace=False)]
 
 
 def circumradii(tets: np.ndarray) -> np.ndarray:
@@ -157,12 +202,13 @@ def capture_car(cloud: np.ndarray, grid: AeroGrid, settings: CaptureSettings = C
     kept["input"] = len(p)
     if len(p) < 50:
         raise ValueError(f"capture: {len(p)} finite map points; at least 50 are needed")
+    if s.max_points and len(p) > s.max_points:
+        p = thin(p, s.max_points)
+        kept["thinned"] = len(p)
+    times["thin"] = time.perf_counter() - t
+    t = time.perf_counter()
     h = _spacing(p)
-    dk = np.asarray(cKDTree(p).query(p, k=s.min_neighbours + 1)[0])
-    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(p))
-    _, idx = pcd.remove_radius_outlier(nb_points=s.min_neighbours,
-                                       radius=s.density_radius * float(np.median(dk[:, -1])))
-    p = p[np.asarray(idx, int)]
+    p = _density_cull(p, s.min_neighbours, s.density_radius)
     kept["density"] = len(p)
     times["density"] = time.perf_counter() - t
 
@@ -217,6 +263,14 @@ def capture_car(cloud: np.ndarray, grid: AeroGrid, settings: CaptureSettings = C
     kept["floor"] = len(p)
     if len(p) < 30:
         raise ValueError(f"capture: {len(p)} points above the floor; the map holds no car")
+    if s.above_floor_density > 0:
+        # the floor's remnants (points of a noisy or drifting floor a little above its cut) lie scattered around the
+        # car, sparser than the car's own surface: the density culling of step 1 again, on what is left
+        p = _density_cull(p, s.min_neighbours, s.above_floor_density)
+        kept["above_floor_density"] = len(p)
+        if len(p) < 30:
+            raise ValueError(f"capture: {len(p)} points above the floor after its density culling; the map holds "
+                             "no car")
     times["floor"] = time.perf_counter() - t
 
     t = time.perf_counter()

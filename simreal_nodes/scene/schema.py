@@ -216,6 +216,9 @@ AERO = Record({
     "recapture_growth": Number("capture again when the cloud has grown by this fraction since the last capture (0: "
                                "only once; a failed capture is tried again at 10 % growth)", lo=0, default=0.2),
     "alpha_m": Number("alpha of the car's alpha shape, metres (Alg. 6.1)", lo=0.05, hi=10, default=1.0),
+    "max_points": Number("thin a larger capture cloud to this many points on a voxel grid before Alg. 6.1 (0: never; "
+                         "the trade of overlap against time: benchmarks/results/aero_video_dev.md)", integer=True, lo=0,
+                         default=5000),
     "streamlines": Number("streamline seeds across the car (a rake of N x N*0.8 upstream of the nose)", integer=True,
                           lo=1, hi=50, default=11),
     "section": Enum(("none", "pressure"), "also draw a contour plane: the pressure coefficient on the symmetry plane "

@@ -56,6 +56,14 @@ def test_the_car_is_captured_and_its_flow_drawn_through_the_graph(tmp_path, smal
     cams = [bags.decode(m) for m in bags.read_bag(out, topics=["/simreal/camera/image"])]
     ovs = [bags.decode(m) for m in bags.read_bag(out, topics=["/simreal/overlay/image_raw"])]
 
+    # the flow carries the replayed frames' time (the capture cloud's stamp is the last tracked frame's, not the
+    # wall clock's)
+    def ns(st) -> int:
+        return st.sec * 1_000_000_000 + st.nanosec
+
+    frame_ns = {ns(c.header.stamp) for c in cams}
+    assert all(ns(m.header.stamp) in frame_ns for f in flows for m in f.markers)
+
     def changed(k: int) -> float:
         assert cams[k].encoding == "rgb8" and ovs[k].encoding == "bgr8"
         a = np.asarray(cams[k].data, np.uint8).reshape(240, 320, 3)[..., ::-1]

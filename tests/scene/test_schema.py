@@ -171,6 +171,7 @@ def test_an_aero_scene_starts_the_aero_node_and_wires_its_flow(tmp_path):
     (("database: db.h5", "database: missing.h5"), r"aero.database: .*not found.*build-aero-db"),
     (("mode: rgbd", "mode: mono"), r"aero.length_m: a monocular map has no scale"),
     (("enabled: true", "enabled: true, neighbours: 1"), r"aero.neighbours: expected"),
+    (("enabled: true", "enabled: true, max_points: -1"), r"aero.max_points: expected"),
 ])
 def test_aero_mistakes_are_named(tmp_path, change, match):
     (tmp_path / "db.h5").write_bytes(b"")

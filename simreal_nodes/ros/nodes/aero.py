@@ -43,7 +43,7 @@ class AeroNode(SimrealNode):
         n = int(a["streamlines"])
         # a metric map keeps its scale: length_m is used for a monocular one only
         length = a["length_m"] if self.scene["localization"]["mode"] == "mono" else None
-        capture = CaptureSettings(alpha_m=float(a["alpha_m"]), length_m=length)
+        capture = CaptureSettings(alpha_m=float(a["alpha_m"]), length_m=length, max_points=int(a["max_points"]) or None)
         self.core = AeroEstimator(db, int(a["neighbours"]), capture, RakeSettings(ny=n, nz=max(1, round(0.8 * n))),
                                   section=a["section"] == "pressure")
         self.lut = speed_lut()

@@ -80,6 +80,7 @@ class LocalizationNode(SimrealNode):
         self.create_service(SetBool, "~/set_localization_only", self.on_set_localization_only)
         self.create_timer(1.0, self.publish_map)
         self._last_status = None
+        self._last_stamp = None  # the last tracked frame's stamp: the maps' clouds carry it (a replay's time, not ours)
         self.set_status("ok", f"waiting for images ({self.mode})")
         self.get_logger().info(f"localization mode {self.mode}")
 
@@ -109,6 +110,7 @@ class LocalizationNode(SimrealNode):
             return
         ns = convert.stamp_ns(header.stamp)
         self._publish(header, self.live.core.step(gray, ns, depth=depth, right=right, focus=self.live.focus(ns)))
+        self._last_stamp = header.stamp
         self.metrics.done(t0, self.age_ms(header.stamp))
         self.progress(header.stamp)
 
@@ -152,7 +154,7 @@ class LocalizationNode(SimrealNode):
         P = self.live.map_points()
         if P is None:
             return
-        head = Header(stamp=self.get_clock().now().to_msg())
+        head = Header(stamp=self._last_stamp if self._last_stamp is not None else self.get_clock().now().to_msg())
         self.pub_map.publish(convert.cloud_msg(P, head, self.map_frame))
         if self.pub_capture is not None and self.live.map is not None and self.live.cam is not None:
             cloud = capture_cloud(self.live.map, self.live.cam, keyframe_depth=self.capture_depth)
