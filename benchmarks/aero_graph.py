@@ -93,7 +93,11 @@ def main(argv: list[str] | None = None) -> None:
             err_node = float("nan")
             if flows and clouds:
                 st = flows[-1].markers[0].header.stamp
-                same = [c for c in clouds if (c.header.stamp.sec, c.header.stamp.nanosec) == (st.sec, st.nanosec)]
+                n_node = int(nodes.get("aero", {}).get("cloud_points", -1))
+                # a cloud is published again with the same stamp when no frame came in between: the point count
+                # (the node's diagnostics) tells them apart
+                same = [c for c in clouds if (c.header.stamp.sec, c.header.stamp.nanosec) == (st.sec, st.nanosec)
+                        and int(np.isfinite(cloud_to_array(c)).all(axis=1).sum()) == n_node]
                 err_node = error(same[-1]) if same else float("nan")
         d = stats.as_dict()
         aero, ov = nodes.get("aero", {}), nodes.get("overlay", {})

@@ -25,9 +25,10 @@ Alg. 6.1, step by step (``capture_car``), on the map's points (any pose; any sca
    counts thinly filled bins as empty);
 6. ``boxAdjustment`` and the similarity ``[S, R, T]``: the length axis turned (within 30 degrees) to the box of
    least area (PCA leans towards where a SLAM map holds more points); the box of the points in the car's axes
-   (0.5-99.5 percentiles) gives the car frame of :mod:`simreal_nodes.aero.grid` (nose at ``x = 0``, centre plane
-   ``y = 0``, floor ``z = 0``); the scale is 1 for a metric map (RGB-D, stereo) or ``length_m`` / box length for a
-   monocular one (the user says how long the car is: the only way to fix a monocular map's scale here);
+   (their quantiles ``box_quantile`` .. 1 - ``box_quantile``, 0.5-99.5 %) gives the car frame of
+   :mod:`simreal_nodes.aero.grid` (nose at ``x = 0``, centre plane ``y = 0``, floor ``z = 0``); the scale is 1
+   for a metric map (RGB-D, stereo) or ``length_m`` / box length for a monocular one (the user says how long the car
+   is: the only way to fix a monocular map's scale here);
 7. the alpha shape of the points (``alpha_m`` metres in the car frame: over half the body's thickness, or a shell of
    surface points leaves the interior hollow; 0.8-1.7 m gave the same overlap on development cars), after closing
    the underside the camera never sees by a cap at the lowest seen height (the sills): its surface from Open3D (for
@@ -71,6 +72,7 @@ class CaptureSettings:
     # (benchmarks/results/aero_video_dev.md) with above_floor_density
     max_points: int | None = 5000
     above_floor_density: float = 2.5  # step 1 again on the points above the floor, with this radius factor (0: off)
+    box_quantile: float = 0.005  # the box spans the points' quantiles from this to 1 - this along each axis
     seed: int = 0
 
 
@@ -106,25 +108,31 @@ def _density_cull(p: np.ndarray, min_neighbours: int, radius_factor: float) -> n
 
 
 def thin(p: np.ndarray, max_points: int) -> np.ndarray:
-    """At most ``max_points`` of ``p`` (and at least 90 % of that): the centroids of the occupied cells of a voxel
-    grid whose edge is found by a few secant steps on the count (a surface's occupied cells fall with the square of
-    the edge; scale free, the first edge comes from the cloud's extent). A dense map's redundancy goes (an RGB-D map
-    holds a surface point once for each keyframe that saw it) and its density evens out: near surfaces are sampled
-    no finer than far ones."""
+    """At most ``max_points`` of ``p``: the centroids of the occupied cells of a voxel grid whose edge is rescaled until
+    the count lands within 90-100 % of ``max_points`` (a surface's occupied cells fall with the square of the edge:
+    the edge is multiplied by the square root of the count's ratio to its target, at most twelve times; the largest
+    count under the bound is kept if none lands). Scale free: the first edge comes from the cloud's extent, so a
+    monocular map of any scale thins alike; but a map covering more ground thins its car more coarsely. A dense map's
+    redundancy goes (an RGB-D map holds a surface point once for each keyframe that saw it) and its density evens
+    out: near surfaces are sampled no finer than far ones. Where no voxel edge brings the count under the bound (a
+    degenerate cloud), ``max_points`` of the points themselves, drawn with a fixed seed."""
     import open3d as o3d
 
     pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(p))
     lo, hi = np.quantile(p, [0.01, 0.99], axis=0)
     extent = np.sort(hi - lo)[::-1]
-    edge = max(float(np.sqrt(extent[0] * extent[1] / max_points)), 1e-9)
+    edge = float(np.sqrt(extent[0] * extent[1] / max_points))
+    if not np.isfinite(edge) or edge <= 1e-9 * max(float(np.abs(p).max()), 1.0):  # flat or collinear: no area
+        edge = float(extent[0]) / max_points
     best = None
-    for _ in range(12):
-        q = np.asarray(pcd.voxel_down_sample(edge).points)
-        if len(q) <= max_points and (best is None or len(q) > len(best)):
-            best = q
-        if 0.9 * max_points <= len(q) <= max_points:
-            break
-        edge *= float(np.clip(np.sqrt(len(q) / (0.95 * max_points)), 0.5, 2.0))
+    if np.isfinite(edge) and edge > 0:
+        for _ in range(12):
+            q = np.asarray(pcd.voxel_down_sample(edge).points)
+            if len(q) <= max_points and (best is None or len(q) > len(best)):
+                best = q
+            if 0.9 * max_points <= len(q) <= max_points:
+                break
+            edge *= float(np.clip(np.sqrt(len(q) / (0.95 * max_points)), 0.5, 2.0))
     return best if best is not None else p[np.random.default_rng(0).choice(len(p), max_points, replace=False)]
 
 
@@ -301,8 +309,8 @@ def capture_car(cloud: np.ndarray, grid: AeroGrid, settings: CaptureSettings = C
     a, b = c_ * a + s_ * b, c_ * b - s_ * a
     R = np.stack([a, b, n])
     local[:, :2] = local[:, :2] @ np.array([[c_, -s_], [s_, c_]])
-    lo = np.quantile(local, 0.005, axis=0)
-    hi = np.quantile(local, 0.995, axis=0)
+    lo = np.quantile(local, s.box_quantile, axis=0)
+    hi = np.quantile(local, 1.0 - s.box_quantile, axis=0)
     length = float(hi[0] - lo[0])
     scale = s.length_m / length if s.length_m else 1.0
     centre = np.array([lo[0], 0.5 * (lo[1] + hi[1]), 0.0])

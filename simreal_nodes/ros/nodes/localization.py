@@ -80,7 +80,7 @@ class LocalizationNode(SimrealNode):
         self.create_service(SetBool, "~/set_localization_only", self.on_set_localization_only)
         self.create_timer(1.0, self.publish_map)
         self._last_status = None
-        self._last_stamp = None  # the last tracked frame's stamp: the maps' clouds carry it (a replay's time, not ours)
+        self._last_stamp = None  # the last processed frame's stamp: the map's clouds carry it (a replay's time)
         self.set_status("ok", f"waiting for images ({self.mode})")
         self.get_logger().info(f"localization mode {self.mode}")
 
