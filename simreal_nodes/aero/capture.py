@@ -213,6 +213,9 @@ def capture_car(cloud: np.ndarray, grid: AeroGrid, settings: CaptureSettings = C
     if s.max_points and len(p) > s.max_points:
         p = thin(p, s.max_points)
         kept["thinned"] = len(p)
+        if len(p) < 50:
+            raise ValueError(f"capture: max_points {s.max_points} thins the map to {len(p)} points; at least 50 are "
+                             "needed (below about 2500 the car itself gets too few: benchmarks/results/aero_video.md)")
     times["thin"] = time.perf_counter() - t
     t = time.perf_counter()
     h = _spacing(p)

@@ -40,6 +40,8 @@ def test_a_map_without_a_car_is_refused() -> None:
         capture_car(floor, GRID)
     with pytest.raises(ValueError, match="at least 50"):
         capture_car(np.full((100, 3), np.nan), GRID)
+    with pytest.raises(ValueError, match="max_points 1 thins the map to 1 points"):  # an absurd thinning: said so
+        capture_car(floor, GRID, CaptureSettings(max_points=1))
 
 
 def test_a_thick_floor_is_taken_away_by_its_own_noise() -> None:
