@@ -52,11 +52,23 @@ class Relocalizer:
         ctx.state = OK
         ctx.T_cw_last = T
         ctx.velocity = None
+        ctx.ref_kf = self.most_shared(match[inl, 1]) or ctx.ref_kf  # the next frame's local map is around it
         lost_for = ctx.frame_id - (ctx.lost_since or ctx.frame_id)
         res = frame_result(ctx.map, RELOCALIZED, f"relocalized after {lost_for} frames", G.inv(T), f, match[:, 0],
                            match[:, 1], inl)
         res.n_matches, res.n_inliers = len(match), int(inl.sum())
         return res, PoseFix(T, match, inl)
+
+    def most_shared(self, ids: np.ndarray) -> KeyFrame | None:
+        """The keyframe that sees most of the points ``ids`` (ORB-SLAM2's reference keyframe after a relocalization:
+        the last keyframe made may be far from where the camera is now)."""
+        counts: dict[int, int] = {}
+        for pid in ids:
+            p = self.ctx.map.points.get(int(pid))
+            for kid in p.obs if p is not None else ():
+                counts[kid] = counts.get(kid, 0) + 1
+        best = max(counts, key=counts.__getitem__, default=None)
+        return self.ctx.map.keyframes.get(best) if best is not None else None
 
     def candidates(self, f: Features, max_kfs: int = 12) -> list[KeyFrame]:
         """Keyframes to relocalize against (ORB-SLAM2 uses a bag of words; here a sample of the frame's

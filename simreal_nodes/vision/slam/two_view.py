@@ -53,7 +53,7 @@ def two_view(f0: Features, f1: Features, K: np.ndarray, min_parallax: float) -> 
     sh = _score_h(H, x0, x1)
     sf = _score_f(F, x0, x1)
     rh = sh / max(sh + sf, 1e-9)
-    if rh > 0.45:
+    if rh > 0.40:  # ORB-SLAM2: a homography unless the fundamental matrix explains clearly more
         sol = _from_h(H, x0, x1, K)
         kind = "homography"
     else:
@@ -74,9 +74,12 @@ _Reconstruction = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]  
 
 
 def _triangulate_check(R: np.ndarray, t: np.ndarray, x0: np.ndarray, x1: np.ndarray,
-                       K: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
-    """Points triangulated under (R, t), which of them are in front of both cameras, reproject within 4 x the
-    chi-square bound and are not at infinity, and their median parallax (radians)."""
+                       K: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, int]:
+    """Points triangulated under (R, t): which of them make map points (in front of both cameras, reprojected within
+    4 x the chi-square bound, not at infinity), their median parallax (radians), and how many matches the pose
+    explains: ORB-SLAM2's count, which includes the reprojecting points too far to show parallax (their side of the
+    camera is not observable). Counting only the map points would favour a wrong pose that inflates the parallax:
+    at low parallax it keeps more points from "infinity" than the right one."""
     P0 = K @ np.c_[np.eye(3), np.zeros(3)]
     P1 = K @ np.c_[R, t]
     X = cv2.triangulatePoints(P0, P1, x0.T.astype(np.float64), x1.T.astype(np.float64))
@@ -92,37 +95,51 @@ def _triangulate_check(R: np.ndarray, t: np.ndarray, x0: np.ndarray, x1: np.ndar
     r0 = X / np.maximum(np.linalg.norm(X, axis=1, keepdims=True), 1e-12)
     r1 = (X - c0) / np.maximum(np.linalg.norm(X - c0, axis=1, keepdims=True), 1e-12)
     cospar = np.sum(r0 * r1, axis=1)
-    good = (z0 > 0) & (z1 > 0) & (e0 < 4 * CHI2_2D) & (e1 < 4 * CHI2_2D) & np.all(np.isfinite(X), axis=1)
-    good &= cospar < 0.99998
+    finite = cospar < 0.99998
+    # a point with parallax must lie in front of both cameras and reproject; one without must reproject (where a
+    # point near infinity falls on a pixel is known, its depth's sign is not)
+    consistent = ((~finite | ((z0 > 0) & (z1 > 0))) & np.all(np.isfinite(X), axis=1) & (e0 < 4 * CHI2_2D)
+                  & (e1 < 4 * CHI2_2D))
+    good = consistent & finite
     par = float(np.arccos(np.clip(np.median(cospar[good]), -1, 1))) if good.sum() else 0.0
-    return X, good, par
+    return X, good, par, int(consistent.sum())
 
 
 def _from_f(F: np.ndarray, x0: np.ndarray, x1: np.ndarray, inl: np.ndarray, K: np.ndarray) -> _Reconstruction | None:
-    E = K.T @ F @ K
-    _, R, t, _ = cv2.recoverPose(E, x0[inl].astype(np.float64), x1[inl].astype(np.float64), K)
-    t = t.ravel()
-    X, good, par = _triangulate_check(R, t, x0, x1, K)
+    """The essential matrix's four poses: the one that puts most of the model's inliers in front of both cameras
+    with parallax, refused when another comes within 70 % of it (ORB-SLAM2's test; a near-planar or low-parallax
+    scene leaves F ill-determined). Points without parallax are left out of this count: they fit all four alike."""
+    R1, R2, t = cv2.decomposeEssentialMat(K.T @ F @ K)
+    t = t.ravel() / max(float(np.linalg.norm(t)), 1e-12)
+    sols = []
+    for R, tt in ((R1, t), (R1, -t), (R2, t), (R2, -t)):
+        good = _triangulate_check(R, tt, x0[inl], x1[inl], K)[1]
+        sols.append((int(good.sum()), R, tt))
+    sols.sort(key=lambda r: r[0], reverse=True)
+    n_good, R, t = sols[0]
+    if n_good < 50 or sum(1 for r in sols if r[0] > 0.7 * n_good) > 1:
+        return None
+    X, good, par, _n = _triangulate_check(R, t, x0, x1, K)
     good &= inl
     return (R, t, X, good, par) if good.sum() >= 50 else None
 
 
 def _from_h(H: np.ndarray, x0: np.ndarray, x1: np.ndarray, K: np.ndarray) -> _Reconstruction | None:
-    """The decomposition that triangulates most points, refused when the second best comes close (ambiguous)."""
+    """The decomposition that explains most matches, refused when the second best comes close (ambiguous)."""
     _n, Rs, ts, _ = cv2.decomposeHomographyMat(H, K)
-    best, second = None, 0
+    best: _Reconstruction | None = None
+    n_best, n_second = 0, 0
     for R, t in zip(Rs, ts):
         t = t.ravel()
         if np.linalg.norm(t) < 1e-9:
             continue
-        X, good, par = _triangulate_check(R, t / np.linalg.norm(t), x0, x1, K)
-        c = int(good.sum())
-        if best is None or c > best[3].sum():
-            second = best[3].sum() if best is not None else second
-            best = (R, t / np.linalg.norm(t), X, good, par)
-        elif c > second:
-            second = c
-    if best is None or best[3].sum() < 50 or second > 0.75 * best[3].sum():
+        X, good, par, n = _triangulate_check(R, t / np.linalg.norm(t), x0, x1, K)
+        if best is None or n > n_best:
+            n_second = n_best
+            best, n_best = (R, t / np.linalg.norm(t), X, good, par), n
+        elif n > n_second:
+            n_second = n
+    if best is None or best[3].sum() < 50 or n_second > 0.75 * n_best:
         return None
     return best
 
