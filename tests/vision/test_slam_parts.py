@@ -237,32 +237,6 @@ def test_relocalization_makes_the_keyframe_it_sees_most_the_reference():
     assert ctx.ref_kf is kf0
 
 
-def test_monocular_keyframe_triangulates_along_epipolar_lines_on_repeated_texture():
-    """A new monocular keyframe's unmatched features pair with a covisible keyframe's along their epipolar lines:
-    on a texture whose descriptors repeat (gravel, bricks), matching over the whole image fails the ratio test,
-    while the line leaves one candidate. (Matching over the whole image made none of these points.)"""
-    X, desc = scene(600)
-    desc[300:] = desc[:300]  # every descriptor twice, at unrelated places
-    ctx = context("mono")
-    mapper = LocalMapper(ctx, async_mapping=False)
-    m = ctx.map
-    T_b = G.make_T(G.rot_axis("y", np.deg2rad(1.0)), np.array([-0.4, 0.0, 0.05]))
-    fa, ia, _ = view(X, desc, np.eye(4))
-    fb, ib, _ = view(X, desc, T_b)
-    kf_a = m.new_keyframe(0, np.eye(4), fa)
-    kf_b = m.new_keyframe(1, G.inv(T_b), fb)
-    known = np.intersect1d(ia, ib)[::4]  # the points the map holds already, seen by both keyframes
-    for i in known:
-        p = m.new_point(X[i], desc[i], kf_a, int(np.flatnonzero(ia == i)[0]))
-        m.link(p, kf_b, int(np.flatnonzero(ib == i)[0]))
-    new = mapper._create_points(kf_b)
-    assert len(new) > 0.6 * (len(np.intersect1d(ia, ib)) - len(known))
-    truth = {int(np.flatnonzero(ib == i)[0]): X[i] for i in ib}
-    for pid in new:
-        p = m.points[pid]
-        assert np.linalg.norm(p.pos - truth[p.obs[kf_b.id]]) < 1e-3  # each made of the right pair
-
-
 def test_deformable_points_never_vote_for_the_pose():
     X, desc = scene()
     ctx = context()

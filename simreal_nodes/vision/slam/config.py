@@ -38,8 +38,6 @@ class SlamConfig:
     flow_win: int = 11  # Lucas-Kanade window (pixels); larger straddles the object's silhouette and drifts
     flow_anchor_px: float = 0.0  # > 0: re-measure tracks on their first image if within this (drift vs. bias)
     max_anchor_images: int = 40  # images kept for the anchored re-measurement (memory vs. track restarts)
-    triangulation_kfs: int = 6  # monocular: covisible keyframes a new keyframe triangulates with (points vs. time)
-    triangulation_ratio: float = 0.7  # monocular: Lowe ratio among a feature's epipolar candidates (points vs. wrong)
     focus_share: float = 0.2  # ORB budget guaranteed to each tracked object's predicted image region (faint objects)
 
     def __post_init__(self) -> None:

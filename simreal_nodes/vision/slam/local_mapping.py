@@ -98,8 +98,7 @@ class LocalMapper:
                 created.append(m.new_point(p, f.desc[i], kf, int(i)).id)
             return created
         # monocular: triangulate unmatched features with the covisible keyframes
-        cfg = ctx.config
-        for other in m.covisible(kf, cfg.triangulation_kfs):
+        for other in m.covisible(kf, 6):
             base = np.linalg.norm(kf.center - other.center)
             med = self._median_depth(other)
             if med <= 0 or base / med < 0.01:
@@ -108,24 +107,20 @@ class LocalMapper:
             fb = np.flatnonzero(other.mp < 0)
             if len(fa) == 0 or len(fb) == 0:
                 continue
-            T_a, T_b = kf.T_cw, other.T_cw
-            # ORB-SLAM2's search for triangulation: a feature's candidates lie on its epipolar line in the other
-            # keyframe (within the 95 % band of that feature's scale), away from the epipole; the best of them by
-            # descriptor, if clearly better than the second
-            F = _fundamental(T_a, T_b, K)
-            xa = np.c_[f.und[fa], np.ones(len(fa))]
-            xb = np.c_[other.feats.und[fb], np.ones(len(fb))]
-            lines = xa @ F.T  # epipolar lines in b, one row per feature of a
-            dist2 = (lines @ xb.T) ** 2 / np.maximum(lines[:, :1] ** 2 + lines[:, 1:2] ** 2, 1e-12)
-            band = dist2 < 3.84 * other.feats.sigma2()[fb][None, :]
-            epi = project(T_b, kf.center[None], K)[0][0]  # a's camera centre seen from b
-            band &= (np.sum((other.feats.und[fb] - epi) ** 2, axis=1) > (10 * other.feats.scale_factor
-                                                                          ** other.feats.octave[fb]) ** 2)[None, :]
-            mt = match_descriptors(f.desc[fa], other.feats.desc[fb], mask=band, max_dist=50,
-                                   ratio=cfg.triangulation_ratio)
+            mt = match_descriptors(f.desc[fa], other.feats.desc[fb], max_dist=50, ratio=0.7)
             if len(mt) == 0:
                 continue
             ia, ib = fa[mt[:, 0]], fb[mt[:, 1]]
+            T_a, T_b = kf.T_cw, other.T_cw
+            F = _fundamental(T_a, T_b, K)
+            xa = np.c_[f.und[ia], np.ones(len(ia))]
+            xb = np.c_[other.feats.und[ib], np.ones(len(ib))]
+            lines = xa @ F.T  # epipolar lines in b
+            dist2 = (np.sum(lines * xb, axis=1) ** 2) / np.maximum(lines[:, 0] ** 2 + lines[:, 1] ** 2, 1e-12)
+            ok = dist2 < 3.84 * other.feats.sigma2()[ib]
+            ia, ib = ia[ok], ib[ok]
+            if len(ia) == 0:
+                continue
             X = cv2.triangulatePoints(K @ T_a[:3], K @ T_b[:3], f.und[ia].T, other.feats.und[ib].T)
             X = (X[:3] / X[3]).T
             ua, za = project(T_a, X, K)
