@@ -31,7 +31,8 @@ class SlamContext:
     state: int = NOT_STARTED  # initialization, tracking, relocalization
     T_cw_last: np.ndarray | None = None  # pose of the last tracked frame, world -> camera (same parts)
     velocity: np.ndarray | None = None  # constant-velocity model: the last frame-to-frame motion (same parts)
-    ref_kf: KeyFrame | None = None  # the reference keyframe: the last one made (initialization, local mapping)
+    ref_kf: KeyFrame | None = None  # the reference keyframe: the last one made (initialization, local mapping), or
+    # after a relocalization the one that sees most of the frame's points (relocalization)
     lost_since: int | None = None  # frame id at which tracking was last lost (:meth:`lose`)
     last_kf_frame: int = 0  # frame id of the last keyframe (initialization, local mapping)
     kf_inliers: int = 0  # pose inliers of the frame that made the last keyframe (same parts)

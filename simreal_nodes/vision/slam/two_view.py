@@ -2,9 +2,11 @@
 
 The two-view reconstruction follows ORB-SLAM2: a homography and a fundamental matrix are fitted to the matches
 with a reference frame, scored by their symmetric transfer errors, and the better explained model (homography for
-a planar or low-parallax scene) is decomposed into a relative pose; the pose whose triangulated points lie in
-front of both cameras and reproject well wins, and it is refused without enough parallax (a pure rotation has no
-depth) or too ambiguous a homography decomposition.
+a planar or low-parallax scene, chosen above a score ratio of 0.40) is decomposed into candidate poses; the pose that
+explains most matches wins (its points with parallax in front of both cameras, every point reprojecting: ORB-SLAM2's
+CheckRT), and it is refused without enough parallax (a pure rotation has no depth) or when a second pose comes close
+(an ambiguous decomposition: a plane at low parallax, or F on a near-planar scene; the initialization then waits for
+more motion).
 """
 
 from __future__ import annotations
