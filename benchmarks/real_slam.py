@@ -1,6 +1,7 @@
 """The SLAM on a real Kinect sequence with ground truth (issue 17): monocular and RGB-D on the 500 frames of 7-Scenes in
 ``../shared/data/real7scenes`` (a table scene, 640 x 480 at 30 fps, a path of about 3.7 m; ground truth from
-KinectFusion, about 1-2 cm). Recorded by others and never used to choose a setting.
+KinectFusion, about 1-2 cm). Recorded by others; used for one decision so far (stop 43: it rejected a triangulation
+change that lost the map here), never to tune a setting's value.
 
     ./run bench real_slam        (needs ../shared/data; about 2 min)
 
