@@ -36,7 +36,10 @@ def load(folder: Path = DATA, frames: int | None = None) -> dict:
     gray, depth, T = [], [], []
     for n in names:
         g = cv2.imread(str(folder / "rgb" / f"{n}.jpg"), cv2.IMREAD_GRAYSCALE)
-        d = cv2.imread(str(folder / "depth" / f"{n}.png"), cv2.IMREAD_UNCHANGED).astype(np.float32) / 1000.0
+        d16 = cv2.imread(str(folder / "depth" / f"{n}.png"), cv2.IMREAD_UNCHANGED)
+        if g is None or d16 is None:
+            raise SystemExit(f"real data unreadable: frame {n} in {folder} (a missing or damaged rgb/depth image)")
+        d = d16.astype(np.float32) / 1000.0
         d[(d <= 0) | (d >= 65.0)] = np.nan  # 0: no reading; 65.535 m: the Kinect's invalid code
         gray.append(g)
         depth.append(d)

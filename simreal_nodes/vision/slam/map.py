@@ -187,15 +187,20 @@ class Map:
         self._alive[drop.id] = False
 
     # -- queries --------------------------------------------------------------------------------------------
-    def covisible(self, kf: KeyFrame, n: int = 10, min_shared: int = 1) -> list[KeyFrame]:
+    def observers(self, ids) -> dict[int, int]:
+        """Keyframe id -> how many of the points ``ids`` it observes (points no longer in the map are skipped)."""
         counts: dict[int, int] = {}
-        for pid in kf.mp[kf.mp >= 0]:
+        for pid in ids:
             p = self.points.get(int(pid))
             if p is None:
                 continue
             for kid in p.obs:
-                if kid != kf.id:
-                    counts[kid] = counts.get(kid, 0) + 1
+                counts[kid] = counts.get(kid, 0) + 1
+        return counts
+
+    def covisible(self, kf: KeyFrame, n: int = 10, min_shared: int = 1) -> list[KeyFrame]:
+        counts = self.observers(kf.mp[kf.mp >= 0])
+        counts.pop(kf.id, None)
         best = sorted((c, k) for k, c in counts.items() if c >= min_shared)[::-1][:n]
         return [self.keyframes[k] for _, k in best if k in self.keyframes]
 

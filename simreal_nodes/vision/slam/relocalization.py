@@ -62,11 +62,7 @@ class Relocalizer:
     def most_shared(self, ids: np.ndarray) -> KeyFrame | None:
         """The keyframe that sees most of the points ``ids`` (ORB-SLAM2's reference keyframe after a relocalization:
         the last keyframe made may be far from where the camera is now)."""
-        counts: dict[int, int] = {}
-        for pid in ids:
-            p = self.ctx.map.points.get(int(pid))
-            for kid in p.obs if p is not None else ():
-                counts[kid] = counts.get(kid, 0) + 1
+        counts = self.ctx.map.observers(ids)
         best = max(counts, key=counts.__getitem__, default=None)
         return self.ctx.map.keyframes.get(best) if best is not None else None
 

@@ -135,13 +135,7 @@ class Tracker:
         ctx, m, n_local = self.ctx, self.ctx.map, self.ctx.config.local_kfs
         kfs = {}
         if seed_ids is not None and len(seed_ids):
-            counts: dict[int, int] = {}
-            for pid in seed_ids:
-                p = m.points.get(int(pid))
-                if p is None:
-                    continue
-                for kid in p.obs:
-                    counts[kid] = counts.get(kid, 0) + 1
+            counts = m.observers(seed_ids)
             for kid in sorted(counts, key=counts.__getitem__, reverse=True)[:n_local]:
                 kfs[kid] = m.keyframes[kid]
         if ctx.ref_kf is not None and ctx.ref_kf.id in m.keyframes:
