@@ -13,12 +13,18 @@ build the node and match its endpoints; a new standby follows after the delay (n
 imports would slow the node it stands behind while that one recovers). Without a standby the restart is cold:
 a new process, its imports, and a new participant that the others must discover
 (``./run bench respawn`` measures both).
+
+With ``one_process`` on (``simreal launch --one-process``), the nodes run in a single process on one executor
+(:mod:`simreal_nodes.ros.compose`), each with the arguments it would have had in its own; the launcher then watches,
+restarts and stops that one process (named :data:`ONE_PROCESS`) as it would a node. ``./run bench graph`` measures it
+against one process per node.
 """
 
 from __future__ import annotations
 
 import contextlib
 import functools
+import json
 import os
 import signal
 import subprocess
@@ -89,6 +95,7 @@ LAUNCHER_PID_ENV = "SIMREAL_LAUNCHER_PID"  # a node ends when the process of thi
 PROMOTE = "go"  # the line written to a standby's stdin to make it the node
 STANDBY_DELAY_S = 5.0  # a standby starts this long after the node it stands behind (start or restart)
 WATCH_PERIOD_S = 0.05  # how often the launcher looks for exited nodes
+ONE_PROCESS = "nodes"  # the name (log, CPU figures) of the process that runs every node in the one-process launch
 
 
 @dataclass
@@ -113,7 +120,7 @@ class Launcher:
 
     def __init__(self, nodes: list[NodeSpec], remaps: dict[str, str] | None = None, respawn: int = 2,
                  env: dict | None = None, echo=print, log_dir: str | Path | None = None, namespace: str = "",
-                 discovery_range: str | None = None, standby: bool = False):
+                 discovery_range: str | None = None, standby: bool = False, one_process: bool = False):
         self.nodes = nodes
         self.remaps = remaps or {}
         self.respawn = respawn
@@ -145,6 +152,12 @@ class Launcher:
             for a, b in self.remaps.items():
                 cmd += ["-r", f"{a}:={b}"]
             self.procs.append(_Proc(spec, cmd))
+        if one_process and self.procs:
+            nodes_json = Path(self._tmp.name) / "nodes.json"
+            nodes_json.write_text(json.dumps([{"module": modules[p.spec.name], "args": p.cmd[3:]}
+                                              for p in self.procs], indent=1))
+            self.procs = [_Proc(NodeSpec(ONE_PROCESS, per_frame=False),
+                                [sys.executable, "-m", "simreal_nodes.ros.compose", str(nodes_json)])]
 
     # -----------------------------------------------------------------------------------------
     def start(self) -> Launcher:

@@ -27,7 +27,8 @@ def cmd_launch(a: argparse.Namespace) -> int:
     nodes = required_nodes(scene, lossless=a.lossless)
     print(f"[launch] scene '{scene['name']}': starting {', '.join(n.name for n in nodes)}")
     return run_until_signal(Launcher(nodes, remaps=_remaps(a.remap), respawn=a.respawn, namespace=a.namespace,
-                                     discovery_range=a.discovery_range, standby=not a.no_standby))
+                                     discovery_range=a.discovery_range, standby=not a.no_standby,
+                                     one_process=a.one_process))
 
 
 def cmd_replay(a: argparse.Namespace) -> int:
@@ -36,7 +37,7 @@ def cmd_replay(a: argparse.Namespace) -> int:
     stats, _report, _ = replay(a.bag, a.scene, rate=a.rate, lossless=a.lossless, record=a.record,
                               storage=a.storage, launch=not a.no_launch, frame_timeout_s=a.frame_timeout,
                               metrics_json=a.metrics, namespace=a.namespace,
-                              standby=False if a.no_standby else None)
+                              standby=False if a.no_standby else None, one_process=a.one_process)
     return 0 if stats is not None and not stats.record_error else 1
 
 
@@ -65,6 +66,9 @@ def add_launch(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--respawn", type=int, default=2, help="restarts allowed per node (default 2)")
     s.add_argument("--no-standby", action="store_true",
                    help="no standby process per node: a restart is cold (slower: imports and DDS discovery)")
+    s.add_argument("--one-process", action="store_true",
+                   help="run every node in one process on one executor (default: one process per node, faster on "
+                        "2 cores: benchmarks/results/graph.md)")
     s.add_argument("--namespace", default="", help="start the nodes in this ROS namespace")
     s.add_argument("--discovery-range", choices=DISCOVERY_RANGES,
                    help="DDS discovery range (default: LOCALHOST unless ROS_AUTOMATIC_DISCOVERY_RANGE is set)")
@@ -86,6 +90,9 @@ def add_replay(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--namespace", default="", help="the graph's ROS namespace")
     s.add_argument("--no-standby", action="store_true",
                    help="live: no standby process per node (a restarted node comes back slower)")
+    s.add_argument("--one-process", action="store_true",
+                   help="run every node in one process on one executor (default: one process per node, faster on "
+                        "2 cores: benchmarks/results/graph.md)")
     s.set_defaults(fn=cmd_replay)
 
 

@@ -47,11 +47,11 @@ def _share_node_environment() -> None:
 def replay(bag: str, scene_file: str, rate: float = 1.0, lossless: bool = False, record: str | None = None,
            storage: str = "mcap", launch: bool = True, frame_timeout_s: float = 30.0, ready_timeout_s: float = 90.0,
            metrics_json: str | None = None, echo=print, extra_params: dict | None = None, namespace: str = "",
-           standby: bool | None = None):
+           standby: bool | None = None, one_process: bool = False):
     """Replay ``bag`` into the graph of ``scene_file``; returns (PlayStats, BagReport, recorder counts).
     ``namespace``: the nodes' namespace; ``standby``: a standby process per node (:class:`~simreal_nodes.launch.
     Launcher`), by default in a live replay and not in a lossless one (a node that exits there is a fault to see,
-    and time does not press)."""
+    and time does not press); ``one_process``: every node in one process on one executor."""
     scene = load_scene(scene_file)
     if launch:
         build_spec_models(scene)  # before the nodes start: they find the built spec:NAME models in the cache
@@ -78,7 +78,8 @@ def replay(bag: str, scene_file: str, rate: float = 1.0, lossless: bool = False,
 
     if standby is None:
         standby = not lossless
-    launcher = Launcher(nodes, echo=echo, namespace=namespace, standby=standby) if launch else None
+    launcher = Launcher(nodes, echo=echo, namespace=namespace, standby=standby,
+                        one_process=one_process) if launch else None
     _share_node_environment()
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     node = Node("simreal_player")

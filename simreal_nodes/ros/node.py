@@ -250,11 +250,19 @@ def _end_with_launcher() -> bool:
 
 def run_node(node_cls, args=None) -> int:
     """main() body for every node: one process, one SingleThreadedExecutor, clean shutdown."""
+    return run_nodes([node_cls], args)
+
+
+def run_nodes(builders: list[Callable[[], Node]], args=None) -> int:
+    """Build the nodes (a node class, or any callable returning a node) and spin them all on one
+    SingleThreadedExecutor until shutdown; then close and destroy each, in the reverse order of their building.
+    One builder is a node's own process (:func:`run_node`); several are the one-process launch
+    (:mod:`simreal_nodes.ros.compose`). A node that fails to build ends the process (the launcher restarts it)."""
     if not _end_with_launcher():
         return 0
     rclpy.init(args=args)
-    node = None
-    profile_dir = os.environ.get("SIMREAL_PROFILE_DIR")  # development: a cProfile of each node's spin
+    nodes: list[Node] = []
+    profile_dir = os.environ.get("SIMREAL_PROFILE_DIR")  # development: a cProfile of the process's spin
     prof = None
     try:
         placeholder = None
@@ -262,11 +270,13 @@ def run_node(node_cls, args=None) -> int:
             placeholder = _standby_until_promoted()
             if placeholder is None:
                 return 0
-        node = node_cls()
+        for build in builders:
+            nodes.append(build())
         if placeholder is not None:
             placeholder.destroy_node()
         ex = SingleThreadedExecutor()
-        ex.add_node(node)
+        for node in nodes:
+            ex.add_node(node)
         if profile_dir:
             import cProfile
 
@@ -277,11 +287,11 @@ def run_node(node_cls, args=None) -> int:
         pass
     finally:
         if prof is not None:
-            assert profile_dir is not None and node is not None  # prof is made only once both exist
+            assert profile_dir is not None and nodes  # prof is made only once the nodes exist
             prof.disable()
             os.makedirs(profile_dir, exist_ok=True)
-            prof.dump_stats(os.path.join(profile_dir, f"{node.get_name()}.prof"))
-        if node is not None:
+            prof.dump_stats(os.path.join(profile_dir, "+".join(n.get_name() for n in nodes) + ".prof"))
+        for node in reversed(nodes):
             close = getattr(node, "close", None)
             if close:
                 try:

@@ -31,8 +31,8 @@ RETRY_GROWTH = 0.1  # a failed capture is tried again once the cloud has grown b
 
 
 class AeroNode(SimrealNode):
-    def __init__(self) -> None:
-        super().__init__("aero")
+    def __init__(self, **kw) -> None:
+        super().__init__("aero", **kw)
         self.scene = load_scene(self.scene_file)
         a = self.scene["aero"]
         self.min_points = self.param("min_points", int(a["min_points"]), "capture once the cloud holds this many")
@@ -82,6 +82,9 @@ class AeroNode(SimrealNode):
         self.metrics.done(t0)
         self.set_status("ok", f"car captured from {n} points: {res.box_m[0]:.2f} x {res.box_m[1]:.2f} x "
                               f"{res.box_m[2]:.2f} m, Cd {res.cd:.3f} (Eq. 6.4), {len(res.lines)} streamlines")
+
+
+NODE_CLASS = AeroNode  # what the one-process launch (simreal_nodes.ros.compose) builds
 
 
 def main(args=None):

@@ -33,8 +33,8 @@ from simreal_nodes.sync import StampSync
 
 
 class CollisionNode(SimrealNode):
-    def __init__(self) -> None:
-        super().__init__("collision")
+    def __init__(self, **kw) -> None:
+        super().__init__("collision", **kw)
         self.scene = load_scene(self.scene_file)
         cam = self.scene["camera"]
         self.stereo = cam["depth"] is None and cam["right_image"] is not None
@@ -124,6 +124,9 @@ class CollisionNode(SimrealNode):
         self.pub_contact[r.object_id].publish(contact_msg(r.object_id, r.state, r.source, stamp, self.map_frame))
         self.pub_params[r.object_id].publish(contact_parameters_msg(r.object_id, self.core.trackers[r.object_id],
                                                                     r.state, stamp))
+
+
+NODE_CLASS = CollisionNode  # what the one-process launch (simreal_nodes.ros.compose) builds
 
 
 def main(args=None):

@@ -23,8 +23,8 @@ from simreal_nodes.vision.undistort import IngestCamera
 
 
 class IngestNode(SimrealNode):
-    def __init__(self):
-        super().__init__("ingest")
+    def __init__(self, **kw):
+        super().__init__("ingest", **kw)
         cam = load_scene(self.scene_file)["camera"] if self.scene_file else {}
         self.source = self.param("source", cam.get("source", "topic"), "topic | bag | video | images")
         self.path = self.param("path", cam.get("path") or "", "bag, video or image folder for non-topic sources")
@@ -143,6 +143,9 @@ class IngestNode(SimrealNode):
             self.pubs["depth"].publish(images.fill_image_msg(Image(header=msg.header), d, f.depth_encoding))
         self.metrics.done(t0)
         self.progress(stamp)
+
+
+NODE_CLASS = IngestNode  # what the one-process launch (simreal_nodes.ros.compose) builds
 
 
 def main(args=None):

@@ -32,8 +32,8 @@ from simreal_nodes.sync import StampSync
 
 
 class LocalizationNode(SimrealNode):
-    def __init__(self):
-        super().__init__("localization")
+    def __init__(self, **kw):
+        super().__init__("localization", **kw)
         scene = load_scene(self.scene_file) if self.scene_file else {}
         loc = scene.get("localization", {})
         aero = scene.get("aero", {})
@@ -151,18 +151,25 @@ class LocalizationNode(SimrealNode):
 
     @guarded
     def publish_map(self) -> None:
-        P = self.live.map_points()
+        # each cloud is built only for someone who reads it (RViz, a recorder, the aero node for the capture)
+        want_map = self.pub_map.get_subscription_count() > 0
+        want_capture = self.pub_capture is not None and self.pub_capture.get_subscription_count() > 0
+        P = self.live.map_points() if want_map or want_capture else None
         if P is None:
             return
         head = Header(stamp=self._last_stamp if self._last_stamp is not None else self.get_clock().now().to_msg())
-        self.pub_map.publish(convert.cloud_msg(P, head, self.map_frame))
-        if self.pub_capture is not None and self.live.map is not None and self.live.cam is not None:
+        if want_map:
+            self.pub_map.publish(convert.cloud_msg(P, head, self.map_frame))
+        if want_capture and self.pub_capture is not None and self.live.map is not None and self.live.cam is not None:
             cloud = capture_cloud(self.live.map, self.live.cam, keyframe_depth=self.capture_depth)
             self.pub_capture.publish(convert.cloud_msg(cloud, head, self.map_frame))
 
     def close(self) -> None:
         if self.live.close(self.save_map):
             self.say(f"saved map to {self.save_map}")
+
+
+NODE_CLASS = LocalizationNode  # what the one-process launch (simreal_nodes.ros.compose) builds
 
 
 def main(args=None):

@@ -33,8 +33,8 @@ from simreal_nodes.sync import StampSync
 
 
 class OverlayNode(SimrealNode):
-    def __init__(self):
-        super().__init__("overlay")
+    def __init__(self, **kw):
+        super().__init__("overlay", **kw)
         self.scene = load_scene(self.scene_file)
         ov, loc = self.scene["overlay"], self.scene["localization"]
         self.static_pose = G.pose7_to_matrix(loc["static_pose"]) if loc["mode"] == "static" else None
@@ -176,7 +176,8 @@ class OverlayNode(SimrealNode):
                 self.set_status("error", str(e))
                 self.video = None
         self.frames += 1
-        if self.marker_every and states and self.frames % self.marker_every == 1 % self.marker_every:
+        if self.marker_every and states and self.frames % self.marker_every == 1 % self.marker_every \
+                and self.pub_markers.get_subscription_count() > 0:  # built only for someone who reads it
             # serialized from the arrays directly: as rclpy message objects a 3 700-vertex mesh took ~110 ms
             self.pub_markers.publish(marker_array_cdr(self.core.markers(), stamp_ns(head.stamp), self.map_frame))
 
@@ -187,6 +188,9 @@ class OverlayNode(SimrealNode):
         self.core.release()
         if self.flow is not None:
             self.flow.release()
+
+
+NODE_CLASS = OverlayNode  # what the one-process launch (simreal_nodes.ros.compose) builds
 
 
 def main(args=None):

@@ -40,8 +40,8 @@ from simreal_nodes.sync import StampSync
 
 
 class TrackerNode(SimrealNode):
-    def __init__(self):
-        super().__init__("tracker")
+    def __init__(self, **kw):
+        super().__init__("tracker", **kw)
         self.scene = load_scene(self.scene_file)
         self.objects = [o for o in self.scene["objects"] if o["tracking"]["enabled"]]
         loc = self.scene["localization"]
@@ -171,6 +171,9 @@ class TrackerNode(SimrealNode):
             self.loc_client.call_async(SetBool.Request(data=True))
             self._loc_only_requested = True
             self.get_logger().info("deformation appeared: localization-only mode requested")
+
+
+NODE_CLASS = TrackerNode  # what the one-process launch (simreal_nodes.ros.compose) builds
 
 
 def main(args=None):
