@@ -65,9 +65,10 @@ def image_to_array(msg, copy: bool = False) -> np.ndarray:
             f"image step {step} is smaller than width*channels*bytes = {w}*{channels}*"
             f"{dtype.itemsize} = {row_bytes} for encoding '{enc}'")
     buf = msg.data
-    if not isinstance(buf, (bytes, bytearray, memoryview, np.ndarray)):
-        buf = bytes(buf) if not isinstance(buf, array.array) else buf.tobytes()
-    raw = np.frombuffer(buf, dtype=np.uint8)
+    if not isinstance(buf, (bytes, bytearray, memoryview, np.ndarray, array.array)):
+        buf = bytes(buf)
+    raw = np.frombuffer(buf, dtype=np.uint8)  # rclpy's array.array: a view of the message's own buffer, no copy
+    raw.flags.writeable = False
     need = step * (h - 1) + row_bytes
     if raw.size < need:
         raise ImageFormatError(

@@ -93,5 +93,5 @@ def test_the_node_list_names_modules_that_have_a_node_class(tmp_path):
     assert len(builders(entries)) == len(entries) == len(set(node_modules()))
     f = tmp_path / "nodes.json"
     f.write_text(json.dumps([{"module": "simreal_nodes.ros.nodes.nothing_here", "args": []}]))
-    with pytest.raises(SimrealError, match="cannot import simreal_nodes.ros.nodes.nothing_here"):
+    with pytest.raises(SimrealError, match=r"cannot import simreal_nodes\.ros\.nodes\.nothing_here"):
         builders(read_nodes(f))
