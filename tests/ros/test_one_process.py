@@ -3,6 +3,7 @@ keeps its own name, namespace, parameters and remaps, so the graph gives the est
 gives; a malformed node list is refused with a reason and nothing outside the node modules is imported."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -24,7 +25,7 @@ def test_the_launcher_runs_one_process_with_each_nodes_own_arguments(tmp_path):
         assert args[:3] == ["--ros-args", "-r", f"__node:={spec.name}"]
         assert "__ns:=/cell2" in args and "/a:=/b" in args
         params = args[args.index("--params-file") + 1]
-        assert f"/cell2/{spec.name}" in open(params).read()  # each node its own parameter file
+        assert f"/cell2/{spec.name}" in Path(params).read_text()  # each node its own parameter file
     launcher._tmp.cleanup()
 
 
