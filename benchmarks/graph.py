@@ -3,7 +3,10 @@ all nodes in one process (``--one-process``), on two scenes:
 
 - the demo (``aluminium_beam``: ingest -> markers localization -> deformable tracker (glued dots) -> overlay) at
   640 x 480 and 1280 x 720;
-- an RGB-D SLAM scene (``foam_beam``: ingest -> RGB-D SLAM -> tracker (map points) -> overlay) at 640 x 480.
+- an RGB-D SLAM scene (``foam_beam``: ingest -> RGB-D SLAM -> tracker (map points) -> overlay) at 640 x 480;
+- a scene of the family (development seed 3, ``family-3``: RGB-D SLAM -> the dense tracker, its beam placed by
+  registration from depth -> overlay) at 640 x 480: the heaviest tracker, where one executor for every node
+  makes the others wait for it.
 
     ./run bench graph
 
@@ -24,7 +27,8 @@ from benchmarks.common import save
 from simreal_nodes.demo import node_metrics, sample_bag
 from simreal_nodes.ros.commands import replay
 
-CASES = (("aluminium_beam", "640x480", None), ("aluminium_beam", "1280x720", 4.0), ("foam_beam", "640x480", None))
+CASES = (("aluminium_beam", "640x480", None), ("aluminium_beam", "1280x720", 4.0), ("foam_beam", "640x480", None),
+         ("family-3", "640x480", None))
 PLAYER = "player + recorder"
 
 
@@ -94,8 +98,8 @@ def report(rows):
     cols += [(k, k.replace("_p50_ms", " p50 (ms)"), "{}") for k in node_cols]
     cpu_cols = sorted({k for r in rows for k in r if k.startswith("cpu_")})
     cols += [(k, k[4:-3] + " CPU/frame (ms)", "{:.1f}") for k in cpu_cols] + [("cores_busy", "cores busy", "{:.2f}")]
-    save("graph", rows, cols, "Whole graph: the demo scene (markers + dots) and an RGB-D SLAM scene (foam beam, map "
-         "points), one process per node against one process",
+    save("graph", rows, cols, "Whole graph: the demo scene (markers + dots), RGB-D SLAM scenes (foam beam, map "
+         "points; family seed 3, dense, registered), one process per node against one process",
          "Goals (issues 7, 18): >= 60 fps at 640x480 and >= 30 fps at 1280x720 lossless, 100 % through live at 30 fps "
          "with p95 <= 2 frame periods, nodes' CPU <= 30 ms per frame at 640x480; RGB-D SLAM graph >= 30 fps "
          "lossless. Node p50 columns: processing time per frame inside each node's callback (its /diagnostics: "

@@ -24,6 +24,7 @@ from simreal_nodes.assimilation.registration import (
     register_loaded,
     register_rgbd,
 )
+from simreal_nodes.assimilation.registration_worker import BackgroundRegistration
 from simreal_nodes.assimilation.tracker import DeformableTracker, Estimate, deformable_feedback, tracker_config
 from simreal_nodes.camera import CameraModel
 from simreal_nodes.rom.model import ReducedModel
@@ -41,7 +42,8 @@ class ObjectTrackers:
     registered objects' :class:`Registration` by id, once found."""
 
     def __init__(self, objects: list[dict[str, Any]], models: dict[str, ReducedModel],
-                 registration: RegistrationConfig | None = None, **cfg_overrides: Any) -> None:
+                 registration: RegistrationConfig | None = None, background: bool = False,
+                 **cfg_overrides: Any) -> None:
         self.objects = [o for o in objects if o["tracking"]["enabled"]]
         self.models = models
         self.registration = registration or RegistrationConfig()
@@ -53,6 +55,13 @@ class ObjectTrackers:
         self._posed: dict[str, int] = {}  # frames with a camera pose seen while waiting for the registration
         self.depth_baseline: float | None = None  # the depth is SGBM on a stereo pair of this baseline (None: RGB-D)
         self.stereo_min_depth = 0.4  # metres: the nearest depth SGBM searches (the scene's camera.stereo_min_depth_m)
+        self.background: BackgroundRegistration | None = None
+        if any(o["anchor"]["kind"] == "registration" for o in self.objects):
+            if background:  # live: registered in a worker process while frames go on (registration_worker.py)
+                self.background = BackgroundRegistration()
+            else:
+                # Open3D is imported now, not inside the first registration (about 2 s on 2 busy cores)
+                import open3d  # noqa: F401
 
     def set_camera(self, cam: CameraModel) -> None:
         """New intrinsics: every tracker starts again (built now, not on the first frame: that frame would wait);
@@ -113,6 +122,15 @@ class ObjectTrackers:
         oid, cfg = o["id"], self.registration
         if o["anchor"]["kind"] != "registration" or oid in self.registrations:
             return ""
+        if self.background is not None:
+            done = self.background.poll(oid)
+            if done is not None:
+                status, value = done
+                if status == "ok":
+                    return self._placed(oid, value)
+                return f"waiting for registration: {value}"  # the views are collected afresh from the next frame
+            if self.background.pending(oid):
+                return f"registering from {cfg.frames} depth views (in the background)"
         if T_wc is None:
             return "waiting for registration: no camera pose yet"
         if depth is None:
@@ -135,15 +153,34 @@ class ObjectTrackers:
                 # the object may be loaded while it is registered: its deformation fitted with its pose
                 lo, hi = tr._free_bounds()
                 n_mu = len(model.axes)
-                reg = register_loaded(cloud, model, guess, cams, lo[:n_mu], hi[:n_mu], cfg,
-                                      n_modes=tr.cfg.n_modes or None)
+                n_modes = tr.cfg.n_modes or None
+                if self.background is not None:
+                    self.background.submit(oid, "loaded", cloud, model, guess, cams, lo[:n_mu], hi[:n_mu], cfg,
+                                           n_modes=n_modes)
+                    return f"registering from {cfg.frames} depth views (in the background)"
+                reg = register_loaded(cloud, model, guess, cams, lo[:n_mu], hi[:n_mu], cfg, n_modes=n_modes)
             else:
+                if self.background is not None:
+                    self.background.submit(oid, "rgbd", cloud, model, guess, cams, cfg)
+                    return f"registering from {cfg.frames} depth views (in the background)"
                 reg = register_rgbd(cloud, model, guess, cams, cfg)
         except RegistrationError as e:
             return f"waiting for registration: {e.args[0]}"
+        return self._placed(oid, reg)
+
+    def _placed(self, oid: str, reg: Registration) -> str:
+        """A registration found: kept, and the object's tracker built again at its pose on its next frame."""
         self.registrations[oid] = reg
-        self.trackers.pop(oid, None)  # built again at the registered pose
+        self.trackers.pop(oid, None)
+        if self.background is not None and all(o["id"] in self.registrations for o in self.objects
+                                               if o["anchor"]["kind"] == "registration"):
+            self.background.close()  # every object placed: the worker's memory is given back
         return ""
+
+    def close(self) -> None:
+        """End the background registration's worker, if there is one."""
+        if self.background is not None:
+            self.background.close()
 
     def depth_of_pair(self, left: np.ndarray, right: np.ndarray) -> np.ndarray | None:
         """The trackers' depth from a rectified stereo pair (:func:`~simreal_nodes.vision.stereo.stereo_depth`),

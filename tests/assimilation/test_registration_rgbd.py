@@ -3,6 +3,7 @@ eye to about a millimetre; a fit that does not hold is refused; the guess decide
 image; the object trackers wait for the registration and then track from the registered pose."""
 
 import copy
+import time
 
 import numpy as np
 import pytest
@@ -132,6 +133,70 @@ def test_object_trackers_wait_for_the_registration_then_track_from_it(scene3):
     assert not objs.needs_depth  # depth is not read any more
     (k, poly), = objs.focus(seq["T"][8])  # the beam's image region, for the localization's feature budget
     assert k == 0 and len(poly) >= 3 and objs.focus(None) == []
+
+
+def test_a_background_registration_lets_frames_go_on_and_places_the_beam_as_the_synchronous_one(scene3):
+    """Live (``background=True``): the views go to a worker process and the frame that completes them returns at
+    once, saying so; frames go on while it works, and its registration is the synchronous one (to rounding: another
+    process's floating point differs in the last bit)."""
+    s, seq = scene3, scene3["seq"]
+    scene = build_spec_models(validate_scene(copy.deepcopy(s["doc"]), "family_3", "."))
+    sync = ObjectTrackers(scene["objects"], {"beam": s["model"]}, registration=CFG)
+    live = ObjectTrackers(scene["objects"], {"beam": s["model"]}, registration=CFG, background=True)
+    try:
+        for objs in (sync, live):
+            objs.set_camera(seq["cam"])
+            for i in range(9):
+                est = objs.update(seq["T"][i], depth=seq["depth"][i])["beam"]
+        assert "beam" in sync.registrations
+        assert "beam" not in live.registrations  # the frame that completed the views did not wait for the fit
+        assert est.state == EstimateState.LOST and est.reason == "registering from 3 depth views (in the background)"
+        t_end = time.monotonic() + 120
+        while "beam" not in live.registrations:
+            assert time.monotonic() < t_end, "no registration from the worker"
+            est = live.update(seq["T"][8], depth=seq["depth"][8])["beam"]
+            if "beam" not in live.registrations:
+                assert est.reason.startswith("registering"), est.reason
+            time.sleep(0.05)
+        np.testing.assert_allclose(live.registrations["beam"].T_map_obj, sync.registrations["beam"].T_map_obj,
+                                   rtol=0, atol=1e-12)
+        assert live.registrations["beam"].fitness == pytest.approx(sync.registrations["beam"].fitness, abs=1e-12)
+        assert np.allclose(live.trackers["beam"].T_map_obj, sync.registrations["beam"].T_map_obj)
+        assert live.background is not None and not live.background.pending("beam")
+    finally:
+        live.close()
+
+
+def test_a_registration_worker_that_dies_is_reported_and_started_again(scene3):
+    from simreal_nodes.assimilation.registration_worker import BackgroundRegistration
+
+    def result(bg):
+        t_end = time.monotonic() + 120
+        while (got := bg.poll("beam")) is None:
+            assert time.monotonic() < t_end, "no answer from the worker"
+            time.sleep(0.05)
+        return got
+
+    s = scene3
+    bg = BackgroundRegistration()
+    try:
+        bg.submit("beam", "rgbd", s["cloud"], s["model"], s["guess"], s["cams"], CFG)
+        assert bg._proc is not None
+        bg._proc.kill()  # killed while it imports or works: reported, not waited for forever
+        status, why = result(bg)
+        assert status == "failed" and "the registration worker exited" in why, why
+        bg.submit("beam", "rgbd", s["cloud"], s["model"], s["guess"], s["cams"], CFG)  # a new worker
+        status, reg = result(bg)
+        assert status == "ok" and isinstance(reg, Registration)
+        np.testing.assert_allclose(reg.T_map_obj, register_rgbd(s["cloud"], s["model"], s["guess"], s["cams"],
+                                                                CFG).T_map_obj, rtol=0, atol=1e-12)
+        bg.submit("beam", "rgbd", np.zeros((10, 3)))  # a failing call is reported with its error
+        status, why = result(bg)
+        assert status == "failed" and "TypeError" in why, why
+        with pytest.raises(ValueError, match="registration kind"):
+            bg.submit("beam", "icp")
+    finally:
+        bg.close()
 
 
 def test_a_fit_slid_along_the_beam_is_pinned_by_its_ends(scene3):

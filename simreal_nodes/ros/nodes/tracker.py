@@ -53,8 +53,9 @@ class TrackerNode(SimrealNode):
             models[o["id"]] = load_model(o["model"], fields=["displacement"])
             self.get_logger().info(f"object {o['id']}: {models[o['id']].summary().splitlines()[0]}")
         overrides = {k: v for k, v in (("huber_px", huber), ("n_modes", modes)) if v}  # 0: the scene's
+        # live, an object is registered in a worker process while frames go on; lossless, in the frame (repeatable)
         self.core = ObjectTrackers(self.objects, models, RegistrationConfig.for_camera(self.scene["camera"]),
-                                   **overrides)
+                                   background=not self.lossless, **overrides)
         keys = graph.tracker_inputs(self.scene)
         self.need_image = any(o["tracking"]["measurements"] in graph.IMAGE_MEASUREMENTS for o in self.objects)
         reads_depth = graph.tracker_reads_depth(self.scene)
@@ -171,6 +172,9 @@ class TrackerNode(SimrealNode):
             self.loc_client.call_async(SetBool.Request(data=True))
             self._loc_only_requested = True
             self.get_logger().info("deformation appeared: localization-only mode requested")
+
+    def close(self) -> None:
+        self.core.close()
 
 
 NODE_CLASS = TrackerNode  # what the one-process launch (simreal_nodes.ros.compose) builds
