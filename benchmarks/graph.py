@@ -23,8 +23,9 @@ import tempfile
 import time
 from pathlib import Path
 
-from benchmarks.common import save
+from benchmarks.common import markdown_table, save
 from simreal_nodes.demo import node_metrics, sample_bag
+from simreal_nodes.metrics import STAGES
 from simreal_nodes.ros.commands import replay
 
 CASES = (("aluminium_beam", "640x480", None), ("aluminium_beam", "1280x720", 4.0), ("foam_beam", "640x480", None),
@@ -63,7 +64,37 @@ def run_case(scene, res, bag, scene_yaml, lossless, one_process) -> dict:
                 nodes_work_ms=sum(float(v["processing_ms_p50"]) for v in nodes.values()
                                   if v.get("processing_ms_p50") not in (None, "")),
                 **{f"{n}_p50_ms": v.get("processing_ms_p50") for n, v in nodes.items()},
-                **{f"cpu_{n.split(' ')[0]}_ms": v for n, v in cpu.items()})
+                **{f"cpu_{n.split(' ')[0]}_ms": v for n, v in cpu.items()},
+                budget={n: {k: _num(v.get(f"{k}_ms_p50")) for k in (*STAGES, "processing")} for n, v in nodes.items()})
+
+
+def _num(x) -> float:
+    try:
+        return float(x)
+    except (TypeError, ValueError):
+        return float("nan")
+
+
+NODES = ("ingest", "localization", "tracker", "overlay")
+
+
+def budget_rows(rows: list[dict]) -> list[dict]:
+    """Per-stage budget of the lossless runs: each node's decode / work / encode and processing (p50, ms), and
+    with one process per node the rest of its CPU per frame (the executor, the middleware, timers; for the
+    localization also its mapping process)."""
+    out = []
+    for r in rows:
+        if r["mode"] != "lossless":
+            continue
+        for n in NODES:
+            b = r["budget"].get(n)
+            if b is None:
+                continue
+            cpu = r.get(f"cpu_{n}_ms", float("nan"))
+            out.append(dict(scene=r["scene"], resolution=r["resolution"], launch=r["launch"], node=n,
+                            **{k: b[k] for k in (*STAGES, "processing")}, cpu=cpu,
+                            rest=cpu - b["processing"] if cpu == cpu else float("nan")))
+    return out
 
 
 def report(rows):
@@ -94,8 +125,6 @@ def report(rows):
             ("delivered_pct", "frames through (%)", "{:.0f}"), ("latency_p50", "latency p50 (ms)", "{:.0f}"),
             ("latency_p95", "p95 (ms)", "{:.0f}"), ("nodes_cpu_ms", "nodes' CPU/frame (ms)", "{:.1f}"),
             ("nodes_work_ms", "nodes' processing p50, summed (ms)", "{:.1f}")]
-    node_cols = sorted({k for r in rows for k in r if k.endswith("_p50_ms")})
-    cols += [(k, k.replace("_p50_ms", " p50 (ms)"), "{}") for k in node_cols]
     cpu_cols = sorted({k for r in rows for k in r if k.startswith("cpu_")})
     cols += [(k, k[4:-3] + " CPU/frame (ms)", "{:.1f}") for k in cpu_cols] + [("cores_busy", "cores busy", "{:.2f}")]
     save("graph", rows, cols, "Whole graph: the demo scene (markers + dots), RGB-D SLAM scenes (foam beam, map "
@@ -108,7 +137,19 @@ def report(rows):
          "frames): the difference is the executor, the middleware and the timers. 'nodes' is the one process of "
          "`--one-process`; the player + recorder is the test harness (the bag reader, the camera's stand-in). "
          "Cores busy: all CPU over the play time. Real time: live QoS, a busy node takes the newest frame "
-         "(skipped frames are the 'not through' ones). 2-core CPU, Mesa llvmpipe for the overlay.", plot)
+         "(skipped frames are the 'not through' ones). 2-core CPU, Mesa llvmpipe for the overlay.\n\n"
+         "## Per-stage budget (lossless runs; ms per frame, p50 of each node's /diagnostics)\n\n"
+         + markdown_table(budget_rows(rows), BUDGET_COLS) + "\n\n"
+         "decode: messages to arrays (for ingest: the JPEG decompression); work: the ROS-free core; encode: arrays "
+         "to messages and their publication; processing: the whole callback. CPU/frame and the rest (CPU/frame "
+         "less processing: the executor, the middleware's receiving side, timers, and for the localization its "
+         "mapping process) only where each node has its own process.", plot)
+
+
+BUDGET_COLS = [("scene", "scene", "{}"), ("resolution", "resolution", "{}"), ("launch", "launch", "{}"),
+               ("node", "node", "{}"), ("decode", "decode", "{:.2f}"), ("work", "work", "{:.2f}"),
+               ("encode", "encode", "{:.2f}"), ("processing", "processing", "{:.2f}"),
+               ("cpu", "CPU/frame", "{:.1f}"), ("rest", "rest", "{:.1f}")]
 
 
 if __name__ == "__main__":

@@ -36,14 +36,20 @@ class WindowStats:
 AGE_LIMIT_MS = (-1e3, 6e4)
 
 
+STAGES = ("decode", "work", "encode")  # a frame's processing in a node: message to arrays, the core, arrays out
+
+
 class StageMetrics:
-    """Per-node statistics: input rate, processing latency, end-to-end age, drops, errors.
+    """Per-node statistics: input rate, processing latency, end-to-end age, drops, errors; the processing split
+    into :data:`STAGES` where the node marks them (:meth:`lap`): ``decode`` (messages to arrays), ``work`` (the
+    ROS-free core), ``encode`` (arrays to messages, published).
 
     ``age_ms``: now minus the input's stamp, kept only while the stamps are on this clock (``AGE_LIMIT_MS``); a
     replayed recording's frames are counted in ``off_clock`` instead and the age reads "n/a"."""
 
     def __init__(self, window: int = 300, clock=time.monotonic):
         self.clock = clock
+        self._window = window
         self._arrivals: deque[float] = deque(maxlen=window)
         self.processing_ms = WindowStats(window)
         self.age_ms = WindowStats(window)
@@ -57,11 +63,20 @@ class StageMetrics:
         self.last_drop_reason = ""
         self.last_skip_reason = ""
         self.extra: dict[str, str] = {}
+        self.stages: dict[str, WindowStats] = {}
+        self._lap_t = clock()
 
     def arrived(self) -> float:
         t = self.clock()
         self._arrivals.append(t)
+        self._lap_t = t
         return t
+
+    def lap(self, stage: str) -> None:
+        """The frame's time since its arrival or the previous lap is ``stage``'s (one of :data:`STAGES`)."""
+        t = self.clock()
+        self.stages.setdefault(stage, WindowStats(self._window)).add((t - self._lap_t) * 1e3)
+        self._lap_t = t
 
     def done(self, t_start: float, age_ms: float | None = None) -> float:
         ms = (self.clock() - t_start) * 1e3
@@ -109,6 +124,7 @@ class StageMetrics:
             "age_ms_p50": (f"{self.age_ms.percentile(50):.2f}" if len(self.age_ms)
                            else "n/a (input stamps not on this clock: a replayed recording?)" if self.off_clock
                            else "nan"),
+            **{f"{k}_ms_p50": f"{self.stages[k].percentile(50):.2f}" for k in STAGES if k in self.stages},
             "processed": str(self.processed),
             "dropped": str(self.dropped),
             "skipped": str(self.skipped),

@@ -93,9 +93,13 @@ class IngestNode(SimrealNode):
                 what = "right compressed image" if kind == "right" else "compressed image"
                 return self._left_out(kind, msg.header.stamp, f"malformed {what}: {e}")
             msg = images.fill_image_msg(Image(header=msg.header), arr, enc)
+        if t0 is not None:
+            self.metrics.lap("decode")
         checked = self.core.check(kind, msg, arr)
         if checked.why:
             return self._left_out(kind, msg.header.stamp, checked.why)
+        if t0 is not None:
+            self.metrics.lap("work")
         if checked.pixels is not None:
             msg = images.fill_image_msg(Image(header=msg.header), checked.pixels, msg.encoding)
         if kind != "right":
@@ -108,6 +112,7 @@ class IngestNode(SimrealNode):
             self.pub_info[kind].publish(info)
         self.pubs[kind].publish(msg)
         if t0 is not None:
+            self.metrics.lap("encode")
             self.metrics.done(t0, self.age_ms(msg.header.stamp))
             self.set_status("ok", "ok")
             self.progress(msg.header.stamp)

@@ -109,7 +109,11 @@ class LocalizationNode(SimrealNode):
             self.drop(header.stamp, f"malformed input: {e}")
             return
         ns = convert.stamp_ns(header.stamp)
-        self._publish(header, self.live.core.step(gray, ns, depth=depth, right=right, focus=self.live.focus(ns)))
+        self.metrics.lap("decode")
+        r = self.live.core.step(gray, ns, depth=depth, right=right, focus=self.live.focus(ns))
+        self.metrics.lap("work")
+        self._publish(header, r)
+        self.metrics.lap("encode")
         self._last_stamp = header.stamp
         self.metrics.done(t0, self.age_ms(header.stamp))
         self.progress(header.stamp)

@@ -150,6 +150,7 @@ class OverlayNode(SimrealNode):
         T_wc = observation_pose(frame["obs"]) if frame.get("obs") is not None else self.static_pose
         params = {oid: (list(m.names), list(m.values)) if (m := frame.get(f"p:{oid}")) is not None else None
                   for oid in self.param_objects}
+        self.metrics.lap("decode")
         try:
             out, states, why = self.core.draw(bgr, T_wc, params, depth)
         except (ValueError, SimrealError) as e:  # an image of another size than CameraInfo says
@@ -158,7 +159,9 @@ class OverlayNode(SimrealNode):
         flow = self._flow_layer() if T_wc is not None else None
         if flow is not None and T_wc is not None:
             out = flow.draw(out, T_wc)
+        self.metrics.lap("work")
         self._publish(out, head, states)
+        self.metrics.lap("encode")
         for k, st in states.items():
             self.metrics.extra.update({f"{k}_modes": str(st.modes), f"{k}_error_px": f"{st.error_px:.3f}"})
         self.metrics.done(t0, self.age_ms(head.stamp))

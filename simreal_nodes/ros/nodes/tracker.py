@@ -140,10 +140,13 @@ class TrackerNode(SimrealNode):
         except (ImageFormatError, ValueError) as e:
             self.drop(head.stamp, f"malformed image: {e}")
             return
+        self.metrics.lap("decode")
         estimates = self.core.update(T_wc, ids, P, uv, bgr, depth)
+        self.metrics.lap("work")
         for oid, est in estimates.items():
             self._publish(oid, est, head)
         self._coordinate_localization(any(e.deforming for e in estimates.values()), head, T_wc)
+        self.metrics.lap("encode")
         self.metrics.done(t0, self.age_ms(head.stamp))
         self.progress(head.stamp)
 
