@@ -67,8 +67,8 @@ def add_launch(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--no-standby", action="store_true",
                    help="no standby process per node: a restart is cold (slower: imports and DDS discovery)")
     s.add_argument("--one-process", action="store_true",
-                   help="run every node in one process on one executor (default: one process per node, faster on "
-                        "2 cores: benchmarks/results/graph.md)")
+                   help="run every node in one process on one executor: faster end to end (benchmarks/results/"
+                        "graph.md), but a fault in one node ends them all and the slowest node paces the others")
     s.add_argument("--namespace", default="", help="start the nodes in this ROS namespace")
     s.add_argument("--discovery-range", choices=DISCOVERY_RANGES,
                    help="DDS discovery range (default: LOCALHOST unless ROS_AUTOMATIC_DISCOVERY_RANGE is set)")
@@ -91,8 +91,8 @@ def add_replay(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--no-standby", action="store_true",
                    help="live: no standby process per node (a restarted node comes back slower)")
     s.add_argument("--one-process", action="store_true",
-                   help="run every node in one process on one executor (default: one process per node, faster on "
-                        "2 cores: benchmarks/results/graph.md)")
+                   help="run every node in one process on one executor: faster end to end (benchmarks/results/"
+                        "graph.md), but a fault in one node ends them all and the slowest node paces the others")
     s.set_defaults(fn=cmd_replay)
 
 
