@@ -126,7 +126,8 @@ def evaluate_run(run_bag: Path, truth_bag: Path, scene: dict, out: Path) -> dict
 
 
 def run_demo(scene: str = DEFAULT_SCENE, out: str | Path = "out/demo", regenerate: bool = False,
-             resolution: str = "640x480", duration: float | None = None, echo=print) -> dict:
+             resolution: str = "640x480", duration: float | None = None, echo=print,
+             one_process: bool = True) -> dict:
     from simreal_nodes.ros.commands import replay
     from simreal_nodes.scene.schema import build_spec_models, load_scene
 
@@ -142,10 +143,12 @@ def run_demo(scene: str = DEFAULT_SCENE, out: str | Path = "out/demo", regenerat
 
         shutil.rmtree(run_bag)
     video = out / "overlay.mp4"
-    echo("[demo] replaying through the graph: " + " -> ".join(n.name for n in __import__(
-        "simreal_nodes.scene.graph", fromlist=["required_nodes"]).required_nodes(sc)))
+    echo("[demo] replaying through the graph" + (" (one process)" if one_process else " (a process per node)") + ": "
+         + " -> ".join(n.name for n in __import__("simreal_nodes.scene.graph",
+                                                   fromlist=["required_nodes"]).required_nodes(sc)))
     stats, _report, counts = replay(str(bag), str(scene_yaml), lossless=True, record=str(run_bag),
-                                   extra_params={"overlay": {"video": str(video.resolve())}}, echo=echo)
+                                   extra_params={"overlay": {"video": str(video.resolve())}}, echo=echo,
+                                   one_process=one_process)
     if stats is None:
         raise SimrealError("the replay did not run")
     params = evaluate_run(run_bag, bag, sc, out)

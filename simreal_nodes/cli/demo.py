@@ -8,7 +8,8 @@ import argparse
 def cmd_demo(a: argparse.Namespace) -> int:
     from simreal_nodes.demo import run_demo
 
-    m = run_demo(a.scene, a.output, regenerate=a.regenerate, resolution=a.resolution, duration=a.duration)
+    m = run_demo(a.scene, a.output, regenerate=a.regenerate, resolution=a.resolution, duration=a.duration,
+                 one_process=a.one_process)
     bad = [k for k, p in m["parameters"].items() if "error" in p]
     return 1 if bad or m["frames"]["frames_completed"] == 0 else 0
 
@@ -22,4 +23,6 @@ def add_demo(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--resolution", default="640x480")
     s.add_argument("--duration", type=float, help="seconds, when the sample bag has to be rendered")
     s.add_argument("--regenerate", action="store_true", help="render the sample bag again")
+    s.add_argument("--process-per-node", dest="one_process", action="store_false",
+                   help="each node in its own process (default: every node in one process, as `simreal launch`)")
     s.set_defaults(fn=cmd_demo)

@@ -18,6 +18,16 @@ def _remaps(items: list[str] | None) -> dict[str, str]:
     return out
 
 
+def _launch_mode(s: argparse.ArgumentParser) -> None:
+    g = s.add_mutually_exclusive_group()
+    g.add_argument("--one-process", dest="one_process", action="store_true", default=True,
+                   help="every node in one process on one executor (the default: faster end to end on every scene "
+                        "measured, benchmarks/results/graph.md)")
+    g.add_argument("--process-per-node", dest="one_process", action="store_false",
+                   help="each node in its own process: a fault in one node leaves the others (and the SLAM map) "
+                        "running")
+
+
 def cmd_launch(a: argparse.Namespace) -> int:
     from simreal_nodes.launch import Launcher, run_until_signal
     from simreal_nodes.scene.graph import required_nodes
@@ -66,9 +76,7 @@ def add_launch(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--respawn", type=int, default=2, help="restarts allowed per node (default 2)")
     s.add_argument("--no-standby", action="store_true",
                    help="no standby process per node: a restart is cold (slower: imports and DDS discovery)")
-    s.add_argument("--one-process", action="store_true",
-                   help="run every node in one process on one executor: faster end to end (benchmarks/results/"
-                        "graph.md), but a fault in one node ends them all and the slowest node paces the others")
+    _launch_mode(s)
     s.add_argument("--namespace", default="", help="start the nodes in this ROS namespace")
     s.add_argument("--discovery-range", choices=DISCOVERY_RANGES,
                    help="DDS discovery range (default: LOCALHOST unless ROS_AUTOMATIC_DISCOVERY_RANGE is set)")
@@ -90,9 +98,7 @@ def add_replay(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--namespace", default="", help="the graph's ROS namespace")
     s.add_argument("--no-standby", action="store_true",
                    help="live: no standby process per node (a restarted node comes back slower)")
-    s.add_argument("--one-process", action="store_true",
-                   help="run every node in one process on one executor: faster end to end (benchmarks/results/"
-                        "graph.md), but a fault in one node ends them all and the slowest node paces the others")
+    _launch_mode(s)
     s.set_defaults(fn=cmd_replay)
 
 

@@ -51,7 +51,8 @@ def replay(bag: str, scene_file: str, rate: float = 1.0, lossless: bool = False,
     """Replay ``bag`` into the graph of ``scene_file``; returns (PlayStats, BagReport, recorder counts).
     ``namespace``: the nodes' namespace; ``standby``: a standby process per node (:class:`~simreal_nodes.launch.
     Launcher`), by default in a live replay and not in a lossless one (a node that exits there is a fault to see,
-    and time does not press); ``one_process``: every node in one process on one executor."""
+    and time does not press); ``one_process``: every node in one process on one executor (the CLI's default; here
+    a process per node unless asked, so that a caller says which it runs)."""
     scene = load_scene(scene_file)
     if launch:
         build_spec_models(scene)  # before the nodes start: they find the built spec:NAME models in the cache

@@ -1,4 +1,5 @@
-"""`simreal launch`: only the required nodes, each its own process; SIGTERM / SIGINT stop all cleanly."""
+"""`simreal launch`: only the required nodes, in one process (the default) or each in its own; SIGTERM / SIGINT stop
+all cleanly."""
 
 import signal
 import subprocess
@@ -11,7 +12,7 @@ import pytest
 
 pytest.importorskip("rclpy")
 
-from simreal_nodes.launch import ros_environment
+from simreal_nodes.launch import ONE_PROCESS, ros_environment
 
 pytestmark = pytest.mark.ros
 
@@ -24,17 +25,20 @@ overlay: {enabled: false}
 
 
 def node_children(proc):
+    """The node processes of a launcher: one per node, or the one process that runs them all."""
     return [c for c in psutil.Process(proc.pid).children(recursive=True)
-            if "simreal_nodes.ros.nodes" in " ".join(c.cmdline())]
+            if any(m in " ".join(c.cmdline()) for m in ("simreal_nodes.ros.nodes", "simreal_nodes.ros.compose"))]
 
 
-@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
-def test_launch_starts_required_nodes_and_stops_cleanly(tmp_path, sig):
+@pytest.mark.parametrize("sig, mode", [(signal.SIGTERM, None), (signal.SIGINT, None),
+                                       (signal.SIGINT, "--process-per-node")])
+def test_launch_starts_required_nodes_and_stops_cleanly(tmp_path, sig, mode):
     f = tmp_path / "scene.yaml"
     f.write_text(textwrap.dedent(SCENE))
     env = ros_environment()
     env["ROS_LOG_DIR"] = str(tmp_path / "logs")
-    p = subprocess.Popen([sys.executable, "-m", "simreal_nodes.cli", "launch", str(f)], env=env,
+    p = subprocess.Popen([sys.executable, "-m", "simreal_nodes.cli", "launch", str(f)] + ([mode] if mode else []),
+                         env=env,
                          stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
         t_end = time.monotonic() + 20
@@ -46,14 +50,16 @@ def test_launch_starts_required_nodes_and_stops_cleanly(tmp_path, sig):
             time.sleep(0.2)
         time.sleep(2.0)
         kids = node_children(p)
-        assert [k.cmdline()[2] for k in kids] == ["simreal_nodes.ros.nodes.ingest"]
+        assert [k.cmdline()[2] for k in kids] == (["simreal_nodes.ros.nodes.ingest"] if mode else
+                                                  ["simreal_nodes.ros.compose"])
         p.send_signal(sig)
         out, _ = p.communicate(timeout=30)
     finally:
         if p.poll() is None:
             p.kill()
     assert p.returncode == 0, out
-    assert "ingest: exit code 0" in out
+    assert ("ingest: exit code 0" if mode else f"{ONE_PROCESS}: exit code 0") in out
+    assert "camera ingest from" in out  # the node itself came up (in the one process: by its own arguments)
     assert not any(k.is_running() and k.status() != psutil.STATUS_ZOMBIE for k in kids)
     assert (tmp_path / "logs").exists()
 
@@ -139,7 +145,7 @@ def test_nodes_end_when_their_launcher_is_killed(tmp_path):
 
     def read() -> None:
         for line in p.stdout:
-            if line.startswith("[ingest]") and "camera ingest from" in line:
+            if "camera ingest from" in line:
                 up.set()  # the node is built: past run_node's start, where it asked for the signal
 
     threading.Thread(target=read, daemon=True).start()
