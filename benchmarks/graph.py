@@ -23,6 +23,8 @@ import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
+
 from benchmarks.common import markdown_table, save
 from simreal_nodes.demo import node_metrics, sample_bag
 from simreal_nodes.metrics import STAGES
@@ -64,8 +66,7 @@ def run_case(scene, res, bag, scene_yaml, lossless, one_process) -> dict:
                 latency_p50=last["p50"], latency_p95=last["p95"], wall_s=wall,
                 cores_busy=sum(stats.cpu_s.values()) / d["play_s"] if d["play_s"] > 0 else float("nan"),
                 nodes_cpu_ms=sum(v for n, v in cpu.items() if n != PLAYER),
-                nodes_work_ms=sum(float(v["processing_ms_p50"]) for v in nodes.values()
-                                  if v.get("processing_ms_p50") not in (None, "")),
+                nodes_work_ms=float(np.nansum([_num(v.get("processing_ms_p50")) for v in nodes.values()])),
                 **{f"{n}_p50_ms": v.get("processing_ms_p50") for n, v in nodes.items()},
                 **{f"cpu_{n.split(' ')[0]}_ms": v for n, v in cpu.items()},
                 budget={n: {k: _num(v.get(f"{k}_ms_p50")) for k in (*STAGES, "processing")} for n, v in nodes.items()})

@@ -153,8 +153,10 @@ def main():
     a = ap.parse_args()
     rows = []
     if a.report or set(a.victims) != set(VICTIMS):
-        rows = [r for r in json.loads((RESULTS / "respawn.json").read_text())["runs"]
-                if a.report or r["node"] not in a.victims]
+        kept = RESULTS / "respawn.json"
+        if not kept.is_file():
+            ap.error(f"--report and --victims keep runs from {kept}, which does not exist: run all victims first")
+        rows = [r for r in json.loads(kept.read_text())["runs"] if a.report or r["node"] not in a.victims]
     if not a.report:
         bag, scene = sample()
         for standby in (True, False):

@@ -1,4 +1,4 @@
-"""`simreal launch SCENE.yaml`: start only the nodes a scene requires, one OS process each.
+"""`simreal launch SCENE.yaml`: start only the nodes a scene requires, in one process or one OS process each.
 
 There is no ros2 launch on PyPI, so this is a small process supervisor: each node runs as
 ``python -m <module> --ros-args -r __node:=NAME [-r __ns:=NAMESPACE] --params-file <generated.yaml> [-r from:=to]``
@@ -14,10 +14,11 @@ imports would slow the node it stands behind while that one recovers). Without a
 a new process, its imports, and a new participant that the others must discover
 (``./run bench respawn`` measures both).
 
-With ``one_process`` on (``simreal launch --one-process``), the nodes run in a single process on one executor
-(:mod:`simreal_nodes.ros.compose`), each with the arguments it would have had in its own; the launcher then watches,
-restarts and stops that one process (named :data:`ONE_PROCESS`) as it would a node. ``./run bench graph`` measures it
-against one process per node.
+With ``one_process`` on (the CLI's default; ``simreal launch --process-per-node`` turns it off), the nodes run in a
+single process on one executor (:mod:`simreal_nodes.ros.compose`), each with the arguments it would have had in its
+own; the launcher then watches, restarts and stops that one process (named :data:`ONE_PROCESS`) as it would a node,
+with one standby. ``./run bench graph`` measures it against one process per node. The class itself starts a process
+per node unless asked (its callers, tests and benchmarks, say which they run).
 """
 
 from __future__ import annotations
@@ -339,7 +340,7 @@ def run_until_signal(launcher: Launcher) -> int:
     stop = threading.Event()
 
     def handler(signum, _frame):
-        launcher.echo(f"[launch] {signal.Signals(signum).name}: stopping {len(launcher.procs)} nodes")
+        launcher.echo(f"[launch] {signal.Signals(signum).name}: stopping {len(launcher.nodes)} nodes")
         stop.set()
 
     old = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}

@@ -174,7 +174,7 @@ class ObjectTrackers:
         self.trackers.pop(oid, None)
         if self.background is not None and all(o["id"] in self.registrations for o in self.objects
                                                if o["anchor"]["kind"] == "registration"):
-            self.background.close()  # every object placed: the worker's memory is given back
+            self.background.close(wait=False)  # every object placed: the worker ends, its memory is given back
         return ""
 
     def close(self) -> None:
@@ -195,7 +195,8 @@ class ObjectTrackers:
         """Whether depth is still read: a registered object waits for its depth views, or a dense tracker for its
         reference view (the surroundings' depth), a sparse one for the state it starts from; afterwards depth is not
         read."""
-        return any(o["anchor"]["kind"] == "registration" and o["id"] not in self.registrations for o in self.objects) \
+        return any(o["anchor"]["kind"] == "registration" and o["id"] not in self.registrations
+                   and not (self.background is not None and self.background.pending(o["id"])) for o in self.objects) \
             or any(tr.dense is not None and not tr.dense.has_template for tr in self.trackers.values()) \
             or any(tr.needs_depth for tr in self.trackers.values()) \
             or any(o["tracking"]["measurements"] == "dense" and o["id"] not in self.trackers for o in self.objects)

@@ -9,12 +9,20 @@ the same; only the frame it arrives at differs. Lossless replay and the offline 
 (every frame in order: repeatable).
 
 The inputs and the result cross the process boundary as pickles over a pipe between this process and the child it
-spawned (as :class:`~simreal_nodes.vision.slam.optimize.AsyncBundleAdjuster` does); nothing is read from a file.
+spawned (as :class:`~simreal_nodes.vision.slam.optimize.AsyncBundleAdjuster` does); nothing is read from a file. A
+job (several MB: the fused cloud, the model) is handed to the pipe by a feeder thread, so a submit never waits for the
+worker to read it (a worker busy with another object, or still importing after a restart). The worker ends when the
+process that started it does, even by ``kill -9`` (Linux ``PR_SET_PDEATHSIG``), or at the end of its pipe.
 """
 
 from __future__ import annotations
 
 import contextlib
+import os
+import queue
+import signal
+import sys
+import threading
 from collections.abc import Callable
 from multiprocessing.connection import Connection
 from multiprocessing.process import BaseProcess
@@ -23,8 +31,21 @@ from typing import Any
 Result = tuple[str, Any]  # ("ok", Registration) | ("refused", why) | ("failed", why)
 
 
-def _serve(conn: Connection) -> None:
-    """The worker's loop: (object id, kind, args) in, (object id, status, value) out; None ends it."""
+def _end_with_parent(parent: int) -> None:
+    """SIGKILL this worker when its parent dies (Linux); where that cannot be asked, the pipe's end still ends it."""
+    if sys.platform.startswith("linux"):
+        import ctypes
+
+        pr_set_pdeathsig = 1
+        with contextlib.suppress(OSError, AttributeError):
+            ctypes.CDLL(None, use_errno=True).prctl(pr_set_pdeathsig, int(signal.SIGKILL), 0, 0, 0)
+    if os.getppid() != parent:  # it died before the line above
+        os._exit(0)
+
+
+def _serve(conn: Connection, parent: int) -> None:
+    """The worker's loop: (object id, kind, args, kwargs) in, (object id, status, value) out; None ends it."""
+    _end_with_parent(parent)
     from simreal_nodes.assimilation.registration import RegistrationError, register_loaded, register_rgbd
 
     run: dict[str, Callable[..., Any]] = {"rgbd": register_rgbd, "loaded": register_loaded}
@@ -46,35 +67,41 @@ def _serve(conn: Connection) -> None:
 
 class BackgroundRegistration:
     """One worker process that registers objects one after the other; :meth:`submit` a job, :meth:`poll` for its
-    result. A worker that died (killed, out of memory) is reported as a failed registration and started again at the
-    next submit."""
+    result. A worker that died (killed, out of memory) is reported as a failed registration and started again at
+    once, ready for the next submit. Nothing here waits on the worker but :meth:`close` with ``wait``."""
 
     def __init__(self) -> None:
         self._proc: BaseProcess | None = None
         self._conn: Connection | None = None
+        self._jobs: queue.SimpleQueue[Any] | None = None
         self._pending: set[str] = set()
         self._done: dict[str, Result] = {}
         self.start()
 
     def start(self) -> None:
+        """Start the worker (its imports take a few seconds, in its own process) and its feeder thread."""
         import multiprocessing as mp
 
         if self._proc is not None and self._proc.is_alive():
             return
+        self._drop_pipe()
         ctx = mp.get_context("spawn")
-        self._conn, child = ctx.Pipe()
-        proc = ctx.Process(target=_serve, args=(child,), daemon=True, name="simreal-registration")
+        conn, child = ctx.Pipe()
+        proc = ctx.Process(target=_serve, args=(child, os.getpid()), daemon=True, name="simreal-registration")
         proc.start()
-        self._proc = proc
         child.close()
+        jobs: queue.SimpleQueue[Any] = queue.SimpleQueue()
+        threading.Thread(target=_feed, args=(jobs, conn), daemon=True, name="simreal-registration-feeder").start()
+        self._proc, self._conn, self._jobs = proc, conn, jobs
 
     def submit(self, oid: str, kind: str, *args: Any, **kwargs: Any) -> None:
-        """Register object ``oid`` with ``register_rgbd`` (kind ``rgbd``) or ``register_loaded`` (``loaded``)."""
+        """Register object ``oid`` with ``register_rgbd`` (kind ``rgbd``) or ``register_loaded`` (``loaded``); returns
+        at once (the feeder thread pickles the job and writes it to the worker)."""
         if kind not in ("rgbd", "loaded"):
             raise ValueError(f"registration kind: expected 'rgbd' or 'loaded'; found {kind!r}")
         self.start()
-        assert self._conn is not None  # start() made it
-        self._conn.send((oid, kind, args, kwargs))
+        assert self._jobs is not None  # start() made it
+        self._jobs.put((oid, kind, args, kwargs))
         self._pending.add(oid)
 
     def pending(self, oid: str) -> bool:
@@ -101,15 +128,41 @@ class BackgroundRegistration:
                 self._done[oid] = ("failed", f"the registration worker exited (code {code})")
             self._pending.clear()
             self._proc = None
+            self.start()  # a new worker, importing while the views are collected again
 
-    def close(self) -> None:
-        """End the worker (it is started again by a later submit)."""
+    def _drop_pipe(self) -> None:
+        if self._jobs is not None:
+            self._jobs.put(None)  # the feeder ends (after the job it may be writing)
         if self._conn is not None:
-            with contextlib.suppress(BrokenPipeError, OSError):
-                self._conn.send(None)
-        if self._proc is not None:
-            self._proc.join(timeout=2)
-            if self._proc.is_alive():
-                self._proc.terminate()
-        self._proc = self._conn = None
+            with contextlib.suppress(OSError):
+                self._conn.close()
+        self._conn = self._jobs = None
+
+    def close(self, wait: bool = True) -> None:
+        """End the worker (a later submit starts another): told to end after its job, then, with ``wait``, waited
+        for up to 2 s and terminated. Without ``wait`` (from a frame callback) nothing blocks: it ends on its own."""
+        if self._jobs is not None:
+            self._jobs.put(None)  # after any job still queued: the worker reads None and returns
+        proc, self._proc = self._proc, None
+        self._jobs = None  # the feeder owns the connection now: it closes it after writing the end
+        self._conn = None
         self._pending.clear()
+        if proc is not None and wait:
+            proc.join(timeout=2)
+            if proc.is_alive():
+                proc.terminate()
+
+
+def _feed(jobs: queue.SimpleQueue[Any], conn: Connection) -> None:
+    """Write the queued jobs to the worker, in order; None (from close) is written on as the worker's end, then the
+    thread closes the connection and ends."""
+    while True:
+        job = jobs.get()
+        try:
+            conn.send(job)
+        except (OSError, ValueError):  # the worker is gone (its death is found by poll) or the pipe was closed
+            return
+        if job is None:
+            with contextlib.suppress(OSError):
+                conn.close()
+            return

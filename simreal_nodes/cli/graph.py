@@ -73,9 +73,10 @@ def add_launch(sub: argparse._SubParsersAction) -> None:
     s.add_argument("scene")
     s.add_argument("--remap", action="append", metavar="FROM:=TO", help="remap a topic in every node")
     s.add_argument("--lossless", action="store_true", help="reliable QoS everywhere")
-    s.add_argument("--respawn", type=int, default=2, help="restarts allowed per node (default 2)")
+    s.add_argument("--respawn", type=int, default=2,
+                   help="restarts allowed per node process (default 2; in one process, of the whole graph)")
     s.add_argument("--no-standby", action="store_true",
-                   help="no standby process per node: a restart is cold (slower: imports and DDS discovery)")
+                   help="no standby process (one per node process): a restart is cold (slower: imports, discovery)")
     _launch_mode(s)
     s.add_argument("--namespace", default="", help="start the nodes in this ROS namespace")
     s.add_argument("--discovery-range", choices=DISCOVERY_RANGES,
@@ -97,7 +98,7 @@ def add_replay(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--metrics", metavar="JSON", help="write replay statistics here")
     s.add_argument("--namespace", default="", help="the graph's ROS namespace")
     s.add_argument("--no-standby", action="store_true",
-                   help="live: no standby process per node (a restarted node comes back slower)")
+                   help="live: no standby process (one per node process): a restarted node comes back slower")
     _launch_mode(s)
     s.set_defaults(fn=cmd_replay)
 

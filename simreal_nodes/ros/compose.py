@@ -10,8 +10,9 @@ separate processes; the nodes share one DDS participant and one SingleThreadedEx
 (:func:`~simreal_nodes.ros.node.run_nodes`), and their topics stay visible to other processes.
 
 The trade, measured by ``./run bench graph`` (``benchmarks/results/graph.md``): one process saves the per-process
-overhead (an interpreter, a participant, the executor's wake-ups per node) but runs every callback on one thread,
-so on two cores the nodes no longer overlap; the launcher's default stays one process per node where that wins.
+overhead (an interpreter, a participant, a publication that wakes another process) but runs every callback on one
+thread, so the nodes no longer overlap and a fault in one ends them all. On two cores it was faster end to end on
+every scene measured, so it is the CLI's default (``--process-per-node`` for one each).
 """
 
 from __future__ import annotations

@@ -298,7 +298,10 @@ def run_nodes(builders: list[Callable[[], Node]], args=None) -> int:
                     close()
                 except Exception as e:  # noqa: BLE001
                     print(f"[{node.get_name()}] close failed: {e}", flush=True)
-            node.destroy_node()
+            try:  # one node's failure here must not keep the others (in one process) from closing
+                node.destroy_node()
+            except Exception as e:  # noqa: BLE001
+                print(f"[{node.get_name()}] destroy failed: {e}", flush=True)
         if rclpy.ok():
             rclpy.shutdown()
     return 0

@@ -38,28 +38,36 @@ def test_launch_starts_required_nodes_and_stops_cleanly(tmp_path, sig, mode):
     env = ros_environment()
     env["ROS_LOG_DIR"] = str(tmp_path / "logs")
     p = subprocess.Popen([sys.executable, "-m", "simreal_nodes.cli", "launch", str(f)] + ([mode] if mode else []),
-                         env=env,
-                         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+                         env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    import threading
+
+    lines: list[str] = []
+    up = threading.Event()
+
+    def read() -> None:
+        assert p.stdout is not None
+        for line in p.stdout:
+            lines.append(line)
+            if "camera ingest from" in line:
+                up.set()  # the node is built (in the one process: by its own arguments), its handlers in place
+
+    reader = threading.Thread(target=read, daemon=True)
+    reader.start()
+    kids = []
     try:
-        t_end = time.monotonic() + 20
-        kids = []
-        while time.monotonic() < t_end:
-            kids = node_children(p)
-            if kids:
-                break
-            time.sleep(0.2)
-        time.sleep(2.0)
+        assert up.wait(60), "the node did not come up:\n" + "".join(lines)
         kids = node_children(p)
         assert [k.cmdline()[2] for k in kids] == (["simreal_nodes.ros.nodes.ingest"] if mode else
                                                   ["simreal_nodes.ros.compose"])
         p.send_signal(sig)
-        out, _ = p.communicate(timeout=30)
+        p.wait(30)
+        reader.join(10)
     finally:
         if p.poll() is None:
             p.kill()
+    out = "".join(lines)
     assert p.returncode == 0, out
     assert ("ingest: exit code 0" if mode else f"{ONE_PROCESS}: exit code 0") in out
-    assert "camera ingest from" in out  # the node itself came up (in the one process: by its own arguments)
     assert not any(k.is_running() and k.status() != psutil.STATUS_ZOMBIE for k in kids)
     assert (tmp_path / "logs").exists()
 

@@ -136,16 +136,19 @@ class TrackerNode(SimrealNode):
         bgr = depth = None
         try:
             bgr = images.bgr8_of(frame["image"]) if "image" in frame and self.need_image else None
+            self.metrics.lap("decode")  # the depth below is work where it is SGBM on a stereo pair
             depth = self._depth(frame)
         except (ImageFormatError, ValueError) as e:
             self.drop(head.stamp, f"malformed image: {e}")
             return
-        self.metrics.lap("decode")
         estimates = self.core.update(T_wc, ids, P, uv, bgr, depth)
+        # what the localization is told: the object's points where the estimate predicts them, its image regions
+        feedback = self.core.feedback() if self.static_pose is None else None
+        focus = self.core.focus(T_wc) if self.static_pose is None else []
         self.metrics.lap("work")
         for oid, est in estimates.items():
             self._publish(oid, est, head)
-        self._coordinate_localization(any(e.deforming for e in estimates.values()), head, T_wc)
+        self._coordinate_localization(any(e.deforming for e in estimates.values()), head, feedback, focus)
         self.metrics.lap("encode")
         self.metrics.done(t0, self.age_ms(head.stamp))
         self.progress(head.stamp)
@@ -161,16 +164,17 @@ class TrackerNode(SimrealNode):
         self.metrics.extra[f"{oid}_solve_ms"] = f"{est.solve_ms:.2f}"
         self.set_status("ok" if est.state == EstimateState.OK else "warn", f"{oid}: " + (est.reason or "ok"))
 
-    def _coordinate_localization(self, deforming: bool, head, T_wc: np.ndarray | None) -> None:
-        """Points on the object leave the pose estimate and are searched where the estimate predicts them; each
-        object's image region gets its share of the next frame's features; mapping stops once deformation appears
-        if the scene asks for it (§4.4.1)."""
-        if self.static_pose is None:
-            ids, P, drop = self.core.feedback()
+    def _coordinate_localization(self, deforming: bool, head, feedback, focus) -> None:
+        """Points on the object leave the pose estimate and are searched where the estimate predicts them
+        (``feedback``: :meth:`ObjectTrackers.feedback`, None with a static camera); each object's image region
+        (``focus``) gets its share of the next frame's features; mapping stops once deformation appears if the scene
+        asks for it (§4.4.1)."""
+        if feedback is not None:
+            ids, P, drop = feedback
             if len(ids):
                 self.pub_deformable.publish(cloud_msg(P, head, self.map_frame, {"id": ids, "drop": drop}))
-            for k, poly in self.core.focus(T_wc):
-                self.pub_focus.publish(focus_msg(poly, k, head, self.camera_frame))
+        for k, poly in focus:
+            self.pub_focus.publish(focus_msg(poly, k, head, self.camera_frame))
         if deforming and self.freeze_map and not self._loc_only_requested and self.loc_client.service_is_ready():
             self.loc_client.call_async(SetBool.Request(data=True))
             self._loc_only_requested = True
