@@ -21,8 +21,8 @@ def _remaps(items: list[str] | None) -> dict[str, str]:
 def _launch_mode(s: argparse.ArgumentParser) -> None:
     g = s.add_mutually_exclusive_group()
     g.add_argument("--one-process", dest="one_process", action="store_true", default=True,
-                   help="every node in one process on one executor (the default: faster end to end on every scene "
-                        "measured, benchmarks/results/graph.md)")
+                   help="every node in one process on one executor (the default: faster end to end or level on every "
+                        "scene measured, benchmarks/results/graph.md)")
     g.add_argument("--process-per-node", dest="one_process", action="store_false",
                    help="each node in its own process: a fault in one node leaves the others (and the SLAM map) "
                         "running")

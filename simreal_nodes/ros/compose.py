@@ -11,8 +11,8 @@ separate processes; the nodes share one DDS participant and one SingleThreadedEx
 
 The trade, measured by ``./run bench graph`` (``benchmarks/results/graph.md``): one process saves the per-process
 overhead (an interpreter, a participant, a publication that wakes another process) but runs every callback on one
-thread, so the nodes no longer overlap and a fault in one ends them all. On two cores it was faster end to end on
-every scene measured, so it is the CLI's default (``--process-per-node`` for one each).
+thread, so the nodes no longer overlap and a fault in one ends them all. On two cores it was faster end to end or level
+on every scene measured, so it is the CLI's default (``--process-per-node`` for one each).
 """
 
 from __future__ import annotations
