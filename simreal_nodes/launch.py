@@ -301,9 +301,13 @@ class Launcher:
         return {p.spec.name: p.popen is not None and p.popen.poll() is None for p in self.procs}
 
     def stop(self, timeout: float = 8.0) -> dict[str, int | None]:
-        """SIGINT every node, wait, then SIGTERM, then SIGKILL; end the standbys. Returns the nodes' exit codes."""
+        """SIGINT every node, wait, then SIGTERM, then SIGKILL; end the standbys. Returns the nodes' exit codes.
+        ``timeout``: the wait after SIGINT for one node; a process running several closes them one after the other
+        (worker processes joined, a map saved, a video finished), so it is given that much per node."""
         with self._lock:
             self._stopping = True
+        if len(self.procs) < len(self.nodes):  # the one-process launch
+            timeout *= len(self.nodes)
         # the processes themselves: with _stopping set, _watch no longer replaces or clears any p.popen
         live = [p.popen for p in self.procs if p.popen is not None and p.popen.poll() is None]
         # standbys end at the EOF of their stdin: they are signalled only from SIGTERM on, if they have not
