@@ -27,7 +27,7 @@ PKG = "simreal_nodes"
 #   `simreal --help` needs no rclpy), so they sit on top of ros.
 # - studies (thesis reproductions, e.g. chapter 3) use the core but nothing may depend on them: the very top.
 LAYERS: list[set[str]] = [
-    {"__init__", "errors", "geometry", "camera", "spec", "states", "sync", "metrics"},
+    {"__init__", "errors", "geometry", "camera", "spec", "states", "sync", "metrics", "lifetime"},
     {"physics", "io"},
     {"rom", "vision"},
     {"assimilation", "collision", "render", "aero"},

@@ -122,6 +122,7 @@ class ObjectTrackers:
         oid, cfg = o["id"], self.registration
         if o["anchor"]["kind"] != "registration" or oid in self.registrations:
             return ""
+        registering = f"registering from {cfg.frames} depth views (in the background)"
         if self.background is not None:
             done = self.background.poll(oid)
             if done is not None:
@@ -130,7 +131,7 @@ class ObjectTrackers:
                     return self._placed(oid, value)
                 return f"waiting for registration: {value}"  # the views are collected afresh from the next frame
             if self.background.pending(oid):
-                return f"registering from {cfg.frames} depth views (in the background)"
+                return registering
         if T_wc is None:
             return "waiting for registration: no camera pose yet"
         if depth is None:
@@ -157,12 +158,12 @@ class ObjectTrackers:
                 if self.background is not None:
                     self.background.submit(oid, "loaded", cloud, model, guess, cams, lo[:n_mu], hi[:n_mu], cfg,
                                            n_modes=n_modes)
-                    return f"registering from {cfg.frames} depth views (in the background)"
+                    return registering
                 reg = register_loaded(cloud, model, guess, cams, lo[:n_mu], hi[:n_mu], cfg, n_modes=n_modes)
             else:
                 if self.background is not None:
                     self.background.submit(oid, "rgbd", cloud, model, guess, cams, cfg)
-                    return f"registering from {cfg.frames} depth views (in the background)"
+                    return registering
                 reg = register_rgbd(cloud, model, guess, cams, cfg)
         except RegistrationError as e:
             return f"waiting for registration: {e.args[0]}"

@@ -21,31 +21,21 @@ import contextlib
 import os
 import queue
 import signal
-import sys
 import threading
 from collections.abc import Callable
 from multiprocessing.connection import Connection
 from multiprocessing.process import BaseProcess
 from typing import Any
 
+from simreal_nodes.lifetime import end_with_parent
+
 Result = tuple[str, Any]  # ("ok", Registration) | ("refused", why) | ("failed", why)
-
-
-def _end_with_parent(parent: int) -> None:
-    """SIGKILL this worker when its parent dies (Linux); where that cannot be asked, the pipe's end still ends it."""
-    if sys.platform.startswith("linux"):
-        import ctypes
-
-        pr_set_pdeathsig = 1
-        with contextlib.suppress(OSError, AttributeError):
-            ctypes.CDLL(None, use_errno=True).prctl(pr_set_pdeathsig, int(signal.SIGKILL), 0, 0, 0)
-    if os.getppid() != parent:  # it died before the line above
-        os._exit(0)
 
 
 def _serve(conn: Connection, parent: int) -> None:
     """The worker's loop: (object id, kind, args, kwargs) in, (object id, status, value) out; None ends it."""
-    _end_with_parent(parent)
+    if not end_with_parent(parent, signal.SIGKILL):  # the node died before the request: no signal will come
+        os._exit(0)
     from simreal_nodes.assimilation.registration import RegistrationError, register_loaded, register_rgbd
 
     run: dict[str, Callable[..., Any]] = {"rgbd": register_rgbd, "loaded": register_loaded}

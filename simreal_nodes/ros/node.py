@@ -7,7 +7,6 @@ node keeps running.
 
 from __future__ import annotations
 
-import contextlib
 import functools
 import os
 import sys
@@ -24,6 +23,7 @@ from rclpy.node import Node
 from std_msgs.msg import Header
 
 from simreal_nodes.launch import LAUNCHER_PID_ENV, PROMOTE, STANDBY_ENV
+from simreal_nodes.lifetime import end_with_parent
 from simreal_nodes.metrics import StageMetrics
 from simreal_nodes.ros.convert import ns_to_stamp, stamp_ns
 from simreal_nodes.ros.qos import reliable_qos
@@ -237,15 +237,11 @@ def _end_with_launcher() -> bool:
     launcher killed with ``kill -9`` leaves no node publishing behind it (they run in their own sessions, out of
     reach of the terminal's Ctrl-C). False when the launcher is already gone."""
     launcher = os.environ.get(LAUNCHER_PID_ENV)
-    if not launcher or not launcher.isdigit() or not sys.platform.startswith("linux"):
+    if not launcher or not launcher.isdigit():
         return True
-    import ctypes
     import signal
 
-    pr_set_pdeathsig = 1
-    with contextlib.suppress(OSError, AttributeError):
-        ctypes.CDLL(None, use_errno=True).prctl(pr_set_pdeathsig, int(signal.SIGTERM), 0, 0, 0)
-    return os.getppid() == int(launcher)  # it died before the line above: no signal will come
+    return end_with_parent(int(launcher), signal.SIGTERM)
 
 
 def run_node(node_cls, args=None) -> int:
