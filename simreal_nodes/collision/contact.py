@@ -11,6 +11,13 @@ Per frame:
                                                        within delta again: held, the pseudo-time oscillating by one
                                                        step where the surface follows the point; else RELEASING)
 
+Another virtual object that presses this one (§5.4.1, virtual-virtual contact) is an exact surface, not a noisy
+sensor's points: its "distance" is the gap between the two surfaces along the direction each contact node would
+be pushed (its load direction), negative where they overlap, and the contact starts at a gap of zero, not within
+delta (delta is the sensor's margin: a depth camera sees a real probe's near side a few millimetres off its
+surface). So the pushed object touches where the pusher's drawn surface reaches it and follows it there, instead of
+starting delta early and staying delta ahead of it.
+
 The contact nodes are the model's precomputed load points on its *surface*, at their *deformed* positions, so a
 virtual surface pushed by a finger moves away from it and the pseudo-time settles where the surface follows the
 finger. "On its surface": a load point that is a node of the drawn surface is its own contact node; a scanned body's
@@ -33,11 +40,25 @@ from simreal_nodes.rom.state import LOAD_POSITION_AXES, LoadPointStates, ModelSt
 from simreal_nodes.states import ContactPhase
 
 
+@dataclass(frozen=True)
+class PusherSurface:
+    """Another virtual object's deformed surface that can press this one (virtual-virtual contact, §5.4.1):
+    ``vertices`` (n, 3) in the world frame and its closed surface's ``triangles`` (m, 3), outward-oriented;
+    ``step_motion``: how far the pusher's own surface moves back when its pseudo-time steps back once while its
+    contact is held (Alg. 5.1 oscillates by one step there; 0 when it is not held), metres."""
+
+    vertices: np.ndarray
+    triangles: np.ndarray
+    step_motion: float = 0.0
+
+
 @dataclass
 class ContactState:
     pseudo_time: float = 0.0
     load_point: int = -1  # index into the model's load points (-1: none)
     node: int = -1  # model node of that load point
+    # the nearest real point's distance to a contact node, or, where a pushing virtual surface is nearer to contact
+    # (its gap less delta), that gap along the push direction (negative: the surfaces overlap); metres
     min_distance: float = float("inf")
     nearest_load_point: int = -1  # where the nearest real point is now (may differ while a contact is held)
     state: ContactPhase = ContactPhase.FREE
@@ -85,6 +106,22 @@ class ContactTracker:
         self.contact_nodes = self._surface_nodes_of(model, self.lp_nodes)
         self.view = model.deformation_view(self.contact_nodes, n_modes)
         self.active = self._active_load_points(min_fraction)
+        self.push_directions = self._push_directions(model)
+
+    def _push_directions(self, model: ReducedModel) -> np.ndarray:
+        """Unit direction (object frame) in which a touching surface pushes each load point: the model's load
+        direction, or where it has none the inward normal of the drawn surface at the contact node."""
+        if model.load_directions is not None:
+            d = np.asarray(model.load_directions, dtype=np.float64).reshape(-1, 3)
+        else:
+            P, F = np.asarray(model.points, dtype=np.float64), np.asarray(model.surface, dtype=np.int64)
+            n = np.zeros_like(P)
+            if len(F):
+                fn = np.cross(P[F[:, 1]] - P[F[:, 0]], P[F[:, 2]] - P[F[:, 0]])  # area-weighted, outward
+                for k in range(3):
+                    np.add.at(n, F[:, k], fn)
+            d = -n[self.contact_nodes]
+        return d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12)
 
     @staticmethod
     def _surface_nodes_of(model: ReducedModel, nodes: np.ndarray) -> np.ndarray:
@@ -106,6 +143,7 @@ class ContactTracker:
         for i in range(len(self.lp_nodes)):
             u = self.model.deformation(self.load_states.state(i, self.tau_max), nodes=[self.lp_nodes[i]])[0]
             full[i] = np.linalg.norm(u)
+        self.full_motion = full
         size = float(np.max(np.ptp(np.asarray(self.model.points), axis=0)))
         act = full >= min_fraction * size if full.max() > 0 else np.ones(len(full), bool)
         if not act.any():  # a stiff object: none moves by that much; keep those within 2 % of the largest
@@ -167,7 +205,7 @@ class ContactTracker:
         sel = gap <= gap.min() + 1e-3
         return tuple(float(v) for v in q[sel].mean(axis=0))
 
-    def _step_motion(self, st: ContactState) -> float:
+    def step_motion(self, st: ContactState) -> float:
         """How far the loaded contact node moves when the pseudo-time steps back once from where it is (metres)."""
         if st.load_point < 0 or st.pseudo_time <= 0:
             return 0.0
@@ -178,14 +216,47 @@ class ContactTracker:
                                                                                                nodes=node)
         return float(np.linalg.norm(d))
 
+    def _pusher_gap(self, nodes: np.ndarray,
+                    surfaces: list[PusherSurface]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Virtual-virtual contact: for each active contact node (world ``nodes``), the gap to the pushing
+        surfaces along its push direction (negative: they overlap; inf: none lies across it) and where that line
+        meets them. The line through the node against its push direction is cut with the pusher's triangles
+        that face the node (outward normal along the push direction); an overlap counts down to twice the
+        node's largest precomputed motion (deeper, the surface behind would belong to another part of the
+        pusher). Third: the winning surface's own step motion per node."""
+        X = nodes[self.active]
+        D = self.push_directions[self.active] @ self.T[:3, :3].T
+        gap = np.full(len(X), np.inf)
+        hit = np.full((len(X), 3), np.nan)
+        slack = np.zeros(len(X))
+        bound = 2.0 * self.full_motion[self.active] + self.threshold
+        for s in surfaces:
+            t = _line_triangle_gaps(X, D, np.asarray(s.vertices, np.float64), np.asarray(s.triangles, np.int64))
+            t[t < -bound[:, None]] = np.inf
+            j = np.argmin(t, axis=1) if t.shape[1] else np.zeros(len(X), np.int64)
+            tj = t[np.arange(len(X)), j] if t.shape[1] else np.full(len(X), np.inf)
+            better = tj < gap
+            gap[better] = tj[better]
+            hit[better] = X[better] - tj[better, None] * D[better]
+            slack[better] = float(s.step_motion)
+        return gap, hit, slack
+
     # -- Alg. 5.1 ------------------------------------------------------------------------------------------
-    def update(self, points_world: np.ndarray | None) -> ContactState:
-        """One frame. ``points_world``: (n, 3) real (or other virtual) points, world frame; None or empty
-        means no valid data this frame (the deformation relaxes, state NO_DATA)."""
+    def update(self, points_world: np.ndarray | None,
+               surfaces: list[PusherSurface] | None = None) -> ContactState:
+        """One frame. ``points_world``: (n, 3) real points, world frame; ``surfaces``: the deformed surfaces of the
+        virtual objects that push this one. No valid points and no surface means no data this frame (the
+        deformation relaxes, state NO_DATA).
+
+        A real point is in contact within delta of a contact node; a pushing surface at a gap of zero or less
+        along the node's push direction. Alg. 5.1 runs on the nearer to contact of the two ("clearance": the
+        distance less delta, or the gap)."""
         st = self.state
         pts = None if points_world is None else np.asarray(points_world, dtype=np.float64).reshape(-1, 3)
         if pts is not None and pts.size:
             pts = pts[np.all(np.isfinite(pts), axis=1)]
+        surfaces = [s for s in (surfaces or []) if len(s.triangles)]
+        has_data = (pts is not None and len(pts) > 0) or bool(surfaces)
         nodes = self.contact_nodes_world()
         st.points_used = 0 if pts is None else len(pts)
         d_min, nearest = np.inf, -1
@@ -205,28 +276,41 @@ class ContactTracker:
                 k = int(np.argmin(d))
                 nearest, d_min = int(self.active[k]), float(d[k])
                 st.contact_point = tuple(float(x) for x in near[idx[k]])
+        clearance = d_min - self.threshold
+        virtual, pusher_slack = False, 0.0
+        if surfaces:
+            gap, hit, slack = self._pusher_gap(nodes, surfaces)
+            k = int(np.argmin(gap))
+            if gap[k] < clearance:  # the pushing surface is nearer to contact than any real point
+                virtual, clearance, nearest, d_min = True, float(gap[k]), int(self.active[k]), float(gap[k])
+                st.contact_point = tuple(float(x) for x in hit[k])
+                pusher_slack = float(slack[k])
         st.min_distance, st.nearest_load_point = d_min, nearest
-        if d_min < self.threshold and st.pseudo_time < self.tau_max - 1e-12:
+        if clearance < 0 and st.pseudo_time < self.tau_max - 1e-12:
             if st.pseudo_time <= 0 or st.load_point < 0:
-                st.load_point = nearest  # a new contact starts where the real point is
-                if self.anywhere:  # the real points within delta of the object: where they touch it first
+                st.load_point = nearest  # a new contact starts where the real point (or the pushing surface) is
+                if self.anywhere and virtual:  # where the pushing surface overlaps the object most
+                    sel = gap <= gap.min() + 1e-3
+                    st.position = tuple(float(v) for v in G.transform(G.inv(self.T), hit[sel]).mean(axis=0))
+                elif self.anywhere:  # the real points within delta of the object: where they touch it first
                     dn = cast(tuple[np.ndarray, np.ndarray], cKDTree(nodes[self.active]).query(near, k=1))[0]
                     st.position = self._contact_position(near[dn < self.threshold], nodes)
             st.pseudo_time = min(self.tau_max, st.pseudo_time + self.step)
             st.state, st.reason = ContactPhase.CONTACT, ""
-        elif d_min < self.threshold:
+        elif clearance < 0:
             st.state, st.reason = ContactPhase.CONTACT, "largest precomputed deformation reached"
         elif st.pseudo_time > self.tau_min + 1e-12:
-            # still held: one step back would bring the surface within delta again (the pseudo-time then oscillates
-            # by one step about where the surface follows the real point, and the contact is still there)
-            held = d_min < self.threshold + self._step_motion(st)
+            # still held: one step back would bring the surface within delta (or onto the pushing surface) again:
+            # the pseudo-time then oscillates by one step about where the surface follows, and the contact is there.
+            # A pushing surface whose own held contact just stepped back has moved away by its step motion too
+            held = clearance < self.step_motion(st) + pusher_slack
             st.pseudo_time = max(self.tau_min, st.pseudo_time - self.step)
             held = held and st.pseudo_time > self.tau_min + 1e-12
             st.state = ContactPhase.CONTACT if held else ContactPhase.RELEASING
-            st.reason = "" if pts is not None and len(pts) else "no valid points: relaxing"
+            st.reason = "" if has_data else "no valid points: relaxing"
         else:
-            st.state = ContactPhase.NO_DATA if pts is None or len(pts) == 0 else ContactPhase.FREE
-            st.reason = "no valid points" if st.state == ContactPhase.NO_DATA else ""
+            st.state = ContactPhase.FREE if has_data else ContactPhase.NO_DATA
+            st.reason = "" if has_data else "no valid points"
         if st.pseudo_time <= 1e-12:
             st.pseudo_time = 0.0
             st.load_point = -1
@@ -235,36 +319,23 @@ class ContactTracker:
         return st
 
 
-def facing_surface_samples(P: np.ndarray, tris: np.ndarray, target: np.ndarray, spacing: float) -> np.ndarray:
-    """Samples of the surface triangles (P, tris) whose outward normal points towards ``target``: the side of
-    a virtual object that can press another one (virtual-virtual contact, §5.4.1)."""
-    tris = np.asarray(tris)
-    a, b, c = P[tris[:, 0]], P[tris[:, 1]], P[tris[:, 2]]
-    n = np.cross(b - a, c - a)
-    facing = np.einsum("ij,ij->i", n, np.asarray(target) - (a + b + c) / 3) > 0
-    return surface_samples(P, tris[facing], spacing)
-
-
-def surface_samples(V: np.ndarray, F: np.ndarray, spacing: float) -> np.ndarray:
-    """Points spread over triangles (V, F) about ``spacing`` apart: a virtual surface seen as a point set
-    (virtual-virtual contact, §5.4.1), dense enough that point distances approximate surface distances."""
-    V = np.asarray(V, dtype=np.float64)
-    F = np.asarray(F, dtype=np.int64)
-    if len(F) == 0:
-        return np.zeros((0, 3))
-    A, B, C = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
-    edge = np.max(np.stack([np.linalg.norm(B - A, axis=1), np.linalg.norm(C - B, axis=1),
-                            np.linalg.norm(A - C, axis=1)]), axis=0)
-    out = [V[np.unique(F)]]
-    for n in np.unique(np.clip(np.ceil(edge / max(spacing, 1e-9)).astype(int), 1, 16)):
-        sel = np.ceil(edge / max(spacing, 1e-9)).clip(1, 16).astype(int) == n
-        if n < 2:
-            continue
-        i, j = np.meshgrid(np.arange(n + 1), np.arange(n + 1), indexing="ij")
-        keep = i + j <= n
-        a, b = i[keep] / n, j[keep] / n
-        c = 1 - a - b
-        P = (a[None, :, None] * A[sel][:, None, :] + b[None, :, None] * B[sel][:, None, :]
-             + c[None, :, None] * C[sel][:, None, :])
-        out.append(P.reshape(-1, 3))
-    return np.concatenate(out)
+def _line_triangle_gaps(X: np.ndarray, D: np.ndarray, V: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """(n, m) signed gaps t at which the line X_i - t D_i (through each point, against its unit push direction
+    D_i) crosses triangle j of (V, F), for the triangles that face the point (outward normal along D_i); inf where
+    it misses one or the triangle faces away. Moller-Trumbore with the ray direction -D_i, t of either sign."""
+    if len(F) == 0 or len(X) == 0:
+        return np.full((len(X), len(F)), np.inf)
+    A, e1, e2 = V[F[:, 0]], V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]
+    r = -D[:, None, :]
+    p = np.cross(r, e2[None])
+    det = np.einsum("mk,nmk->nm", e1, p)  # = D_i . (e1 x e2): > 0 where the triangle faces the point
+    ok = det > 1e-14 * np.einsum("mk,mk->m", e1, e1)[None]
+    inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
+    s = X[:, None, :] - A[None]
+    u = np.einsum("nmk,nmk->nm", s, p) * inv
+    q = np.cross(s, e1[None])
+    v = np.einsum("nmk,nmk->nm", np.broadcast_to(r, q.shape), q) * inv
+    t = np.einsum("mk,nmk->nm", e2, q) * inv
+    tol = 1e-9
+    inside = ok & (u >= -tol) & (v >= -tol) & (u + v <= 1 + tol)
+    return np.where(inside, t, np.inf)

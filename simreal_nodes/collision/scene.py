@@ -1,8 +1,9 @@
 """One frame of collision for all the colliding objects of a scene (thesis Alg. 5.1, §5.4.1).
 
 Real points come from the depth image, decimated per object and back-projected into the map frame; an object
-listed in another object's ``collision.pushes`` also receives that object's deformed surface as points
-(virtual-virtual contact), so the pushing object is updated first. The collision node converts messages and
+listed in another object's ``collision.pushes`` also receives that object's deformed surface (virtual-virtual
+contact: an exact surface, touching at a gap of zero along the push direction, not within the depth's delta), so the
+pushing object is updated first. The collision node converts messages and
 publishes; everything between the depth image and the contact states is here, testable without ROS.
 """
 
@@ -14,7 +15,7 @@ import numpy as np
 
 from simreal_nodes import geometry as G
 from simreal_nodes.camera import CameraModel
-from simreal_nodes.collision.contact import ContactState, ContactTracker, facing_surface_samples
+from simreal_nodes.collision.contact import ContactState, ContactTracker, PusherSurface
 from simreal_nodes.rom.model import ReducedModel
 from simreal_nodes.vision.depth import depth_points
 
@@ -40,6 +41,19 @@ def pusher_order(objects: list[dict]) -> list[dict]:
     return [by_id[i] for i in out]
 
 
+def outward_triangles(P: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """A closed surface's triangles turned outward: reversed when the volume they enclose comes out negative (the
+    pusher's gap test takes the triangles whose outward normal faces the pushed object)."""
+    F = np.asarray(F, dtype=np.int64).reshape(-1, 3)
+    P = np.asarray(P, dtype=np.float64)
+    if len(F) == 0:
+        return F
+    c = P[np.unique(F)].mean(axis=0)  # about the surface's own centre: the sum is exact for a closed surface
+    a, b, d = P[F[:, 0]] - c, P[F[:, 1]] - c, P[F[:, 2]] - c
+    volume = float(np.einsum("ij,ij->i", a, np.cross(b, d)).sum()) / 6
+    return F[:, ::-1].copy() if volume < 0 else F
+
+
 @dataclass
 class ObjectContact:
     """One object's contact state after a frame, and what it was measured against (``depth``, or
@@ -54,16 +68,14 @@ class ContactScene:
     """The :class:`ContactTracker` of every colliding object (``objects``: validated scene objects whose collision
     is enabled; ``models``: their reduced models by id), in pusher order.
 
-    ``decimation``: overrides every object's depth decimation step (0 = each object's own);
-    ``surface_spacing``: sample spacing (metres) of a pushing object's surface."""
+    ``decimation``: overrides every object's depth decimation step (0 = each object's own)."""
 
-    def __init__(self, objects: list[dict], models: dict[str, ReducedModel], decimation: int = 0,
-                 surface_spacing: float = 0.002):
+    def __init__(self, objects: list[dict], models: dict[str, ReducedModel], decimation: int = 0):
         self.objects = pusher_order(objects)
         self.models = models
         self.decimation = decimation
-        self.surface_spacing = surface_spacing
         self.trackers: dict[str, ContactTracker] = {}
+        self.outward = {oid: outward_triangles(m.points, m.surface) for oid, m in models.items()}
         for o in self.objects:
             c = o["collision"]
             self.trackers[o["id"]] = ContactTracker(models[o["id"]], G.pose7_to_matrix(o["anchor"]["pose"]),
@@ -86,24 +98,21 @@ class ContactScene:
                 pts = pts_by_step[step]
                 why = "" if len(pts) else "no valid depth"
             pushers = [p for p in self.objects if o["id"] in p["collision"]["pushes"]]
-            surfaces = [self._surface_world(p["id"], toward=o["id"]) for p in pushers]
-            extra = [e for e in surfaces if e is not None and len(e)]
-            if extra:
-                pts = np.vstack([pts] + extra) if pts is not None and len(pts) else np.vstack(extra)
-            st = self.trackers[o["id"]].update(pts)
+            surfaces = [(p["id"], self._surface_world(p["id"])) for p in pushers]
+            pressing = [(i, s) for i, s in surfaces if s is not None]
+            st = self.trackers[o["id"]].update(pts, [s for _, s in pressing])
             if why and not st.reason:
                 st.reason = why
-            source = "depth" if not extra else "depth+" + ",".join(p["id"] for p in pushers)
+            source = "depth" if not pressing else "depth+" + ",".join(i for i, _ in pressing)
             out.append(ObjectContact(o["id"], st, source))
         return out
 
-    def _surface_world(self, oid: str, toward: str) -> np.ndarray | None:
-        """The pushing object's deformed surface that faces the pushed object, in the map frame (virtual-virtual
-        contact, §5.4.1): triangles whose outward normal points towards the pushed object's centre."""
+    def _surface_world(self, oid: str) -> PusherSurface | None:
+        """The pushing object's deformed surface in the map frame (virtual-virtual contact, §5.4.1); None while it
+        is undeformed (its rest shape does not overlap the objects it may push)."""
         tr = self.trackers[oid]
         if tr.state.pseudo_time <= 0:
             return None
         m = self.models[oid]
-        P = G.transform(tr.T, m.points + tr.displacement())
-        target = G.transform(self.trackers[toward].T, self.models[toward].points.mean(axis=0)[None])[0]
-        return facing_surface_samples(P, m.surface, target, self.surface_spacing)
+        held = tr.step_motion(tr.state) if tr.state.in_contact else 0.0
+        return PusherSurface(G.transform(tr.T, m.points + tr.displacement()), self.outward[oid], held)

@@ -160,7 +160,8 @@ TRACKING = Record({
 
 COLLISION = Record({
     "enabled": Bool("real points in depth (or other objects) push this object", default=False),
-    "threshold_m": Number("contact distance delta, metres", lo=0, lo_open=True, default=0.01),
+    "threshold_m": Number("contact distance delta to the real points seen in depth, metres (a pushing virtual "
+                          "object touches at a gap of zero)", lo=0, lo_open=True, default=0.01),
     "decimation": Number("use every N-th depth pixel in each direction", integer=True, lo=1, hi=64, default=4),
     "step": Number("pseudo-time increment per frame while in contact (and decrement after)", lo=0, lo_open=True, hi=1,
                    default=0.05),

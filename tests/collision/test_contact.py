@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from simreal_nodes import geometry as G
-from simreal_nodes.collision.contact import ContactTracker
+from simreal_nodes.collision.contact import ContactTracker, PusherSurface, _line_triangle_gaps
 from simreal_nodes.states import ContactPhase
 from tests.modelkit import plate_load_model, probe_model
 
@@ -216,3 +216,72 @@ def test_a_stiff_object_keeps_its_load_points_searchable():
     assert len(tr.active) == len(m.load_points)
     node_w = G.transform(T_WO, m.points[14][None])[0]
     assert tr.update(_probe(node_w, 0.002)).state == ContactPhase.CONTACT
+
+
+def _sheet(center, half: float, up: bool) -> PusherSurface:
+    """A square sheet of two triangles about ``center`` (world), normal +z if ``up`` else -z."""
+    c = np.asarray(center, dtype=np.float64)
+    V = c + np.array([[-half, -half, 0], [half, -half, 0], [half, half, 0], [-half, half, 0]])
+    F = np.array([[0, 1, 2], [0, 2, 3]]) if up else np.array([[0, 2, 1], [0, 3, 2]])
+    return PusherSurface(V, F)
+
+
+def test_a_pushing_virtual_surface_touches_at_a_gap_of_zero_not_within_delta():
+    """Virtual-virtual contact: a pusher's drawn surface is exact, so the pushed object is in contact where the two
+    surfaces meet or overlap along its push direction, not when they come within the depth's delta; a sheet facing
+    away (its outward normal up, not towards the plate) cannot push."""
+    m = probe_model(depth=0.01)
+    tr = ContactTracker(m, T_WO, threshold=0.005, step=0.25)
+    node_w = G.transform(T_WO, m.points[14][None])[0]
+    st = tr.update(None, [_sheet(node_w + [0, 0, 0.003], 0.004, up=False)])  # 3 mm above: within delta, apart
+    assert st.state == ContactPhase.FREE and st.pseudo_time == 0.0
+    assert st.min_distance == pytest.approx(0.003) and st.nearest_load_point == 14
+    st = tr.update(None, [_sheet(node_w + [0, 0, 0.003], 0.004, up=True)])  # facing away: no gap measured
+    assert st.state == ContactPhase.FREE and st.min_distance == np.inf and st.reason == ""
+    st = tr.update(None, [_sheet(node_w - [0, 0, 0.001], 0.004, up=False)])  # 1 mm through the surface
+    assert st.state == ContactPhase.CONTACT and st.load_point == 14 and st.pseudo_time == 0.25
+    assert st.min_distance == pytest.approx(-0.001)
+    assert np.allclose(st.contact_point, node_w - [0, 0, 0.001])
+    # held 2.5 mm into the rest surface: the drawn surface follows the sheet, the pseudo-time oscillating by one step
+    # (1 mm at the node) about 0.25 where the two surfaces meet, in contact throughout
+    tr = ContactTracker(m, T_WO, threshold=0.005, step=0.1)
+    states, taus = [], []
+    for _ in range(8):
+        st = tr.update(None, [_sheet(node_w - [0, 0, 0.0025], 0.004, up=False)])
+        states.append(st.state)
+        taus.append(st.pseudo_time)
+    assert states == [ContactPhase.CONTACT] * 8
+    assert taus[:3] == pytest.approx([0.1, 0.2, 0.3]) and sorted(set(np.round(taus[2:], 6))) == [0.2, 0.3]
+
+
+def test_a_held_pusher_stepping_back_does_not_release_the_object_it_presses():
+    """The pusher's own held contact oscillates by one pseudo-time step: the frame its surface steps back by its
+    step motion, the pressed object's gap is within its own step motion plus the pusher's: still the contact."""
+    m = probe_model(depth=0.01)
+    node_w = G.transform(T_WO, m.points[14][None])[0]
+    runs = {}
+    for slack in (0.0, 0.004):
+        tr = ContactTracker(m, T_WO, threshold=0.005, step=0.1)
+        for _ in range(3):  # pressed to a pseudo-time of 0.3: 3 mm down at the node
+            tr.update(None, [_sheet(node_w - [0, 0, 0.004], 0.004, up=False)])
+        assert tr.state.pseudo_time == pytest.approx(0.3)
+        # the pusher steps back: 2.5 mm above the pressed node's drawn position; one step back of the pressed
+        # object (1 mm) does not reach it, one step of the pusher (4 mm) does
+        sheet = _sheet(node_w - [0, 0, 0.0005], 0.004, up=False)
+        runs[slack] = tr.update(None, [PusherSurface(sheet.vertices, sheet.triangles, slack)]).state
+    assert runs[0.0] == ContactPhase.RELEASING and runs[0.004] == ContactPhase.CONTACT
+
+
+def test_the_gap_is_measured_along_the_push_direction_through_a_tilted_surface():
+    """The line through a point against its push direction cut with a tilted facing triangle: the signed gap is
+    the distance along that line (negative behind the point), not the distance to the triangle."""
+    X = np.array([[0.0, 0.0, 0.0], [0.5, 0.0, 0.0], [5.0, 0.0, 0.0]])
+    D = np.tile([0.0, 0.0, -1.0], (3, 1))  # pushed downwards: the pusher is looked for above
+    V = np.array([[-1.0, -1.0, 1.0], [1.0, -1.0, 2.0], [1.0, 1.0, 2.0], [-1.0, 1.0, 1.0]])  # z = 1.5 + x / 2
+    F = np.array([[0, 2, 1], [0, 3, 2]])  # normals down (towards the points)
+    t = _line_triangle_gaps(X, D, V, F)
+    assert t.shape == (3, 2)
+    assert np.nanmin(t[0]) == pytest.approx(1.5) and np.nanmin(t[1]) == pytest.approx(1.75)
+    assert np.all(np.isinf(t[2]))  # the line misses the sheet
+    assert np.all(np.isinf(_line_triangle_gaps(X, D, V, F[:, ::-1])))  # facing away: never a gap
+    assert np.nanmin(_line_triangle_gaps(X + [0, 0, 2.0], D, V, F)[0]) == pytest.approx(-0.5)  # overlapping

@@ -1,12 +1,13 @@
 """One collision frame over a scene's objects (ContactScene): pusher order, real points from depth, and
-virtual-virtual contact -- an upper plate pressed by a probe seen in depth bends onto a lower plate it crosses."""
+virtual-virtual contact -- an upper plate pressed by a probe seen in depth bends onto a lower plate it crosses, and
+the lower plate is touched only once the upper one's drawn surface reaches it (a gap of zero, not delta)."""
 
 import numpy as np
 import pytest
 
 from simreal_nodes import geometry as G
 from simreal_nodes.camera import CameraModel
-from simreal_nodes.collision.scene import ContactScene, pusher_order
+from simreal_nodes.collision.scene import ContactScene, outward_triangles, pusher_order
 from simreal_nodes.states import ContactPhase
 from tests.modelkit import plate_load_model, probe_model
 
@@ -53,10 +54,21 @@ def test_a_pressed_upper_plate_pushes_the_lower_one():
     assert up.object_id == "upper" and up.state.state == ContactPhase.CONTACT
     assert up.state.load_point == 14 and up.source == "depth"
     assert up.state.points_used == 9
-    # the upper plate bent 5 mm down at node 14 (pseudo-time 0.5) in this frame: 1 mm above the lower plate now
+    # the upper plate bent 5 mm down at node 14 (pseudo-time 0.5) in this frame: 1 mm above the lower plate now.
+    # That is within the lower plate's delta (5 mm), but two drawn surfaces 1 mm apart do not touch: delta is the
+    # depth sensor's margin, a pushing virtual surface is exact
     assert low.object_id == "lower" and low.source == "depth+upper"
+    assert low.state.state == ContactPhase.FREE and low.state.pseudo_time == 0.0
+    assert low.state.nearest_load_point == 14
+    assert low.state.min_distance == pytest.approx(0.001, abs=1e-6)  # the gap along the push direction (-z)
+    # the probe pushes on, 3 mm into the upper plate's rest surface: the upper plate goes to its full 10 mm, 4 mm
+    # through the lower plate's rest surface: the lower plate is in contact at node 14, its gap -4 mm
+    up, low = scene.step(_probe_depth(-0.003), CAM, T_WC)
+    assert up.state.state == ContactPhase.CONTACT and up.state.pseudo_time == 1.0
     assert low.state.state == ContactPhase.CONTACT and low.state.load_point == 14
-    assert low.state.min_distance == pytest.approx(0.001, abs=3e-4)
+    assert low.state.min_distance == pytest.approx(-0.004, abs=1e-6)
+    assert low.state.pseudo_time == 0.5  # one step of Alg. 5.1 per frame
+    assert np.allclose(low.state.contact_point, [0.04, 0.04, GAP - 0.010], atol=1e-9)  # where the surfaces meet
 
 
 def test_the_probe_alone_does_not_reach_the_lower_plate():
@@ -97,3 +109,11 @@ def test_collision_anywhere_reaches_the_tracker_and_is_refused_for_discrete_load
     assert scene.trackers["plate"].model_state().mu == pytest.approx([x, 0.04], abs=1e-3)
     with pytest.raises(ValueError, match="discrete"):
         ContactScene([obj], {"plate": probe_model()})
+
+
+def test_an_inward_oriented_pusher_surface_is_turned_outward():
+    """A closed surface stored with inward normals would never face what it presses: it is turned round."""
+    V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1.0]])
+    F = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])  # outward (volume +1/6)
+    assert np.array_equal(outward_triangles(V + 5.0, F), F)
+    assert np.array_equal(outward_triangles(V, F[:, ::-1]), F)

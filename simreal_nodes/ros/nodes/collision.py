@@ -4,7 +4,8 @@ Per frame: the depth image (RGB-D, or SGBM on the rectified stereo pair) and the
 node go to the ROS-free :class:`ContactScene`: it back-projects the decimated depth into the map frame, and for
 every colliding object a :class:`ContactTracker` finds the nearest real point to its contact nodes (KD-tree) and
 advances or relaxes the pseudo-time. Objects listed in another object's ``collision.pushes`` also receive that
-object's deformed surface as points (virtual-virtual contact, §5.4.1), so the pushing object is updated first.
+object's deformed surface (virtual-virtual contact, §5.4.1: touching at a gap of zero along the push direction),
+so the pushing object is updated first.
 
 Publishes per object ``/simreal/objects/<id>/contact`` (simreal_msgs/ContactState) and
 ``/simreal/objects/<id>/parameters`` (ModelParameters: the load point / position and pseudo-time or load
@@ -41,10 +42,9 @@ class CollisionNode(SimrealNode):
         loc = self.scene["localization"]
         self.static_pose = G.pose7_to_matrix(loc["static_pose"]) if loc["mode"] == "static" else None
         decimation = self.param("decimation", 0, "override every object's depth decimation step (0 = scene)")
-        spacing = self.param("surface_spacing_m", 0.002, "sample spacing of a pushing object's surface, metres")
         colliding = [o for o in self.scene["objects"] if o["collision"]["enabled"]]
         models = {o["id"]: load_model(o["model"], fields=["displacement"]) for o in colliding}
-        self.core = ContactScene(colliding, models, decimation, spacing)
+        self.core = ContactScene(colliding, models, decimation)
         self.objects = self.core.objects
         for o in self.objects:
             c, lp = o["collision"], models[o["id"]].load_points
