@@ -894,7 +894,10 @@ def crossed_beams_probe_heldout(width=640, height=480, duration=3.2, fps=30.0) -
 # A static room for localization benchmarks (RGB, depth and a rectified stereo pair at once)
 
 
-def slam_room(width=640, height=480, duration=10.0, fps=30.0) -> SynthScene:
+def slam_room(width=640, height=480, duration=10.0, fps=30.0, period: float | None = None,
+              name: str = "slam_room") -> SynthScene:
+    """A static textured room circled on a hand-held arc there and back; ``period``: one there-and-back lap takes so
+    long and the laps repeat over ``duration`` (default: one lap over the whole duration)."""
     center = np.array([0.3, 0.2, 0.15])
 
     def build(sc, r, models):
@@ -914,19 +917,21 @@ def slam_room(width=640, height=480, duration=10.0, fps=30.0) -> SynthScene:
 
     def cam_pose(t):
         return W.arc_trajectory(np.array([t]), center, 1.0, 0.45, np.deg2rad(-140), np.deg2rad(-40), jitter=0.01,
-                                seed=51, period=duration)[0]
+                                seed=51, period=period or duration)[0]
 
     def yaml(sc):
-        return {"simreal_scene": 1, "name": "slam_room", "description": "Static textured room for localization.",
+        return {"simreal_scene": 1, "name": name, "description": "Static textured room for localization.",
                 "camera": _camera_yaml(sc), "localization": {"mode": "rgbd", "features": 1000},
                 "overlay": {"enabled": False}}
 
-    return SynthScene("slam_room", "Static room, hand-held arc, RGB + depth + stereo", default_camera(width, height),
+    return SynthScene(name, "Static room, hand-held arc, RGB + depth + stereo", default_camera(width, height),
                       fps, duration, {}, build, update, cam_pose, yaml, depth=True, stereo_baseline=0.12)
 
 
 SCENES: dict[str, Callable[..., SynthScene]] = {
     "slam_room": slam_room,
+    # a long sequence (2 100 frames): the room's 10 s lap seven times over (benchmarks/long_slam.py)
+    "slam_room_laps": lambda **kw: slam_room(**{"duration": 70.0, **kw}, period=10.0, name="slam_room_laps"),
     "aluminium_beam": aluminium_beam,
     # the load close to the clamp, where the images barely see it (low sensitivity, large variance)
     "aluminium_beam_clamp": lambda **kw: aluminium_beam(positions=(0.0, 0.02, 0.05, 0.08, 0.12),
