@@ -44,8 +44,8 @@ from simreal_nodes.states import ContactPhase
 class PusherSurface:
     """Another virtual object's deformed surface that can press this one (virtual-virtual contact, §5.4.1):
     ``vertices`` (n, 3) in the world frame and its closed surface's ``triangles`` (m, 3), outward-oriented;
-    ``step_motion``: how far the pusher's own surface moves back when its pseudo-time steps back once while its
-    contact is held (Alg. 5.1 oscillates by one step there; 0 when it is not held), metres."""
+    ``step_motion``: how far the pusher's loaded node moved back this frame when its held contact stepped its
+    pseudo-time back (Alg. 5.1 oscillates by one step there; 0 when it did not), metres."""
 
     vertices: np.ndarray
     triangles: np.ndarray
@@ -57,8 +57,9 @@ class ContactState:
     pseudo_time: float = 0.0
     load_point: int = -1  # index into the model's load points (-1: none)
     node: int = -1  # model node of that load point
-    # the nearest real point's distance to a contact node, or, where a pushing virtual surface is nearer to contact
-    # (its gap less delta), that gap along the push direction (negative: the surfaces overlap); metres
+    # the nearest real point's distance to a contact node; or, where a pushing virtual surface is nearer to contact
+    # (its gap below the real point's distance less delta), that gap along the push direction (negative: the
+    # surfaces overlap); metres
     min_distance: float = float("inf")
     nearest_load_point: int = -1  # where the nearest real point is now (may differ while a contact is held)
     state: ContactPhase = ContactPhase.FREE
@@ -114,7 +115,8 @@ class ContactTracker:
         if model.load_directions is not None:
             d = np.asarray(model.load_directions, dtype=np.float64).reshape(-1, 3)
         else:
-            P, F = np.asarray(model.points, dtype=np.float64), np.asarray(model.surface, dtype=np.int64)
+            P = np.asarray(model.points, dtype=np.float64)
+            F = outward_triangles(P, np.asarray(model.surface, dtype=np.int64))
             n = np.zeros_like(P)
             if len(F):
                 fn = np.cross(P[F[:, 1]] - P[F[:, 0]], P[F[:, 2]] - P[F[:, 0]])  # area-weighted, outward
@@ -209,12 +211,19 @@ class ContactTracker:
         """How far the loaded contact node moves when the pseudo-time steps back once from where it is (metres)."""
         if st.load_point < 0 or st.pseudo_time <= 0:
             return 0.0
-        node = [int(self.contact_nodes[st.load_point])]
         back = ContactState(pseudo_time=max(self.tau_min, st.pseudo_time - self.step), load_point=st.load_point,
                             position=st.position)
-        d = self.model.deformation(self.model_state(st), nodes=node) - self.model.deformation(self.model_state(back),
-                                                                                               nodes=node)
-        return float(np.linalg.norm(d))
+        return self.node_motion(st, back)
+
+    def node_motion(self, a: ContactState, b: ContactState) -> float:
+        """How far the loaded contact node of ``a`` moves between the states ``a`` and ``b`` of the same contact
+        (metres; 0 without one)."""
+        if a.load_point < 0:
+            return 0.0
+        node = [int(self.contact_nodes[a.load_point])]
+        ua = self.model.deformation(self.model_state(a), nodes=node) if a.pseudo_time > 0 else np.zeros((1, 3))
+        ub = self.model.deformation(self.model_state(b), nodes=node) if b.pseudo_time > 0 else np.zeros((1, 3))
+        return float(np.linalg.norm(ua - ub))
 
     def _pusher_gap(self, nodes: np.ndarray,
                     surfaces: list[PusherSurface]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -229,9 +238,19 @@ class ContactTracker:
         gap = np.full(len(X), np.inf)
         hit = np.full((len(X), 3), np.nan)
         slack = np.zeros(len(X))
+        # an overlap deeper than that bound is not this contact (a line through the whole pusher can meet another of
+        # its faces far behind); past the largest precomputed motion the pushed object is saturated anyway
         bound = 2.0 * self.full_motion[self.active] + self.threshold
+        lo, hi = X.min(axis=0), X.max(axis=0)
         for s in surfaces:
-            t = _line_triangle_gaps(X, D, np.asarray(s.vertices, np.float64), np.asarray(s.triangles, np.int64))
+            V = np.asarray(s.vertices, np.float64)
+            F = np.asarray(s.triangles, np.int64).reshape(-1, 3)
+            # only the pusher's triangles within reach of the nodes (a scanned pusher has 10^4-10^5 of them): farther
+            # ones can neither overlap a node nor hold its contact (a hold reaches one step motion, under the bound)
+            reach = float(bound.max()) + float(s.step_motion)
+            tri = V[F]
+            near = np.all((tri.max(axis=1) >= lo - reach) & (tri.min(axis=1) <= hi + reach), axis=1)
+            t = _line_triangle_gaps(X, D, V, F[near])
             t[t < -bound[:, None]] = np.inf
             j = np.argmin(t, axis=1) if t.shape[1] else np.zeros(len(X), np.int64)
             tj = t[np.arange(len(X)), j] if t.shape[1] else np.full(len(X), np.inf)
@@ -317,6 +336,20 @@ class ContactTracker:
             st.position = (np.nan, np.nan, np.nan)
         st.node = int(self.lp_nodes[st.load_point]) if st.load_point >= 0 else -1
         return st
+
+
+def outward_triangles(P: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """A closed surface's triangles turned outward: reversed when the volume they enclose comes out negative (the
+    pusher's gap test takes the triangles whose outward normal faces the pushed object; a model without load
+    directions is pushed along its inward normals)."""
+    F = np.asarray(F, dtype=np.int64).reshape(-1, 3)
+    P = np.asarray(P, dtype=np.float64)
+    if len(F) == 0:
+        return F
+    c = P[np.unique(F)].mean(axis=0)  # about the surface's own centre: the sum is exact for a closed surface
+    a, b, d = P[F[:, 0]] - c, P[F[:, 1]] - c, P[F[:, 2]] - c
+    volume = float(np.einsum("ij,ij->i", a, np.cross(b, d)).sum()) / 6
+    return F[:, ::-1].copy() if volume < 0 else F
 
 
 def _line_triangle_gaps(X: np.ndarray, D: np.ndarray, V: np.ndarray, F: np.ndarray) -> np.ndarray:

@@ -9,13 +9,13 @@ publishes; everything between the depth image and the contact states is here, te
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from simreal_nodes import geometry as G
 from simreal_nodes.camera import CameraModel
-from simreal_nodes.collision.contact import ContactState, ContactTracker, PusherSurface
+from simreal_nodes.collision.contact import ContactState, ContactTracker, PusherSurface, outward_triangles
 from simreal_nodes.rom.model import ReducedModel
 from simreal_nodes.vision.depth import depth_points
 
@@ -41,19 +41,6 @@ def pusher_order(objects: list[dict]) -> list[dict]:
     return [by_id[i] for i in out]
 
 
-def outward_triangles(P: np.ndarray, F: np.ndarray) -> np.ndarray:
-    """A closed surface's triangles turned outward: reversed when the volume they enclose comes out negative (the
-    pusher's gap test takes the triangles whose outward normal faces the pushed object)."""
-    F = np.asarray(F, dtype=np.int64).reshape(-1, 3)
-    P = np.asarray(P, dtype=np.float64)
-    if len(F) == 0:
-        return F
-    c = P[np.unique(F)].mean(axis=0)  # about the surface's own centre: the sum is exact for a closed surface
-    a, b, d = P[F[:, 0]] - c, P[F[:, 1]] - c, P[F[:, 2]] - c
-    volume = float(np.einsum("ij,ij->i", a, np.cross(b, d)).sum()) / 6
-    return F[:, ::-1].copy() if volume < 0 else F
-
-
 @dataclass
 class ObjectContact:
     """One object's contact state after a frame, and what it was measured against (``depth``, or
@@ -76,6 +63,7 @@ class ContactScene:
         self.decimation = decimation
         self.trackers: dict[str, ContactTracker] = {}
         self.outward = {oid: outward_triangles(m.points, m.surface) for oid, m in models.items()}
+        self._stepped_back: dict[str, float] = {}  # a held contact's step back this frame: how far its node moved
         for o in self.objects:
             c = o["collision"]
             self.trackers[o["id"]] = ContactTracker(models[o["id"]], G.pose7_to_matrix(o["anchor"]["pose"]),
@@ -100,7 +88,10 @@ class ContactScene:
             pushers = [p for p in self.objects if o["id"] in p["collision"]["pushes"]]
             surfaces = [(p["id"], self._surface_world(p["id"])) for p in pushers]
             pressing = [(i, s) for i, s in surfaces if s is not None]
+            before = replace(self.trackers[o["id"]].state)
             st = self.trackers[o["id"]].update(pts, [s for _, s in pressing])
+            self._stepped_back[o["id"]] = (self.trackers[o["id"]].node_motion(before, st)
+                                           if st.in_contact and st.pseudo_time < before.pseudo_time else 0.0)
             if why and not st.reason:
                 st.reason = why
             source = "depth" if not pressing else "depth+" + ",".join(i for i, _ in pressing)
@@ -114,5 +105,5 @@ class ContactScene:
         if tr.state.pseudo_time <= 0:
             return None
         m = self.models[oid]
-        held = tr.step_motion(tr.state) if tr.state.in_contact else 0.0
-        return PusherSurface(G.transform(tr.T, m.points + tr.displacement()), self.outward[oid], held)
+        return PusherSurface(G.transform(tr.T, m.points + tr.displacement()), self.outward[oid],
+                             self._stepped_back.get(oid, 0.0))

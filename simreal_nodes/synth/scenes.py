@@ -691,8 +691,9 @@ def _probe_scene(kind: str, width, height, duration, fps, stereo: bool, heldout:
     def yaml(sc):
         T_map = sc.T_map_world()
         # depth decimation: the crossed beams take a point every ~4 mm on the beams (every 4th pixel at 640 px wide,
-        # 8th at 1280): chosen on the development set-up at both widths (benchmarks/results/collision.md: the upper
-        # beam's surface 0.40 mm off the truth against 2.05 mm at step 2, the same agreement), confirmed held-out
+        # 8th at 1280): chosen on the development set-up (benchmarks/results/collision.md: at 640, the upper beam's
+        # surface 0.40 mm off the truth against 2.05 mm at step 2, the same agreement, confirmed held-out; at 1280,
+        # 0.67 against 2.38 mm at step 4, with less agreement: the surface first)
         step = max(1, round(4 * sc.camera.width / 640)) if kind == "crossed_beams" else 2
         objs = [{
             "id": "object" if kind != "crossed_beams" else "beam_a", "model": f"spec:{spec}",

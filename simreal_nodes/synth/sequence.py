@@ -34,10 +34,14 @@ class FrameStream:
         n = round(sc.duration * sc.fps)
         self.n = n if frames is None else min(n, int(frames))
         self._models = models
+        self._used = False
 
     def __iter__(self):
         import cv2
 
+        if self._used:  # the scene's state (loads, probe positions) has moved on: render a new stream instead
+            raise RuntimeError("a FrameStream is iterated once; make a new one to render the frames again")
+        self._used = True
         sc = self.scene
         r = Renderer(self.cam, ssaa=self.ssaa)
         try:

@@ -7,7 +7,8 @@ import pytest
 
 from simreal_nodes import geometry as G
 from simreal_nodes.camera import CameraModel
-from simreal_nodes.collision.scene import ContactScene, outward_triangles, pusher_order
+from simreal_nodes.collision.contact import outward_triangles
+from simreal_nodes.collision.scene import ContactScene, pusher_order
 from simreal_nodes.states import ContactPhase
 from tests.modelkit import plate_load_model, probe_model
 

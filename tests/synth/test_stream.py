@@ -1,6 +1,7 @@
 """Frames rendered one at a time (synth.sequence.FrameStream) for sequences too long to hold, and the long room."""
 
 import numpy as np
+import pytest
 
 from simreal_nodes.synth.makebag import make_scene
 from simreal_nodes.synth.sequence import FrameStream, sequence
@@ -16,6 +17,8 @@ def test_a_stream_gives_the_frames_of_the_sequence_noise_included():
         for k in ("rgb", "gray", "right", "T"):
             assert np.array_equal(f[k], seq[k][i]), k
         assert np.array_equal(f["depth"], seq["depth"][i], equal_nan=True)
+    with pytest.raises(RuntimeError, match="once"):
+        next(iter(fs))
     # another seed draws other noise on the same picture
     other = next(iter(FrameStream("slam_room", 64, 48, frames=1, ssaa=1, seed=3)))
     assert not np.array_equal(other["rgb"], frames[0]["rgb"])
