@@ -2,6 +2,8 @@
 virtual-virtual contact -- an upper plate pressed by a probe seen in depth bends onto a lower plate it crosses, and
 the lower plate is touched only once the upper one's drawn surface reaches it (a gap of zero, not delta)."""
 
+import itertools
+
 import numpy as np
 import pytest
 
@@ -118,3 +120,26 @@ def test_an_inward_oriented_pusher_surface_is_turned_outward():
     F = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])  # outward (volume +1/6)
     assert np.array_equal(outward_triangles(V + 5.0, F), F)
     assert np.array_equal(outward_triangles(V, F[:, ::-1]), F)
+
+
+def test_the_lower_plate_stays_pressed_while_the_upper_one_oscillates_about_its_hold():
+    """The probe holds the upper plate at its full bend; Alg. 5.1 then steps its pseudo-time down and up by one step
+    each frame. The frames it steps back, its surface rises by its step (1 mm) off the lower plate: that is the
+    pusher's own hold, passed on as its step back this frame, and the lower plate stays in contact throughout."""
+    upper = probe_model()
+    upper.surface = np.vstack([upper.surface, upper.surface[:, ::-1]])
+    objects = [_obj("lower", 0.0), _obj("upper", GAP, pushes=["lower"])]
+    for o in objects:
+        o["collision"]["step"] = 0.1
+    objects[0]["collision"]["threshold_m"] = 0.0005  # the probe's depth points never reach the lower plate
+    scene = ContactScene(objects, {"lower": probe_model(), "upper": upper})
+    runs = []
+    for _ in range(16):
+        up, low = scene.step(_probe_depth(-0.004), CAM, T_WC)
+        runs.append((up.state.pseudo_time, scene._stepped_back["upper"], low.state.state, low.state.min_distance))
+    assert [r[2] for r in runs[:6]] == [ContactPhase.FREE] * 6  # the upper plate comes down: 1 mm a frame
+    assert runs[5][3] == pytest.approx(0.0, abs=1e-9)  # touching, not through: no contact yet
+    assert [r[2] for r in runs[6:]] == [ContactPhase.CONTACT] * 10
+    backs = [r for a, r in itertools.pairwise(runs[9:]) if r[0] < a[0]]  # the upper plate's steps back
+    assert len(backs) == 3 and all(r[1] == pytest.approx(0.001) and r[3] == pytest.approx(0.001) for r in backs)
+    assert all(r[1] == 0.0 for a, r in itertools.pairwise(runs) if r[0] >= a[0])
