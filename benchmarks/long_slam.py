@@ -27,10 +27,9 @@ import numpy as np
 import psutil
 
 from benchmarks.common import save
-from simreal_nodes import geometry as G
 from simreal_nodes.synth.sequence import FrameStream
 from simreal_nodes.vision.slam.system import Slam
-from simreal_nodes.vision.trajectory import umeyama
+from simreal_nodes.vision.trajectory import ate, rpe
 
 LAP_S = 10.0
 FPS = 30.0
@@ -85,23 +84,13 @@ def run(mode: str, laps: int, seed: int = 0, features: int = 1000, width: int = 
     ok = np.array([T is not None for T in est])
     idx = np.flatnonzero(ok)
     P = np.array([est[i][:3, 3] for i in idx])  # type: ignore[index]
-    Q = np.array([ref[i][:3, 3] for i in idx])
-    R, t, s = umeyama(P, Q, with_scale=(mode == "mono"))
-    err = np.linalg.norm((s * P @ R.T + t) - Q, axis=1)
+    a = ate(P, np.array([ref[i][:3, 3] for i in idx]), with_scale=(mode == "mono"))
+    err, s = a["errors"], a["scale"]
     length = float(np.sum(np.linalg.norm(np.diff(np.array([T[:3, 3] for T in ref]), axis=0), axis=1)))
     lap_of = idx // per_lap
     lap_ate = [1e3 * float(np.sqrt(np.mean(err[lap_of == k] ** 2))) if np.any(lap_of == k) else float("nan")
                for k in range(laps)]
-    # RPE over 1 s, the estimate's translations scaled by the alignment's scale
-    et, er = [], []
-    for i in idx:
-        j = i + RPE_FRAMES
-        if j < n and est[j] is not None:
-            dE = G.inv(est[i]) @ est[j]  # type: ignore[arg-type]
-            dE[:3, 3] *= s
-            e = G.inv(G.inv(ref[i]) @ ref[j]) @ dE
-            et.append(np.linalg.norm(e[:3, 3]))
-            er.append(np.degrees(np.linalg.norm(G.log_so3(e[:3, :3]))))
+    r = rpe(est, ref, delta=RPE_FRAMES, scale=s)  # over 1 s, the estimate scaled by the alignment's scale
     gaps = np.diff(np.r_[-1, idx, n]) - 1
     lost_at = [int(k) for k in np.flatnonzero(~ok) if k > 10]
     row = dict(mode=mode, seed=seed, frames=n, tracked=int(ok.sum()), tracked_pct=100 * float(ok.mean()),
@@ -110,8 +99,7 @@ def run(mode: str, laps: int, seed: int = 0, features: int = 1000, width: int = 
                lost_reasons="; ".join(f"{k} x{v}" for k, v in sorted(reasons.items(), key=lambda kv: -kv[1])),
                ate_mm=1e3 * float(np.sqrt(np.mean(err ** 2))), ate_pct=100 * float(np.sqrt(np.mean(err ** 2))) / length,
                lap1_mm=lap_ate[0], last_lap_mm=lap_ate[-1], worst_lap_mm=float(np.nanmax(lap_ate)),
-               rpe_mm=1e3 * float(np.sqrt(np.mean(np.square(et)))) if et else float("nan"),
-               rpe_deg=float(np.sqrt(np.mean(np.square(er)))) if er else float("nan"),
+               rpe_mm=1e3 * r["trans_rmse"], rpe_deg=r["rot_rmse_deg"],
                scale=float(s), tracking_ms_p50=float(np.nanmedian(track_ms)),
                tracking_ms_p95=float(np.nanpercentile(track_ms, 95)), fps_wall=n / wall,
                keyframes_lap1=series["keyframes"][0] if series["keyframes"] else 0,

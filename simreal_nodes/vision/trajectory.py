@@ -42,12 +42,16 @@ def ate(est: np.ndarray, ref: np.ndarray, with_scale: bool = False) -> dict:
             "R": R, "t": t, "errors": e}
 
 
-def rpe(est_T: list[np.ndarray], ref_T: list[np.ndarray], delta: int = 1, scale: float = 1.0) -> dict:
-    """Relative pose error over ``delta`` frames: translation (m) and rotation (deg) RMSE."""
+def rpe(est_T: list[np.ndarray | None], ref_T: list[np.ndarray], delta: int = 1, scale: float = 1.0) -> dict:
+    """Relative pose error over ``delta`` frames: translation (m) and rotation (deg) RMSE. A frame without an
+    estimate (None: lost) leaves out the pairs it belongs to."""
     et_list: list[np.floating] = []
     er_list: list[np.floating] = []
     for i in range(len(est_T) - delta):
-        dE = G.inv(est_T[i]) @ est_T[i + delta]
+        a, b = est_T[i], est_T[i + delta]
+        if a is None or b is None:
+            continue
+        dE = G.inv(a) @ b
         dR = G.inv(ref_T[i]) @ ref_T[i + delta]
         dE = dE.copy()
         dE[:3, 3] *= scale

@@ -34,6 +34,10 @@ def test_umeyama_recovers_a_similarity_and_ate_rpe(tmp_path):
     assert ate(P, Q, with_scale=False)["rmse"] > 0.1
     Ts = [G.make_T(G.exp_so3(rng.normal(0, 0.1, 3)), rng.normal(0, 1, 3)) for _ in range(10)]
     assert rpe(Ts, Ts)["trans_rmse"] < 1e-12
+    # a lost frame (no estimate) leaves out the pairs it belongs to, not the run
+    lost = [None if i == 4 else T for i, T in enumerate(Ts)]
+    r = rpe(lost, Ts, delta=2)
+    assert r["n"] == 6 and r["trans_rmse"] < 1e-12
     write_tum(tmp_path / "t.txt", np.arange(10) * 0.1, Ts)
     _t, back = read_tum(tmp_path / "t.txt")
     np.testing.assert_allclose(back[3], Ts[3], atol=1e-8)
