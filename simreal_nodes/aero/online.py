@@ -22,6 +22,9 @@ from simreal_nodes.aero.manifold import ShapeManifold
 from simreal_nodes.aero.streamlines import FlowField, section, seed_rake, trace
 from simreal_nodes.render.aero import FLOW_TUBE_RADIUS_M, car_to_world, speed_lut
 
+SECTIONS = ("none", "pressure", "velocity")  # the contour planes on offer (scene key aero.section)
+SPEED_SCALE = 1.4  # speeds are coloured from 0 to this x the inflow (streamlines and the velocity section)
+
 
 @dataclass
 class FlowResult:
@@ -41,8 +44,9 @@ class FlowResult:
     speed_inf: float  # the database's inflow speed (m/s)
     cloud_points: int
     seconds: dict[str, float] = field(default_factory=dict)
-    # the pressure coefficient on the symmetry plane outside the body (Fig. 6.10b), when asked: vertices (map frame),
-    # triangles, colours (through the colour table, Cp from -1 to 1)
+    # a contour plane when asked (Fig. 6.10b): the pressure coefficient (Cp from -1 to 1) or the speed (0 to 1.4 x the
+    # inflow, the streamlines' scale) on the symmetry plane outside the body: vertices (map frame), triangles, colours
+    # (through the colour table)
     section: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
     @property
@@ -68,8 +72,11 @@ class AeroEstimator:
     """The database, its manifold (``neighbours`` = M) and the capture settings; :meth:`estimate` per cloud."""
 
     def __init__(self, db: AeroDatabase, neighbours: int = 15, capture: CaptureSettings | None = None,
-                 rake: RakeSettings | None = None, section: bool = False) -> None:
-        """``section``: also Eq. 6.4's pressure, drawn as its coefficient on the symmetry plane."""
+                 rake: RakeSettings | None = None, section: str = "none") -> None:
+        """``section``: also a contour plane on the symmetry plane: ``pressure`` (Eq. 6.4 on the database's pressure,
+        as its coefficient) or ``velocity`` (the speed of Eq. 6.4's velocity); ``none``: no plane."""
+        if section not in SECTIONS:
+            raise ValueError(f"aero: section must be one of {', '.join(SECTIONS)}; found {section!r}")
         self.db = db
         self.section = section
         dbi = db.database
@@ -114,10 +121,14 @@ class AeroEstimator:
         lines = [ln[:: r.draw_every] for ln in lines if len(ln[:: r.draw_every]) >= 2]
         tm = (cap.scale, cap.rotation, cap.translation)
         sec = None
-        if self.section:  # Eq. 6.4 on the kinematic pressure; Cp = p / (U^2 / 2) (the outlet's p is 0)
-            cp = (ShapeManifold.interpolate(self.P[:, :, None], nb)[:, 0] * (1.0 - cap.presence)
-                  / (0.5 * self.speed_inf ** 2))
-            SV, ST, SC = section(self.db.grid, cp, axis=1, index=0, lut=self.lut, vmin=-1.0, vmax=1.0,
+        if self.section != "none":
+            if self.section == "pressure":  # Eq. 6.4 on the kinematic pressure; Cp = p / (U^2 / 2) (outlet's p: 0)
+                vals = (ShapeManifold.interpolate(self.P[:, :, None], nb)[:, 0] * (1.0 - cap.presence)
+                        / (0.5 * self.speed_inf ** 2))
+                vmin, vmax = -1.0, 1.0
+            else:  # the speed of Eq. 6.4's velocity, on the streamlines' colour scale
+                vals, vmin, vmax = np.linalg.norm(v, axis=1), 0.0, SPEED_SCALE * self.speed_inf
+            SV, ST, SC = section(self.db.grid, vals, axis=1, index=0, lut=self.lut, vmin=vmin, vmax=vmax,
                                  keep=cap.presence == 0)
             sec = (car_to_world(SV, *tm), ST, SC)
         return FlowResult(
@@ -144,7 +155,7 @@ def flow_markers(res: FlowResult, lut: np.ndarray, tube_radius_m: float = FLOW_T
         SV, ST, SC = res.section
         idx = np.asarray(ST).ravel()
         out.append(TriangleListMarker("aero/section", 0, eye, SV[idx], SC[idx]))
-    top = 1.4 * res.speed_inf
+    top = SPEED_SCALE * res.speed_inf
     for k, (P, sp) in enumerate(zip(res.lines, res.speeds)):
         u = np.clip(np.nan_to_num(sp / top), 0.0, 1.0)
         out.append(TriangleListMarker("aero/streamlines", k, eye, P, lut[(u * 255).astype(int)], kind=LINE_STRIP,

@@ -222,8 +222,9 @@ AERO = Record({
                          default=5000),
     "streamlines": Number("streamline seeds across the car (a rake of N x N*0.8 upstream of the nose)", integer=True,
                           lo=1, hi=50, default=11),
-    "section": Enum(("none", "pressure"), "also draw a contour plane: the pressure coefficient on the symmetry plane "
-                    "(thesis Fig. 6.10b), from Eq. 6.4 on the database's pressure", default="none"),
+    "section": Enum(("none", "pressure", "velocity"), "also draw a contour plane on the symmetry plane (thesis Fig. "
+                    "6.10b): the pressure coefficient from Eq. 6.4 on the database's pressure, or the speed of Eq. "
+                    "6.4's velocity on the streamlines' colour scale", default="none"),
 })
 
 SCENE = Record({

@@ -56,19 +56,37 @@ def test_a_cloud_without_a_car_is_refused(db) -> None:
         AeroEstimator(db, neighbours=len(db.database))
 
 
-def test_the_pressure_section_is_eq_6_4_on_the_pressure(db) -> None:
-    """The contour plane (Fig. 6.10b): the pressure coefficient on the symmetry plane outside the body, placed in the
-    map frame, coloured, and sent as a marker only when asked."""
+@pytest.mark.parametrize("kind", ["pressure", "velocity"])
+def test_the_section_is_eq_6_4_on_the_symmetry_plane(db, kind: str) -> None:
+    """The contour plane (Fig. 6.10b): the pressure coefficient or the speed of Eq. 6.4 on the symmetry plane outside
+    the body, placed in the map frame, coloured by the value at each grid point, and sent as a marker only when
+    asked."""
     i = next(k for k in db.held if db.cars[k].group == "sport")
     car = db.cars[i]
     m = simulate_map(car, np.random.default_rng(11))
-    res = AeroEstimator(db, neighbours=3, section=True).estimate(m.cloud)
+    est = AeroEstimator(db, neighbours=3, section=kind)
+    res = est.estimate(m.cloud)
     assert res.section is not None
     SV, ST, SC = res.section
     P = m.to_car(SV)
     assert np.all(np.abs(P[:, 1]) < 0.5) and len(ST) > 100  # the plane next to y = 0
     assert ST.max() < len(SV) and SC.shape == SV.shape and np.all((SC >= 0) & (SC <= 1))
+    # each vertex coloured by its grid point's value: Eq. 6.4 on the pressure (as Cp) or the speed, zero in the body
+    cap, nb, v = est._flow(m.cloud)
+    if kind == "pressure":
+        vals = (np.einsum("k,kd->d", nb.weights, db.pressure[db.database][nb.indices]) * (1.0 - cap.presence)
+                / (0.5 * est.speed_inf ** 2))
+        lo, hi = -1.0, 1.0
+    else:
+        vals, lo, hi = np.linalg.norm(v, axis=1), 0.0, 1.4 * est.speed_inf
+    plane = vals.reshape(db.grid.shape)[:, 0, :].ravel()
+    want = est.lut[(np.clip((plane - lo) / (hi - lo), 0.0, 1.0) * 255).astype(int)]
+    used = np.unique(ST)
+    assert np.allclose(SC[used], want[used], atol=1.5 / 255)  # one step of the table at most (round-off at a step)
+    assert np.ptp(plane[used]) > 0.2 * (hi - lo)  # the plane shows contrast, not one colour
     marks = flow_markers(res, speed_lut())
     sec = [mk for mk in marks if mk.ns == "aero/section"]
     assert len(sec) == 1 and len(sec[0].points) == 3 * len(ST)
     assert AeroEstimator(db, neighbours=3).estimate(m.cloud).section is None  # only when asked
+    with pytest.raises(ValueError, match="section"):
+        AeroEstimator(db, neighbours=3, section="vorticity")

@@ -45,7 +45,7 @@ class AeroNode(SimrealNode):
         length = a["length_m"] if self.scene["localization"]["mode"] == "mono" else None
         capture = CaptureSettings(alpha_m=float(a["alpha_m"]), length_m=length, max_points=int(a["max_points"]) or None)
         self.core = AeroEstimator(db, int(a["neighbours"]), capture, RakeSettings(ny=n, nz=max(1, round(0.8 * n))),
-                                  section=a["section"] == "pressure")
+                                  section=a["section"])
         self.lut = speed_lut()
         self.captured_at = 0  # cloud size at the last successful capture (0: none yet)
         self.tried_at = 0  # cloud size at the last attempt (a failed one is retried on a larger cloud)
