@@ -204,7 +204,7 @@ def main(argv: list[str] | None = None) -> None:
             overlay.show("aero_section")
             frames.append(overlay.draw(bgr, T_wc)[..., ::-1])
             overlay.show("aero_streamlines")
-        # the streamlines with the section plane (as the node draws `aero.section: pressure`)
+        # the streamlines with the section plane (as the node draws `aero.section: velocity`; pressure: same triangles)
         overlay.show("aero_streamlines", "aero_section")
         t1 = time.perf_counter()
         overlay.draw(bgr, T_wc)

@@ -48,12 +48,16 @@ def small_aero_db(tmp_path_factory) -> tuple[Path, Path, list[str]]:
     return root, assemble(spec, root / "work", root / "db.h5"), lines
 
 
-# In CI (the CI environment variable set, as `.ci/run` runs on a fresh clone) every dependency is installed by
+# In CI (the CI environment variable set and not 0/false; `.ci/run` sets it) every dependency is installed by
 # `./run setup`, so a test skipped for a missing one (OpenFOAM, rclpy, the built messages, a committed sample) means
 # the fresh machine's set-up missed it: that fails the run instead of passing quietly. The one skip allowed there is
 # the real data of ../shared/data, which a checkout may not have.
 CI_ALLOWED_SKIPS = ("../shared/data",)
 _ci_unexpected_skips: list[str] = []
+
+
+def _in_ci() -> bool:
+    return os.environ.get("CI", "").strip().lower() not in ("", "0", "false", "no")
 
 
 def _skip_reason(report) -> str:
@@ -62,7 +66,7 @@ def _skip_reason(report) -> str:
 
 
 def _note_skip(report) -> None:
-    if report.skipped and os.environ.get("CI") and not hasattr(report, "wasxfail"):
+    if report.skipped and _in_ci() and not hasattr(report, "wasxfail"):
         reason = _skip_reason(report)
         if not any(a in reason for a in CI_ALLOWED_SKIPS):
             _ci_unexpected_skips.append(f"{report.nodeid}: {reason}")

@@ -113,7 +113,7 @@ class OverlayNode(SimrealNode):
                 V, T, C = tubes(lines, radius=0.5 * width, sides=5, colors=colors)
                 self.flow = FlowOverlay(self.core.cam, body, np.arange(len(body)).reshape(-1, 3), V, T, C,
                                         world_scale=width / (2.0 * FLOW_TUBE_RADIUS_M))
-                if sec is not None:  # the pressure section (Fig. 6.10b), drawn with the streamlines
+                if sec is not None:  # the contour plane (pressure or speed; Fig. 6.10b), drawn with the streamlines
                     self.flow.add_layer("aero_section", sec[0], np.arange(len(sec[0])).reshape(-1, 3), sec[1])
             except (ValueError, SimrealError) as e:
                 self.flow_geometry = None  # not tried again on every frame
