@@ -50,6 +50,10 @@ RADIUS, PRESS = 0.012, 0.003
 BUNNY_POINTS = 4  # probes between the bunny's load points
 PAIR_FORCE = 6.0  # newtons on each probe of a pair (the model's load: 15 N)
 N_PAIRS = 8  # two-contact cases: pairs of off-grid positions 40 mm apart or more
+# the tracker on the pairs: probes seen 1 mm inside their surface (delta), load steps of 1 % of the model's 15 N,
+# 3 mm of approach over 40 frames, then 60 frames held
+PAIR_DELTA, PAIR_STEP, PAIR_APPROACH, PAIR_DESCENT, PAIR_HOLD = 0.001, 0.01, 0.003, 40, 60
+TRACKERS = ("coupled", "one", "independent")
 THIN = (1, 2, 4, 8)  # the load grid along x: every load position, every 2nd, 4th, 8th
 # the bunny's pseudo-times: also fine near 0 (a probe 0.5 mm past the scan can take under 1 % of the model's 4 N)
 TAUS_FINE = np.unique(np.r_[np.linspace(0.0, 1.0, 101), np.geomspace(1e-4, 0.05, 80)])
@@ -134,7 +138,7 @@ def main(argv=None):
     bunny, bunny_info = ([], {}) if args.quick else bunny_rows()
 
     def plot(plt):
-        fig, ax = plt.subplots(1, 3 if bunny else 2, figsize=(16 if bunny else 11, 3.8))
+        fig, ax = plt.subplots(1, 4 if bunny else 3, figsize=(21 if bunny else 16, 3.8))
         a = ax[0]
         x = np.arange(len(summary))
         for j, (key, lab) in enumerate((("snap_force_pct", "snap, F/15 N"), ("anywhere_force_pct", "anywhere, F/15 N"),
@@ -168,6 +172,18 @@ def main(argv=None):
             c.set_xlabel("bunny: off-grid probe")
             c.set_ylabel("RMS error within 20 mm of the contact (mm)")
             c.legend(fontsize=7)
+        d = ax[-1]
+        x = np.arange(len(pairs))
+        for j, (key, lab) in enumerate((("anywhere_pct", "model at the true forces"),
+                                        ("tracker_coupled_pct", "tracker, two contacts"),
+                                        ("tracker_independent_pct", "two trackers summed"),
+                                        ("tracker_one_pct", "tracker, one contact"))):
+            d.bar(x + (j - 1.5) * 0.2, [p[key] for p in pairs], 0.2, label=lab)
+        d.set_xticks(x, [p["x_mm"] for p in pairs], fontsize=6)
+        d.set_xlabel("two probes at once: x of each (mm)")
+        d.set_ylabel("surface RMS error, % of the true |u| RMS")
+        d.set_yscale("log")
+        d.legend(fontsize=6)
         fig.tight_layout()
         return fig
 
@@ -188,7 +204,10 @@ def main(argv=None):
              ("alone_N", "each alone (N)", "{}"),
              ("true_rms_mm", "true RMS (mm)", "{:.2f}"),
              ("single_sum_pct", "sum of single-probe truths (%)", "{:.2f}"),
-             ("snap_pct", "snap, summed (%)", "{:.2f}"), ("anywhere_pct", "anywhere, summed (%)", "{:.2f}")]
+             ("snap_pct", "snap, summed (%)", "{:.2f}"), ("anywhere_pct", "anywhere, summed (%)", "{:.2f}"),
+             ("tracker_coupled_pct", "tracker, two contacts (%)", "{:.2f}"),
+             ("tracker_independent_pct", "two trackers summed (%)", "{:.2f}"),
+             ("tracker_one_pct", "tracker, one contact (%)", "{:.2f}")]
     bcols = [("point", "point", "{}"), ("nearest_mm", "nearest load point (mm)", "{:.0f}"),
              ("force_N", "true force (N)", "{:.2f}"), ("method", "method", "{}"), ("tau", "best tau", "{:.4f}"),
              ("rms_mm", "RMS err (mm)", "{:.4f}"), ("truth_rms_mm", "true RMS (mm)", "{:.4f}"),
@@ -215,7 +234,19 @@ def main(argv=None):
              "independent pseudo-times would be this far off; at the true forces a linear model superposes exactly "
              "up to its own error. Not valid for the bunny and the dragon (neo-Hookean, large strain: see below) "
              "nor for the St. Venant-Kirchhoff beams of the thesis: their contacts need the combined load "
-             "precomputed (thesis §5.3).")
+             "precomputed (thesis §5.3).\n\n"
+             "The tracker on the same pairs (Alg. 5.1 run over frames, `collision/contact.py`): each probe's points "
+             f"(a sphere seen {1e3 * PAIR_DELTA:.0f} mm inside its surface: the sensor's margin that delta stands "
+             f"for, delta = {1e3 * PAIR_DELTA:.0f} mm) come down {1e3 * PAIR_APPROACH:.0f} mm onto the beam over "
+             f"{PAIR_DESCENT} frames to where the truth has it, then stay {PAIR_HOLD} frames; load steps of "
+             f"{100 * PAIR_STEP:.0f} % of the model's 15 N, anywhere on; the error is that of the surface averaged "
+             "over the hold's last half, against the two-sphere truth. 'two contacts': one tracker with "
+             "`max_contacts: 2` (each contact steps on the distance at its own probe with the beam at the summed "
+             "deformation, measured from the drawn surface between the load points too); 'two trackers summed': one "
+             "such tracker per "
+             "probe, each seeing only its own, their deformations added (superposition without the coupling); 'one "
+             "contact': the default tracker (`max_contacts: 1`, the gap measured at the load points), both probes "
+             "in its points.")
     if bunny:
         notes += (
             "\n\n## The bunny: discrete load points, probes between them\n\n" + markdown_table(bunny, bcols) + "\n\n"
@@ -323,14 +354,46 @@ def two_contacts(m, body, sn, solved, H: float) -> list[dict]:
                                                      nodes=sn)
         single = alone[0].displacement["a"][sn] + alone[1].displacement["a"][sn]
         pct = [100 * _rms(u - u_true) / size for u in (single, snap, anyw)]
+        tracked = {how: 100 * _rms(track_pair(m, sn, cs, how) - u_true) / size for how in TRACKERS}
         out.append(dict(pair=len(out), x_mm=f"{1e3 * p[0][0]:.0f}, {1e3 * q[0][0]:.0f}",
                         y_mm=f"{1e3 * p[0][1]:.0f}, {1e3 * q[0][1]:.0f}",
                         forces_N=f"{forces[0]:.1f}, {forces[1]:.1f}",
                         press_mm=f"{1e3 * press[0]:.1f}, {1e3 * press[1]:.1f}",
                         alone_N=f"{alone[0].total['a']:.1f}, {alone[1].total['a']:.1f}", true_rms_mm=1e3 * size,
-                        single_sum_pct=pct[0], snap_pct=pct[1], anywhere_pct=pct[2]))
+                        single_sum_pct=pct[0], snap_pct=pct[1], anywhere_pct=pct[2],
+                        **{f"tracker_{how}_pct": v for how, v in tracked.items()}))
         print(out[-1], flush=True)
     return out
+
+
+def track_pair(m, sn, centres: list[np.ndarray], how: str) -> np.ndarray:
+    """The surface displacement (at ``sn``) Alg. 5.1 settles at with two probes pressing, each descending from
+    PAIR_APPROACH above its final centre to it over PAIR_DESCENT frames and held for PAIR_HOLD: averaged over the
+    hold's last half (the pseudo-times oscillate by a step there). The probes are seen as points PAIR_DELTA inside
+    their surface (the sensor's margin that delta stands for), so a contact settles on the probe's true surface.
+
+    ``how``: "coupled" (one tracker, two contacts at once: each sees the other's deformation), "one" (one tracker,
+    one contact: what Alg. 5.1 does without slots), "independent" (one tracker per probe, the deformations summed:
+    superposition without the coupling)."""
+    down = np.array([0.0, 0.0, 1.0])
+
+    def probe(c, f):
+        z = PAIR_APPROACH * max(0.0, 1.0 - f / PAIR_DESCENT)
+        return sphere_points(np.asarray(c) + z * down, RADIUS - PAIR_DELTA)
+
+    kw = dict(threshold=PAIR_DELTA, step=PAIR_STEP, anywhere=True, max_contacts=1 if how == "one" else 2)
+    if how == "independent":
+        trackers = [(ContactTracker(m, np.eye(4), **kw), [i]) for i in (0, 1)]
+    else:
+        trackers = [(ContactTracker(m, np.eye(4), **kw), [0, 1])]
+    u = np.zeros((len(sn), 3))
+    frames = PAIR_DESCENT + PAIR_HOLD
+    for f in range(frames):
+        for tr, which in trackers:
+            tr.update(np.vstack([probe(centres[i], f) for i in which]))
+        if f >= frames - PAIR_HOLD // 2:
+            u += sum(tr.displacement(nodes=sn) for tr, _ in trackers)
+    return u / (PAIR_HOLD // 2)
 
 
 def between_load_points(LP: np.ndarray, S: np.ndarray, k: int) -> np.ndarray:

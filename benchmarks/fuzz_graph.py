@@ -499,14 +499,17 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--graphs", default=",".join(GRAPHS), help=f"comma-separated, of {', '.join(GRAPHS)}")
     ap.add_argument("--report", action="store_true", help="rewrite table and plot from the results JSON")
+    ap.add_argument("--name", default="fuzz_graph",
+                    help="results name (benchmarks/results/NAME.md): a longer run beside the default one")
     a = ap.parse_args()
     if a.report:
-        runs = json.loads((RESULTS / "fuzz_graph.json").read_text())["runs"]
+        runs = json.loads((RESULTS / f"{a.name}.json").read_text())["runs"]
     else:
         runs = []
         with tempfile.TemporaryDirectory() as d:
             for g in a.graphs.split(","):
                 r = fuzz_graph(g, a.messages, a.seed, Path(d))
+                r["messages"] = a.messages
                 runs.append(r)
                 print(json.dumps({k: v for k, v in r.items() if k != "log_tail"})[:3000], flush=True)
     rows = []
@@ -517,14 +520,14 @@ def main() -> None:
                          "unexpected": sum(s["unexpected"].values()), "rejected": sum(s["rejected"].values()),
                          "reasons": len(s["rejected"]), "done_during": s["done_during_fuzz"],
                          "hang": "no" if s["done_after_fuzz"] > 0 else "YES",
-                         "rss": " -> ".join(f"{x.get(n, math.nan):.0f}" for _, x in r.get("rss_series", [])[::2])
+                         "rss": " -> ".join(f"{x.get(n, math.nan):.0f}" for _, x in r.get("rss_series", []))
                          or f"{s['rss_mb_before']:.0f} -> {s['rss_mb_after']:.0f}"})
     cols = [("graph", "graph", "{}"), ("node", "node", "{}"), ("inputs", "hostile messages into the graph", "{}"),
             ("exits", "node exits (crashes)", "{}"), ("unexpected", "unexpected exceptions (caught)", "{}"),
             ("rejected", "frames rejected with a reason", "{}"), ("reasons", "distinct reasons", "{}"),
             ("done_during", "frames finished during the fuzz", "{}"),
             ("hang", "hang (no valid frame out after)", "{}"),
-            ("rss", "RSS MB: before, after 2/5, 4/5 of the messages", "{}")]
+            ("rss", "RSS MB: before, then after each fifth of the messages", "{}")]
     lines = []
     for r in runs:
         lines.append(f"\n**{r['graph']}** ({', '.join(r['nodes'])}): {sum(r['sent'].values())} messages in "
@@ -534,8 +537,12 @@ def main() -> None:
                 lines.append(f"- {n}, unexpected ({c}x): `{w[:200]}`")
             for w, c in sorted(s["rejected"].items(), key=lambda x: -x[1])[:12]:
                 lines.append(f"- {n}, rejected ({c}x): {w[:200]}")
-    save("fuzz_graph", rows, cols, "Hostile messages into the live node graph",
-         "`python -m benchmarks.fuzz_graph` (see its docstring): per graph, seeded hostile messages on every topic "
+    n_msg = runs[0].get("messages", a.messages) if runs else a.messages
+    args = "" if a.name == "fuzz_graph" else \
+        f" --messages {n_msg} --graphs {','.join(r['graph'] for r in runs)} --name {a.name}"
+    save(a.name, rows, cols, "Hostile messages into the live node graph",
+         f"`python -m benchmarks.fuzz_graph{args}` (see its docstring): per graph, seeded hostile messages on every "
+         "topic "
          "its nodes subscribe to, a valid frame after every 50; the nodes run without respawn, so an exit stays "
          "counted. The count is of messages published (at 600 a second); a node busy with one takes the newest "
          "next, so not every message reaches its callback: the frames rejected and finished are what the nodes "

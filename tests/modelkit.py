@@ -83,3 +83,30 @@ def plate_load_model(n: int = 6, size: float = 0.1, depth: float = 0.01) -> Redu
     return ReducedModel("plate_load", P, tris, "tri3", axes, {"displacement": fld}, tris, "test plate, load anywhere",
                         {"law": "linear_elastic"}, load_points=np.arange(k),
                         load_directions=np.tile([0, 0, -1.0], (k, 1)))
+
+
+def strip_load_model(n: int = 31, length: float = 0.3, width: float = 0.03, tip: float = 0.02) -> ReducedModel:
+    """A linear cantilever strip (a sheet, clamped at x = 0) loaded along its centreline, axis ``s`` (the load's x)
+    as the beams' PGD has: the load at s bends it by Euler-Bernoulli's Green's function, w(x; s) = x^2 (3 s - x) / 6
+    for x <= s, s^2 (3 x - s) / 6 beyond, scaled so that the load at the tip bends the tip by ``tip`` (down). One
+    separated mode per load position, its parameter mode the position's indicator (linear between positions). A
+    load anywhere bends the whole strip: two loads share it (what makes two contacts at once couple)."""
+    xs = np.linspace(0.0, length, n)
+    X, Y = np.meshgrid(xs, [0.0, width / 2, width], indexing="ij")
+    P = np.c_[X.ravel(), Y.ravel(), np.zeros(X.size)]
+    tris = []
+    for i in range(n - 1):
+        for j in range(2):
+            a, b, c, d = 3 * i + j, 3 * (i + 1) + j, 3 * (i + 1) + j + 1, 3 * i + j + 1
+            tris += [[a, b, c], [a, c, d]]
+    x = P[:, 0]
+    space = np.zeros((n, len(P), 3))
+    for g, s in enumerate(xs):
+        w = np.where(x <= s, x ** 2 * (3 * s - x), s ** 2 * (3 * x - s)) / 6.0
+        space[g, :, 2] = -tip * w / (length ** 3 / 3.0)
+    axes = [Axis("s", xs, "m", interpolation="linear")]
+    fld = SeparatedField("displacement", space, [np.eye(n)], axes, "m", ["x", "y", "z"])
+    lp = 3 * np.arange(n) + 1  # the centreline
+    return ReducedModel("strip_load", P, np.asarray(tris, np.int64), "tri3", axes, {"displacement": fld},
+                        np.asarray(tris, np.int64), "test strip, cantilever, load along its centreline",
+                        {"law": "linear_elastic"}, load_points=lp, load_directions=np.tile([0, 0, -1.0], (n, 1)))

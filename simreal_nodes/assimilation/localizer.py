@@ -182,8 +182,12 @@ class LiveLocalizer:
         self._focus: dict[int, tuple[int, np.ndarray]] = {}  # object index -> (stamp ns, (K, 2) image polygon)
 
     def set_focus(self, index: int, stamp_ns: int, polygon: np.ndarray) -> None:
-        """Where tracked object ``index`` projected in the frame of ``stamp_ns`` (from the tracker)."""
-        self._focus[int(index)] = (int(stamp_ns), np.asarray(polygon, np.float64).reshape(-1, 2))
+        """Where tracked object ``index`` projected in the frame of ``stamp_ns`` (from the tracker). Regions too
+        old (or too far ahead) to steer a frame of this time are forgotten, so the regions held stay as many as
+        the objects reporting now, whatever indices and stamps a sender invents."""
+        t = int(stamp_ns)
+        self._focus = {k: v for k, v in self._focus.items() if abs(t - v[0]) < FOCUS_MAX_AGE_NS}
+        self._focus[int(index)] = (t, np.asarray(polygon, np.float64).reshape(-1, 2))
 
     def focus(self, stamp_ns: int) -> list[np.ndarray]:
         """The objects' image regions that steer the features of the frame at ``stamp_ns``: those reported for a

@@ -18,6 +18,17 @@ delta (delta is the sensor's margin: a depth camera sees a real probe's near sid
 surface). So the pushed object touches where the pusher's drawn surface reaches it and follows it there, instead of
 starting delta early and staying delta ahead of it.
 
+Several contacts at once (``max_contacts`` > 1; thesis §7.3's future work): where the model is linear (a load
+scale on a linear-elastic model), the deformation of several loads is the sum of each one's, so each contact gets its
+own slot of Alg. 5.1 (load point or position, pseudo-time) and the surface sits at the *summed* deformation. The
+distance is then measured from samples of the drawn surface between the load points too (a probe between two load
+points presses the surface there). A slot steps on the clearance of the samples within ``separation`` of its load;
+touches farther than that from every slot start a new one. Because every slot sees the others' deformation, two
+probes that press the same body share the load as they do in the body (each takes less where the other presses): summing
+independent single-contact pseudo-times would not (`benchmarks/results/contact_anywhere.md`, "Two contacts at
+once": 88-98 % off). Not offered for the probe models (NI-PGD over a discrete load point x pseudo-time of a
+non-linear law): their contacts do not superpose, they need the combined load precomputed (thesis §5.3).
+
 The contact nodes are the model's precomputed load points on its *surface*, at their *deformed* positions, so a
 virtual surface pushed by a finger moves away from it and the pseudo-time settles where the surface follows the
 finger. "On its surface": a load point that is a node of the drawn surface is its own contact node; a scanned body's
@@ -28,7 +39,7 @@ the virtual object's nodes; the probe scenes' full-order truth showed the volume
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import cast
 
 import numpy as np
@@ -36,7 +47,7 @@ from scipy.spatial import cKDTree
 
 from simreal_nodes import geometry as G
 from simreal_nodes.rom.model import ReducedModel
-from simreal_nodes.rom.state import LOAD_POSITION_AXES, LoadPointStates, ModelState
+from simreal_nodes.rom.state import LOAD_POSITION_AXES, PSEUDO_TIME, LoadPointStates, ModelState
 from simreal_nodes.states import ContactPhase
 
 
@@ -88,8 +99,14 @@ class ContactTracker:
 
     def __init__(self, model: ReducedModel, T_world_object: np.ndarray, threshold: float = 0.01, step: float = 0.05,
                  tau_min: float = 0.0, tau_max: float = 1.0, n_modes: int | None = None, min_fraction: float = 1e-3,
-                 anywhere: bool = False):
+                 anywhere: bool = False, max_contacts: int = 1, separation: float = 0.0):
         self.load_states = LoadPointStates(model)
+        if int(max_contacts) < 1:
+            raise ValueError(f"max_contacts must be at least 1, not {max_contacts}")
+        if int(max_contacts) > 1 and self.load_states.probe:
+            raise ValueError(f"model '{model.name}': several contacts at once add their deformations, which holds for "
+                             "a linear model whose contact scales its load; this one is an NI-PGD over load point x "
+                             f"{PSEUDO_TIME} (a non-linear law): set collision.max_contacts: 1")
         if anywhere and self.load_states.probe:
             raise ValueError(f"model '{model.name}': its load points are discrete (NI-PGD over load point x "
                              "pseudo-time): a contact between them has no model state; contact anywhere needs "
@@ -108,6 +125,14 @@ class ContactTracker:
         self.view = model.deformation_view(self.contact_nodes, n_modes)
         self.active = self._active_load_points(min_fraction)
         self.push_directions = self._push_directions(model)
+        self.max_contacts = int(max_contacts)
+        self.separation = float(separation) if separation > 0 else self._default_separation()
+        self.contacts: list[ContactState] = []  # max_contacts > 1: the slots in contact, oldest first
+        if self.max_contacts > 1:
+            if model.load_directions is None:
+                raise ValueError(f"model '{model.name}' has no load directions: several contacts cannot tell where "
+                                 "a real point presses; set collision.max_contacts: 1")
+            self._samples = self._contact_samples()
 
     def _push_directions(self, model: ReducedModel) -> np.ndarray:
         """Unit direction (object frame) in which a touching surface pushes each load point: the model's load
@@ -152,6 +177,48 @@ class ContactTracker:
             act = full >= 0.02 * full.max()
         return np.nonzero(act)[0]
 
+    def _default_separation(self) -> float:
+        """Two contacts are told apart when their load points are more than 2.5 load-point spacings apart (the
+        median distance of an active load point to its nearest neighbour, rest shape): a probe touches a patch of
+        neighbouring load points that belongs to one contact, and a closer pair of probes is taken as one."""
+        P = self.model.points[self.contact_nodes[self.active]]
+        if len(P) < 2:
+            return float("inf")
+        d = cast(tuple[np.ndarray, np.ndarray], cKDTree(P).query(P, k=2))[0][:, 1]
+        return 2.5 * float(np.median(d))
+
+    def _contact_samples(self) -> tuple[np.ndarray, np.ndarray]:
+        """Several contacts: points on the drawn surface where a touch is looked for, in place of the load points
+        alone (a probe between load points presses the surface between them): the triangles that face against the
+        push direction (those a load can press; on a sheet, either side) sampled on a barycentric grid about a
+        third of a load-point spacing apart, without those nearest an inactive load point (a support). Returns
+        (vertex indices (s, 3), barycentric weights (s, 3)): a sample moves with its triangle's vertices."""
+        P = np.asarray(self.model.points, dtype=np.float64)
+        F = np.asarray(self.model.surface, dtype=np.int64).reshape(-1, 3)
+        closed = _is_closed(F)
+        F = outward_triangles(P, F) if closed else F
+        d = np.mean(self.push_directions[self.active], axis=0)
+        d /= max(float(np.linalg.norm(d)), 1e-12)
+        n = np.cross(P[F[:, 1]] - P[F[:, 0]], P[F[:, 2]] - P[F[:, 0]])
+        facing = -(n @ d) / np.maximum(np.linalg.norm(n, axis=1), 1e-300)
+        F = F[facing > 0.3] if closed else F  # within about 70 degrees of facing the pusher
+        spacing = self.separation / 2.5 if np.isfinite(self.separation) else float(np.ptp(P, axis=0).max())
+        tri, bary = [], []
+        for f in F:
+            edge = max(float(np.linalg.norm(P[f[i]] - P[f[(i + 1) % 3]])) for i in range(3))
+            k = max(1, int(np.ceil(edge / (spacing / 3.0))))
+            ij = np.array([(i, j) for i in range(k + 1) for j in range(k + 1 - i)], dtype=np.float64) / k
+            w = np.c_[1.0 - ij.sum(axis=1), ij]
+            tri.append(np.tile(f, (len(w), 1)))
+            bary.append(w)
+        if not tri:
+            return np.zeros((0, 3), np.int64), np.zeros((0, 3))
+        T, B = np.vstack(tri), np.vstack(bary)
+        X = np.einsum("sk,skj->sj", B, P[T])
+        near = cast(tuple[np.ndarray, np.ndarray], cKDTree(P[self.contact_nodes]).query(X, k=1))[1]
+        keep = np.isin(np.asarray(near, np.int64), self.active)
+        return T[keep], B[keep]
+
     # -- the contact as a model state -----------------------------------------------------------------------
     def model_state(self, state: ContactState | None = None) -> ModelState:
         """The model state of the current contact (load point 0 when there is none)."""
@@ -177,6 +244,14 @@ class ContactTracker:
         return self.load_states.layout.vector(self.model_state(state))
 
     def displacement(self, nodes=None, state: ContactState | None = None, n_modes=None) -> np.ndarray:
+        """The deformation of ``state`` (object frame); by default of the current contact, the sum of every
+        contact's with ``max_contacts`` > 1."""
+        if state is None and self.max_contacts > 1:
+            n = self.model.n_nodes if nodes is None else len(nodes)
+            u = np.zeros((n, 3))
+            for c in self.contacts:
+                u += self.displacement(nodes, c, n_modes)
+            return u
         st = state or self.state
         if st.pseudo_time <= 0 or st.load_point < 0:
             n = self.model.n_nodes if nodes is None else len(nodes)
@@ -186,9 +261,14 @@ class ContactTracker:
     def contact_nodes_world(self) -> np.ndarray:
         """The load points' contact nodes (on the surface) at their current deformed positions, world frame."""
         P = self.model.points[self.contact_nodes]
-        if self.state.pseudo_time > 0 and self.state.load_point >= 0:
-            P = P + self.view(self.model_state())
+        for st in (self.contacts if self.max_contacts > 1 else [self.state]):
+            if st.pseudo_time > 0 and st.load_point >= 0:
+                P = P + self.view(self.model_state(st))
         return G.transform(self.T, P)
+
+    def states(self) -> list[ContactState]:
+        """The contacts whose deformation is drawn: the slots in contact (``max_contacts`` > 1), else the one."""
+        return list(self.contacts) if self.max_contacts > 1 else [self.state]
 
     def _contact_position(self, near: np.ndarray, nodes: np.ndarray) -> tuple:
         """Contact anywhere: where the real points ``near`` (world) touch first, object frame. Each point's gap is
@@ -276,6 +356,8 @@ class ContactTracker:
             pts = pts[np.all(np.isfinite(pts), axis=1)]
         surfaces = [s for s in (surfaces or []) if len(s.triangles)]
         has_data = (pts is not None and len(pts) > 0) or bool(surfaces)
+        if self.max_contacts > 1:
+            return self._update_many(pts, surfaces, has_data)
         nodes = self.contact_nodes_world()
         st.points_used = 0 if pts is None else len(pts)
         d_min, nearest = np.inf, -1
@@ -293,8 +375,9 @@ class ContactTracker:
                 # many query points with k=1: arrays of distances and indices (the stubs also allow scalars)
                 d, idx = cast(tuple[np.ndarray, np.ndarray], cKDTree(near).query(nodes[self.active], k=1))
                 k = int(np.argmin(d))
-                nearest, d_min = int(self.active[k]), float(d[k])
-                st.contact_point = tuple(float(x) for x in near[idx[k]])
+                if np.isfinite(d[k]):  # points so far off (1e300 m) that their distance overflows: none near
+                    nearest, d_min = int(self.active[k]), float(d[k])
+                    st.contact_point = tuple(float(x) for x in near[idx[k]])
         clearance = d_min - self.threshold
         virtual, pusher_slack = False, 0.0
         if surfaces:
@@ -337,6 +420,154 @@ class ContactTracker:
         st.node = int(self.lp_nodes[st.load_point]) if st.load_point >= 0 else -1
         return st
 
+    def _all_back_motion(self, st: ContactState) -> float:
+        """How far the loaded contact node of ``st`` moves when every contact steps its pseudo-time back once
+        (several contacts: the deformations add, so the others' steps move it too; metres)."""
+        node = [int(self.contact_nodes[st.load_point])]
+        u = np.zeros((1, 3))
+        for c in self.contacts:
+            back = replace(c, pseudo_time=max(self.tau_min, c.pseudo_time - self.step))
+            u += self.displacement(node, c) - self.displacement(node, back)
+        return float(np.linalg.norm(u))
+
+    def _step(self, st: ContactState, clearance: float, slack: float, has_data: bool,
+              back: float | None = None) -> None:
+        """Alg. 5.1's step of one contact on its clearance (the distance less delta, or a pushing surface's gap):
+        on while under zero, held while one step back would bring it under zero again (``back``: how far its node
+        moves then, by default its own step's motion; ``slack``: how far the pushing surface itself stepped
+        back), else released."""
+        if clearance < 0 and st.pseudo_time < self.tau_max - 1e-12:
+            st.pseudo_time = min(self.tau_max, st.pseudo_time + self.step)
+            st.state, st.reason = ContactPhase.CONTACT, ""
+        elif clearance < 0:
+            st.state, st.reason = ContactPhase.CONTACT, "largest precomputed deformation reached"
+        else:
+            held = clearance < (self.step_motion(st) if back is None else back) + slack
+            st.pseudo_time = max(self.tau_min, st.pseudo_time - self.step)
+            held = held and st.pseudo_time > self.tau_min + 1e-12
+            st.state = ContactPhase.CONTACT if held else ContactPhase.RELEASING
+            st.reason = "" if has_data else "no valid points: relaxing"
+        if st.pseudo_time <= 1e-12:
+            st.pseudo_time, st.load_point, st.position = 0.0, -1, (np.nan, np.nan, np.nan)
+        st.node = int(self.lp_nodes[st.load_point]) if st.load_point >= 0 else -1
+
+    def _touches(self, pts: np.ndarray | None,
+                 surfaces: list[PusherSurface]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Where things touch the object this frame, for several contacts: (gap (n,), where on the object's
+        deformed surface (n, 3) world, slack (n,), from a pushing surface (n,) bool, the touching point (n, 3)).
+
+        Real points: Alg. 5.1's distance, from each of the drawn surface's contact samples
+        (:meth:`_contact_samples`, at the summed deformation) to the nearest real point; a pushing virtual surface:
+        its gap at each active contact node (:meth:`_pusher_gap`)."""
+        T, B = self._samples
+        gaps, hits, slack, virt, src = [np.zeros(0)], [np.zeros((0, 3))], [np.zeros(0)], [np.zeros(0, bool)], \
+            [np.zeros((0, 3))]
+        if pts is not None and len(pts) and len(T):
+            U = self.displacement(np.unique(T))
+            V = np.asarray(self.model.points, dtype=np.float64).copy()
+            V[np.unique(T)] += U
+            X = G.transform(self.T, np.einsum("sk,skj->sj", B, V[T]))
+            lo, hi = X.min(axis=0) - self.threshold, X.max(axis=0) + self.threshold
+            near = pts[np.all((pts >= lo) & (pts <= hi), axis=1)]
+            if len(near) == 0:  # nothing can touch: the reported distance from at most 5 000 of the points
+                near = pts[:: max(1, len(pts) // 5000)]
+            dist, idx = cast(tuple[np.ndarray, np.ndarray], cKDTree(near).query(X, k=1))
+            ok = np.isfinite(dist)  # an overflowing distance (points 1e300 m off) is no neighbour
+            gaps.append(np.asarray(dist, np.float64)[ok])
+            hits.append(X[ok])
+            slack.append(np.zeros(int(ok.sum())))
+            virt.append(np.zeros(int(ok.sum()), bool))
+            src.append(near[np.asarray(idx, np.int64)[ok]])
+        if surfaces:
+            nodes = self.contact_nodes_world()
+            gap, hit, sl = self._pusher_gap(nodes, surfaces)
+            ok = np.isfinite(gap)
+            gaps.append(gap[ok])
+            hits.append(nodes[self.active][ok])
+            slack.append(sl[ok])
+            virt.append(np.ones(int(ok.sum()), bool))
+            src.append(hit[ok])
+        return (np.concatenate(gaps), np.concatenate(hits), np.concatenate(slack), np.concatenate(virt),
+                np.concatenate(src))
+
+    def _update_many(self, pts: np.ndarray | None, surfaces: list[PusherSurface], has_data: bool) -> ContactState:
+        """One frame of Alg. 5.1 with several contacts (``max_contacts`` > 1; the module docstring). Each slot steps
+        on the smallest clearance (gap less delta for a real point, the gap for a pushing surface) of what touches
+        the object within ``separation`` of the slot's load, with the deformed surface at the summed deformation;
+        touches farther than that from every slot start new slots (the deepest first) while fewer than
+        ``max_contacts`` are in contact. ``self.state`` sums them up for the messages: the oldest contact's load
+        and pseudo-time, the phase CONTACT while any is."""
+        gap, hit, slack, virtual, src = self._touches(pts, surfaces)
+        clear = np.where(virtual, gap, gap - self.threshold)
+        T_inv = G.inv(self.T)
+        at = G.transform(T_inv, hit) if len(hit) else np.zeros((0, 3))  # object frame, on the surface
+        lp_rest = self.model.points[self.contact_nodes[self.active]]
+
+        def centre(c: ContactState) -> np.ndarray:
+            p = np.asarray(c.position, dtype=np.float64)
+            if self.anywhere and np.all(np.isfinite(p)):
+                return p
+            return self.model.points[self.contact_nodes[c.load_point]]
+
+        def around(c: np.ndarray) -> np.ndarray:
+            return np.linalg.norm(at - c, axis=1) < self.separation
+
+        # each slot's clearance, and how far its node moves when every slot steps back once (the held test: the
+        # others' step back lifts it too), all on this frame's states before any of them steps
+        steps = []
+        for st in self.contacts:
+            nb = around(centre(st))
+            k = int(np.flatnonzero(nb)[np.argmin(clear[nb])]) if nb.any() else -1
+            steps.append((k, self._all_back_motion(st)))
+        for st, (k, back) in zip(self.contacts, steps):
+            if k >= 0:
+                st.min_distance, st.contact_point = float(gap[k]), tuple(float(v) for v in src[k])
+                self._step(st, float(clear[k]), float(slack[k]), has_data, back)
+            else:
+                st.min_distance = float("inf")
+                self._step(st, float("inf"), 0.0, has_data, back)
+            st.points_used = 0 if pts is None else len(pts)
+        self.contacts = [c for c in self.contacts if c.load_point >= 0]
+        free = clear < 0
+        for c in self.contacts:
+            free &= ~around(centre(c))
+        while free.any() and len(self.contacts) < self.max_contacts:
+            k = int(np.argmin(np.where(free, clear, np.inf)))
+            nb = around(at[k])
+            lp = int(self.active[int(np.argmin(np.linalg.norm(lp_rest - at[k], axis=1)))])
+            st = ContactState(load_point=lp, min_distance=float(gap[k]), nearest_load_point=lp,
+                              contact_point=tuple(float(v) for v in src[k]),
+                              points_used=0 if pts is None else len(pts))
+            if self.anywhere:  # where it touches first: the mean of the touches within 1 mm of the deepest
+                sel = nb & free & (clear <= clear[k] + 1e-3)
+                st.position = tuple(float(v) for v in at[sel].mean(axis=0))
+            self._step(st, float(clear[k]), float(slack[k]), has_data)
+            self.contacts.append(st)
+            free &= ~nb
+        k = int(np.argmin(gap)) if len(gap) else -1
+        nearest = (float(gap[k]), int(self.active[int(np.argmin(np.linalg.norm(lp_rest - at[k], axis=1)))]),
+                   tuple(float(v) for v in src[k])) if k >= 0 else None
+        return self._summary(nearest, pts, has_data)
+
+    def _summary(self, nearest: tuple | None, pts: np.ndarray | None, has_data: bool) -> ContactState:
+        """The state the messages carry with several contacts: the oldest contact's, the phase CONTACT while any
+        contact is, the nearest touch over the whole object (``nearest``: gap, its load point, the touching point)."""
+        st = replace(self.contacts[0]) if self.contacts else ContactState()
+        if any(c.in_contact for c in self.contacts):
+            st.state, st.reason = ContactPhase.CONTACT, next((c.reason for c in self.contacts if c.in_contact), "")
+        elif self.contacts:
+            st.state = ContactPhase.RELEASING
+        else:
+            st.state = ContactPhase.FREE if has_data else ContactPhase.NO_DATA
+            st.reason = "" if has_data else "no valid points"
+        if nearest is not None:
+            st.min_distance, st.nearest_load_point, st.contact_point = nearest
+        else:
+            st.min_distance, st.nearest_load_point = float("inf"), -1
+        st.points_used = 0 if pts is None else len(pts)
+        self.state = st
+        return st
+
 
 def outward_triangles(P: np.ndarray, F: np.ndarray) -> np.ndarray:
     """A closed surface's triangles turned outward: reversed when the volume they enclose comes out negative (the
@@ -350,6 +581,15 @@ def outward_triangles(P: np.ndarray, F: np.ndarray) -> np.ndarray:
     a, b, d = P[F[:, 0]] - c, P[F[:, 1]] - c, P[F[:, 2]] - c
     volume = float(np.einsum("ij,ij->i", a, np.cross(b, d)).sum()) / 6
     return F[:, ::-1].copy() if volume < 0 else F
+
+
+def _is_closed(F: np.ndarray) -> bool:
+    """Whether the triangles close a surface: every edge shared by exactly two of them."""
+    if len(F) == 0:
+        return False
+    e = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1)
+    _, counts = np.unique(e, axis=0, return_counts=True)
+    return bool(np.all(counts == 2))
 
 
 def _line_triangle_gaps(X: np.ndarray, D: np.ndarray, V: np.ndarray, F: np.ndarray) -> np.ndarray:

@@ -68,7 +68,9 @@ class ContactScene:
             c = o["collision"]
             self.trackers[o["id"]] = ContactTracker(models[o["id"]], G.pose7_to_matrix(o["anchor"]["pose"]),
                                                     threshold=c["threshold_m"], step=c["step"],
-                                                    anywhere=bool(c.get("anywhere", False)))
+                                                    anywhere=bool(c.get("anywhere", False)),
+                                                    max_contacts=int(c.get("max_contacts", 1)),
+                                                    separation=float(c.get("separation_m", 0.0)))
 
     def step(self, depth: np.ndarray, cam: CameraModel, T_wc: np.ndarray | None) -> list[ObjectContact]:
         """Advance every object by one frame: ``depth`` in metres (registered to ``cam``), ``T_wc`` the camera pose

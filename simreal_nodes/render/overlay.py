@@ -171,6 +171,19 @@ class ObjectOverlay:
             val = np.zeros(len(u))
         return u, val
 
+    def values_sum(self, states: list[ModelState], m: int) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`values` of several contacts at once (a linear model): their deformations and stresses add, and
+        the von Mises stress is that of the summed stress."""
+        u = np.sum([self.u_view(s, m) for s in states], axis=0)
+        if self.s_view is not None:
+            sv = self.s_view
+            val = von_mises(np.sum([s.load_scale * sv.evaluate(s.mu, min(m, sv.n_modes)) for s in states], axis=0))
+        elif self.field_name == "displacement":
+            val = np.linalg.norm(u, axis=1)
+        else:
+            val = np.zeros(len(u))
+        return u, val
+
     def choose_modes(self, state: ModelState, T_cam_obj: np.ndarray, cam: CameraModel) -> tuple[int, float]:
         """Smallest m whose on-screen truncation error over visible nodes is <= max_error_px."""
         if self.fixed_modes:
@@ -194,14 +207,15 @@ class ObjectOverlay:
 
     def geometry(self, names, values, T_world_cam: np.ndarray, cam: CameraModel):
         """Deformed vertices (object frame), RGB colours and the draw state for this frame."""
-        state = ModelState.from_named(self.model.axes, names, values)
+        states = ModelState.from_named_contacts(self.model.axes, names, values)
         T_cam_obj = np.linalg.inv(T_world_cam) @ self.T
         st = DrawState()
         Xc = G.transform(T_cam_obj, self.X)
         st.visible_nodes = int(np.count_nonzero(Xc[:, 2] > 1e-3))
         st.behind_camera = st.visible_nodes == 0
-        m, err = self.choose_modes(state, T_cam_obj, cam)
-        u, val = self.values(state, m)
+        chosen = [self.choose_modes(s, T_cam_obj, cam) for s in states]
+        m, err = max(c[0] for c in chosen), float(np.sum([c[1] for c in chosen]))
+        u, val = self.values(states[0], m) if len(states) == 1 else self.values_sum(states, m)
         V = self.X + self.magnify * u
         if self.field_name == "none":
             col = np.tile(np.asarray(self.tint, dtype=np.float64), (len(V), 1))

@@ -53,6 +53,8 @@ ALPHA_Z = "alpha_z"
 LOAD_SCALE = "load_scale"
 SHIFT = ("shift_x", "shift_y", "shift_z")
 PSEUDO_TIME = "pseudo_time"
+# a message with several contacts names the k-th one's parameters "<name>@k" (k >= 2; ModelParameters.msg)
+CONTACT_SEP = "@"
 # Axes of linear contact models that are the position of their load: which coordinate of a load point they take.
 LOAD_POSITION_AXES: dict[str, int] = {"s": 0, "s_x": 0, "s_y": 1}
 # load_scale is a pseudo-time: 0 undeformed, 1 the largest precomputed deformation (ContactState.msg).
@@ -115,6 +117,26 @@ class ModelState:
         scale = given.get(LOAD_SCALE, 1.0)
         return cls(np.asarray(mu, dtype=np.float64), alpha if np.isfinite(alpha) else 0.0,
                    scale if np.isfinite(scale) else 0.0)
+
+
+    @classmethod
+    def from_named_contacts(cls, axes: Sequence[Axis], names: Sequence[str],
+                            values: Sequence[float]) -> list[ModelState]:
+        """The states of a message that carries several contacts (a collision with ``max_contacts`` > 1): the
+        first contact's parameters under their names, the k-th one's as ``name@k`` (k = 2, 3, ...); each contact
+        is read as :meth:`from_named` reads one. Their deformations add (linear models only send several)."""
+        if len(names) != len(values):
+            raise ValueError(f"{len(names)} parameter names for {len(values)} values")
+        groups: dict[int, tuple[list[str], list[float]]] = {1: ([], [])}
+        for name, value in zip(names, values):
+            base, sep, k = str(name).partition(CONTACT_SEP)
+            if sep and not (k.isdigit() and int(k) >= 2):
+                raise ValueError(f"parameter '{name}': a further contact's name ends in {CONTACT_SEP}2, "
+                                 f"{CONTACT_SEP}3, ...")
+            n_, v_ = groups.setdefault(int(k) if sep else 1, ([], []))
+            n_.append(base)
+            v_.append(value)
+        return [cls.from_named(axes, *groups[k]) for k in sorted(groups)]
 
 
 @dataclass(frozen=True)

@@ -21,6 +21,7 @@ from simreal_msgs.msg import FeatureObservations, ModelParameters, TrackingStatu
 from std_msgs.msg import Header
 
 from simreal_nodes import geometry
+from simreal_nodes.rom.state import CONTACT_SEP
 from simreal_nodes.states import ContactPhase
 
 if TYPE_CHECKING:  # (annotations only: the player imports this module and needs none of the cores)
@@ -59,11 +60,19 @@ def pose_to_matrix(p: Pose) -> np.ndarray:
     return T
 
 
+MAX_POSITION_M = 1e6  # a camera farther than this from the map origin is not a pose (a damaged message)
+
+
 def observation_pose(obs) -> np.ndarray | None:
-    """T_map_camera of a FeatureObservations, or None when localization had no pose (zero quaternion)."""
+    """T_map_camera of a FeatureObservations, or None when localization had no pose (zero quaternion); ValueError
+    for a quaternion without a rotation or a position that is not finite or absurdly far (over MAX_POSITION_M)."""
     q = obs.camera_pose.orientation
     if abs(q.x) + abs(q.y) + abs(q.z) + abs(q.w) == 0:
         return None
+    p = obs.camera_pose.position
+    t = np.array([p.x, p.y, p.z], np.float64)
+    if not np.all(np.isfinite(t)) or np.abs(t).max() > MAX_POSITION_M:
+        raise ValueError(f"camera position {t.tolist()} is not finite or beyond {MAX_POSITION_M:g} m")
     return pose_to_matrix(obs.camera_pose)
 
 
@@ -172,10 +181,23 @@ def focus_msg(poly: np.ndarray, index: int, header: Header, frame_id: str) -> Po
     return m
 
 
+FOCUS_MAX_PX = 1e5  # a focus polygon's coordinates beyond this (pixels) are not an image region
+FOCUS_MAX_POINTS = 10_000  # a tracked object's image hull has tens of corners
+FOCUS_MAX_INDEX = 1024  # object indices of a scene's tracked objects
+
+
 def focus_polygon(msg: PolygonInstanceStamped) -> tuple[int, np.ndarray]:
-    """(object index, (K, 2) pixels) of :func:`focus_msg`'s message."""
+    """(object index, (K, 2) pixels) of :func:`focus_msg`'s message; ValueError for an index or a size no scene
+    has, and for coordinates that are not finite or lie absurdly far off any image (over FOCUS_MAX_PX)."""
+    index, n = int(msg.polygon.id), len(msg.polygon.polygon.points)
+    if not 0 <= index < FOCUS_MAX_INDEX or n > FOCUS_MAX_POINTS:
+        raise ValueError(f"focus polygon of object index {index} with {n} points (at most {FOCUS_MAX_INDEX} objects, "
+                         f"{FOCUS_MAX_POINTS} points)")
     pts = np.array([(p.x, p.y) for p in msg.polygon.polygon.points], np.float64).reshape(-1, 2)
-    return int(msg.polygon.id), pts
+    if not np.all(np.isfinite(pts)) or (len(pts) and np.abs(pts).max() > FOCUS_MAX_PX):
+        raise ValueError(f"focus polygon of {len(pts)} points has non-finite coordinates or ones beyond "
+                         f"{FOCUS_MAX_PX:g} px")
+    return index, pts
 
 
 # simreal_msgs ------------------------------------------------------------------------------------------------
@@ -243,10 +265,16 @@ def contact_parameters_msg(oid: str, tr: ContactTracker, st: ContactState, stamp
     m.header.stamp = stamp
     m.header.frame_id = oid
     m.object_id, m.model_id = oid, tr.model.model_id
-    m.names = tr.parameter_names()
+    names = tr.parameter_names()
     axes_units = [a.unit for a in tr.model.axes]
-    m.units = axes_units + [""] * (len(m.names) - len(axes_units))
-    m.values = [float(v) for v in tr.parameters()]
+    units = axes_units + [""] * (len(names) - len(axes_units))
+    all_names, all_units, values = list(names), list(units), [float(v) for v in tr.parameters(st)]
+    # several contacts at once (collision.max_contacts): the further ones as name@k, their deformations added
+    for k, c in enumerate(tr.states()[1:], start=2):
+        all_names += [f"{n}{CONTACT_SEP}{k}" for n in names]
+        all_units += units
+        values += [float(v) for v in tr.parameters(c)]
+    m.names, m.units, m.values = all_names, all_units, values
     m.frozen = [False] * len(m.names)
     m.covariance = [0.0] * (len(m.names) ** 2)
     m.residual_rms_px = -1.0

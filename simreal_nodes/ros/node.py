@@ -205,10 +205,13 @@ def guarded(fn):
 
 
 def _stamp_of(args):
+    """The stamp of the message a callback was given, or of a synchronized frame's (a dict of messages): the
+    frame a failure is reported for."""
     for a in args:
-        h = getattr(a, "header", None)
-        if h is not None and hasattr(h, "stamp"):
-            return h.stamp
+        for m in (a.values() if isinstance(a, dict) else (a,)):
+            h = getattr(m, "header", None)
+            if h is not None and hasattr(h, "stamp"):
+                return h.stamp
     return None
 
 

@@ -170,6 +170,11 @@ COLLISION = Record({
     "max_depth_m": Number("ignore depth beyond this, metres", lo=0, lo_open=True, default=5.0),
     "anywhere": Bool("the load sits where the real object touches, between the model's load points (models with "
                      "load-position axes: the linear beams), instead of at the nearest load point", default=False),
+    "max_contacts": Number("contacts at once, their deformations added (linear models whose contact scales the load: "
+                           "the beams; a probe model of a non-linear law takes 1)", integer=True, lo=1, hi=8,
+                           default=1),
+    "separation_m": Number("two touching load points farther apart than this are two contacts, metres (0: 2.5 "
+                           "load-point spacings)", lo=0, default=0.0),
 })
 
 OBJECT_OVERLAY = Record({

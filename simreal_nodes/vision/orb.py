@@ -97,7 +97,11 @@ class OrbExtractor:
             gray = cv2.cvtColor(gray, cv2.COLOR_BGR2GRAY)
         if gray.dtype != np.uint8:
             gray = cv2.convertScaleAbs(gray)
-        polys = [np.asarray(p, np.float64).reshape(-1, 2) for p in focus if len(p) >= 3]
+        # a polygon that is not finite steers nothing; one far off the image is clipped to a margin around it
+        # (its pixel bounds must fit an int)
+        big = 4.0 * max(gray.shape)
+        polys = [np.clip(q, -big, big) for q in (np.asarray(p, np.float64).reshape(-1, 2) for p in focus if len(p) >= 3)
+                 if np.all(np.isfinite(q))]
         kps: list[cv2.KeyPoint] = []
         for lvl, img in enumerate(self.pyramid(gray)):
             s = self.sf ** lvl

@@ -106,3 +106,28 @@ def test_live_focus_regions_expire():
     live.set_focus(0, 1_900_000_000, square + 5)
     (p,) = live.focus(2_000_000_000)
     np.testing.assert_allclose(p, square + 5)
+
+
+def test_focus_regions_held_stay_few_whatever_the_senders_invent():
+    """Regions too old to steer are dropped as new ones come in: a sender inventing an index per message (the graph
+    fuzz did) leaves only the regions of the last half second held, not one per message."""
+    live = LiveLocalizer(MARKERS)
+    square = np.array([[0, 0], [10, 0], [10, 10], [0, 10]], float)
+    for i in range(1000):
+        live.set_focus(i, i * 100_000_000, square)  # ten a second, each under a new index
+    assert len(live._focus) == 5
+
+
+def test_focus_polygons_that_are_not_finite_or_far_off_steer_nothing_and_break_nothing():
+    """The feature extractor takes any polygon it is given: one with NaN is ignored, one with huge coordinates is
+    clipped (its pixel bounds must fit an int), and the frame's features come out as without them."""
+    from simreal_nodes.vision.orb import OrbExtractor
+
+    rng = np.random.default_rng(2)
+    img = rng.integers(0, 255, (240, 320)).astype(np.uint8)
+    ex = OrbExtractor(300)
+    plain = ex.extract(img)
+    nan = np.array([[0, 0], [np.nan, 5.0], [10, 10]])
+    huge = np.array([[-1e30, -1e30], [1e30, -1e30], [1e30, 1e30], [-1e30, 1e30]])
+    got = ex.extract(img, focus=[nan, huge], focus_share=0.2)
+    assert len(got) == pytest.approx(len(plain), rel=0.05)

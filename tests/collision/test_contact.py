@@ -8,8 +8,9 @@ import pytest
 
 from simreal_nodes import geometry as G
 from simreal_nodes.collision.contact import ContactTracker, PusherSurface, _line_triangle_gaps
+from simreal_nodes.rom.state import ModelState
 from simreal_nodes.states import ContactPhase
-from tests.modelkit import plate_load_model, probe_model
+from tests.modelkit import plate_load_model, probe_model, strip_load_model
 
 T_WO = G.make_T(t=[1.0, 2.0, 0.5])
 
@@ -285,3 +286,140 @@ def test_the_gap_is_measured_along_the_push_direction_through_a_tilted_surface()
     assert np.all(np.isinf(t[2]))  # the line misses the sheet
     assert np.all(np.isinf(_line_triangle_gaps(X, D, V, F[:, ::-1])))  # facing away: never a gap
     assert np.nanmin(_line_triangle_gaps(X + [0, 0, 2.0], D, V, F)[0]) == pytest.approx(-0.5)  # overlapping
+
+
+# -- several contacts at once (max_contacts > 1) -------------------------------------------------------------------
+
+W_STRIP = 0.03  # strip_load_model's width: its centreline at y = 15 mm
+DELTA, STEP = 0.002, 0.01
+
+
+def _tip(x, z):
+    """A probe tip seen over the strip's centreline at x (object frame), its lowest points at height z: five points
+    within 0.3 mm (world frame)."""
+    local = np.array([[x, W_STRIP / 2, z], [x + 3e-4, W_STRIP / 2, z], [x - 3e-4, W_STRIP / 2, z],
+                      [x, W_STRIP / 2 + 3e-4, z + 1e-4], [x, W_STRIP / 2 - 3e-4, z + 1e-4]])
+    return G.transform(T_WO, local)
+
+
+def _strip_bends(m, xs):
+    """B[i, k]: the strip's height at xs[i] under the load at xs[k] at load scale 1 (the model; m)."""
+    nodes = [3 * round(x / 0.01) + 1 for x in xs]
+    return np.array([[m.deformation(ModelState(np.array([xk]), load_scale=1.0), nodes=[n])[0, 2] for xk in xs]
+                     for n in nodes])
+
+
+def _press(tr, probes, frames, descent=100):
+    """The probes come down from 1 mm above the strip to their depths over ``descent`` frames (slower than the
+    surface can follow at one step a frame), then stay; each is seen delta above where it presses."""
+    for f in range(frames):
+        a = max(0.0, 1.0 - f / descent) if descent else 0.0
+        tr.update(np.vstack([_tip(x, (1 - a) * z + a * 0.001 + DELTA) for x, z in probes]))
+    return {round(c.position[0], 3): c.pseudo_time for c in tr.contacts}
+
+
+def _rms(u):
+    return float(np.sqrt(np.mean(np.sum(u * u, axis=1))))
+
+
+def test_two_probes_press_at_once_and_share_the_load_as_the_body_does():
+    """Two probes press a linear cantilever strip at once, each to a depth of its own. Each contact's slot steps on
+    the clearance at its own probe with the surface at the *summed* deformation, so the drawn surface settles at the
+    coupled problem's (the loads tau solving B tau = -press, B the model's bending at each probe under each load):
+    within about 1 % of its RMS, where summing what each probe would take alone (-press_i / B_ii) is 96 % off.
+    (The pseudo-times themselves are ill-determined here, B's condition number 74: two loads 80 mm apart near the
+    tip bend the strip alike; the surface is what is drawn and scored.) Lifting one probe releases its contact only;
+    the other then takes the load it needs alone."""
+    m = strip_load_model()
+    tr = ContactTracker(m, T_WO, threshold=DELTA, step=STEP, anywhere=True, max_contacts=2)
+    xs, coupled = [0.20, 0.28], np.array([0.3, 0.3])
+    B = _strip_bends(m, xs)
+    press = -B @ coupled  # 4.6 and 7.7 mm: the depths at which the coupled problem's solution is (0.3, 0.3)
+    alone = -press / np.diag(B)  # 0.78, 0.47
+    u1 = [m.deformation(ModelState(np.array([x]), load_scale=1.0)) for x in xs]
+    truth = coupled[0] * u1[0] + coupled[1] * u1[1]
+    summed = alone[0] * u1[0] + alone[1] * u1[1]
+    assert _rms(summed - truth) > 0.5 * _rms(truth)  # the coupling is large here: the test can tell
+    _press(tr, list(zip(xs, -press)), 200)
+    assert len(tr.contacts) == 2
+    assert sorted(c.position[0] for c in tr.contacts) == pytest.approx(xs, abs=1e-3)  # where the probes are
+    assert tr.state.in_contact and tr.state.pseudo_time == tr.contacts[0].pseudo_time
+    u = np.mean([_press(tr, list(zip(xs, -press)), 1, descent=0) and tr.displacement() for _ in range(20)],
+                axis=0)
+    assert _rms(u - truth) < 0.03 * _rms(truth)
+    for x, p in zip(xs, press):  # under each probe, where it presses (within the oscillation)
+        assert u[3 * round(x / 0.01) + 1, 2] == pytest.approx(-p, abs=0.0003)
+    # lift the second probe: its contact relaxes and goes, the first one's takes over the load it needs alone
+    taus = _press(tr, [(xs[0], -press[0]), (xs[1], 0.1)], 150, descent=0)
+    assert list(taus) == [0.2] and taus[0.2] == pytest.approx(alone[0], abs=2.5 * STEP)
+
+
+def test_contacts_are_told_apart_by_the_separation_and_capped():
+    """Touches closer than the separation (2.5 load-point spacings: 25 mm on the strip) are one contact; at most
+    max_contacts are tracked at once (the deepest touch first)."""
+    m = strip_load_model()
+    tr = ContactTracker(m, T_WO, threshold=DELTA, step=STEP, anywhere=True, max_contacts=3)
+    assert tr.separation == pytest.approx(0.025)
+    _press(tr, [(0.20, -0.001), (0.21, -0.001)], 5, descent=0)  # seen 1 mm over the strip: within delta
+    assert len(tr.contacts) == 1
+    capped = ContactTracker(m, T_WO, threshold=DELTA, step=STEP, anywhere=True, max_contacts=2)
+    _press(capped, [(0.10, -0.0005), (0.20, -0.001), (0.29, -0.0015)], 1, descent=0)  # 1.5, 1, 0.5 mm over it
+    assert len(capped.contacts) == 2 and capped.contacts[0].position[0] == pytest.approx(0.29, abs=1e-3)
+
+
+def _slab(m, h=0.01):
+    """The strip made a closed solid ``h`` thick: its nodes copied h below with the same displacement, the bottom
+    face the top one reversed, the sides closed along the boundary edges (orientations consistent)."""
+    from simreal_nodes.rom.model import ReducedModel
+    from simreal_nodes.rom.separated import SeparatedField
+
+    n, F = len(m.points), np.asarray(m.surface)
+    e = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
+    key = np.sort(e, axis=1)
+    _, inv, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    sides = [[b, a, a + n] for a, b in e[counts[inv] == 1]] + [[b, a + n, b + n] for a, b in e[counts[inv] == 1]]
+    tris = np.vstack([F, F[:, ::-1] + n, np.asarray(sides)])
+    fld = m.fields["displacement"]
+    f2 = SeparatedField("displacement", np.concatenate([fld.space, fld.space], axis=1), fld.params, fld.axes, "m",
+                        ["x", "y", "z"])
+    return ReducedModel("slab_load", np.vstack([m.points, m.points - [0, 0, h]]), tris, "tri3", m.axes,
+                        {"displacement": f2}, tris, "test slab", {"law": "linear_elastic"}, load_points=m.load_points,
+                        load_directions=m.load_directions)
+
+
+def test_a_probe_seen_between_load_points_is_touched_there():
+    """Several contacts measure Alg. 5.1's distance from the drawn surface between the load points too (its samples),
+    not from the load points alone: a probe 5 mm from the nearest load points, 0.3 mm over the surface, is a contact
+    at its own position (the load points are over delta away). On a solid only the faces a load presses are
+    sampled: a point under it (the table) is not a touch, nor is one over a support (the clamp's block)."""
+    slab = _slab(strip_load_model())
+    for m in (slab, strip_load_model()):
+        tr = ContactTracker(m, T_WO, threshold=0.0005, step=STEP, anywhere=True, max_contacts=2)
+        assert tr.update(_tip(0.155, 0.0003)).in_contact and len(tr.contacts) == 1
+        assert tr.contacts[0].position[0] == pytest.approx(0.155, abs=1e-3)
+        snap = ContactTracker(m, T_WO, threshold=0.0005, step=STEP, anywhere=True)  # the load points' distance
+        assert not snap.update(_tip(0.155, 0.0003)).in_contact
+    tr = ContactTracker(slab, T_WO, threshold=0.0005, step=STEP, anywhere=True, max_contacts=2)
+    assert not tr.update(np.vstack([_tip(0.25, -0.0103), _tip(0.0, 0.0002)])).in_contact  # under it; the clamp
+    assert 0 not in tr.active
+
+
+def test_several_contacts_need_a_linear_model_with_load_directions():
+    with pytest.raises(ValueError, match="max_contacts"):
+        ContactTracker(probe_model(), T_WO, max_contacts=2)
+    m = strip_load_model()
+    m.load_directions = None
+    with pytest.raises(ValueError, match="load directions"):
+        ContactTracker(m, T_WO, max_contacts=2)
+    with pytest.raises(ValueError, match="at least 1"):
+        ContactTracker(strip_load_model(), T_WO, max_contacts=0)
+
+
+def test_points_so_far_off_that_their_distance_overflows_touch_nothing():
+    """Found by the graph fuzz (a camera pose 1e300 m off put the depth there): the KD-tree's distance overflows to
+    inf and its index points past the end; the tracker, with one contact or several, reports nothing near."""
+    far = np.full((50, 3), 1e300)
+    for kw in ({}, {"max_contacts": 2, "anywhere": True}):
+        m = strip_load_model() if kw else probe_model()
+        st = ContactTracker(m, T_WO, threshold=0.005, step=0.25, **kw).update(far)
+        assert st.state == ContactPhase.FREE and not st.in_contact and st.min_distance == np.inf

@@ -8,7 +8,7 @@ from simreal_nodes import geometry as G
 from simreal_nodes.camera import CameraModel
 from simreal_nodes.render.gl import Mesh, Renderer
 from simreal_nodes.render.overlay import ObjectOverlay, OverlayCompositor, apply_colormap, colormap_lut, von_mises
-from tests.modelkit import beam_model
+from tests.modelkit import beam_model, strip_load_model
 
 CAMS = {
     "pinhole": CameraModel.from_intrinsics(320, 240, 262.0, 260.0, 159.3, 120.6),
@@ -167,3 +167,17 @@ def test_a_closed_surface_drawn_without_back_faces_looks_the_same():
     strip = OverlayCompositor(cam, {"beam": ObjectOverlay(beam_model(), np.eye(4))}, colorbar=False)
     assert not strip.renderer.meshes["beam"].cull_back  # an open strip: both faces drawn
     strip.release()
+
+
+def test_several_contacts_are_drawn_summed():
+    """A collision's message with two contacts (the second's parameters as name@2): the drawn deformation is the sum
+    of both (a linear model), coloured by the summed displacement; with one contact, the one state's."""
+    m = strip_load_model()
+    ob = ObjectOverlay(m, np.eye(4), "displacement", modes=m.fields["displacement"].n_modes)
+    cam, view = CAMS["pinhole"], _view(1.0)
+    V, col, _ = ob.geometry(["s", "load_scale", "s@2", "load_scale@2"], [0.1, 0.5, 0.25, 0.3], view, cam)
+    u = 0.5 * m.displacement([0.1], ob.nodes) + 0.3 * m.displacement([0.25], ob.nodes)
+    np.testing.assert_allclose(V, m.points[ob.nodes] + u, atol=1e-12)
+    V1, _, _ = ob.geometry(["s", "load_scale"], [0.1, 0.5], view, cam)
+    np.testing.assert_allclose(V1, m.points[ob.nodes] + 0.5 * m.displacement([0.1], ob.nodes), atol=1e-12)
+    assert not np.allclose(col, ob.geometry(["s", "load_scale"], [0.1, 0.5], view, cam)[1])

@@ -130,3 +130,20 @@ def test_load_point_states_reject_what_a_contact_cannot_drive() -> None:
     beam.axes[0].name = "E"
     with pytest.raises(ValueError, match="not load positions"):
         LoadPointStates(beam)
+
+
+def test_a_message_with_several_contacts_gives_one_state_each() -> None:
+    """A collision with max_contacts > 1 sends the k-th contact's parameters as name@k: each is read as one contact
+    is, in order; a malformed suffix is an error, not a silently dropped contact."""
+    axes = beam_model().axes
+    sts = ModelState.from_named_contacts(axes, ["s", "load_scale", "s@2", "load_scale@2", "s@3", "load_scale@3"],
+                                         [0.1, 0.5, 0.3, 0.25, 0.45, 0.1])
+    assert [s.mu.tolist() for s in sts] == [[0.1], [0.3], [0.45]]
+    assert [s.load_scale for s in sts] == [0.5, 0.25, 0.1]
+    (one,) = ModelState.from_named_contacts(axes, ["s"], [0.2])
+    assert one.mu.tolist() == [0.2] and one.load_scale == 1.0
+    for bad in ("s@1", "s@x", "s@"):
+        with pytest.raises(ValueError, match="@2"):
+            ModelState.from_named_contacts(axes, ["s", bad], [0.1, 0.2])
+    with pytest.raises(ValueError, match="unknown parameter"):
+        ModelState.from_named_contacts(axes, ["s", "theta@2"], [0.1, 0.2])

@@ -47,6 +47,34 @@ def test_focus_polygon_round_trips():
     assert index == 2 and np.allclose(back, poly, atol=1e-4)
 
 
+def test_hostile_focus_polygons_are_refused_with_a_reason():
+    """Found by the graph fuzz: a focus polygon with NaN or huge coordinates made the localization's frame fail
+    (int(NaN) in the feature extractor), and invented object indices with big polygons piled up in its memory."""
+    from simreal_nodes.ros.convert import focus_msg, focus_polygon
+
+    poly = np.array([[10.0, 20.0], [30.0, 22.0], [28.0, 40.0]])
+    for bad, what in ((np.r_[poly[:2], [[np.nan, 1.0]]], "non-finite"), (poly * 1e30, "non-finite|beyond"),
+                      (poly + 2e5, "beyond")):
+        with pytest.raises(ValueError, match=what):
+            focus_polygon(focus_msg(bad, 0, Header(), "cam"))
+    with pytest.raises(ValueError, match="object index"):
+        focus_polygon(focus_msg(poly, 5000, Header(), "cam"))
+    with pytest.raises(ValueError, match="points"):
+        focus_polygon(focus_msg(np.zeros((20_000, 2)), 0, Header(), "cam"))
+
+
+def test_a_failure_in_a_synchronized_frame_is_reported_with_its_stamp():
+    """The guard reports an exception to /simreal/progress with the stamp of the frame it failed on; a frame of
+    synchronized messages (a dict) is found by its messages' stamp (before, such failures went uncounted)."""
+    from simreal_nodes.ros.node import _stamp_of
+
+    h = Header()
+    h.stamp.sec = 42
+    frame = {"image": type("M", (), {"header": h})(), "obs": None}
+    assert _stamp_of((frame,)).sec == 42
+    assert _stamp_of(({"x": 1},)) is None
+
+
 def test_observations_whose_lists_disagree_are_refused_with_their_lengths():
     from simreal_msgs.msg import FeatureObservations
 
@@ -58,3 +86,60 @@ def test_observations_whose_lists_disagree_are_refused_with_their_lengths():
     obs.points_xyz = [0.0] * 7  # found by the graph fuzz: numpy's "cannot reshape" reached the user before
     with pytest.raises(ValueError, match=r"2 ids, 7 point coordinates, 4 pixel coordinates"):
         observation_arrays(obs)
+
+
+def test_a_collision_with_two_contacts_sends_both_and_the_overlay_draws_their_sum():
+    """collision.max_contacts: 2 from a scene object, two probes in the points, the ModelParameters message the
+    collision node publishes (the second contact as name@2), and the overlay's state from it: the deformation the
+    tracker holds, both contacts summed."""
+    from simreal_nodes import geometry as G
+    from simreal_nodes.collision.scene import ContactScene
+    from simreal_nodes.render.overlay import ObjectOverlay
+    from simreal_nodes.ros.convert import contact_parameters_msg
+    from simreal_nodes.scene.schema import COLLISION
+    from simreal_nodes.spec import Context
+    from tests.modelkit import strip_load_model
+
+    m = strip_load_model()
+    coll = COLLISION.validate({"enabled": True, "threshold_m": 0.002, "step": 0.05, "anywhere": True,
+                               "max_contacts": 2}, "collision", Context(source="test"))
+    scene = ContactScene([{"id": "strip", "anchor": {"pose": [0.0, 0, 0, 0, 0, 0, 1]}, "collision": coll}],
+                         {"strip": m})
+    tr = scene.trackers["strip"]
+    assert tr.max_contacts == 2
+    probes = np.array([[0.12, 0.015, 0.001], [0.27, 0.015, -0.002]])
+    for _ in range(3):
+        tr.update(probes)
+    assert len(tr.contacts) == 2
+    msg = contact_parameters_msg("strip", tr, tr.state, Header().stamp)
+    assert list(msg.names) == ["s", "load_scale", "s@2", "load_scale@2"] and len(msg.units) == 4
+    ob = ObjectOverlay(m, np.eye(4), "displacement", modes=m.fields["displacement"].n_modes)
+    V, _, _ = ob.geometry(list(msg.names), list(msg.values), G.make_T(G.rot_axis("x", np.pi), [0.15, 0, 1.0]),
+                          _camera())
+    np.testing.assert_allclose(V, m.points[ob.nodes] + tr.displacement(ob.nodes), atol=1e-9)
+
+
+def _camera():
+    from simreal_nodes.camera import CameraModel
+
+    return CameraModel.from_intrinsics(64, 48, 100.0, 100.0, 32.0, 24.0)
+
+
+def test_an_observation_pose_far_off_or_without_rotation_is_refused():
+    """Found by the graph fuzz: a camera position of 1e300 m (or NaN) went through to the collision node's depth
+    back-projection; a quaternion without a rotation is refused as before."""
+    from simreal_msgs.msg import FeatureObservations
+
+    from simreal_nodes.ros.convert import observation_pose
+
+    obs = FeatureObservations()
+    obs.camera_pose.orientation.w = 1.0
+    assert observation_pose(obs).shape == (4, 4)
+    for bad in (1e300, float("nan"), 2e6):
+        obs.camera_pose.position.x = bad
+        with pytest.raises(ValueError, match="camera position"):
+            observation_pose(obs)
+    obs.camera_pose.position.x = 0.0
+    obs.camera_pose.orientation.x = float("inf")
+    with pytest.raises(ValueError, match="quaternion"):
+        observation_pose(obs)

@@ -105,9 +105,16 @@ class CollisionNode(SimrealNode):
             return
         T_wc = self.static_pose
         if "obs" in frame:
-            T_wc = observation_pose(frame["obs"])
+            try:
+                T_wc = observation_pose(frame["obs"])
+            except ValueError as e:
+                self.drop(head.stamp, f"malformed observations: {e}")
+                return
         try:
             depth = self._depth(frame)
+            if depth.shape != (self.cam.height, self.cam.width):
+                raise ValueError(f"depth image is {depth.shape[1]}x{depth.shape[0]}, CameraInfo says "
+                                 f"{self.cam.width}x{self.cam.height}")
         except (ImageFormatError, ValueError) as e:
             self.drop(head.stamp, f"malformed depth input: {e}")
             return

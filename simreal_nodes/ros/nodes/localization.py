@@ -150,7 +150,11 @@ class LocalizationNode(SimrealNode):
 
     @guarded
     def on_focus(self, msg: PolygonInstanceStamped) -> None:
-        index, poly = convert.focus_polygon(msg)
+        try:
+            index, poly = convert.focus_polygon(msg)
+        except ValueError as e:
+            self.get_logger().warning(f"ignored malformed focus polygon: {e}", throttle_duration_sec=1.0)
+            return
         self.live.set_focus(index, convert.stamp_ns(msg.header.stamp), poly)
 
     @guarded

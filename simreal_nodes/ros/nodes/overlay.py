@@ -147,7 +147,11 @@ class OverlayNode(SimrealNode):
         except ImageFormatError as e:
             self.drop(head.stamp, f"malformed input: {e}")
             return
-        T_wc = observation_pose(frame["obs"]) if frame.get("obs") is not None else self.static_pose
+        try:
+            T_wc = observation_pose(frame["obs"]) if frame.get("obs") is not None else self.static_pose
+        except ValueError as e:  # a pose whose quaternion has no rotation
+            self.drop(head.stamp, f"malformed observations: {e}")
+            return
         params = {oid: (list(m.names), list(m.values)) if (m := frame.get(f"p:{oid}")) is not None else None
                   for oid in self.param_objects}
         self.metrics.lap("decode")
