@@ -24,10 +24,11 @@ own slot of Alg. 5.1 (load point or position, pseudo-time) and the surface sits 
 distance is then measured from samples of the drawn surface between the load points too (a probe between two load
 points presses the surface there). A slot steps on the clearance of the samples within ``separation`` of its load;
 touches farther than that from every slot start a new one. Because every slot sees the others' deformation, two
-probes that press the same body share the load as they do in the body (each takes less where the other presses): summing
-independent single-contact pseudo-times would not (`benchmarks/results/contact_anywhere.md`, "Two contacts at
-once": 88-98 % off). Not offered for the probe models (NI-PGD over a discrete load point x pseudo-time of a
-non-linear law): their contacts do not superpose, they need the combined load precomputed (thesis §5.3).
+probes that press the same body share the load as they do in the body (each takes less where the other presses):
+summing independent single-contact pseudo-times would not (`benchmarks/results/contact_anywhere.md`, "Two contacts at
+once": two such trackers summed are 78-96 % off the two-sphere truth, these slots 0.7-7.9 %). Not offered for the
+probe models (NI-PGD over a discrete load point x pseudo-time of a non-linear law): their contacts do not
+superpose, they need the combined load precomputed (thesis §5.3).
 
 The contact nodes are the model's precomputed load points on its *surface*, at their *deformed* positions, so a
 virtual surface pushed by a finger moves away from it and the pseudo-time settles where the surface follows the
@@ -185,7 +186,8 @@ class ContactTracker:
         if len(P) < 2:
             return float("inf")
         d = cast(tuple[np.ndarray, np.ndarray], cKDTree(P).query(P, k=2))[0][:, 1]
-        return 2.5 * float(np.median(d))
+        size = float(np.max(np.ptp(np.asarray(self.model.points), axis=0)))
+        return 2.5 * max(float(np.median(d)), 1e-3 * size)  # (load points stacked on one another: a floor)
 
     def _contact_samples(self) -> tuple[np.ndarray, np.ndarray]:
         """Several contacts: points on the drawn surface where a touch is looked for, in place of the load points
@@ -202,7 +204,10 @@ class ContactTracker:
         n = np.cross(P[F[:, 1]] - P[F[:, 0]], P[F[:, 2]] - P[F[:, 0]])
         facing = -(n @ d) / np.maximum(np.linalg.norm(n, axis=1), 1e-300)
         F = F[facing > 0.3] if closed else F  # within about 70 degrees of facing the pusher
-        spacing = self.separation / 2.5 if np.isfinite(self.separation) else float(np.ptp(P, axis=0).max())
+        size = float(np.ptp(P, axis=0).max())
+        # samples a third of a load-point spacing apart, but never finer than a 300th of the object's size (a tiny
+        # separation_m would otherwise ask for millions of samples a triangle)
+        spacing = max(self.separation / 2.5 if np.isfinite(self.separation) else size, size / 100.0)
         tri, bary = [], []
         for f in F:
             edge = max(float(np.linalg.norm(P[f[i]] - P[f[(i + 1) % 3]])) for i in range(3))
@@ -453,8 +458,9 @@ class ContactTracker:
 
     def _touches(self, pts: np.ndarray | None,
                  surfaces: list[PusherSurface]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Where things touch the object this frame, for several contacts: (gap (n,), where on the object's
-        deformed surface (n, 3) world, slack (n,), from a pushing surface (n,) bool, the touching point (n, 3)).
+        """Where things touch the object this frame, for several contacts: (gap (n,), where on the object's surface
+        (n, 3), object frame, at *rest*: a contact's load position and its neighbourhood are rest coordinates, whatever
+        the deflection; slack (n,), from a pushing surface (n,) bool, the touching point (n, 3) world).
 
         Real points: Alg. 5.1's distance, from each of the drawn surface's contact samples
         (:meth:`_contact_samples`, at the summed deformation) to the nearest real point; a pushing virtual surface:
@@ -474,7 +480,7 @@ class ContactTracker:
             dist, idx = cast(tuple[np.ndarray, np.ndarray], cKDTree(near).query(X, k=1))
             ok = np.isfinite(dist)  # an overflowing distance (points 1e300 m off) is no neighbour
             gaps.append(np.asarray(dist, np.float64)[ok])
-            hits.append(X[ok])
+            hits.append(np.einsum("sk,skj->sj", B, np.asarray(self.model.points, dtype=np.float64)[T])[ok])
             slack.append(np.zeros(int(ok.sum())))
             virt.append(np.zeros(int(ok.sum()), bool))
             src.append(near[np.asarray(idx, np.int64)[ok]])
@@ -483,7 +489,7 @@ class ContactTracker:
             gap, hit, sl = self._pusher_gap(nodes, surfaces)
             ok = np.isfinite(gap)
             gaps.append(gap[ok])
-            hits.append(nodes[self.active][ok])
+            hits.append(np.asarray(self.model.points, dtype=np.float64)[self.contact_nodes[self.active]][ok])
             slack.append(sl[ok])
             virt.append(np.ones(int(ok.sum()), bool))
             src.append(hit[ok])
@@ -493,14 +499,12 @@ class ContactTracker:
     def _update_many(self, pts: np.ndarray | None, surfaces: list[PusherSurface], has_data: bool) -> ContactState:
         """One frame of Alg. 5.1 with several contacts (``max_contacts`` > 1; the module docstring). Each slot steps
         on the smallest clearance (gap less delta for a real point, the gap for a pushing surface) of what touches
-        the object within ``separation`` of the slot's load, with the deformed surface at the summed deformation;
-        touches farther than that from every slot start new slots (the deepest first) while fewer than
-        ``max_contacts`` are in contact. ``self.state`` sums them up for the messages: the oldest contact's load
-        and pseudo-time, the phase CONTACT while any is."""
-        gap, hit, slack, virtual, src = self._touches(pts, surfaces)
+        the object within ``separation`` of the slot's load (rest coordinates), with the deformed surface at the
+        summed deformation; touches farther than that from every slot start new slots (the deepest first) while
+        fewer than ``max_contacts`` are held (in contact or releasing). ``self.state`` sums them up for the
+        messages: the oldest contact's load and pseudo-time, the phase CONTACT while any is."""
+        gap, at, slack, virtual, src = self._touches(pts, surfaces)  # at: where, object frame at rest
         clear = np.where(virtual, gap, gap - self.threshold)
-        T_inv = G.inv(self.T)
-        at = G.transform(T_inv, hit) if len(hit) else np.zeros((0, 3))  # object frame, on the surface
         lp_rest = self.model.points[self.contact_nodes[self.active]]
 
         def centre(c: ContactState) -> np.ndarray:

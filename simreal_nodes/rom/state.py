@@ -136,6 +136,9 @@ class ModelState:
             n_, v_ = groups.setdefault(int(k) if sep else 1, ([], []))
             n_.append(base)
             v_.append(value)
+        if sorted(groups) != list(range(1, len(groups) + 1)) or (len(groups) > 1 and not groups[1][0]):
+            raise ValueError(f"contacts {sorted(groups)} in a message: the first one's parameters under their names, "
+                             f"the next as {CONTACT_SEP}2, {CONTACT_SEP}3, ... without gaps")
         return [cls.from_named(axes, *groups[k]) for k in sorted(groups)]
 
 

@@ -423,3 +423,22 @@ def test_points_so_far_off_that_their_distance_overflows_touch_nothing():
         m = strip_load_model() if kw else probe_model()
         st = ContactTracker(m, T_WO, threshold=0.005, step=0.25, **kw).update(far)
         assert st.state == ContactPhase.FREE and not st.in_contact and st.min_distance == np.inf
+
+
+def test_a_contact_pressed_deeper_than_its_separation_keeps_its_probe():
+    """A contact's neighbourhood is taken at rest: pressed 30 mm deep (over the 25 mm separation), the slot still
+    sees its own probe, as one contact does (found in review: measured on the deformed surface, the slot lost its
+    probe, released, and the probe ended up through the strip)."""
+    m = strip_load_model(tip=0.1)  # 100 mm at the tip under the model's load
+    depth = 0.03
+    one = ContactTracker(m, T_WO, threshold=DELTA, step=STEP, anywhere=True)
+    many = ContactTracker(m, T_WO, threshold=DELTA, step=STEP, anywhere=True, max_contacts=2)
+    slots = []
+    for tr in (one, many):
+        for f in range(400):  # down over 100 frames, then held
+            z = -depth * min(1.0, f / 100)
+            tr.update(_tip(0.29, z + DELTA))
+            slots.append(len(many.contacts))
+    u_one, u_many = one.displacement()[3 * 29 + 1, 2], many.displacement()[3 * 29 + 1, 2]
+    assert u_many == pytest.approx(-depth, abs=0.001) and u_one == pytest.approx(-depth, abs=0.001)
+    assert max(slots) == 1 and len(many.contacts) == 1  # never a second slot for the same probe

@@ -147,3 +147,6 @@ def test_a_message_with_several_contacts_gives_one_state_each() -> None:
             ModelState.from_named_contacts(axes, ["s", bad], [0.1, 0.2])
     with pytest.raises(ValueError, match="unknown parameter"):
         ModelState.from_named_contacts(axes, ["s", "theta@2"], [0.1, 0.2])
+    for names in (["s", "s@3"], ["s@2", "load_scale@2"]):  # a gap; a further contact without the first
+        with pytest.raises(ValueError, match="without gaps"):
+            ModelState.from_named_contacts(axes, names, [0.1, 0.2])
