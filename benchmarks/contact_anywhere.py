@@ -51,9 +51,9 @@ BUNNY_POINTS = 4  # probes between the bunny's load points
 PAIR_FORCE = 6.0  # newtons on each probe of a pair (the model's load: 15 N)
 N_PAIRS = 8  # two-contact cases: pairs of off-grid positions 40 mm apart or more
 # the tracker on the pairs: probes seen 1 mm inside their surface (delta), load steps of 1 % of the model's 15 N,
-# pseudo-times up to 2 (30 N: each probe alone would take 14-20 N, and the model is linear), 3 mm of approach over
-# 40 frames, then 260 frames held (the slowest, a probe alone at 20 N, has settled by frame 170), scored over the
-# last 130
+# pseudo-times up to 2 (30 N: the larger probe of a pair would take 14-20 N alone; the model is linear), 3 mm of
+# approach over 40 frames, then 260 frames held (the slowest, a probe alone at 20 N, has settled by frame 170),
+# scored over the last 130
 PAIR_DELTA, PAIR_STEP, PAIR_TAU_MAX, PAIR_APPROACH, PAIR_DESCENT, PAIR_HOLD = 0.001, 0.01, 2.0, 0.003, 40, 260
 TRACKERS = ("coupled", "one", "independent")
 THIN = (1, 2, 4, 8)  # the load grid along x: every load position, every 2nd, 4th, 8th
@@ -242,14 +242,13 @@ def main(argv=None):
              f"for, delta = {1e3 * PAIR_DELTA:.0f} mm) come down {1e3 * PAIR_APPROACH:.0f} mm onto the beam over "
              f"{PAIR_DESCENT} frames to where the truth has it, then stay {PAIR_HOLD} frames; load steps of "
              f"{100 * PAIR_STEP:.0f} % of the model's 15 N, pseudo-times up to {PAIR_TAU_MAX:g} (so that no tracker "
-             "is capped: a probe alone would take 14-20 N), anywhere on; the error is that of the surface averaged "
-             "over the hold's last half, against the two-sphere truth. 'two contacts': one tracker with "
-             "`max_contacts: 2` (each contact steps on the distance at its own probe with the beam at the summed "
-             "deformation, measured from the drawn surface between the load points too); 'two trackers summed': one "
-             "such tracker per "
-             "probe, each seeing only its own, their deformations added (superposition without the coupling); 'one "
-             "contact': the default tracker (`max_contacts: 1`, the distance measured at the load points), both "
-             "probes in its points (100 %: it never reported a contact).")
+             "is capped: the larger probe of a pair would take 14-20 N alone), anywhere on; the error is that of "
+             "the surface averaged over the hold's last half, against the two-sphere truth. 'two contacts': one "
+             "tracker with `max_contacts: 2` (each contact steps on the distance at its own probe with the beam at "
+             "the summed deformation, measured from the drawn surface between the load points too); 'two trackers "
+             "summed': one such tracker per probe, each seeing only its own, their deformations added (superposition "
+             "without the coupling); 'one contact': the default tracker (`max_contacts: 1`, the distance measured at "
+             "the load points), both probes in its points (100 % on pair 1: no deformation over the scored frames).")
     if bunny:
         notes += (
             "\n\n## The bunny: discrete load points, probes between them\n\n" + markdown_table(bunny, bcols) + "\n\n"

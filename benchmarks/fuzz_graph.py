@@ -50,7 +50,8 @@ ENCODINGS = ("rgb8", "bgr8", "mono8", "mono16", "16UC1", "32FC1", "64FC1", "bgra
              "yuv422", "bayer_rggb8", "16SC1", "32SC1", "", "garbage", "jpeg", "BGR8", "8UC4", "16UC3")
 STRINGS = ("", "x" * 10000, "\x01\x7f", "é✓ unicode", "../../etc/passwd", "mono16", "32FC1", "plumb_bob",
            "rational_polynomial", "equidistant", "map", "camera_optical_frame", "%s%n", "nan")
-UNEXPECTED = re.compile(r"^[A-Z]\w*(Error|Exception|Warning)\b")  # the guard's "TypeName: message"
+# the guard's "TypeName: message" (OpenCV's exception type is the lowercase cv2.error)
+UNEXPECTED = re.compile(r"^([A-Z]\w*(Error|Exception|Warning)|error)\b")
 MAX_ITEMS = 300_000  # the longest array a mutation makes (a few MB on the wire)
 
 

@@ -76,6 +76,8 @@ class CameraModel:
                 f"(expected one of {', '.join(m for m in DISTORTION_MODELS if m)})")
         if not np.all(np.isfinite(self.D)):
             raise CameraInfoError("distortion coefficients have NaN or inf entries")
+        if len(self.D) not in (0, 4, 5, 8, 12, 14):
+            raise CameraInfoError(f"{len(self.D)} distortion coefficients (OpenCV takes 4, 5, 8, 12 or 14)")
 
     # -- properties ---------------------------------------------------------------------
     @property

@@ -24,6 +24,13 @@ def test_zero_camera_info_is_rejected_clearly():
     # found by the graph fuzz (benchmarks/fuzz_graph.py): the overlay allocated by the declared width
     with pytest.raises(CameraInfoError, match="over 16384 pixels a side"):
         CameraModel.from_camera_info(Info(2 ** 32 - 1, 480, [500, 0, 320, 0, 500, 240, 0, 0, 1]))
+    # found by the graph fuzz in stop 47: 3 coefficients passed, and OpenCV asserted in the collision node
+    K = [500, 0, 320, 0, 500, 240, 0, 0, 1]
+    for n in (0, 4, 5, 8, 12, 14):
+        CameraModel.from_camera_info(Info(640, 480, K, d=[0.01] * n))
+    for n in (1, 3, 6, 20):
+        with pytest.raises(CameraInfoError, match=f"{n} distortion coefficients"):
+            CameraModel.from_camera_info(Info(640, 480, K, d=[0.01] * n))
 
 
 def test_project_backproject_and_yaml(tmp_path):

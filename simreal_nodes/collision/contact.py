@@ -134,6 +134,8 @@ class ContactTracker:
                 raise ValueError(f"model '{model.name}' has no load directions: several contacts cannot tell where "
                                  "a real point presses; set collision.max_contacts: 1")
             self._samples = self._contact_samples()
+            T, B = self._samples
+            self._samples_rest = np.einsum("sk,skj->sj", B, np.asarray(model.points, dtype=np.float64)[T])
 
     def _push_directions(self, model: ReducedModel) -> np.ndarray:
         """Unit direction (object frame) in which a touching surface pushes each load point: the model's load
@@ -187,7 +189,8 @@ class ContactTracker:
             return float("inf")
         d = cast(tuple[np.ndarray, np.ndarray], cKDTree(P).query(P, k=2))[0][:, 1]
         size = float(np.max(np.ptp(np.asarray(self.model.points), axis=0)))
-        return 2.5 * max(float(np.median(d)), 1e-3 * size)  # (load points stacked on one another: a floor)
+        # (load points stacked on one another: a floor, well over the surface samples' spacing)
+        return 2.5 * max(float(np.median(d)), 0.01 * size)
 
     def _contact_samples(self) -> tuple[np.ndarray, np.ndarray]:
         """Several contacts: points on the drawn surface where a touch is looked for, in place of the load points
@@ -480,7 +483,7 @@ class ContactTracker:
             dist, idx = cast(tuple[np.ndarray, np.ndarray], cKDTree(near).query(X, k=1))
             ok = np.isfinite(dist)  # an overflowing distance (points 1e300 m off) is no neighbour
             gaps.append(np.asarray(dist, np.float64)[ok])
-            hits.append(np.einsum("sk,skj->sj", B, np.asarray(self.model.points, dtype=np.float64)[T])[ok])
+            hits.append(self._samples_rest[ok])
             slack.append(np.zeros(int(ok.sum())))
             virt.append(np.zeros(int(ok.sum()), bool))
             src.append(near[np.asarray(idx, np.int64)[ok]])

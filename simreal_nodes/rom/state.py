@@ -130,7 +130,7 @@ class ModelState:
         groups: dict[int, tuple[list[str], list[float]]] = {1: ([], [])}
         for name, value in zip(names, values):
             base, sep, k = str(name).partition(CONTACT_SEP)
-            if sep and not (k.isdigit() and int(k) >= 2):
+            if sep and not (k.isdigit() and int(k) >= 2 and k == str(int(k))):
                 raise ValueError(f"parameter '{name}': a further contact's name ends in {CONTACT_SEP}2, "
                                  f"{CONTACT_SEP}3, ...")
             n_, v_ = groups.setdefault(int(k) if sep else 1, ([], []))

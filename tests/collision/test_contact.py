@@ -438,7 +438,8 @@ def test_a_contact_pressed_deeper_than_its_separation_keeps_its_probe():
         for f in range(400):  # down over 100 frames, then held
             z = -depth * min(1.0, f / 100)
             tr.update(_tip(0.29, z + DELTA))
-            slots.append(len(many.contacts))
+            if tr is many:
+                slots.append(len(many.contacts))
     u_one, u_many = one.displacement()[3 * 29 + 1, 2], many.displacement()[3 * 29 + 1, 2]
     assert u_many == pytest.approx(-depth, abs=0.001) and u_one == pytest.approx(-depth, abs=0.001)
     assert max(slots) == 1 and len(many.contacts) == 1  # never a second slot for the same probe

@@ -142,7 +142,7 @@ def test_a_message_with_several_contacts_gives_one_state_each() -> None:
     assert [s.load_scale for s in sts] == [0.5, 0.25, 0.1]
     (one,) = ModelState.from_named_contacts(axes, ["s"], [0.2])
     assert one.mu.tolist() == [0.2] and one.load_scale == 1.0
-    for bad in ("s@1", "s@x", "s@"):
+    for bad in ("s@1", "s@x", "s@", "s@02"):
         with pytest.raises(ValueError, match="@2"):
             ModelState.from_named_contacts(axes, ["s", bad], [0.1, 0.2])
     with pytest.raises(ValueError, match="unknown parameter"):
