@@ -214,7 +214,8 @@ def main():
          "participant up) is promoted; cold: a new process (`--no-standby`). 'nodes': the one-process launch "
          "(`--one-process`) killed whole, the tracker's output measured. The issue's target: tracking back "
          "within 1 s. `--victims` reruns some rows and keeps the others' runs from the JSON (the 'nodes' rows were "
-         "added in stop 44, the others are stop 33's).", plot, extra={"runs": rows})
+         "added in stop 44, the localization's rerun in stop 47, the others are stop 33's).", plot,
+         extra={"runs": rows})
 
 
 if __name__ == "__main__":

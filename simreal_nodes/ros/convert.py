@@ -21,7 +21,6 @@ from simreal_msgs.msg import FeatureObservations, ModelParameters, TrackingStatu
 from std_msgs.msg import Header
 
 from simreal_nodes import geometry
-from simreal_nodes.rom.state import CONTACT_SEP
 from simreal_nodes.states import ContactPhase
 
 if TYPE_CHECKING:  # (annotations only: the player imports this module and needs none of the cores)
@@ -261,6 +260,8 @@ def contact_msg(oid: str, st: ContactState, source: str, stamp, frame_id: str) -
 def contact_parameters_msg(oid: str, tr: ContactTracker, st: ContactState, stamp) -> ModelParameters:
     """ModelParameters of a contact (load point / position and pseudo-time or load scale): what the overlay draws.
     No fit behind them: no covariance, no residual."""
+    from simreal_nodes.rom.state import CONTACT_SEP  # here: importing rom (scipy) costs every node ~50 MB at start
+
     m = ModelParameters()
     m.header.stamp = stamp
     m.header.frame_id = oid
