@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from simreal_nodes.errors import CameraInfoError
+from simreal_nodes.errors import CameraInfoError, ImageFormatError
 
 DISTORTION_MODELS = ("plumb_bob", "rational_polynomial", "equidistant", "none", "")
 MAX_IMAGE_SIDE = 16384  # pixels: above any camera the graph serves (and OpenGL's usual texture limit)
@@ -78,6 +78,13 @@ class CameraModel:
             raise CameraInfoError("distortion coefficients have NaN or inf entries")
         if len(self.D) not in (0, 4, 5, 8, 12, 14):
             raise CameraInfoError(f"{len(self.D)} distortion coefficients (OpenCV takes 4, 5, 8, 12 or 14)")
+
+    def check_size(self, image: np.ndarray, what: str = "image") -> None:
+        """ImageFormatError unless ``image`` (rows x columns [x channels]) has this camera's size: a frame of
+        another size than its CameraInfo says cannot be back-projected or matched against this camera."""
+        if image.shape[:2] != (self.height, self.width):
+            raise ImageFormatError(f"{what} is {image.shape[1]}x{image.shape[0]}, CameraInfo says "
+                                   f"{self.width}x{self.height}")
 
     # -- properties ---------------------------------------------------------------------
     @property

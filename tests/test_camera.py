@@ -56,3 +56,12 @@ def test_bad_calibration_yaml(tmp_path):
         CameraModel.from_calibration_yaml(f)
     with pytest.raises(CameraInfoError, match="not found"):
         CameraModel.from_calibration_yaml(tmp_path / "missing.yaml")
+
+
+def test_an_image_of_another_size_than_the_camera_is_refused_with_both_sizes():
+    from simreal_nodes.errors import ImageFormatError
+
+    cam = CameraModel.from_camera_info(Info(64, 48, [50, 0, 32, 0, 50, 24, 0, 0, 1]))
+    cam.check_size(np.zeros((48, 64, 3)))
+    with pytest.raises(ImageFormatError, match="depth image is 64x1, CameraInfo says 64x48"):
+        cam.check_size(np.zeros((1, 64)), "depth image")

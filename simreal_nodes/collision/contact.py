@@ -133,9 +133,12 @@ class ContactTracker:
             if model.load_directions is None:
                 raise ValueError(f"model '{model.name}' has no load directions: several contacts cannot tell where "
                                  "a real point presses; set collision.max_contacts: 1")
-            self._samples = self._contact_samples()
-            T, B = self._samples
-            self._samples_rest = np.einsum("sk,skj->sj", B, np.asarray(model.points, dtype=np.float64)[T])
+            T, self._sample_weights = self._contact_samples()
+            # the samples' triangle vertices, once: each frame deforms these only
+            self._sample_nodes, inv = np.unique(T, return_inverse=True)
+            self._sample_tris = inv.reshape(T.shape)
+            P = np.asarray(model.points, dtype=np.float64)[self._sample_nodes]
+            self._samples_rest = np.einsum("sk,skj->sj", self._sample_weights, P[self._sample_tris])
 
     def _push_directions(self, model: ReducedModel) -> np.ndarray:
         """Unit direction (object frame) in which a touching surface pushes each load point: the model's load
@@ -256,10 +259,7 @@ class ContactTracker:
         contact's with ``max_contacts`` > 1."""
         if state is None and self.max_contacts > 1:
             n = self.model.n_nodes if nodes is None else len(nodes)
-            u = np.zeros((n, 3))
-            for c in self.contacts:
-                u += self.displacement(nodes, c, n_modes)
-            return u
+            return sum((self.displacement(nodes, c, n_modes) for c in self.states()), np.zeros((n, 3)))
         st = state or self.state
         if st.pseudo_time <= 0 or st.load_point < 0:
             n = self.model.n_nodes if nodes is None else len(nodes)
@@ -269,7 +269,7 @@ class ContactTracker:
     def contact_nodes_world(self) -> np.ndarray:
         """The load points' contact nodes (on the surface) at their current deformed positions, world frame."""
         P = self.model.points[self.contact_nodes]
-        for st in (self.contacts if self.max_contacts > 1 else [self.state]):
+        for st in self.states():
             if st.pseudo_time > 0 and st.load_point >= 0:
                 P = P + self.view(self.model_state(st))
         return G.transform(self.T, P)
@@ -396,36 +396,20 @@ class ContactTracker:
                 st.contact_point = tuple(float(x) for x in hit[k])
                 pusher_slack = float(slack[k])
         st.min_distance, st.nearest_load_point = d_min, nearest
-        if clearance < 0 and st.pseudo_time < self.tau_max - 1e-12:
-            if st.pseudo_time <= 0 or st.load_point < 0:
-                st.load_point = nearest  # a new contact starts where the real point (or the pushing surface) is
-                if self.anywhere and virtual:  # where the pushing surface overlaps the object most
-                    sel = gap <= gap.min() + 1e-3
-                    st.position = tuple(float(v) for v in G.transform(G.inv(self.T), hit[sel]).mean(axis=0))
-                elif self.anywhere:  # the real points within delta of the object: where they touch it first
-                    dn = cast(tuple[np.ndarray, np.ndarray], cKDTree(nodes[self.active]).query(near, k=1))[0]
-                    st.position = self._contact_position(near[dn < self.threshold], nodes)
-            st.pseudo_time = min(self.tau_max, st.pseudo_time + self.step)
-            st.state, st.reason = ContactPhase.CONTACT, ""
-        elif clearance < 0:
-            st.state, st.reason = ContactPhase.CONTACT, "largest precomputed deformation reached"
-        elif st.pseudo_time > self.tau_min + 1e-12:
-            # still held: one step back would bring the surface within delta (or onto the pushing surface) again:
-            # the pseudo-time then oscillates by one step about where the surface follows, and the contact is there.
-            # A pushing surface whose own held contact just stepped back has moved away by its step motion too
-            held = clearance < self.step_motion(st) + pusher_slack
-            st.pseudo_time = max(self.tau_min, st.pseudo_time - self.step)
-            held = held and st.pseudo_time > self.tau_min + 1e-12
-            st.state = ContactPhase.CONTACT if held else ContactPhase.RELEASING
-            st.reason = "" if has_data else "no valid points: relaxing"
+        if clearance < 0 and st.pseudo_time < self.tau_max - 1e-12 and (st.pseudo_time <= 0 or st.load_point < 0):
+            st.load_point = nearest  # a new contact starts where the real point (or the pushing surface) is
+            if self.anywhere and virtual:  # where the pushing surface overlaps the object most
+                sel = gap <= gap.min() + 1e-3
+                st.position = tuple(float(v) for v in G.transform(G.inv(self.T), hit[sel]).mean(axis=0))
+            elif self.anywhere:  # the real points within delta of the object: where they touch it first
+                dn = cast(tuple[np.ndarray, np.ndarray], cKDTree(nodes[self.active]).query(near, k=1))[0]
+                st.position = self._contact_position(near[dn < self.threshold], nodes)
+        if clearance < 0 or st.pseudo_time > self.tau_min + 1e-12:
+            self._step(st, clearance, pusher_slack, has_data)
         else:
             st.state = ContactPhase.FREE if has_data else ContactPhase.NO_DATA
             st.reason = "" if has_data else "no valid points"
-        if st.pseudo_time <= 1e-12:
-            st.pseudo_time = 0.0
-            st.load_point = -1
-            st.position = (np.nan, np.nan, np.nan)
-        st.node = int(self.lp_nodes[st.load_point]) if st.load_point >= 0 else -1
+            self._settle(st)
         return st
 
     def _all_back_motion(self, st: ContactState) -> float:
@@ -450,11 +434,18 @@ class ContactTracker:
         elif clearance < 0:
             st.state, st.reason = ContactPhase.CONTACT, "largest precomputed deformation reached"
         else:
+            # still held: one step back would bring the surface within delta (or onto the pushing surface) again:
+            # the pseudo-time then oscillates by one step about where the surface follows, and the contact is there.
+            # A pushing surface whose own held contact just stepped back has moved away by its step motion too
             held = clearance < (self.step_motion(st) if back is None else back) + slack
             st.pseudo_time = max(self.tau_min, st.pseudo_time - self.step)
             held = held and st.pseudo_time > self.tau_min + 1e-12
             st.state = ContactPhase.CONTACT if held else ContactPhase.RELEASING
             st.reason = "" if has_data else "no valid points: relaxing"
+        self._settle(st)
+
+    def _settle(self, st: ContactState) -> None:
+        """A contact relaxed to zero forgets its load point and position; the node follows the load point."""
         if st.pseudo_time <= 1e-12:
             st.pseudo_time, st.load_point, st.position = 0.0, -1, (np.nan, np.nan, np.nan)
         st.node = int(self.lp_nodes[st.load_point]) if st.load_point >= 0 else -1
@@ -468,14 +459,12 @@ class ContactTracker:
         Real points: Alg. 5.1's distance, from each of the drawn surface's contact samples
         (:meth:`_contact_samples`, at the summed deformation) to the nearest real point; a pushing virtual surface:
         its gap at each active contact node (:meth:`_pusher_gap`)."""
-        T, B = self._samples
         gaps, hits, slack, virt, src = [np.zeros(0)], [np.zeros((0, 3))], [np.zeros(0)], [np.zeros(0, bool)], \
             [np.zeros((0, 3))]
-        if pts is not None and len(pts) and len(T):
-            U = self.displacement(np.unique(T))
-            V = np.asarray(self.model.points, dtype=np.float64).copy()
-            V[np.unique(T)] += U
-            X = G.transform(self.T, np.einsum("sk,skj->sj", B, V[T]))
+        if pts is not None and len(pts) and len(self._samples_rest):
+            rest = np.asarray(self.model.points, dtype=np.float64)[self._sample_nodes]
+            V = rest + self.displacement(self._sample_nodes)
+            X = G.transform(self.T, np.einsum("sk,skj->sj", self._sample_weights, V[self._sample_tris]))
             lo, hi = X.min(axis=0) - self.threshold, X.max(axis=0) + self.threshold
             near = pts[np.all((pts >= lo) & (pts <= hi), axis=1)]
             if len(near) == 0:  # nothing can touch: the reported distance from at most 5 000 of the points

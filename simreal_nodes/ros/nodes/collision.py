@@ -112,9 +112,7 @@ class CollisionNode(SimrealNode):
                 return
         try:
             depth = self._depth(frame)
-            if depth.shape != (self.cam.height, self.cam.width):
-                raise ValueError(f"depth image is {depth.shape[1]}x{depth.shape[0]}, CameraInfo says "
-                                 f"{self.cam.width}x{self.cam.height}")
+            self.cam.check_size(depth, "depth image")
         except (ImageFormatError, ValueError) as e:
             self.drop(head.stamp, f"malformed depth input: {e}")
             return

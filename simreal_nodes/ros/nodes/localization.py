@@ -105,11 +105,9 @@ class LocalizationNode(SimrealNode):
             gray = images.gray8_of(frame["image"])
             depth = images.depth_metres_of(frame["depth"]) if "depth" in frame else None
             right = images.gray8_of(frame["right"]) if "right" in frame else None
-            cam = self.live.cam
             for what, img in (("image", gray), ("depth image", depth), ("right image", right)):
-                if cam is not None and img is not None and img.shape[:2] != (cam.height, cam.width):
-                    raise ImageFormatError(f"{what} is {img.shape[1]}x{img.shape[0]}, CameraInfo says "
-                                           f"{cam.width}x{cam.height}")
+                if self.live.cam is not None and img is not None:
+                    self.live.cam.check_size(img, what)
         except ImageFormatError as e:
             self.drop(header.stamp, f"malformed input: {e}")
             return
