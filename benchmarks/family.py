@@ -117,6 +117,8 @@ def run_scene(seed: int, width: int = 640, height: int = 480, preloaded: bool = 
         **registration_error(pipe, seq),
         **scene_model_error(sc, pipe.objects.models["beam"]),
         "curve": {"truth": [None if not np.isfinite(v) else float(v) for v in truth_a], "est": est_a.tolist(),
+                  "state": [int(v) for v in states_a],
+                  "gain": [None if not np.isfinite(v) else round(v, 4) for v in run["gain"]],
                   **({"truth_y": [None if not np.isfinite(v) else float(v) for v in tv[:, 1]],
                       "est_y": ev[:, 1].tolist()} if tv.shape[1] > 1 else {})},
     }
@@ -127,9 +129,10 @@ def track(pipe: Pipeline, seq: dict, fps: float, oid: str = "beam") -> dict[str,
     """Every frame of a rendered sequence through the offline pipeline: per frame the truth and estimate of the
     object's first parameter (``truth_all``, ``est_all``: of every parameter the truth gives), its state and
     reason, the step's time; the tracker's own time and the camera's position error (map frame: both start at the
-    first camera frame) where the camera was localized; the solve's time where one ran."""
+    first camera frame) where the camera was localized; the solve's time where one ran; the dense fit's
+    brightness gain (NaN where no dense fit ran: the low-confidence flags are calibrated on it)."""
     run: dict[str, list] = {k: [] for k in ("truth", "est", "states", "reasons", "step_ms", "cam_err", "solve_ms",
-                                            "tracker_ms", "truth_all", "est_all")}
+                                            "tracker_ms", "truth_all", "est_all", "gain")}
     for i in range(len(seq["rgb"])):
         bgr = np.ascontiguousarray(seq["rgb"][i][:, :, ::-1])
         t1 = time.perf_counter()
@@ -148,6 +151,7 @@ def track(pipe: Pipeline, seq: dict, fps: float, oid: str = "beam") -> dict[str,
         run["est_all"].append([float(v) for v in e.values[:len(tp)]])
         run["states"].append(int(e.state))
         run["reasons"].append(e.reason)
+        run["gain"].append(float(e.debug.get("gain", float("nan"))))
     return run
 
 

@@ -85,6 +85,9 @@ class DenseSettings:
     held_rot_rad: float = np.deg2rad(0.1)
     held_trans_m: float = 0.003
     grid: int = 32  # coarse search over mu at the coarsest level every frame (0: off)
+    # the grid's candidates compared with the object's brightness (a, b, g) fitted to each (the profile of the
+    # cost, as :meth:`DenseAligner._refine` does); False: at the warm start's brightness
+    grid_brightness: bool = True
     # the static surroundings (RGB-D: a ring around the object's outline in the reference view, back-projected
     # with its depth) measure the camera's error apart from the object's; 0: off (the object alone)
     static_ring_px: float = 32.0
@@ -115,6 +118,14 @@ class DenseSettings:
     # (the gap is NaN)
     camera_check: bool = True
     max_camera_gap: float = 1.0
+    # the tracker flags a fit whose brightness gain (a: the share of the reference's texture contrast the image
+    # shows where the fit put the samples) is under this: a misaligned fit sees the texture decorrelated and
+    # explains the image by its mean (development seed 0 seen at 65 degrees of azimuth, after the camera was lost:
+    # gain 0.03-0.24 on its frames more than 2 % of the span off). 0.5 lies between that and the frames within 2 %
+    # of the development beams 0-19 and of 18 views of seeds 0 and 1 (grazing, from 0.5-2 m, 16 grey levels of
+    # noise, 4 px of blur): their gain is 0.77 at the least (`python -m benchmarks.flag_calibration --gain`). It
+    # changes no estimate of a frame, only its state (and so whether its shading is fused)
+    min_gain: float = 0.5
     # the shading change of the deforming surface (g in the module docstring; False: the affine brightness alone)
     # and the 1-sigma of g's prior about zero (brightness fraction per unit change of the normal: k_d / k_a is at
     # most a few for a matte surface; the prior only holds the component along the normal, which no turn sees)
@@ -951,12 +962,20 @@ class DenseAligner:
         """The level's robust cost of the object's samples at ``mu`` with the brightness (a, b and the shading g)
         at its best for that mu (Tukey-weighted least squares with g's prior, two passes) and the rigid parts as
         fitted: the profile of the cost over mu."""
+        return self._profile(lvl, img, rows, f, mu, T_cw, sigma)[0]
+
+    def _profile(self, lvl: int, img: NDArray[np.float32], rows: NDArray[np.int64], f: _Fit, mu: Array,
+                 T_cw: Array, sigma: float, cold: bool = False) -> tuple[float, Array]:
+        """:meth:`_profile_cost` and the brightness that attains it. ``cold``: the reweighting starts from the
+        plain least-squares brightness at this mu, its first pass at that fit's own residual scale (at least
+        ``sigma``), instead of from the fit's brightness (which a misaligned frame may have left at a gain near
+        zero and a bias far off: every sample would then lie beyond Tukey's threshold)."""
         L = self.levels[lvl]
         uv, _ = self._geometry(L, rows, mu, f.total, T_cw, jac=False)
         v = bilinear(img, _at_level(uv, lvl)).astype(np.float64)
         ok = np.isfinite(v)
         if ok.sum() < 10:
-            return float("inf")
+            return float("inf"), f.photo.copy()
         v, B = v[ok], self._brightness_basis(L, rows[ok], mu)
         prior = np.zeros((self.n_photo, self.n_photo))
         pull = np.zeros(self.n_photo)
@@ -966,17 +985,24 @@ class DenseAligner:
             prior[2:, 2:] = Pg * sigma**2
             pull[2:] = prior[2:, 2:] @ g_mean
         p = f.photo.copy()
-        for _ in range(2):
-            w = self._weights((v - B @ p) / sigma, TUKEY)
+        scales = [sigma, sigma]
+        if cold:
+            try:
+                p = np.asarray(np.linalg.solve(B.T @ B + prior, B.T @ v + pull), np.float64)
+            except np.linalg.LinAlgError:
+                return float("inf"), f.photo.copy()
+            scales = [max(sigma, self._scale(v - B @ p)), sigma, sigma]
+        for sc in scales:
+            w = self._weights((v - B @ p) / sc, TUKEY)
             if float(w.sum()) <= 0:
-                return float("inf")
+                return float("inf"), f.photo.copy()
             A = B.T @ (B * w[:, None]) + prior
             try:
                 p = np.asarray(np.linalg.solve(A, B.T @ (w * v) + pull), np.float64)
             except np.linalg.LinAlgError:
                 p = np.r_[1.0, float(w @ v) / float(w.sum()), g_mean]
         cost = self._rho((v - B @ p) / sigma, TUKEY) + self._g_prior_cost(p[2:])
-        return cost / len(v)
+        return cost / len(v), p
 
     def _refine(self, lvl: int, img: NDArray[np.float32], rows: NDArray[np.int64], f: _Fit, T_cw: Array,
                 lo: Array, hi: Array, sigma: float) -> Array:
@@ -1023,8 +1049,12 @@ class DenseAligner:
         ok0 = np.isfinite(r0)
         if ok0.sum() < 10:
             return
-        k = TUKEY * self._scale(r0[ok0])
-        best, best_c = None, self._rho(r0[ok0], k) / ok0.sum()
+        sigma = self._scale(r0[ok0])
+        if self.s.grid_brightness:
+            best_c, best_p = self._profile(lvl, pyr[lvl], rows, f, f.mu, T_cw, sigma, cold=True)
+        else:
+            best_c, best_p = self._rho(r0[ok0], TUKEY * sigma) / ok0.sum(), f.photo
+        best = None
         for cnd in cands:
             t = f.copy()
             assert t.mu is not None
@@ -1033,11 +1063,15 @@ class DenseAligner:
             ok = np.isfinite(r)
             if ok.sum() < 0.8 * ok0.sum():
                 continue
-            c = self._rho(r[ok], k) / ok.sum()
+            if self.s.grid_brightness:
+                c, p = self._profile(lvl, pyr[lvl], rows, t, t.mu, T_cw, sigma, cold=True)
+            else:
+                c, p = self._rho(r[ok], TUKEY * sigma) / ok.sum(), f.photo
             if c < best_c:
-                best, best_c = t.mu, c
+                best, best_c, best_p = t.mu, c, p
         if best is not None:
             f.mu = best
+        f.photo = np.asarray(best_p, np.float64).copy()
 
     def _run(self, pyr: list[NDArray[np.float32]], grads: list[Grad], f: _Fit,
              T_cw: Array, lo: Array, hi: Array, finest: int = 0) -> list[tuple[Array, Array, float, NDArray[np.int64]]]:
@@ -1119,5 +1153,6 @@ class DenseAligner:
             self.rest_rigid, self.rest_cam = g0.rigid.copy(), g0.cam.copy()
             self.rest_photo, self.rest_photo_s = g0.photo.copy(), g0.photo_s.copy()
             res.rest_rms = sigma0
+            res.debug["rest_gain"] = float(g0.photo[0])
             res.debug["rms_at_rest_level"] = per_level[len(per_level) - 1 - cmp][2]
         return res

@@ -554,6 +554,13 @@ class DeformableTracker:
                    "deformation (a view along the floor?)")
             est.reason = why if est.state == EstimateState.OK else f"{est.reason}; {why}"
             est.state = EstimateState.LOW_CONFIDENCE
+        gain = float(res.debug.get("gain", float("nan")))
+        if est.state in (EstimateState.OK, EstimateState.LOW_CONFIDENCE) and not gain >= self.cfg.dense.min_gain:
+            why = (f"the image shows the object's texture at {gain:.2f} of the reference view's contrast (at least "
+                   f"{self.cfg.dense.min_gain:g}): the fit is misaligned, or the view no longer shows what the "
+                   "reference saw")
+            est.reason = why if est.state == EstimateState.OK else f"{est.reason}; {why}"
+            est.state = EstimateState.LOW_CONFIDENCE
         if est.state == EstimateState.OK:  # a sound fit's shading joins the next frames' prior (shading_frames)
             self.dense.accept_shading()
         return est
@@ -813,6 +820,7 @@ def tracker_config(obj: dict[str, Any], **overrides: Any) -> TrackerConfig:
                                           camera_first=t["dense_camera_first"],
                                           camera_check=t["dense_camera_check"], shading=t["dense_shading"],
                                           shading_frames=t["dense_shading_frames"],
+                                          grid_brightness=t["dense_grid_brightness"],
                                           placement_measured=obj["anchor"]["kind"] == "registration"),
                         dots=np.asarray(t["dots"]) if t["dots"] else None, dot_color=tuple(t["dot_color"]))
     return replace(cfg, **overrides)

@@ -121,6 +121,9 @@ TRACKING = Record({
                                    "shading (a property of the light, the same in every frame) over about this "
                                    "many frames the tracker judged sound into the next frames' prior (about 3 s at "
                                    "15 fps); 0: each frame alone", integer=True, lo=0, hi=100000, default=50),
+    "dense_grid_brightness": Bool("measurements 'dense': compare the coarse search's candidates each with the "
+                                  "object's brightness fitted to it (off: at the last frame's brightness, which a "
+                                  "misaligned frame drags towards zero gain, flattening the search)", default=True),
     "dense_camera_first": Bool("measurements 'dense' with the surroundings: measure the camera's error on them "
                                "alone, then fit the object with it held (off, the default: one joint fit)",
                                default=False),
