@@ -12,7 +12,7 @@
   ``python -m benchmarks.family --seeds 0-19``) and of the views of ``--plan`` run here (a view may add ``+noiseN``
   or ``+blurN``: benchmarks/camera_quality.py's degradations).
 
-    ./run bench flag_calibration                      # both, on the sets the thresholds were chosen on
+    ./run bench flag_calibration                      # all three, on the sets the thresholds were chosen on
     python -m benchmarks.flag_calibration --registration --plan "1:-d0.5"   # one registration
     python -m benchmarks.flag_calibration --camera --plan "1:-el5"          # one scene's frames
     python -m benchmarks.flag_calibration --gain --plan "0:-az65-arc20,1:+noise16"
@@ -129,8 +129,9 @@ def gain_rows_from_runs(name: str) -> list[dict]:
             if t is None or g is None:
                 continue
             err = 100 * abs(e - t) / spans[0]
-            if "truth_y" in c and c["truth_y"][i] is not None:
-                err = max(err, 100 * abs(c["est_y"][i] - c["truth_y"][i]) / spans[1])
+            if "truth_y" in c and c["truth_y"][i] is not None:  # a plate: the larger of its two axes' errors
+                ey = 100 * abs(c["est_y"][i] - c["truth_y"][i]) / spans[1]
+                err = max(err, ey) if np.isfinite(ey) else float("inf")
             gains.append(g)
             errs.append(err)
             states.append(c["state"][i])
