@@ -469,8 +469,8 @@ table of stop 38 that the next paragraph compares with is kept as `family_dev_0_
 Stop 39 fused the shading term's g over the frames the tracker judged sound (`tracking.dense_shading_frames`, 50;
 docs/tracking.md), chosen on development plates and beams ("Plates" below; on development beams 0-19 every scene
 within 0.2 points: `family_dev_0_19_dense_shading_frames_50` against `family_dev_0_19_stop38`). All 100 held-out
-rows were rerun with it (two scenes at a time; `family_stop39`; stop 38's is `family_stop38`): median of the per-scene medians
-0.50 % (0.49 % in stop 38), p90 1.58 % (1.59 %), 76 % within 1 % (75 %) and 95 % within 2 % (96 %): the targets still
+rows were rerun with it (two scenes at a time; `family_stop39`; stop 38's is `family_stop38`): median of the
+per-scene medians 0.50 % (0.49 % in stop 38), p90 1.58 % (1.59 %), 76 % within 1 % (75 %) and 95 % within 2 % (96 %): the targets still
 met; 96 scenes within 0.1 points of stop 38's median, the largest changes 1056 1.92 % -> 2.15 %, 1085 1.31 % ->
 1.14 %, 1003 2.36 % -> 2.22 %; two supports 0.38 % (100 % within 2 %), cantilevers 0.55 % (90 %). At or over 2 %: 1003
 (2.2 %), 1056 (2.2 %) and 1065 (2.5 %), loads under 3 px on faint speckles; 1070 (2.0 %, flagged on every frame);
@@ -479,8 +479,8 @@ quarter of this run shared the host with a test run).
 
 Stop 38 added the shading term to the dense measurement (`tracking.dense_shading`, on; docs/tracking.md), chosen on
 development plates and beams ("Plates" below; on development beams 0-19 it changed no scene by more than 0.16
-points: `family_dev_0_19_stop38` against `family_dev_0_19_dense_shading_false`). All 100 held-out rows were rerun with it
-(`family_stop38`; two scenes at a time, alone on the AMD host): median of the per-scene medians 0.49 % (0.51 %
+points: `family_dev_0_19_stop38` against `family_dev_0_19_dense_shading_false`). All 100 held-out rows were rerun
+with it (`family_stop38`; two scenes at a time, alone on the AMD host): median of the per-scene medians 0.49 % (0.51 %
 before), p90 1.59 % (1.55 %), 75 % within 1 % and 96 % within 2 % (the same); 90 scenes within 0.1 points of their
 previous median, the largest changes 1014 1.31 % -> 0.56 %, 1011 1.55 % -> 1.81 %, 1020 0.44 % -> 0.21 %; on two
 supports 0.38 % (100 % within 2 %), on cantilevers 0.53 % (92 %). The scenes at or over 2 %: 1003 (2.4 %) and 1065
