@@ -468,14 +468,14 @@ table of stop 38 that the next paragraph compares with is kept as `family_dev_0_
 
 Stop 39 fused the shading term's g over the frames the tracker judged sound (`tracking.dense_shading_frames`, 50;
 docs/tracking.md), chosen on development plates and beams ("Plates" below; on development beams 0-19 every scene
-within 0.2 points: `family_dev_0_19_dense_shading_frames_50` against `family_dev_0_19_stop38`). All 100 held-out
-rows were rerun with it (two scenes at a time; `family_stop39`; stop 38's is `family_stop38`): median of the
-per-scene medians 0.50 % (0.49 % in stop 38), p90 1.58 % (1.59 %), 76 % within 1 % (75 %) and 95 % within 2 %
-(96 %): the targets still met; 96 scenes within 0.1 points of stop 38's median, the largest changes 1056 1.92 % ->
-2.15 %, 1085 1.31 % -> 1.14 %, 1003 2.36 % -> 2.22 %; two supports 0.38 % (100 % within 2 %), cantilevers 0.55 % (90 %). At or over 2 %: 1003
-(2.2 %), 1056 (2.2 %) and 1065 (2.5 %), loads under 3 px on faint speckles; 1070 (2.0 %, flagged on every frame);
-1081, never placed. The tracker takes 156 ms per frame at the median of the rows (148 ms in stop 38's run; the first
-quarter of this run shared the host with a test run).
+within 0.2 points: `family_dev_0_19_dense_shading_frames_50` against `family_dev_0_19_stop38`). All 100 held-out rows
+were rerun with it (two scenes at a time; `family_stop39`; stop 38's is `family_stop38`): median of the per-scene
+medians 0.50 % (0.49 % in stop 38), p90 1.58 % (1.59 %), 76 % within 1 % (75 %) and 95 % within 2 % (96 %): the
+targets still met; 96 scenes within 0.1 points of stop 38's median, the largest changes 1056 1.92 % -> 2.15 %, 1085
+1.31 % -> 1.14 %, 1003 2.36 % -> 2.22 %; two supports 0.38 % (100 % within 2 %), cantilevers 0.55 % (90 %). At or over
+2 %: 1003 (2.2 %), 1056 (2.2 %) and 1065 (2.5 %), loads under 3 px on faint speckles; 1070 (2.0 %, flagged on every
+frame); 1081, never placed. The tracker takes 156 ms per frame at the median of the rows (148 ms in stop 38's run; the
+first quarter of this run shared the host with a test run).
 
 Stop 38 added the shading term to the dense measurement (`tracking.dense_shading`, on; docs/tracking.md), chosen on
 development plates and beams ("Plates" below; on development beams 0-19 it changed no scene by more than 0.16
