@@ -68,19 +68,25 @@ def registration_rows(specs: list[tuple[int, str]]) -> list[dict]:
     return rows
 
 
+def _view_frames(seq: dict):
+    """Each frame of a rendered view through the offline pipeline: (the beam's estimate, the true load position,
+    the span it is measured against)."""
+    sc = seq["scene"]
+    span = sc.state["draw"].span
+    scene = build_spec_models(validate_scene(copy.deepcopy(sc.scene_yaml(sc)), sc.name, "."))
+    pipe = Pipeline(scene, seq["cam"], baseline=sc.stereo_baseline)
+    for i in range(len(seq["rgb"])):
+        _, out = pipe.step(np.ascontiguousarray(seq["rgb"][i][:, :, ::-1]), int(i * 1e9 / FPS),
+                           *_depth_or_pair(seq, i))
+        yield out["beam"], seq["truth"][i].params["beam"][2][0], span
+
+
 def camera_rows(specs: list[tuple[int, str]]) -> list[dict]:
     rows = []
     for seed, view in specs:
         seq = sequence.__wrapped__(scene_name(seed) + view, 640, 480, duration=DURATION, fps=FPS)
-        sc = seq["scene"]
-        span = sc.state["draw"].span
-        scene = build_spec_models(validate_scene(copy.deepcopy(sc.scene_yaml(sc)), sc.name, "."))
-        pipe = Pipeline(scene, seq["cam"], baseline=sc.stereo_baseline)
         gaps, errs = [], []
-        for i in range(len(seq["rgb"])):
-            _, out = pipe.step(np.ascontiguousarray(seq["rgb"][i][:, :, ::-1]), int(i * 1e9 / FPS),
-                               *_depth_or_pair(seq, i))
-            e, truth = out["beam"], seq["truth"][i].params["beam"][2][0]
+        for e, truth, span in _view_frames(seq):
             gap = float(e.debug.get("camera_gap_sigma", np.nan))
             if np.isfinite(truth) and np.isfinite(gap):
                 gaps.append(gap)
@@ -150,15 +156,8 @@ def gain_rows(specs: list[tuple[int, str]]) -> list[dict]:
         if worse:
             kind = worse.rstrip("0123456789.")
             seq = made_worse(seq, kind, float(worse[len(kind):]), seed)
-        sc = seq["scene"]
-        span = sc.state["draw"].span
-        scene = build_spec_models(validate_scene(copy.deepcopy(sc.scene_yaml(sc)), sc.name, "."))
-        pipe = Pipeline(scene, seq["cam"], baseline=sc.stereo_baseline)
         gains, errs, states = [], [], []
-        for i in range(len(seq["rgb"])):
-            _, out = pipe.step(np.ascontiguousarray(seq["rgb"][i][:, :, ::-1]), int(i * 1e9 / FPS),
-                               *_depth_or_pair(seq, i))
-            e, truth = out["beam"], seq["truth"][i].params["beam"][2][0]
+        for e, truth, span in _view_frames(seq):
             gain = float(e.debug.get("gain", np.nan))
             if np.isfinite(truth) and np.isfinite(gain):
                 gains.append(gain)

@@ -281,6 +281,16 @@ def test_surroundings_that_disagree_with_the_object_about_the_camera_are_reporte
                     .debug["camera_gap_sigma"])
 
 
+def _dense_tracker_with_reference(model, tex):
+    """A dense tracker that took its reference view of the plate at rest, and its aligner's own solve (a test
+    wraps it to report what a failing fit would)."""
+    tr = DeformableTracker(model, np.eye(4), {"s": {"mode": "tracked", "initial": 0.5}}, CAM,
+                           TrackerConfig(measurements="dense"))
+    tr.update(pose(), image_bgr=cv2.cvtColor(render(tex, pose(), 0.0), cv2.COLOR_GRAY2BGR))
+    assert tr.dense is not None
+    return tr, tr.dense.solve
+
+
 def test_the_tracker_reports_a_fit_whose_camera_the_surroundings_dispute(model):
     """The tracker's side of the check: an estimate it would call OK is reported low-confidence, saying why, when
     the aligner's camera gap exceeds the limit; under it the estimate stays OK."""
@@ -288,11 +298,7 @@ def test_the_tracker_reports_a_fit_whose_camera_the_surroundings_dispute(model):
     bgr = lambda img: cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)  # noqa: E731
     limit = DenseSettings().max_camera_gap
     for gap, state in ((0.5 * limit, EstimateState.OK), (2.0 * limit, EstimateState.LOW_CONFIDENCE)):
-        tr = DeformableTracker(model, np.eye(4), {"s": {"mode": "tracked", "initial": 0.5}}, CAM,
-                               TrackerConfig(measurements="dense"))
-        tr.update(pose(), image_bgr=bgr(render(tex, pose(), 0.0)))
-        assert tr.dense is not None
-        solve = tr.dense.solve
+        tr, solve = _dense_tracker_with_reference(model, tex)
 
         def disputed(*a, solve=solve, gap=gap, **k):
             r = solve(*a, **k)
@@ -315,11 +321,7 @@ def test_the_tracker_reports_a_fit_that_sees_the_texture_decorrelated(model):
     assert 0.0 < limit < 1.0
     for gain, state in ((None, EstimateState.OK), (0.5 * limit, EstimateState.LOW_CONFIDENCE),
                         (float("nan"), EstimateState.LOW_CONFIDENCE)):
-        tr = DeformableTracker(model, np.eye(4), {"s": {"mode": "tracked", "initial": 0.5}}, CAM,
-                               TrackerConfig(measurements="dense"))
-        tr.update(pose(), image_bgr=bgr(render(tex, pose(), 0.0)))
-        assert tr.dense is not None
-        solve = tr.dense.solve
+        tr, solve = _dense_tracker_with_reference(model, tex)
 
         def decorrelated(*a, solve=solve, gain=gain, **k):
             r = solve(*a, **k)
