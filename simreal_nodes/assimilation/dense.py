@@ -967,8 +967,9 @@ class DenseAligner:
         return self._profile(lvl, img, rows, f, mu, T_cw, sigma)[0]
 
     def _profile(self, lvl: int, img: NDArray[np.float32], rows: NDArray[np.int64], f: _Fit, mu: Array,
-                 T_cw: Array, sigma: float, cold: bool = False) -> tuple[float, Array]:
-        """:meth:`_profile_cost` and the brightness that attains it. ``cold``: the reweighting starts from the
+                 T_cw: Array, sigma: float, cold: bool = False) -> tuple[float, Array, int]:
+        """:meth:`_profile_cost`, the brightness that attains it and how many samples fell inside the image (the
+        cost is a mean over them). ``cold``: the reweighting starts from the
         plain least-squares brightness at this mu, its first pass at that fit's own residual scale (at least
         ``sigma``), instead of from the fit's brightness (which a misaligned frame may have left at a gain near
         zero and a bias far off: every sample would then lie beyond Tukey's threshold)."""
@@ -976,8 +977,9 @@ class DenseAligner:
         uv, _ = self._geometry(L, rows, mu, f.total, T_cw, jac=False)
         v = bilinear(img, _at_level(uv, lvl)).astype(np.float64)
         ok = np.isfinite(v)
-        if ok.sum() < 10:
-            return float("inf"), f.photo.copy()
+        n = int(ok.sum())
+        if n < 10:
+            return float("inf"), f.photo.copy(), n
         v, B = v[ok], self._brightness_basis(L, rows[ok], mu)
         prior = np.zeros((self.n_photo, self.n_photo))
         pull = np.zeros(self.n_photo)
@@ -992,19 +994,19 @@ class DenseAligner:
             try:
                 p = np.asarray(np.linalg.solve(B.T @ B + prior, B.T @ v + pull), np.float64)
             except np.linalg.LinAlgError:
-                return float("inf"), f.photo.copy()
+                return float("inf"), f.photo.copy(), n
             scales = [max(sigma, self._scale(v - B @ p)), sigma, sigma]
         for sc in scales:
             w = self._weights((v - B @ p) / sc, TUKEY)
             if float(w.sum()) <= 0:
-                return float("inf"), f.photo.copy()
+                return float("inf"), f.photo.copy(), n
             A = B.T @ (B * w[:, None]) + prior
             try:
                 p = np.asarray(np.linalg.solve(A, B.T @ (w * v) + pull), np.float64)
             except np.linalg.LinAlgError:
                 p = np.r_[1.0, float(w @ v) / float(w.sum()), g_mean]
         cost = self._rho((v - B @ p) / sigma, TUKEY) + self._g_prior_cost(p[2:])
-        return cost / len(v), p
+        return cost / len(v), p, n
 
     def _refine(self, lvl: int, img: NDArray[np.float32], rows: NDArray[np.int64], f: _Fit, T_cw: Array,
                 lo: Array, hi: Array, sigma: float) -> Array:
@@ -1053,7 +1055,7 @@ class DenseAligner:
             return
         sigma = self._scale(r0[ok0])
         if self.s.grid_brightness:
-            best_c, best_p = self._profile(lvl, pyr[lvl], rows, f, f.mu, T_cw, sigma, cold=True)
+            best_c, best_p, _ = self._profile(lvl, pyr[lvl], rows, f, f.mu, T_cw, sigma, cold=True)
         else:
             best_c, best_p = self._rho(r0[ok0], TUKEY * sigma) / ok0.sum(), f.photo
         best = None
@@ -1061,14 +1063,15 @@ class DenseAligner:
             t = f.copy()
             assert t.mu is not None
             t.mu[free] = cnd
-            r = self._residuals(lvl, pyr[lvl], rows, t, T_cw)
-            ok = np.isfinite(r)
-            if ok.sum() < 0.8 * ok0.sum():
-                continue
-            if self.s.grid_brightness:
-                c, p = self._profile(lvl, pyr[lvl], rows, t, t.mu, T_cw, sigma, cold=True)
+            if self.s.grid_brightness:  # one sampling per candidate: the profile counts the samples in view
+                c, p, n = self._profile(lvl, pyr[lvl], rows, t, t.mu, T_cw, sigma, cold=True)
             else:
-                c, p = self._rho(r[ok], TUKEY * sigma) / ok.sum(), f.photo
+                r = self._residuals(lvl, pyr[lvl], rows, t, T_cw)
+                ok = np.isfinite(r)
+                n = int(ok.sum())
+                c, p = (self._rho(r[ok], TUKEY * sigma) / n if n else float("inf")), f.photo
+            if n < 0.8 * ok0.sum():
+                continue
             if c < best_c:
                 best, best_c, best_p = t.mu, c, p
         if best is not None:
@@ -1156,6 +1159,5 @@ class DenseAligner:
             self.rest_rigid, self.rest_cam = g0.rigid.copy(), g0.cam.copy()
             self.rest_photo, self.rest_photo_s = g0.photo.copy(), g0.photo_s.copy()
             res.rest_rms = sigma0
-            res.debug["rest_gain"] = float(g0.photo[0])
             res.debug["rms_at_rest_level"] = per_level[len(per_level) - 1 - cmp][2]
         return res

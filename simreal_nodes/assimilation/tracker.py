@@ -552,15 +552,13 @@ class DeformableTracker:
             why = (f"the static surroundings alone put the camera {gap:.1f} sigma from the joint fit's (at most "
                    f"{self.cfg.dense.max_camera_gap:g}): the fit traded the camera's error against the object's "
                    "deformation (a view along the floor?)")
-            est.reason = why if est.state == EstimateState.OK else f"{est.reason}; {why}"
-            est.state = EstimateState.LOW_CONFIDENCE
+            _doubt(est, why)
         gain = float(res.debug.get("gain", float("nan")))
         if est.state in (EstimateState.OK, EstimateState.LOW_CONFIDENCE) and not gain >= self.cfg.dense.min_gain:
             why = (f"the image shows the object's texture at {gain:.2f} of the reference view's contrast (at least "
                    f"{self.cfg.dense.min_gain:g}): the fit is misaligned, or the view no longer shows what the "
                    "reference saw")
-            est.reason = why if est.state == EstimateState.OK else f"{est.reason}; {why}"
-            est.state = EstimateState.LOW_CONFIDENCE
+            _doubt(est, why)
         if est.state == EstimateState.OK:  # a sound fit's shading joins the next frames' prior (shading_frames)
             self.dense.accept_shading()
         return est
@@ -804,6 +802,12 @@ class DeformableTracker:
                                self.cfg.max_iterations)
         rest = np.linalg.norm(obs - np.c_[Xo[:, 0], Xo[:, 2]], axis=1) / px
         return res, float(np.sqrt(np.mean(np.minimum(rest, 3 * self.cfg.huber_px) ** 2)))
+
+
+def _doubt(est: Estimate, why: str) -> None:
+    """Report a measured estimate (OK or already doubted) low-confidence, adding why to its reasons."""
+    est.reason = why if est.state == EstimateState.OK else f"{est.reason}; {why}"
+    est.state = EstimateState.LOW_CONFIDENCE
 
 
 def tracker_config(obj: dict[str, Any], **overrides: Any) -> TrackerConfig:
