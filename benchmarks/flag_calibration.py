@@ -10,9 +10,12 @@
   texture contrast the image shows where the fit put the samples; flagged under ``DenseSettings.min_gain``) beside
   the frame's load error: the frames of the development family's results (``--runs``, the per-frame curves of
   ``python -m benchmarks.family --seeds 0-19``) and of the views of ``--plan`` run here (a view may add ``+noiseN``
-  or ``+blurN``: benchmarks/camera_quality.py's degradations).
+  or ``+blurN``: benchmarks/camera_quality.py's degradations);
+- ``--margin``: on the same frames (one pass serves both), the dense fit's coarse-search margin (``grid_margin``:
+  how much more the cheapest candidate a quarter of a range or more from the winner costs, as a share of the
+  winner's cost): a diagnostic no flag reads, whether a fit in the wrong basin can be told from a sound one.
 
-    ./run bench flag_calibration                      # all three, on the sets the thresholds were chosen on
+    ./run bench flag_calibration                      # all four, on the sets the thresholds were chosen on
     python -m benchmarks.flag_calibration --registration --plan "1:-d0.5"   # one registration
     python -m benchmarks.flag_calibration --camera --plan "1:-el5"          # one scene's frames
     python -m benchmarks.flag_calibration --gain --plan "0:-az65-arc20,1:+noise16"
@@ -26,6 +29,7 @@ from __future__ import annotations
 import argparse
 import copy
 import json
+from typing import Any
 
 import numpy as np
 
@@ -48,6 +52,7 @@ GAIN_PLAN = ",".join(f"{s}:{v}" for s in (0, 1) for v in ("-az45-arc20", "-az65-
                                                             "-d0.5", "-d2", "+noise16", "+blur4"))
 GAIN_RUNS = "family_dev_0_19"
 GAIN_LEVELS = (0.3, 0.5, 0.7)  # the thresholds the table counts at
+MARGIN_LEVELS = (0.005, 0.01, 0.02, 0.05)
 
 
 def parse_plan(plan: str) -> list[tuple[int, str]]:
@@ -101,71 +106,119 @@ def camera_rows(specs: list[tuple[int, str]]) -> list[dict]:
     return rows
 
 
-def gain_row(seed: int, view: str, gains: list, errs: list, states: list) -> dict:
-    """One scene's loaded frames with a dense fit: the gain's distribution, the frames more than 2 % of the span
-    off and how many of them (and of the others) each of :data:`GAIN_LEVELS` flags."""
-    g, err, st = np.array(gains, float), np.array(errs, float), np.array(states)
+# the per-frame quantities a flag reads (``--gain``, ``--margin``): the dense fit's debug key, the family curves'
+# key, the thresholds the table counts at, what is flagged (under the threshold, or NaN too) and the axis label
+QUANTITIES: dict[str, dict[str, Any]] = {
+    "gain": dict(debug="gain", levels=GAIN_LEVELS, nan_flagged=True, setting="min_gain",
+                 label="dense fit's brightness gain", clip=(-0.2, 1.5)),
+    "margin": dict(debug="grid_margin", levels=MARGIN_LEVELS, nan_flagged=False, setting=None,
+                   label="coarse search's runner-up margin (other basin)", clip=(-0.05, 2.0)),
+}
+
+
+def quantity_row(q: str, seed: int, view: str, vals: list, errs: list, states: list) -> dict:
+    """One scene's loaded frames with a dense fit: quantity ``q``'s distribution (over its finite values), the frames
+    more than 2 % of the span off and how many of them (and of the others) each of its levels flags."""
+    spec = QUANTITIES[q]
+    g, err, st = np.array(vals, float), np.array(errs, float), np.array(states)
+    fin = g[np.isfinite(g)]
     bad = err > 2.0
     row = {"seed": seed, "view": view, "frames": len(g), "ok_frames": int((st == int(EstimateState.OK)).sum()),
-           "gain_min": float(g.min()) if len(g) else float("nan"),
-           "gain_p10": float(np.percentile(g, 10)) if len(g) else float("nan"),
-           "gain_median": float(np.median(g)) if len(g) else float("nan"),
+           f"{q}_min": float(fin.min()) if len(fin) else float("nan"),
+           f"{q}_p10": float(np.percentile(fin, 10)) if len(fin) else float("nan"),
+           f"{q}_median": float(np.median(fin)) if len(fin) else float("nan"),
            "err_median_pct": float(np.median(err)) if len(g) else float("nan"), "frames_over_2pct": int(bad.sum()),
-           "gains": [round(float(v), 4) for v in g], "errs": [round(float(v), 4) for v in err]}
-    for t in GAIN_LEVELS:
-        row[f"caught_{t:g}"] = int((bad & (g < t)).sum())
-        row[f"good_{t:g}"] = int((~bad & (g < t)).sum())
+           "values": [None if not np.isfinite(v) else round(float(v), 4) for v in g],
+           "errs": [round(float(v), 4) for v in err]}
+    for t in spec["levels"]:
+        flagged = ~(g >= t) if spec["nan_flagged"] else (g < t)
+        row[f"caught_{t:g}"] = int((bad & flagged).sum())
+        row[f"good_{t:g}"] = int((~bad & flagged).sum())
     return row
 
 
-def gain_rows_from_runs(name: str) -> list[dict]:
-    """The per-frame curves of a family results file (benchmarks/family.py): gain, state, truth and estimate."""
+def frames_from_runs(name: str) -> list[tuple[int, str, dict]]:
+    """The per-frame curves of a family results file (benchmarks/family.py): per scene its seed, a label and per
+    loaded frame each quantity, the load error (% of the span; a plate: the larger of its two axes') and state."""
     from simreal_nodes.synth.family import draw, draw_plate
 
     doc = json.loads((RESULTS / f"{name}.json").read_text())
     assert all(r["seed"] < 50 for r in doc["rows"]), "development seeds only (0-49)"
-    rows = []
+    out = []
     for r in doc["rows"]:
         c = doc["curves"][str(r["seed"])]
-        if "gain" not in c:
-            raise SystemExit(f"{name} has no per-frame gain (rerun it with the current benchmarks/family.py)")
+        missing = [q for q in QUANTITIES if q not in c]
+        if missing:
+            raise SystemExit(f"{name} has no per-frame {missing} (rerun it with the current benchmarks/family.py)")
         spans = (draw_plate if r["object"] == "plate" else draw)(r["seed"]).spans
-        gains, errs, states = [], [], []
-        for i, (t, e, g) in enumerate(zip(c["truth"], c["est"], c["gain"])):
-            if t is None or g is None:
+        fr: dict[str, list] = {k: [] for k in [*QUANTITIES, "errs", "states"]}
+        for i, (t, e) in enumerate(zip(c["truth"], c["est"])):
+            if t is None or c["gain"][i] is None:  # no dense fit ran
                 continue
             err = 100 * abs(e - t) / spans[0]
-            if "truth_y" in c and c["truth_y"][i] is not None:  # a plate: the larger of its two axes' errors
+            if "truth_y" in c and c["truth_y"][i] is not None:
                 ey = 100 * abs(c["est_y"][i] - c["truth_y"][i]) / spans[1]
                 err = max(err, ey) if np.isfinite(ey) else float("inf")
-            gains.append(g)
-            errs.append(err)
-            states.append(c["state"][i])
-        rows.append(gain_row(r["seed"], f"{name} ({r['object']})", gains, errs, states))
-        print({k: v for k, v in rows[-1].items() if k not in ("gains", "errs")}, flush=True)
-    return rows
+            for q in QUANTITIES:
+                fr[q].append(np.nan if c[q][i] is None else c[q][i])
+            fr["errs"].append(err)
+            fr["states"].append(c["state"][i])
+        out.append((r["seed"], f"{name} ({r['object']})", fr))
+    return out
 
 
-def gain_rows(specs: list[tuple[int, str]]) -> list[dict]:
+def frames_from_views(specs: list[tuple[int, str]]) -> list[tuple[int, str, dict]]:
+    """The views of ``specs`` run here, 6 s each (a view may add ``+noiseN`` or ``+blurN``: made worse as
+    benchmarks/camera_quality.py does): per loaded frame with a dense fit each quantity, load error and state."""
     from benchmarks.camera_quality import made_worse
 
-    rows = []
+    out = []
     for seed, view in specs:
         name, _, worse = view.partition("+")
         seq = sequence.__wrapped__(scene_name(seed) + name, 640, 480, duration=DURATION, fps=FPS)
         if worse:
             kind = worse.rstrip("0123456789.")
             seq = made_worse(seq, kind, float(worse[len(kind):]), seed)
-        gains, errs, states = [], [], []
+        fr: dict[str, list] = {k: [] for k in [*QUANTITIES, "errs", "states"]}
         for e, truth, span in _view_frames(seq):
-            gain = float(e.debug.get("gain", np.nan))
-            if np.isfinite(truth) and np.isfinite(gain):
-                gains.append(gain)
-                errs.append(100 * abs(float(e.values[0]) - truth) / span)
-                states.append(int(e.state))
-        rows.append(gain_row(seed, view or "as drawn", gains, errs, states))
-        print({k: v for k, v in rows[-1].items() if k not in ("gains", "errs")}, flush=True)
-    return rows
+            if not np.isfinite(truth) or not np.isfinite(float(e.debug.get("gain", np.nan))):
+                continue
+            for q, spec in QUANTITIES.items():
+                fr[q].append(float(e.debug.get(spec["debug"], np.nan)))
+            fr["errs"].append(100 * abs(float(e.values[0]) - truth) / span)
+            fr["states"].append(int(e.state))
+        out.append((seed, view or "as drawn", fr))
+        print({"seed": seed, "view": view, "frames": len(fr["errs"])}, flush=True)
+    return out
+
+
+def save_quantity(q: str, scenes: list[tuple[int, str, dict]]) -> None:
+    """flag_calibration_<q>: per scene the quantity against the load error, the totals, the scatter plot."""
+    spec = QUANTITIES[q]
+    rows = [quantity_row(q, seed, view, fr[q], fr["errs"], fr["states"]) for seed, view, fr in scenes]
+    cols = [("seed", "seed", "{}"), ("view", "view", "{}"), ("frames", "loaded frames fitted", "{}"),
+            ("ok_frames", "OK", "{}"), (f"{q}_min", f"{q} min", "{:.2f}"), (f"{q}_p10", "p10", "{:.2f}"),
+            (f"{q}_median", "median", "{:.2f}"), ("err_median_pct", "load error median (% span)", "{:.2f}"),
+            ("frames_over_2pct", "frames > 2 % off", "{}")]
+    for t in spec["levels"]:
+        cols += [(f"caught_{t:g}", f"of those, {q} < {t:g}", "{}"),
+                 (f"good_{t:g}", f"frames <= 2 % with {q} < {t:g}", "{}")]
+    tot = {k: sum(r[k] for r in rows) for k in ["frames", "frames_over_2pct"]
+           + [f"{p}_{t:g}" for t in spec["levels"] for p in ("caught", "good")]}
+    nan = float("nan")
+    save(f"flag_calibration_{q}", [{k: v for k, v in r.items() if k not in ("values", "errs")} for r in rows]
+         + [{"seed": "all", "view": "", "ok_frames": sum(r["ok_frames"] for r in rows), f"{q}_min": nan,
+             f"{q}_p10": nan, f"{q}_median": nan, "err_median_pct": nan, **tot}],
+         cols, f"Dense fit: the {spec['label']} per frame against the load error (development seeds)",
+         f"`python -m benchmarks.flag_calibration --{q}` (see its docstring). "
+         + (f"A frame is flagged under DenseSettings.{spec['setting']}"
+            f"{' (or where it is not finite)' if spec['nan_flagged'] else ''}. " if spec["setting"]
+            else "No flag reads it (a diagnostic: the counts say what a threshold would catch). ")
+         + "The "
+         "frames are every loaded frame with a dense fit, whatever the tracker called it (a frame flagged for "
+         "another reason counts too). Views of the camera sweep are 6 s long.",
+         lambda plt: _plot_quantity(plt, q, rows),
+         extra={"frames": {f"{r['seed']}:{r['view']}": [r["values"], r["errs"]] for r in rows}})
 
 
 def main() -> None:
@@ -173,11 +226,13 @@ def main() -> None:
     ap.add_argument("--registration", action="store_true")
     ap.add_argument("--camera", action="store_true")
     ap.add_argument("--gain", action="store_true")
+    ap.add_argument("--margin", action="store_true")
     ap.add_argument("--plan", help="SEED:SUFFIX,... (default: the set each threshold was chosen on)")
-    ap.add_argument("--runs", default=GAIN_RUNS, help="--gain: family results (development seeds) whose frames join")
+    ap.add_argument("--runs", default=GAIN_RUNS,
+                    help="--gain, --margin: family results (development seeds) whose frames join")
     a = ap.parse_args()
-    if not (a.registration or a.camera or a.gain):
-        a.registration = a.camera = a.gain = True
+    if not (a.registration or a.camera or a.gain or a.margin):
+        a.registration = a.camera = a.gain = a.margin = True
     if a.registration:
         rows = registration_rows(parse_plan(a.plan or REGISTRATION_PLAN))
         save("flag_calibration_registration", rows,
@@ -201,38 +256,25 @@ def main() -> None:
              "Dense fit: the camera's gap to the surroundings alone, per frame (development seeds)",
              "`python -m benchmarks.flag_calibration --camera` (see its docstring). A frame is flagged past "
              "DenseSettings.max_camera_gap sigma.", lambda plt: _plot_gap(plt, rows))
-    if a.gain:
-        rows = [] if a.runs in ("", "none") else [r for n in a.runs.split(",") for r in gain_rows_from_runs(n)]
-        rows += gain_rows(parse_plan(a.plan or GAIN_PLAN))
-        cols = [("seed", "seed", "{}"), ("view", "view", "{}"), ("frames", "loaded frames fitted", "{}"),
-                ("ok_frames", "OK", "{}"), ("gain_min", "gain min", "{:.2f}"), ("gain_p10", "p10", "{:.2f}"),
-                ("gain_median", "median", "{:.2f}"), ("err_median_pct", "load error median (% span)", "{:.2f}"),
-                ("frames_over_2pct", "frames > 2 % off", "{}")]
-        for t in GAIN_LEVELS:
-            cols += [(f"caught_{t:g}", f"of those, gain < {t:g}", "{}"),
-                     (f"good_{t:g}", f"frames <= 2 % with gain < {t:g}", "{}")]
-        tot = {k: sum(r[k] for r in rows) for k in ["frames", "frames_over_2pct"]
-               + [f"{p}_{t:g}" for t in GAIN_LEVELS for p in ("caught", "good")]}
-        save("flag_calibration_gain", [{k: v for k, v in r.items() if k not in ("gains", "errs")} for r in rows]
-             + [{"seed": "all", "view": "", "ok_frames": sum(r["ok_frames"] for r in rows), "gain_min": float("nan"),
-                 "gain_p10": float("nan"), "gain_median": float("nan"), "err_median_pct": float("nan"), **tot}],
-             cols, "Dense fit: the brightness gain per frame against the load error (development seeds)",
-             "`python -m benchmarks.flag_calibration --gain` (see its docstring). A frame is flagged under "
-             "DenseSettings.min_gain. The frames are every loaded frame with a dense fit, whatever the tracker "
-             "called it (a frame flagged for another reason counts too). Views of the camera sweep are 6 s long.",
-             lambda plt: _plot_gains(plt, rows), extra={"frames": {f"{r['seed']}:{r['view']}": [r["gains"], r["errs"]]
-                                                                 for r in rows}})
+    qs = [q for q in QUANTITIES if getattr(a, q)]
+    if qs:  # one pass over the frames serves each quantity
+        scenes = [] if a.runs in ("", "none") else [sc for n in a.runs.split(",") for sc in frames_from_runs(n)]
+        scenes += frames_from_views(parse_plan(a.plan or GAIN_PLAN))
+        for q in qs:
+            save_quantity(q, scenes)
 
 
-def _plot_gains(plt, rows: list[dict]):
+def _plot_quantity(plt, q: str, rows: list[dict]):
+    spec = QUANTITIES[q]
     fig, ax = plt.subplots(figsize=(5.5, 3.6))
-    g = np.concatenate([r["gains"] for r in rows])
+    g = np.array([np.nan if v is None else v for r in rows for v in r["values"]], float)
     e = np.concatenate([r["errs"] for r in rows])
-    ax.plot(np.clip(g, -0.2, 1.5), np.clip(e, 1e-3, 100), ".", ms=2, alpha=0.5)
-    ax.axvline(DenseSettings().min_gain, color="grey", lw=0.8)
+    ax.plot(np.clip(g, *spec["clip"]), np.clip(e, 1e-3, 100), ".", ms=2, alpha=0.5)
+    if spec["setting"]:
+        ax.axvline(getattr(DenseSettings(), spec["setting"]), color="grey", lw=0.8)
     ax.axhline(2.0, color="grey", lw=0.5, ls=":")
     ax.set_yscale("log")
-    ax.set_xlabel("dense fit's brightness gain (clipped to -0.2..1.5)")
+    ax.set_xlabel(f"{spec['label']} (clipped to {spec['clip'][0]:g}..{spec['clip'][1]:g})")
     ax.set_ylabel("load error (% span)")
     fig.tight_layout()
     return fig

@@ -62,6 +62,9 @@ N_RIGID = 6  # omega (3), t (3)
 TUKEY = 4.685  # biweight threshold in robust standard deviations (95 % efficiency under Gaussian noise)
 
 
+GRID_BRIGHTNESS = ("auto", "always", "never")  # DenseSettings.grid_brightness
+
+
 @dataclass
 class DenseSettings:
     """What the dense measurement trades (each measured in benchmarks/family.py's dense rows)."""
@@ -85,9 +88,14 @@ class DenseSettings:
     held_rot_rad: float = np.deg2rad(0.1)
     held_trans_m: float = 0.003
     grid: int = 32  # coarse search over mu at the coarsest level every frame (0: off)
-    # the grid's candidates compared with the object's brightness (a, b, g) fitted to each (the profile of the
-    # cost, as :meth:`DenseAligner._refine` does); False: at the warm start's brightness
-    grid_brightness: bool = True
+    # how the grid's candidates are compared: "always" with the object's brightness (a, b, g) fitted to each (the
+    # profile of the cost, as :meth:`DenseAligner._refine` does); "never" at the warm start's brightness (the last
+    # frame's); "auto" fitted only when the warm start's gain is under min_gain (a misaligned frame left it stale:
+    # at that brightness the candidates differ by the spurious shading rather than by how the texture lines up),
+    # else at the warm start's. "always" mended development seed 0 at 65 degrees of azimuth but let seed 1 at 80
+    # degrees pick wrong candidates (OK frames' p90 0.34 -> 9.8 % of the span): with its brightness free, a
+    # misplaced candidate at the coarsest level can explain the image nearly as well
+    grid_brightness: str = "auto"
     # the static surroundings (RGB-D: a ring around the object's outline in the reference view, back-projected
     # with its depth) measure the camera's error apart from the object's; 0: off (the object alone)
     static_ring_px: float = 32.0
@@ -121,12 +129,12 @@ class DenseSettings:
     # the tracker flags a fit whose brightness gain (a: the share of the reference's texture contrast the image
     # shows where the fit put the samples) is under this: a misaligned fit sees the texture decorrelated and
     # explains the image by its mean (development seed 0 seen at 65 degrees of azimuth, after the camera was lost:
-    # gain -0.06 to 0.11 on its 4 frames more than 2 % of the span off; development beam 14: -0.38 on one). 0.5 lies
-    # between those and the 2614 frames within 2 % of the development beams 0-19 and of 18 views of seeds 0 and 1
+    # gain -0.06 to 0.11 on its 4 frames more than 2 % of the span off; development beam 14: -0.36 on one). 0.5 lies
+    # between those and the 2630 frames within 2 % of the development beams 0-19 and of 18 views of seeds 0 and 1
     # (grazing, from 0.5-2 m, 16 grey levels of noise, 4 px of blur): their gain is 0.77 at the least
     # (`python -m benchmarks.flag_calibration --gain`). It catches a fit that lost the texture, not every wrong one
-    # (5 of those views' and beams' 256 frames more than 2 % off). It changes no estimate of a frame, only its
-    # state (and so whether its shading is fused)
+    # (5 of those views' and beams' 240 frames more than 2 % off; rerun in stop 49). It changes no estimate of a
+    # frame, only its state (and so whether its shading is fused)
     min_gain: float = 0.5
     # the shading change of the deforming surface (g in the module docstring; False: the affine brightness alone)
     # and the 1-sigma of g's prior about zero (brightness fraction per unit change of the normal: k_d / k_a is at
@@ -139,6 +147,11 @@ class DenseSettings:
     # into the next frames' prior, so that a frame whose deformation is barely seen cannot pass its signal off as
     # shading; 0: each frame's g alone, under the prior above
     shading_frames: int = 50
+
+    def __post_init__(self) -> None:
+        if self.grid_brightness not in GRID_BRIGHTNESS:
+            raise ValueError(f"DenseSettings.grid_brightness must be one of {', '.join(GRID_BRIGHTNESS)}, "
+                             f"not {self.grid_brightness!r}")
 
 
 @dataclass
@@ -398,6 +411,7 @@ class DenseAligner:
         self.g_info = np.zeros((3, 3))
         self.g_eta = np.zeros(3)
         self.g_frame: tuple[Array, Array] | None = None  # the last solve's (information, its sum), not yet fused
+        self.grid_margin = float("nan")  # the last coarse search's runner-up margin (see :meth:`_grid_start`)
         self.c = G.transform(self.T_mo, np.asarray(model.points, np.float64).mean(axis=0, keepdims=True))[0]
         # images are undistorted once per frame (one remap) so that the hot loop projects with the pinhole alone
         self._maps = None
@@ -1054,16 +1068,19 @@ class DenseAligner:
         if ok0.sum() < 10:
             return
         sigma = self._scale(r0[ok0])
-        if self.s.grid_brightness:
+        fitted = self.s.grid_brightness == "always" or (
+            self.s.grid_brightness == "auto" and not float(f.photo[0]) >= self.s.min_gain)
+        if fitted:
             best_c, best_p, _ = self._profile(lvl, pyr[lvl], rows, f, f.mu, T_cw, sigma, cold=True)
         else:
             best_c, best_p = self._rho(r0[ok0], TUKEY * sigma) / ok0.sum(), f.photo
         best = None
+        seen: list[tuple[Array, float]] = []  # the valid candidates and their costs
         for cnd in cands:
             t = f.copy()
             assert t.mu is not None
             t.mu[free] = cnd
-            if self.s.grid_brightness:  # one sampling per candidate: the profile counts the samples in view
+            if fitted:  # one sampling per candidate: the profile counts the samples in view
                 c, p, n = self._profile(lvl, pyr[lvl], rows, t, t.mu, T_cw, sigma, cold=True)
             else:
                 r = self._residuals(lvl, pyr[lvl], rows, t, T_cw)
@@ -1072,10 +1089,17 @@ class DenseAligner:
                 c, p = (self._rho(r[ok], TUKEY * sigma) / n if n else float("inf")), f.photo
             if n < 0.8 * ok0.sum():
                 continue
+            seen.append((cnd, c))
             if c < best_c:
                 best, best_c, best_p = t.mu, c, p
         if best is not None:
             f.mu = best
+        # the runner-up from another basin: the cheapest candidate more than a quarter of a range from the winner,
+        # its cost above the winner's as a share of it (small: two places explain the image about as well)
+        win, span = f.mu[free], np.maximum(hi[free] - lo[free], 1e-12)
+        far = [c for cnd, c in seen if np.max(np.abs(cnd - win) / span) > 0.25]
+        if far and np.isfinite(best_c) and best_c > 0:
+            self.grid_margin = float((min(far) - best_c) / best_c)
         if np.isfinite(best_c) and np.all(np.isfinite(best_p)):  # never a non-finite brightness into the solve
             f.photo = np.asarray(best_p, np.float64).copy()
 
@@ -1090,6 +1114,7 @@ class DenseAligner:
         """Fit mu (within [lo, hi]; a parameter with lo == hi stays put) and the nuisances to this image."""
         T_cw = np.asarray(T_cw, np.float64)
         self.g_frame = None
+        self.grid_margin = float("nan")
         pyr = pyramid(self.ideal(gray), len(self.levels))
         # central differences: [-1, 0, 1] / 2
         grads = [(np.asarray(cv2.Sobel(p, cv2.CV_32F, 1, 0, ksize=1, scale=0.5), np.float32),
@@ -1147,7 +1172,7 @@ class DenseAligner:
                          static_samples=float(len(self.static[0].X) if use_s else 0),
                          camera_rot_deg=float(np.rad2deg(np.linalg.norm(f.cam[:3]))),
                          camera_trans_mm=float(1e3 * np.linalg.norm(f.cam[3:])),
-                         camera_gap_sigma=cam_gap)
+                         camera_gap_sigma=cam_gap, grid_margin=self.grid_margin)
         if with_rest:
             # is there a deformation at all? The same fit with zero displacement, at the coarser levels only (it
             # is a yes/no question), compared with the deformed fit's residual at the same level

@@ -121,9 +121,11 @@ TRACKING = Record({
                                    "shading (a property of the light, the same in every frame) over about this "
                                    "many frames the tracker judged sound into the next frames' prior (about 3 s at "
                                    "15 fps); 0: each frame alone", integer=True, lo=0, hi=100000, default=50),
-    "dense_grid_brightness": Bool("measurements 'dense': compare the coarse search's candidates each with the "
-                                  "object's brightness fitted to it (off: at the last frame's brightness, which a "
-                                  "misaligned frame drags towards zero gain, flattening the search)", default=True),
+    "dense_grid_brightness": Enum(("auto", "always", "never"), "measurements 'dense': how the coarse search "
+                                  "compares its candidates: always with the object's brightness fitted to each; "
+                                  "never at the last frame's brightness (which a misaligned frame drags towards "
+                                  "zero gain, flattening the search); auto (the default): fitted only when the last "
+                                  "frame's gain is under the low-confidence threshold", default="auto"),
     "dense_camera_first": Bool("measurements 'dense' with the surroundings: measure the camera's error on them "
                                "alone, then fit the object with it held (off, the default: one joint fit)",
                                default=False),

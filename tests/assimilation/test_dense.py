@@ -492,22 +492,64 @@ def test_the_tracker_fuses_the_shading_of_sound_frames_only():
 def test_the_coarse_search_compares_each_candidate_at_its_own_brightness(g):
     """A frame after a misaligned one starts from a brightness gain near zero and a spurious shading: compared at
     that brightness, the coarse search's candidates differ by the shading's change with mu rather than by how the
-    texture lines up, and it picks a bound; each at the brightness fitted to it (``grid_brightness``), it lands
-    next to the truth and restores the gain."""
+    texture lines up, and it picks a bound; each at the brightness fitted to it (``grid_brightness`` "always", and
+    "auto" since the gain is under ``min_gain``), it lands next to the truth and restores the gain."""
     from simreal_nodes.assimilation.dense import N_RIGID, _Fit
 
     m = bend_model()
     tex = texture(0.3)
     T0, T1 = pose(), pose(0.02)
     picked = {}
-    for profiled in (True, False):
-        al = DenseAligner(m, np.eye(4), CAM, None, DenseSettings(grid_brightness=profiled))
+    for mode in ("always", "auto", "never"):
+        al = DenseAligner(m, np.eye(4), CAM, None, DenseSettings(grid_brightness=mode))
         assert al.set_reference(render_lit(tex, T0, 0.0, 1.0, 0), G.inv(T0))
         pyr = pyramid(al.ideal(render_lit(tex, T1, 0.8, 1.0, 1)), len(al.levels))
         f = _Fit(np.array([0.1]), np.array([True]), np.zeros(N_RIGID), np.zeros(N_RIGID), np.r_[0.1, 110.0, g],
                  np.array([1.0, 0.0]), (np.zeros(N_RIGID), al._wide()), False, False)
         al._grid_start(pyr, f, G.inv(T1), np.zeros(1), np.ones(1))
         assert f.mu is not None
-        picked[profiled] = (float(f.mu[0]), float(f.photo[0]))
-    assert abs(picked[True][0] - 0.8) < 0.05 and abs(picked[True][1] - 1.0) < 0.05, picked
-    assert abs(picked[False][0] - 0.8) > 0.3, picked  # what the search did before: the test can tell
+        picked[mode] = (float(f.mu[0]), float(f.photo[0]))
+    for mode in ("always", "auto"):
+        assert abs(picked[mode][0] - 0.8) < 0.05 and abs(picked[mode][1] - 1.0) < 0.05, picked
+    assert abs(picked["never"][0] - 0.8) > 0.3, picked  # what the search did before stop 48: the test can tell
+
+
+def test_the_coarse_search_reports_how_far_another_basin_is_behind(model):
+    """``grid_margin``: the cheapest coarse candidate a quarter of a range or more from the winner, its cost above
+    the winner's as a share of it: well apart where the texture pins the stretch, near zero where the texture is
+    too faint to tell one place from another (a diagnostic: ``python -m benchmarks.flag_calibration --margin``)."""
+    T0, T1 = pose(), pose(0.02)
+    margin = {}
+    for contrast in (0.3, 0.005):
+        tex = texture(contrast)
+        al = _aligner(model)
+        assert al.set_reference(render(tex, T0, 0.0, 4.0, 0), G.inv(T0))
+        res = al.solve(render(tex, T1, 0.7, 4.0, 1), G.inv(T1), np.array([0.2]), np.zeros(1), np.ones(1))
+        margin[contrast] = res.debug["grid_margin"]
+    assert margin[0.3] > 0.1 and 0 <= margin[0.005] < 0.03, margin
+
+
+def test_the_coarse_search_keeps_a_sound_brightness_when_auto():
+    """"auto": a warm start whose gain is at least ``min_gain`` is trusted, the candidates compared at its
+    brightness (what "never" does, its brightness passed on unchanged); "always" refits it."""
+    from simreal_nodes.assimilation.dense import N_RIGID, _Fit
+
+    m = bend_model()
+    tex = texture(0.3)
+    T0, T1 = pose(), pose(0.02)
+    start = np.r_[0.9, 5.0, 0.0, 0.0, 0.0]
+    out = {}
+    for mode in ("always", "auto", "never"):
+        al = DenseAligner(m, np.eye(4), CAM, None, DenseSettings(grid_brightness=mode))
+        assert al.set_reference(render_lit(tex, T0, 0.0, 1.0, 0), G.inv(T0))
+        pyr = pyramid(al.ideal(render_lit(tex, T1, 0.8, 1.0, 1)), len(al.levels))
+        f = _Fit(np.array([0.1]), np.array([True]), np.zeros(N_RIGID), np.zeros(N_RIGID), start.copy(),
+                 np.array([1.0, 0.0]), (np.zeros(N_RIGID), al._wide()), False, False)
+        al._grid_start(pyr, f, G.inv(T1), np.zeros(1), np.ones(1))
+        assert f.mu is not None
+        out[mode] = (float(f.mu[0]), f.photo.copy())
+    assert np.array_equal(out["auto"][1], start) and np.array_equal(out["never"][1], start)
+    assert out["auto"][0] == out["never"][0]
+    assert not np.allclose(out["always"][1], start)  # the fitted brightness: the test tells the modes apart
+    with pytest.raises(ValueError, match="grid_brightness"):
+        DenseSettings(grid_brightness="sometimes")
