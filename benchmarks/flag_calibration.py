@@ -12,7 +12,7 @@
   ``python -m benchmarks.family --seeds 0-19``) and of the views of ``--plan`` run here (a view may add ``+noiseN``
   or ``+blurN``: benchmarks/camera_quality.py's degradations);
 - ``--margin``: on the same frames (one pass serves both), the dense fit's coarse-search margin (``grid_margin``:
-  how much more the cheapest candidate a quarter of a range or more from the winner costs, as a share of the
+  how much more the cheapest grid candidate more than a quarter of a range from the winner costs, as a share of the
   winner's cost): a diagnostic no flag reads, whether a fit in the wrong basin can be told from a sound one.
 
     ./run bench flag_calibration                      # all four, on the sets the thresholds were chosen on
@@ -106,12 +106,14 @@ def camera_rows(specs: list[tuple[int, str]]) -> list[dict]:
     return rows
 
 
-# the per-frame quantities a flag reads (``--gain``, ``--margin``): the dense fit's debug key, the family curves'
-# key, the thresholds the table counts at, what is flagged (under the threshold, or NaN too) and the axis label
+# the per-frame quantities (``--gain``, ``--margin``; the family curves' key is the name): the dense fit's debug key,
+# the thresholds the table counts at, what a threshold would flag (under it, or NaN too), the DenseSettings field of
+# the flag that reads it (None: a diagnostic), the table's title, the plot's axis label and clipping
 QUANTITIES: dict[str, dict[str, Any]] = {
-    "gain": dict(debug="gain", levels=GAIN_LEVELS, nan_flagged=True, setting="min_gain",
+    "gain": dict(debug="gain", levels=GAIN_LEVELS, nan_flagged=True, setting="min_gain", title="brightness gain",
                  label="dense fit's brightness gain", clip=(-0.2, 1.5)),
     "margin": dict(debug="grid_margin", levels=MARGIN_LEVELS, nan_flagged=False, setting=None,
+                   title="coarse search's runner-up margin (other basin)",
                    label="coarse search's runner-up margin (other basin)", clip=(-0.05, 2.0)),
 }
 
@@ -137,7 +139,7 @@ def quantity_row(q: str, seed: int, view: str, vals: list, errs: list, states: l
     return row
 
 
-def frames_from_runs(name: str) -> list[tuple[int, str, dict]]:
+def frames_from_runs(name: str, quantities: tuple[str, ...] = tuple(QUANTITIES)) -> list[tuple[int, str, dict]]:
     """The per-frame curves of a family results file (benchmarks/family.py): per scene its seed, a label and per
     loaded frame each quantity, the load error (% of the span; a plate: the larger of its two axes') and state."""
     from simreal_nodes.synth.family import draw, draw_plate
@@ -147,11 +149,11 @@ def frames_from_runs(name: str) -> list[tuple[int, str, dict]]:
     out = []
     for r in doc["rows"]:
         c = doc["curves"][str(r["seed"])]
-        missing = [q for q in QUANTITIES if q not in c]
+        missing = [q for q in quantities if q not in c]
         if missing:
             raise SystemExit(f"{name} has no per-frame {missing} (rerun it with the current benchmarks/family.py)")
         spans = (draw_plate if r["object"] == "plate" else draw)(r["seed"]).spans
-        fr: dict[str, list] = {k: [] for k in [*QUANTITIES, "errs", "states"]}
+        fr: dict[str, list] = {k: [] for k in [*quantities, "errs", "states"]}
         for i, (t, e) in enumerate(zip(c["truth"], c["est"])):
             if t is None or c["gain"][i] is None:  # no dense fit ran
                 continue
@@ -159,7 +161,7 @@ def frames_from_runs(name: str) -> list[tuple[int, str, dict]]:
             if "truth_y" in c and c["truth_y"][i] is not None:
                 ey = 100 * abs(c["est_y"][i] - c["truth_y"][i]) / spans[1]
                 err = max(err, ey) if np.isfinite(ey) else float("inf")
-            for q in QUANTITIES:
+            for q in quantities:
                 fr[q].append(np.nan if c[q][i] is None else c[q][i])
             fr["errs"].append(err)
             fr["states"].append(c["state"][i])
@@ -209,7 +211,7 @@ def save_quantity(q: str, scenes: list[tuple[int, str, dict]]) -> None:
     save(f"flag_calibration_{q}", [{k: v for k, v in r.items() if k not in ("values", "errs")} for r in rows]
          + [{"seed": "all", "view": "", "ok_frames": sum(r["ok_frames"] for r in rows), f"{q}_min": nan,
              f"{q}_p10": nan, f"{q}_median": nan, "err_median_pct": nan, **tot}],
-         cols, f"Dense fit: the {spec['label']} per frame against the load error (development seeds)",
+         cols, f"Dense fit: the {spec['title']} per frame against the load error (development seeds)",
          f"`python -m benchmarks.flag_calibration --{q}` (see its docstring). "
          + (f"A frame is flagged under DenseSettings.{spec['setting']}"
             f"{' (or where it is not finite)' if spec['nan_flagged'] else ''}. " if spec["setting"]
@@ -258,7 +260,8 @@ def main() -> None:
              "DenseSettings.max_camera_gap sigma.", lambda plt: _plot_gap(plt, rows))
     qs = [q for q in QUANTITIES if getattr(a, q)]
     if qs:  # one pass over the frames serves each quantity
-        scenes = [] if a.runs in ("", "none") else [sc for n in a.runs.split(",") for sc in frames_from_runs(n)]
+        scenes = [] if a.runs in ("", "none") else [sc for n in a.runs.split(",")
+                                                    for sc in frames_from_runs(n, tuple(qs))]
         scenes += frames_from_views(parse_plan(a.plan or GAIN_PLAN))
         for q in qs:
             save_quantity(q, scenes)

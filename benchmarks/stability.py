@@ -394,9 +394,10 @@ with earlier runs: this one shared the 2 cores with the held-out family for its 
   with the object, traded the two: its camera correction reached 2 degrees where the camera was 0.4 degrees off.
   The surroundings alone put the camera right: `tracking.dense_camera_first: true` gave 0.56 % on that scene, and
   `dense_surroundings_px: 0` gave 0.66 % (both before the shading term); neither became the default (docs/family.md).
-  **With the coarse search fitting each candidate's brightness after a stale one (stops 48-49) this scene reads
-  0.34 %, 90 % of its loaded frames OK** (stop 47: 8.65 %, every loaded frame flagged by the check): the trade
-  started where the search picked a wrong candidate at a stale brightness. Not looked into further than this table.
+  **With the coarse search fitting each candidate's brightness (stop 48: on every frame; stop 49: after a frame whose
+  brightness went stale) this scene reads 0.34 %, 90 % of its loaded frames OK** (stop 47: 8.65 %, every loaded
+  frame flagged by the check): the trade started where the search picked a wrong candidate at a stale brightness.
+  Not looked into further than this table.
   - **The check.** After the joint fit, the camera's error is refitted on the surroundings alone, starting from
     the joint one. The gap is measured in the correction prior's sigmas. Past `DenseSettings.max_camera_gap` = 1
     the estimate is reported low-confidence (`tracking.dense_camera_check`, on). 1 was chosen on development

@@ -1094,8 +1094,10 @@ class DenseAligner:
                 best, best_c, best_p = t.mu, c, p
         if best is not None:
             f.mu = best
-        # the runner-up from another basin: the cheapest candidate more than a quarter of a range from the winner,
-        # its cost above the winner's as a share of it (small: two places explain the image about as well)
+        # the runner-up from another basin: the cheapest grid candidate more than a quarter of a range from the
+        # winner (the warm start is not one of them), its cost above the winner's as a share of it (small: two places
+        # explain the image about as well). A diagnostic: its scale differs where the brightness was fitted (the
+        # profile, with g's prior) and where it was not
         win, span = f.mu[free], np.maximum(hi[free] - lo[free], 1e-12)
         far = [c for cnd, c in seen if np.max(np.abs(cnd - win) / span) > 0.25]
         if far and np.isfinite(best_c) and best_c > 0:

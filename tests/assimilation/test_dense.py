@@ -515,7 +515,7 @@ def test_the_coarse_search_compares_each_candidate_at_its_own_brightness(g):
 
 
 def test_the_coarse_search_reports_how_far_another_basin_is_behind(model):
-    """``grid_margin``: the cheapest coarse candidate a quarter of a range or more from the winner, its cost above
+    """``grid_margin``: the cheapest coarse candidate more than a quarter of a range from the winner, its cost above
     the winner's as a share of it: well apart where the texture pins the stretch, near zero where the texture is
     too faint to tell one place from another (a diagnostic: ``python -m benchmarks.flag_calibration --margin``)."""
     T0, T1 = pose(), pose(0.02)
