@@ -27,8 +27,9 @@ touches farther than that from every slot start a new one. Because every slot se
 probes that press the same body share the load as they do in the body (each takes less where the other presses):
 summing independent single-contact pseudo-times would not (`benchmarks/results/contact_anywhere.md`, "Two contacts at
 once": two such trackers summed are 78-96 % off the two-sphere truth, these slots 0.7-7.9 %). Not offered for the
-probe models (NI-PGD over a discrete load point x pseudo-time of a non-linear law): their contacts do not
-superpose, they need the combined load precomputed (thesis §5.3).
+non-linear models (a pseudo-time axis: the probe models' NI-PGD over a discrete load point x pseudo-time, the SVK
+beams' over the load's position x pseudo-time): their contacts do not superpose, they need the combined load
+precomputed (thesis §5.3).
 
 The contact nodes are the model's precomputed load points on its *surface*, at their *deformed* positions, so a
 virtual surface pushed by a finger moves away from it and the pseudo-time settles where the surface follows the
@@ -90,11 +91,13 @@ class ContactTracker:
 
     ``model``: the object's reduced model; its load points are the contact nodes. The contact is a model
     state (:class:`~simreal_nodes.rom.state.LoadPointStates`): parameters (load_point, pseudo_time) for probe
-    models (NI-PGD over contact point x pseudo-time), and (s_x[, s_y], load_scale) for linear PGD beams, where
-    the pseudo-time scales the precomputed load. ``T_world_object``: where the virtual object sits.
+    models (NI-PGD over contact point x pseudo-time), (s_x, s_y, pseudo_time) for the non-linear beams (NI-PGD
+    over the load's position x pseudo-time), and (s_x[, s_y], load_scale) for linear PGD beams, where the
+    pseudo-time scales the precomputed load. ``T_world_object``: where the virtual object sits.
 
     ``anywhere``: the load sits where the real object touches, between the load points (thesis §7.3's future work;
-    models with load-position axes only, :meth:`state_at`), instead of at the nearest load point.
+    models with load-position axes only, :meth:`state_at`; on a non-linear model the interpolation between load
+    positions is the model's own, measured by its builder), instead of at the nearest load point.
     The load points stay the contact nodes of the distance test.
     """
 
@@ -104,10 +107,10 @@ class ContactTracker:
         self.load_states = LoadPointStates(model)
         if int(max_contacts) < 1:
             raise ValueError(f"max_contacts must be at least 1, not {max_contacts}")
-        if int(max_contacts) > 1 and self.load_states.probe:
+        if int(max_contacts) > 1 and self.load_states.pseudo_time:
             raise ValueError(f"model '{model.name}': several contacts at once add their deformations, which holds for "
-                             "a linear model whose contact scales its load; this one is an NI-PGD over load point x "
-                             f"{PSEUDO_TIME} (a non-linear law): set collision.max_contacts: 1")
+                             "a linear model whose contact scales its load; this one is an NI-PGD over its load "
+                             f"and {PSEUDO_TIME} (a non-linear law): set collision.max_contacts: 1")
         if anywhere and self.load_states.probe:
             raise ValueError(f"model '{model.name}': its load points are discrete (NI-PGD over load point x "
                              "pseudo-time): a contact between them has no model state; contact anywhere needs "
@@ -116,7 +119,8 @@ class ContactTracker:
             raise ValueError(f"model '{model.name}' has no load directions: contact anywhere cannot tell where a real "
                              "point touches first; set collision.anywhere: false")
         self.anywhere = bool(anywhere)
-        self._position_axes = [(LOAD_POSITION_AXES[a.name], a.range) for a in model.axes] if anywhere else []
+        self._position_axes = [(LOAD_POSITION_AXES[a.name], a.range) for a in model.axes
+                               if a.name in LOAD_POSITION_AXES] if anywhere else []
         self.model = model
         self.T = np.asarray(T_world_object, dtype=np.float64)
         self.threshold, self.step, self.tau_min, self.tau_max = threshold, step, tau_min, tau_max
@@ -244,14 +248,15 @@ class ContactTracker:
         interpolates its parameter modes along them: the reduced space's own interpolation, which for a linear
         model is the load shared among the neighbouring load positions with the axis' interpolation weights."""
         p = np.asarray(point, dtype=np.float64).ravel()
-        mu = np.array([min(max(float(p[k]), lo), hi) for k, (lo, hi) in self._position_axes])
-        return ModelState(mu, load_scale=pseudo_time)
+        return self.load_states.at([min(max(float(p[k]), lo), hi) for k, (lo, hi) in self._position_axes],
+                                   pseudo_time)
 
     def parameter_names(self) -> list[str]:
         return self.load_states.layout.names
 
     def parameters(self, state: ContactState | None = None) -> np.ndarray:
-        """The contact's model state as a vector: (load_point, pseudo_time) or (s..., load_scale)."""
+        """The contact's model state as a vector: (load_point, pseudo_time), (s..., pseudo_time) or
+        (s..., load_scale)."""
         return self.load_states.layout.vector(self.model_state(state))
 
     def displacement(self, nodes=None, state: ContactState | None = None, n_modes=None) -> np.ndarray:

@@ -309,6 +309,16 @@ class Solid:
         f[self.vertex_dofs(self.nearest_vertex(point))] += np.asarray(force, dtype=np.float64)
         return f
 
+    def consistent_point_load(self, point, force) -> np.ndarray:
+        """Nodal forces of a point force at ``point`` (newtons), anywhere in the mesh: each node takes its shape
+        function's value there (the load's virtual work is exact; at a vertex it is that vertex's alone)."""
+        S = self.sbasis.probes(np.asarray(point, dtype=np.float64).reshape(self.dim, 1)).tocoo()
+        f = np.zeros(self.N)
+        F = np.asarray(force, dtype=np.float64)
+        for k, w in zip(S.col, S.data):
+            f[self.dim * k:self.dim * k + self.dim] += w * F  # vector dofs are interleaved per scalar node
+        return f
+
     def vertices_in(self, region: RegionSpec) -> NDArray[np.int64]:
         return np.flatnonzero(Region.from_spec(region).mask(self.mesh.p, self.bounds))
 
@@ -491,6 +501,11 @@ class Solid:
             step = alpha * np.linalg.norm(du)
             u = trial
         return u, False, max_iter, res
+
+    def energy(self, u: np.ndarray) -> float:
+        """The stored energy W_int(u) = int Psi(F) dV (in E units, as the internal force: its gradient)."""
+        Psi = self._m.energy(self._F3(self._grad_u(u)))
+        return float(np.sum(Psi * self.basis.dx)) * self.thickness
 
     def min_jacobian(self, u: np.ndarray) -> float:
         if isinstance(self.material, mat.LinearElastic):

@@ -7,6 +7,9 @@ Builders (``kind`` in the spec):
   Aluminium beam, crossed beams.
 - ``beam_snapshots``: hyperelastic (SVK) beam under a patch load at each position s (Newton), NI-PGD of the
   displacement and stress snapshots. Foam beam.
+- ``beam_contact_nipgd``: hyperelastic (SVK) beam under a point load at each top-face vertex growing over
+  pseudo-time (Newton increments); NI-PGD of the (space x s_x x s_y x pseudo-time) tensors: u(x, s_x, s_y, tau).
+  The thesis's crossed beams (§5.4.1, St. Venant-Kirchhoff).
 - ``joint_boot``: neo-Hookean bellows whose top ring follows a lever rotated by theta (Newton along theta),
   NI-PGD. Joint boot (virtual and real; alpha_z is a rigid parameter handled by the tracker).
 - ``probe_nipgd``: scanned surface (bunny, dragon) -> volumetric mesh; loads at contact points growing over
@@ -92,7 +95,8 @@ COMMON = {
     "simreal_model_spec": Number("spec format version", integer=True, required=True),
     "name": Str("model name", required=True),
     "description": Str(default=""),
-    "kind": Enum(("beam_pgd", "beam_snapshots", "joint_boot", "probe_nipgd"), "builder", required=True),
+    "kind": Enum(("beam_pgd", "beam_snapshots", "beam_contact_nipgd", "joint_boot", "probe_nipgd"), "builder",
+                 required=True),
     "material": MATERIAL,
 }
 NIPGD = Record({"max_terms": Number(integer=True, lo=1, default=30), "tol": Number(lo=0, lo_open=True, default=1e-4)})
@@ -130,6 +134,24 @@ SPECS = {
         "steps": Number("Newton load steps per snapshot", integer=True, lo=1, default=4),
         "nipgd": NIPGD,
         "interpolation": Enum(("cubic", "linear"), default="cubic"),
+    }),
+    "beam_contact_nipgd": Record({**COMMON,
+        "geometry": Record({"length": Number(lo=0, lo_open=True, required=True),
+                            "width": Number(lo=0, lo_open=True, required=True),
+                            "height": Number(lo=0, lo_open=True, required=True)}),
+        "mesh": Record({"cells": Vector(3, what="[nx, ny, nz]", required=True),
+                        "element": Enum(("hex", "tet"), default="hex"),
+                        "order": Number(integer=True, lo=1, hi=2, default=2)}),
+        "supports": ListOf(SUPPORT, min_len=1, required=True),
+        "load": Record({"force": Number("largest total force, N", lo=0, lo_open=True, required=True),
+                        "direction": Vector(3, default=[0, 0, -1]),
+                        "x_range": Vector(2, nullable=True), "y_range": Vector(2, nullable=True),
+                        "increments": Number("Newton load increments: the pseudo-time axis has this many steps",
+                                             integer=True, lo=2, default=8)}),
+        "nipgd": NIPGD,
+        "interpolation": Enum(("cubic", "linear"), default="cubic"),
+        "validation_points": Number("full-order solves at load positions between the grid's (interpolation check)",
+                                    integer=True, lo=0, default=4),
     }),
     "joint_boot": Record({**COMMON,
         "geometry": Record({k: Number(lo=0, lo_open=True, default=d) for k, d in
@@ -439,6 +461,123 @@ def build_beam_snapshots(spec: ModelSpec, progress: Progress | None = None) -> R
     return model
 
 
+def _contact_solid(spec: ModelSpec) -> fem.Solid:
+    g, ms = spec["geometry"], spec["mesh"]
+    mesh = meshes.box(g["length"], g["width"], g["height"], tuple(int(c) for c in ms["cells"]), ms["element"])
+    return fem.Solid(mesh, _material(spec), ms["order"], _supports(spec))
+
+
+def _contact_paths(spec: ModelSpec, points: list[list[float]]) -> list[tuple[Any, Any, int]]:
+    """Worker of :func:`build_beam_contact_nipgd`: for each load point, the Newton path of a point force growing
+    to the spec's load over its increments -> (vertex displacement (nv, 3, n_inc), Cauchy stress (nv, 6, n_inc),
+    Newton iterations). A module-level function: it runs in a process of its own."""
+    solid = _contact_solid(spec)
+    ld = spec["load"]
+    force = ld["force"] * np.asarray(ld["direction"], dtype=np.float64) / np.linalg.norm(ld["direction"])
+    out = []
+    for p in points:
+        path: list[NDArray[np.float64]] = []
+        try:
+            _, info = solid.solve(solid.consistent_point_load(p, force), steps=ld["increments"], path=path)
+        except FemError as e:
+            raise FemError(f"load point {np.round(p, 6).tolist()}: {e}; lower load.force") from None
+        out.append((np.stack([solid.vertex_displacement(u) for u in path], axis=-1),
+                    np.stack([solid.stress(u)["cauchy"] for u in path], axis=-1), info.newton_iterations))
+    return out
+
+
+def _build_workers() -> int:
+    """Processes for a snapshot sweep: ``SIMREAL_BUILD_WORKERS``, else every core. The model does not depend on it."""
+    return max(1, int(os.environ.get("SIMREAL_BUILD_WORKERS", "0")) or (os.cpu_count() or 1))
+
+
+def build_beam_contact_nipgd(spec: ModelSpec, progress: Progress | None = None) -> ReducedModel:
+    """The thesis's crossed beams (§5.4.1): a hyperelastic beam pressed at any vertex of its top face (the load
+    positions S = (s_x, s_y) of Eq. 5.6) by a point force growing over the pseudo-time of Alg. 5.1 (Newton
+    increments of the load: tau = force / the spec's force), snapshots reduced by NI-PGD into
+    u(x, s_x, s_y, tau) (Eq. 5.4-5.5). Between load positions the model interpolates its parameter modes; the
+    error of that is measured against full-order solves at ``validation_points`` positions between the grid's."""
+    from concurrent.futures import ProcessPoolExecutor
+    from multiprocessing import get_context
+
+    t0 = time.time()
+    _warn_bending(spec)
+    ld = spec["load"]
+    H = spec["geometry"]["height"]
+    solid = _contact_solid(spec)
+    mesh, P = solid.mesh, solid.mesh.p
+    top = solid.vertices_in({"face": "zmax"})
+    for ax, rng in ((0, ld["x_range"]), (1, ld["y_range"])):
+        if rng:
+            top = top[(P[ax, top] >= rng[0] - 1e-9) & (P[ax, top] <= rng[1] + 1e-9)]
+    xs, ys = np.unique(np.round(P[0, top], 12)), np.unique(np.round(P[1, top], 12))
+    ix, iy = np.searchsorted(xs, np.round(P[0, top], 12)), np.searchsorted(ys, np.round(P[1, top], 12))
+    if len(top) != len(xs) * len(ys) or len(xs) < 2 or len(ys) < 2:
+        raise SceneError(f"{spec['_path']}: the top face's load positions must form a grid of at least 2 x 2 vertices "
+                         f"(found {len(top)} vertices, {len(xs)} x {len(ys)} coordinates)")
+    order = np.lexsort((iy, ix))  # by x, then y
+    top, ix, iy = top[order], ix[order], iy[order]
+    n_inc = int(ld["increments"])
+    force = ld["force"] * np.asarray(ld["direction"], dtype=np.float64) / np.linalg.norm(ld["direction"])
+    nv = P.shape[1]
+    U = np.zeros((nv, 3, len(xs), len(ys), n_inc + 1))
+    S = np.zeros((nv, 6, len(xs), len(ys), n_inc + 1))
+    newton = np.zeros((len(xs), len(ys)), np.int64)
+    pts = [P[:, v].tolist() for v in top]
+    workers = min(_build_workers(), len(pts))
+    chunks = [list(range(k, min(k + 4, len(pts)))) for k in range(0, len(pts), 4)]
+    done = 0
+
+    def take(idx: list[int], res: list[tuple[Any, Any, int]]) -> None:
+        nonlocal done
+        for j, (u, st, its) in zip(idx, res):
+            U[:, :, ix[j], iy[j], 1:], S[:, :, ix[j], iy[j], 1:], newton[ix[j], iy[j]] = u, st, its
+        done += len(idx)
+        if progress:
+            progress("snapshots", done, len(pts), f"{done} of {len(pts)} load points ({workers} processes)")
+
+    if workers > 1:
+        # fork: the workers need nothing of the caller but this module (spawn would re-run a caller's script)
+        with ProcessPoolExecutor(workers, mp_context=get_context("fork")) as ex:
+            futs = [(idx, ex.submit(_contact_paths, spec, [pts[j] for j in idx])) for idx in chunks]
+            for idx, fut in futs:
+                take(idx, fut.result())
+    else:
+        for idx in chunks:
+            take(idx, _contact_paths(spec, [pts[j] for j in idx]))
+    tau = np.linspace(0.0, 1.0, n_inc + 1)
+    interp = spec["interpolation"]
+    axes = [Axis("s_x", xs, "m", description="load position on the top face, x", interpolation=interp),
+            Axis("s_y", ys, "m", description="load position on the top face, y", interpolation=interp),
+            Axis("pseudo_time", tau, "", description="deformation pseudo-time: 0 undeformed, 1 the full load "
+                                                     "(Alg. 5.1); the force grows linearly with it",
+                 interpolation=interp)]
+    fields = _nipgd_fields(["s_x", "s_y", "pseudo_time"], U, S, axes, spec["nipgd"], progress)
+    snaps = fields.pop("_snapshots", None)
+    # the interpolation between load positions: full-order solves midway between grid positions, at the full load
+    n_val = int(spec["validation_points"])
+    rng = np.random.default_rng(0)
+    val_err = []
+    for _ in range(n_val):
+        i, j = int(rng.integers(0, len(xs) - 1)), int(rng.integers(0, len(ys) - 1))
+        p = [0.5 * (xs[i] + xs[i + 1]), 0.5 * (ys[j] + ys[j + 1]), H]
+        u, _ = solid.solve(solid.consistent_point_load(p, force), steps=n_inc)
+        ref = solid.vertex_displacement(u)
+        err = float(np.linalg.norm(fields["displacement"].evaluate([p[0], p[1], 1.0]) - ref))
+        val_err.append({"s_x": float(p[0]), "s_y": float(p[1]),
+                        "relative_error": err / max(float(np.linalg.norm(ref)), 1e-300)})
+    model = ReducedModel(spec["name"], mesh.p.T.copy(), mesh.t.T.copy(), _cell_type(mesh), axes, fields,
+                         meshes.boundary_triangles(mesh), spec["description"], _material(spec).as_dict(),
+                         spec["supports"],
+                         {"force_N": ld["force"], "direction": list(force / ld["force"]), "where": "top_face"},
+                         load_points=top, load_directions=np.tile(force / ld["force"], (len(top), 1)))
+    model.provenance = _provenance(spec, t0, {"method": "Newton increments + NI-PGD (Eq. 5.4-5.6)",
+                                              "newton_iterations": newton.ravel().tolist(),
+                                              "between_positions_error": val_err, "workers": workers})
+    model.snapshots = snaps
+    return model
+
+
 def build_joint_boot(spec: ModelSpec, progress: Progress | None = None) -> ReducedModel:
     t0 = time.time()
     g, ms, lv = spec["geometry"], spec["mesh"], spec["lever"]
@@ -613,7 +752,8 @@ def _rings(adj: sp.csr_matrix, node: int, rings: int) -> list[int]:
     return sorted(cur)
 
 
-BUILDERS = {"beam_pgd": build_beam_pgd, "beam_snapshots": build_beam_snapshots, "joint_boot": build_joint_boot,
+BUILDERS = {"beam_pgd": build_beam_pgd, "beam_snapshots": build_beam_snapshots,
+            "beam_contact_nipgd": build_beam_contact_nipgd, "joint_boot": build_joint_boot,
             "probe_nipgd": build_probe_nipgd}
 
 

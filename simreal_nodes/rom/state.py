@@ -53,6 +53,7 @@ ALPHA_Z = "alpha_z"
 LOAD_SCALE = "load_scale"
 SHIFT = ("shift_x", "shift_y", "shift_z")
 PSEUDO_TIME = "pseudo_time"
+LOAD_POINT = "load_point"  # a probe model's axis: the index of its discrete contact point
 # a message with several contacts names the k-th one's parameters "<name>@k" (k >= 2; ModelParameters.msg)
 CONTACT_SEP = "@"
 # Axes of linear contact models that are the position of their load: which coordinate of a load point they take.
@@ -245,35 +246,55 @@ class StateLayout:
 class LoadPointStates:
     """The model state of a contact at one of the model's load points pushed to a pseudo-time (Alg. 5.1).
 
-    A probe model (NI-PGD over contact point x pseudo-time) takes both as its parameters: mu = (load point
-    index, pseudo-time). A linear model without a pseudo-time axis takes the load point's position (its axes
-    ``s``, ``s_x``, ``s_y``: see LOAD_POSITION_AXES) and the pseudo-time scales the precomputed load:
-    mu = position, load_scale = pseudo-time.
+    Three kinds of contact model:
+
+    - a probe model (NI-PGD over contact point x pseudo-time, a scanned body): mu = (load point index,
+      pseudo-time); its load points are discrete (``probe``);
+    - a non-linear model over load positions and pseudo-time (the SVK crossed beams: u(x, s_x, s_y, tau)):
+      mu = (the load point's position on the axes ``s``, ``s_x``, ``s_y`` (LOAD_POSITION_AXES), pseudo-time);
+    - a linear model without a pseudo-time axis: mu = the load point's position and the pseudo-time scales the
+      precomputed load: load_scale = pseudo-time.
+
+    ``pseudo_time``: the model has a pseudo-time axis (a non-linear law: contacts do not superpose).
     """
 
     def __init__(self, model: ModelDescription):
         if model.load_points is None or len(model.load_points) == 0:
             raise ValueError(f"model '{model.name}' has no load points: it cannot take contacts")
         names = [a.name for a in model.axes]
-        self.probe = PSEUDO_TIME in names
-        if not self.probe and model.material.get("law") != "linear_elastic":
+        self.pseudo_time = PSEUDO_TIME in names
+        self.probe = self.pseudo_time and LOAD_POINT in names
+        if not self.pseudo_time and model.material.get("law") != "linear_elastic":
             raise ValueError(f"model '{model.name}' has no {PSEUDO_TIME} axis and is not linear: cannot scale its load")
-        self.layout = StateLayout(tuple(model.axes), load_scale=not self.probe)
+        self.layout = StateLayout(tuple(model.axes), load_scale=not self.pseudo_time)
+        self._tau = names.index(PSEUDO_TIME) if self.pseudo_time else -1
         n_lp = len(model.load_points)
         if self.probe:
             self._mu = np.arange(n_lp, dtype=np.float64)[:, None]
+            self._slots = [names.index(LOAD_POINT)]
         else:
-            unknown = [n for n in names if n not in LOAD_POSITION_AXES]
+            position = [n for n in names if n != PSEUDO_TIME]
+            unknown = [n for n in position if n not in LOAD_POSITION_AXES]
             if unknown:
                 raise ValueError(f"model '{model.name}': axes {unknown} are not load positions "
                                  f"({', '.join(LOAD_POSITION_AXES)}): a contact cannot set them")
             P = model.points[np.asarray(model.load_points, dtype=np.int64)]
-            self._mu = np.stack([P[:, LOAD_POSITION_AXES[n]] for n in names], axis=1)
+            self._mu = np.stack([P[:, LOAD_POSITION_AXES[n]] for n in position], axis=1)
+            self._slots = [names.index(n) for n in position]
+        self._n = len(names)
 
     def __len__(self) -> int:
         return len(self._mu)
 
+    def at(self, position: ArrayLike, pseudo_time: float) -> ModelState:
+        """The state of a load at ``position`` (its values on the load-position axes, or a probe model's load point
+        index) pushed to ``pseudo_time``."""
+        if not self.pseudo_time:
+            return ModelState(np.asarray(position, dtype=np.float64).ravel(), load_scale=pseudo_time)
+        mu = np.empty(self._n)
+        mu[self._slots] = np.asarray(position, dtype=np.float64).ravel()
+        mu[self._tau] = pseudo_time
+        return ModelState(mu)
+
     def state(self, load_point: int, pseudo_time: float) -> ModelState:
-        if self.probe:
-            return ModelState(np.concatenate([self._mu[load_point], [pseudo_time]]))
-        return ModelState(self._mu[load_point], load_scale=pseudo_time)
+        return self.at(self._mu[load_point], pseudo_time)

@@ -345,24 +345,20 @@ class SphereOnSolid:
 
     def solve(self, center, u0: np.ndarray | None = None, tol: float = 1e-8, max_iter: int = 30) -> SphereState:
         """Equilibrium with the sphere at ``center`` (body frame), Newton from ``u0`` (the previous probe
-        position's solution: the path is followed in small steps by :meth:`solve_path`)."""
+        position's solution: the path is followed in small steps by :meth:`solve_path`); where Newton fails, the
+        potential's damped descent (:meth:`_descend`)."""
         c = np.asarray(center, dtype=np.float64)
         s = self.solid
         u = np.zeros(s.N) if u0 is None else np.array(u0, dtype=np.float64)
+        start = u.copy()
         free = s.free
         prev = np.inf
         for it in range(max_iter + 1):
             r, f, act, g = self._residual(u, c)
-            # relative to the contact force, never below 0.1 mN (at the first touch the force is round-off)
-            ref = max(float(np.linalg.norm(f)), 1e-4) / self.E
-            rn = float(np.linalg.norm(r[free]))
-            res = rn / ref
+            res, rn = self._relative(r, f)
             if not np.isfinite(res):
                 break
-            if len(act) == 0 and rn < 1e-14:
-                return self._state(u, c, it)
-            # converged; or stalled at round-off (a stiff body's internal force carries a floor of E-unit round-off)
-            if len(act) and (res < tol or (res < np.sqrt(tol) and rn > 0.5 * prev)):
+            if self._converged(res, rn, prev, len(act), tol):
                 return self._state(u, c, it)
             prev = rn
             if it == max_iter:
@@ -380,7 +376,67 @@ class SphereOnSolid:
                     break
                 alpha *= 0.5
             u = trial
-        raise FemError(f"the sphere contact did not converge at {np.round(c, 5).tolist()} (residual {res:.2e})")
+        return self._descend(c, start, tol)
+
+    def _relative(self, r: np.ndarray, f: np.ndarray) -> tuple[float, float]:
+        """(the residual relative to the contact force, never below 0.1 mN: at the first touch the force is
+        round-off; its norm, E units)."""
+        rn = float(np.linalg.norm(r[self.solid.free]))
+        return rn / (max(float(np.linalg.norm(f)), 1e-4) / self.E), rn
+
+    @staticmethod
+    def _converged(res: float, rn: float, prev: float, n_active: int, tol: float) -> bool:
+        """Converged; or stalled at round-off (a stiff body's internal force carries a floor of E-unit round-off);
+        without contact, at rest."""
+        if n_active == 0:
+            return rn < 1e-14
+        return res < tol or (res < np.sqrt(tol) and rn > 0.5 * prev)
+
+    def potential(self, u: np.ndarray, center) -> float:
+        """The total potential (E units) whose gradient the residual is: the body's stored energy and the
+        penalty's ``k/2 <-g>^2`` per sample."""
+        _, g, _, _ = self._contact(u, np.asarray(center, dtype=np.float64))
+        return self.solid.energy(u) + 0.5 * self.k * float(np.sum(g ** 2)) / self.E
+
+    def _descend(self, c: np.ndarray, u: np.ndarray, tol: float, max_iter: int = 300) -> SphereState:
+        """Newton's fallback: steps on the potential damped Levenberg-Marquardt style, ``(K + mu diag|K|) du = -r``,
+        each kept only where the potential falls (the damping grows after a rejected step, shrinks after a good
+        one). Plain Newton fails where a slender part bends away under the frictionless sphere: past a limit point
+        of the quasi-static path the tangent is near-singular or indefinite and the penalty's active set flips
+        between iterations. The descent follows the potential down to an equilibrium: the state a heavily damped
+        motion would reach, the stable one beyond the limit point (the part slips off the probe, or stays on it)."""
+        s, free = self.solid, self.solid.free
+        u = np.array(u, dtype=np.float64)
+        pot = self.potential(u, c)
+        mu, prev, res = 1e-3, np.inf, np.inf
+        for it in range(max_iter + 1):
+            r, f, act, g = self._residual(u, c)
+            res, rn = self._relative(r, f)
+            if not np.isfinite(res):
+                break
+            if self._converged(res, rn, prev, len(act), tol):
+                return self._state(u, c, it)
+            prev = rn
+            K = self._tangent(u, c, act, g)[free][:, free].tocsc()
+            D = sp.diags(np.abs(K.diagonal()) + 1e-30)
+            while mu < 1e12:
+                du = spla.spsolve((K + mu * D).tocsc(), -r[free])
+                trial = u.copy()
+                trial[free] += du
+                if np.all(np.isfinite(du)) and s.min_jacobian(trial) > 0:
+                    p_trial = self.potential(trial, c)
+                    model = float(r[free] @ du) + 0.5 * float(du @ (K @ du))  # the quadratic model's change
+                    if p_trial < pot or (p_trial <= pot + 1e-12 * abs(pot) and
+                                         np.linalg.norm(self._residual(trial, c)[0][free]) < rn):
+                        rho = (p_trial - pot) / model if model < 0 else 0.0
+                        mu = mu / 3 if rho > 0.75 else (mu * 2 if rho < 0.25 else mu)
+                        u, pot = trial, p_trial
+                        break
+                mu = max(mu * 4, 1e-8)
+            else:
+                break
+        raise FemError(f"the sphere contact did not converge at {np.round(c, 5).tolist()} (residual {res:.2e}), "
+                       "neither by Newton nor by the potential's damped descent")
 
     def _state(self, u, c, its) -> SphereState:
         f, _, g = self.forces(u, c)
@@ -400,41 +456,49 @@ class SphereOnSolid:
         return float(np.min(t[hit] - np.sqrt(self.R ** 2 - r2[hit]))) if np.any(hit) else -np.inf
 
     def solve_path(self, start, direction, travels) -> list[SphereState]:
-        """Follow the sphere's centre ``start + s direction`` over increasing ``travels`` s (metres), each
-        solve starting from the last; a step that fails is halved (at most 6 times)."""
-        n = np.asarray(direction, dtype=np.float64)
-        n = n / np.linalg.norm(n)
-        start = np.asarray(start, dtype=np.float64)
-        out: list[SphereState] = []
-        u = np.zeros(self.solid.N)
-        u_last, s_last = u, None  # the solution before u: a secant predictor along the stroke
-        pos = float(travels[0]) if len(travels) else 0.0
-        for s_t in (float(v) for v in travels):
-            span = s_t - pos
-            step = span
-            st = None
-            while st is None or pos < s_t - 1e-15:
-                tgt = min(pos + step, s_t) if span > 0 else s_t
-                guess = u
-                if s_last is not None and pos > s_last:
-                    guess = u + (u - u_last) * (tgt - pos) / (pos - s_last)
+        """Follow the sphere's centre ``start + s direction`` over increasing ``travels`` s (metres)
+        (:func:`follow_path`)."""
+        return follow_path(self.solve, np.zeros(self.solid.N), start, direction, travels)
+
+
+def follow_path(solve, u_zero: np.ndarray, start, direction, travels) -> list:
+    """Follow a probe's centre ``start + s direction`` over increasing ``travels`` s (metres): ``solve(centre,
+    guess)`` returns a state with the dofs ``.u`` or raises :class:`FemError`; each solve starts from a secant
+    prediction along the stroke (the last two solutions), then from the last solution; a step that fails is
+    halved (at most 6 times)."""
+    n = np.asarray(direction, dtype=np.float64)
+    n = n / np.linalg.norm(n)
+    start = np.asarray(start, dtype=np.float64)
+    out: list = []
+    u = np.asarray(u_zero, dtype=np.float64)
+    u_last, s_last = u, None  # the solution before u: a secant predictor along the stroke
+    pos = float(travels[0]) if len(travels) else 0.0
+    for s_t in (float(v) for v in travels):
+        span = s_t - pos
+        step = span
+        st = None
+        while st is None or pos < s_t - 1e-15:
+            tgt = min(pos + step, s_t) if span > 0 else s_t
+            guess = u
+            if s_last is not None and pos > s_last:
+                guess = u + (u - u_last) * (tgt - pos) / (pos - s_last)
+            try:
                 try:
-                    try:
-                        st = self.solve(start + n * tgt, guess)
-                    except FemError:
-                        if guess is u:
-                            raise
-                        st = self.solve(start + n * tgt, u)
+                    st = solve(start + n * tgt, guess)
                 except FemError:
-                    step *= 0.5
-                    if step < span / 64 or span <= 0:
+                    if guess is u:
                         raise
-                    continue
-                u_last, s_last = u, pos
-                u, pos = st.u, tgt
-                step = 2 * step
-            out.append(st)
-        return out
+                    st = solve(start + n * tgt, u)
+            except FemError:
+                step *= 0.5
+                if step < span / 64 or span <= 0:
+                    raise
+                continue
+            u_last, s_last = u, pos
+            u, pos = st.u, tgt
+            step = 2 * step
+        out.append(st)
+    return out
 
 
 @dataclass

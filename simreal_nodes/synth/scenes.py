@@ -580,8 +580,10 @@ def _probe_path(t, contacts, T_wo, model, radius, presses, approach=0.06, seg=(0
 
 # the scanned bodies' strokes: the load points the probe presses. The held-out pair was fixed before any result of the
 # full-order truth was seen and is never used to choose anything (benchmarks/probe_scenes.py reports it apart)
-PROBE_CONTACTS: dict[str, list[int | None]] = {"bunny": [3, 9], "dragon": [2, 7], "crossed_beams": [None]}
-PROBE_CONTACTS_HELDOUT: dict[str, list[int | None]] = {"bunny": [6, 13], "dragon": [5, 12], "crossed_beams": [None]}
+PROBE_CONTACTS: dict[str, list[int | None]] = {"bunny": [3, 9], "dragon": [2, 7], "crossed_beams": [None],
+                                               "crossed_beams_svk": [None]}
+PROBE_CONTACTS_HELDOUT: dict[str, list[int | None]] = {"bunny": [6, 13], "dragon": [5, 12], "crossed_beams": [None],
+                                                       "crossed_beams_svk": [None]}
 # the crossed beams' set-up: where beam b crosses under a (its centre line, metres from a's free end), how far b's free
 # end reaches past a's far side, b's rest gap under a, where the probe presses on a's top face (from a's free end;
 # across, a share of a's width), the press as a share of the largest precomputed deflection there, and the camera's
@@ -596,7 +598,12 @@ CROSSED_BEAMS = {
 
 
 def _probe_scene(kind: str, width, height, duration, fps, stereo: bool, heldout: bool = False) -> SynthScene:
-    spec = {"bunny": "bunny", "dragon": "dragon", "crossed_beams": "crossed_beams"}[kind]
+    """The probe scenes of §5.4: ``kind`` bunny, dragon, crossed_beams (linear elastic beams, the linear truth) or
+    crossed_beams_svk (the thesis's St. Venant-Kirchhoff beams, the large-deformation truth); the crossed beams'
+    set-ups are the same for both laws."""
+    spec = {"bunny": "bunny", "dragon": "dragon", "crossed_beams": "crossed_beams",
+            "crossed_beams_svk": "crossed_beams_svk"}[kind]
+    beams = kind.startswith("crossed_beams")
     radius = 0.012
     contacts = list((PROBE_CONTACTS_HELDOUT if heldout else PROBE_CONTACTS)[kind])
     origin = np.array([0.35, 0.15, 0.0])
@@ -605,13 +612,13 @@ def _probe_scene(kind: str, width, height, duration, fps, stereo: bool, heldout:
     def build(sc, r, models):
         add_environment(r, center=(0.35, 0.15), seed=4)
         _probe_mesh(r, radius)
-        if kind == "crossed_beams":
+        if beams:
             V, F = W.box((0.06, 0.08, 0.24), (origin[0] - 0.03, origin[1] + 0.015, 0.12))
             r.add(Mesh("clamp_a", V, F, mode="texture", texture=W.texture("plate"), tex_scale=5.0, smooth=False))
 
     def prepare(sc, models):
         m = models["object"]
-        if kind == "crossed_beams":
+        if beams:
             sc.state["T_wo"] = G.make_T(t=origin + [0, 0, 0.20])
             # beam B along y, its free end under beam A's free end (development: its centre line 20 mm from A's
             # tip), its top 3 mm below A's bottom (held-out: 35 mm, 5 mm). (B's free end, not its middle: pressed
@@ -634,7 +641,7 @@ def _probe_scene(kind: str, width, height, duration, fps, stereo: bool, heldout:
         # near the models' 15 N: 14 N, measured)
         tr = ContactTracker(m, sc.state["T_wo"])
         presses, full = [], []
-        fraction = cb["fraction"] if kind == "crossed_beams" else 0.7
+        fraction = cb["fraction"] if beams else 0.7
         for lp in contacts:
             node = m.load_points[lp]
             u = m.deformation(tr.load_states.state(lp, 1.0), nodes=[node])[0]
@@ -645,9 +652,17 @@ def _probe_scene(kind: str, width, height, duration, fps, stereo: bool, heldout:
         # the probe's silhouette pixels (the ones nearest the object) and adds mm-level noise (measured: the
         # nearest observed probe point is 4-10 mm farther than the nearest visible surface point)
         sc.state["delta"] = round(max(0.008, 0.2 * max(full)), 4)
-        if kind == "crossed_beams":  # the truth: a full-order contact solve of the probe on beam a, a on beam b
+        if beams:  # the truth: a full-order contact solve of the probe on beam a, a on beam b
             T_ab = np.linalg.inv(sc.state["T_wo"]) @ sc.state["T_wo_b"]
-            sc.state["fe"] = _crossed_beams_fe(m, m.points[m.load_points[contacts[0]]], T_ab, radius)
+            press_point = m.points[m.load_points[contacts[0]]]
+            if kind == "crossed_beams_svk":  # large deformation, along the stroke (minutes the first time; cached)
+                progress = sc.state.get("progress")
+                if progress:
+                    progress("truth", 0, 1, "full-order large-deformation contact solve of the stroke (minutes the "
+                                            "first time; kept in cache/truth)")
+                sc.state["fe_path"] = crossed_beams_svk_truth(m, spec, press_point, T_ab, radius, presses[0])
+            else:
+                sc.state["fe"] = _crossed_beams_fe(m, press_point, T_ab, radius)
         else:  # the truth: a full-order large-strain contact solve of the probe on the scanned body, per stroke
             paths, progress = [], sc.state.get("progress")
             for i, (lp, press) in enumerate(zip(contacts, presses)):
@@ -672,17 +687,19 @@ def _probe_scene(kind: str, width, height, duration, fps, stereo: bool, heldout:
         R = np.stack([x, np.cross(z, x), z], axis=1)
         r.update("probe", pose=G.make_T(R, center))
         T_map = sc.T_map_world()
-        if kind == "crossed_beams":
+        k, depth = _probe_stroke(t, len(contacts), sc.state["presses"], seg=seg)
+        if kind == "crossed_beams_svk":  # the large-deformation solve along the stroke (synth.beams_truth)
+            return _crossed_beams_svk_truth(sc, m, depth, radius, T_map)
+        if beams:
             # ground truth: the full-order contact solve (synth.contact_truth), independent of the reduced model
             # and of Alg. 5.1; the estimators see the noisy, decimated depth image of the probe
             return _crossed_beams_truth(sc, m, center, radius, T_map)
         # bunny, dragon: the full-order neo-Hookean contact solve along the stroke (synth.contact_truth)
-        k, depth = _probe_stroke(t, len(contacts), sc.state["presses"], seg=seg)
         return _scan_probe_truth(sc, m, contacts[k], sc.state["fe_paths"][k], depth, T_map)
 
-    target = origin + [0.1, 0.0, 0.12] if kind == "crossed_beams" else origin + [0, 0, 0.07]
+    target = origin + [0.1, 0.0, 0.12] if beams else origin + [0, 0, 0.07]
 
-    arc, seed = (cb["arc"], cb["seed"]) if kind == "crossed_beams" else ((-118.0, -72.0), 41)
+    arc, seed = (cb["arc"], cb["seed"]) if beams else ((-118.0, -72.0), 41)
 
     def cam_pose(t):
         return W.arc_trajectory(np.array([t]), target, 0.55, 0.38, np.deg2rad(arc[0]), np.deg2rad(arc[1]),
@@ -694,15 +711,15 @@ def _probe_scene(kind: str, width, height, duration, fps, stereo: bool, heldout:
         # 8th at 1280): chosen on the development set-up (benchmarks/results/collision.md: at 640, the upper beam's
         # surface 0.40 mm off the truth against 2.05 mm at step 2, the same agreement, confirmed held-out; at 1280,
         # 0.67 against 2.38 mm at step 4, with less agreement: the surface first)
-        step = max(1, round(4 * sc.camera.width / 640)) if kind == "crossed_beams" else 2
+        step = max(1, round(4 * sc.camera.width / 640)) if beams else 2
         objs = [{
-            "id": "object" if kind != "crossed_beams" else "beam_a", "model": f"spec:{spec}",
+            "id": "object" if not beams else "beam_a", "model": f"spec:{spec}",
             "anchor": {"kind": "pose", "pose": _pose7(T_map @ sc.state["T_wo"])},
             "collision": {"enabled": True, "threshold_m": sc.state["delta"], "step": 0.04, "decimation": step,
-                          "pushes": ["beam_b"] if kind == "crossed_beams" else []},
-            "overlay": {"field": "von_mises" if kind != "crossed_beams" else "displacement"},
+                          "pushes": ["beam_b"] if beams else []},
+            "overlay": {"field": "von_mises" if not beams else "displacement"},
         }]
-        if kind == "crossed_beams":
+        if beams:
             objs.append({"id": "beam_b", "model": f"spec:{spec}",
                          "anchor": {"kind": "pose", "pose": _pose7(T_map @ sc.state["T_wo_b"])},
                          "collision": {"enabled": True, "threshold_m": 0.002, "step": 0.04},
@@ -789,50 +806,127 @@ def _crossed_beams_truth(sc, m, center_world, radius, T_map) -> Truth:
     return truth
 
 
+def _sphere_contact_point(c, centroid, n, radius) -> np.ndarray:
+    """Where a force centroid on the reference surface meets the sphere of centre ``c`` pressing along ``n``: the
+    centroid moved along ``n`` onto the sphere (the deformed surface touches it there)."""
+    rel = centroid - c
+    axial = float(rel @ n)
+    radial2 = float(rel @ rel) - axial ** 2
+    return centroid - n * (centroid @ n) + n * (c @ n + np.sqrt(max(radius ** 2 - radial2, 0.0)))
+
+
+def _crossed_beams_svk_truth(sc, m, depth: float, radius: float, T_map) -> Truth:
+    """One frame of the SVK crossed-beams probe's truth: the large-deformation solve along the stroke at the probe's
+    depth past a's top face (``synth.beams_truth``), for both beams."""
+    path = sc.state["fe_path"]
+    res = path.at(depth)
+    F = float(m.loads.get("force_N", 1.0))
+    c = path.start + path.direction * depth
+    truth = Truth()
+    for oid, body, T in (("beam_a", "a", sc.state["T_wo"]), ("beam_b", "b", sc.state["T_wo_b"])):
+        total, cen, disp = res[body]
+        point = cen
+        if total > 1e-3:
+            if body == "a":
+                point = _sphere_contact_point(c, cen, path.direction, radius)
+            else:  # b: its force centroid, displaced like its nearest model node
+                point = cen + disp[int(np.argmin(np.linalg.norm(m.points - cen, axis=1)))]
+        st = _fe_contact_state(m, cen, total, T_map @ T, point, max(-depth, 0.0) if body == "a" else 0.0)
+        truth.contacts[oid] = st
+        truth.object_poses[oid] = T_map @ T
+        truth.displacements[oid] = disp.copy()
+        s_xy = cen[:2] if total > 1e-3 else m.points[m.load_points[0], :2]
+        truth.params[oid] = (["s_x", "s_y", "pseudo_time"], ["m", "m", ""], [float(s_xy[0]), float(s_xy[1]), total / F])
+    return truth
+
+
+def _cached_truth(prefix: str, key: list, names: tuple[str, ...], solve, make, fits):
+    """A full-order truth kept on disk (``cache/truth/<prefix>-<digest>.npz``), keyed on ``key`` (JSON: the model,
+    the set-up, the truth's settings and code): minutes to solve, milliseconds to load. ``solve()`` computes it,
+    ``make(arrays, info)`` rebuilds it from the file's arrays ``names`` and its ``info`` dict, ``fits(obj)`` says
+    whether a loaded one has the shapes the caller needs; a file that does not load cleanly is solved again.
+    Earlier files of the same prefix (older code or model) are removed."""
+    import hashlib
+    import json
+
+    from simreal_nodes.rom.build import cache_dir
+
+    f = cache_dir().parent / "truth" / f"{prefix}-{hashlib.sha256(json.dumps(key).encode()).hexdigest()[:16]}.npz"
+    if f.is_file():
+        try:
+            with np.load(f, allow_pickle=False) as z:
+                obj = make({n: np.array(z[n]) for n in names}, json.loads(str(z["info"])))
+            if fits(obj):
+                return obj
+        except Exception:  # noqa: BLE001 - a damaged cache file (bad zip, truncated member, ...) is solved again
+            pass
+    obj = solve()
+    f.parent.mkdir(parents=True, exist_ok=True)
+    tmp = f.with_suffix(".tmp.npz")
+    np.savez_compressed(tmp, **{n: getattr(obj, n) for n in names}, info=json.dumps(obj.info))
+    tmp.replace(f)
+    for old in f.parent.glob(f"{prefix}-*.npz"):  # earlier code's or model's truths of the same set-up
+        if old != f and not old.name.endswith(".tmp.npz"):  # (another process's file being written is left alone)
+            old.unlink(missing_ok=True)
+    return obj
+
+
+def crossed_beams_svk_truth(model, spec_name: str, press_point, T_ab, radius: float, press: float):
+    """The large-deformation truth of the crossed-beams probe along its stroke
+    (:func:`synth.beams_truth.crossed_beams_path`), kept on disk keyed on the model, the set-up, the truth's
+    settings and the truth code itself."""
+    from pathlib import Path
+
+    from simreal_nodes.rom.build import builder_version, source_digest
+    from simreal_nodes.synth import beams_truth as bt
+
+    code = source_digest(Path(bt.__file__).resolve().parents[2], bt.__name__)
+    key = [model.model_id, np.round(np.asarray(press_point, float), 12).tolist(),
+           np.round(np.asarray(T_ab, float), 12).tolist(), radius, round(float(press), 12), code, builder_version()]
+    names = ("start", "direction", "travels", "total", "centroid", "displacement", "gap")
+    setup = _setup_digest(key[1:5])
+    return _cached_truth(f"{spec_name}-{setup}", key, names,
+                         lambda: bt.crossed_beams_path(model, press_point, T_ab, radius, press),
+                         lambda a, info: bt.BeamsPath(**a, info=info),
+                         lambda p: p.displacement.shape[2:] == (len(model.points), 3))
+
+
+def _setup_digest(obj) -> str:
+    """A short digest of a JSON-able set-up (names a cache file's set-up apart from its version)."""
+    import hashlib
+    import json
+
+    return hashlib.sha256(json.dumps(obj).encode()).hexdigest()[:8]
+
+
 TRUTH_MESH_FACTOR = 0.6  # the scanned bodies' truth mesh: this fraction of the model's cell size (finer)
 
 
 def scan_probe_truth(model, spec_name: str, load_point: int, press: float, radius: float):
     """The full-order truth of one probe stroke on a scanned model (:func:`synth.contact_truth.probe_path_truth`),
     kept on disk (``cache/truth``) keyed on the model, the stroke, the truth's settings and the truth code itself:
-    minutes to solve, milliseconds to load. A cache file that does not load cleanly is solved again."""
-    import hashlib
-    import json
+    minutes to solve, milliseconds to load."""
+    from pathlib import Path
 
-    from simreal_nodes.rom.build import builder_version, cache_dir, load_spec, source_digest
+    from simreal_nodes.rom.build import builder_version, load_spec, source_digest
     from simreal_nodes.synth import contact_truth as ct
 
     spec = load_spec(f"{spec_name}.yaml")
     nv = int(model.provenance.get("volume_nodes", 0))
     h = float(spec["mesh"]["cell_size"]) * float(np.ptp(model.points[nv:, 2])) * TRUTH_MESH_FACTOR
     base = float(spec["base_fraction"])
-    from pathlib import Path
-
     code = source_digest(Path(ct.__file__).resolve().parents[2], ct.__name__)
-    key = json.dumps([model.model_id, int(load_point), round(float(press), 12), radius, round(h, 12), base, code,
-                      builder_version()])
-    f = cache_dir().parent / "truth" / f"{spec_name}-lp{load_point}-{hashlib.sha256(key.encode()).hexdigest()[:16]}.npz"
+    key = [model.model_id, int(load_point), round(float(press), 12), radius, round(h, 12), base, code,
+           builder_version()]
     names = ("start", "direction", "travels", "total", "centroid", "penetration", "displacement", "von_mises")
-    if f.is_file():
-        try:
-            with np.load(f, allow_pickle=False) as z:
-                a = {n: np.array(z[n]) for n in names}
-                path = ct.ProbePath(a["start"], a["direction"], a["travels"], a["total"], a["centroid"],
-                                    a["penetration"], a["displacement"], a["von_mises"], json.loads(str(z["info"])))
-            if path.displacement.shape[1:] == (len(model.points), 3) and path.total.shape == (len(path.travels), 3) \
-                    and path.von_mises.shape == path.displacement.shape[:2]:
-                return path
-        except Exception:  # noqa: BLE001 - a damaged cache file (bad zip, truncated member, ...) is solved again
-            pass
-    path = ct.probe_path_truth(model, load_point, press, radius, base, h, solid_cache=_FE_CACHE)
-    f.parent.mkdir(parents=True, exist_ok=True)
-    tmp = f.with_suffix(".tmp.npz")
-    np.savez_compressed(tmp, **{n: getattr(path, n) for n in names}, info=json.dumps(path.info))
-    tmp.replace(f)
-    for old in f.parent.glob(f"{spec_name}-lp{load_point}-*.npz"):  # earlier code's or model's truths of the stroke
-        if old != f and not old.name.endswith(".tmp.npz"):  # (another process's file being written is left alone)
-            old.unlink(missing_ok=True)
-    return path
+
+    def fits(path) -> bool:
+        return (path.displacement.shape[1:] == (len(model.points), 3) and path.total.shape == (len(path.travels), 3)
+                and path.von_mises.shape == path.displacement.shape[:2])
+
+    return _cached_truth(f"{spec_name}-lp{load_point}", key, names,
+                         lambda: ct.probe_path_truth(model, load_point, press, radius, base, h, solid_cache=_FE_CACHE),
+                         lambda a, info: ct.ProbePath(**a, info=info), fits)
 
 
 def _scan_probe_truth(sc, m, load_point: int, path, depth: float, T_map) -> Truth:
@@ -889,6 +983,14 @@ def crossed_beams_probe(width=640, height=480, duration=3.2, fps=30.0) -> SynthS
 
 def crossed_beams_probe_heldout(width=640, height=480, duration=3.2, fps=30.0) -> SynthScene:
     return _probe_scene("crossed_beams", width, height, duration, fps, stereo=False, heldout=True)
+
+
+def crossed_beams_svk_probe(width=640, height=480, duration=3.2, fps=30.0) -> SynthScene:
+    return _probe_scene("crossed_beams_svk", width, height, duration, fps, stereo=False)
+
+
+def crossed_beams_svk_probe_heldout(width=640, height=480, duration=3.2, fps=30.0) -> SynthScene:
+    return _probe_scene("crossed_beams_svk", width, height, duration, fps, stereo=False, heldout=True)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -948,6 +1050,9 @@ SCENES: dict[str, Callable[..., SynthScene]] = {
     "joint_boot_truth_heldout": functools.partial(joint_boot_view, "_heldout"),
     "crossed_beams_probe": crossed_beams_probe,
     "crossed_beams_probe_heldout": crossed_beams_probe_heldout,
+    # the thesis's St. Venant-Kirchhoff beams (the same set-ups), scored against a large-deformation truth
+    "crossed_beams_svk_probe": crossed_beams_svk_probe,
+    "crossed_beams_svk_probe_heldout": crossed_beams_svk_probe_heldout,
     "bunny_probe": bunny_probe,
     "bunny_probe_stereo": bunny_probe_stereo,
     "dragon_probe": dragon_probe,

@@ -157,3 +157,20 @@ def test_uniaxial_compression_against_the_analytic_laws_and_svk_past_its_limit_p
                   [{"region": f"{ax}min", "kind": "sliding", "component": k} for k, ax in enumerate("xyz")])
     with pytest.raises(FemError, match="Newton did not converge"):
         s.solve(s.traction("xmax", (-0.25e6, 0.0, 0.0)), steps=2, min_step=1e-2)
+
+
+def test_a_point_force_anywhere_has_consistent_nodal_forces():
+    """At a vertex the consistent nodal forces are that vertex's alone (the nearest-vertex point load); between
+    nodes they add up to the force and do the virtual work of a force at that point (any displacement field of the
+    element space: here one quadratic in x)."""
+    s = fem.Solid(meshes.box(0.3, 0.03, 0.01, (6, 1, 1), "hex"), mat.make_material("linear_elastic", 3.5e9, 0.36), 2,
+                  [fem.Support(fem.Region("xmin"))])
+    F = np.array([0.3, -0.2, -15.0])
+    np.testing.assert_allclose(s.consistent_point_load([0.25, 0.03, 0.01], F), s.point_load([0.25, 0.03, 0.01], F),
+                               rtol=0, atol=1e-12 * 15)
+    p = np.array([0.137, 0.011, 0.01])
+    f = s.consistent_point_load(p, F)
+    np.testing.assert_allclose([f[0::3].sum(), f[1::3].sum(), f[2::3].sum()], F, rtol=1e-12)
+    X = s.basis.doflocs
+    u = (X[0] ** 2 + 0.5 * X[1]) * (np.arange(s.N) % 3 == 2)  # u_z = x^2 + y / 2
+    assert f @ u == pytest.approx(F[2] * (p[0] ** 2 + 0.5 * p[1]), rel=1e-12)
