@@ -9,15 +9,22 @@ quadratic tetrahedra 60 x 6 x 4 per beam (`synth/contact_truth.py`; the model: h
 Alg. 5.1 state machine being scored. The estimator sees the noisy Kinect-like depth and the true camera pose (the
 localization's error is measured elsewhere).
 
+The thesis's crossed beams are St. Venant-Kirchhoff: the SVK rows run the same two set-ups with both beams the SVK
+model (`crossed_beams_svk`: u(x, s_x, s_y, pseudo-time), Newton snapshots + NI-PGD) against a large-deformation
+truth (`synth/beams_truth.py`: both beams SVK on quadratic tetrahedra 40 x 4 x 3, total Lagrangian, exact
+frictionless contact, solved along the probe's stroke); one more row draws the linear model against that truth
+(what the linear law costs in the scene).
+
 Per frame (depth_points + ContactScene.step, both beams):
 - contact: the estimate's CONTACT against a true contact force > 1 mN; precision, recall, agreement, beside the
   agreement of an estimator that always says "free" (the all-free baseline);
 - contact point (frames both call contact): distance in the beam's plane between the estimate's load point and
   the true force centroid, mm;
-- force: the linear beam's load scale times its 15 N against the true contact force (frames both call contact);
+- force: the beam's load scale (SVK: pseudo-time) times its 15 N against the true contact force (frames both call
+  contact);
 - surface: RMS over the model's surface nodes of |u_estimate - u_true| (mm), over the frames the truth is in
   contact; beside it the **model error**: the reduced model at the true contact's nearest load point, its load
-  scale fitted to the true displacement (what a perfect Alg. 5.1 would still be off by: the model's
+  scale (SVK: pseudo-time) fitted to the true displacement (what a perfect Alg. 5.1 would still be off by: the model's
   discretisation, the load grid, and for beam a the one-way coupling -- the model of a does not know that b
   holds it up); phantom: the error drawn on frames the estimate calls contact and the truth does not.
 """
@@ -25,6 +32,7 @@ Per frame (depth_points + ContactScene.step, both beams):
 from __future__ import annotations
 
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -32,6 +40,7 @@ from benchmarks.common import save
 from simreal_nodes import geometry as G
 from simreal_nodes.collision.contact import PusherSurface
 from simreal_nodes.collision.scene import ContactScene
+from simreal_nodes.rom.build import cached_model
 from simreal_nodes.rom.model_file import load_model
 from simreal_nodes.scene.schema import build_spec_models, validate_scene
 from simreal_nodes.synth.sequence import sequence
@@ -52,13 +61,15 @@ def _rms(d: np.ndarray) -> float:
     return 1e3 * float(np.sqrt(np.mean(np.sum(d ** 2, axis=1))))
 
 
-def run(seq, scene, step: int, anywhere: bool = False, max_contacts: int = 1) -> dict:
+def run(seq, scene, step: int, anywhere: bool = False, max_contacts: int = 1, model: str | None = None) -> dict:
     """One estimator run; ``anywhere``: both beams' contacts placed where they touch, between the load points
     (``collision.anywhere``), instead of at the nearest load point; ``max_contacts``: ``collision.max_contacts``
-    (above 1, the touch is looked for on the drawn surface between the load points too)."""
+    (above 1, the touch is looked for on the drawn surface between the load points too); ``model``: another model
+    for both beams than the scene's (a built-in spec's name: the linear beams against the SVK scene's truth)."""
     objs = [o for o in scene["objects"] if o["collision"]["enabled"]]
     objs = [{**o, "collision": {**o["collision"], "anywhere": anywhere, "max_contacts": max_contacts}} for o in objs]
-    models = {o["id"]: load_model(o["model"], fields=["displacement"]) for o in objs}
+    models = {o["id"]: load_model(cached_model(model) if model else o["model"], fields=["displacement"])
+              for o in objs}
     cs = ContactScene(objs, models, decimation=step)
     surface = {oid: surface_nodes(m) for oid, m in models.items()}
     stats: dict[str, dict[str, list]] = {oid: {k: [] for k in KEYS} for oid in OBJECTS}
@@ -71,7 +82,8 @@ def run(seq, scene, step: int, anywhere: bool = False, max_contacts: int = 1) ->
         by_id = {r.object_id: r.state for r in res}
         for oid in OBJECTS:
             _score(stats[oid], models[oid], cs.trackers[oid], by_id[oid], seq["truth"][i], oid, surface[oid])
-    row: dict = dict(step=step, anywhere="yes" if anywhere else "no", contacts=max_contacts, pusher="estimate",
+    row: dict = dict(model=model or _spec_of(objs[0]["model"]), step=step, anywhere="yes" if anywhere else "no",
+                     contacts=max_contacts, pusher="estimate",
                      points=int(np.median(npts)), ms=1e3 * float(np.median(times)),
                      p95_ms=1e3 * float(np.percentile(times, 95)), frames=len(times))
     for oid in OBJECTS:
@@ -99,10 +111,17 @@ def run_virtual(seq, scene) -> dict:
         st = tr.update(None, push)
         times.append(time.perf_counter() - t0)
         _score(stats, mb, tr, st, truth, "beam_b", surface_nodes(mb))
-    row: dict = dict(step=0, anywhere="no", contacts=1, pusher="truth", points=0, ms=1e3 * float(np.median(times)),
+    row: dict = dict(model=_spec_of(o["model"]), step=0, anywhere="no", contacts=1, pusher="truth", points=0,
+                     ms=1e3 * float(np.median(times)),
                      p95_ms=1e3 * float(np.percentile(times, 95)), frames=len(times))
     row.update(_summary(stats, "beam_b"))
     return row
+
+
+def _spec_of(path: str) -> str:
+    """The built-in spec a scene's model file was built from (its cache file's name: the spec's model name)."""
+    stem = Path(path).stem
+    return {"crossed_beam": "crossed_beams", "crossed_beam_svk": "crossed_beams_svk"}.get(stem, stem)
 
 
 def _score(s: dict, m, tr, st, truth, oid: str, sn: np.ndarray) -> None:
@@ -200,10 +219,15 @@ def main():
         if w == 640 and kind == "development":  # contact anywhere (the load where the contact is), same frames
             runs += [(run, (s, True)) for s in ANYWHERE_STEPS]
             runs += [(run, (s, True, 2)) for s in MULTI_STEPS]  # the knob max_contacts on this one-probe scene
+        if kind.startswith("SVK"):  # what the linear law costs in the scene: the linear model, the SVK truth
+            runs.append((run, (4, False, 1, "crossed_beams")))
         for fn, args in runs:
             row = dict(head, **fn(seq, scene, *args))
             rows.append(row)
             print(row, flush=True)
+
+    def rows_model(kind: str) -> str:
+        return "crossed_beams_svk" if kind.startswith("SVK") else "crossed_beams"
 
     def plot(plt):
         fig, ax = plt.subplots(1, 3, figsize=(15, 3.8))
@@ -211,7 +235,7 @@ def main():
                                 (("development", "1280x720"), "s--"), (("SVK development", "640x480"), "D:"),
                                 (("SVK held-out", "640x480"), "v:")):
             rr = [r for r in rows if r["resolution"] == res and r["scene"] == kind and r["anywhere"] == "no"
-                  and r["pusher"] == "estimate" and r["contacts"] == 1]
+                  and r["pusher"] == "estimate" and r["contacts"] == 1 and r["model"] == rows_model(kind)]
             res = f"{kind} {res}"
             x = [r["step"] for r in rr]
             ax[0].plot(x, [r["a_agree_pct"] for r in rr], mk, label=f"{res} beam a agreement")
@@ -232,7 +256,8 @@ def main():
         fig.tight_layout()
         return fig
 
-    cols = [("scene", "scene", "{}"), ("resolution", "resolution", "{}"), ("step", "decimation", "{}"),
+    cols = [("scene", "scene", "{}"), ("resolution", "resolution", "{}"), ("model", "model", "{}"),
+            ("step", "decimation", "{}"),
             ("anywhere", "anywhere", "{}"), ("contacts", "max contacts", "{}"), ("pusher", "b pushed by a's", "{}"),
             ("points", "depth points", "{}"),
             ("a_agree_pct", "a: agrees (%)", "{:.0f}"), ("a_free_baseline_pct", "a: all-free (%)", "{:.0f}"),

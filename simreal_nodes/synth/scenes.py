@@ -705,6 +705,8 @@ def _probe_scene(kind: str, width, height, duration, fps, stereo: bool, heldout:
         return W.arc_trajectory(np.array([t]), target, 0.55, 0.38, np.deg2rad(arc[0]), np.deg2rad(arc[1]),
                                 jitter=0.003, seed=seed, period=duration)[0]
 
+    what = "St. Venant-Kirchhoff crossed beams" if kind == "crossed_beams_svk" else kind.replace("_", " ")
+
     def yaml(sc):
         T_map = sc.T_map_world()
         # depth decimation: the crossed beams take a point every ~4 mm on the beams (every 4th pixel at 640 px wide,
@@ -726,7 +728,7 @@ def _probe_scene(kind: str, width, height, duration, fps, stereo: bool, heldout:
                          "overlay": {"field": "displacement"}})
         return {
             "simreal_scene": 1, "name": sc.name,
-            "description": f"A real probe pushes the virtual {kind.replace('_', ' ')} (thesis §5.4); "
+            "description": f"A real probe pushes the virtual {what} (thesis §5.4); "
                            f"{'stereo (SGBM) depth' if stereo else 'RGB-D depth'}.",
             "camera": _camera_yaml(sc),
             "localization": {"mode": "stereo" if stereo else "rgbd", "features": 1500},
