@@ -201,6 +201,8 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--quick", action="store_true", help="decimation 2 only")
     ap.add_argument("--scenes", default="", help="comma-separated subset of the scenes")
+    ap.add_argument("--out", default="probe_scenes",
+                    help="results name under benchmarks/results/ (e.g. probe_scenes_dragon_heldout for a subset)")
     ap.add_argument("--no-thesis-grid", action="store_true",
                     help="skip the rows of the models at the thesis's load grid (bunny 34 x 26, dragon 32 x 16)")
     args = ap.parse_args(argv)
@@ -288,7 +290,7 @@ def main(argv=None):
              "point with the pseudo-time that fits the true displacement best. Phantom: drawn displacement on frames "
              "the estimate calls contact and the truth does not. True camera pose; SGBM on the grey pair, its time "
              "apart from the contact time.")
-    save("probe_scenes", rows, cols,
+    save(args.out, rows, cols,
          "The seed probe scenes (bunny, dragon; RGB-D and stereo) against a full-order large-strain contact truth",
          notes, plot, extra={"truth": truths})
 

@@ -785,13 +785,7 @@ def _crossed_beams_truth(sc, m, center_world, radius, T_map) -> Truth:
     names, units = ["s_x", "s_y", "load_scale"], ["m", "m", ""]
     # where the probe presses a: its force centroid moved onto the sphere (the deformed surface touches it)
     ca = r.centroid["a"]
-    if r.total["a"] > 1e-3:
-        rel = ca - c
-        axial = float(rel @ fe.n)
-        radial2 = float(rel @ rel) - axial ** 2
-        pa = ca - fe.n * (ca @ fe.n) + fe.n * (c @ fe.n + np.sqrt(max(radius ** 2 - radial2, 0.0)))
-    else:
-        pa = ca
+    pa = _sphere_contact_point(c, ca, fe.n, radius) if r.total["a"] > 1e-3 else ca
     for oid, body, T, point in (("beam_a", "a", T_wo, pa), ("beam_b", "b", T_wb, None)):
         total = r.total.get(body, 0.0)
         cen = r.centroid.get(body, np.full(3, np.nan))
