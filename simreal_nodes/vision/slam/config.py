@@ -39,10 +39,16 @@ class SlamConfig:
     flow_anchor_px: float = 0.0  # > 0: re-measure tracks on their first image if within this (drift vs. bias)
     max_anchor_images: int = 40  # images kept for the anchored re-measurement (memory vs. track restarts)
     focus_share: float = 0.2  # ORB budget guaranteed to each tracked object's predicted image region (faint objects)
+    two_view_model: str = "fundamental"  # mono start: eight-point F (ORB-SLAM2) or five-point "essential" (see below)
+    # "essential": a better first pose, and the rendered room's failing noise draw holds; but on the real 7-Scenes
+    # frames the maps it starts break down hundreds of frames later, on each of 4 starts (benchmarks/two_view.py)
 
     def __post_init__(self) -> None:
+        if self.two_view_model not in ("fundamental", "essential"):
+            raise ValueError(f"SlamConfig.two_view_model must be 'fundamental' or 'essential', not "
+                             f"{self.two_view_model!r}")
         for f in fields(self):
-            if getattr(self, f.name) < 0:
+            if isinstance(getattr(self, f.name), (int, float)) and getattr(self, f.name) < 0:
                 raise ValueError(f"SlamConfig.{f.name} must not be negative, not {getattr(self, f.name)}")
         if self.focus_share > 1:
             raise ValueError(f"SlamConfig.focus_share is a share of the ORB budget (0..1), not {self.focus_share}")

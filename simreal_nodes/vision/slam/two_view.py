@@ -1,8 +1,15 @@
 """Map initialization: from the first frame's depth (RGB-D / stereo), or two-view for a monocular camera.
 
-The two-view reconstruction follows ORB-SLAM2: a homography and a fundamental matrix are fitted to the matches
+The two-view reconstruction follows ORB-SLAM2: a homography and a general two-view model are fitted to the matches
 with a reference frame, scored by their symmetric transfer errors, and the better explained model (homography for
-a planar or low-parallax scene, chosen above a score ratio of 0.40) is decomposed into candidate poses; the pose that
+a planar or low-parallax scene, chosen above a score ratio of 0.40) is decomposed into candidate poses. The general
+model is ORB-SLAM2's eight-point fundamental matrix by default, or (``SlamConfig.two_view_model = "essential"``) the
+essential matrix from the five-point RANSAC on the calibrated matches, which does not spend three degrees of freedom
+on intrinsics the camera already has. The five-point pose is the better one (`benchmarks/two_view.py`: on the
+rendered room 0.42 against 1.27 deg of rotation and 4.9 against 23 deg of translation direction, median), and it
+saves the rendered room's noise draw whose eight-point start lost the map; but on the real 7-Scenes frames the maps
+it starts break down hundreds of frames later on each of 4 starting frames (ATE 208-539 mm against 43-75 mm), for a
+cause not found (docs/localization.md): it stays a knob. The pose that
 explains most matches wins (its points with parallax in front of both cameras, every point reprojecting: ORB-SLAM2's
 CheckRT), and it is refused without enough parallax (a pure rotation has no depth) or when a second pose comes close
 (an ambiguous decomposition: a plane at low parallax, or F on a near-planar scene; the initialization then waits for
@@ -39,9 +46,18 @@ class TwoViewSolution:
     kind: str  # homography or fundamental
 
 
-def two_view(f0: Features, f1: Features, K: np.ndarray, min_parallax: float) -> tuple[str, TwoViewSolution | None]:
+GENERAL_MODELS = ("essential", "fundamental")
+
+
+def two_view(f0: Features, f1: Features, K: np.ndarray, min_parallax: float,
+             general: str = "fundamental") -> tuple[str, TwoViewSolution | None]:
     """Reconstruct two views of a static scene; returns (why not, None) or ("<kind> model", solution).
-    ``min_parallax``: radians, the least median parallax of the triangulated points accepted."""
+    ``min_parallax``: radians, the least median parallax of the triangulated points accepted. ``general``: the
+    non-planar model, "fundamental" (ORB-SLAM2's eight-point, the default) or "essential" (five-point, calibrated;
+    ``SlamConfig.two_view_model``). Either way the solution's kind is "fundamental" for the general model (as ORB-SLAM2
+    names it) and "homography" for the planar one."""
+    if general not in GENERAL_MODELS:
+        raise ValueError(f"two_view: general model {general!r} is not one of {', '.join(GENERAL_MODELS)}")
     d = np.linalg.norm(f0.und[:, None, :] - f1.und[None, :, :], axis=2) if len(f0) * len(f1) < 4e6 else None
     mask = (d < 150) if d is not None else None
     m = match_descriptors(f0.desc, f1.desc, mask, max_dist=50, ratio=0.9)
@@ -49,9 +65,16 @@ def two_view(f0: Features, f1: Features, K: np.ndarray, min_parallax: float) -> 
         return f"only {len(m)} matches with the reference frame (need 100): too little overlap or texture", None
     x0, x1 = f0.und[m[:, 0]], f1.und[m[:, 1]]
     H, _mh = cv2.findHomography(x0, x1, cv2.RANSAC, 2.0)
-    F, mf = cv2.findFundamentalMat(x0, x1, cv2.FM_RANSAC, 1.5, 0.999)
-    if F is None or F.shape != (3, 3) or H is None:
+    E: np.ndarray | None
+    if general == "essential":
+        E, mf = cv2.findEssentialMat(x0, x1, K, cv2.RANSAC, 0.999, 1.0)
+    else:
+        F8, mf = cv2.findFundamentalMat(x0, x1, cv2.FM_RANSAC, 1.5, 0.999)
+        E = K.T @ F8 @ K if F8 is not None and F8.shape == (3, 3) else None
+    if E is None or E.shape != (3, 3) or H is None or mf is None:
         return "cannot estimate two-view geometry", None
+    Ki = np.linalg.inv(K)
+    F = Ki.T @ E @ Ki  # the fundamental matrix of the essential one, for ORB-SLAM2's score
     sh = _score_h(H, x0, x1)
     sf = _score_f(F, x0, x1)
     rh = sh / max(sh + sf, 1e-9)
@@ -59,7 +82,7 @@ def two_view(f0: Features, f1: Features, K: np.ndarray, min_parallax: float) -> 
         sol = _from_h(H, x0, x1, K)
         kind = "homography"
     else:
-        sol = _from_f(F, x0, x1, mf.ravel().astype(bool), K)
+        sol = _from_f(E, x0, x1, mf.ravel().astype(bool), K)
         kind = "fundamental"
     if sol is None:
         return f"{kind} model gives no valid reconstruction", None
@@ -107,12 +130,13 @@ def _triangulate_check(R: np.ndarray, t: np.ndarray, x0: np.ndarray, x1: np.ndar
     return X, good, par, int(consistent.sum())
 
 
-def _from_f(F: np.ndarray, x0: np.ndarray, x1: np.ndarray, inl: np.ndarray, K: np.ndarray) -> _Reconstruction | None:
-    """The essential matrix's four poses: the one that puts most of the model's inliers in front of both cameras
-    with parallax, refused when another comes within 70 % of it (ORB-SLAM2's test; a near-planar or low-parallax
-    scene leaves F ill-determined). Points without parallax are left out of this count: they fit all four alike."""
-    R1, R2, t = cv2.decomposeEssentialMat(K.T @ F @ K)
-    t = t.ravel() / max(float(np.linalg.norm(t)), 1e-12)
+def _from_f(E: np.ndarray, x0: np.ndarray, x1: np.ndarray, inl: np.ndarray, K: np.ndarray) -> _Reconstruction | None:
+    """The essential matrix's four poses (``inl``: the RANSAC's inliers): the one that puts most of the model's
+    inliers in front of both cameras with parallax, refused when another comes within 70 % of it (ORB-SLAM2's test; a
+    near-planar or low-parallax scene leaves F ill-determined). Points without parallax are left out of this count:
+    they fit all four alike."""
+    R1, R2, t0 = cv2.decomposeEssentialMat(E)
+    t = np.asarray(t0, np.float64).ravel() / max(float(np.linalg.norm(t0)), 1e-12)
     sols = []
     for R, tt in ((R1, t), (R1, -t), (R2, t), (R2, -t)):
         good = _triangulate_check(R, tt, x0[inl], x1[inl], K)[1]
@@ -195,7 +219,7 @@ class Initializer:
             ctx.state = INITIALIZING
             return TrackResult(INITIALIZING, "initializing: reference frame set, move the camera sideways")
         f0, s0, _ = self.ref
-        reason, sol = two_view(f0, f, ctx.K, ctx.config.min_parallax)
+        reason, sol = two_view(f0, f, ctx.K, ctx.config.min_parallax, general=ctx.config.two_view_model)
         if sol is None:
             ctx.state = INITIALIZING
             return TrackResult(INITIALIZING, f"initializing: {reason}")
