@@ -41,13 +41,12 @@ CUTS = (60, 120, 170)
 LAP = 300
 
 
-def _frames(name: str, duration: float, stereo: bool) -> list[dict]:
+def _frames(name: str, duration: float, stereo: bool) -> tuple[list[dict], object]:
+    """The scene's frames (gray, depth, right, true pose) and its camera."""
     from simreal_nodes.synth.sequence import FrameStream
 
     fs = FrameStream(name, 640, 480, duration=duration, fps=30.0, stereo=stereo, ssaa=1, seed=0)
-    out = [{"gray": f["gray"], "depth": f["depth"], "right": f["right"], "T": f["T"]} for f in fs]
-    out.append({"cam": fs.cam})  # the camera rides at the end (the list stays indexable by frame)
-    return out
+    return [{"gray": f["gray"], "depth": f["depth"], "right": f["right"], "T": f["T"]} for f in fs], fs.cam
 
 
 def _slam(cam, mode: str):
@@ -67,9 +66,7 @@ def _align(est: list[np.ndarray], truth: list[np.ndarray], mono: bool) -> tuple[
     return umeyama(np.array(est), np.array(truth), with_scale=mono)
 
 
-def kidnap(frames: list[dict], mode: str, cut: int) -> dict:
-    cam = frames[-1]["cam"]
-    seq = frames[:-1]
+def kidnap(seq: list[dict], cam, mode: str, cut: int) -> dict:
     slam = _slam(cam, mode)
     before: dict[int, np.ndarray] = {}
     after: list[tuple[int, object]] = []
@@ -123,11 +120,9 @@ def kidnap(frames: list[dict], mode: str, cut: int) -> dict:
     return row
 
 
-def reuse(frames: list[dict], mode: str, work: Path) -> dict:
+def reuse(seq: list[dict], cam, mode: str, work: Path) -> dict:
     from simreal_nodes.vision.slam.map import Map
 
-    cam = frames[-1]["cam"]
-    seq = frames[:-1]
     slam = _slam(cam, mode)
     p1: dict[int, np.ndarray] = {}
     ms1 = []
@@ -185,10 +180,10 @@ def main(argv: list[str] | None = None) -> None:
     stereo = "stereo" in modes
     if a.only != "reuse":
         rows_k = []
-        frames = _frames("slam_room", 10.0, stereo)
+        frames, cam = _frames("slam_room", 10.0, stereo)
         for mode in modes:
             for cut in (int(c) for c in a.cuts.split(",")):
-                rows_k.append(kidnap(frames, mode, cut))
+                rows_k.append(kidnap(frames, cam, mode, cut))
         del frames
         cols_k = [("mode", "SLAM", "{}"), ("cut_s", "cut (s)", "{:.1f}"), ("resume", "resumes at frame", "{}"),
                   ("jump_m", "camera moved meanwhile (m)", "{:.2f}"), ("lost_frames", "frames lost", "{}"),
@@ -206,10 +201,10 @@ def main(argv: list[str] | None = None) -> None:
     if a.only == "kidnap":
         return
     rows_r = []
-    frames = _frames("slam_room_laps", 20.0, stereo)
+    frames, cam = _frames("slam_room_laps", 20.0, stereo)
     with tempfile.TemporaryDirectory() as d:
         for mode in modes:
-            rows_r.append(reuse(frames, mode, Path(d)))
+            rows_r.append(reuse(frames, cam, mode, Path(d)))
     cols_r = [("mode", "SLAM", "{}"), ("map_keyframes", "map keyframes", "{}"), ("map_points", "map points", "{}"),
               ("map_mb", "map file (MB)", "{:.1f}"), ("pass1_ate_mm", "pass 1 ATE (mm)", "{:.1f}"),
               ("pass2_tracked_pct", "pass 2 localized (%)", "{:.0f}"), ("pass2_first", "pass 2 first frame", "{}"),

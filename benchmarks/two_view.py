@@ -54,10 +54,9 @@ def relative(T_wc0: np.ndarray, T_wc1: np.ndarray) -> tuple[np.ndarray, np.ndarr
 
 def opencv_pose(f0, f1, K: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
     """OpenCV's plain five-point RANSAC and ``recoverPose`` (cheirality only) on the same matches as ``two_view``."""
-    from simreal_nodes.vision.orb import match_descriptors
+    from simreal_nodes.vision.slam.two_view import initial_matches
 
-    d = np.linalg.norm(f0.und[:, None, :] - f1.und[None, :, :], axis=2)
-    m = match_descriptors(f0.desc, f1.desc, d < 150, max_dist=50, ratio=0.9)
+    m = initial_matches(f0, f1)
     if len(m) < 100:
         return None
     x0, x1 = f0.und[m[:, 0]], f1.und[m[:, 1]]

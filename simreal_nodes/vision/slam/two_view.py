@@ -49,6 +49,14 @@ class TwoViewSolution:
 GENERAL_MODELS = ("essential", "fundamental")
 
 
+def initial_matches(f0: Features, f1: Features) -> np.ndarray:
+    """The reference frame's features matched to the current frame's ((M, 2) indices): descriptors within 150 px of
+    each other (where there are few enough features to compare positions), Hamming distance at most 50, ratio 0.9."""
+    d = np.linalg.norm(f0.und[:, None, :] - f1.und[None, :, :], axis=2) if len(f0) * len(f1) < 4e6 else None
+    mask = (d < 150) if d is not None else None
+    return match_descriptors(f0.desc, f1.desc, mask, max_dist=50, ratio=0.9)
+
+
 def two_view(f0: Features, f1: Features, K: np.ndarray, min_parallax: float,
              general: str = "fundamental") -> tuple[str, TwoViewSolution | None]:
     """Reconstruct two views of a static scene; returns (why not, None) or ("<kind> model", solution).
@@ -58,9 +66,7 @@ def two_view(f0: Features, f1: Features, K: np.ndarray, min_parallax: float,
     names it) and "homography" for the planar one."""
     if general not in GENERAL_MODELS:
         raise ValueError(f"two_view: general model {general!r} is not one of {', '.join(GENERAL_MODELS)}")
-    d = np.linalg.norm(f0.und[:, None, :] - f1.und[None, :, :], axis=2) if len(f0) * len(f1) < 4e6 else None
-    mask = (d < 150) if d is not None else None
-    m = match_descriptors(f0.desc, f1.desc, mask, max_dist=50, ratio=0.9)
+    m = initial_matches(f0, f1)
     if len(m) < 100:
         return f"only {len(m)} matches with the reference frame (need 100): too little overlap or texture", None
     x0, x1 = f0.und[m[:, 0]], f1.und[m[:, 1]]
