@@ -34,11 +34,11 @@ import cv2
 import numpy as np
 
 from benchmarks.common import save
+from simreal_nodes.vision.slam.config import TWO_VIEW_MODELS as GENERAL  # SlamConfig.two_view_model
 
 ROOM_GAPS = (10, 15, 20, 30)
 REAL_GAPS = (15, 30)
 METHODS = ("essential", "fundamental", "opencv")
-GENERAL = ("fundamental", "essential")  # SlamConfig.two_view_model
 REAL_STARTS = (0, 10, 20, 40)
 
 

@@ -21,6 +21,10 @@ STATE_NAMES: dict[int, str] = {NOT_STARTED: "not started", INITIALIZING: "initia
                RELOCALIZED: "relocalized"}
 
 
+# the monocular initialization's general two-view models (``SlamConfig.two_view_model``, :mod:`.two_view`)
+TWO_VIEW_MODELS = ("fundamental", "essential")
+
+
 @dataclass(frozen=True)
 class SlamConfig:
     """Tuning of the SLAM; the defaults are the values the tests and benchmarks were measured with."""
@@ -44,8 +48,8 @@ class SlamConfig:
     # frames the maps it starts break down hundreds of frames later, on each of 4 starts (benchmarks/two_view.py)
 
     def __post_init__(self) -> None:
-        if self.two_view_model not in ("fundamental", "essential"):
-            raise ValueError(f"SlamConfig.two_view_model must be 'fundamental' or 'essential', not "
+        if self.two_view_model not in TWO_VIEW_MODELS:
+            raise ValueError(f"SlamConfig.two_view_model must be one of {', '.join(TWO_VIEW_MODELS)}, not "
                              f"{self.two_view_model!r}")
         for f in fields(self):
             if isinstance(getattr(self, f.name), (int, float)) and getattr(self, f.name) < 0:

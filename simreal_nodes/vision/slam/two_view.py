@@ -5,11 +5,9 @@ with a reference frame, scored by their symmetric transfer errors, and the bette
 a planar or low-parallax scene, chosen above a score ratio of 0.40) is decomposed into candidate poses. The general
 model is ORB-SLAM2's eight-point fundamental matrix by default, or (``SlamConfig.two_view_model = "essential"``) the
 essential matrix from the five-point RANSAC on the calibrated matches, which does not spend three degrees of freedom
-on intrinsics the camera already has. The five-point pose is the better one (`benchmarks/two_view.py`: on the
-rendered room 0.42 against 1.27 deg of rotation and 4.9 against 23 deg of translation direction, median), and it
-saves the rendered room's noise draw whose eight-point start lost the map; but on the real 7-Scenes frames the maps
-it starts break down hundreds of frames later on each of 4 starting frames (ATE 208-539 mm against 43-75 mm), for a
-cause not found (docs/localization.md): it stays a knob. The pose that
+on intrinsics the camera already has. The five-point pose is the better first pose, but on the real 7-Scenes frames
+the maps it starts break down hundreds of frames later, for a cause not found: it stays a knob (the measurements in
+docs/localization.md, from `benchmarks/two_view.py`). The pose that
 explains most matches wins (its points with parallax in front of both cameras, every point reprojecting: ORB-SLAM2's
 CheckRT), and it is refused without enough parallax (a pure rotation has no depth) or when a second pose comes close
 (an ambiguous decomposition: a plane at low parallax, or F on a near-planar scene; the initialization then waits for
@@ -25,7 +23,7 @@ import numpy as np
 
 from simreal_nodes import geometry as G
 from simreal_nodes.vision.orb import Features, match_descriptors
-from simreal_nodes.vision.slam.config import INITIALIZING, OK
+from simreal_nodes.vision.slam.config import INITIALIZING, OK, TWO_VIEW_MODELS
 from simreal_nodes.vision.slam.context import SlamContext
 from simreal_nodes.vision.slam.local_mapping import LocalMapper
 from simreal_nodes.vision.slam.map import KeyFrame
@@ -46,9 +44,6 @@ class TwoViewSolution:
     kind: str  # homography or fundamental
 
 
-GENERAL_MODELS = ("essential", "fundamental")
-
-
 def initial_matches(f0: Features, f1: Features) -> np.ndarray:
     """The reference frame's features matched to the current frame's ((M, 2) indices): descriptors within 150 px of
     each other (where there are few enough features to compare positions), Hamming distance at most 50, ratio 0.9."""
@@ -64,8 +59,8 @@ def two_view(f0: Features, f1: Features, K: np.ndarray, min_parallax: float,
     non-planar model, "fundamental" (ORB-SLAM2's eight-point, the default) or "essential" (five-point, calibrated;
     ``SlamConfig.two_view_model``). Either way the solution's kind is "fundamental" for the general model (as ORB-SLAM2
     names it) and "homography" for the planar one."""
-    if general not in GENERAL_MODELS:
-        raise ValueError(f"two_view: general model {general!r} is not one of {', '.join(GENERAL_MODELS)}")
+    if general not in TWO_VIEW_MODELS:
+        raise ValueError(f"two_view: general model {general!r} is not one of {', '.join(TWO_VIEW_MODELS)}")
     m = initial_matches(f0, f1)
     if len(m) < 100:
         return f"only {len(m)} matches with the reference frame (need 100): too little overlap or texture", None
