@@ -96,3 +96,23 @@ def save(name: str, rows: list[dict], columns, title: str, notes: str = "", plot
     (RESULTS / f"{name}.md").write_text("\n".join(md) + "\n")
     print("\n".join(md))
     return RESULTS / f"{name}.json"
+
+
+def replot(name: str, plot_rows) -> Path:
+    """Redraw results/<name>.png from the rows saved in results/<name>.json by the benchmark's last run (no rerun:
+    the rows, the table and the machine line stay as that run wrote them). ``plot_rows(plt, rows)`` returns the figure;
+    the table gets the image link if it lacks one."""
+    doc = json.loads((RESULTS / f"{name}.json").read_text())
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig = plot_rows(plt, doc["rows"])
+    png = RESULTS / f"{name}.png"
+    fig.savefig(png, dpi=110, bbox_inches="tight")
+    plt.close(fig)
+    md = RESULTS / f"{name}.md"
+    if md.exists() and f"({name}.png)" not in md.read_text():
+        md.write_text(md.read_text().rstrip("\n") + f"\n\n![{doc['title']}]({name}.png)\n")
+    return png

@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.common import save
+from benchmarks.common import replot, save
 
 KIDNAP_AT = 120
 CUTS = (60, 120, 170)
@@ -170,12 +170,49 @@ def reuse(seq: list[dict], cam, mode: str, work: Path) -> dict:
     return row
 
 
+def plot_kidnap_rows(plt, rows: list[dict]):
+    """Per SLAM mode and cut: the first pose's error after the cut and the ATE over the frames after it."""
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4))
+    modes = list(dict.fromkeys(r["mode"] for r in rows))
+    cuts = list(dict.fromkeys(r["cut_s"] for r in rows))
+    for ax, key, label in ((axes[0], "first_err_mm", "first pose within 5 cm: its error (mm)"),
+                           (axes[1], "ate_after_mm", "ATE after the cut (mm)")):
+        for k, mode in enumerate(modes):
+            v = {r["cut_s"]: r.get(key) for r in rows if r["mode"] == mode}
+            x = np.arange(len(cuts)) + 0.8 / len(modes) * (k - (len(modes) - 1) / 2)
+            ax.bar(x, [v.get(c) if v.get(c) is not None else np.nan for c in cuts], width=0.8 / len(modes),
+                   label=mode)
+        ax.set_xticks(np.arange(len(cuts)), [f"cut {c:.1f} s" for c in cuts])
+        ax.set_ylabel(label)
+        ax.legend(title="SLAM")
+    return fig
+
+
+def plot_reuse_rows(plt, rows: list[dict]):
+    """Per SLAM mode: pass 1's ATE beside pass 2's error (RMS and p95) against the loaded map."""
+    fig, ax = plt.subplots(figsize=(6, 4))
+    x = np.arange(len(rows))
+    for k, (key, label) in enumerate((("pass1_ate_mm", "pass 1 ATE (mapping)"),
+                                      ("pass2_err_mm", "pass 2 error, RMS (map loaded)"),
+                                      ("pass2_err_p95_mm", "pass 2 error, p95"))):
+        ax.bar(x + 0.27 * (k - 1), [r.get(key) if r.get(key) is not None else np.nan for r in rows], width=0.27,
+               label=label)
+    ax.set_xticks(x, [f"{r['mode']} ({r['pass2_tracked_pct']:.0f} % localized)" for r in rows])
+    ax.set_ylabel("mm against the truth (pass 1's alignment)")
+    ax.legend()
+    return fig
+
+
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--modes", default="rgbd,stereo,mono")
     ap.add_argument("--cuts", default=",".join(str(c) for c in CUTS), help="frames cut out of the stream")
     ap.add_argument("--only", choices=("kidnap", "reuse"), default=None, help="run one of the two parts")
+    ap.add_argument("--replot", action="store_true", help="only redraw the two PNGs from the saved results (no run)")
     a = ap.parse_args(argv)
+    if a.replot:
+        print(replot("relocalization", plot_kidnap_rows), replot("map_reuse", plot_reuse_rows))
+        return
     modes = a.modes.split(",")
     stereo = "stereo" in modes
     if a.only != "reuse":
@@ -197,7 +234,7 @@ def main(argv: list[str] | None = None) -> None:
              "`python -m benchmarks.relocalization` (see its docstring): frames 0-119 tracked, then the stream jumps "
              "ahead by the cut (the arc goes out and back: 2 s resumes near where the camera was, going the other "
              "way; longer cuts resume where it passed earlier). Errors after the similarity (monocular) or rigid "
-             "alignment of the frames before the cut to the truth.")
+             "alignment of the frames before the cut to the truth.", lambda plt: plot_kidnap_rows(plt, rows_k))
     if a.only == "kidnap":
         return
     rows_r = []
@@ -214,7 +251,7 @@ def main(argv: list[str] | None = None) -> None:
     save("map_reuse", rows_r, cols_r, "Map reuse: a saved map, loaded, localization-only on a second pass",
          "`python -m benchmarks.relocalization` (see its docstring): pass 1 maps lap 1 of `slam_room_laps`, pass 2 "
          "(lap 2: other hand jitter, other image noise) localizes against the loaded map with mapping off. Pass 2's "
-         "error uses pass 1's alignment to the truth.")
+         "error uses pass 1's alignment to the truth.", lambda plt: plot_reuse_rows(plt, rows_r))
 
 
 if __name__ == "__main__":

@@ -33,7 +33,7 @@ import time
 import cv2
 import numpy as np
 
-from benchmarks.common import save
+from benchmarks.common import replot, save
 from simreal_nodes.vision.slam.config import TWO_VIEW_MODELS as GENERAL  # SlamConfig.two_view_model
 
 ROOM_GAPS = (10, 15, 20, 30)
@@ -206,6 +206,26 @@ def slam_rows(room_seeds: list[int], real: bool) -> list[dict]:
     return rows
 
 
+def plot_slam_rows(plt, rows: list[dict]):
+    """ATE of the whole monocular SLAM from each start, one panel per sequence, the two models side by side (log
+    scale: a broken map is two orders of magnitude off)."""
+    datas = list(dict.fromkeys(r["data"] for r in rows))
+    fig, axes = plt.subplots(1, len(datas), figsize=(6 * len(datas), 4), squeeze=False)
+    for ax, data in zip(axes[0], datas):
+        rs = [r for r in rows if r["data"] == data]
+        starts = list(dict.fromkeys(r["start"] for r in rs))
+        for k, model in enumerate(dict.fromkeys(r["model"] for r in rs)):
+            ate = {r["start"]: r.get("ate_mm") for r in rs if r["model"] == model}
+            x = np.arange(len(starts)) + 0.4 * (k - 0.5)
+            ax.bar(x, [ate.get(s) or np.nan for s in starts], width=0.4, label=model)
+        ax.set_xticks(np.arange(len(starts)), starts, rotation=20)
+        ax.set_yscale("log")
+        ax.set_ylabel("ATE (mm, Sim(3))")
+        ax.set_title(data)
+        ax.legend(title="two-view model")
+    return fig
+
+
 def _seeds(s: str) -> list[int]:
     a, _, b = s.partition("-")
     return list(range(int(a), int(b or a) + 1))
@@ -217,7 +237,12 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--no-real", action="store_true", help="leave out the 7-Scenes pairs")
     ap.add_argument("--no-slam", action="store_true", help="only the pairs, not the whole SLAM from each model")
     ap.add_argument("--slam-room-seeds", default="0-4", help="noise draws of the room run through the whole SLAM")
+    ap.add_argument("--replot", action="store_true",
+                    help="only redraw two_view_slam.png from the saved results (no run)")
     args = ap.parse_args(argv)
+    if args.replot:
+        print(replot("two_view_slam", plot_slam_rows))
+        return
     rows: list[dict] = []
     series: dict[str, dict] = {}
     pairs, K = room_pairs(_seeds(args.room_seeds))
@@ -271,7 +296,8 @@ def main(argv: list[str] | None = None) -> None:
     save("two_view_slam", srows, scols, "Monocular SLAM started by each two-view model",
          "`python -m benchmarks.two_view` (see its docstring): `Slam(mode='mono', 1000 features, "
          "SlamConfig(two_view_model=...))`, synchronous mapping (deterministic). The rendered room: 300 frames, exact "
-         "truth; 7-Scenes: the real frames from the given one to the end, KinectFusion's truth (1-2 cm).")
+         "truth; 7-Scenes: the real frames from the given one to the end, KinectFusion's truth (1-2 cm).",
+         lambda plt: plot_slam_rows(plt, srows))
 
 
 if __name__ == "__main__":

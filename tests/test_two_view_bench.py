@@ -29,3 +29,25 @@ def test_rows_count_refusals_and_the_common_pairs():
     # the pairs every method reconstructed: the first and the third
     assert rows["essential"]["common"] == 2 and rows["essential"]["c_dir_med"] == 2.0
     assert rows["fundamental"]["c_rot_med"] == 2.0
+
+
+def test_replot_redraws_from_the_saved_rows(tmp_path, monkeypatch):
+    """`--replot` draws the PNG from the JSON a run saved (a failed run's missing ATE is a gap, not a zero bar) and
+    links it from the table once."""
+    import json
+
+    import benchmarks.common as common
+    from benchmarks.relocalization import plot_kidnap_rows, plot_reuse_rows
+    from benchmarks.two_view import plot_slam_rows
+
+    monkeypatch.setattr(common, "RESULTS", tmp_path)
+    slam = [{"data": d, "start": s, "model": m, "ate_mm": None if (s, m) == ("a", "x") else 3.0}
+            for d in ("room", "real") for s in ("a", "b") for m in ("x", "y")]
+    kid = [{"mode": m, "cut_s": c, "first_err_mm": 2.0, "ate_after_mm": None} for m in ("rgbd", "mono") for c in (2, 4)]
+    reuse = [{"mode": "rgbd", "pass2_tracked_pct": 100.0, "pass1_ate_mm": 1.0, "pass2_err_mm": None}]
+    for name, rows, fn in (("s", slam, plot_slam_rows), ("k", kid, plot_kidnap_rows), ("r", reuse, plot_reuse_rows)):
+        (tmp_path / f"{name}.json").write_text(json.dumps({"title": name, "rows": rows}))
+        (tmp_path / f"{name}.md").write_text("# table\n")
+        assert common.replot(name, fn).stat().st_size > 1000
+        common.replot(name, fn)
+        assert (tmp_path / f"{name}.md").read_text().count(f"({name}.png)") == 1
