@@ -1,5 +1,5 @@
-"""The monocular two-view initialization against truth (issue 17): ORB-SLAM2's eight-point fundamental matrix (the
-default, ``SlamConfig.two_view_model = "fundamental"``), the five-point essential matrix (``"essential"``), and
+"""The monocular two-view initialization against truth (issue 17): ORB-SLAM2's eight-point fundamental matrix
+(``SlamConfig.two_view_model = "fundamental"``), the five-point essential matrix (``"essential"``, the default), and
 OpenCV's plain five-point + ``recoverPose`` as a reference, on the same ORB matches; then the whole monocular SLAM
 started by each of the two models.
 
@@ -265,10 +265,10 @@ def main(argv: list[str] | None = None) -> None:
             ("common", "pairs every method reconstructed", "{}"), ("c_rot_med", "on those: rotation median", "{:.2f}"),
             ("c_dir_med", "direction median", "{:.1f}"), ("c_dir_p90", "direction p90", "{:.1f}"),
             ("ms_p50", "ms per pair (p50)", "{:.1f}")]
-    notes = ("`python -m benchmarks.two_view` (see its docstring). 'fundamental': `two_view(general='fundamental')`, "
-             "the SLAM's initialization (ORB-SLAM2's eight-point fundamental matrix, RANSAC, 1.5 px); 'essential': the "
-             "same with the five-point essential matrix (RANSAC, 1 px; `SlamConfig.two_view_model`); 'opencv': "
-             "`findEssentialMat` + "
+    notes = ("`python -m benchmarks.two_view` (see its docstring). 'essential': `two_view(general='essential')`, "
+             "the SLAM's initialization since stop 53 (the five-point essential matrix, RANSAC, 1 px; "
+             "`SlamConfig.two_view_model`); 'fundamental': the same with ORB-SLAM2's eight-point fundamental matrix "
+             "(RANSAC, 1.5 px); 'opencv': `findEssentialMat` + "
              "`recoverPose` on the same matches, with no model selection, parallax or ambiguity test (it never "
              "refuses). Errors in degrees against the truth's relative pose; the rendered room's truth is exact, "
              "7-Scenes' is KinectFusion's (1-2 cm: several degrees of direction at these baselines).")

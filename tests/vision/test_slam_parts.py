@@ -196,19 +196,19 @@ def test_monocular_initializer_sets_a_reference_then_builds_a_unit_depth_map():
 
 
 def test_monocular_initializer_uses_the_configured_two_view_model(monkeypatch):
-    """``SlamConfig.two_view_model`` reaches the two-view reconstruction (the default: ORB-SLAM2's eight-point)."""
+    """``SlamConfig.two_view_model`` reaches the two-view reconstruction (the default: the five-point)."""
     import simreal_nodes.vision.slam.two_view as tv
 
     f0, f1, _ = arc_views(3, 0.10, 3.0)
     for model in ("fundamental", "essential"):
         seen: list[str] = []
 
-        def spy(*a, general="fundamental", seen=seen, **k):
+        def spy(*a, general="(none given)", seen=seen, **k):
             seen.append(general)
             return two_view(*a, general=general, **k)
 
         monkeypatch.setattr(tv, "two_view", spy)
-        ctx = context("mono") if model == "fundamental" else context("mono", two_view_model=model)
+        ctx = context("mono") if model == "essential" else context("mono", two_view_model=model)
         init = Initializer(ctx, LocalMapper(ctx, async_mapping=False), None)
         ctx.frame_id = 1
         init.initialize(f0, None, 0)
@@ -232,6 +232,64 @@ def test_tracking_from_a_depth_map_and_a_keyframe():
     kf = init.mapper.insert_keyframe(5, fix.T_cw, f1, z1, fix.match, fix.inl)
     assert ctx.ref_kf is kf and ctx.last_kf_frame == ctx.frame_id and ctx.kf_inliers == res.n_inliers
     assert np.max(np.abs(kf.T_cw - T_cw1)) < 1e-5  # the BA keeps the exact pose
+
+
+def test_fusion_merges_a_point_mapped_twice_and_links_a_missed_observation():
+    """ORB-SLAM2's SearchInNeighbors: keyframe A maps 300 points; keyframe B (4 cm aside) sees the same points,
+    the first 100 as duplicates of their own (3 mm off, the same descriptor, also seen by a third keyframe C), the
+    next 100 not linked at all, the rest with a descriptor that differs (not the same point). Fusing A's points into
+    B merges each duplicate into one point seen by A, B and C, links the missed observations, and leaves the
+    different descriptors alone."""
+    X, desc = scene(300, seed=3)
+    ctx = context("rgbd")
+    m = ctx.map
+    mapper = LocalMapper(ctx, async_mapping=False)
+    T_b = G.make_T(G.rot_axis("y", np.deg2rad(0.3)), np.array([-0.04, 0.0, 0.0]))
+    T_c = G.make_T(np.eye(3), np.array([-0.08, 0.0, 0.0]))
+    fa, ia, _ = view(X, desc, np.eye(4))
+    desc_b = desc.copy()
+    desc_b[200:] ^= 0xFF  # far in Hamming distance: other points where A's are projected
+    fb, ib, _ = view(X, desc_b, T_b)
+    fc, ic, _ = view(X, desc, T_c)
+    assert len(ia) == len(ib) == len(ic) == 300
+    A = m.new_keyframe(0, np.eye(4), fa)
+    B = m.new_keyframe(1, G.inv(T_b), fb)
+    C = m.new_keyframe(2, G.inv(T_c), fc)
+    own = [m.new_point(X[i], desc[i], A, k).id for k, i in enumerate(ia)]
+    dup = {}
+    for k, i in enumerate(ib[:100]):
+        q = m.new_point(X[i] + 0.003, desc[i], B, k)
+        m.link(q, C, int(np.flatnonzero(ic == i)[0]))
+        dup[int(i)] = q.id
+    touched = mapper._fuse_into(B, np.array(own))
+    assert len(touched) == 200
+    for k, i in enumerate(ia):
+        p_ids = {int(B.mp[np.flatnonzero(ib == i)[0]])}
+        if i < 100:  # one point left, seen by all three keyframes
+            (pid,) = p_ids
+            assert set(m.points[pid].obs) == {A.id, B.id, C.id}
+            assert (own[k] in m.points) != (dup[int(i)] in m.points)
+        elif i < 200:  # A's point, now also seen by B
+            assert p_ids == {own[k]} and set(m.points[own[k]].obs) == {A.id, B.id}
+        else:  # another descriptor: not the same point
+            assert p_ids == {-1} and set(m.points[own[k]].obs) == {A.id}
+    assert len(m.points) == 300
+    # a second pass finds nothing more to do
+    assert mapper._fuse_into(B, np.fromiter(m.points, np.int64)) == set()
+
+
+@pytest.mark.parametrize("fuse,mode,runs", [("mono", "rgbd", 0), ("all", "rgbd", 1), ("mono", "mono", 1),
+                                             ("none", "mono", 0)])
+def test_fusion_runs_for_the_configured_modes(monkeypatch, fuse, mode, runs):
+    """The default fuses monocular keyframes only (RGB-D's depth fixes its scale; there it is a knob)."""
+    calls = []
+    monkeypatch.setattr(LocalMapper, "_fuse_neighbours", lambda self, kf: calls.append(kf.id))
+    ctx = context(mode, fuse_neighbours=fuse)
+    X, desc = scene(100)
+    f, _, z = view(X, desc, np.eye(4))
+    kf = ctx.map.new_keyframe(0, np.eye(4), f, z if mode == "rgbd" else None)
+    LocalMapper(ctx, async_mapping=False)._local_mapping(kf)
+    assert len(calls) == runs
 
 
 def test_keyframe_decision():
@@ -370,3 +428,5 @@ def test_config_defaults_are_documented_and_checked():
         SlamConfig(flow_win=1)
     with pytest.raises(ValueError, match="two_view_model"):
         SlamConfig(two_view_model="affine")
+    with pytest.raises(ValueError, match="fuse_neighbours"):
+        SlamConfig(fuse_neighbours="yes")

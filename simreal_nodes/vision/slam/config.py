@@ -21,6 +21,9 @@ STATE_NAMES: dict[int, str] = {NOT_STARTED: "not started", INITIALIZING: "initia
                RELOCALIZED: "relocalized"}
 
 
+# which SLAM modes fuse a new keyframe's points with its neighbours' (``SlamConfig.fuse_neighbours``)
+FUSE_MODES = ("none", "mono", "all")
+
 # the monocular initialization's general two-view models (``SlamConfig.two_view_model``, :mod:`.two_view`)
 TWO_VIEW_MODELS = ("fundamental", "essential")
 
@@ -43,14 +46,20 @@ class SlamConfig:
     flow_anchor_px: float = 0.0  # > 0: re-measure tracks on their first image if within this (drift vs. bias)
     max_anchor_images: int = 40  # images kept for the anchored re-measurement (memory vs. track restarts)
     focus_share: float = 0.2  # ORB budget guaranteed to each tracked object's predicted image region (faint objects)
-    two_view_model: str = "fundamental"  # mono start: eight-point F (ORB-SLAM2) or five-point "essential" (see below)
-    # "essential": a better first pose, and the rendered room's failing noise draw holds; but on the real 7-Scenes
-    # frames the maps it starts break down hundreds of frames later, on each of 4 starts (benchmarks/two_view.py)
+    fuse_neighbours: str = "mono"  # modes whose keyframes' points fuse with the neighbours' (ORB-SLAM2): see below
+    # "mono": halves the monocular drift on the real 7-Scenes frames; on RGB-D (its depth fixes the scale) it was level
+    # on the room and 7-Scenes and mixed on family development scenes, so "all" is a knob (docs/localization.md)
+    two_view_model: str = "essential"  # mono start: five-point E, or "fundamental" (ORB-SLAM2's eight-point F)
+    # "essential" since stop 53: a better first pose (the rendered room's failing noise draw holds) and, with the
+    # keyframe fusion, level or better on each of the real 7-Scenes starts (benchmarks/two_view.py)
 
     def __post_init__(self) -> None:
         if self.two_view_model not in TWO_VIEW_MODELS:
             raise ValueError(f"SlamConfig.two_view_model must be one of {', '.join(TWO_VIEW_MODELS)}, not "
                              f"{self.two_view_model!r}")
+        if self.fuse_neighbours not in FUSE_MODES:
+            raise ValueError(f"SlamConfig.fuse_neighbours must be one of {', '.join(FUSE_MODES)}, not "
+                             f"{self.fuse_neighbours!r}")
         for f in fields(self):
             if isinstance(getattr(self, f.name), (int, float)) and getattr(self, f.name) < 0:
                 raise ValueError(f"SlamConfig.{f.name} must not be negative, not {getattr(self, f.name)}")

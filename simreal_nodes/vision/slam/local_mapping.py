@@ -6,9 +6,10 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
+from scipy.spatial import cKDTree
 
 from simreal_nodes import geometry as G
-from simreal_nodes.vision.orb import Features, match_descriptors
+from simreal_nodes.vision.orb import Features, hamming, match_descriptors
 from simreal_nodes.vision.slam.context import SlamContext
 from simreal_nodes.vision.slam.map import KeyFrame, MapPoint
 from simreal_nodes.vision.slam.optimize import CHI2_2D, AsyncBundleAdjuster, ba_request, bundle_adjust, project
@@ -78,6 +79,9 @@ class LocalMapper:
         new = self._create_points(kf)
         for pid in new:
             self._recent_points.append((pid, kf.id))
+        fuse = self.ctx.config.fuse_neighbours
+        if fuse == "all" or (fuse == "mono" and self.ctx.mode == "mono"):
+            self._fuse_neighbours(kf)
         neighbours = self.ctx.map.covisible(kf, self.ctx.config.local_kfs)
         self.bundle_adjust([kf] + neighbours, None)
         self._cull_points(kf)
@@ -140,6 +144,100 @@ class LocalMapper:
                 m.link(mp, other, int(b))
                 created.append(mp.id)
         return created
+
+    def _fuse_neighbours(self, kf: KeyFrame) -> None:
+        """ORB-SLAM2's SearchInNeighbors: the new keyframe's points are projected into its covisible keyframes (20
+        for a monocular map, 10 otherwise, and 5 of each one's own) and theirs into it; a projection landing on a
+        feature with a like descriptor either adds that observation to the point or, where the feature already
+        has a point, fuses the two (the better observed one stays). The same physical point triangulated twice in
+        different keyframe pairs becomes one, so the bundle adjustment ties the keyframes together (monocular
+        scale drift) instead of leaving parallel copies. Touched points get a representative descriptor."""
+        m = self.ctx.map
+        n = 20 if self.ctx.mode == "mono" else 10
+        targets = {k.id: k for k in m.covisible(kf, n)}
+        for k in list(targets.values()):
+            for k2 in m.covisible(k, 5):
+                if k2.id != kf.id:
+                    targets.setdefault(k2.id, k2)
+        touched: set[int] = set()
+
+        def own(k: KeyFrame) -> np.ndarray:
+            ids = k.mp[k.mp >= 0]
+            ids = ids[m.alive(ids)]
+            if self.ctx.deformable:
+                ids = ids[self.ctx.rigid(ids)]
+            return ids
+
+        for t in targets.values():
+            touched |= self._fuse_into(t, own(kf))
+        pool = np.unique(np.concatenate([own(t) for t in targets.values()])) if targets else np.zeros(0, np.int64)
+        touched |= self._fuse_into(kf, pool)
+        for pid in touched:
+            p = m.points.get(pid)
+            if p is not None:
+                m.update_descriptor(p)
+
+    def _fuse_into(self, kf: KeyFrame, ids: np.ndarray, radius: float = 3.0) -> set[int]:
+        """Project the points ``ids`` into ``kf`` and fuse or link them (ORB-SLAM2's Fuse): a candidate feature lies
+        within ``radius`` x its level's scale of the projection and passes the reprojection chi-square test (5.99,
+        its level's variance), its level is within one of the level the point's distance predicts, and its
+        descriptor is the closest within 50 bits. Returns the ids of points that gained observations."""
+        m, K, f = self.ctx.map, self.ctx.K, kf.feats
+        ids = ids[m.alive(ids)]
+        if len(ids) == 0 or len(f) == 0:
+            return set()
+        ids = ids[~np.isin(ids, kf.mp)]  # not observed by kf already (kf.mp and the points' obs agree)
+        if len(ids) == 0:
+            return set()
+        P = m._pos[ids]
+        uv, z = project(kf.T_cw, P, K)
+        W, H = self.ctx.cam.width, self.ctx.cam.height
+        vis = (z > 0) & (uv[:, 0] >= 0) & (uv[:, 0] < W) & (uv[:, 1] >= 0) & (uv[:, 1] < H)
+        ids, uv = ids[vis], uv[vis]
+        if len(ids) == 0:
+            return set()
+        pred = m.predicted_level(ids, kf.center, f.scale_factor)
+        sf = f.scale_factor
+        rmax = radius * sf ** int(np.max(f.octave))
+        k_nn = min(8, len(f))
+        dpix, nn = cKDTree(f.und).query(uv, k=k_nn, distance_upper_bound=rmax)
+        dpix, nn = np.reshape(dpix, (len(uv), k_nn)), nn.reshape(len(uv), k_nn)
+        valid = np.isfinite(dpix)
+        rows = np.broadcast_to(np.arange(len(uv))[:, None], nn.shape)[valid]
+        cols = nn[valid]
+        oct_ = f.octave[cols].astype(np.float64)
+        e2 = np.sum((f.und[cols] - uv[rows]) ** 2, axis=1) / f.sigma2()[cols]
+        lvl = np.floor(pred[rows])
+        ok = (dpix[valid] <= radius * sf ** oct_) & (e2 < 5.99) & (np.isnan(lvl) | (np.abs(oct_ - lvl) <= 1))
+        rows, cols = rows[ok], cols[ok]
+        if len(rows) == 0:
+            return set()
+        dist = hamming(m._desc[ids[rows]], f.desc[cols])
+        good = dist <= 50
+        rows, cols, dist = rows[good], cols[good], dist[good]
+        if len(rows) == 0:
+            return set()
+        order = np.lexsort((dist, rows))
+        rows, cols = rows[order], cols[order]
+        first = np.r_[True, rows[1:] != rows[:-1]]
+        touched: set[int] = set()
+        for r, c in zip(rows[first], cols[first]):
+            pid = int(ids[r])
+            p = m.points.get(pid)
+            if p is None or kf.id in p.obs:
+                continue
+            other = int(kf.mp[c])
+            if other >= 0 and other in m.points:
+                q = m.points[other]
+                if q.deformable or p.deformable:
+                    continue
+                keep, drop = (p, q) if len(p.obs) >= len(q.obs) else (q, p)
+                m.fuse(keep, drop)
+                touched.add(keep.id)
+            elif other < 0 or other not in m.points:
+                m.link(p, kf, int(c))
+                touched.add(pid)
+        return touched
 
     def _median_depth(self, kf: KeyFrame) -> float:
         ids = kf.mp[kf.mp >= 0]

@@ -100,6 +100,9 @@ class Map:
         self._nvis = np.zeros(1024, np.int64)
         self._nfound = np.zeros(1024, np.int64)
         self._alive = np.zeros(1024, bool)
+        # distance at which a point would be seen at pyramid level 0 (its first observation's distance x scale^level;
+        # ORB-SLAM2's max distance): the level it is predicted at from elsewhere; NaN unknown (points of a loaded map)
+        self._dist0 = np.full(1024, np.nan)
         self.version = 0  # bumped by every keyframe change (caches key on it)
 
     def _reserve(self, n: int) -> None:
@@ -112,6 +115,9 @@ class Map:
             alive = np.zeros(cap, bool)
             alive[: len(self._alive)] = self._alive
             self._alive = alive
+            dist0 = np.full(cap, np.nan)
+            dist0[: len(self._dist0)] = self._dist0
+            self._dist0 = dist0
 
     def alive(self, ids: np.ndarray) -> np.ndarray:
         """Mask of the ids that are live points."""
@@ -137,7 +143,11 @@ class Map:
         if kf is not None:
             assert idx is not None  # every caller that links to a keyframe names the feature
             p.first_kf = kf.id
+            self._dist0[p.id] = np.linalg.norm(np.asarray(pos) - kf.center) * kf.feats.scale_factor ** int(
+                kf.feats.octave[idx])
             self.link(p, kf, idx)
+        else:
+            self._dist0[p.id] = np.nan
         return p
 
     def link(self, p: MapPoint, kf: KeyFrame, idx: int) -> None:
@@ -169,6 +179,13 @@ class Map:
                 if len(p.obs) == 0:
                     self.points.pop(pid)
                     self._alive[pid] = False
+
+    def predicted_level(self, ids: np.ndarray, center: np.ndarray, scale_factor: float) -> np.ndarray:
+        """The pyramid level (float) at which the points ``ids`` should be detected from a camera at ``center``;
+        NaN where unknown."""
+        d = np.linalg.norm(self._pos[ids] - center, axis=1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.log(self._dist0[ids] / np.maximum(d, 1e-9)) / np.log(scale_factor)
 
     def fuse(self, keep: MapPoint, drop: MapPoint) -> None:
         """Replace ``drop`` by ``keep`` in every keyframe that observes it."""

@@ -3,11 +3,10 @@
 The two-view reconstruction follows ORB-SLAM2: a homography and a general two-view model are fitted to the matches
 with a reference frame, scored by their symmetric transfer errors, and the better explained model (homography for
 a planar or low-parallax scene, chosen above a score ratio of 0.40) is decomposed into candidate poses. The general
-model is ORB-SLAM2's eight-point fundamental matrix by default, or (``SlamConfig.two_view_model = "essential"``) the
-essential matrix from the five-point RANSAC on the calibrated matches, which does not spend three degrees of freedom
-on intrinsics the camera already has. The five-point pose is the better first pose, but on the real 7-Scenes frames
-the maps it starts break down hundreds of frames later, for a cause not found: it stays a knob (the measurements in
-docs/localization.md, from `benchmarks/two_view.py`). The pose that
+model is by default (``SlamConfig.two_view_model = "essential"``) the essential matrix from the five-point RANSAC on
+the calibrated matches, which does not spend three degrees of freedom on intrinsics the camera already has, or
+ORB-SLAM2's eight-point fundamental matrix (``"fundamental"``). The five-point pose is the better first pose (the
+measurements in docs/localization.md, from `benchmarks/two_view.py`). The pose that
 explains most matches wins (its points with parallax in front of both cameras, every point reprojecting: ORB-SLAM2's
 CheckRT), and it is refused without enough parallax (a pure rotation has no depth) or when a second pose comes close
 (an ambiguous decomposition: a plane at low parallax, or F on a near-planar scene; the initialization then waits for
@@ -53,10 +52,10 @@ def initial_matches(f0: Features, f1: Features) -> np.ndarray:
 
 
 def two_view(f0: Features, f1: Features, K: np.ndarray, min_parallax: float,
-             general: str = "fundamental") -> tuple[str, TwoViewSolution | None]:
+             general: str = "essential") -> tuple[str, TwoViewSolution | None]:
     """Reconstruct two views of a static scene; returns (why not, None) or ("<kind> model", solution).
     ``min_parallax``: radians, the least median parallax of the triangulated points accepted. ``general``: the
-    non-planar model, "fundamental" (ORB-SLAM2's eight-point, the default) or "essential" (five-point, calibrated;
+    non-planar model, "essential" (five-point, calibrated; the default) or "fundamental" (ORB-SLAM2's eight-point;
     ``SlamConfig.two_view_model``). Either way the solution's kind is "fundamental" for the general model (as ORB-SLAM2
     names it) and "homography" for the planar one."""
     if general not in TWO_VIEW_MODELS:
