@@ -167,8 +167,8 @@ def main(argv=None):
              "keyframe bookkeeping (as `localization.md`). No loop closing is built: a revisited place is tracked "
              "against the points already in the map (the local map), not corrected by a pose-graph optimisation. "
              "The noise seed draws the image (and depth) noise only: the monocular rows show how much the outcome "
-             "depends on it (on the 300-frame room, seed 0 is a failure case of the monocular initialization: "
-             "its map comes out distorted).")
+             "depends on it (seed 0 was a failure case of the eight-point start before stop 53: see "
+             "docs/localization.md).")
     save("long_slam", rows, cols, "Localization over a long sequence: tracking, drift per lap, map size", notes, plot)
 
 
