@@ -234,7 +234,7 @@ class LocalMapper:
                 keep, drop = (p, q) if len(p.obs) >= len(q.obs) else (q, p)
                 m.fuse(keep, drop)
                 touched.add(keep.id)
-            elif other < 0 or other not in m.points:
+            else:  # a free feature (or one whose point is gone): a missed observation of p
                 m.link(p, kf, int(c))
                 touched.add(pid)
         return touched

@@ -146,8 +146,6 @@ class Map:
             self._dist0[p.id] = np.linalg.norm(np.asarray(pos) - kf.center) * kf.feats.scale_factor ** int(
                 kf.feats.octave[idx])
             self.link(p, kf, idx)
-        else:
-            self._dist0[p.id] = np.nan
         return p
 
     def link(self, p: MapPoint, kf: KeyFrame, idx: int) -> None:
