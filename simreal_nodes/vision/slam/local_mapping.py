@@ -1,6 +1,7 @@
 """Local mapping (ORB-SLAM2's LocalMapping, run in the tracking thread): the keyframe decision, keyframe insertion,
-new points (triangulated with covisible keyframes, or from depth), local bundle adjustment in GTSAM (synchronous,
-or in a mapping process whose result is applied at a later frame) and map-point and keyframe culling."""
+new points (triangulated with covisible keyframes, or from depth), fusion of the keyframe's points with its
+neighbours' (SearchInNeighbors; monocular maps by default), local bundle adjustment in GTSAM (synchronous, or in a
+mapping process whose result is applied at a later frame) and map-point and keyframe culling."""
 
 from __future__ import annotations
 

@@ -5,7 +5,8 @@ fundamental model, chosen by score) or an RGB-D / stereo map from the first fram
 constant-velocity motion model and search by projection, pose optimization with outlier rejection,
 falling back to descriptor matching + PnP RANSAC -> tracking of the local map (points of the covisible
 keyframes) -> keyframe decision. A new keyframe triggers local mapping: new points (triangulated with
-covisible keyframes, or from depth), local bundle adjustment in GTSAM, map-point and keyframe culling.
+covisible keyframes, or from depth), fusion with the neighbouring keyframes' points (monocular), local bundle
+adjustment in GTSAM, map-point and keyframe culling.
 A lost frame triggers relocalization (descriptor matching against the whole map + PnP RANSAC). In
 localization-only mode the map is frozen: no keyframes, no new points.
 
