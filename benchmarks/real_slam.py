@@ -66,7 +66,6 @@ def run(seq: dict, mode: str, n_features: int = 1000, fuse: str | None = None) -
 
     cfg = SlamConfig() if fuse is None else SlamConfig(fuse_neighbours=fuse)
     slam = Slam(seq["cam"], mode, n_features, config=cfg)
-    fused = cfg.fuse_neighbours == "all" or (cfg.fuse_neighbours == "mono" and mode == "mono")
     est: dict[int, np.ndarray] = {}
     ms, kf_ms, lost_at = [], [], None
     for i, g in enumerate(seq["gray"]):
@@ -79,7 +78,7 @@ def run(seq: dict, mode: str, n_features: int = 1000, fuse: str | None = None) -
         elif est and lost_at is None and r.state_name == "lost":
             lost_at = i
     slam.close()
-    row = {"mode": mode, "fusion": "yes" if fused else "no", "default": fuse is None, "features": n_features,
+    row = {"mode": mode, "fusion": "yes" if cfg.fuses(mode) else "no", "default": fuse is None, "features": n_features,
            "frames": len(seq["gray"]), "tracked": len(est), "keyframes": len(slam.map.keyframes),
            "mapping_ms_per_frame": float(np.sum(kf_ms)) / len(seq["gray"]),
            "first_tracked": min(est) if est else None, "first_lost": lost_at,

@@ -69,6 +69,10 @@ class SlamConfig:
             raise ValueError(f"SlamConfig: flow_win >= 3, local_kfs >= 1 and ba_iterations >= 1 needed, not "
                              f"{self.flow_win}, {self.local_kfs}, {self.ba_iterations}")
 
+    def fuses(self, mode: str) -> bool:
+        """Whether a SLAM in ``mode`` (mono, rgbd, stereo) fuses its keyframes' points (``fuse_neighbours``)."""
+        return self.fuse_neighbours == "all" or (self.fuse_neighbours == "mono" and mode == "mono")
+
     @property
     def min_parallax(self) -> float:
         """The minimum parallax of a two-view initialization in radians."""

@@ -80,8 +80,7 @@ class LocalMapper:
         new = self._create_points(kf)
         for pid in new:
             self._recent_points.append((pid, kf.id))
-        fuse = self.ctx.config.fuse_neighbours
-        if fuse == "all" or (fuse == "mono" and self.ctx.mode == "mono"):
+        if self.ctx.config.fuses(self.ctx.mode):
             self._fuse_neighbours(kf)
         neighbours = self.ctx.map.covisible(kf, self.ctx.config.local_kfs)
         self.bundle_adjust([kf] + neighbours, None)
