@@ -164,8 +164,8 @@ def main(argv=None):
              "bundle adjustment in the mapping process (as live), every frame processed. ATE and the per-lap errors "
              "use one alignment of the whole run (monocular: a similarity; its scale is in the table), so drift shows "
              "as a later lap's error. RPE over 30 frames, where both ends have a pose. Tracking time excludes the "
-             "keyframe bookkeeping (as `localization.md`). No loop closing is built: a revisited place is tracked "
-             "against the points already in the map (the local map), not corrected by a pose-graph optimisation. "
+             "keyframe bookkeeping (as `localization.md`). Loop closing is off (its default; `loop_closing.md`): a "
+             "revisited place is tracked against the points already in the map (the local map). "
              "The noise seed draws the image (and depth) noise only: the monocular rows show how much the outcome "
              "depends on it (seed 0 was a failure case of the eight-point start before stop 53: see "
              "docs/localization.md).")

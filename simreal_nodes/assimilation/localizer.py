@@ -10,7 +10,7 @@ a :class:`Localization` and takes the deformable tracker's word on which map poi
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -138,10 +138,11 @@ def make_localizer(loc: dict[str, Any], cam: CameraModel, baseline: float | None
                    map_file: str = "", localization_only: bool = False,
                    slam_config: SlamConfig | None = None) -> Localizer:
     """The localizer of a scene's ``localization`` section (``mode``; for markers ``markers``, for a static camera
-    ``static_pose``, for SLAM ``features``, ``scale_factor``, ``pyramid_levels``, ``known_scale_m``) on camera
-    ``cam``. SLAM only: ``baseline`` (stereo, metres), ``async_mapping`` (local bundle adjustment in a worker
-    process), ``map_file`` (a saved map to relocalize into), ``localization_only`` (start with mapping frozen),
-    ``slam_config`` (the SLAM's tuning; default :class:`SlamConfig`)."""
+    ``static_pose``, for SLAM ``features``, ``scale_factor``, ``pyramid_levels``, ``known_scale_m``,
+    ``loop_closing``) on camera ``cam``. SLAM only: ``baseline`` (stereo, metres), ``async_mapping`` (local bundle
+    adjustment in a worker process), ``map_file`` (a saved map to relocalize into), ``localization_only`` (start with
+    mapping frozen), ``slam_config`` (the SLAM's tuning; default :class:`SlamConfig`; the section's ``loop_closing``
+    overrides its field)."""
     mode = loc["mode"]
     if mode == "markers":
         from simreal_nodes.vision.markers import MarkerLocalizer
@@ -154,6 +155,10 @@ def make_localizer(loc: dict[str, Any], cam: CameraModel, baseline: float | None
     from simreal_nodes.vision.slam.map import Map
     from simreal_nodes.vision.slam.system import Slam
 
+    if loc.get("loop_closing") is not None:
+        from simreal_nodes.vision.slam import config as slam_cfg
+
+        slam_config = replace(slam_config or slam_cfg.SlamConfig(), loop_closing=bool(loc["loop_closing"]))
     slam = Slam(cam, mode, loc["features"], loc["scale_factor"], loc["pyramid_levels"], baseline=baseline,
                 known_scale=loc.get("known_scale_m"), async_mapping=async_mapping, config=slam_config)
     if localization_only:

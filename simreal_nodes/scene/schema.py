@@ -78,6 +78,9 @@ LOCALIZATION = Record({
                                       default=False),
     "known_scale_m": Number("monocular: distance between the first two keyframes, metres", lo=0, lo_open=True,
                             nullable=True),
+    "loop_closing": Bool("SLAM: search each new keyframe for a loop and correct the map (Sim3, essential graph, "
+                         "global BA; docs/localization.md). Off by default: measured on one rendered scene only",
+                         default=False),
 })
 
 PARAMETER = Record({

@@ -994,9 +994,11 @@ def crossed_beams_svk_probe_heldout(width=640, height=480, duration=3.2, fps=30.
 
 
 def slam_room(width=640, height=480, duration=10.0, fps=30.0, period: float | None = None,
-              name: str = "slam_room") -> SynthScene:
+              name: str = "slam_room", orbit: bool = False) -> SynthScene:
     """A static textured room circled on a hand-held arc there and back; ``period``: one there-and-back lap takes so
-    long and the laps repeat over ``duration`` (default: one lap over the whole duration)."""
+    long and the laps repeat over ``duration`` (default: one lap over the whole duration). ``orbit``: instead, one
+    full turn around the objects and on past the start by 60 degrees (a loop: the camera comes back to where it
+    began by the other side, with the drift of the whole turn; loop closing's scene)."""
     center = np.array([0.3, 0.2, 0.15])
 
     def build(sc, r, models):
@@ -1015,6 +1017,9 @@ def slam_room(width=640, height=480, duration=10.0, fps=30.0, period: float | No
         return Truth()
 
     def cam_pose(t):
+        if orbit:  # azimuth -90 -> 330 degrees once over the duration (half a period), eased at both ends
+            return W.arc_trajectory(np.array([t]), center, 0.75, 0.45, np.deg2rad(-90), np.deg2rad(330),
+                                    jitter=0.01, seed=51, period=2.0 * duration)[0]
         return W.arc_trajectory(np.array([t]), center, 1.0, 0.45, np.deg2rad(-140), np.deg2rad(-40), jitter=0.01,
                                 seed=51, period=period or duration)[0]
 
@@ -1031,6 +1036,8 @@ SCENES: dict[str, Callable[..., SynthScene]] = {
     "slam_room": slam_room,
     # a long sequence (2 100 frames): the room's 10 s lap seven times over (benchmarks/long_slam.py)
     "slam_room_laps": lambda **kw: slam_room(**{"duration": 70.0, **kw}, period=10.0, name="slam_room_laps"),
+    # one full turn around the room's objects and past the start (loop closing: benchmarks/loop_closing.py)
+    "slam_room_orbit": lambda **kw: slam_room(**{"duration": 24.0, **kw}, orbit=True, name="slam_room_orbit"),
     "aluminium_beam": aluminium_beam,
     # the load close to the clamp, where the images barely see it (low sensitivity, large variance)
     "aluminium_beam_clamp": lambda **kw: aluminium_beam(positions=(0.0, 0.02, 0.05, 0.08, 0.12),

@@ -48,10 +48,12 @@ class LocalizationNode(SimrealNode):
         self.save_map = self.param("save_map", "", "save the map here on shutdown ('' = no)")
         known_scale = self.param("known_scale_m", float(loc.get("known_scale_m") or 0.0),
                                  "monocular: metric distance between the first two keyframes (0 = unknown)")
+        loop = self.param("loop_closing", bool(loc.get("loop_closing", False)),
+                          "SLAM: close loops (Sim3, essential graph, global BA)", read_only=True)
         async_mapping = self.param("async_mapping", True, "run local bundle adjustment in a worker process")
         frozen = self.param("localization_only", bool(loc.get("localization_only", False)), "start with mapping frozen")
         section = dict(loc, mode=self.mode, features=n_features, scale_factor=scale, pyramid_levels=levels,
-                       known_scale_m=known_scale or None)
+                       known_scale_m=known_scale or None, loop_closing=loop)
         self.live = LiveLocalizer(section, async_mapping, self.map_file, frozen)
         q = data_qos(self.lossless)
         ordered = q if self.lossless else reliable_qos(10)  # poses and observations: each one, in order

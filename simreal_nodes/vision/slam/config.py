@@ -53,6 +53,8 @@ class SlamConfig:
     # "essential" since stop 53: a better first pose (the rendered room's failing noise draw holds) and, with the
     # keyframe fusion, level or better on each of the real 7-Scenes starts (benchmarks/two_view.py)
 
+    loop_closing: bool = False  # search every new keyframe for a loop and correct the map (:mod:`.loop_closing`)
+
     def __post_init__(self) -> None:
         if self.two_view_model not in TWO_VIEW_MODELS:
             raise ValueError(f"SlamConfig.two_view_model must be one of {', '.join(TWO_VIEW_MODELS)}, not "

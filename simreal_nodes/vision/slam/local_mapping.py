@@ -7,12 +7,11 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
-from scipy.spatial import cKDTree
 
 from simreal_nodes import geometry as G
 from simreal_nodes.vision.orb import Features, hamming, match_descriptors
 from simreal_nodes.vision.slam.context import SlamContext
-from simreal_nodes.vision.slam.map import KeyFrame, MapPoint
+from simreal_nodes.vision.slam.map import KeyFrame
 from simreal_nodes.vision.slam.optimize import CHI2_2D, AsyncBundleAdjuster, ba_request, bundle_adjust, project
 
 
@@ -24,6 +23,10 @@ class LocalMapper:
         self.ba_stats = {"submitted": 0, "applied": 0, "deferred": 0}
         self._pending_ba: KeyFrame | None = None  # newest keyframe of a BA deferred while the worker was busy
         self._recent_points: list[tuple[int, int]] = []  # (point id, keyframe id at creation)
+        self._epoch = 0  # bumped when the map is corrected (a loop): a BA submitted before is stale
+        self._submitted_epoch = 0
+        self._inflight: dict | None = None  # the request the mapping process is optimizing
+        self._pending_global = False  # a global BA (after a loop) waits for the mapping process
 
     def close(self) -> None:
         if self._ba is not None:
@@ -35,11 +38,24 @@ class LocalMapper:
         if self._ba is None:
             return
         res = self._ba.poll()
-        if res is not None:
-            self._apply_ba(res)
-            if self._pending_ba is not None and self._pending_ba.id in self.ctx.map.keyframes:
-                kf, self._pending_ba = self._pending_ba, None
-                self.bundle_adjust([kf] + self.ctx.map.covisible(kf, self.ctx.config.local_kfs), None)
+        if res is None:
+            return
+        if self._submitted_epoch == self._epoch:
+            self._apply_ba(res, self._inflight)
+        else:  # it optimized the map as it was before a loop correction
+            self.ba_stats["stale"] = self.ba_stats.get("stale", 0) + 1
+        self._inflight = None
+        if self._pending_global:
+            self._pending_global = False
+            self.global_bundle_adjust()
+        elif self._pending_ba is not None and self._pending_ba.id in self.ctx.map.keyframes:
+            kf, self._pending_ba = self._pending_ba, None
+            self.bundle_adjust([kf] + self.ctx.map.covisible(kf, self.ctx.config.local_kfs), None)
+
+    def stale(self) -> None:
+        """The map was corrected as a whole (a closed loop): a bundle adjustment still running in the mapping process
+        optimized the old map, and its result is dropped."""
+        self._epoch += 1
 
     def need_keyframe(self, n_inliers: int) -> bool:
         """ORB-SLAM2's rule, simplified: the current frame tracks clearly fewer points than the reference
@@ -200,7 +216,7 @@ class LocalMapper:
         sf = f.scale_factor
         rmax = radius * sf ** int(np.max(f.octave))
         k_nn = min(8, len(f))
-        dpix, nn = cKDTree(f.und).query(uv, k=k_nn, distance_upper_bound=rmax)
+        dpix, nn = kf.tree.query(uv, k=k_nn, distance_upper_bound=rmax)
         dpix, nn = np.reshape(dpix, (len(uv), k_nn)), nn.reshape(len(uv), k_nn)
         valid = np.isfinite(dpix)
         rows = np.broadcast_to(np.arange(len(uv))[:, None], nn.shape)[valid]
@@ -240,38 +256,50 @@ class LocalMapper:
         return touched
 
     def _median_depth(self, kf: KeyFrame) -> float:
-        ids = kf.mp[kf.mp >= 0]
-        if len(ids) == 0:
-            return 0.0
-        P = np.array([self.ctx.map.points[int(i)].pos for i in ids if int(i) in self.ctx.map.points])
+        _, P, _ = self.ctx.map.point_arrays(kf.mp[kf.mp >= 0])
         if len(P) == 0:
             return 0.0
         _, z = project(kf.T_cw, P, self.ctx.K)
         return float(np.median(z))
 
-    def bundle_adjust(self, kfs_opt: list[KeyFrame], kfs_fixed: list[KeyFrame] | None, sync: bool = False) -> None:
+    def global_bundle_adjust(self, sync: bool = False) -> None:
+        """Bundle adjustment of the whole map (after a loop closure, as ORB-SLAM2): every keyframe but the first
+        (the first two for a monocular map: its scale) and every rigid point. In the mapping process when mapping
+        is asynchronous; keyframes and points made meanwhile follow the correction of the keyframe they share most
+        points with (:meth:`_apply_ba`)."""
+        kfs = sorted(self.ctx.map.keyframes.values(), key=lambda k: k.id)
+        nf = 2 if self.ctx.mode == "mono" else 1
+        if len(kfs) > nf:
+            self.bundle_adjust(kfs[nf:], kfs[:nf], sync=sync, max_points=10 ** 9, whole=True)
+
+    def bundle_adjust(self, kfs_opt: list[KeyFrame], kfs_fixed: list[KeyFrame] | None, sync: bool = False,
+                      max_points: int | None = None, whole: bool = False) -> None:
         """Local BA over ``kfs_opt`` and the points they see (the best observed ones, at most
         ``max_ba_points``); keyframes outside that also see the points are held fixed (or, without any,
         the oldest optimized one). Synchronous, or handed to the mapping process."""
         ctx, m, cfg = self.ctx, self.ctx.map, self.ctx.config
         kfs_opt = [k for k in kfs_opt if k.id in m.keyframes]
+        if not kfs_opt:
+            return
         opt_ids = {k.id for k in kfs_opt}
-        pts: dict[int, MapPoint] = {}
-        for kf in kfs_opt:
-            for pid in kf.mp[kf.mp >= 0]:
-                p = m.points.get(int(pid))
-                if p is not None and not p.deformable:
-                    pts[p.id] = p
-        if len(pts) > cfg.max_ba_points:
-            best = sorted(pts.values(), key=lambda p: len(p.obs), reverse=True)[: cfg.max_ba_points]
-            pts = {p.id: p for p in best}
+        # the points they see, in the order first seen (keyframe by keyframe), rigid ones only
+        seen = np.concatenate([k.mp[k.mp >= 0] for k in kfs_opt])
+        _, first = np.unique(seen, return_index=True)
+        pts = seen[np.sort(first)]
+        pts = pts[m.alive(pts)]
+        pts = pts[~np.fromiter((m.points[int(i)].deformable for i in pts), bool, len(pts))]
+        pid, kid, _ = m.observations()
+        max_points = cfg.max_ba_points if max_points is None else max_points
+        if len(pts) > max_points:  # the most observed (stable: first seen first among equals)
+            n_obs = np.bincount(pid, minlength=len(m._alive))
+            pts = pts[np.argsort(-n_obs[pts], kind="stable")[:max_points]]
         if kfs_fixed is None:
-            fixed: dict[int, int] = {}
-            for p in pts.values():
-                for kid in p.obs:
-                    if kid not in opt_ids and kid in m.keyframes:
-                        fixed[kid] = fixed.get(kid, 0) + 1
-            kfs_fixed = [m.keyframes[k] for k in sorted(fixed, key=fixed.__getitem__, reverse=True)[:10]]
+            # keyframes outside the window that see the points, most shared first (ties: the newest), at most 10
+            inside = np.zeros(len(m._alive), bool)
+            inside[pts] = True
+            outer = kid[inside[pid] & ~np.isin(kid, list(opt_ids))]
+            fixed = m.ranked(outer)
+            kfs_fixed = [m.keyframes[k] for k in fixed if k in m.keyframes][:10]
             # gauge: 6 dof need one fixed keyframe; a monocular map's scale needs a second one
             need = 2 if ctx.mode == "mono" else 1
             for oldest in sorted(kfs_opt, key=lambda k: k.id):
@@ -279,27 +307,50 @@ class LocalMapper:
                     break
                 kfs_fixed.append(oldest)
                 kfs_opt = [k for k in kfs_opt if k.id != oldest.id]
-        if not kfs_opt or not pts:
+        if not kfs_opt or not len(pts):
             return
-        req = ba_request(kfs_opt, kfs_fixed, list(pts.values()))
+        req = ba_request(m, kfs_opt, kfs_fixed, pts)
+        req["whole"] = whole
         if self._ba is not None and not sync:
             if self._ba.submit(req):
                 self.ba_stats["submitted"] += 1
+                self._submitted_epoch = self._epoch
+                self._inflight = req
+            elif whole:  # the mapping process is busy: the global BA goes first when it is free
+                self._pending_global = True
             else:  # the mapping process is busy: optimize around the newest keyframe when it is free
                 self.ba_stats["deferred"] += 1
                 self._pending_ba = max(kfs_opt, key=lambda k: k.id)
             return
-        self._apply_ba(bundle_adjust(req, ctx.K, ctx.baseline, cfg.ba_iterations))
+        self._apply_ba(bundle_adjust(req, ctx.K, ctx.baseline, cfg.ba_iterations), req)
 
-    def _apply_ba(self, res: dict) -> None:
+    def _apply_ba(self, res: dict, req: dict | None = None) -> None:
         if not res.get("ok"):
             return
         m = self.ctx.map
         self.ba_stats["applied"] += 1
+        moved: dict[int, np.ndarray] = {}  # a global BA: keyframe id -> its world correction (new pose x old^-1)
+        if req is not None and req.get("whole"):
+            for kid, T0, T1, fx in zip(req["kf_ids"], req["poses"], res["poses"], res["fixed"]):
+                moved[int(kid)] = np.eye(4) if fx else T1 @ G.inv(T0)
+            for new in sorted(m.keyframes.values(), key=lambda k: k.id):  # made while it ran: follow a neighbour
+                if new.id not in moved:
+                    ref = next((k.id for k in m.covisible(new, 10 ** 6) if k.id in moved), None)
+                    moved[new.id] = moved[ref] if ref is not None else np.eye(4)
+                    new.T_wc = moved[new.id] @ new.T_wc
         for kid, T, fx in zip(res["kf_ids"], res["poses"], res["fixed"]):
             kf = m.keyframes.get(int(kid))
             if kf is not None and not fx:
                 kf.T_wc = T
+        if moved:  # points made while it ran follow their reference keyframe
+            done = set(np.asarray(res["pt_ids"]).tolist())
+            for pid, q in m.points.items():
+                if pid in done:
+                    continue
+                C = moved.get(m.reference_keyframe(q))
+                if C is not None:
+                    m._pos[pid] = C[:3, :3] @ m._pos[pid] + C[:3, 3]
+            m.version += 1
         for pid, P in zip(res["pt_ids"], res["pos"]):
             if int(pid) in m.points:
                 m._pos[int(pid)] = P
@@ -308,9 +359,7 @@ class LocalMapper:
             kf = m.keyframes.get(kid)
             if p is None or kf is None:
                 continue
-            idx = p.obs.pop(kid, None)
-            if idx is not None and kf.mp[idx] == pid:
-                kf.mp[idx] = -1
+            m.unlink(p, kf)
             if len(p.obs) < (1 if self.ctx.mode != "mono" else 2):
                 m.erase_point(pid)
 

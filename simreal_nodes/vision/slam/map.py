@@ -3,10 +3,11 @@ points (position, representative descriptor, observations), with save / load to 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from simreal_nodes.errors import SimrealError
 from simreal_nodes.vision.orb import Features
@@ -74,6 +75,14 @@ class KeyFrame:
     feats: Features
     mp: np.ndarray  # (N,) map point id per feature, -1 none
     depth: np.ndarray | None = None  # (N,) metric depth per feature (RGB-D / stereo), NaN unknown
+    _tree: cKDTree | None = field(default=None, repr=False, compare=False)
+
+    @property
+    def tree(self) -> cKDTree:
+        """k-d tree of the features' ideal pixels (built once: a keyframe's features never change)."""
+        if self._tree is None:
+            self._tree = cKDTree(self.feats.und)
+        return self._tree
 
     @property
     def T_cw(self) -> np.ndarray:
@@ -104,6 +113,9 @@ class Map:
         # ORB-SLAM2's max distance): the level it is predicted at from elsewhere; NaN unknown (points of a loaded map)
         self._dist0 = np.full(1024, np.nan)
         self.version = 0  # bumped by every keyframe change (caches key on it)
+        # every observation as arrays (point id, keyframe id, feature index), from the keyframes' point links; rebuilt
+        # on the first query after a link changes (the covisibility queries read it instead of looping over points)
+        self._obs: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
     def _reserve(self, n: int) -> None:
         if n > len(self._pos):
@@ -131,6 +143,7 @@ class Map:
         self.keyframes[kf.id] = kf
         self.version += 1
         self._next_kf += 1
+        self._obs = None
         return kf
 
     def new_point(self, pos, desc, kf: KeyFrame | None = None, idx: int | None = None) -> MapPoint:
@@ -149,17 +162,32 @@ class Map:
         return p
 
     def link(self, p: MapPoint, kf: KeyFrame, idx: int) -> None:
+        """``kf``'s feature ``idx`` observes ``p`` (replacing the point it observed; a keyframe observes a point
+        through one feature, so a link of ``p`` elsewhere in ``kf`` is dropped: ``kf.mp`` and the points' ``obs``
+        stay each other's inverse)."""
         old = kf.mp[idx]
         if old >= 0 and old != p.id and old in self.points:
             self.points[old].obs.pop(kf.id, None)
+        prev = p.obs.get(kf.id)
+        if prev is not None and prev != idx and kf.mp[prev] == p.id:
+            kf.mp[prev] = -1
         kf.mp[idx] = p.id
         p.obs[kf.id] = idx
+        self._obs = None
+
+    def unlink(self, p: MapPoint, kf: KeyFrame) -> None:
+        """``kf`` no longer observes ``p`` (an outlier observation)."""
+        idx = p.obs.pop(kf.id, None)
+        if idx is not None and kf.mp[idx] == p.id:
+            kf.mp[idx] = -1
+        self._obs = None
 
     def erase_point(self, pid: int) -> None:
         p = self.points.pop(pid, None)
         if p is None:
             return
         self._alive[pid] = False
+        self._obs = None
         for kid, idx in p.obs.items():
             kf = self.keyframes.get(kid)
             if kf is not None and kf.mp[idx] == pid:
@@ -170,6 +198,7 @@ class Map:
         if kf is None:
             return
         self.version += 1
+        self._obs = None
         for pid in kf.mp:
             if pid >= 0 and pid in self.points:
                 p = self.points[pid]
@@ -200,24 +229,62 @@ class Map:
         keep.n_found += drop.n_found
         self.points.pop(drop.id, None)
         self._alive[drop.id] = False
+        self._obs = None
 
     # -- queries --------------------------------------------------------------------------------------------
+    def observations(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Every observation as three arrays: point id, keyframe id, feature index (from the keyframes' point
+        links, which are the inverse of the points' ``obs``); cached until a link changes."""
+        if self._obs is None:
+            kfs = list(self.keyframes.values())
+            if not kfs:
+                e = np.zeros(0, np.int64)
+                self._obs = (e, e, e)
+            else:
+                mp = np.concatenate([k.mp for k in kfs]).astype(np.int64)
+                kid = np.repeat(np.array([k.id for k in kfs], np.int64), [len(k.mp) for k in kfs])
+                idx = np.concatenate([np.arange(len(k.mp), dtype=np.int64) for k in kfs])
+                keep = mp >= 0
+                keep[keep] = self._alive[mp[keep]]
+                self._obs = (mp[keep], kid[keep], idx[keep])
+        return self._obs
+
     def observers(self, ids) -> dict[int, int]:
-        """Keyframe id -> how many of the points ``ids`` it observes (points no longer in the map are skipped)."""
-        counts: dict[int, int] = {}
-        for pid in ids:
-            p = self.points.get(int(pid))
-            if p is None:
-                continue
-            for kid in p.obs:
-                counts[kid] = counts.get(kid, 0) + 1
-        return counts
+        """Keyframe id -> how many of the points ``ids`` it observes (a point listed twice counts twice; points no
+        longer in the map are skipped), ordered by count, most first, then by keyframe id, newest first."""
+        ids = np.asarray(ids, np.int64).ravel()
+        ids = ids[(ids >= 0) & (ids < len(self._alive))]
+        pid, kid, _ = self.observations()
+        if len(ids) == 0 or len(pid) == 0:
+            return {}
+        weight = np.bincount(ids, minlength=len(self._alive))[pid]
+        sel = weight > 0
+        if not np.any(sel):
+            return {}
+        return self.ranked(kid[sel], weight[sel])
+
+    @staticmethod
+    def ranked(kid: np.ndarray, weight: np.ndarray | None = None) -> dict[int, int]:
+        """Keyframe id -> its (weighted) count among ``kid``, most first, then the newest first."""
+        if len(kid) == 0:
+            return {}
+        kids, inv = np.unique(kid, return_inverse=True)
+        counts = np.bincount(inv, weights=weight).astype(np.int64)
+        order = np.lexsort((-kids, -counts))
+        return {int(k): int(c) for k, c in zip(kids[order], counts[order])}
 
     def covisible(self, kf: KeyFrame, n: int = 10, min_shared: int = 1) -> list[KeyFrame]:
+        """The ``n`` keyframes sharing most points with ``kf`` (at least ``min_shared``), most first (ties: the
+        newest first)."""
         counts = self.observers(kf.mp[kf.mp >= 0])
         counts.pop(kf.id, None)
-        best = sorted((c, k) for k, c in counts.items() if c >= min_shared)[::-1][:n]
-        return [self.keyframes[k] for _, k in best if k in self.keyframes]
+        best = [k for k, c in counts.items() if c >= min_shared][:n]
+        return [self.keyframes[k] for k in best if k in self.keyframes]
+
+    def reference_keyframe(self, p: MapPoint) -> int:
+        """The keyframe a point moves with when the map is corrected: the one that made it, or while that is gone the
+        oldest that sees it (-1: none)."""
+        return p.first_kf if p.first_kf in self.keyframes else min(p.obs, default=-1)
 
     def point_arrays(self, ids=None):
         """(ids, positions, descriptors) of live points (all, or those of ``ids`` that still exist)."""

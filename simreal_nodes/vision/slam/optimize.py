@@ -11,6 +11,7 @@ from simreal_nodes import geometry as G
 
 CHI2_2D = 5.991  # 95 % for 2 dof
 CHI2_3D = 7.815
+FIXED_SIGMA = 1e-6  # prior sigma that holds a fixed keyframe in a GTSAM graph (radians, map units)
 
 
 def project(T_cw: np.ndarray, P: np.ndarray, K: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -53,28 +54,37 @@ def refine_pose(T_cw: np.ndarray, P: np.ndarray, uv: np.ndarray, sigma2: np.ndar
     return T, inl
 
 
-def ba_request(kfs_opt, kfs_fixed, points) -> dict:
-    """Everything a bundle adjustment needs, as plain arrays (it can cross a process boundary)."""
+def ba_request(m, kfs_opt, kfs_fixed, pt_ids: np.ndarray) -> dict:
+    """Everything a bundle adjustment needs, as plain arrays (it can cross a process boundary): the keyframes
+    (``kfs_opt`` optimized, ``kfs_fixed`` held), the points ``pt_ids`` of the map ``m`` and every observation of
+    those points by those keyframes (point-major, then in the keyframes' order), gathered from the map's
+    observation arrays (no loop over points)."""
     kfs = list(kfs_opt) + list(kfs_fixed)
-    kid_index = {kf.id: i for i, kf in enumerate(kfs)}
-    obs_p, obs_k, uv, z, sig = [], [], [], [], []
-    for j, p in enumerate(points):
-        for kid, idx in p.obs.items():
-            i = kid_index.get(kid)
-            if i is None:
-                continue
-            kf = kfs[i]
-            obs_p.append(j)
-            obs_k.append(i)
-            uv.append(kf.feats.und[idx])
-            z.append(kf.depth[idx] if kf.depth is not None else np.nan)
-            sig.append(kf.feats.scale_factor ** float(kf.feats.octave[idx]))
+    pt_ids = np.asarray(pt_ids, np.int64)
+    pid, kid, idx = m.observations()
+    jmap = np.full(len(m._alive), -1, np.int64)
+    jmap[pt_ids] = np.arange(len(pt_ids))
+    kmap = np.full(max([k.id for k in kfs] + [int(kid.max()) if len(kid) else 0]) + 1, -1, np.int64)
+    kmap[[k.id for k in kfs]] = np.arange(len(kfs))
+    sel = (jmap[pid] >= 0) & (kmap[kid] >= 0)
+    obs_p, obs_k, fi = jmap[pid[sel]], kmap[kid[sel]], idx[sel]
+    order = np.lexsort((obs_k, obs_p))
+    obs_p, obs_k, fi = obs_p[order], obs_k[order], fi[order]
+    uv = np.zeros((len(fi), 2))
+    z = np.full(len(fi), np.nan)
+    sig = np.ones(len(fi))
+    for i, kf in enumerate(kfs):
+        at = obs_k == i
+        if not np.any(at):
+            continue
+        uv[at] = kf.feats.und[fi[at]]
+        sig[at] = kf.feats.scale_factor ** kf.feats.octave[fi[at]].astype(np.float64)
+        if kf.depth is not None:
+            z[at] = kf.depth[fi[at]]
     return {"kf_ids": np.array([kf.id for kf in kfs], np.int64), "poses": np.array([kf.T_wc for kf in kfs]),
             "fixed": np.array([False] * len(kfs_opt) + [True] * len(kfs_fixed)),
-            "pt_ids": np.array([p.id for p in points], np.int64),
-            "pos": np.array([p.pos for p in points]).reshape(-1, 3),
-            "obs_p": np.array(obs_p, np.int64), "obs_k": np.array(obs_k, np.int64), "uv": np.array(uv).reshape(-1, 2),
-            "z": np.array(z, np.float64), "sigma": np.array(sig, np.float64)}
+            "pt_ids": pt_ids, "pos": m._pos[pt_ids].copy().reshape(-1, 3),
+            "obs_p": obs_p, "obs_k": obs_k, "uv": uv, "z": z, "sigma": sig}
 
 
 def bundle_adjust(req: dict, K: np.ndarray, baseline: float | None = None, iterations: int = 10,
@@ -90,12 +100,20 @@ def bundle_adjust(req: dict, K: np.ndarray, baseline: float | None = None, itera
     vals = gtsam.Values()
     cal = gtsam.Cal3_S2(K[0, 0], K[1, 1], K[0, 1], K[0, 2], K[1, 2])
     stereo_cal = gtsam.Cal3_S2Stereo(K[0, 0], K[1, 1], K[0, 1], K[0, 2], K[1, 2], baseline) if baseline else None
+    held = gtsam.noiseModel.Isotropic.Sigma(6, FIXED_SIGMA)
     huber2 = gtsam.noiseModel.mEstimator.Huber.Create(np.sqrt(CHI2_2D))
     huber3 = gtsam.noiseModel.mEstimator.Huber.Create(np.sqrt(CHI2_3D))
     for kid, T, fx in zip(req["kf_ids"], req["poses"], req["fixed"]):
         vals.insert(X(int(kid)), gtsam.Pose3(T))
         if fx:
-            graph.add(gtsam.NonlinearEqualityPose3(X(int(kid)), gtsam.Pose3(T)))
+            if req.get("whole"):
+                # a global BA: held by a prior of 1e-6 (rad, map units); a hard NonlinearEquality makes GTSAM eliminate
+                # the clique of every pose with a constrained (QR) factor, 25 times slower on a whole map (the result
+                # 1e-8 apart). Local BAs keep the hard constraint: with the prior (5 times faster) the asynchronous
+                # monocular runs at 2000 features broke (localization benchmark, stop 54; cause not found)
+                graph.add(gtsam.PriorFactorPose3(X(int(kid)), gtsam.Pose3(T), held))
+            else:
+                graph.add(gtsam.NonlinearEqualityPose3(X(int(kid)), gtsam.Pose3(T)))
     n_obs = np.bincount(req["obs_p"], minlength=len(req["pt_ids"]))
     for j, (pid, P) in enumerate(zip(req["pt_ids"], req["pos"])):
         vals.insert(L(int(pid)), gtsam.Point3(*P))

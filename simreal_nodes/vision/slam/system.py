@@ -6,7 +6,8 @@ constant-velocity motion model and search by projection, pose optimization with 
 falling back to descriptor matching + PnP RANSAC -> tracking of the local map (points of the covisible
 keyframes) -> keyframe decision. A new keyframe triggers local mapping: new points (triangulated with
 covisible keyframes, or from depth), fusion with the neighbouring keyframes' points (monocular), local bundle
-adjustment in GTSAM, map-point and keyframe culling.
+adjustment in GTSAM, map-point and keyframe culling; with ``SlamConfig.loop_closing``, a loop search (Sim3, essential
+graph, global BA: :mod:`.loop_closing`).
 A lost frame triggers relocalization (descriptor matching against the whole map + PnP RANSAC). In
 localization-only mode the map is frozen: no keyframes, no new points.
 
@@ -14,8 +15,8 @@ Map points on a deforming object can be flagged ``deformable``: they never vote 
 and they are followed from frame to frame as the deformable tracker's measurements (:mod:`.deformable`).
 
 :class:`Slam` only sequences the parts, which share one :class:`~.context.SlamContext`: :mod:`.two_view`
-(initialization), :mod:`.tracking`, :mod:`.relocalization`, :mod:`.local_mapping` and :mod:`.deformable`, tuned
-by one :class:`~.config.SlamConfig`.
+(initialization), :mod:`.tracking`, :mod:`.relocalization`, :mod:`.local_mapping`, :mod:`.loop_closing` and
+:mod:`.deformable`, tuned by one :class:`~.config.SlamConfig`.
 """
 
 from __future__ import annotations
@@ -32,6 +33,7 @@ from simreal_nodes.vision.slam.config import INITIALIZING, LOST, NOT_STARTED, OK
 from simreal_nodes.vision.slam.context import SlamContext
 from simreal_nodes.vision.slam.deformable import DeformableTracks
 from simreal_nodes.vision.slam.local_mapping import LocalMapper
+from simreal_nodes.vision.slam.loop_closing import LoopCloser
 from simreal_nodes.vision.slam.map import Map
 from simreal_nodes.vision.slam.relocalization import Relocalizer
 from simreal_nodes.vision.slam.result import TrackResult
@@ -66,6 +68,7 @@ class Slam:
         """A fresh context and parts: no map, not started."""
         self.ctx = SlamContext(self.cam, self.cam.K.copy(), self.mode, baseline, self.config)
         self.mapper = LocalMapper(self.ctx, self.async_mapping)
+        self.loop_closer = LoopCloser(self.ctx, self.mapper)
         self.initializer = Initializer(self.ctx, self.mapper, self.known_scale)
         self.tracker = Tracker(self.ctx)
         self.relocalizer = Relocalizer(self.ctx, self.tracker)
@@ -144,9 +147,17 @@ class Slam:
                 self.tracks.observe(feats, fix.T_cw, res, exclude=fix.match[:, 0])
                 if not self.localization_only and self.mapper.need_keyframe(res.n_inliers):
                     t3 = time.perf_counter()
-                    self.mapper.insert_keyframe(stamp, fix.T_cw, feats, z, fix.match, fix.inl)
+                    kf = self.mapper.insert_keyframe(stamp, fix.T_cw, feats, z, fix.match, fix.inl)
                     res.keyframe = True
                     tim["mapping_ms"] = (time.perf_counter() - t3) * 1e3
+                    if self.config.loop_closing:
+                        t4 = time.perf_counter()
+                        loop = self.loop_closer.process(kf)
+                        tim["loop_ms"] = (time.perf_counter() - t4) * 1e3
+                        if loop is not None:
+                            res.reason = (f"loop closed: keyframe {loop.kf} on {loop.loop_kf} ({loop.matches} "
+                                          f"matches, scale {loop.scale:.3f})")
+                            res.T_wc = kf.T_wc.copy()
         res.n_features = len(feats)
         res.timings.update(tim)
         res.timings["total_ms"] = (time.perf_counter() - t0) * 1e3
