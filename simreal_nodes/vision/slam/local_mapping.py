@@ -20,7 +20,7 @@ class LocalMapper:
         self.ctx = ctx
         cfg = ctx.config
         self._ba = AsyncBundleAdjuster(ctx.K, ctx.baseline, cfg.ba_iterations) if async_mapping else None
-        self.ba_stats = {"submitted": 0, "applied": 0, "deferred": 0}
+        self.ba_stats = {"submitted": 0, "applied": 0, "deferred": 0, "ba_ms": 0.0}  # ba_ms: the BAs' own time
         self._pending_ba: KeyFrame | None = None  # newest keyframe of a BA deferred while the worker was busy
         self._recent_points: list[tuple[int, int]] = []  # (point id, keyframe id at creation)
         self._epoch = 0  # bumped when the map is corrected (a loop): a BA submitted before is stale
@@ -44,6 +44,7 @@ class LocalMapper:
             self._apply_ba(res, self._inflight)
         else:  # it optimized the map as it was before a loop correction
             self.ba_stats["stale"] = self.ba_stats.get("stale", 0) + 1
+            self.ba_stats["ba_ms"] += float(res.get("ms", 0.0))
         self._inflight = None
         if self._pending_global:
             self._pending_global = False
@@ -274,8 +275,8 @@ class LocalMapper:
 
     def bundle_adjust(self, kfs_opt: list[KeyFrame], kfs_fixed: list[KeyFrame] | None, sync: bool = False,
                       max_points: int | None = None, whole: bool = False) -> None:
-        """Local BA over ``kfs_opt`` and the points they see (the best observed ones, at most
-        ``max_ba_points``); keyframes outside that also see the points are held fixed (or, without any,
+        """Local BA over ``kfs_opt`` and the points they see (all of them, or the best observed ``max_ba_points``);
+        keyframes outside that also see the points are held fixed (or, without any,
         the oldest optimized one). Synchronous, or handed to the mapping process."""
         ctx, m, cfg = self.ctx, self.ctx.map, self.ctx.config
         kfs_opt = [k for k in kfs_opt if k.id in m.keyframes]
@@ -290,7 +291,7 @@ class LocalMapper:
         pts = pts[~np.fromiter((m.points[int(i)].deformable for i in pts), bool, len(pts))]
         pid, kid, _ = m.observations()
         max_points = cfg.max_ba_points if max_points is None else max_points
-        if len(pts) > max_points:  # the most observed (stable: first seen first among equals)
+        if 0 < max_points < len(pts):  # the most observed (stable: first seen first among equals)
             n_obs = np.bincount(pid, minlength=len(m._alive))
             pts = pts[np.argsort(-n_obs[pts], kind="stable")[:max_points]]
         if kfs_fixed is None:
@@ -325,6 +326,7 @@ class LocalMapper:
         self._apply_ba(bundle_adjust(req, ctx.K, ctx.baseline, cfg.ba_iterations), req)
 
     def _apply_ba(self, res: dict, req: dict | None = None) -> None:
+        self.ba_stats["ba_ms"] += float(res.get("ms", 0.0))
         if not res.get("ok"):
             return
         m = self.ctx.map

