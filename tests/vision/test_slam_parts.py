@@ -311,6 +311,30 @@ def test_local_bundle_adjustment_optimizes_every_point_its_keyframes_see(monkeyp
     assert moved.max() < 1e-4  # exact observations: the optimized points stay on the truth, the others untouched
 
 
+def test_fusion_with_depth_keeps_points_apart_across_a_depth_edge():
+    """RGB-D keyframes: keyframe B's features lie where A's points project, with A's descriptors, but the first 100
+    read twice the depth (a surface behind: a depth edge). ORB-SLAM2's Fuse tests the virtual right coordinate as
+    well (3 dof): those 100 are not linked to A's points; the ones whose depth agrees are, and so are those with no
+    depth reading (the 2D test alone)."""
+    X, desc = scene(200, seed=7)
+    ctx = context("rgbd")
+    m = ctx.map
+    T_b = G.make_T(G.rot_axis("y", np.deg2rad(0.5)), np.array([-0.05, 0.0, 0.0]))
+    fa, ia, za = view(X, desc, np.eye(4))
+    fb, ib, zb = view(X, desc, T_b)
+    assert len(ia) == len(ib) == 200
+    zb = zb.copy()
+    zb[:100] *= 2.0
+    zb[100:150] = np.nan
+    A = m.new_keyframe(0, np.eye(4), fa, za)
+    B = m.new_keyframe(1, G.inv(T_b), fb, zb)
+    own = np.array([m.new_point(X[i], desc[i], A, k).id for k, i in enumerate(ia)])
+    touched = LocalMapper(ctx, async_mapping=False)._fuse_into(B, own)
+    assert np.all(B.mp[:100] == -1)
+    assert np.array_equal(B.mp[100:], own[np.searchsorted(ia, ib[100:])])
+    assert len(touched) == 100
+
+
 @pytest.mark.parametrize("fuse,mode,runs", [("mono", "rgbd", 0), ("all", "rgbd", 1), ("mono", "mono", 1),
                                              ("none", "mono", 0)])
 def test_fusion_runs_for_the_configured_modes(monkeypatch, fuse, mode, runs):

@@ -12,7 +12,7 @@ from simreal_nodes import geometry as G
 from simreal_nodes.vision.orb import Features, hamming, match_descriptors
 from simreal_nodes.vision.slam.context import SlamContext
 from simreal_nodes.vision.slam.map import KeyFrame
-from simreal_nodes.vision.slam.optimize import CHI2_2D, AsyncBundleAdjuster, ba_request, bundle_adjust, project
+from simreal_nodes.vision.slam.optimize import CHI2_2D, CHI2_3D, AsyncBundleAdjuster, ba_request, bundle_adjust, project
 
 
 class LocalMapper:
@@ -197,8 +197,9 @@ class LocalMapper:
     def _fuse_into(self, kf: KeyFrame, ids: np.ndarray, radius: float = 3.0) -> set[int]:
         """Project the points ``ids`` into ``kf`` and fuse or link them (ORB-SLAM2's Fuse): a candidate feature lies
         within ``radius`` x its level's scale of the projection and passes the reprojection chi-square test (5.99,
-        its level's variance), its level is within one of the level the point's distance predicts, and its
-        descriptor is the closest within 50 bits. Returns the ids of points that gained observations."""
+        its level's variance; 7.81 with the virtual right coordinate where the feature has a depth), its level is
+        within one of the level the point's distance predicts, and its descriptor is the closest within 50 bits.
+        Returns the ids of points that gained observations."""
         m, K, f = self.ctx.map, self.ctx.K, kf.feats
         ids = ids[m.alive(ids)]
         if len(ids) == 0 or len(f) == 0:
@@ -210,7 +211,7 @@ class LocalMapper:
         uv, z = project(kf.T_cw, P, K)
         W, H = self.ctx.cam.width, self.ctx.cam.height
         vis = (z > 0) & (uv[:, 0] >= 0) & (uv[:, 0] < W) & (uv[:, 1] >= 0) & (uv[:, 1] < H)
-        ids, uv = ids[vis], uv[vis]
+        ids, uv, z = ids[vis], uv[vis], z[vis]
         if len(ids) == 0:
             return set()
         pred = m.predicted_level(ids, kf.center, f.scale_factor)
@@ -224,8 +225,18 @@ class LocalMapper:
         cols = nn[valid]
         oct_ = f.octave[cols].astype(np.float64)
         e2 = np.sum((f.und[cols] - uv[rows]) ** 2, axis=1) / f.sigma2()[cols]
+        chi2 = np.full(len(rows), CHI2_2D)
+        if kf.depth is not None and self.ctx.baseline:
+            # a feature with a depth (RGB-D, stereo) must agree in depth too: the virtual right coordinate
+            # u_r = u - fx b / z (ORB-SLAM2's Fuse, 3 dof), so a point is not fused across a depth edge
+            zf = kf.depth[cols]
+            has = np.isfinite(zf) & (zf > 0)
+            bf = K[0, 0] * self.ctx.baseline
+            er = bf / np.where(has, zf, 1.0) - bf / z[rows]
+            e2 = e2 + np.where(has, er ** 2, 0.0) / f.sigma2()[cols]
+            chi2[has] = CHI2_3D
         lvl = np.floor(pred[rows])
-        ok = (dpix[valid] <= radius * sf ** oct_) & (e2 < 5.99) & (np.isnan(lvl) | (np.abs(oct_ - lvl) <= 1))
+        ok = (dpix[valid] <= radius * sf ** oct_) & (e2 < chi2) & (np.isnan(lvl) | (np.abs(oct_ - lvl) <= 1))
         rows, cols = rows[ok], cols[ok]
         if len(rows) == 0:
             return set()
