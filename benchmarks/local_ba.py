@@ -24,10 +24,9 @@ import argparse
 import numpy as np
 
 from benchmarks.common import save
+from benchmarks.localization import run_slam
 from simreal_nodes.synth.sequence import sequence
 from simreal_nodes.vision.slam.config import SlamConfig
-from simreal_nodes.vision.slam.system import Slam
-from simreal_nodes.vision.trajectory import ate
 
 CAPS = (400, 800, 1600, 0)
 RUNS = ("mono:1000:sync", "mono:2000:sync", "rgbd:1000:sync", "mono:1000:async", "mono:2000:async",
@@ -35,30 +34,9 @@ RUNS = ("mono:1000:sync", "mono:2000:sync", "rgbd:1000:sync", "mono:1000:async",
 
 
 def run(seq: dict, mode: str, n_features: int, mapping: str, cap: int) -> dict:
-    slam = Slam(seq["cam"], mode, n_features, async_mapping=(mapping == "async"),
-                config=SlamConfig(max_ba_points=cap))
-    est, res = [], []
-    try:
-        for i, g in enumerate(seq["gray"]):
-            r = slam.track(g, i, depth=seq["depth"][i] if mode == "rgbd" else None)
-            res.append(r)
-            est.append(r.T_wc)
-    finally:
-        slam.close()
-    ok = [i for i, T in enumerate(est) if T is not None]
-    a = ate(np.array([est[i][:3, 3] for i in ok]), np.array([seq["T"][i][:3, 3] for i in ok]),
-            with_scale=(mode == "mono"))
-    st = slam.mapper.ba_stats
-    n_ba = st["applied"] + st.get("stale", 0) if mapping == "async" else st["applied"]
-    kf_work = [r.timings["mapping_ms"] for r in res if "mapping_ms" in r.timings]
-    tracking = [r.timings.get("total_ms", np.nan) - r.timings.get("mapping_ms", 0.0) for r in res[5:]]
-    return {"mode": mode, "features": n_features, "mapping": mapping, "cap": cap if cap else "all",
-            "frames": len(est), "tracked": len(ok), "ate_mm": a["rmse"] * 1e3, "ate_pct": a["rmse_pct_length"],
-            "keyframes": len(slam.map.keyframes), "points": len(slam.map.points),
-            "ba_applied": st["applied"], "ba_submitted": st["submitted"], "ba_deferred": st["deferred"],
-            "ba_ms_mean": st["ba_ms"] / max(n_ba, 1),
-            "keyframe_ms_per_frame": float(np.sum(kf_work)) / len(res),
-            "tracking_ms_p50": float(np.nanmedian(tracking))}
+    row = run_slam(seq, mode, n_features, async_mapping=(mapping == "async"), config=SlamConfig(max_ba_points=cap))
+    row.update(mapping=mapping, cap=cap if cap else "all", keyframe_ms_per_frame=row["mapping_ms_per_frame"])
+    return row
 
 
 def main(argv=None) -> None:

@@ -23,8 +23,9 @@ from simreal_nodes.vision.trajectory import ate
 STAGES = ("extract_ms", "depth_ms", "match_ms", "pose_ms", "local_map_ms", "mapping_ms", "relocalization_ms")
 
 
-def run_slam(seq, mode, n_features, async_mapping=True):
-    slam = Slam(seq["cam"], mode, n_features, baseline=0.12 if mode == "stereo" else None, async_mapping=async_mapping)
+def run_slam(seq, mode, n_features, async_mapping=True, config=None):
+    slam = Slam(seq["cam"], mode, n_features, baseline=0.12 if mode == "stereo" else None, async_mapping=async_mapping,
+                config=config)
     res, est = [], []
     t0 = time.perf_counter()
     for i in range(len(seq["gray"])):
@@ -42,6 +43,9 @@ def run_slam(seq, mode, n_features, async_mapping=True):
            "ate_pct": a["rmse_pct_length"], "fps_wall": len(est) / wall,
            "tracking_ms_p50": float(np.nanmedian(tracking)), "tracking_ms_p95": float(np.nanpercentile(tracking, 95)),
            "keyframes": len(slam.map.keyframes), "points": len(slam.map.points)}
+    st = slam.mapper.ba_stats  # the local BAs: applied, submitted, deferred while busy, their own time
+    row.update(ba_applied=st["applied"], ba_submitted=st["submitted"], ba_deferred=st["deferred"],
+               ba_ms_mean=st["ba_ms"] / max(st["applied"] + st.get("stale", 0), 1))
     for s in STAGES:
         vals = [r.timings[s] for r in res if s in r.timings]
         row[s] = float(np.mean(vals)) if vals else 0.0
