@@ -81,8 +81,8 @@ def main(argv=None) -> None:
 
     save("local_ba", rows, cols, "Local bundle adjustment: points per BA against accuracy and time",
          "`python -m benchmarks.local_ba` (see its docstring). slam_room at 640 x 480, 300 frames (the development "
-         "scene). Fixed keyframes held by a GTSAM prior of 1e-6 (stop 55; a NonlinearEquality constraint gives the "
-         "same result 1e-8 apart, 4.7 times slower). Synchronous runs are deterministic; asynchronous ones move "
+         "scene). Fixed keyframes held by a GTSAM prior of 1e-6 (stop 55; a NonlinearEquality constraint gives poses "
+         "1e-8 apart, 4.7 times slower in a scratch run). Synchronous runs are deterministic; asynchronous ones move "
          "from run to run with the host's timing.", plot)
 
 
