@@ -45,7 +45,7 @@ def run_slam(seq, mode, n_features, async_mapping=True, config=None):
            "keyframes": len(slam.map.keyframes), "points": len(slam.map.points)}
     st = slam.mapper.ba_stats  # the local BAs: applied, submitted, deferred while busy, their own time
     row.update(ba_applied=st["applied"], ba_submitted=st["submitted"], ba_deferred=st["deferred"],
-               ba_ms_mean=st["ba_ms"] / max(st["applied"] + st.get("stale", 0), 1))
+               ba_stopped=st["stopped"], ba_ms_mean=st["ba_ms"] / max(st["applied"] + st.get("stale", 0), 1))
     for s in STAGES:
         vals = [r.timings[s] for r in res if s in r.timings]
         row[s] = float(np.mean(vals)) if vals else 0.0

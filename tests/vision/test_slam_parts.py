@@ -311,6 +311,127 @@ def test_local_bundle_adjustment_optimizes_every_point_its_keyframes_see(monkeyp
     assert moved.max() < 1e-4  # exact observations: the optimized points stay on the truth, the others untouched
 
 
+def four_keyframes(ctx: SlamContext) -> list:
+    """Four keyframes 10 cm apart (stored up to 0.9 degrees and 3 cm off their true poses) seeing 300 points stored
+    2 cm (sigma) off theirs: a local BA that takes several iterations."""
+    X, desc = scene(300, seed=5)
+    rng = np.random.default_rng(1)
+    m = ctx.map
+    Ts = [G.make_T(G.rot_axis("y", np.deg2rad(2.0 * k)), np.array([-0.1 * k, 0.02 * k, 0.0])) for k in range(4)]
+    views = [view(X, desc, T) for T in Ts]
+    kfs = [m.new_keyframe(k, G.inv(G.make_T(G.rot_axis("x", np.deg2rad(0.3 * k)), np.array([0.01 * k, 0, 0])) @ T),
+                          f, z if ctx.mode == "rgbd" else None) for k, (T, (f, _, z)) in enumerate(zip(Ts, views))]
+    for k, i in enumerate(views[0][1]):
+        p = m.new_point(X[i] + rng.normal(0.0, 0.02, 3), desc[i], kfs[0], k)
+        for kf, (_, ids, _) in zip(kfs[1:], views[1:]):
+            j = np.flatnonzero(ids == i)
+            if len(j):
+                m.link(p, kf, int(j[0]))
+    return kfs
+
+
+def test_bundle_adjustment_stops_when_asked_with_what_it_has():
+    """GTSAM's own loop, run iteration by iteration: without a stop it gives what ``optimize()`` gives (bit for bit);
+    a stop asked for ends it after the first iteration, and the points have moved toward the truth by then."""
+    import gtsam
+
+    from simreal_nodes.vision.slam import optimize as O
+
+    ctx = context("mono")
+    kfs = four_keyframes(ctx)
+    m = ctx.map
+    req = O.ba_request(m, kfs[2:], kfs[:2], np.array(sorted(m.points)))
+    full = O.bundle_adjust(req, ctx.K, None, 10)
+    graphs = []
+    real = gtsam.LevenbergMarquardtOptimizer
+
+    class Spy(real):  # type: ignore[misc,valid-type]
+        def __init__(self, g, v, p):
+            super().__init__(g, v, p)
+            graphs.append((g, v, p))
+
+    gtsam.LevenbergMarquardtOptimizer = Spy
+    try:
+        O.bundle_adjust(req, ctx.K, None, 10)
+    finally:
+        gtsam.LevenbergMarquardtOptimizer = real
+    (g, v, p), = graphs
+    ref = real(g, v, p).optimize()
+    from gtsam.symbol_shorthand import L
+    assert np.array_equal(full["pos"], np.array([np.asarray(ref.atPoint3(L(int(i)))) for i in req["pt_ids"]]))
+    assert full["iterations"] > 2 and not full["stopped"]
+    part = O.bundle_adjust(req, ctx.K, None, 10, stop=lambda: True)
+    assert part["ok"] and part["stopped"] and part["iterations"] == 1
+    truth_err = np.linalg.norm(full["pos"] - req["pos"], axis=1)
+    assert 0 < np.median(np.linalg.norm(part["pos"] - full["pos"], axis=1)) < 0.5 * np.median(truth_err)
+
+
+def test_bundle_adjustment_rejects_an_observation_whose_depth_disagrees():
+    """RGB-D: a feature whose depth reads twice the point's (a depth edge, a hole filled wrongly) while its pixel is
+    right is an outlier of the BA by the stereo factor's third coordinate (u_r, 3-dof chi-square 7.81, as
+    ORB-SLAM2); the 2D reprojection alone passes it."""
+    from simreal_nodes.vision.slam import optimize as O
+
+    ctx = context("rgbd")
+    kfs = four_keyframes(ctx)
+    m = ctx.map
+    k = kfs[2]
+    fi = int(np.flatnonzero(k.mp >= 0)[7])
+    pid = int(k.mp[fi])
+    k.depth[fi] *= 2.0
+    req = O.ba_request(m, kfs[2:], kfs[:2], np.array(sorted(m.points)))
+    res = O.bundle_adjust(req, ctx.K, ctx.baseline, 10)
+    assert (pid, k.id) in res["outliers"]
+    assert len(res["outliers"]) < 5  # (the 2 cm noise of the points' start is no outlier)
+
+
+def test_a_depth_camera_s_disparity_noise_weighs_its_depth_in_the_bundle_adjustment():
+    """RGB-D with exact depth readings and pixels 1 px off (sigma): ORB-SLAM2's model (u_r as a measurement of its own
+    at the level sigma, ``rgbd_disparity_sigma_px`` 0) lets the pixel noise move the points along their rays; a
+    disparity sigma of 0.05 px (a structured-light camera's) keeps them on the depth they were read at."""
+    from simreal_nodes.vision.slam import optimize as O
+
+    errs = {}
+    for sd in (0.0, 0.05):
+        ctx = context("rgbd", rgbd_disparity_sigma_px=sd)
+        kfs = four_keyframes(ctx)
+        m = ctx.map
+        rng = np.random.default_rng(3)
+        for k in kfs:
+            k.feats.und[:] += rng.normal(0.0, 1.0, k.feats.und.shape)
+        LocalMapper(ctx, async_mapping=False).bundle_adjust(kfs, None)
+        pid = np.array(sorted(i for i, p in m.points.items() if kfs[0].id in p.obs))
+        assert len(pid) > 250
+        Pc = m._pos[pid] @ kfs[0].T_cw[:3, :3].T + kfs[0].T_cw[:3, 3]  # in the held first keyframe's camera
+        fi = np.array([m.points[int(i)].obs[kfs[0].id] for i in pid])
+        errs[sd] = np.median(np.abs(Pc[:, 2] - kfs[0].depth[fi]))
+    assert errs[0.05] < 0.3 * errs[0.0] and errs[0.05] < 0.003
+
+
+@pytest.mark.parametrize("interrupt", [True, False])
+def test_a_waiting_keyframe_stops_the_running_asynchronous_bundle_adjustment(interrupt):
+    """Asynchronous mapping: a second local BA asked for while the mapping process runs the first waits; with
+    ``interrupt_ba`` it stops the first after its current iteration (ORB-SLAM2's abort flag), which is applied, and
+    the waiting one then runs to its end."""
+    import time
+
+    ctx = context("mono", interrupt_ba=interrupt)
+    kfs = four_keyframes(ctx)
+    mapper = LocalMapper(ctx, async_mapping=True)
+    try:
+        mapper.bundle_adjust(kfs, None)
+        mapper.bundle_adjust(kfs, None)  # the process is busy (it is still starting): deferred
+        assert mapper.ba_stats["submitted"] == 1 and mapper.ba_stats["deferred"] == 1
+        t0 = time.monotonic()
+        while mapper.ba_stats["applied"] < 2 and time.monotonic() - t0 < 60:
+            mapper.poll()
+            time.sleep(0.01)
+        assert mapper.ba_stats["applied"] == 2 and mapper.ba_stats["submitted"] == 2
+        assert mapper.ba_stats["stopped"] == int(interrupt)  # the first if interrupted; never the second
+    finally:
+        mapper.close()
+
+
 def test_fusion_with_depth_keeps_points_apart_across_a_depth_edge():
     """RGB-D keyframes: keyframe B's features lie where A's points project, with A's descriptors, but the first 100
     read twice the depth (a surface behind: a depth edge). ORB-SLAM2's Fuse tests the virtual right coordinate as

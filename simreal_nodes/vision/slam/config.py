@@ -40,6 +40,11 @@ class SlamConfig:
     max_ba_points: int = 0  # most-observed points a local BA optimizes, 0 = all (BA time vs. map accuracy)
     # 0 since stop 55: a cap leaves the other points where the keyframes that moved had put them (800 broke monocular
     # 2000-feature maps, 115 mm against 1.8 mm; benchmarks/local_ba.py)
+    rgbd_disparity_sigma_px: float = 0.0  # RGB-D: noise of the depth reading as a virtual disparity fx b / z
+    # (pixels; b the 0.08 m virtual baseline): the BA's and the fusion's weight on depth; 0 = ORB-SLAM2's model (u_r
+    # as an independent measurement at the feature's level sigma: depth weighed about 10 times below a Kinect's)
+    interrupt_ba: bool = True  # asynchronous mapping: a keyframe that must wait stops the running local BA after its
+    # current iteration (ORB-SLAM2's abort flag; the partial result is applied): a current map vs. converged BAs
     deformable_radius: float = 20.0  # pixels; ORB re-acquisition radius around a deformable point's prediction
     reacquire_below: int = 8  # fewer flow tracks than this (once more were followed): wide re-acquisition
     reacquire_wide_px: float = 80.0  # pixels; the wide re-acquisition radius (recovers after gaps vs. wrong matches)

@@ -12,7 +12,15 @@ from simreal_nodes import geometry as G
 from simreal_nodes.vision.orb import Features, hamming, match_descriptors
 from simreal_nodes.vision.slam.context import SlamContext
 from simreal_nodes.vision.slam.map import KeyFrame
-from simreal_nodes.vision.slam.optimize import CHI2_2D, CHI2_3D, AsyncBundleAdjuster, ba_request, bundle_adjust, project
+from simreal_nodes.vision.slam.optimize import (
+    CHI2_2D,
+    CHI2_3D,
+    AsyncBundleAdjuster,
+    ba_request,
+    bundle_adjust,
+    depth_e2,
+    project,
+)
 
 
 class LocalMapper:
@@ -20,7 +28,8 @@ class LocalMapper:
         self.ctx = ctx
         cfg = ctx.config
         self._ba = AsyncBundleAdjuster(ctx.K, ctx.baseline, cfg.ba_iterations) if async_mapping else None
-        self.ba_stats = {"submitted": 0, "applied": 0, "deferred": 0, "ba_ms": 0.0}  # ba_ms: the BAs' own time
+        # ba_ms: the BAs' own time; stopped: local BAs ended early by a newer keyframe (``SlamConfig.interrupt_ba``)
+        self.ba_stats = {"submitted": 0, "applied": 0, "deferred": 0, "stopped": 0, "ba_ms": 0.0}
         self._pending_ba: KeyFrame | None = None  # newest keyframe of a BA deferred while the worker was busy
         self._recent_points: list[tuple[int, int]] = []  # (point id, keyframe id at creation)
         self._epoch = 0  # bumped when the map is corrected (a loop): a BA submitted before is stale
@@ -231,9 +240,9 @@ class LocalMapper:
             # u_r = u - fx b / z (ORB-SLAM2's Fuse, 3 dof), so a point is not fused across a depth edge
             zf = kf.depth[cols]
             has = np.isfinite(zf) & (zf > 0)
-            bf = K[0, 0] * self.ctx.baseline
-            er = bf / np.where(has, zf, 1.0) - bf / z[rows]
-            e2 = e2 + np.where(has, er ** 2, 0.0) / f.sigma2()[cols]
+            e2 = e2 + np.where(has, depth_e2(uv[rows, 0] - f.und[cols, 0], K[0, 0] * self.ctx.baseline, z[rows],
+                                             np.where(has, zf, 1.0), np.sqrt(f.sigma2()[cols]),
+                                             self._disparity_sigma()), 0.0)
             chi2[has] = CHI2_3D
         lvl = np.floor(pred[rows])
         ok = (dpix[valid] <= radius * sf ** oct_) & (e2 < chi2) & (np.isnan(lvl) | (np.abs(oct_ - lvl) <= 1))
@@ -266,6 +275,11 @@ class LocalMapper:
                 m.link(p, kf, int(c))
                 touched.add(pid)
         return touched
+
+    def _disparity_sigma(self) -> float:
+        """The depth camera's disparity noise the BA and the fusion weigh a depth reading by (RGB-D only; 0: the
+        isotropic model, which a stereo pair keeps)."""
+        return self.ctx.config.rgbd_disparity_sigma_px if self.ctx.mode == "rgbd" else 0.0
 
     def _median_depth(self, kf: KeyFrame) -> float:
         _, P, _ = self.ctx.map.point_arrays(kf.mp[kf.mp >= 0])
@@ -323,21 +337,26 @@ class LocalMapper:
             return
         req = ba_request(m, kfs_opt, kfs_fixed, pts)
         req["whole"] = whole
+        req["disparity_sigma"] = self._disparity_sigma()
         if self._ba is not None and not sync:
             if self._ba.submit(req):
                 self.ba_stats["submitted"] += 1
                 self._submitted_epoch = self._epoch
                 self._inflight = req
-            elif whole:  # the mapping process is busy: the global BA goes first when it is free
-                self._pending_global = True
-            else:  # the mapping process is busy: optimize around the newest keyframe when it is free
-                self.ba_stats["deferred"] += 1
-                self._pending_ba = max(kfs_opt, key=lambda k: k.id)
+            else:
+                if whole:  # the mapping process is busy: the global BA goes first when it is free
+                    self._pending_global = True
+                else:  # the mapping process is busy: optimize around the newest keyframe when it is free
+                    self.ba_stats["deferred"] += 1
+                    self._pending_ba = max(kfs_opt, key=lambda k: k.id)
+                if cfg.interrupt_ba:  # ORB-SLAM2: a new keyframe stops the running local BA
+                    self._ba.interrupt()
             return
         self._apply_ba(bundle_adjust(req, ctx.K, ctx.baseline, cfg.ba_iterations), req)
 
     def _apply_ba(self, res: dict, req: dict | None = None) -> None:
         self.ba_stats["ba_ms"] += float(res.get("ms", 0.0))
+        self.ba_stats["stopped"] += int(bool(res.get("stopped")))
         if not res.get("ok"):
             return
         m = self.ctx.map

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import time
+from collections.abc import Callable
 
 import cv2
 import numpy as np
@@ -89,11 +90,13 @@ def ba_request(m, kfs_opt, kfs_fixed, pt_ids: np.ndarray) -> dict:
 
 
 def bundle_adjust(req: dict, K: np.ndarray, baseline: float | None = None, iterations: int = 10,
-                  optimizer: str = "levenberg_marquardt") -> dict:
+                  optimizer: str = "levenberg_marquardt", stop: Callable[[], bool] | None = None) -> dict:
     """GTSAM Levenberg-Marquardt on a :func:`ba_request`: optimizes the non-fixed poses and all points.
     Observations with a depth (RGB-D / stereo) are stereo factors (virtual right coordinate
     u_r = u - fx b / z), the others projection factors, all with a Huber loss scaled by the pyramid level.
-    Returns new poses and positions and the outlier observations (point id, keyframe id)."""
+    ``stop``: asked after every iteration (from the first on); True ends the BA there with what it has (ORB-SLAM2's
+    abort flag: a new keyframe waits). Returns new poses and positions, the outlier observations (point id, keyframe
+    id), the iterations run and whether it was stopped."""
     import gtsam
     from gtsam.symbol_shorthand import L, X
 
@@ -120,11 +123,12 @@ def bundle_adjust(req: dict, K: np.ndarray, baseline: float | None = None, itera
     # one robust noise model per pyramid-level sigma, shared by the factors at that level
     robust2: dict[float, gtsam.noiseModel.Robust] = {}
     robust3: dict[float, gtsam.noiseModel.Robust] = {}
+    sd = float(req.get("disparity_sigma", 0.0))
     for j, i, (u, v), z, s in zip(req["obs_p"], req["obs_k"], req["uv"], req["z"], req["sigma"]):
         kx, lx = X(int(req["kf_ids"][i])), L(int(req["pt_ids"][j]))
         if stereo_cal is not None and np.isfinite(z) and z > 0:
             nm = robust3.get(s) or robust3.setdefault(
-                s, gtsam.noiseModel.Robust.Create(huber3, gtsam.noiseModel.Isotropic.Sigma(3, s)))
+                s, gtsam.noiseModel.Robust.Create(huber3, _stereo_noise(gtsam, s, sd)))
             graph.add(gtsam.GenericStereoFactor3D(gtsam.StereoPoint2(u, u - K[0, 0] * baseline / z, v), nm, kx, lx,
                                                   stereo_cal))
         else:
@@ -132,17 +136,22 @@ def bundle_adjust(req: dict, K: np.ndarray, baseline: float | None = None, itera
                 s, gtsam.noiseModel.Robust.Create(huber2, gtsam.noiseModel.Isotropic.Sigma(2, s)))
             graph.add(gtsam.GenericProjectionFactorCal3_S2(gtsam.Point2(u, v), nm, kx, lx, cal))
     try:
+        opt: gtsam.NonlinearOptimizer
         if optimizer == "gauss_newton":
             gn = gtsam.GaussNewtonParams()
             gn.setMaxIterations(iterations)
             gn.setRelativeErrorTol(1e-5)
-            result = gtsam.GaussNewtonOptimizer(graph, vals, gn).optimize()
+            params: gtsam.NonlinearOptimizerParams = gn
+            opt = gtsam.GaussNewtonOptimizer(graph, vals, gn)
         else:
             lm = gtsam.LevenbergMarquardtParams()
             lm.setMaxIterations(iterations)
             lm.setRelativeErrorTol(1e-5)
             lm.setVerbosityLM("SILENT")
-            result = gtsam.LevenbergMarquardtOptimizer(graph, vals, lm).optimize()
+            params = lm
+            opt = gtsam.LevenbergMarquardtOptimizer(graph, vals, lm)
+        n_it, stopped = _iterate(gtsam, opt, params, stop)
+        result = opt.values()
     except RuntimeError as e:
         return {"ok": False, "error": str(e), "ms": (time.perf_counter() - t0) * 1e3}
     poses = np.array([result.atPose3(X(int(k))).matrix() for k in req["kf_ids"]])
@@ -158,13 +167,63 @@ def bundle_adjust(req: dict, K: np.ndarray, baseline: float | None = None, itera
             pr = np.c_[K[0, 0] * Xc[:, 0] / Xc[:, 2] + K[0, 1] * Xc[:, 1] / Xc[:, 2] + K[0, 2],
                        K[1, 1] * Xc[:, 1] / Xc[:, 2] + K[1, 2]]
             e2 = np.sum((pr - req["uv"]) ** 2, axis=1) / req["sigma"] ** 2
-        bad = ~np.isfinite(e2) | (e2 > CHI2_2D) | (Xc[:, 2] <= 0)
+            chi2 = np.full(len(e2), CHI2_2D)
+            if stereo_cal is not None:  # a stereo factor's third coordinate, u_r = u - fx b / z: 3 dof (7.81)
+                z = req["z"]
+                has = np.isfinite(z) & (z > 0)
+                e2 = e2 + np.where(has, depth_e2(pr[:, 0] - req["uv"][:, 0], K[0, 0] * baseline, Xc[:, 2], z,
+                                                 req["sigma"], sd), 0.0)
+                chi2[has] = CHI2_3D
+        bad = ~np.isfinite(e2) | (e2 > chi2) | (Xc[:, 2] <= 0)
         out = list(zip(req["pt_ids"][req["obs_p"][bad]].tolist(), req["kf_ids"][req["obs_k"][bad]].tolist()))
     return {"ok": True, "kf_ids": req["kf_ids"], "fixed": req["fixed"], "poses": poses, "pt_ids": req["pt_ids"],
-            "pos": pos, "outliers": out, "ms": (time.perf_counter() - t0) * 1e3}
+            "pos": pos, "outliers": out, "iterations": n_it, "stopped": stopped, "ms": (time.perf_counter() - t0) * 1e3}
 
 
-def _worker(conn, K, baseline, iterations):  # pragma: no cover - runs in the mapping process
+def _stereo_noise(gtsam, s: float, disparity_sigma: float):
+    """The noise of a stereo factor's (u_l, u_r, v) at pyramid sigma ``s``: ORB-SLAM2's isotropic ``s`` on each
+    (``disparity_sigma`` 0; right for a matched stereo pair, whose u_r is measured in its own image); or, for a depth
+    camera, u_r = u_l - d with the disparity d = fx b / z read from the depth image: u_l's noise shared by u_r and
+    the disparity's own ``disparity_sigma`` (pixels) added, covariance [[s2, s2, 0], [s2, s2 + sd2, 0], [0, 0, s2]]."""
+    if disparity_sigma <= 0:
+        return gtsam.noiseModel.Isotropic.Sigma(3, s)
+    s2 = s * s
+    return gtsam.noiseModel.Gaussian.Covariance(np.array([[s2, s2, 0.0], [s2, s2 + disparity_sigma ** 2, 0.0],
+                                                          [0.0, 0.0, s2]]))
+
+
+def depth_e2(du: np.ndarray, bf: float, z_pred: np.ndarray, z_meas: np.ndarray, sigma: np.ndarray,
+             disparity_sigma: float) -> np.ndarray:
+    """The depth part of a stereo observation's chi-square, beside the 2D part (du^2 + dv^2) / s^2, under
+    :func:`_stereo_noise`: the u_r residual (u_l error ``du`` minus the disparity error) over s^2 (isotropic), or
+    the disparity error over ``disparity_sigma``^2 (depth camera). ``bf``: fx times the (virtual) baseline."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        e_d = bf / z_pred - bf / z_meas  # predicted minus measured disparity
+    if disparity_sigma > 0:
+        return e_d ** 2 / disparity_sigma ** 2
+    return (du - e_d) ** 2 / np.asarray(sigma) ** 2
+
+
+def _iterate(gtsam, opt, params, stop: Callable[[], bool] | None) -> tuple[int, bool]:
+    """GTSAM's own optimize loop (NonlinearOptimizer::defaultOptimize: iterate until the maximum count or the
+    relative / absolute decrease is below its tolerance), with ``stop`` asked between iterations."""
+    err = opt.error()
+    if err <= params.getErrorTol():
+        return 0, False
+    n = 0
+    while True:
+        prev = err
+        opt.iterate()
+        n += 1
+        err = opt.error()
+        if n >= params.getMaxIterations() or not np.isfinite(prev) or gtsam.checkConvergence(
+                params.getRelativeErrorTol(), params.getAbsoluteErrorTol(), params.getErrorTol(), prev, err):
+            return n, False
+        if stop is not None and stop():
+            return n, True
+
+
+def _worker(conn, K, baseline, iterations, abort):  # pragma: no cover - runs in the mapping process
     while True:
         try:
             req = conn.recv()
@@ -172,7 +231,8 @@ def _worker(conn, K, baseline, iterations):  # pragma: no cover - runs in the ma
             return
         if req is None:
             return
-        conn.send(bundle_adjust(req, K, baseline, iterations))
+        # a global BA (after a loop) runs to the end; a local one stops when a newer keyframe waits
+        conn.send(bundle_adjust(req, K, baseline, iterations, stop=None if req.get("whole") else abort.is_set))
 
 
 class AsyncBundleAdjuster:
@@ -184,14 +244,21 @@ class AsyncBundleAdjuster:
 
         ctx = mp.get_context("spawn")
         self.conn, child = ctx.Pipe()
-        self.proc = ctx.Process(target=_worker, args=(child, K, baseline, iterations), daemon=True,
+        self._abort = ctx.Event()
+        self.proc = ctx.Process(target=_worker, args=(child, K, baseline, iterations, self._abort), daemon=True,
                                 name="simreal-local-mapping")
         self.proc.start()
         self.busy = False
 
+    def interrupt(self) -> None:
+        """Ask the running local BA to stop after its current iteration (it returns what it has)."""
+        if self.busy:
+            self._abort.set()
+
     def submit(self, req: dict) -> bool:
         if self.busy or not self.proc.is_alive():
             return False
+        self._abort.clear()  # a stop asked for while the last BA ran (it finished meanwhile) is not this one's
         self.conn.send(req)
         self.busy = True
         return True
