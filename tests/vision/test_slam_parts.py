@@ -389,7 +389,6 @@ def test_a_depth_camera_s_disparity_noise_weighs_its_depth_in_the_bundle_adjustm
     """RGB-D with exact depth readings and pixels 1 px off (sigma): ORB-SLAM2's model (u_r as a measurement of its own
     at the level sigma, ``rgbd_disparity_sigma_px`` 0) lets the pixel noise move the points along their rays; a
     disparity sigma of 0.05 px (a structured-light camera's) keeps them on the depth they were read at."""
-    from simreal_nodes.vision.slam import optimize as O
 
     errs = {}
     for sd in (0.0, 0.05):
