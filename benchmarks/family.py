@@ -482,30 +482,31 @@ into in this stop. The tracker's time in this table (244 ms per frame at the med
 39's) is not comparable: this run shared the 2 cores with two other benchmarks for most of its length. The
 development table of stop 38 that the next paragraph compares with is kept as `family_dev_0_19_stop38`.
 
-Stop 55 reran the held-out seeds on the SLAM as it is now (the first table; seeds 1000-1036 in stop 55, 1037-1099
-in stop 56 from a clone of stop 55's code; promoted to the main table in stop 57, stop 49's is now `family_stop49`): stops 50-55 changed the SLAM (the five-point start and keyframe fusion for
-monocular maps, array covisibility queries whose ties order the BA differently, and stop 55's local BAs over every
-point their keyframes see, where RGB-D's had optimized at most 800), the tracker not at all. All 100 scenes: median
-of the per-scene medians 0.49 % (stop 49's, `family_stop49`: 0.50 %), p90 1.57 % (1.58 %), within 1 % 79 % (76 %), within
-2 % 96 % (95 %); camera ATE median 2.06 mm (2.02 mm). At or over 2 %: 1003 (2.25 %), 1056 (2.12 %), 1065 (2.49 %)
-and 1081 (never registered), as before; 1070 2.01 -> 1.79 %. 15 scenes moved by more than 0.1 points, both ways (1001
-0.52 -> 0.69 %, 1014 0.66 -> 0.88 %, 1085 1.14 -> 1.37 %; 1008 1.24 -> 0.96 %, 1023 1.86 -> 1.49 %, 1089 1.58 -> 1.39
-%): a wash. Stop 56's RGB-D outlier test in the BA came after this run (on the development orbit it changed nothing
-before a loop). Its tracker times ran beside other benchmarks (about twice stop 49's).
+Stop 55 reran the held-out seeds on the SLAM as it is now (the first table; seeds 1000-1036 in stop 55, 1037-1099 in
+stop 56 from a clone of stop 55's code; promoted to the main table in stop 57, stop 49's is now `family_stop49`): stops
+50-55 changed the SLAM (the five-point start and keyframe fusion for monocular maps, array covisibility queries whose
+ties order the BA differently, and stop 55's local BAs over every point their keyframes see, where RGB-D's had optimized
+at most 800), the tracker not at all. All 100 scenes: median of the per-scene medians 0.49 % (stop 49's,
+`family_stop49`: 0.50 %), p90 1.57 % (1.58 %), within 1 % 79 % (76 %), within 2 % 96 % (95 %); camera ATE median 2.06 mm
+(2.02 mm). At or over 2 %: 1003 (2.25 %), 1056 (2.12 %), 1065 (2.49 %) and 1081 (never registered), as before; 1070 2.01
+-> 1.79 %. 15 scenes moved by more than 0.1 points, both ways (1001 0.52 -> 0.69 %, 1014 0.66 -> 0.88 %, 1085 1.14 ->
+1.37 %; 1008 1.24 -> 0.96 %, 1023 1.86 -> 1.49 %, 1089 1.58 -> 1.39 %): a wash. Stop 56's RGB-D outlier test in the BA
+came after this run (on the development orbit it changed nothing before a loop). Its tracker times ran beside other
+benchmarks (about twice stop 49's).
 
 Stop 49 fits the candidates' brightness in the coarse search only when the warm start's gain is under 0.5
-(`dense_grid_brightness: auto`): fitted on every frame (`always`, stop 48's default), a camera-sweep view of
-development seed 1 at 80 degrees of azimuth picked wrong candidates (the 90th percentile of its frames called OK
-0.34 % -> 9.8 % of the span; docs/stability.md). On the development beams 0-19 (`family_dev_0_19`) `auto` reads as
-`never` (`family_dev_0_19_dense_grid_brightness_false`, the defaults before stop 48) in every row to the hundredth,
-states and all; `always` (`family_dev_0_19_dense_grid_brightness_always`, stop 48's run) was better on seeds 6, 7,
-12 and 19 (their 90th percentile by 0.04-0.27 points, their median by up to 0.07) and worse on none by more than
-0.02: a few tenths on four scenes against a 10 % tail in a grazing view, traded for the tail (docs/tracking.md). All
-100 held-out rows were rerun (`family_stop49`; stop 48's is `family_stop48`): median of the per-scene medians 0.50 %, p90
-1.58 %, 76 % within 1 %, 95 % within 2 %, every scene's median within 0.01 points of stop 39's (stop 48: 77 % within
-1 %, 1003 2.34 % and 1011 1.69 %, now 2.22 % and 1.91 % as in stop 39). At or over 2 %: 1003, 1056, 1065, 1070 and
-1081, as before; 1071 and 1041 keep their OK frames' 90th percentile at 71 % and 57 %. The tracker's time in this
-table is not comparable (the run shared the 2 cores with the camera sweep and the gain calibration).
+(`dense_grid_brightness: auto`): fitted on every frame (`always`, stop 48's default), a camera-sweep view of development
+seed 1 at 80 degrees of azimuth picked wrong candidates (the 90th percentile of its frames called OK 0.34 % -> 9.8 % of
+the span; docs/stability.md). On the development beams 0-19 (`family_dev_0_19`) `auto` reads as `never`
+(`family_dev_0_19_dense_grid_brightness_false`, the defaults before stop 48) in every row to the hundredth, states and
+all; `always` (`family_dev_0_19_dense_grid_brightness_always`, stop 48's run) was better on seeds 6, 7, 12 and 19 (their
+90th percentile by 0.04-0.27 points, their median by up to 0.07) and worse on none by more than 0.02: a few tenths on
+four scenes against a 10 % tail in a grazing view, traded for the tail (docs/tracking.md). All 100 held-out rows were
+rerun (`family_stop49`; stop 48's is `family_stop48`): median of the per-scene medians 0.50 %, p90 1.58 %, 76 % within 1
+%, 95 % within 2 %, every scene's median within 0.01 points of stop 39's (stop 48: 77 % within 1 %, 1003 2.34 % and 1011
+1.69 %, now 2.22 % and 1.91 % as in stop 39). At or over 2 %: 1003, 1056, 1065, 1070 and 1081, as before; 1071 and 1041
+keep their OK frames' 90th percentile at 71 % and 57 %. The tracker's time in this table is not comparable (the run
+shared the 2 cores with the camera sweep and the gain calibration).
 
 Stop 39 fused the shading term's g over the frames the tracker judged sound (`tracking.dense_shading_frames`, 50;
 docs/tracking.md), chosen on development plates and beams ("Plates" below; on development beams 0-19 every scene
