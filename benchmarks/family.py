@@ -120,6 +120,8 @@ def run_scene(seed: int, width: int = 640, height: int = 480, preloaded: bool = 
                   "state": [int(v) for v in states_a],
                   "gain": [None if not np.isfinite(v) else round(v, 4) for v in run["gain"]],
                   "margin": [None if not np.isfinite(v) else round(v, 4) for v in run["margin"]],
+                  "basin": [None if not np.isfinite(v) else round(v, 4) for v in run["basin"]],
+                  "switched": [int(v) for v in run["switched"]],
                   **({"truth_y": [None if not np.isfinite(v) else float(v) for v in tv[:, 1]],
                       "est_y": ev[:, 1].tolist()} if tv.shape[1] > 1 else {})},
     }
@@ -132,9 +134,12 @@ def track(pipe: Pipeline, seq: dict, fps: float, oid: str = "beam") -> dict[str,
     reason, the step's time; the tracker's own time and the camera's position error (map frame: both start at the
     first camera frame) where the camera was localized; the solve's time where one ran; the dense fit's
     brightness gain and its coarse search's runner-up margin (NaN where no dense fit ran or the search had no
-    candidate from another basin: the low-confidence flags are calibrated on them)."""
+    candidate from another basin: the low-confidence flags are calibrated on them); where the runner-up was fitted
+    too (``DenseSettings.basin_check``), how much more the other basin cost at full resolution and whether the fit
+    moved there (``switched``)."""
     run: dict[str, list] = {k: [] for k in ("truth", "est", "states", "reasons", "step_ms", "cam_err", "solve_ms",
-                                            "tracker_ms", "truth_all", "est_all", "gain", "margin")}
+                                            "tracker_ms", "truth_all", "est_all", "gain", "margin", "basin",
+                                            "switched")}
     for i in range(len(seq["rgb"])):
         bgr = np.ascontiguousarray(seq["rgb"][i][:, :, ::-1])
         t1 = time.perf_counter()
@@ -155,6 +160,8 @@ def track(pipe: Pipeline, seq: dict, fps: float, oid: str = "beam") -> dict[str,
         run["reasons"].append(e.reason)
         run["gain"].append(float(e.debug.get("gain", float("nan"))))
         run["margin"].append(float(e.debug.get("grid_margin", float("nan"))))
+        run["basin"].append(float(e.debug.get("basin_gap", float("nan"))))
+        run["switched"].append(int(e.debug.get("basin_switched", 0.0) > 0))
     return run
 
 

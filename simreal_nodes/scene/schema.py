@@ -136,6 +136,10 @@ TRACKING = Record({
                                "alone after the joint fit and flag the estimate low-confidence where they disagree "
                                "(the fit traded the camera against the deformation; one more small fit per frame)",
                                default=True),
+    "dense_basin_check": Number("measurements 'dense': where the coarse search's best candidate from another "
+                                "basin costs less than this share more than its winner, fit from both and keep the "
+                                "cheaper at full resolution (a second fit on those frames); 0: off",
+                                lo=0.0, hi=10.0, default=0.1),
     "reference": Enum(("depth", "rest"), "the object's state in the view that later ones are compared with (the "
                       "dense reference view, a registered object's fit): read from the depth image where there is "
                       "one (the model's deformed surface fitted to it; a scene loaded from its first frame), or "
