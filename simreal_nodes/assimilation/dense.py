@@ -1163,7 +1163,7 @@ class DenseAligner:
         per_level = self._fit_from(pyr, grads, f, T_cw, lo, hi, finest)
         H, r, sigma, rows = per_level[-1]
         assert f.mu is not None
-        basin_gap, switched = float("nan"), 0.0
+        basin_gap, switched, other = float("nan"), 0.0, None
         alt_mu = self.grid_runner_up
         if (alt_mu is not None and self.grid_margin < self.s.basin_check and len(rows) >= self.s.min_samples
                 and np.isfinite(sigma)):
@@ -1175,8 +1175,9 @@ class DenseAligner:
             if len(rows_a) >= self.s.min_samples and np.isfinite(sigma_a):
                 c_win = self._profile_cost(finest, pyr[finest], rows, f, f.mu, T_cw, sigma)
                 c_alt = self._profile_cost(finest, pyr[finest], rows_a, alt, alt.mu, T_cw, sigma)
+                other = alt.mu
                 if c_alt < c_win:
-                    f, per_level, switched = alt, per_alt, 1.0
+                    f, per_level, switched, other = alt, per_alt, 1.0, f.mu
                     H, r, sigma, rows = per_level[-1]
                     c_win, c_alt = c_alt, c_win
                 if np.isfinite(c_alt) and c_win > 0:
@@ -1216,6 +1217,8 @@ class DenseAligner:
                          camera_trans_mm=float(1e3 * np.linalg.norm(f.cam[3:])),
                          camera_gap_sigma=cam_gap, grid_margin=self.grid_margin, basin_gap=basin_gap,
                          basin_switched=switched)
+        if other is not None:  # where the other basin's fit ended (the tracker names it when it flags the frame)
+            res.debug.update({f"basin_other_{i}": float(other[i]) for i in fi})
         if with_rest:
             # is there a deformation at all? The same fit with zero displacement, at the coarser levels only (it
             # is a yes/no question), compared with the deformed fit's residual at the same level

@@ -529,6 +529,72 @@ def test_the_coarse_search_reports_how_far_another_basin_is_behind(model):
     assert margin[0.3] > 0.1 and 0 <= margin[0.005] < 0.03, margin
 
 
+TWO_A1, TWO_A2, TWO_WAVE = 0.004, 0.0008, SIZE / 20  # the two-basin plate below: metres, metres, wavelength
+
+
+def _two_basin_u(x: np.ndarray, s: float) -> np.ndarray:
+    """u_x of the two-basin plate: a smooth stretch whose size 4 s (1 - s) is the same for s and 1 - s, plus a
+    ripple of 10 mm wavelength growing with s (under 1 px, finer than the coarsest pyramid level resolves)."""
+    return (TWO_A1 * 4 * s * (1 - s) * (np.clip(x, 0, None) / SIZE) ** 2
+            + TWO_A2 * s * np.sin(2 * np.pi * x / TWO_WAVE))
+
+
+def two_basin_model(n: int = 101) -> ReducedModel:
+    """:func:`_two_basin_u` as a two-mode separated model on the square plate (2 mm nodes: 5 per ripple)."""
+    P, tris = plate_points(n, SIZE)
+    space = np.zeros((2, len(P), 3))
+    space[0, :, 0] = TWO_A1 * (P[:, 0] / SIZE) ** 2
+    space[1, :, 0] = TWO_A2 * np.sin(2 * np.pi * P[:, 0] / TWO_WAVE)
+    s = np.linspace(0, 1, 101)
+    axes = [Axis("s", s, "")]
+    fld = SeparatedField("displacement", space, [np.stack([4 * s * (1 - s), s])], axes, "m", ["x", "y", "z"])
+    return ReducedModel("two_basin", P, tris, "tri3", axes, {"displacement": fld}, tris, "two basins",
+                        {"law": "linear_elastic"})
+
+
+def render_two_basin(tex: np.ndarray, T_wc: np.ndarray, s: float, noise: float, seed: int) -> np.ndarray:
+    """The two-basin plate deformed by s, rendered as :func:`render` does (inverse mapping, fixed point)."""
+    v, u = np.mgrid[0 : CAM.height, 0 : CAM.width].astype(np.float64)
+    d = np.stack([(u - CAM.cx) / CAM.fx, (v - CAM.cy) / CAM.fy, np.ones_like(u)], -1) @ T_wc[:3, :3].T
+    X = T_wc[:3, 3] + (-T_wc[2, 3] / d[..., 2])[..., None] * d
+    x = X[..., 0].copy()
+    for _ in range(40):
+        x = X[..., 0] - _two_basin_u(x, s)
+    texel = 0.25e-3
+    img = cv2.remap(tex, ((x + 0.05) / texel).astype(np.float32), ((X[..., 1] + 0.05) / texel).astype(np.float32),
+                    cv2.INTER_LINEAR)
+    img = img + np.random.default_rng(seed).normal(0, noise, img.shape).astype(np.float32)
+    return np.clip(img, 0, 255).astype(np.uint8)
+
+
+def test_the_other_basin_is_fitted_at_full_detail_where_the_coarse_search_cannot_tell():
+    """``basin_check``: s and 1 - s stretch the plate alike and differ by a ripple the coarsest level cannot
+    resolve, so the coarse search keeps the warm start's basin and Gauss-Newton only polishes it (what development
+    seed 9's load over the wrong support did). Fitted from the runner-up too, the full-resolution cost picks the
+    truth; the other basin costs more than its winner by well over the trigger."""
+    m = two_basin_model()
+    tex = texture(0.3)
+    T0, T1 = pose(), pose(0.02)
+    for truth, start in ((0.8, 0.2), (0.75, 0.25)):
+        out = {}
+        for check in (0.0, DenseSettings().basin_check):
+            al = DenseAligner(m, np.eye(4), CAM, None, DenseSettings(basin_check=check))
+            assert al.set_reference(render_two_basin(tex, T0, 0.0, 1.0, 0), G.inv(T0))
+            res = al.solve(render_two_basin(tex, T1, truth, 1.0, 1), G.inv(T1), np.array([start]), np.zeros(1),
+                           np.ones(1))
+            out[check] = res
+        off, on = out[0.0], out[DenseSettings().basin_check]
+        assert abs(off.mu[0] - truth) > 0.3 and off.debug["basin_switched"] == 0  # the test can tell
+        assert abs(on.mu[0] - truth) < 0.02 and on.debug["basin_switched"] == 1, (truth, on.mu)
+        assert on.debug["grid_margin"] < DenseSettings().basin_check and on.debug["basin_gap"] > 0.5
+    # where the coarse search already tells the basins apart (its runner-up far behind), no second fit
+    al = DenseAligner(m, np.eye(4), CAM, None, DenseSettings())
+    assert al.set_reference(render_two_basin(tex, T0, 0.0, 1.0, 0), G.inv(T0))
+    res = al.solve(render_two_basin(tex, T1, 0.2, 1.0, 1), G.inv(T1), np.array([0.8]), np.zeros(1), np.ones(1))
+    assert abs(res.mu[0] - 0.2) < 0.02 and res.debug["grid_margin"] > DenseSettings().basin_check
+    assert np.isnan(res.debug["basin_gap"]) and res.debug["basin_switched"] == 0
+
+
 def test_the_coarse_search_keeps_a_sound_brightness_when_auto():
     """"auto": a warm start whose gain is at least ``min_gain`` is trusted, the candidates compared at its
     brightness (what "never" does, its brightness passed on unchanged); "always" refits it."""
