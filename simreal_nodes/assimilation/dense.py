@@ -141,7 +141,9 @@ class DenseSettings:
     # then the search of the cost) and the cheaper of the two at the finest level is kept. The coarsest level sees
     # a small load's bending at a quarter of its size, too little to tell a load over one support from the same
     # load over the other (development seed 9), and once picked, the finer levels only polish that basin; 0: off.
-    # It costs a second fit on the frames it runs on (3 % of the development frames have a margin under 0.05)
+    # It costs a second fit on the frames it runs on (9.5 % of the development frames have a margin under 0.1; set
+    # from those frames' margins before any run with it: development seed 9's frames at the wrong support read
+    # 0.013-0.072). Development seed 9: p90 99.5 % -> 0.47 % of the span; docs/tracking.md
     basin_check: float = 0.1
     # the shading change of the deforming surface (g in the module docstring; False: the affine brightness alone)
     # and the 1-sigma of g's prior about zero (brightness fraction per unit change of the normal: k_d / k_a is at
