@@ -1219,7 +1219,7 @@ class DenseAligner:
                          camera_trans_mm=float(1e3 * np.linalg.norm(f.cam[3:])),
                          camera_gap_sigma=cam_gap, grid_margin=self.grid_margin, basin_gap=basin_gap,
                          basin_switched=switched)
-        if other is not None:  # where the other basin's fit ended (the tracker names it when it flags the frame)
+        if other is not None:  # where the other basin's fit ended (a diagnostic: benchmarks/family.py records it)
             res.debug.update({f"basin_other_{i}": float(other[i]) for i in fi})
         if with_rest:
             # is there a deformation at all? The same fit with zero displacement, at the coarser levels only (it

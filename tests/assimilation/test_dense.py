@@ -46,16 +46,23 @@ def texture(contrast: float, seed: int = 0) -> np.ndarray:
     return (128 + contrast * 100 * t / t.std()).astype(np.float32)
 
 
-def render(tex: np.ndarray, T_wc: np.ndarray, s: float, noise: float = 0.0, seed: int = 1) -> np.ndarray:
-    """The plate (z = 0) deformed by s: each pixel's ray meets the plane at X; its material point x solves
-    x + u(x) = X (fixed point: u is small and smooth); the texture is read at x."""
+def _stretch_u(x: np.ndarray, s: float) -> np.ndarray:
+    """u_x of :func:`stretch_model`."""
+    return s * STRETCH * (np.clip(x, 0, None) / SIZE) ** 2
+
+
+def render(tex: np.ndarray, T_wc: np.ndarray, s: float, noise: float = 0.0, seed: int = 1,
+           u_x=_stretch_u, iterations: int = 20) -> np.ndarray:
+    """The plate (z = 0) deformed by s in its plane (u_x(x, s), :func:`stretch_model`'s by default): each pixel's
+    ray meets the plane at X; its material point x solves x + u(x) = X (fixed point: u is small and smooth); the
+    texture is read at x."""
     v, u = np.mgrid[0 : CAM.height, 0 : CAM.width].astype(np.float64)
     d = np.stack([(u - CAM.cx) / CAM.fx, (v - CAM.cy) / CAM.fy, np.ones_like(u)], -1) @ T_wc[:3, :3].T
     lam = -T_wc[2, 3] / d[..., 2]
     X = T_wc[:3, 3] + lam[..., None] * d
     x = X[..., 0].copy()
-    for _ in range(20):
-        x = X[..., 0] - s * STRETCH * (np.clip(x, 0, None) / SIZE) ** 2
+    for _ in range(iterations):
+        x = X[..., 0] - u_x(x, s)
     texel = 0.25e-3
     mx = ((x + 0.05) / texel).astype(np.float32)
     my = ((X[..., 1] + 0.05) / texel).astype(np.float32)
@@ -553,18 +560,8 @@ def two_basin_model(n: int = 101) -> ReducedModel:
 
 
 def render_two_basin(tex: np.ndarray, T_wc: np.ndarray, s: float, noise: float, seed: int) -> np.ndarray:
-    """The two-basin plate deformed by s, rendered as :func:`render` does (inverse mapping, fixed point)."""
-    v, u = np.mgrid[0 : CAM.height, 0 : CAM.width].astype(np.float64)
-    d = np.stack([(u - CAM.cx) / CAM.fx, (v - CAM.cy) / CAM.fy, np.ones_like(u)], -1) @ T_wc[:3, :3].T
-    X = T_wc[:3, 3] + (-T_wc[2, 3] / d[..., 2])[..., None] * d
-    x = X[..., 0].copy()
-    for _ in range(40):
-        x = X[..., 0] - _two_basin_u(x, s)
-    texel = 0.25e-3
-    img = cv2.remap(tex, ((x + 0.05) / texel).astype(np.float32), ((X[..., 1] + 0.05) / texel).astype(np.float32),
-                    cv2.INTER_LINEAR)
-    img = img + np.random.default_rng(seed).normal(0, noise, img.shape).astype(np.float32)
-    return np.clip(img, 0, 255).astype(np.uint8)
+    """The two-basin plate deformed by s (:func:`render`, its ripple resolved by more fixed-point steps)."""
+    return render(tex, T_wc, s, noise, seed, u_x=_two_basin_u, iterations=40)
 
 
 def test_the_other_basin_is_fitted_at_full_detail_where_the_coarse_search_cannot_tell():
