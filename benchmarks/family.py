@@ -512,11 +512,11 @@ the wrong basin (`family_stop57_wrong_basin`: 1041, 1047, 1051, 1069, 1071) keep
 the span off, against 33 (1071 p90 71.2 % -> 1.62 %, 1069 mean 7.62 % -> 0.57 %, 1041 p90 53.1 % -> 2.20 %; 1041's 6 are
 frames where the two basins' full-resolution costs differ by 0.01-0.4 %: nothing in the cost tells them apart, and no
 flag says so yet); and the held-out seeds from 1000 up in order, as far as the stop's time allowed (`family_stop57`):
-seeds 1000-1049 (the first half; the run was cut there for time): median of the per-scene medians 0.52 % (the first
-table on the same 50 seeds: 0.53 %), p90 1.50 % (1.57 %), 82 % within 1 % (80 %), 98 % within 2 % (98 %); frames called
-OK more than 10 % off 1 -> 0, more than 2 % off 88 -> 94 (2-3 % frames of cantilevers the check did not touch: 1028 0.72
--> 0.81 %, 1029 0.69 -> 0.85 % moved with stop 56's change to the RGB-D BA, their camera ATE 1.15 -> 1.11 and 1.19 ->
-1.16 mm); where it moved frames, 1011's mean 5.35 % -> 1.63 % and 1021's 1.48 % -> 0.52 %. Its tracker times are not
+seeds 1000-1065 (the run was cut there for time): median of the per-scene medians 0.50 % (the first table on the same 66
+seeds: 0.49 %), p90 1.54 % (1.57 %), 82 % within 1 % (80 %), 95 % within 2 % (95 %); frames called OK more than 10 % off
+16 -> 7 (1041's 6 among them), more than 2 % off 164 -> 160 (2-3 % frames of cantilevers the check did not touch: 1028
+0.72 -> 0.81 %, 1029 0.69 -> 0.85 % moved with stop 56's change to the RGB-D BA, their camera ATE 1.15 -> 1.11 and 1.19
+-> 1.16 mm); where it moved frames, 1011's mean 5.35 % -> 1.63 % and 1021's 1.48 % -> 0.52 %. Its tracker times are not
 comparable (three runs shared the 2 cores).
 
 Stop 55 reran the held-out seeds on the SLAM as it is now (the first table; seeds 1000-1036 in stop 55, 1037-1099 in
