@@ -1,4 +1,4 @@
-"""Where the two low-confidence flags of issue 20's camera sweep were set (development seeds only):
+"""Where the low-confidence flags of issue 20's camera sweep were set (development seeds only):
 
 - ``--registration``: the registration step alone on development scenes of the family, as drawn and with the
   camera at 0.5 and 0.7 m: its error and the share of the beam's length it could slide at about the same cover
@@ -13,7 +13,11 @@
   or ``+blurN``: benchmarks/camera_quality.py's degradations);
 - ``--margin``: on the same frames (one pass serves both), the dense fit's coarse-search margin (``grid_margin``:
   how much more the cheapest grid candidate more than a quarter of a range from the winner costs, as a share of the
-  winner's cost): a diagnostic no flag reads, whether a fit in the wrong basin can be told from a sound one.
+  winner's cost): a diagnostic no flag reads, whether a fit in the wrong basin can be told from a sound one;
+- ``--ambiguity``: per loaded frame of the development beams (``family_dev_0_19_other``: stop 58's rerun, which
+  records where the other basin's fit ended), where that fit (``DenseSettings.basin_check``) ended more than
+  ``ambiguity_apart`` of the range from the kept one, how much more it cost at full resolution (``basin_gap``;
+  flagged under ``DenseSettings.max_ambiguity_gap``): two loads the image cannot tell apart.
 
     ./run bench flag_calibration                      # all four, on the sets the thresholds were chosen on
     python -m benchmarks.flag_calibration --registration --plan "1:-d0.5"   # one registration
@@ -53,6 +57,9 @@ GAIN_PLAN = ",".join(f"{s}:{v}" for s in (0, 1) for v in ("-az45-arc20", "-az65-
 GAIN_RUNS = "family_dev_0_19"
 GAIN_LEVELS = (0.3, 0.5, 0.7)  # the thresholds the table counts at
 MARGIN_LEVELS = (0.005, 0.01, 0.02, 0.05)
+AMBIGUITY_LEVELS = (0.001, 0.002, 0.005, 0.01, 0.02)
+# stop 58: the development beams rerun with the other basin's end point recorded (``other`` in the curves)
+AMBIGUITY_RUNS = "family_dev_0_19_other"
 
 
 def parse_plan(plan: str) -> list[tuple[int, str]]:
@@ -112,6 +119,11 @@ def camera_rows(specs: list[tuple[int, str]]) -> list[dict]:
 QUANTITIES: dict[str, dict[str, Any]] = {
     "gain": dict(debug="gain", levels=GAIN_LEVELS, nan_flagged=True, setting="min_gain", title="brightness gain",
                  label="dense fit's brightness gain", clip=(-0.2, 1.5)),
+    # the other basin's fit (DenseSettings.basin_check) where it ended more than DenseSettings.ambiguity_apart of the
+    # range away: how much more it cost at full resolution (NaN where it was not run or fell back to the winner's)
+    "ambiguity": dict(debug="basin_gap", levels=AMBIGUITY_LEVELS, nan_flagged=False, setting="max_ambiguity_gap",
+                      title="other basin's cost gap at full resolution (where it ended apart)",
+                      label="other basin's full-resolution cost gap (ended apart)", clip=(-0.002, 0.1)),
     "margin": dict(debug="grid_margin", levels=MARGIN_LEVELS, nan_flagged=False, setting=None,
                    title="coarse search's runner-up margin (other basin)",
                    label="coarse search's runner-up margin (other basin)", clip=(-0.05, 2.0)),
@@ -149,7 +161,7 @@ def frames_from_runs(name: str, quantities: tuple[str, ...] = tuple(QUANTITIES))
     out = []
     for r in doc["rows"]:
         c = doc["curves"][str(r["seed"])]
-        missing = [q for q in quantities if q not in c]
+        missing = [q for q in quantities if q not in c and not (q == "ambiguity" and "other" in c)]
         if missing:
             raise SystemExit(f"{name} has no per-frame {missing} (rerun it with the current benchmarks/family.py)")
         spans = (draw_plate if r["object"] == "plate" else draw)(r["seed"]).spans
@@ -162,7 +174,12 @@ def frames_from_runs(name: str, quantities: tuple[str, ...] = tuple(QUANTITIES))
                 ey = 100 * abs(c["est_y"][i] - c["truth_y"][i]) / spans[1]
                 err = max(err, ey) if np.isfinite(ey) else float("inf")
             for q in quantities:
-                fr[q].append(np.nan if c[q][i] is None else c[q][i])
+                if q == "ambiguity":  # the first parameter's end point is recorded: beams (one parameter) only
+                    o, b = c["other"][i], c["basin"][i]
+                    apart = o is not None and abs(o - e) / spans[0] > DenseSettings().ambiguity_apart
+                    fr[q].append(b if apart and b is not None and len(spans) == 1 else np.nan)
+                else:
+                    fr[q].append(np.nan if c[q][i] is None else c[q][i])
             fr["errs"].append(err)
             fr["states"].append(c["state"][i])
         out.append((r["seed"], f"{name} ({r['object']})", fr))
@@ -187,6 +204,8 @@ def frames_from_views(specs: list[tuple[int, str]]) -> list[tuple[int, str, dict
                 continue
             for q, spec in QUANTITIES.items():
                 fr[q].append(float(e.debug.get(spec["debug"], np.nan)))
+            if not float(e.debug.get("basin_apart", 0.0)) > DenseSettings().ambiguity_apart:
+                fr["ambiguity"][-1] = np.nan
             fr["errs"].append(100 * abs(float(e.values[0]) - truth) / span)
             fr["states"].append(int(e.state))
         out.append((seed, view or "as drawn", fr))
@@ -229,12 +248,13 @@ def main() -> None:
     ap.add_argument("--camera", action="store_true")
     ap.add_argument("--gain", action="store_true")
     ap.add_argument("--margin", action="store_true")
+    ap.add_argument("--ambiguity", action="store_true")
     ap.add_argument("--plan", help="SEED:SUFFIX,... (default: the set each threshold was chosen on)")
     ap.add_argument("--runs", default=GAIN_RUNS,
                     help="--gain, --margin: family results (development seeds) whose frames join")
     a = ap.parse_args()
-    if not (a.registration or a.camera or a.gain or a.margin):
-        a.registration = a.camera = a.gain = a.margin = True
+    if not (a.registration or a.camera or a.gain or a.margin or a.ambiguity):
+        a.registration = a.camera = a.gain = a.margin = a.ambiguity = True
     if a.registration:
         rows = registration_rows(parse_plan(a.plan or REGISTRATION_PLAN))
         save("flag_calibration_registration", rows,
@@ -258,7 +278,11 @@ def main() -> None:
              "Dense fit: the camera's gap to the surroundings alone, per frame (development seeds)",
              "`python -m benchmarks.flag_calibration --camera` (see its docstring). A frame is flagged past "
              "DenseSettings.max_camera_gap sigma.", lambda plt: _plot_gap(plt, rows))
-    qs = [q for q in QUANTITIES if getattr(a, q)]
+    qs = [q for q in QUANTITIES if getattr(a, q) and q != "ambiguity"]
+    if a.ambiguity:  # the development beams rerun with the other basin's end point (no views unless --plan)
+        runs = a.runs if a.runs != GAIN_RUNS else AMBIGUITY_RUNS
+        save_quantity("ambiguity", [sc for n in runs.split(",") for sc in frames_from_runs(n, ("ambiguity",))]
+                      + frames_from_views(parse_plan(a.plan or "")))
     if qs:  # one pass over the frames serves each quantity
         scenes = [] if a.runs in ("", "none") else [sc for n in a.runs.split(",")
                                                     for sc in frames_from_runs(n, tuple(qs))]

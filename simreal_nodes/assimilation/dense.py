@@ -145,6 +145,17 @@ class DenseSettings:
     # from those frames' margins before any run with it: development seed 9's frames at the wrong support read
     # 0.013-0.072). Development seed 9: p90 99.5 % -> 0.47 % of the span; docs/tracking.md
     basin_check: float = 0.1
+    # the tracker flags a fit whose other basin's fit (``basin_check``) ended more than ``ambiguity_apart`` of a
+    # range away (any free parameter) and costs less than ``max_ambiguity_gap`` more at the finest level: two loads
+    # explain the image alike, and which one was kept is a coin toss (what held-out beam 1041's six frames 55-58 % of
+    # the span off showed in stop 57). Set on the development beams 0-19 (``python -m benchmarks.flag_calibration
+    # --ambiguity``): of their 224 frames with a second fit, 150 ended within 0.02 of a range of the kept one (a fall
+    # back into its basin, however close the cost: not an ambiguity) and 72 more than 0.1 away, whose gaps are 0.187
+    # at the least (71 of them within 2 % of the span; seed 14's frame 39, 40 % off, has 0.80 and was flagged for
+    # its gain): 0.01 flags none of them and leaves a factor of about 20. The development beams hold no ambiguous frame, so what it catches is measured on held-out
+    # seeds only. It changes no estimate, only its state (and so whether its shading is fused); 0: no flag
+    max_ambiguity_gap: float = 0.01
+    ambiguity_apart: float = 0.1
     # the shading change of the deforming surface (g in the module docstring; False: the affine brightness alone)
     # and the 1-sigma of g's prior about zero (brightness fraction per unit change of the normal: k_d / k_a is at
     # most a few for a matte surface; the prior only holds the component along the normal, which no turn sees)
@@ -1219,8 +1230,10 @@ class DenseAligner:
                          camera_trans_mm=float(1e3 * np.linalg.norm(f.cam[3:])),
                          camera_gap_sigma=cam_gap, grid_margin=self.grid_margin, basin_gap=basin_gap,
                          basin_switched=switched)
-        if other is not None:  # where the other basin's fit ended (a diagnostic: benchmarks/family.py records it)
+        if other is not None:  # where the other basin's fit ended (benchmarks/family.py records it) and how far apart
             res.debug.update({f"basin_other_{i}": float(other[i]) for i in fi})
+            span = np.maximum(np.asarray(hi, float) - np.asarray(lo, float), 1e-12)
+            res.debug["basin_apart"] = float(np.max(np.abs(other - f.mu)[fi] / span[fi])) if len(fi) else 0.0
         if with_rest:
             # is there a deformation at all? The same fit with zero displacement, at the coarser levels only (it
             # is a yes/no question), compared with the deformed fit's residual at the same level

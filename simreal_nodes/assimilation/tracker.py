@@ -553,6 +553,9 @@ class DeformableTracker:
                    f"{self.cfg.dense.max_camera_gap:g}): the fit traded the camera's error against the object's "
                    "deformation (a view along the floor?)")
             _doubt(est, why)
+        why = ambiguity(res.debug, self.cfg.dense, [a.name for a in self.model.axes])
+        if est.state in (EstimateState.OK, EstimateState.LOW_CONFIDENCE) and why:
+            _doubt(est, why)
         gain = float(res.debug.get("gain", float("nan")))
         if est.state in (EstimateState.OK, EstimateState.LOW_CONFIDENCE) and not gain >= self.cfg.dense.min_gain:
             why = (f"the image shows the object's texture at {gain:.2f} of the reference view's contrast (at least "
@@ -802,6 +805,18 @@ class DeformableTracker:
                                self.cfg.max_iterations)
         rest = np.linalg.norm(obs - np.c_[Xo[:, 0], Xo[:, 2]], axis=1) / px
         return res, float(np.sqrt(np.mean(np.minimum(rest, 3 * self.cfg.huber_px) ** 2)))
+
+
+def ambiguity(debug: dict[str, float], s: DenseSettings, names: list[str]) -> str:
+    """Why a dense fit is a coin toss between two loads, or "": its other basin's fit (``basin_check``) ended more
+    than ``s.ambiguity_apart`` of a range away and cost less than ``s.max_ambiguity_gap`` more at full resolution
+    (:meth:`DenseAligner.solve`'s debug values ``basin_gap``, ``basin_apart``, ``basin_other_i``)."""
+    gap, apart = float(debug.get("basin_gap", float("nan"))), float(debug.get("basin_apart", 0.0))
+    if not (gap < s.max_ambiguity_gap and apart > s.ambiguity_apart):
+        return ""
+    alt = ", ".join(f"{n}={debug[f'basin_other_{i}']:.3g}" for i, n in enumerate(names) if f"basin_other_{i}" in debug)
+    return (f"another load ({alt}) explains the image as well: its fit costs {100 * gap:.2f} % more at full "
+            f"resolution (at least {100 * s.max_ambiguity_gap:g} % tells them apart)")
 
 
 def _doubt(est: Estimate, why: str) -> None:

@@ -546,15 +546,18 @@ def _two_basin_u(x: np.ndarray, s: float) -> np.ndarray:
             + TWO_A2 * s * np.sin(2 * np.pi * x / TWO_WAVE))
 
 
-def two_basin_model(n: int = 101) -> ReducedModel:
-    """:func:`_two_basin_u` as a two-mode separated model on the square plate (2 mm nodes: 5 per ripple)."""
+def two_basin_model(n: int = 101, ripple: bool = True) -> ReducedModel:
+    """:func:`_two_basin_u` as a two-mode separated model on the square plate (2 mm nodes: 5 per ripple); without
+    the ripple, its stretch mode alone (s and 1 - s the same displacement)."""
     P, tris = plate_points(n, SIZE)
     space = np.zeros((2, len(P), 3))
     space[0, :, 0] = TWO_A1 * (P[:, 0] / SIZE) ** 2
     space[1, :, 0] = TWO_A2 * np.sin(2 * np.pi * P[:, 0] / TWO_WAVE)
     s = np.linspace(0, 1, 101)
     axes = [Axis("s", s, "")]
-    fld = SeparatedField("displacement", space, [np.stack([4 * s * (1 - s), s])], axes, "m", ["x", "y", "z"])
+    k = 2 if ripple else 1
+    fld = SeparatedField("displacement", space[:k], [np.stack([4 * s * (1 - s), s])[:k]], axes, "m",
+                         ["x", "y", "z"])
     return ReducedModel("two_basin", P, tris, "tri3", axes, {"displacement": fld}, tris, "two basins",
                         {"law": "linear_elastic"})
 
@@ -590,6 +593,34 @@ def test_the_other_basin_is_fitted_at_full_detail_where_the_coarse_search_cannot
     res = al.solve(render_two_basin(tex, T1, 0.2, 1.0, 1), G.inv(T1), np.array([0.8]), np.zeros(1), np.ones(1))
     assert abs(res.mu[0] - 0.2) < 0.02 and res.debug["grid_margin"] > DenseSettings().basin_check
     assert np.isnan(res.debug["basin_gap"]) and res.debug["basin_switched"] == 0
+
+
+def test_a_fit_whose_two_basins_explain_the_image_alike_is_flagged():
+    """``max_ambiguity_gap``: without the ripple, s and 1 - s stretch the plate identically, so the other basin's fit
+    ends at 1 - s at the same cost: the tracker's :func:`ambiguity` says so (naming the other load); with the
+    ripple the full-resolution cost tells them apart and nothing is flagged."""
+    from simreal_nodes.assimilation.tracker import ambiguity
+
+    tex = texture(0.3)
+    T0, T1 = pose(), pose(0.02)
+    why = {}
+    for ripple in (False, True):
+        m = two_basin_model(ripple=ripple)
+        u_x = _two_basin_u if ripple else (lambda x, s: TWO_A1 * 4 * s * (1 - s) * (np.clip(x, 0, None) / SIZE) ** 2)
+        al = DenseAligner(m, np.eye(4), CAM, None, DenseSettings())
+        assert al.set_reference(render(tex, T0, 0.0, 1.0, 0, u_x=u_x, iterations=40), G.inv(T0))
+        res = al.solve(render(tex, T1, 0.8, 1.0, 1, u_x=u_x, iterations=40), G.inv(T1), np.array([0.2]),
+                       np.zeros(1), np.ones(1))
+        why[ripple] = ambiguity(res.debug, DenseSettings(), ["s"])
+        if not ripple:  # either basin may be kept; the other fit ended at the mirror load
+            assert min(abs(res.mu[0] - 0.8), abs(res.mu[0] - 0.2)) < 0.02, res.mu
+            assert abs(res.debug["basin_other_0"] - (1 - res.mu[0])) < 0.03, res.debug
+            assert res.debug["basin_apart"] > 0.5 and abs(res.debug["basin_gap"]) < DenseSettings().max_ambiguity_gap
+    assert why[False].startswith("another load (s=") and why[True] == "", why
+    # a second fit that fell back into the winner's basin is no ambiguity, however close its cost
+    assert ambiguity({"basin_gap": 0.0, "basin_apart": 0.01, "basin_other_0": 0.21}, DenseSettings(), ["s"]) == ""
+    assert ambiguity({"basin_gap": 0.0, "basin_apart": 0.6, "basin_other_0": 0.8},
+                     DenseSettings(max_ambiguity_gap=0.0), ["s"]) == ""  # 0: no flag
 
 
 def test_the_coarse_search_keeps_a_sound_brightness_when_auto():
