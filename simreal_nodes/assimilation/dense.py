@@ -153,7 +153,8 @@ class DenseSettings:
     # back into its basin, however close the cost: not an ambiguity) and 72 more than 0.1 away, whose gaps are 0.187
     # at the least (71 of them within 2 % of the span; seed 14's frame 39, 40 % off, has 0.80 and was flagged for
     # its gain): 0.01 flags none of them and leaves a factor of about 20. The development beams hold no ambiguous
-    # frame, so what it catches is measured on held-out seeds only. It changes no estimate, only its state (and so whether its shading is fused); 0: no flag
+    # frame, so what it catches is measured on held-out seeds only. It changes no estimate, only its state (and so
+    # whether its shading is fused); 0: no flag
     max_ambiguity_gap: float = 0.01
     ambiguity_apart: float = 0.1
     # the shading change of the deforming surface (g in the module docstring; False: the affine brightness alone)
