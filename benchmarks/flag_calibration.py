@@ -123,7 +123,7 @@ QUANTITIES: dict[str, dict[str, Any]] = {
     # range away: how much more it cost at full resolution (NaN where it was not run or fell back to the winner's)
     "ambiguity": dict(debug="basin_gap", levels=AMBIGUITY_LEVELS, nan_flagged=False, setting="max_ambiguity_gap",
                       title="other basin's cost gap at full resolution (where it ended apart)",
-                      label="other basin's full-resolution cost gap (ended apart)", clip=(-0.002, 0.1)),
+                      label="other basin's full-resolution cost gap (ended apart)", clip=(1e-5, 2.0), xlog=True),
     "margin": dict(debug="grid_margin", levels=MARGIN_LEVELS, nan_flagged=False, setting=None,
                    title="coarse search's runner-up margin (other basin)",
                    label="coarse search's runner-up margin (other basin)", clip=(-0.05, 2.0)),
@@ -301,6 +301,8 @@ def _plot_quantity(plt, q: str, rows: list[dict]):
         ax.axvline(getattr(DenseSettings(), spec["setting"]), color="grey", lw=0.8)
     ax.axhline(2.0, color="grey", lw=0.5, ls=":")
     ax.set_yscale("log")
+    if spec.get("xlog"):
+        ax.set_xscale("log")
     ax.set_xlabel(f"{spec['label']} (clipped to {spec['clip'][0]:g}..{spec['clip'][1]:g})")
     ax.set_ylabel("load error (% span)")
     fig.tight_layout()
