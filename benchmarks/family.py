@@ -123,6 +123,7 @@ def run_scene(seed: int, width: int = 640, height: int = 480, preloaded: bool = 
                   "basin": [None if not np.isfinite(v) else round(v, 4) for v in run["basin"]],
                   "switched": [int(v) for v in run["switched"]],
                   "other": [None if not np.isfinite(v) else float(v) for v in run["other"]],
+                  "warm": [int(v) for v in run["warm"]],
                   **({"truth_y": [None if not np.isfinite(v) else float(v) for v in tv[:, 1]],
                       "est_y": ev[:, 1].tolist()} if tv.shape[1] > 1 else {})},
     }
@@ -137,10 +138,11 @@ def track(pipe: Pipeline, seq: dict, fps: float, oid: str = "beam") -> dict[str,
     brightness gain and its coarse search's runner-up margin (NaN where no dense fit ran or the search had no
     candidate from another basin: the low-confidence flags are calibrated on them); where the runner-up was fitted
     too (``DenseSettings.basin_check``), how much more the other basin cost at full resolution, whether the fit
-    moved there (``switched``) and where the other fit ended (``other``: the first parameter)."""
+    moved there (``switched``), where the other fit ended (``other``: the first parameter) and whether the last
+    frame's estimate was fitted as well (``warm``: ``DenseSettings.basin_warm``)."""
     run: dict[str, list] = {k: [] for k in ("truth", "est", "states", "reasons", "step_ms", "cam_err", "solve_ms",
                                             "tracker_ms", "truth_all", "est_all", "gain", "margin", "basin",
-                                            "switched", "other")}
+                                            "switched", "other", "warm")}
     for i in range(len(seq["rgb"])):
         bgr = np.ascontiguousarray(seq["rgb"][i][:, :, ::-1])
         t1 = time.perf_counter()
@@ -164,6 +166,7 @@ def track(pipe: Pipeline, seq: dict, fps: float, oid: str = "beam") -> dict[str,
         run["basin"].append(float(e.debug.get("basin_gap", float("nan"))))
         run["switched"].append(int(e.debug.get("basin_switched", 0.0) > 0))
         run["other"].append(float(e.debug.get("basin_other_0", float("nan"))))
+        run["warm"].append(int(e.debug.get("basin_warm", 0.0) > 0))
     return run
 
 

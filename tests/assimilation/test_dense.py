@@ -595,6 +595,31 @@ def test_the_other_basin_is_fitted_at_full_detail_where_the_coarse_search_cannot
     assert np.isnan(res.debug["basin_gap"]) and res.debug["basin_switched"] == 0
 
 
+def test_the_last_frames_basin_is_fitted_where_the_coarse_search_leads_both_fits_astray(monkeypatch):
+    """``basin_warm``: where the coarse search's winner and its runner-up both end in one wrong basin (forced here:
+    the search puts the winner at 0.2 and the runner-up at 0.05, whose fit falls to 0.2 as well), the warm start
+    (the last frame's estimate, 0.8 and right) is fitted too and, cheaper at full resolution, kept."""
+    m = two_basin_model()
+    tex = texture(0.3)
+    T0, T1 = pose(), pose(0.02)
+
+    def astray(self, pyr, f, T_cw, lo, hi):
+        f.mu = np.array([0.2])
+        self.grid_margin, self.grid_runner_up = 0.01, np.array([0.05])
+
+    monkeypatch.setattr(DenseAligner, "_grid_start", astray)
+    out = {}
+    for warm in (False, True):
+        al = DenseAligner(m, np.eye(4), CAM, None, DenseSettings(basin_warm=warm))
+        assert al.set_reference(render_two_basin(tex, T0, 0.0, 1.0, 0), G.inv(T0))
+        out[warm] = al.solve(render_two_basin(tex, T1, 0.8, 1.0, 1), G.inv(T1), np.array([0.8]), np.zeros(1),
+                             np.ones(1))
+    assert abs(out[False].mu[0] - 0.2) < 0.05 and out[False].debug["basin_warm"] == 0, out[False].mu  # can tell
+    on = out[True]
+    assert abs(on.mu[0] - 0.8) < 0.02 and on.debug["basin_warm"] == 1 and on.debug["basin_switched"] == 2, on.mu
+    assert on.debug["basin_gap"] > 0.5 and abs(on.debug["basin_other_0"] - 0.2) < 0.05, on.debug
+
+
 def test_a_fit_whose_two_basins_explain_the_image_alike_is_flagged():
     """``max_ambiguity_gap``: without the ripple, s and 1 - s stretch the plate identically, so the other basin's fit
     ends at 1 - s at the same cost: the tracker's :func:`ambiguity` says so (naming the other load); with the
