@@ -840,7 +840,7 @@ def tracker_config(obj: dict[str, Any], **overrides: Any) -> TrackerConfig:
                                           camera_check=t["dense_camera_check"], shading=t["dense_shading"],
                                           shading_frames=t["dense_shading_frames"],
                                           grid_brightness=t["dense_grid_brightness"],
-                                          basin_check=t["dense_basin_check"],
+                                          basin_check=t["dense_basin_check"], basin_warm=t["dense_basin_warm"],
                                           placement_measured=obj["anchor"]["kind"] == "registration"),
                         dots=np.asarray(t["dots"]) if t["dots"] else None, dot_color=tuple(t["dot_color"]))
     return replace(cfg, **overrides)
