@@ -213,8 +213,34 @@ def frames_from_views(specs: list[tuple[int, str]]) -> list[tuple[int, str, dict
     return out
 
 
-def save_quantity(q: str, scenes: list[tuple[int, str, dict]]) -> None:
-    """flag_calibration_<q>: per scene the quantity against the load error, the totals, the scatter plot."""
+def unloaded_ties(names: list[str]) -> str:
+    """The same quantity on the runs' frames before the load comes on (the first 1.5 s), where nothing in the image
+    places a load: how many of those with a second fit that ended apart read under the threshold, and their spread
+    (a sentence for the table's notes: these frames are the development set's only ties)."""
+    from simreal_nodes.synth.family import draw
+
+    s = DenseSettings()
+    gaps = []
+    for name in names:
+        doc = json.loads((RESULTS / f"{name}.json").read_text())
+        for r in doc["rows"]:
+            c = doc["curves"][str(r["seed"])]
+            span = draw(r["seed"]).spans[0]
+            for t, e, o, b in zip(c["truth"], c["est"], c["other"], c["basin"]):
+                if t is None and b is not None and o is not None and abs(o - e) / span > s.ambiguity_apart:
+                    gaps.append(b)
+    if not gaps:
+        return ""
+    g = np.sort(gaps)
+    return (f"Before the load comes on (no load in the image, so no position to tell: the development set's only "
+            f"ties), {len(g)} frames had a second fit that ended apart: {int((g < s.max_ambiguity_gap).sum())} read "
+            f"under {s.max_ambiguity_gap:g} (median {np.median(g):.4f}, p90 {np.percentile(g, 90):.4f}, the most "
+            f"{g[-1]:.4f}).")
+
+
+def save_quantity(q: str, scenes: list[tuple[int, str, dict]], note: str = "") -> None:
+    """flag_calibration_<q>: per scene the quantity against the load error, the totals, the scatter plot (``note``
+    joins the table's notes)."""
     spec = QUANTITIES[q]
     rows = [quantity_row(q, seed, view, fr[q], fr["errs"], fr["states"]) for seed, view, fr in scenes]
     cols = [("seed", "seed", "{}"), ("view", "view", "{}"), ("frames", "loaded frames fitted", "{}"),
@@ -237,7 +263,7 @@ def save_quantity(q: str, scenes: list[tuple[int, str, dict]]) -> None:
             else "No flag reads it (a diagnostic: the counts say what a threshold would catch). ")
          + "The "
          "frames are every loaded frame with a dense fit, whatever the tracker called it (a frame flagged for "
-         "another reason counts too). Views of the camera sweep are 6 s long.",
+         "another reason counts too). Views of the camera sweep are 6 s long." + (f" {note}" if note else ""),
          lambda plt: _plot_quantity(plt, q, rows),
          extra={"frames": {f"{r['seed']}:{r['view']}": [r["values"], r["errs"]] for r in rows}})
 
@@ -282,7 +308,7 @@ def main() -> None:
     if a.ambiguity:  # the development beams rerun with the other basin's end point (no views unless --plan)
         runs = a.runs if a.runs != GAIN_RUNS else AMBIGUITY_RUNS
         save_quantity("ambiguity", [sc for n in runs.split(",") for sc in frames_from_runs(n, ("ambiguity",))]
-                      + frames_from_views(parse_plan(a.plan or "")))
+                      + frames_from_views(parse_plan(a.plan or "")), unloaded_ties(runs.split(",")))
     if qs:  # one pass over the frames serves each quantity
         scenes = [] if a.runs in ("", "none") else [sc for n in a.runs.split(",")
                                                     for sc in frames_from_runs(n, tuple(qs))]
