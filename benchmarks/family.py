@@ -336,6 +336,11 @@ def write(rows: list[dict], label: str, name: str = "family", measured_on: dict 
 
 TABLES = (("family", "Held-out seeds (the accuracy this project reports)"),
           ("family_dev", "Development seeds 12-49 (the only ones defaults may be chosen on)"),
+          ("family_stop58_warm", "Held-out seeds on the code of stop 58 (`dense_basin_warm`): the seeds where a "
+           "frame could meet its condition in the runs of stop 57's code (below), and two where none did (1066, "
+           "1072)"),
+          ("family_stop58", "Held-out seeds 1041 and 1066-1099 on the code of stop 57 with stop 58's ambiguity flag "
+           "(the rest of the held-out seeds of `family_stop57`)"),
           ("family_stop57", "Held-out seeds on the code of stop 57 (the other basin fitted at full detail, "
            "`dense_basin_check: 0.1`; seeds from 1000 up, in order, as far as the stop's time allowed)"),
           ("family_stop57_wrong_basin", "Held-out seeds on the code of stop 57: the five scenes whose frames the "
@@ -367,6 +372,12 @@ TABLES = (("family", "Held-out seeds (the accuracy this project reports)"),
           ("family_plate_dev_dense_rigid_false", "Plates, knob: no rigid correction (`--object plate --seeds 7 "
            "--tracking dense_rigid=false`), on the development plate whose s_y was worst (stop-37 code, before the "
            "shading term)"),
+          ("family_dev_0_19_other", "Development seeds 0-19 on the code of stop 57 rerun in stop 58 on another "
+           "host (AMD EPYC; every row the same as the table below) with where the other basin's fit ended recorded: "
+           "the low-confidence flag `max_ambiguity_gap` was set on its frames (`flag_calibration_ambiguity`)"),
+          ("family_dev_warm", "Development seeds with the defaults of stop 58 (the last frame's basin fitted too "
+           "where both fits of the basin check end far from it: `dense_basin_warm: true`): the seeds where a frame "
+           "met that condition in the table above (0, 1, 6, 7, 11, 14, 16, 17) and seed 9, where none did"),
           ("family_dev_0_19_basin", "Development seeds 0-19 with the defaults of stop 57 (the other basin fitted "
            "at full detail where the coarse search's runner-up costs under 10 % more than its winner: "
            "`dense_basin_check: 0.1`), beside the knob below"),
@@ -512,9 +523,9 @@ the same code with it off, on the seeds where it moved a frame): seed 9 from p90
 near a support read at the other support on 21 frames), seeds 6-8 within 0.07 points either way, the rest the same to
 the hundredth. Held out, two runs after the trigger was fixed: the five scenes whose frames the first table called OK in
 the wrong basin (`family_stop57_wrong_basin`: 1041, 1047, 1051, 1069, 1071) keep 6 frames called OK more than 10 % of
-the span off, against 33 (1071 p90 71.2 % -> 1.62 %, 1069 mean 7.62 % -> 0.57 %, 1041 p90 53.1 % -> 2.20 %; 1041's 6 are
-frames where the two basins' full-resolution costs differ by 0.01-0.4 %: nothing in the cost tells them apart, and no
-flag says so yet); and the held-out seeds from 1000 up in order, as far as the stop's time allowed (`family_stop57`):
+the span off, against 33 (1071 p90 71.2 % -> 1.62 %, 1069 mean 7.62 % -> 0.57 %, 1041 p90 53.1 % -> 2.20 %; 1041's 6,
+which stop 57 took for two basins of the same cost, are frames where both fits ended in one wrong basin: stop 58 below);
+and the held-out seeds from 1000 up in order, as far as the stop's time allowed (`family_stop57`):
 seeds 1000-1065 (the run was cut there for time): median of the per-scene medians 0.50 % (the first table on the same 66
 seeds: 0.49 %), p90 1.54 % (1.57 %), 82 % within 1 % (80 %), 95 % within 2 % (95 %); frames called OK more than 10 % off
 16 -> 7 (1041's 6 among them), more than 2 % off 164 -> 160 (2-3 % frames of cantilevers the check did not touch: 1028

@@ -23,3 +23,26 @@ def test_a_margin_that_is_not_finite_is_not_flagged():
     row = quantity_row("margin", 3, "as drawn", [np.nan, 0.004, 0.3], [5.0, 5.0, 0.1], [0, 0, 0])
     assert row["caught_0.005"] == 1 and row["good_0.005"] == 0
     assert row["caught_0.05"] == 1 and row["good_0.05"] == 0
+
+
+def test_the_ambiguity_counts_only_other_fits_that_ended_apart(tmp_path, monkeypatch):
+    """``--ambiguity`` from a family run's curves: a second fit that fell back into the kept basin is no tie however
+    close its cost (NaN, never flagged); one that ended apart gives its gap; frames before the load are counted
+    apart, in the table's notes."""
+    import json
+
+    import benchmarks.flag_calibration as fc
+    from simreal_nodes.synth.family import draw
+
+    span = draw(3).spans[0]
+    c = {"truth": [None, None, 0.5 * span, 0.5 * span, 0.5 * span], "est": [0.1, 0.1, 0.5 * span, 0.5 * span, 0.5],
+         "state": [1, 1, 0, 0, 0], "gain": [0.9] * 5, "basin": [0.002, 0.5, 0.004, 0.004, None],
+         "other": [0.9 * span, 0.9 * span, 0.5 * span + 0.01 * span, 0.9 * span, None]}
+    doc = {"rows": [{"seed": 3, "object": "beam"}], "curves": {"3": c}}
+    (tmp_path / "runs.json").write_text(json.dumps(doc))
+    monkeypatch.setattr(fc, "RESULTS", tmp_path)
+    [(seed, _, fr)] = fc.frames_from_runs("runs", ("ambiguity",))
+    assert seed == 3 and len(fr["ambiguity"]) == 3  # the loaded frames only
+    assert np.isnan(fr["ambiguity"][0]) and fr["ambiguity"][1] == 0.004 and np.isnan(fr["ambiguity"][2])
+    note = fc.unloaded_ties(["runs"])
+    assert "2 frames had a second fit that ended apart: 1 read under 0.01" in note, note
