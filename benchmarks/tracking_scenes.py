@@ -342,11 +342,11 @@ the same to the hundredth; all twenty: median of the per-scene medians 0.27 %, p
 1069, 1071: `family_stop57_wrong_basin`, run after the trigger was fixed) keep 6 frames called OK more than 10 % of the
 span off, against 33 before (1071: p90 71.2 % -> 1.62 %; 1069: mean 7.62 % -> 0.57 %; 1041: p90 53.1 % -> 2.20 %, its 6
 left at 55-58 %, which stop 57 took for two basins of the same cost: stop 58 recorded where the other fit ends, and on
-those frames both fits ended in one wrong basin, see below); the held-out seeds from 1000 up (`family_stop57`, docs/family.md) move by a few hundredths where the
-check did not move a frame (stop 56's SLAM change) and gain where it did (1011: mean 5.35 % -> 1.63 %, 1021: 1.48 % ->
-0.52 %). A unit test builds two basins that the coarsest level cannot tell apart (`tests/assimilation/test_dense.py`: a
-stretch the same for s and 1 - s with a sub-pixel ripple growing with s): 0.2 read for 0.8 without the check, 0.806 with
-it. The gain
+those frames both fits ended in one wrong basin, see below); the held-out seeds from 1000 up (`family_stop57`,
+docs/family.md) move by a few hundredths where the check did not move a frame (stop 56's SLAM change) and gain where it
+did (1011: mean 5.35 % -> 1.63 %, 1021: 1.48 % -> 0.52 %). A unit test builds two basins that the coarsest level cannot
+tell apart (`tests/assimilation/test_dense.py`: a stretch the same for s and 1 - s with a sub-pixel ripple growing with
+s): 0.2 read for 0.8 without the check, 0.806 with it. The gain
 is measured against the reference view, so a camera whose automatic exposure halves the object's contrast since
 that view would be flagged too (the rendered scenes keep their exposure: not measured); fix the exposure for
 dense tracking. The flag changes a frame's state, not its estimate; a frame it flags is not fused into the shading
