@@ -137,9 +137,10 @@ def track(pipe: Pipeline, seq: dict, fps: float, oid: str = "beam") -> dict[str,
     first camera frame) where the camera was localized; the solve's time where one ran; the dense fit's
     brightness gain and its coarse search's runner-up margin (NaN where no dense fit ran or the search had no
     candidate from another basin: the low-confidence flags are calibrated on them); where the runner-up was fitted
-    too (``DenseSettings.basin_check``), how much more the other basin cost at full resolution, whether the fit
-    moved there (``switched``), where the other fit ended (``other``: the first parameter) and whether the last
-    frame's estimate was fitted as well (``warm``: ``DenseSettings.basin_warm``)."""
+    too (``DenseSettings.basin_check``), how much more the other basin cost at full resolution, whether the fit moved
+    there (``switched``: 1 to the runner-up's fit, 2 to the warm start's), where the other fit ended (``other``: the
+    first parameter) and whether the last frame's estimate was fitted as well (``warm``:
+    ``DenseSettings.basin_warm``)."""
     run: dict[str, list] = {k: [] for k in ("truth", "est", "states", "reasons", "step_ms", "cam_err", "solve_ms",
                                             "tracker_ms", "truth_all", "est_all", "gain", "margin", "basin",
                                             "switched", "other", "warm")}
@@ -164,7 +165,7 @@ def track(pipe: Pipeline, seq: dict, fps: float, oid: str = "beam") -> dict[str,
         run["gain"].append(float(e.debug.get("gain", float("nan"))))
         run["margin"].append(float(e.debug.get("grid_margin", float("nan"))))
         run["basin"].append(float(e.debug.get("basin_gap", float("nan"))))
-        run["switched"].append(int(e.debug.get("basin_switched", 0.0) > 0))
+        run["switched"].append(int(e.debug.get("basin_switched", 0.0)))  # 1: the runner-up kept, 2: the warm start
         run["other"].append(float(e.debug.get("basin_other_0", float("nan"))))
         run["warm"].append(int(e.debug.get("basin_warm", 0.0) > 0))
     return run
