@@ -516,6 +516,23 @@ into in this stop. The tracker's time in this table (244 ms per frame at the med
 39's) is not comparable: this run shared the 2 cores with two other benchmarks for most of its length. The
 development table of stop 38 that the next paragraph compares with is kept as `family_dev_0_19_stop38`.
 
+Stop 58 (docs/tracking.md) reran the development beams with where the other basin's fit ends recorded
+(`family_dev_0_19_other`: every row as in `family_dev_0_19_basin`, on an AMD EPYC host where that ran on an Intel Xeon)
+and found held-out 1041's six frames 55-58 % off to be both fits in one wrong basin, not a tie. The fit now also runs
+from the last frame's estimate where both fits end more than a quarter of a range from it (`tracking.dense_basin_warm`,
+on; made after looking at 1041, so 1041 is no held-out evidence for it). Development seeds where a frame met its
+condition (`family_dev_warm`): every row the same to the hundredth. Held out, the 26 seeds where a frame could meet it
+in the runs of stop 57's code and two where none could (`family_stop58_warm`, beside `family_stop57` and
+`family_stop58`): 1041's frames called OK more than 10 % off 6 -> 0 (mean 4.61 % -> 0.89 %, median 0.88 % -> 0.76 %);
+elsewhere loaded estimates moved by 0.6 % of the span at most (1005 p90 0.57 % -> 0.64 %, 1062 mean 0.60 % -> 0.63 %);
+over the 28, median of the per-scene medians 0.56 % and p90 1.39 % either way, frames called OK more than 10 % off 7 ->
+1. The held-out seeds stop 57 had not reached, 1041 and 1066-1099, ran on stop 57's code with stop 58's ambiguity flag
+(`family_stop58`; the flag fired only before the load, on frames already low-confidence, so it changed no state):
+median of the per-scene medians 0.51 % (the first table on the same 35 seeds: 0.54 %), p90 1.35 % (1.38 %), within 1 %
+77 % (74 %), within 2 % 97 % (97 %); frames called OK more than 10 % off 31 -> 6 (1041's six), more than 2 % off 136 ->
+107. With `family_stop57`, stop 57's code has run on all 100 held-out seeds; the main table stays stop 55's single run.
+Tracker times in these tables are not comparable (two scenes at a time).
+
 Stop 57 fits the other basin at full detail (`tracking.dense_basin_check`, 0.1; docs/tracking.md): where the coarse
 search's best candidate from another basin costs less than 10 % more than its winner, the fit runs a second time from
 that candidate and the cheaper of the two at full resolution is kept. The trigger was set from the development frames'
