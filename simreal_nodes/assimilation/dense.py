@@ -1184,7 +1184,7 @@ class DenseAligner:
         per_level = self._fit_from(pyr, grads, f, T_cw, lo, hi, finest)
         H, r, sigma, rows = per_level[-1]
         assert f.mu is not None
-        basin_gap, switched, other, warm_ran = float("nan"), 0.0, None, 0.0
+        basin_gap, switched, other, warm_ran, other_apart = float("nan"), 0.0, None, 0.0, 0.0
         alt_mu = self.grid_runner_up
         if (alt_mu is not None and self.grid_margin < self.s.basin_check and len(rows) >= self.s.min_samples
                 and np.isfinite(sigma)):
@@ -1218,6 +1218,7 @@ class DenseAligner:
             if rest:
                 j = min(far or rest, key=lambda i: costs[i])
                 other = ends[j][0].mu
+                other_apart = apart(other, f.mu) if len(fi_b) else 0.0
                 if costs[k] > 0:
                     basin_gap = float((costs[j] - costs[k]) / costs[k])
         assert f.mu is not None
@@ -1257,8 +1258,7 @@ class DenseAligner:
                          basin_switched=switched, basin_warm=warm_ran)
         if other is not None:  # where the other basin's fit ended (benchmarks/family.py records it) and how far apart
             res.debug.update({f"basin_other_{i}": float(other[i]) for i in fi})
-            span = np.maximum(np.asarray(hi, float) - np.asarray(lo, float), 1e-12)
-            res.debug["basin_apart"] = float(np.max(np.abs(other - f.mu)[fi] / span[fi])) if len(fi) else 0.0
+            res.debug["basin_apart"] = other_apart
         if with_rest:
             # is there a deformation at all? The same fit with zero displacement, at the coarser levels only (it
             # is a yes/no question), compared with the deformed fit's residual at the same level
