@@ -161,8 +161,11 @@ class DenseSettings:
     # with ``basin_check``: where the warm start (the last frame's estimate) lies more than a quarter of a range from
     # where both the winner's and the runner-up's fits ended, fit from it as well (a third fit) and keep the cheapest:
     # the coarse search can lead both into one wrong basin while the last frame's is right (held-out beam 1041, stop
-    # 58: six frames read at 0.14 for 0.33, both fits there, the frames before and after at 0.33); False: two fits
-    basin_warm: bool = True
+    # 58: six frames read at 0.14 for 0.33, both fits there, the frames before and after at 0.33); False: two fits.
+    # Off by default since stop 59: on the 50 development beams the third fit was kept on 7 frames; it moved no loaded
+    # frame's estimate by more than 0.011 of a range and helped none (benchmarks/results/family_dev_warm_off.md);
+    # its only gain is 1041, the held-out scene that prompted it (a knob that helps one scene is a knob)
+    basin_warm: bool = False
     ambiguity_apart: float = 0.1
     # the shading change of the deforming surface (g in the module docstring; False: the affine brightness alone)
     # and the 1-sigma of g's prior about zero (brightness fraction per unit change of the normal: k_d / k_a is at

@@ -142,7 +142,8 @@ TRACKING = Record({
                                 lo=0.0, hi=10.0, default=0.1),
     "dense_basin_warm": Bool("measurements 'dense' with dense_basin_check: where the fits from the coarse "
                              "search's winner and runner-up both end far from the last frame's estimate, fit from "
-                             "that estimate too and keep the cheapest (a third fit on those frames)", default=True),
+                             "that estimate too and keep the cheapest (a third fit on those frames; it helped no "
+                             "development scene: docs/family.md)", default=False),
     "reference": Enum(("depth", "rest"), "the object's state in the view that later ones are compared with (the "
                       "dense reference view, a registered object's fit): read from the depth image where there is "
                       "one (the model's deformed surface fitted to it; a scene loaded from its first frame), or "
