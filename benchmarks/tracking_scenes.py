@@ -364,30 +364,31 @@ p90 36.5 % -> 38.1 % with it on); every other row the same to the hundredth. Ove
 none, so by the rule that a knob helping one scene is a knob, it is off by default. What the checks cost (`python -m
 benchmarks.basin_cost`: development beams 0, 1, 9, 14, 17, alone on the host, each rendered once and tracked with no
 check, with the runner-up's fit (the defaults) and with the third fit too): the second fit ran on 10-31 % of the frames
-(40 of 131 on seed 9, whose p90 it takes from 99.5 % to 0.47 %), and those frames took 10-44 % longer than the others of
-the same run (seed 9 274 against 248 ms, seed 17 634 against 440 ms); a frame with the third fit took about twice the
-others' time (seed 0 831 against 438 ms, seed 17 921 against 425 ms). Per-scene means do not rank the settings: two runs
-of the same work differ by up to 15 % on this host (seed 9 with and without the third fit, which never ran there: 256
-and 295 ms). Stop 58 also flags a frame whose other fit ended more than a tenth of a range away and costs less than 1 %
-more at full resolution (`DenseSettings.max_ambiguity_gap`, 0.01: two loads explain the image alike), naming the other
-load. It was set on the development beams (`flag_calibration_ambiguity`): of their 224 loaded frames with a second fit,
-150 fell back into the kept basin and 72 ended apart, with gaps of 0.187 at the least (none flagged); before the load
-comes on, where the image holds no load to place, 41 of 107 such frames read under 0.01 (median 0.015). On the held-out
-seeds 1041 and 1066-1099 (`family_stop58`) it flagged 44 frames, all before the load and already low-confidence (no
-measurable deformation): it changed no state in the family. Its unit test is a plate that two loads stretch identically.
-The gain is measured against the reference view, so a camera whose automatic exposure halves the object's contrast since
-that view would be flagged too (the rendered scenes keep their exposure: not measured); fix the exposure for dense
-tracking. The flag changes a frame's state, not its estimate; a frame it flags is not fused into the shading prior (only
-frames called OK are), but a flagged frame at rest before any load still holds the placement, as with the camera check.
-Map points on the object are still linked, so the localization leaves them out of the camera pose. Scene keys:
-`tracking.dense_step_px` (sample spacing, 1.5 px), `tracking.dense_rigid` (the rigid correction, on) and
-`tracking.dense_surroundings_px` (the ring's width, 32 px; 0: the object alone), `tracking.dense_refine` (on),
-`tracking.dense_shading` (on), `tracking.dense_grid_brightness` (`auto`) and `tracking.dense_camera_first` (off); their
-trades are measured on development seeds in `docs/family.md`'s knob tables. The object's state in the reference view:
-read from its depth where there is a depth image (`tracking.reference: depth`, the default,
-`assimilation/depth_state.py`: the model's deformed surface fitted to the depth cloud and compared with the rest shape),
-else taken to be the rest shape; a scene loaded from its first frame is measured in `docs/family.md` ("loaded from the
-first frame"). Numbers: `docs/family.md` (the scene family, dense by default, the sparse mode beside it).
+(40 of 131 on seed 9, whose p90 it takes from 99.5 % to 0.47 %), and on four of the five scenes those frames took 10-44
+% longer than the others of the same run (seed 9 274 against 248 ms, seed 17 634 against 440 ms; on seed 14 15 % less);
+a frame with the third fit took 1.3-2.2 times the others' time (seed 0 831 against 438 ms, seed 17 921 against 425 ms).
+Per-scene means do not rank the settings: two runs of the same work differ by up to 15 % on this host (seed 9 with and
+without the third fit, which never ran there: 256 and 295 ms). Stop 58 also flags a frame whose other fit ended more
+than a tenth of a range away and costs less than 1 % more at full resolution (`DenseSettings.max_ambiguity_gap`, 0.01:
+two loads explain the image alike), naming the other load. It was set on the development beams
+(`flag_calibration_ambiguity`): of their 224 loaded frames with a second fit, 150 fell back into the kept basin and 72
+ended apart, with gaps of 0.187 at the least (none flagged); before the load comes on, where the image holds no load to
+place, 41 of 107 such frames read under 0.01 (median 0.015). On the held-out seeds 1041 and 1066-1099 (`family_stop58`)
+it flagged 44 frames, all before the load and already low-confidence (no measurable deformation): it changed no state in
+the family. Its unit test is a plate that two loads stretch identically. The gain is measured against the reference
+view, so a camera whose automatic exposure halves the object's contrast since that view would be flagged too (the
+rendered scenes keep their exposure: not measured); fix the exposure for dense tracking. The flag changes a frame's
+state, not its estimate; a frame it flags is not fused into the shading prior (only frames called OK are), but a flagged
+frame at rest before any load still holds the placement, as with the camera check. Map points on the object are still
+linked, so the localization leaves them out of the camera pose. Scene keys: `tracking.dense_step_px` (sample spacing,
+1.5 px), `tracking.dense_rigid` (the rigid correction, on) and `tracking.dense_surroundings_px` (the ring's width, 32
+px; 0: the object alone), `tracking.dense_refine` (on), `tracking.dense_shading` (on), `tracking.dense_grid_brightness`
+(`auto`) and `tracking.dense_camera_first` (off); their trades are measured on development seeds in `docs/family.md`'s
+knob tables. The object's state in the reference view: read from its depth where there is a depth image
+(`tracking.reference: depth`, the default, `assimilation/depth_state.py`: the model's deformed surface fitted to the
+depth cloud and compared with the rest shape), else taken to be the rest shape; a scene loaded from its first frame is
+measured in `docs/family.md` ("loaded from the first frame"). Numbers: `docs/family.md` (the scene family, dense by
+default, the sparse mode beside it).
 
 Why mapping goes on by default: with the map frozen, the camera leaves the mapped views and its pose error grows
 to centimetres, which the tracker reads as deformation (the 'frozen' rows below: boot theta error 3x larger and
