@@ -543,14 +543,15 @@ and seed 32's mean (0.600 % -> 0.603 %). It helped no development scene, so it i
 (`tracking.dense_basin_warm: false`): a knob, whose held-out table is `family_stop58_warm` (`benchmarks/basin_cost.py`
 measures its time). The defaults are then stop 57's tracker with stop 58's ambiguity flag, which has run on every
 held-out seed, so the main table is now made of those runs: the rows of `family_stop57` (1000-1040, 1042-1065, Intel
-Xeon) and `family_stop58` (1041, 1066-1099, AMD EPYC); the flag changes a frame's state, never its estimate, and on the
-35 seeds it ran on it changed none. Stop 55's main table is `family_stop55`. Median of the per-scene medians **0.50 %**
-(stop 55: 0.49 %), p90 **1.50 %** (1.57 %), **80 %** within 1 % (79 %), **96 %** within 2 % (96 %); two supports 0.39 %
-(100 % within 2 %), cantilevers 0.62 % (92 %); frames called OK more than 10 % of the span off 35 -> 7 (1041's six,
-1056's one), more than 2 % off 283 -> 256. At or over 2 %: 1003 (2.25 %), 1056 (2.13 %), 1065 (2.49 %) and 1081 (never
-placed: its registration refused, the slide along the beam unresolved). Rerun on this stop's code (`family_regen_check`:
-1000, 1011, 1021, 1047, whose rows came from stop 57's run on the Intel host), every row the same to the thousandth, no
-frame's state changed, estimates within 1.1e-5 of a range.
+Xeon) and `family_stop58` (1041, 1066-1099, AMD EPYC); the flag changes a frame's state (and so whether the frame joins
+the shading prior), not its estimate, and on the 35 seeds it ran on it fired only on frames already low-confidence. Stop
+55's main table is `family_stop55`. Median of the per-scene medians **0.50 %** (stop 55: 0.49 %), p90 **1.50 %** (1.57
+%), **80 %** within 1 % (79 %), **96 %** within 2 % (96 %); two supports 0.39 % (100 % within 2 %), cantilevers 0.62 %
+(92 %); frames called OK more than 10 % of the span off 35 -> 7 (1041's six, 1056's one), more than 2 % off 283 -> 256.
+At or over 2 %: 1003 (2.25 %), 1056 (2.13 %), 1065 (2.49 %) and 1081 (never placed: its registration refused, the slide
+along the beam unresolved). Rerun on this stop's code (`family_regen_check`: 1000, 1011, 1021, 1047, whose rows came
+from stop 57's run on the Intel host), every row the same to the thousandth, no frame's state changed, estimates within
+1.1e-5 of a range.
 
 Stop 58 (docs/tracking.md) reran the development beams with where the other basin's fit ends recorded
 (`family_dev_0_19_other`: every row as in `family_dev_0_19_basin`, on an AMD EPYC host where that ran on an Intel Xeon)
