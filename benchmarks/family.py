@@ -911,6 +911,8 @@ def main() -> None:
     if a.jobs > 1:  # the spawned workers inherit it before numpy loads its BLAS
         for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
             os.environ[var] = "1"
+    else:  # this process's BLAS is loaded already: held to one thread too, so that rows' times compare
+        _one_thread()
     job = functools.partial(run_scene, preloaded=a.preloaded, measurements=a.measurements, tracking=knobs,
                             sensor=a.sensor, object=a.object)
     with multiprocessing.get_context("spawn").Pool(a.jobs, initializer=_one_thread) if a.jobs > 1 else \
@@ -923,11 +925,14 @@ def main() -> None:
 
 
 def _one_thread() -> None:
-    """A worker of ``--jobs``: one OpenCV thread (BLAS is held to one by the environment it was spawned with),
-    so that N workers share N cores fairly."""
+    """A worker of ``--jobs`` (or the one process of ``--jobs 1``): one OpenCV thread and one BLAS thread, so that N
+    workers share N cores fairly and a row's times do not depend on the job count (a ``--jobs 1`` run with BLAS's
+    default threads beside other work ran about five times slower)."""
     import cv2
+    from threadpoolctl import threadpool_limits
 
     cv2.setNumThreads(1)
+    threadpool_limits(1)
 
 
 if __name__ == "__main__":

@@ -74,16 +74,19 @@ def default_camera(width=640, height=480) -> CameraModel:
 # Environment
 
 
-def add_environment(r: Renderer, center=(0.3, 0.0), seed: int = 0) -> None:
-    """Table, walls and clutter with photographic textures: features for localization."""
+def add_environment(r: Renderer, center=(0.3, 0.0), seed: int = 0, half_width: float = 1.1) -> None:
+    """Table, walls and clutter with photographic textures: features for localization. ``half_width``: the side
+    walls' distance from the centre (metres; the table and the back wall are as wide as the room): a camera path
+    that would pass within reach of a wall gets a wider room (:func:`room_half_width`)."""
     cx, cy = center
-    V, F = W.box((2.4, 2.4, 0.04), (cx, cy, -0.02))
+    width = 2.4 + 2 * (half_width - 1.1)  # 2.4 m exactly in the default room
+    V, F = W.box((width, 2.4, 0.04), (cx, cy, -0.02))
     r.add(Mesh("table", V, F, mode="texture", texture=W.texture("wood"), tex_scale=1.6, smooth=False))
-    V, F = W.box((2.4, 0.05, 1.4), (cx, cy + 1.0, 0.7))
+    V, F = W.box((width, 0.05, 1.4), (cx, cy + 1.0, 0.7))
     r.add(Mesh("wall_back", V, F, mode="texture", texture=W.texture("brick"), tex_scale=1.2, smooth=False))
-    V, F = W.box((0.05, 2.4, 1.4), (cx - 1.1, cy, 0.7))
+    V, F = W.box((0.05, 2.4, 1.4), (cx - half_width, cy, 0.7))
     r.add(Mesh("wall_left", V, F, mode="texture", texture=W.texture("gravel"), tex_scale=1.5, smooth=False))
-    V, F = W.box((0.05, 2.4, 1.4), (cx + 1.1, cy, 0.7))
+    V, F = W.box((0.05, 2.4, 1.4), (cx + half_width, cy, 0.7))
     r.add(Mesh("wall_right", V, F, mode="texture", texture=W.texture("grass"), tex_scale=1.5, smooth=False))
     rng = np.random.default_rng(seed)
     for k in range(7):
@@ -98,6 +101,15 @@ def add_environment(r: Renderer, center=(0.3, 0.0), seed: int = 0) -> None:
         tex = ["grass", "gravel", "brick", "probe"][k % 4]
         r.add(Mesh(f"clutter{k}", V, F, mode="texture", texture=W.texture(tex), tex_scale=4.0, smooth=False,
                    pose=G.make_T(G.rot_axis("z", rng.uniform(0, np.pi)), pos)))
+
+
+def room_half_width(camera_x: np.ndarray, center_x: float = 0.0, clearance: float = 0.3) -> float:
+    """The side walls' distance from the room's centre (:func:`add_environment`) that keeps every camera position
+    (world x, metres) at least ``clearance`` from a wall's inner face: the default room (1.1 m) unless the path
+    reaches farther. A camera path through a wall, or grazing it, fills the view with a surface too near for the
+    depth camera: the camera is lost for reasons that are not the scene's."""
+    reach = float(np.max(np.abs(np.asarray(camera_x, dtype=np.float64) - center_x))) if np.size(camera_x) else 0.0
+    return max(1.1, reach + clearance + 0.025)  # 0.025: half the wall's thickness
 
 
 def deformable_mesh(model: ReducedModel, name: str, texture: str, tex_scale: float, pose, smooth=False) -> Mesh:

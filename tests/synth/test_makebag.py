@@ -98,3 +98,22 @@ def test_family_scene_names_move_the_camera_and_leave_the_physics():
     assert np.linalg.norm(eye1 - eye0) > 1.0
     with pytest.raises(Exception, match="unknown scene"):
         make_scene("family-4-d", 640, 480, 6.0, 15.0)
+
+
+def test_room_is_wide_enough_for_the_camera_path():
+    """Development seed 14's drawn arc went through the room's right wall (the view filled with the wall's texture,
+    the depth camera blind: the camera was lost for a reason not the scene's). The family widens such a room so
+    the whole path keeps WALL_CLEARANCE_M from both side walls; a room the path never reaches stays the default."""
+    from simreal_nodes.synth.family import WALL_CLEARANCE_M, family_scene
+    from simreal_nodes.synth.scenes import room_half_width
+
+    assert room_half_width(np.array([-0.4, 0.2, 0.7])) == 1.1  # 0.3 m from the default room's walls
+    assert room_half_width(np.array([-1.3, 0.2]), clearance=0.1) == pytest.approx(1.425)
+    assert room_half_width(np.array([1.3]), center_x=0.5, clearance=0.2) == 1.1
+    scenes = {seed: family_scene(seed) for seed in (14, 4)}
+    for seed, sc in scenes.items():
+        x = np.array([sc.camera_pose(t)[0, 3] for t in np.linspace(0.0, sc.duration, 97)])
+        inner = sc.state["room_half_width"] - 0.025  # the walls' inner faces
+        assert np.all(inner - np.abs(x) >= WALL_CLEARANCE_M - 1e-3), seed
+    assert scenes[14].state["room_half_width"] > 1.2  # its path reached x = 1.14 m
+    assert scenes[4].state["room_half_width"] == 1.1
