@@ -60,8 +60,6 @@ class SlamConfig:
     # "essential" since stop 53: a better first pose (the rendered room's failing noise draw holds) and, with the
     # keyframe fusion, level or better on each of the real 7-Scenes starts (benchmarks/two_view.py)
 
-    keyframe_depth_points: int = 250  # RGB-D / stereo keyframe: new points from the depth of at most this many
-    # unmatched features, nearest first; 0 = all with depth (ORB-SLAM2's close points): coverage vs. map size
     loop_closing: bool = False  # search every new keyframe for a loop and correct the map (:mod:`.loop_closing`)
 
     def __post_init__(self) -> None:

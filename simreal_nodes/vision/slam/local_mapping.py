@@ -121,9 +121,7 @@ class LocalMapper:
         if ctx.mode != "mono" and kf.depth is not None:
             ok = free & np.isfinite(kf.depth)
             idx = np.flatnonzero(ok)
-            idx = idx[np.argsort(kf.depth[idx])]
-            if ctx.config.keyframe_depth_points:
-                idx = idx[:ctx.config.keyframe_depth_points]
+            idx = idx[np.argsort(kf.depth[idx])][:250]
             P = ctx.cam.backproject(f.und[idx], kf.depth[idx])
             T = kf.T_wc
             for i, p in zip(idx, P @ T[:3, :3].T + T[:3, 3]):
