@@ -861,6 +861,9 @@ def main() -> None:
                          "family_plate*)")
     ap.add_argument("--out", help="results name (default: from the seeds and options, e.g. family_dev_stereo)")
     ap.add_argument("--jobs", type=int, default=1, help="scenes run in parallel processes (one core each)")
+    ap.add_argument("--compose", metavar="NAME,NAME,...",
+                    help="write --out from the rows of these results (a later one's row replaces an earlier one's of "
+                         "the same seed; nothing is run): a table made of several runs of the same defaults")
     ap.add_argument("--resume", action="store_true",
                     help="keep the rows of a results JSON with the same label (a run that was cut off on the same "
                          "code) and run only the seeds it lacks")
@@ -886,6 +889,23 @@ def main() -> None:
     knobs = {k: yaml.safe_load(v) for k, v in pairs}
     name += "".join(f"_{k}_{v.lower()}" for k, v in pairs)
     name = a.out or name
+    if a.compose:
+        if not a.out:
+            raise SystemExit("--compose needs --out")
+        by_seed: dict[int, dict] = {}
+        machines = []
+        for part in a.compose.split(","):
+            doc = json.loads((RESULTS / f"{part}.json").read_text())
+            curves = doc.get("curves", {})
+            machines.append(doc.get("machine"))
+            for r in doc["rows"]:
+                by_seed[r["seed"]] = {**r, "curve": curves.get(str(r["seed"]), {})}
+        rows = [by_seed[k] for k in sorted(by_seed) if k in seeds]
+        label = (("held-out seeds " if all(k >= HELD_OUT_SEEDS.start for k in seeds) else "seeds ") + a.seeds
+                 + ": the rows of " + ", ".join(f"`{p}`" for p in a.compose.split(","))
+                 + " (a later one's row replaces an earlier one's)")
+        write(rows, label, name, measured_on=machines[-1])
+        return
     if a.report:
         doc = json.loads((RESULTS / f"{name}.json").read_text())
         curves = doc.get("curves", {})
