@@ -493,7 +493,7 @@ def family_scene(seed: int, width: int = 640, height: int = 480, fps: float = 15
                     build, update, cam_pose, scene_yaml, depth=not stereo, pixel_sigma=d.pixel_sigma,
                     blur_subframes=d.blur_subframes, stereo_baseline=STEREO_BASELINE if stereo else None)
     sc.state["draw"] = d
-    path_x = [cam_pose(t)[0, 3] for t in np.linspace(0.0, d.duration, 241)]
+    path_x = np.array([cam_pose(t)[0, 3] for t in np.linspace(0.0, d.duration, 241)])
     sc.state["room_half_width"] = room_half_width(path_x, 0.0, WALL_CLEARANCE_M)
     return sc
 
