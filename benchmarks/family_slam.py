@@ -24,6 +24,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import functools
+import json
 import multiprocessing
 import os
 import time
@@ -149,7 +150,20 @@ def main() -> None:
     ap.add_argument("--features", type=int, default=1000)
     ap.add_argument("--jobs", type=int, default=2, help="scenes run in parallel processes (one core each)")
     ap.add_argument("--out", help="results name (default family_slam, or family_slam_dev for development seeds)")
+    ap.add_argument("--report", action="store_true",
+                    help="rewrite table and plot from the results JSON, labelled with the seeds it holds (a run "
+                         "stopped early is reported on the seeds it finished)")
     a = ap.parse_args()
+    if a.report:
+        from benchmarks.common import RESULTS
+
+        name = a.out or "family_slam"
+        doc = json.loads((RESULTS / f"{name}.json").read_text())
+        done = sorted({r["seed"] for r in doc["rows"]})
+        kind = "held-out" if all(k >= HELD_OUT_SEEDS.start for k in done) else "development"
+        label = f"{kind} seeds {done[0]}-{done[-1]} ({len(done)} scenes)"
+        write(doc["rows"], label, name)
+        return
     seeds = parse_seeds(a.seeds)
     modes = tuple(m for m in a.modes.split(",") if m)
     unknown = set(modes) - {"mono", "rgbd"}
