@@ -32,6 +32,7 @@ import time
 import numpy as np
 
 from benchmarks.common import save
+from benchmarks.family import _one_thread  # one OpenCV and one BLAS thread per job
 
 FPS = 15.0
 TARGET_TRACKED = {"mono": 95.0, "rgbd": 99.0, "stereo": 99.0}
@@ -130,15 +131,6 @@ def write(rows: list[dict], label: str, name: str) -> None:
 
     save(name, rows, cols, "The SLAM alone on the scene family: frames tracked, ATE, time", notes, plot,
          extra={"summary": s, "label": label})
-
-
-def _one_thread() -> None:
-    """A worker (or the one process): one OpenCV and one BLAS thread, so N workers share N cores fairly."""
-    import cv2
-    from threadpoolctl import threadpool_limits
-
-    cv2.setNumThreads(1)
-    threadpool_limits(1)
 
 
 def main() -> None:
