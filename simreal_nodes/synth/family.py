@@ -61,7 +61,8 @@ DEV_SEEDS = range(0, 50)
 HELD_OUT_SEEDS = range(1000, 1100)
 T_FREE = 1.5  # s: the camera maps the unloaded scene first (thesis: scanning before deformation)
 WALL_CLEARANCE_M = 0.1  # the camera path's least distance to the room's side walls: where a drawn path would pass
-# nearer (or through a wall: development seeds 14, 36 and 41 did, and lost the camera there), the room is wider
+# nearer (or through a wall: development seeds 14, 36 and 41 did, and lost the camera or its accuracy there), the
+# room is wider
 
 
 @dataclass(frozen=True)
