@@ -446,6 +446,8 @@ TABLES = (("family", "Held-out seeds (the accuracy this project reports): the de
            "reference taken to be the rest shape (`--tracking reference=rest`, the behaviour before stop 30)"),
           ("family_stereo", "Stereo pair: held-out seeds (`--sensor stereo`)"),
           ("family_dev_stereo", "Stereo pair: development seeds 0-19 (`--sensor stereo`)"),
+          ("family_stereo_stop60", "Stereo pair: held-out seeds before stop 61 replaced 1001's row"),
+          ("family_dev_stereo_stop60", "Stereo pair: development seeds 0-19 before stop 61 replaced 5, 14 and 18"),
           ("family_dev_rgbd_0_19", "RGB-D on the same development seeds 0-19 and the same code, beside the stereo "
            "table (`--seeds 0-19 --out family_dev_rgbd_0_19`)"),
           ("family_registration_stereo", "Stereo pair: the registration step alone, development seeds 0-9 "
@@ -552,7 +554,8 @@ is stop 59's with those six rows replaced (`python -m benchmarks.family --compos
 family`): the summary is unchanged (0.50 %, p90 1.50 %, 80 % within 1 %, 96 % within 2 %), the camera is now tracked on
 **100 % of the frames of all 100 held-out scenes** (1050 77 % and 1087 78 % before), frames more than 2 % of the span
 off 873 -> 828, more than 10 % off 138 -> 111; frames called OK more than 10 % off stay 7 (1041's six, 1056's one).
-Older tables that hold one of the 12 seeds were run in the old room.
+Older tables that hold one of the 12 seeds were run in the old room, but for the stereo tables: stop 61 reran their
+four (development 5, 14 and 18, held-out 1001) in the wider room on its own code and composed them in (below).
 
 Stop 59 looked for development evidence for stop 58's third fit and found none. The development beams 20-49, last run on
 the defaults of 2026-11-23 (`family_dev`), ran with it on (`family_dev_20_49`): median of the per-scene medians 0.49 %
@@ -755,7 +758,7 @@ the SLAM):
   either way (seed 13: 17.9 mm -> 0.9 mm; 2.2 mm in the run below). On RGB-D seeds 0-9 the registration step
   reads the same to the digit.
 
-On development seeds 0-19 (`family_dev_stereo` below): median of the per-scene medians 0.57 % of the load range,
+On development seeds 0-19 (`family_dev_stereo_stop60`): median of the per-scene medians 0.57 % of the load range,
 p90 1.4 %, 80 % of scenes within 1 %, 90 % within 2 %; registration 2.1 mm and 0.06 degrees at the median. RGB-D on
 the same seeds and code (`family_dev_rgbd_0_19`): 0.30 %, p90 1.2 %, 85 % and 100 %; registration 0.50 mm and 0.14
 degrees. The tracker's time per frame is about the same (86 ms against 80 ms at the median, two scenes in parallel);
@@ -763,8 +766,8 @@ the whole step is 126 ms against 104 ms (SGBM in the few frames that read depth,
 SLAM). The registration step alone on seeds 0-9: 2.0 mm and 0.06 degrees at the median, seed 1 25.7 mm off
 (`family_registration_stereo`).
 
-On held-out seeds 1000-1029, run once after these choices (`family_stereo`): median of the per-scene medians 0.68 %
-(target < 1 %: met), p90 2.4 % (< 3 %: met), 73 % of scenes within 1 % and 83 % within 2 % (target >= 90 %: **not
+On held-out seeds 1000-1029, run once after these choices (`family_stereo_stop60`): median of the per-scene medians
+0.68 % (target < 1 %: met), p90 2.4 % (< 3 %: met), 73 % of scenes within 1 % and 83 % within 2 % (target >= 90 %: **not
 met**); registration 2.7 mm and 0.05 degrees at the median (targets 3 mm and 0.5 degrees: met); camera ATE 2.6 mm at
 the median (RGB-D 1.8 mm). The RGB-D rows of the same 30 seeds (held-out table above, older runs of code unchanged
 for them): 0.52 %, p90 1.6 %, 97 % within 2 %. The five stereo scenes at 2 % or more: 1014 (13 %: a faint beam,
@@ -775,6 +778,16 @@ a beam along its axis are then a few noisy pixels, and where one end is outside 
 1: the left end outside the right camera's view in the first frames) the slide is not pinned and the registration
 is 26 mm off without being refused. Still open: a photometric pin of the slide (the beam's end edges in the image),
 and the monocular family (registration needs metric depth; a monocular map must get its scale first).
+
+**Stop 61: the stereo tables' scenes that the camera's drawn path had taken through a wall** (development 5, 14 and
+18, held-out 1001; stop 60's room mend above) were rerun in the wider room (`family_dev_stereo_room`,
+`family_stereo_room`) on this stop's code and composed into `family_dev_stereo` and `family_stereo` (the tables
+above are kept as `*_stop60`; the other rows are the older runs). Seed 14 now keeps the camera on every frame (86.8 %
+before) and its p90 falls from 27.0 % to 1.55 % (median 0.26 -> 0.15 %); seed 5 0.67 -> 0.95 %, seed 18 0.85 ->
+0.53 %; held-out 1001 0.70 -> 1.27 % (p90 2.62 -> 3.69 %). Development: 0.53 %, p90 1.42 %, 80 % within 1 %, 90 %
+within 2 %. Held out: 0.70 %, p90 2.41 %, 70 % within 1 %, 83 % within 2 %. The reruns' "OK frames" are not
+comparable with the older rows': a registration on depth that scatters over 3.5 mm about the fitted surface now
+flags every frame (seed 14 and 1001: 4.6 and 4.8 mm, so 0 % OK), a check added after the older rows were run.
 
 **Plates** (`--object plate`, `simreal make-bag family --seed N --object plate`; stop 37): a plate 0.25-0.6 m long,
 0.4-1 times as wide, 12-40 times as long as thick, clamped along one end (a shelf) or bolted on two blocks at both
