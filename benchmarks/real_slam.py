@@ -58,14 +58,15 @@ def rpe_m(est: dict[int, np.ndarray], truth: np.ndarray, R: np.ndarray, s: float
     return float(np.sqrt(np.mean(np.square(errs)))) if errs else float("nan")
 
 
-def run(seq: dict, mode: str, n_features: int = 1000, fuse: str | None = None, loop: bool = False) -> dict:
+def run(seq: dict, mode: str, n_features: int = 1000, fuse: str | None = None, loop: bool = False,
+        overrides: dict | None = None) -> dict:
     """One SLAM run over the sequence; ``fuse``: ``SlamConfig.fuse_neighbours`` (None: the default); ``loop``: loop
-    closing (``SlamConfig.loop_closing``)."""
+    closing (``SlamConfig.loop_closing``); ``overrides``: other ``SlamConfig`` fields."""
     from simreal_nodes.vision.slam.config import SlamConfig
     from simreal_nodes.vision.slam.system import Slam
     from simreal_nodes.vision.trajectory import ate, umeyama
 
-    cfg = SlamConfig(loop_closing=loop) if fuse is None else SlamConfig(fuse_neighbours=fuse, loop_closing=loop)
+    cfg = SlamConfig(loop_closing=loop, **(overrides or {}), **({} if fuse is None else {"fuse_neighbours": fuse}))
     slam = Slam(seq["cam"], mode, n_features, config=cfg)
     est: dict[int, np.ndarray] = {}
     ms, kf_ms, loop_ms, lost_at = [], [], [], None

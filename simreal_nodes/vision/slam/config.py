@@ -27,6 +27,9 @@ FUSE_MODES = ("none", "mono", "all")
 # the monocular initialization's general two-view models (``SlamConfig.two_view_model``, :mod:`.two_view`)
 TWO_VIEW_MODELS = ("fundamental", "essential")
 
+# what tells a homography's decompositions apart at a monocular start (``SlamConfig.homography_ambiguity``)
+H_AMBIGUITY = ("explained", "triangulated")
+
 
 @dataclass(frozen=True)
 class SlamConfig:
@@ -59,6 +62,8 @@ class SlamConfig:
     two_view_model: str = "essential"  # mono start: five-point E, or "fundamental" (ORB-SLAM2's eight-point F)
     # "essential" since stop 53: a better first pose (the rendered room's failing noise draw holds) and, with the
     # keyframe fusion, level or better on each of the real 7-Scenes starts (benchmarks/two_view.py)
+    homography_ambiguity: str = "explained"  # a homography start is refused when a second decomposition comes within
+    # 75 % of the best one's count of "explained" matches (ORB-SLAM2's) or of "triangulated" points (with parallax)
 
     loop_closing: bool = False  # search every new keyframe for a loop and correct the map (:mod:`.loop_closing`)
 
@@ -66,6 +71,9 @@ class SlamConfig:
         if self.two_view_model not in TWO_VIEW_MODELS:
             raise ValueError(f"SlamConfig.two_view_model must be one of {', '.join(TWO_VIEW_MODELS)}, not "
                              f"{self.two_view_model!r}")
+        if self.homography_ambiguity not in H_AMBIGUITY:
+            raise ValueError(f"SlamConfig.homography_ambiguity must be one of {', '.join(H_AMBIGUITY)}, not "
+                             f"{self.homography_ambiguity!r}")
         if self.fuse_neighbours not in FUSE_MODES:
             raise ValueError(f"SlamConfig.fuse_neighbours must be one of {', '.join(FUSE_MODES)}, not "
                              f"{self.fuse_neighbours!r}")

@@ -22,7 +22,7 @@ import numpy as np
 
 from simreal_nodes import geometry as G
 from simreal_nodes.vision.orb import Features, match_descriptors
-from simreal_nodes.vision.slam.config import INITIALIZING, OK, TWO_VIEW_MODELS
+from simreal_nodes.vision.slam.config import H_AMBIGUITY, INITIALIZING, OK, TWO_VIEW_MODELS
 from simreal_nodes.vision.slam.context import SlamContext
 from simreal_nodes.vision.slam.local_mapping import LocalMapper
 from simreal_nodes.vision.slam.map import KeyFrame
@@ -52,14 +52,17 @@ def initial_matches(f0: Features, f1: Features) -> np.ndarray:
 
 
 def two_view(f0: Features, f1: Features, K: np.ndarray, min_parallax: float,
-             general: str = "essential") -> tuple[str, TwoViewSolution | None]:
+             general: str = "essential", ambiguity: str = "explained") -> tuple[str, TwoViewSolution | None]:
     """Reconstruct two views of a static scene; returns (why not, None) or ("<kind> model", solution).
     ``min_parallax``: radians, the least median parallax of the triangulated points accepted. ``general``: the
     non-planar model, "essential" (five-point, calibrated; the default) or "fundamental" (ORB-SLAM2's eight-point;
-    ``SlamConfig.two_view_model``). Either way the solution's kind is "fundamental" for the general model (as ORB-SLAM2
+    ``SlamConfig.two_view_model``); ``ambiguity``: how a homography's decompositions are told apart
+    (:func:`_from_h`). Either way the solution's kind is "fundamental" for the general model (as ORB-SLAM2
     names it) and "homography" for the planar one."""
     if general not in TWO_VIEW_MODELS:
         raise ValueError(f"two_view: general model {general!r} is not one of {', '.join(TWO_VIEW_MODELS)}")
+    if ambiguity not in H_AMBIGUITY:
+        raise ValueError(f"two_view: ambiguity {ambiguity!r} is not one of {', '.join(H_AMBIGUITY)}")
     m = initial_matches(f0, f1)
     if len(m) < 100:
         return f"only {len(m)} matches with the reference frame (need 100): too little overlap or texture", None
@@ -79,7 +82,7 @@ def two_view(f0: Features, f1: Features, K: np.ndarray, min_parallax: float,
     sf = _score_f(F, x0, x1)
     rh = sh / max(sh + sf, 1e-9)
     if rh > 0.40:  # ORB-SLAM2: a homography unless the fundamental matrix explains clearly more
-        sol = _from_h(H, x0, x1, K)
+        sol = _from_h(H, x0, x1, K, ambiguity)
         kind = "homography"
     else:
         sol = _from_f(E, x0, x1, mf.ravel().astype(bool), K)
@@ -150,22 +153,27 @@ def _from_f(E: np.ndarray, x0: np.ndarray, x1: np.ndarray, inl: np.ndarray, K: n
     return (R, t, X, good, par) if good.sum() >= 50 else None
 
 
-def _from_h(H: np.ndarray, x0: np.ndarray, x1: np.ndarray, K: np.ndarray) -> _Reconstruction | None:
-    """The decomposition that explains most matches, refused when the second best comes close (ambiguous)."""
+def _from_h(H: np.ndarray, x0: np.ndarray, x1: np.ndarray, K: np.ndarray,
+            ambiguity: str = "explained") -> _Reconstruction | None:
+    """The decomposition that explains most matches, refused when another comes close (ambiguous). ``ambiguity``:
+    what "close" counts (``SlamConfig.homography_ambiguity``): "explained", every match a pose explains (ORB-SLAM2;
+    the points too far for parallax fit every decomposition alike), or "triangulated", only the points it puts in
+    front of both cameras with parallax (as :func:`_from_f` does)."""
     _n, Rs, ts, _ = cv2.decomposeHomographyMat(H, K)
-    best: _Reconstruction | None = None
-    n_best, n_second = 0, 0
+    cands = []
     for R, t in zip(Rs, ts):
         t = t.ravel()
         if np.linalg.norm(t) < 1e-9:
             continue
         X, good, par, n = _triangulate_check(R, t / np.linalg.norm(t), x0, x1, K)
-        if best is None or n > n_best:
-            n_second = n_best
-            best, n_best = (R, t / np.linalg.norm(t), X, good, par), n
-        elif n > n_second:
-            n_second = n
-    if best is None or best[3].sum() < 50 or n_second > 0.75 * n_best:
+        cands.append((n, (R, t / np.linalg.norm(t), X, good, par)))
+    if not cands:
+        return None
+    i = max(range(len(cands)), key=lambda j: cands[j][0])
+    best = cands[i][1]
+    score = (lambda c: c[0]) if ambiguity == "explained" else (lambda c: int(c[1][3].sum()))
+    second = max((score(c) for j, c in enumerate(cands) if j != i), default=0)
+    if best[3].sum() < 50 or second > 0.75 * score(cands[i]):
         return None
     return best
 
@@ -219,7 +227,8 @@ class Initializer:
             ctx.state = INITIALIZING
             return TrackResult(INITIALIZING, "initializing: reference frame set, move the camera sideways")
         f0, s0, _ = self.ref
-        reason, sol = two_view(f0, f, ctx.K, ctx.config.min_parallax, general=ctx.config.two_view_model)
+        reason, sol = two_view(f0, f, ctx.K, ctx.config.min_parallax, general=ctx.config.two_view_model,
+                               ambiguity=ctx.config.homography_ambiguity)
         if sol is None:
             ctx.state = INITIALIZING
             return TrackResult(INITIALIZING, f"initializing: {reason}")
