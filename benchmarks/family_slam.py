@@ -180,7 +180,11 @@ def write(rows: list[dict], label: str, name: str) -> None:
                "the frames from there on are tracked (median)." if "onset_median" in m else ""))
     notes = (f"{label}. " + " ".join(lines) + " The SLAM alone (no deformable tracker), 1000 ORB features, "
              "synchronous mapping, every frame; monocular ATE after a similarity alignment, RGB-D after a rigid one, "
-             "over the tracked frames. `benchmarks/family_slam.py` (its docstring says what a scene is).")
+             "over the tracked frames. `benchmarks/family_slam.py` (its docstring says what a scene is)."
+             + (f" Monocular rows: '1 deg median parallax at' is the first frame at which the truth's median parallax "
+                f"with frame 0 reaches 1 deg (`{ONSET}.md`); 'tracked from there' the frames tracked over the frames "
+                "from that one on (over 100 % where the map started earlier: its own estimate of the parallax "
+                "passed 1 deg first)." if any("onset" in r for r in rows) else ""))
 
     def plot(plt):
         fig, axes = plt.subplots(1, 2, figsize=(10, 3.6))
