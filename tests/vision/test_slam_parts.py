@@ -260,6 +260,27 @@ def test_monocular_initializer_uses_the_configured_two_view_model(monkeypatch):
         assert init.initialize(f1, None, 1).state == OK and seen == [model], (model, seen)
 
 
+def test_monocular_initializer_uses_the_configured_homography_ambiguity(monkeypatch):
+    """``SlamConfig.homography_ambiguity`` reaches the two-view reconstruction (the default: ORB-SLAM2's count)."""
+    import simreal_nodes.vision.slam.two_view as tv
+
+    f0, f1, _ = arc_views(3, 0.10, 3.0)
+    for ambiguity in ("explained", "triangulated"):
+        seen: list[str] = []
+
+        def spy(*a, ambiguity="(none given)", seen=seen, **k):
+            seen.append(ambiguity)
+            return two_view(*a, ambiguity=ambiguity, **k)
+
+        monkeypatch.setattr(tv, "two_view", spy)
+        ctx = context("mono") if ambiguity == "explained" else context("mono", homography_ambiguity=ambiguity)
+        init = Initializer(ctx, LocalMapper(ctx, async_mapping=False), None)
+        ctx.frame_id = 1
+        init.initialize(f0, None, 0)
+        ctx.frame_id = 2
+        assert init.initialize(f1, None, 1).state == OK and seen == [ambiguity], (ambiguity, seen)
+
+
 def test_tracking_from_a_depth_map_and_a_keyframe():
     X, desc = scene()
     ctx = context()
@@ -649,5 +670,7 @@ def test_config_defaults_are_documented_and_checked():
         SlamConfig(flow_win=1)
     with pytest.raises(ValueError, match="two_view_model"):
         SlamConfig(two_view_model="affine")
+    with pytest.raises(ValueError, match="homography_ambiguity"):
+        SlamConfig(homography_ambiguity="most")
     with pytest.raises(ValueError, match="fuse_neighbours"):
         SlamConfig(fuse_neighbours="yes")
