@@ -30,7 +30,9 @@ import json
 import multiprocessing
 import os
 import time
+from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import yaml
@@ -966,20 +968,25 @@ def main() -> None:
         done = {r["seed"] for r in rows}
         seeds = [s for s in seeds if s not in done]
         print(f"--resume: {len(done)} seeds kept, {len(seeds)} to run", flush=True)
-    if a.jobs > 1:  # the spawned workers inherit it before numpy loads its BLAS
+    job = functools.partial(run_scene, preloaded=a.preloaded, measurements=a.measurements, tracking=knobs,
+                            sensor=a.sensor, object=a.object)
+    for row in scene_map(job, seeds, a.jobs):
+        rows.append(row)
+        print({k: v for k, v in row.items() if k != "curve"}, flush=True)
+        write(sorted(rows, key=lambda r: r["seed"]), label, name)
+
+
+def scene_map(fn: Callable[[int], Any], seeds: list[int], jobs: int) -> Iterator[Any]:
+    """``fn`` of each seed, in seed order, ``jobs`` scenes at a time in spawned processes (one core each: one OpenCV
+    and one BLAS thread, :func:`_one_thread`), each result as soon as it and those before it are done."""
+    if jobs > 1:  # the spawned workers inherit it before numpy loads its BLAS
         for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
             os.environ[var] = "1"
     else:  # this process's BLAS is loaded already: held to one thread too, so that rows' times compare
         _one_thread()
-    job = functools.partial(run_scene, preloaded=a.preloaded, measurements=a.measurements, tracking=knobs,
-                            sensor=a.sensor, object=a.object)
-    with multiprocessing.get_context("spawn").Pool(a.jobs, initializer=_one_thread) if a.jobs > 1 else \
+    with multiprocessing.get_context("spawn").Pool(jobs, initializer=_one_thread) if jobs > 1 else \
             contextlib.nullcontext() as pool:
-        results = pool.imap(job, seeds) if pool is not None else map(job, seeds)
-        for row in results:
-            rows.append(row)
-            print({k: v for k, v in row.items() if k != "curve"}, flush=True)
-            write(sorted(rows, key=lambda r: r["seed"]), label, name)
+        yield from (pool.imap(fn, seeds) if pool is not None else map(fn, seeds))
 
 
 def _one_thread() -> None:

@@ -22,18 +22,15 @@ the path length (issue 17's targets), and the medians over scenes.
 from __future__ import annotations
 
 import argparse
-import contextlib
 import functools
 import itertools
 import json
-import multiprocessing
-import os
 import time
 
 import numpy as np
 
 from benchmarks.common import save
-from benchmarks.family import _one_thread  # one OpenCV and one BLAS thread per job
+from benchmarks.family import scene_map  # scenes in parallel, one OpenCV and one BLAS thread per job
 
 FPS = 15.0
 TARGET_TRACKED = {"mono": 95.0, "rgbd": 99.0, "stereo": 99.0}
@@ -322,15 +319,12 @@ def main() -> None:
         return
     seeds = parse_seeds(a.seeds)
     if a.onset:  # other seeds' rows already in the table are kept
-        _one_thread()
         kept = [r for k, r in _onsets().items() if k not in seeds]
-        with multiprocessing.get_context("spawn").Pool(a.jobs, initializer=_one_thread) if a.jobs > 1 else \
-                contextlib.nullcontext() as pool:
-            onsets = []
-            for o in (pool.imap(parallax_onset, seeds) if pool is not None else map(parallax_onset, seeds)):
-                print(o, flush=True)
-                onsets.append(o)
-                write_onset(sorted(kept + onsets, key=lambda r: r["seed"]))
+        onsets = []
+        for o in scene_map(parallax_onset, seeds, a.jobs):
+            print(o, flush=True)
+            onsets.append(o)
+            write_onset(sorted(kept + onsets, key=lambda r: r["seed"]))
         return
     modes = tuple(m for m in a.modes.split(",") if m)
     unknown = set(modes) - {"mono", "rgbd"}
@@ -339,25 +333,17 @@ def main() -> None:
     held_out = all(s >= HELD_OUT_SEEDS.start for s in seeds)
     name = a.out or ("family_slam" if held_out else "family_slam_dev")
     label = ("held-out seeds " if held_out else "development seeds ") + a.seeds
-    if a.jobs > 1:  # the spawned workers inherit it before numpy loads its BLAS
-        for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-            os.environ[var] = "1"
-    else:
-        _one_thread()
     configs: dict[str, dict] = {} if a.no_default and a.config else {"default": {}}
     for spec in a.config:
         clabel, _, fields = spec.partition(":")
         configs[clabel] = dict(_field(f) for f in fields.split(",") if f)
     job = functools.partial(run_scene, modes=modes, n_features=a.features, configs=configs)
     rows: list[dict] = []
-    with multiprocessing.get_context("spawn").Pool(a.jobs, initializer=_one_thread) if a.jobs > 1 else \
-            contextlib.nullcontext() as pool:
-        results = pool.imap(job, seeds) if pool is not None else map(job, seeds)
-        for scene_rows in results:
-            rows.extend(scene_rows)
-            for r in scene_rows:
-                print({k: (round(v, 3) if isinstance(v, float) else v) for k, v in r.items()}, flush=True)
-            write(sorted(rows, key=lambda r: (r["seed"], r["mode"])), label, name)
+    for scene_rows in scene_map(job, seeds, a.jobs):
+        rows.extend(scene_rows)
+        for r in scene_rows:
+            print({k: (round(v, 3) if isinstance(v, float) else v) for k, v in r.items()}, flush=True)
+        write(sorted(rows, key=lambda r: (r["seed"], r["mode"])), label, name)
 
 
 if __name__ == "__main__":

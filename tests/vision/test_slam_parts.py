@@ -239,46 +239,29 @@ def test_monocular_initializer_sets_a_reference_then_builds_a_unit_depth_map():
     assert len(ctx.map.keyframes) == 2 and ctx.ref_kf is ctx.map.keyframes[1]
 
 
-def test_monocular_initializer_uses_the_configured_two_view_model(monkeypatch):
-    """``SlamConfig.two_view_model`` reaches the two-view reconstruction (the default: the five-point)."""
+@pytest.mark.parametrize("field, value", [("two_view_model", "fundamental"), ("two_view_model", "essential"),
+                                          ("homography_ambiguity", "explained"),
+                                          ("homography_ambiguity", "triangulated")])
+def test_monocular_initializer_passes_its_two_view_settings(monkeypatch, field, value):
+    """``SlamConfig.two_view_model`` and ``homography_ambiguity`` reach the two-view reconstruction, the defaults
+    (the five-point model, ORB-SLAM2's count) when not set."""
     import simreal_nodes.vision.slam.two_view as tv
 
     f0, f1, _ = arc_views(3, 0.10, 3.0)
-    for model in ("fundamental", "essential"):
-        seen: list[str] = []
+    seen: list[dict] = []
 
-        def spy(*a, general="(none given)", seen=seen, **k):
-            seen.append(general)
-            return two_view(*a, general=general, **k)
+    def spy(*a, **k):
+        seen.append(k)
+        return two_view(*a, **k)
 
-        monkeypatch.setattr(tv, "two_view", spy)
-        ctx = context("mono") if model == "essential" else context("mono", two_view_model=model)
-        init = Initializer(ctx, LocalMapper(ctx, async_mapping=False), None)
-        ctx.frame_id = 1
-        init.initialize(f0, None, 0)
-        ctx.frame_id = 2
-        assert init.initialize(f1, None, 1).state == OK and seen == [model], (model, seen)
-
-
-def test_monocular_initializer_uses_the_configured_homography_ambiguity(monkeypatch):
-    """``SlamConfig.homography_ambiguity`` reaches the two-view reconstruction (the default: ORB-SLAM2's count)."""
-    import simreal_nodes.vision.slam.two_view as tv
-
-    f0, f1, _ = arc_views(3, 0.10, 3.0)
-    for ambiguity in ("explained", "triangulated"):
-        seen: list[str] = []
-
-        def spy(*a, ambiguity="(none given)", seen=seen, **k):
-            seen.append(ambiguity)
-            return two_view(*a, ambiguity=ambiguity, **k)
-
-        monkeypatch.setattr(tv, "two_view", spy)
-        ctx = context("mono") if ambiguity == "explained" else context("mono", homography_ambiguity=ambiguity)
-        init = Initializer(ctx, LocalMapper(ctx, async_mapping=False), None)
-        ctx.frame_id = 1
-        init.initialize(f0, None, 0)
-        ctx.frame_id = 2
-        assert init.initialize(f1, None, 1).state == OK and seen == [ambiguity], (ambiguity, seen)
+    monkeypatch.setattr(tv, "two_view", spy)
+    ctx = context("mono") if getattr(SlamConfig(), field) == value else context("mono", **{field: value})
+    init = Initializer(ctx, LocalMapper(ctx, async_mapping=False), None)
+    ctx.frame_id = 1
+    init.initialize(f0, None, 0)
+    ctx.frame_id = 2
+    assert init.initialize(f1, None, 1).state == OK
+    assert [k[{"two_view_model": "general", "homography_ambiguity": "ambiguity"}[field]] for k in seen] == [value]
 
 
 def test_tracking_from_a_depth_map_and_a_keyframe():
