@@ -205,10 +205,21 @@ def run_boot(name: str, w: int, h: int, fps: float, tracking: dict, frames: int 
 
 
 def boot_model_error(model, truth, every: int = 2) -> dict:
-    """The boot model against the truth at every ``every``-th tabulated lever angle, on the model's boot surface
-    nodes (each the truth's nearest vertex: the meshes are nested, 0.05 mm apart at most): the relative
-    displacement error, the largest node error (mm), and the model's own theta bias, the angle whose model
+    """The boot model against the truth at every ``every``-th tabulated lever angle (:func:`boot_model_fit`): the
+    relative displacement error, the largest node error (mm), and the model's own theta bias, the angle whose model
     displacement is closest to the truth's (what a tracker that saw every surface node exactly would report)."""
+    th, fit, rel, worst = boot_model_fit(model, truth, every)
+    bias = np.rad2deg(np.abs(fit - th))
+    return {"model_rel_l2_median_pct": float(100 * np.median(rel)), "model_rel_l2_max_pct": float(100 * np.max(rel)),
+            "model_node_max_mm": float(np.max(worst)), "model_bias_median_deg": float(np.median(bias)),
+            "model_bias_max_deg": float(np.max(bias))}
+
+
+def boot_model_fit(model, truth, every: int = 1) -> tuple[np.ndarray, ...]:
+    """At every ``every``-th tabulated lever angle but rest, on the model's boot surface nodes (each the truth's
+    nearest vertex: the meshes are nested, 0.05 mm apart at most): the angle (rad), the model's best-fit angle to the
+    truth's displacement there (on a grid of 521 angles over its range), the relative displacement error and the
+    largest node error (mm) of the model at the true angle."""
     from scipy.spatial import cKDTree
 
     nb = int(model.provenance.get("lever_nodes", [model.n_nodes])[0])
@@ -219,17 +230,16 @@ def boot_model_error(model, truth, every: int = 2) -> dict:
     lo, hi = model.axis("theta").range
     grid = np.linspace(lo, hi, 521)
     table = np.stack([view.evaluate([g]).ravel() for g in grid])
-    rel, bias, worst = [], [], []
+    ths, fit, rel, worst = [], [], [], []
     for k in range(1, len(truth.theta), every):
         th = float(truth.theta[k])
         ut = truth.U[k][near].ravel()
         um = view.evaluate([th]).ravel()
         rel.append(np.linalg.norm(um - ut) / max(np.linalg.norm(ut), 1e-300))
         worst.append(1e3 * np.linalg.norm((um - ut).reshape(-1, 3), axis=1).max())
-        bias.append(np.rad2deg(abs(grid[int(np.argmin(np.sum((table - ut) ** 2, axis=1)))] - th)))
-    return {"model_rel_l2_median_pct": float(100 * np.median(rel)), "model_rel_l2_max_pct": float(100 * np.max(rel)),
-            "model_node_max_mm": float(np.max(worst)), "model_bias_median_deg": float(np.median(bias)),
-            "model_bias_max_deg": float(np.max(bias))}
+        ths.append(th)
+        fit.append(float(grid[int(np.argmin(np.sum((table - ut) ** 2, axis=1)))]))
+    return np.array(ths), np.array(fit), np.array(rel), np.array(worst)
 
 
 def _thesis_at(name: str, pos: dict[float, float]) -> float:

@@ -29,7 +29,9 @@ def cmd_make_bag(a: argparse.Namespace) -> int:
     try:
         name = a.scene
         if a.scene == "family":  # the family's scene is drawn from the seed
-            name = ("family-plate-" if a.object == "plate" else "family-") + str(a.seed) + (
+            if a.object == "boot" and a.sensor != "rgbd":
+                raise SimrealError(f"--object boot --sensor {a.sensor}: the boot's family scenes are RGB-D only")
+            name = {"plate": "family-plate-", "boot": "family-boot-"}.get(a.object, "family-") + str(a.seed) + (
                 "-stereo" if a.sensor == "stereo" else "")
         elif a.sensor != "rgbd" or a.object != "beam":
             raise SimrealError(f"--sensor {a.sensor} --object {a.object}: only the 'family' scenes are drawn for "
@@ -66,8 +68,9 @@ def add_make_bag(sub: argparse._SubParsersAction) -> None:
                    "seeds 0-49 for tuning, held-out 1000-1099 for reporting)")
     s.add_argument("--sensor", choices=("rgbd", "stereo"), default="rgbd",
                    help="'family' only: the camera it is seen through (stereo: a rectified pair, no depth topic)")
-    s.add_argument("--object", choices=("beam", "plate"), default="beam",
-                   help="'family' only: a beam loaded along its top (s), or a plate loaded anywhere on it (s_x, s_y)")
+    s.add_argument("--object", choices=("beam", "plate", "boot"), default="beam",
+                   help="'family' only: a beam loaded along its top (s), a plate loaded anywhere on it (s_x, s_y), or "
+                        "the joint boot bent by its lever (theta; its turn alpha_z unknown)")
     s.add_argument("--ssaa", type=int, default=2, help="supersampling factor (anti-aliasing)")
     s.add_argument("--scene-out", help="also write the scene YAML that runs the graph on this bag")
     s.add_argument("--image-format", choices=("raw", "jpeg", "png"), default="raw",

@@ -362,6 +362,28 @@ def speckle_texture(contrast: float, seed: int, size: int = 512, dots: int = 260
     return (np.clip(img[..., None] * tint, 0, 1) * 255).astype(np.uint8)
 
 
+def add_clutter(r: Renderer, seed: int, n: int, contrast: float, reach: float, center=(0.0, 0.0),
+                directions: tuple[float, float] | None = None) -> None:
+    """``n`` boxes of clutter (3-12 cm, photographic textures at ``contrast`` of their own) 0.25-0.6 m beyond
+    ``reach`` from ``center`` (world x, y): by default beside and behind a beam along x (y > 0.2), or between the
+    azimuths ``directions`` (radians) around the centre."""
+    for k in range(n):
+        rng = np.random.default_rng([seed, k])
+        size = rng.uniform(0.03, 0.12, 3)
+        ang = rng.uniform(0, 2 * np.pi)
+        rad = rng.uniform(0.25, 0.6) + reach
+        if directions is None:
+            pos = (center[0] + rad * np.cos(ang), center[1] + 0.2 + abs(rad * np.sin(ang)), size[2] / 2)
+        else:
+            a = directions[0] + (directions[1] - directions[0]) * ang / (2 * np.pi)
+            pos = (center[0] + rad * np.cos(a), center[1] + rad * np.sin(a), size[2] / 2)
+        V, F = W.box(size)
+        tex = W.texture(["gravel", "brick", "grass", "probe"][k % 4]).astype(np.float32)
+        tex = (tex.mean() + contrast * (tex - tex.mean())).clip(0, 255).astype(np.uint8)
+        r.add(Mesh(f"fam_clutter{k}", V, F, mode="texture", texture=tex, tex_scale=4.0, smooth=False,
+                   pose=G.make_T(G.rot_axis("z", rng.uniform(0, np.pi)), pos)))
+
+
 STEREO_BASELINE = 0.12  # metres, a common stereo camera's (e.g. ZED 2)
 
 
@@ -410,17 +432,7 @@ def family_scene(seed: int, width: int = 640, height: int = 480, fps: float = 15
         tr = truth_for(d)
         sc.state["truth"] = tr
         add_environment(r, center=(0.0, 0.0), seed=d.seed, half_width=sc.state["room_half_width"])
-        for k in range(d.clutter):  # clutter beside and behind the beam, its contrast drawn
-            rng = np.random.default_rng([d.seed, k])
-            size = rng.uniform(0.03, 0.12, 3)
-            ang = rng.uniform(0, 2 * np.pi)
-            rad = rng.uniform(0.25, 0.6) + d.length / 2
-            pos = (rad * np.cos(ang), 0.2 + abs(rad * np.sin(ang)), size[2] / 2)
-            V, F = W.box(size)
-            tex = W.texture(["gravel", "brick", "grass", "probe"][k % 4]).astype(np.float32)
-            tex = (tex.mean() + d.clutter_contrast * (tex - tex.mean())).clip(0, 255).astype(np.uint8)
-            r.add(Mesh(f"fam_clutter{k}", V, F, mode="texture", texture=tex, tex_scale=4.0, smooth=False,
-                       pose=G.make_T(G.rot_axis("z", rng.uniform(0, np.pi)), pos)))
+        add_clutter(r, d.seed, d.clutter, d.clutter_contrast, reach=d.length / 2)  # beside and behind the beam
         block = (0.06, d.width + 0.04, origin[2])
         ends = [0.0] if d.support == "cantilever" else [0.0, d.length]
         for k, x in enumerate(ends):

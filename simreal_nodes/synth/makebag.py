@@ -101,12 +101,16 @@ class MsgFactory:
 
 def make_scene(name: str, width: int = 640, height: int = 480, duration: float | None = None,
                fps: float = 30.0) -> SynthScene:
-    # one scene of the family (synth.family; "family-plate-N": a plate's). "-preloaded": the load is on from the
-    # first frame; "-stereo": a stereo pair instead of RGB-D; "-d2.5", "-el60", "-az45", "-arc20": the camera's
-    # distance (m), elevation, azimuth and arc (deg) changed
+    # one scene of the family (synth.family; "family-plate-N": a plate's; "family-boot-N": the joint boot's,
+    # synth.boot_family). "-preloaded": the load is on from the first frame; "-stereo": a stereo pair instead of
+    # RGB-D; "-d2.5", "-el60", "-az45", "-arc20": the camera's distance (m), elevation, azimuth and arc (deg) changed
     num = r"(\d+(?:\.\d+)?)"
     family = re.fullmatch(rf"family[-_](plate[-_])?(\d+)(-preloaded)?(-stereo)?(?:-d{num})?(?:-el{num})?"
                           rf"(?:-az(-?\d+(?:\.\d+)?))?(?:-arc{num})?", name)
+    boot = re.fullmatch(r"family[-_]boot[-_](\d+)", name)
+    if boot:  # the joint boot in a drawn set-up (synth.boot_family)
+        from simreal_nodes.synth.boot_family import boot_family_scene
+        return boot_family_scene(int(boot[1]), width, height, fps=fps, duration=duration)
     if family:
         from simreal_nodes.synth.family import T_FREE, family_scene
         keys = ("distance", "elevation_deg", "azimuth_deg", "arc_deg")

@@ -10,6 +10,7 @@ user would know (camera topics, marker layout, where a virtual object is placed)
 from __future__ import annotations
 
 import functools
+import json
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -424,10 +425,26 @@ def boot_truth() -> LeverTruth:
     """The real boot of :func:`joint_boot` (spec ``joint_boot``: neo-Hookean bellows, E 5 MPa, nu 0.45, its top ring
     carried by the lever) solved at full order on a finer grid than its model (72 x 2 x 60 trilinear hexahedra
     against 36 x 1 x 48), Newton every 2 degrees of the lever (:func:`~simreal_nodes.synth.truth.boot_lever_truth`;
-    about 11 minutes on 2 cores)."""
+    about 11 minutes on 2 cores), kept on disk keyed on the spec and the truth's and the builders' code."""
     from simreal_nodes.rom.build import load_spec
 
-    return boot_lever_truth(dict(load_spec("joint_boot.yaml")))
+    spec = dict(load_spec("joint_boot.yaml"))
+    return _cached_truth("joint_boot", boot_truth_key(spec), ("points", "surface", "theta", "U", "description"),
+                         lambda: boot_lever_truth(spec),
+                         lambda a, info: LeverTruth(**{**a, "description": str(a["description"])}, info=info),
+                         lambda t: t.U.ndim == 3 and t.U.shape[1:] == t.points.shape)
+
+
+def boot_truth_key(spec: dict) -> list:
+    """What the boot's cached truth is keyed on: the spec's content (not the file it was read from: a clone
+    elsewhere uses the same truth), the truth's code and the builders' code."""
+    from pathlib import Path
+
+    from simreal_nodes.rom.build import builder_version, source_digest
+    from simreal_nodes.synth import truth as tr
+
+    code = source_digest(Path(tr.__file__).resolve().parents[2], tr.__name__)
+    return [json.loads(json.dumps({k: v for k, v in spec.items() if not k.startswith("_")})), code, builder_version()]
 
 
 # the camera's arc about the boot (azimuths, degrees), its jitter's seed, the guess's seed and the boot's turn alpha_z
