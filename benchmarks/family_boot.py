@@ -142,7 +142,8 @@ def write(rows: list[dict], label: str, name: str) -> None:
     s = summary(rows)
     notes = (f"{label}: {s['scenes']} scenes of the real joint boot at 640x480, {FPS:.0f} fps, RGB-D SLAM + PGD "
              "tracker with the boot scene file's settings (map points, Huber 2 px, alpha_z a constant fixed over 40 "
-             "informative frames), placed by registration from a guess by eye. Over scenes: median of the per-scene "
+             "informative frames) but for the knobs the label names, placed by registration from a guess by eye. "
+             "Over scenes: median of the per-scene "
              f"median lever-angle error {s['median_of_medians_pct']:.2f} % of its 52 deg range, p90 "
              f"{s['p90_of_medians_pct']:.2f} %, {s['within_1pct']:.0f} % of scenes within 1 %, "
              f"{s['within_2pct']:.0f} % within 2 % (the beams' targets: < 1 %, < 3 %, >= 90 % within 2 %); alpha_z "
