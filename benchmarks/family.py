@@ -396,12 +396,19 @@ TABLES = (("family", "Held-out seeds (the accuracy this project reports): the de
            "--tracking dense_rigid=false`), on the development plate whose s_y was worst (stop-37 code, before the "
            "shading term)"),
           ("family_boot", "The joint boot, held-out seeds (`python -m benchmarks.family_boot`: seeds 1000-1019; "
-           "the lever angle theta, the turn alpha_z unknown)"),
-          ("family_boot_dev", "The joint boot, development seeds (`python -m benchmarks.family_boot --seeds 0-9`)"),
+           "the lever angle theta, the turn alpha_z unknown; alpha_z searched until first seen)"),
+          ("family_boot_dev_constant_search_24", "The joint boot, development seeds 0-9 with alpha_z searched over 24 "
+           "values until first seen (`--tracking constant_search=24`: the family's boot scene file since this run)"),
+          ("family_boot_before_search", "The joint boot, held-out seeds 1000-1019 before the search (stop 62's first "
+           "run: the thesis boot scene file's settings alone)"),
+          ("family_boot_dev_before_search", "The joint boot, development seeds 0-9 before the search (stop 62's "
+           "first run)"),
           ("family_boot_dev_constant_frames_15", "The joint boot, knob: alpha_z fixed over 15 informative frames, not "
-           "40 (`--tracking constant_frames=15`: the tracker's own default), development seeds 0-9"),
+           "40 (`--tracking constant_frames=15`: the tracker's own default), development seeds 0-9, before the "
+           "search"),
           ("family_boot_dev_freeze_map", "The joint boot, knob: no new map points once the boot deforms "
-           "(`--localization freeze_map_on_deformation=true`, thesis §4.4.1), development seeds 0-9"),
+           "(`--localization freeze_map_on_deformation=true`, thesis §4.4.1), development seeds 0-9, before the "
+           "search"),
           ("family_dev_0_19_other", "Development seeds 0-19 on the code of stop 57 rerun in stop 58 on another "
            "host (AMD EPYC; every row the same as the table below) with where the other basin's fit ended recorded: "
            "the low-confidence flag `max_ambiguity_gap` was set on its frames (`flag_calibration_ambiguity`)"),

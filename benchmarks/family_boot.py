@@ -7,8 +7,9 @@
 Each scene (:mod:`simreal_nodes.synth.boot_family`: the thesis's real boot turned an unknown ``alpha_z`` about its
 axis, its lever held at 4-6 drawn angles, the camera's arc, the speckle's contrast, clutter, light, noise and blur
 drawn; 640 x 480 RGB-D at 15 fps) is rendered from the independent full-order solve and run through the offline
-pipeline with the settings of the boot's scene file (map points, registration from a guess by eye). Per scene: the
-lever angle's error over the frames whose lever is more than about a degree from rest (as
+pipeline with the settings of the boot's scene file (map points, registration from a guess by eye, alpha_z searched
+over its range until first seen: ``tracking.constant_search``). Per scene: the lever angle's error over the frames
+whose lever is more than about a degree from rest (as
 ``benchmarks/thesis_truth.py`` scores the boot), in degrees and in % of the model's 52 degree range, the turn
 ``alpha_z``'s error (the registration's turn about the axis and the tracker's constant together), the registration's
 error (axis origin, axis tilt), the model's own bias and error, the camera's error and the step's time. The summary
@@ -142,7 +143,8 @@ def write(rows: list[dict], label: str, name: str) -> None:
     s = summary(rows)
     notes = (f"{label}: {s['scenes']} scenes of the real joint boot at 640x480, {FPS:.0f} fps, RGB-D SLAM + PGD "
              "tracker with the boot scene file's settings (map points, Huber 2 px, alpha_z a constant fixed over 40 "
-             "informative frames) but for the knobs the label names, placed by registration from a guess by eye. "
+             "informative frames, searched over 24 values until first seen) but for the knobs the label names, "
+             "placed by registration from a guess by eye. "
              "Over scenes: median of the per-scene "
              f"median lever-angle error {s['median_of_medians_pct']:.2f} % of its 52 deg range, p90 "
              f"{s['p90_of_medians_pct']:.2f} %, {s['within_1pct']:.0f} % of scenes within 1 %, "

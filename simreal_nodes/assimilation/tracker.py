@@ -74,6 +74,11 @@ class TrackerConfig:
     # pose is corrected from its dots there (rigidly) and held (a pose measured by hand, a few mm and a degree off)
     rest_frames: int = 0
     global_samples: int = 32  # coarse search over the tracked parameters when the warm start fits badly (0: off)
+    # > 0 (measurements map_points): until a 'constant' (alpha_z) has its first informative frame, every frame also
+    # fits the tracked parameters with the constant held at each of this many values over its range (the map points
+    # relinked at each), and keeps the best fit where it explains the images visibly better (0: off; the constant
+    # then moves only by the frame's own fit, and not at all while the object looks undeformed)
+    constant_search: int = 0
     dense: DenseSettings = field(default_factory=DenseSettings)  # measurements 'dense'
     # measurements 'dense': a deformation is seen when it lowers the photometric residual by this fraction
     dense_min_gain: float = 0.05
@@ -429,6 +434,11 @@ class DeformableTracker:
             if self.cfg.global_samples and self._fits_badly(res, len(X)):
                 res = self._global_restart(p, res, lo_p, hi_p)
                 est.debug["restarted"] = True
+            if (self.cfg.constant_search and not self._const_samples and sh <= 0
+                    and self.cfg.measurements == "map_points" and ids is not None and P_map is not None
+                    and uv is not None):
+                res, meas = self._constant_search(res, meas, lo_p, hi_p, est, T_cw, ids, P_map, uv)
+                X, uvm = meas[0], meas[1]
             if sh > 0:  # the shift is a nuisance: kept for the next frame, reported in debug, marginalised out
                 n = len(self.values)
                 self.shift = res.x[n:].copy()
@@ -622,6 +632,61 @@ class DeformableTracker:
             return True
         ref = self._rms_ref if self._rms_ref is not None else 0.0
         return res.rms_px > max(1.3 * ref, 0.75 * self.cfg.huber_px)
+
+    def _constant_search(self, res: lm.Result, meas: Measurements, lo: np.ndarray, hi: np.ndarray, est: Estimate,
+                         T_cw: np.ndarray, ids: np.ndarray, P_map: np.ndarray,
+                         uv: np.ndarray) -> tuple[lm.Result, Measurements]:
+        """Before a constant (alpha_z) is known (``constant_search`` > 0): the frame is also fitted with the constant
+        held at each of ``constant_search`` values over its range, the map points relinked at each (a point's
+        material point depends on how the boot is turned), the tracked parameters free. The frame's own fit starts
+        from the current constant, and while the object looked undeformed the constant is held: a wrong alpha_z then
+        reads a bent boot as unbent, and an unbent boot never moves alpha_z. The best sample (least Huber cost per
+        measurement, at least 80 % of the frame's measurements linked) is polished with the constant free and kept
+        if its RMS beats the frame's fit by ``min_deformation_px``; otherwise the links and values are restored.
+        One unfrozen constant only (alpha_z). Returns the fit and its measurements."""
+        const = np.flatnonzero(np.array([m == "constant" for m in self.mode]) & ~self.frozen)
+        if len(const) != 1 or not np.isfinite(res.rms_px):
+            return res, meas
+        c = int(const[0])
+        tracked = np.flatnonzero(np.array([m == "tracked" for m in self.mode]) & ~self.frozen)
+        saved_values, saved_links = self.values.copy(), dict(self.links)
+        n0 = len(meas[0])
+        lo_s, hi_s = lo.copy(), hi.copy()
+        lo_s[tracked], hi_s[tracked] = self.lo[tracked], self.hi[tracked]
+
+        def fit_at(g: float, free: bool) -> tuple[lm.Result, Measurements] | None:
+            self.values = saved_values.copy()
+            self.values[c] = g
+            self.links = dict(saved_links)
+            self.relink()
+            m = self._map_point_measurements(ids, P_map, uv)
+            if m is None or len(m[0]) < max(self.cfg.min_measurements, 0.8 * n0):
+                return None
+            p = lm.Problem(m[0], m[1], self._disp_fn(m[2], m[3]), T_cw, self.R_wo, self.K, self.layout)
+            x = res.x.copy()
+            x[c] = g
+            lo_g, hi_g = lo_s.copy(), hi_s.copy()
+            if free:
+                lo_g[c], hi_g[c] = self.lo[c], self.hi[c]
+            else:
+                lo_g[c] = hi_g[c] = g
+            return lm.solve(p, x, lo_g, hi_g, self.cfg.huber_px, self.cfg.max_iterations), m
+
+        best_g, best_score = None, res.cost / max(n0, 1)
+        for g in np.linspace(self.lo[c], self.hi[c], self.cfg.constant_search, endpoint=False):
+            out = fit_at(float(g), False)
+            if out is not None and np.isfinite(out[0].cost) and out[0].cost / len(out[1][0]) < best_score:
+                best_g, best_score = float(g), out[0].cost / len(out[1][0])
+        found = fit_at(best_g, True) if best_g is not None else None
+        if found is None or not (found[0].rms_px < res.rms_px - self.cfg.min_deformation_px):
+            self.values, self.links = saved_values, saved_links  # nothing better: as the frame left them
+            return res, meas
+        r, m = found
+        # the links stay those made at the sample (a relink at the polished value happens as alpha_z is sampled)
+        self.values = saved_values.copy()
+        self.values[c] = best_g
+        est.debug["constant_searched"] = float(r.x[c])
+        return r, m
 
     def _global_restart(self, p: lm.Problem, res: lm.Result, lo: np.ndarray, hi: np.ndarray) -> lm.Result:
         """The warm start fitted badly: the load may have jumped into another basin of the cost (a load moved
@@ -830,7 +895,7 @@ def tracker_config(obj: dict[str, Any], **overrides: Any) -> TrackerConfig:
     t = obj["tracking"]
     cfg = TrackerConfig(measurements=t["measurements"], huber_px=t["huber_px"], n_modes=t["modes"],
                         max_iterations=t["max_iterations"], constant_frames=t["constant_frames"],
-                        constant_std_frac=t["constant_std_frac"],
+                        constant_std_frac=t["constant_std_frac"], constant_search=t["constant_search"],
                         min_measurements=t["min_measurements"], max_points=t["points"], anchor=t["anchor"],
                         object_shift_m=t["object_shift_m"], rest_frames=t["rest_frames"],
                         reference=t["reference"],

@@ -155,6 +155,9 @@ TRACKING = Record({
                               lo=1, default=15),
     "constant_std_frac": Number("a frame informs a 'constant' parameter only if its standard deviation is below this "
                                 "fraction of its range", lo=0, lo_open=True, hi=1, default=0.0025),
+    "constant_search": Number("> 0: until a 'constant' parameter (alpha_z) has its first informative frame, also fit "
+                              "each frame with it held at this many values over its range and keep the best (0: "
+                              "off)", integer=True, lo=0, hi=360, default=0),
     "min_measurements": Number("fewer inlier measurements than this -> lost", integer=True, lo=1, default=6),
     "points": Number("most model-linked points used per frame (0 = all)", integer=True, lo=0, default=0),
     "object_shift_m": Number("> 0: also fit a translation of the whole object, bounded by this (metres), each frame: "
