@@ -23,20 +23,21 @@ from dataclasses import dataclass
 import numpy as np
 
 from simreal_nodes import geometry as G
-from simreal_nodes.render.gl import Mesh, Renderer
+from simreal_nodes.render.gl import Renderer
 from simreal_nodes.synth import world as W
 from simreal_nodes.synth.family import T_FREE, WALL_CLEARANCE_M, add_clutter, speckle_texture
 from simreal_nodes.synth.scenes import (
     BOOT_ORIGIN,
-    PLATE,
     SynthScene,
     Truth,
     _camera_yaml,
     _pose7,
     _truth_params,
+    add_boot_props,
     add_environment,
     boot_truth,
     default_camera,
+    place_lever,
     room_half_width,
     truth_mesh,
 )
@@ -129,13 +130,7 @@ def boot_family_scene(seed: int, width: int = 640, height: int = 480, fps: float
         away = np.deg2rad(d.arc_mid_deg) + np.pi
         add_clutter(r, d.seed, d.clutter, d.clutter_contrast, reach=0.1, center=BOOT_ORIGIN[:2],
                     directions=(away - np.pi / 2, away + np.pi / 2))
-        V, F = W.box(PLATE, (BOOT_ORIGIN[0], BOOT_ORIGIN[1], PLATE[2] / 2))
-        r.add(Mesh("plate", V, F, mode="texture", texture=W.texture("plate"), tex_scale=6.0, smooth=False))
-        width_, depth_, z0, z1 = m.loads["lever"]["bar"]
-        V, F = W.box((width_, depth_, z1 - z0), (0, 0, (z0 + z1) / 2))
-        r.add(Mesh("lever", V, F, mode="texture", texture=W.texture("lever"), tex_scale=12.0, smooth=False))
-        V, F = W.sphere(0.018, 12)
-        r.add(Mesh("knob", V, F, mode="texture", texture=W.texture("rubber"), tex_scale=30.0))
+        add_boot_props(r, m)
         tex = speckle_texture(d.speckle_contrast, d.seed, radius_px=d.speckle_mm / 2e3 / TEXTURE_TILE_M * 512)
         r.add(truth_mesh(sc.state["truth"], "boot", tex, 1.0 / TEXTURE_TILE_M, T_wo, smooth=True))
         r.ambient = d.ambient
@@ -144,11 +139,7 @@ def boot_family_scene(seed: int, width: int = 640, height: int = 480, fps: float
     def update(sc: SynthScene, r: Renderer, t: float) -> Truth:
         m = sc.state["models"]["boot"]
         th = lever_angle(d, t)
-        lv = m.loads["lever"]
-        R = G.rot_axis(lv["axis"], th)
-        T_lever = T_wo @ G.make_T(R, np.asarray(lv["pivot"]) - R @ np.asarray(lv["pivot"]))
-        r.update("lever", pose=T_lever)
-        r.update("knob", pose=T_lever @ G.make_T(t=[0, 0, lv["bar"][3] + 0.01]))
+        place_lever(r, m, T_wo, th)
         r.update("boot", vertices=sc.state["truth"].deformed_points(th), pose=T_wo)
         truth = Truth(object_poses={"boot": sc.T_map_world() @ T_axis})
         names, units, vals = _truth_params(m, [th])

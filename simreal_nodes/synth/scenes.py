@@ -435,6 +435,26 @@ def boot_truth() -> LeverTruth:
                          lambda t: t.U.ndim == 3 and t.U.shape[1:] == t.points.shape)
 
 
+def add_boot_props(r: Renderer, m: ReducedModel) -> None:
+    """The boot's base plate, its lever (the model's bar) and the lever's knob: the rigid parts around the boot."""
+    V, F = W.box(PLATE, (BOOT_ORIGIN[0], BOOT_ORIGIN[1], PLATE[2] / 2))
+    r.add(Mesh("plate", V, F, mode="texture", texture=W.texture("plate"), tex_scale=6.0, smooth=False))
+    width_, depth_, z0, z1 = m.loads["lever"]["bar"]
+    V, F = W.box((width_, depth_, z1 - z0), (0, 0, (z0 + z1) / 2))
+    r.add(Mesh("lever", V, F, mode="texture", texture=W.texture("lever"), tex_scale=12.0, smooth=False))
+    V, F = W.sphere(0.018, 12)
+    r.add(Mesh("knob", V, F, mode="texture", texture=W.texture("rubber"), tex_scale=30.0))
+
+
+def place_lever(r: Renderer, m: ReducedModel, T_wo: np.ndarray, theta: float) -> None:
+    """The lever and its knob turned by ``theta`` about the model's pivot axis, the boot at ``T_wo``."""
+    lv = m.loads["lever"]
+    R = G.rot_axis(lv["axis"], theta)
+    T_lever = T_wo @ G.make_T(R, np.asarray(lv["pivot"]) - R @ np.asarray(lv["pivot"]))
+    r.update("lever", pose=T_lever)
+    r.update("knob", pose=T_lever @ G.make_T(t=[0, 0, lv["bar"][3] + 0.01]))
+
+
 def boot_truth_key(spec: dict) -> list:
     """What the boot's cached truth is keyed on: the spec's content (not the file it was read from: a clone
     elsewhere uses the same truth), the truth's code and the builders' code."""
@@ -466,13 +486,7 @@ def _joint_boot_scene(real_boot: bool, width, height, duration, fps, alpha_z: fl
     def build(sc, r, models):
         m = models["boot"]
         add_environment(r, center=(0.3, 0.1), seed=3)
-        V, F = W.box(PLATE, (BOOT_ORIGIN[0], BOOT_ORIGIN[1], PLATE[2] / 2))
-        r.add(Mesh("plate", V, F, mode="texture", texture=W.texture("plate"), tex_scale=6.0, smooth=False))
-        width_, depth_, z0, z1 = m.loads["lever"]["bar"]
-        V, F = W.box((width_, depth_, z1 - z0), (0, 0, (z0 + z1) / 2))
-        r.add(Mesh("lever", V, F, mode="texture", texture=W.texture("lever"), tex_scale=12.0, smooth=False))
-        V, F = W.sphere(0.018, 12)
-        r.add(Mesh("knob", V, F, mode="texture", texture=W.texture("rubber"), tex_scale=30.0))
+        add_boot_props(r, m)
         if independent:
             sc.state["truth"] = boot_truth()
             r.add(truth_mesh(sc.state["truth"], "boot", "rubber", 18.0, np.eye(4), smooth=True))
@@ -486,11 +500,7 @@ def _joint_boot_scene(real_boot: bool, width, height, duration, fps, alpha_z: fl
         m = sc.state["models"]["boot"]
         th = _theta_of_t(t, t_free, duration)
         T_wo = T_world_obj()
-        lv = m.loads["lever"]
-        R = G.rot_axis(lv["axis"], th)
-        T_lever = T_wo @ G.make_T(R, np.asarray(lv["pivot"]) - R @ np.asarray(lv["pivot"]))
-        r.update("lever", pose=T_lever)
-        r.update("knob", pose=T_lever @ G.make_T(t=[0, 0, lv["bar"][3] + 0.01]))
+        place_lever(r, m, T_wo, th)
         if independent:
             r.update("boot", vertices=sc.state["truth"].deformed_points(th), pose=T_wo)
         elif real_boot:
