@@ -649,7 +649,7 @@ class DeformableTracker:
             return res, meas
         c = int(const[0])
         tracked = np.flatnonzero(np.array([m == "tracked" for m in self.mode]) & ~self.frozen)
-        saved_values, saved_links = self.values.copy(), dict(self.links)
+        saved_values, saved_links, saved_static = self.values.copy(), dict(self.links), set(self.static)
         n0 = len(meas[0])
         lo_s, hi_s = lo.copy(), hi.copy()
         lo_s[tracked], hi_s[tracked] = self.lo[tracked], self.hi[tracked]
@@ -657,8 +657,8 @@ class DeformableTracker:
         def fit_at(g: float, free: bool) -> tuple[lm.Result, Measurements] | None:
             self.values = saved_values.copy()
             self.values[c] = g
-            self.links = dict(saved_links)
-            self.relink()
+            self.links, self.static = dict(saved_links), set(saved_static)  # a point off the surface at this turn
+            self.relink()  # is marked static by the relink: for this sample only
             m = self._map_point_measurements(ids, P_map, uv)
             if m is None or len(m[0]) < max(self.cfg.min_measurements, 0.8 * n0):
                 return None
@@ -679,7 +679,7 @@ class DeformableTracker:
                 best_g, best_score = float(g), out[0].cost / len(out[1][0])
         found = fit_at(best_g, True) if best_g is not None else None
         if found is None or not (found[0].rms_px < res.rms_px - self.cfg.min_deformation_px):
-            self.values, self.links = saved_values, saved_links  # nothing better: as the frame left them
+            self.values, self.links, self.static = saved_values, saved_links, saved_static  # as the frame left them
             return res, meas
         r, m = found
         # the links stay those made at the sample (a relink at the polished value happens as alpha_z is sampled)

@@ -327,5 +327,7 @@ def test_constant_search_finds_how_the_boot_is_turned(search):
     err_alpha = np.rad2deg(abs((est.values[1] - alpha + np.pi) % (2 * np.pi) - np.pi))
     if search:
         assert err_theta < 1.0 and err_alpha < 3.0 and est.state == EstimateState.OK
+        # every observed point stays linked, none both linked and static
+        assert not set(tr.links) & tr.static and len(tr.links) == int(seen.sum())
     else:  # the deadlock the search breaks (the test can fail)
         assert err_theta > 10.0
