@@ -10,6 +10,7 @@ so it tells the localization nothing); on success the tracker is built again at 
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any
 
 import numpy as np
@@ -120,6 +121,10 @@ class ObjectTrackers:
         """Registration of a registered object not placed yet, fed this frame: '' once it is placed (or needs no
         registration), else why its estimate waits."""
         oid, cfg = o["id"], self.registration
+        if o["anchor"].get("fine", "auto") != "auto":  # the scene file's choices for this object
+            cfg = dataclasses.replace(cfg, fine=o["anchor"]["fine"])
+        if o["anchor"].get("polish_mm", 0.0) > 0:
+            cfg = dataclasses.replace(cfg, polish=1e-3 * float(o["anchor"]["polish_mm"]))
         if o["anchor"]["kind"] != "registration" or oid in self.registrations:
             return ""
         registering = f"registering from {cfg.frames} depth views (in the background)"

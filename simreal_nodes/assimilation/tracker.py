@@ -79,6 +79,10 @@ class TrackerConfig:
     # relinked at each), and keeps the best fit where it explains the images visibly better (0: off; the constant
     # then moves only by the frame's own fit, and not at all while the object looks undeformed)
     constant_search: int = 0
+    # how long the search runs: "seen" (until the constant's first informative frame) or "frozen" (every frame until
+    # the constant is fixed: a search that wins there by ``min_deformation_px`` moves the constant to another basin
+    # and restarts its informative frames, which came from the basin it left)
+    constant_search_until: str = "seen"
     dense: DenseSettings = field(default_factory=DenseSettings)  # measurements 'dense'
     # measurements 'dense': a deformation is seen when it lowers the photometric residual by this fraction
     dense_min_gain: float = 0.05
@@ -434,7 +438,9 @@ class DeformableTracker:
             if self.cfg.global_samples and self._fits_badly(res, len(X)):
                 res = self._global_restart(p, res, lo_p, hi_p)
                 est.debug["restarted"] = True
-            if (self.cfg.constant_search and not self._const_samples and sh <= 0
+            searching = not self._const_samples or (self.cfg.constant_search_until == "frozen"
+                                                    and self._unfrozen_constants().size > 0)
+            if (self.cfg.constant_search and searching and sh <= 0
                     and self.cfg.measurements == "map_points" and ids is not None and P_map is not None
                     and uv is not None):
                 res, meas = self._constant_search(res, meas, lo_p, hi_p, est, T_cw, ids, P_map, uv)
@@ -633,6 +639,9 @@ class DeformableTracker:
         ref = self._rms_ref if self._rms_ref is not None else 0.0
         return res.rms_px > max(1.3 * ref, 0.75 * self.cfg.huber_px)
 
+    def _unfrozen_constants(self) -> np.ndarray:
+        return np.flatnonzero(np.array([m == "constant" for m in self.mode], dtype=bool) & ~self.frozen)
+
     def _constant_search(self, res: lm.Result, meas: Measurements, lo: np.ndarray, hi: np.ndarray, est: Estimate,
                          T_cw: np.ndarray, ids: np.ndarray, P_map: np.ndarray,
                          uv: np.ndarray) -> tuple[lm.Result, Measurements]:
@@ -644,7 +653,7 @@ class DeformableTracker:
         measurement, at least 80 % of the frame's measurements linked) is polished with the constant free and kept
         if its RMS beats the frame's fit by ``min_deformation_px``; otherwise the links and values are restored.
         One unfrozen constant only (alpha_z). Returns the fit and its measurements."""
-        const = np.flatnonzero(np.array([m == "constant" for m in self.mode]) & ~self.frozen)
+        const = self._unfrozen_constants()
         if len(const) != 1 or not np.isfinite(res.rms_px):
             return res, meas
         c = int(const[0])
@@ -678,10 +687,15 @@ class DeformableTracker:
             if out is not None and np.isfinite(out[0].cost) and out[0].cost / len(out[1][0]) < best_score:
                 best_g, best_score = float(g), out[0].cost / len(out[1][0])
         found = fit_at(best_g, True) if best_g is not None else None
+        est.debug["constant_search_rms_px"] = float(found[0].rms_px) if found is not None else float("nan")
         if found is None or not (found[0].rms_px < res.rms_px - self.cfg.min_deformation_px):
             self.values, self.links, self.static = saved_values, saved_links, saved_static  # as the frame left them
             return res, meas
         r, m = found
+        step = (self.hi[c] - self.lo[c]) / self.cfg.constant_search
+        if self._const_samples and abs(best_g - saved_values[c]) > step:
+            self._const_samples.clear()  # they were taken in the basin the search left
+            est.debug["constant_samples_cleared"] = 1.0
         # the links stay those made at the sample (a relink at the polished value happens as alpha_z is sampled)
         self.values = saved_values.copy()
         self.values[c] = best_g
@@ -896,6 +910,7 @@ def tracker_config(obj: dict[str, Any], **overrides: Any) -> TrackerConfig:
     cfg = TrackerConfig(measurements=t["measurements"], huber_px=t["huber_px"], n_modes=t["modes"],
                         max_iterations=t["max_iterations"], constant_frames=t["constant_frames"],
                         constant_std_frac=t["constant_std_frac"], constant_search=t["constant_search"],
+                        constant_search_until=t["constant_search_until"],
                         min_measurements=t["min_measurements"], max_points=t["points"], anchor=t["anchor"],
                         object_shift_m=t["object_shift_m"], rest_frames=t["rest_frames"],
                         reference=t["reference"],

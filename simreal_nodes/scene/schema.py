@@ -97,6 +97,12 @@ ANCHOR = Record({
     "guess": Vector(7, what=POSE7, doc="registration: the object frame in the map frame (the first camera frame) "
                     "as judged by eye, centimetres and some degrees off; it picks between mirror-image fits of a "
                     "symmetric object", nullable=True),
+    "fine": Enum(("auto", "full", "upright"), "registration: the fine stage's freedom: full (6 degrees), upright "
+                 "(translation and a turn about the object's z axis; roll and pitch from the support plane: an object "
+                 "standing on it) or auto (upright for depth from a stereo pair, else full)", default="auto"),
+    "polish_mm": Number("registration: > 0: the fit is also refined from starts this far away along each object "
+                        "axis and the one most faces meet within 2 mm kept (a ridged surface, the joint boot's "
+                        "bellows, can hold the fine stage a ridge away; 0: off)", lo=0, hi=50, default=0),
 })
 
 TRACKING = Record({
@@ -158,6 +164,9 @@ TRACKING = Record({
     "constant_search": Number("> 0: until a 'constant' parameter (alpha_z) has its first informative frame, also fit "
                               "each frame with it held at this many values over its range and keep the best (0: "
                               "off)", integer=True, lo=0, hi=360, default=0),
+    "constant_search_until": Enum(("seen", "frozen"), "how long constant_search runs: until the constant's first "
+                                  "informative frame (seen), or every frame until it is fixed (frozen: a win moves it "
+                                  "to another basin and restarts its informative frames)", default="seen"),
     "min_measurements": Number("fewer inlier measurements than this -> lost", integer=True, lo=1, default=6),
     "points": Number("most model-linked points used per frame (0 = all)", integer=True, lo=0, default=0),
     "object_shift_m": Number("> 0: also fit a translation of the whole object, bounded by this (metres), each frame: "

@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import functools
 import hashlib
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import NamedTuple
@@ -384,6 +385,28 @@ def add_clutter(r: Renderer, seed: int, n: int, contrast: float, reach: float, c
                    pose=G.make_T(G.rot_axis("z", rng.uniform(0, np.pi)), pos)))
 
 
+def arc_camera(d, target: np.ndarray, az_mid: float) -> Callable[[float], np.ndarray]:
+    """The drawn camera path of a family scene ``d`` (a beam's, a plate's or the boot's draw): an arc of
+    ``d.arc_deg`` centred on the azimuth ``az_mid`` (radians) around ``target`` at ``d.distance`` and
+    ``d.cam_elevation_deg``, one sweep over the scene's duration with a hand's jitter. Returns t -> T_world_cam."""
+    el = np.deg2rad(d.cam_elevation_deg)
+    az0, az1 = az_mid - np.deg2rad(d.arc_deg) / 2, az_mid + np.deg2rad(d.arc_deg) / 2
+
+    def cam_pose(t: float) -> np.ndarray:
+        return W.arc_trajectory(np.array([t]), target, d.distance * np.cos(el), d.distance * np.sin(el), az0, az1,
+                                jitter=0.004, seed=d.seed, period=d.duration)[0]
+
+    return cam_pose
+
+
+def guess_by_eye(err, R: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """A user's guess of a pose (R, t) in the world, off by the drawn ``err`` (x, y, z in metres, then rotations
+    about x, y and z in radians): what a scene file's registration starts from."""
+    err = np.asarray(err)
+    R_err = G.rot_axis("x", err[3]) @ G.rot_axis("y", err[4]) @ G.rot_axis("z", err[5])
+    return G.make_T(R_err @ R, t + err[:3])
+
+
 STEREO_BASELINE = 0.12  # metres, a common stereo camera's (e.g. ZED 2)
 
 
@@ -463,19 +486,12 @@ def family_scene(seed: int, width: int = 640, height: int = 480, fps: float = 15
         return truth
 
     target = T_wo[:3, :3] @ np.array([d.length / 2, d.width / 2, d.height / 2]) + origin
-    el = np.deg2rad(d.cam_elevation_deg)
     az_mid = yaw - np.pi / 2 + np.deg2rad(float(view.get("azimuth_deg", 0.0)))  # looks at the front face (y = 0)
-    az0, az1 = az_mid - np.deg2rad(d.arc_deg) / 2, az_mid + np.deg2rad(d.arc_deg) / 2
-
-    def cam_pose(t: float) -> np.ndarray:
-        return W.arc_trajectory(np.array([t]), target, d.distance * np.cos(el), d.distance * np.sin(el), az0, az1,
-                                jitter=0.004, seed=d.seed, period=d.duration)[0]
+    cam_pose = arc_camera(d, target, az_mid)
 
     def scene_yaml(sc: SynthScene) -> dict:
         err = np.asarray(d.guess_error)
-        R_err = G.rot_axis("x", err[3]) @ G.rot_axis("y", err[4]) @ G.rot_axis("z", err[5])
-        T_user = G.make_T(R_err @ T_wo[:3, :3], T_wo[:3, 3] + err[:3])  # the user's guess, world frame
-        guess = sc.T_map_world() @ T_user
+        guess = sc.T_map_world() @ guess_by_eye(err, T_wo[:3, :3], T_wo[:3, 3])  # the user's guess
         camera = _camera_yaml(sc)
         if stereo:  # the nearest depth to match: half the distance the user guesses the object at
             camera["stereo_min_depth_m"] = round(max(0.2, 0.5 * float(np.linalg.norm(guess[:3, 3]))), 2)

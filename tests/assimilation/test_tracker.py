@@ -331,3 +331,43 @@ def test_constant_search_finds_how_the_boot_is_turned(search):
         assert not set(tr.links) & tr.static and len(tr.links) == int(seen.sum())
     else:  # the deadlock the search breaks (the test can fail)
         assert err_theta > 10.0
+
+
+@pytest.mark.parametrize("until", ["seen", "frozen"])
+def test_constant_search_until_frozen_leaves_a_wrong_basin(until):
+    """Development seed 2 of the boot family: the depth image's reference state put alpha_z 63 degrees off, that
+    first frame counted as informative, and a search that stops once the constant is seen never ran again; alpha_z
+    then wandered and was fixed 50 degrees off (theta 11 % off). ``constant_search_until: frozen`` searches every
+    frame until the constant is fixed, moves it where the images are explained visibly better and restarts its
+    informative frames. Here the tracker is put in that state (alpha_z 100 degrees off, one sample taken there)
+    and shown the bent boot."""
+    from simreal_nodes.synth.scenes import default_camera
+
+    model = load_model(cached_model("joint_boot"), fields=["displacement"])
+    params = {"theta": {"mode": "tracked", "initial": 0.2}, "alpha_z": {"mode": "constant", "initial": 0.0}}
+    cam = default_camera(640, 480)
+    tr = DeformableTracker(model, np.eye(4), params, cam, TrackerConfig(
+        measurements="map_points", constant_search=24, constant_search_until=until))
+    alpha, theta = np.deg2rad(40.0), np.deg2rad(25.0)
+    nodes = tr.cand_nodes[::3]
+    Rz = G.rot_axis("z", alpha)
+    rest = model.points[nodes].astype(np.float64) @ Rz.T
+    bent = np.asarray(model.deformed_points([theta]), np.float64)[nodes] @ Rz.T
+    ids = np.arange(len(nodes))
+    T_wc = G.look_at([0.45, -0.3, 0.3], [0.0, 0.0, 0.08])
+    seen = G.transform(G.inv(T_wc), rest)[:, 2] > 0
+    for _ in range(3):  # the boot at rest: its points are linked
+        tr.update(T_wc, ids[seen], rest[seen], cam.project(G.transform(G.inv(T_wc), rest[seen])))
+    tr.values[1] = alpha - np.deg2rad(100.0)  # a wrong basin, as a reference state read from depth left it
+    tr.relink()
+    tr._was_deforming = True
+    tr._const_samples.append(tr.values.copy())  # and one informative frame taken there
+    for _ in range(6):
+        est = tr.update(T_wc, ids[seen], rest[seen], cam.project(G.transform(G.inv(T_wc), bent[seen])))
+    err_theta = np.rad2deg(abs(est.values[0] - theta))
+    err_alpha = np.rad2deg(abs((est.values[1] - alpha + np.pi) % (2 * np.pi) - np.pi))
+    if until == "frozen":
+        assert err_theta < 1.0 and err_alpha < 3.0
+        assert all(abs(s[1] - est.values[1]) < np.deg2rad(3.0) for s in tr._const_samples)  # the old one dropped
+    else:  # stuck where it was left (the test can fail)
+        assert err_alpha > 20.0 or err_theta > 5.0

@@ -63,3 +63,36 @@ def test_a_registering_tracker_subscribes_to_depth():
         s = validate_scene(doc, "reg", ".")
         nodes = {n.name: n for n in graph.required_nodes(s)}
         assert (graph.CAM_DEPTH in nodes["tracker"].inputs) == wants == graph.tracker_reads_depth(s), (anchor, tracking)
+
+
+@pytest.mark.parametrize("fine, want", [(None, "full"), ("auto", "full"), ("upright", "upright"), ("full", "full")])
+def test_the_anchor_chooses_the_registration_fine_stage(monkeypatch, fine, want):
+    """``anchor.fine`` reaches the registration of that object (``auto``: the camera's choice, full for RGB-D)."""
+    import numpy as np
+
+    from simreal_nodes.assimilation import objects
+    from simreal_nodes.assimilation.registration import RegistrationConfig, RegistrationError
+    from simreal_nodes.rom.build import cached_model
+    from simreal_nodes.rom.model_file import load_model
+    from simreal_nodes.synth.scenes import default_camera
+
+    anchor = {"kind": "registration", "guess": GUESS} | ({"fine": fine} if fine else {})
+    scene = validate_scene(_doc(anchor), "reg", ".")
+    seen = []
+
+    def register(*args, **kw):
+        seen.append(next(a for a in args if isinstance(a, RegistrationConfig)).fine)
+        raise RegistrationError("stopped here")
+
+    monkeypatch.setattr(objects, "register_loaded", register)
+    monkeypatch.setattr(objects, "register_rgbd", register)
+    model = load_model(cached_model("aluminium_beam"), fields=["displacement"])
+    cam = default_camera(64, 48)
+    tr = objects.ObjectTrackers(scene["objects"], {"beam": model}, RegistrationConfig.for_camera(scene["camera"]))
+    tr.set_camera(cam)
+    depth = np.full((48, 64), 1.2, np.float32)
+    for _ in range(RegistrationConfig().frames * RegistrationConfig().every):
+        tr._register(scene["objects"][0], np.eye(4), depth)
+    assert seen == [want]
+    with pytest.raises(SceneError, match="fine"):
+        validate_scene(_doc({**anchor, "fine": "sideways"}), "reg", ".")
