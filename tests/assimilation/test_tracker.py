@@ -295,6 +295,39 @@ def test_map_points_unseen_for_long_are_forgotten(beam):
     assert set(tr.links) == set(range(20))  # linked anew
 
 
+class _BootScene:
+    """A boot tracker (alpha_z a constant starting at 0) and synthetic map points on the model's own surface, the
+    boot turned by ``alpha_deg``, at rest and with its lever at 25 degrees (the mechanics, not the accuracy)."""
+
+    def __init__(self, alpha_deg: float, **cfg):
+        from simreal_nodes.synth.scenes import default_camera
+
+        model = load_model(cached_model("joint_boot"), fields=["displacement"])
+        params = {"theta": {"mode": "tracked", "initial": 0.2}, "alpha_z": {"mode": "constant", "initial": 0.0}}
+        self.cam = default_camera(640, 480)
+        self.tr = DeformableTracker(model, np.eye(4), params, self.cam, TrackerConfig(measurements="map_points",
+                                                                                      **cfg))
+        self.alpha, self.theta = np.deg2rad(alpha_deg), np.deg2rad(25.0)
+        nodes = self.tr.cand_nodes[::3]
+        Rz = G.rot_axis("z", self.alpha)
+        self.rest = model.points[nodes].astype(np.float64) @ Rz.T
+        self.bent = np.asarray(model.deformed_points([self.theta]), np.float64)[nodes] @ Rz.T
+        self.ids = np.arange(len(nodes))
+        self.T_wc = G.look_at([0.45, -0.3, 0.3], [0.0, 0.0, 0.08])
+        self.seen = G.transform(G.inv(self.T_wc), self.rest)[:, 2] > 0
+
+    def show(self, bent: bool):
+        """One frame: the map points (at rest in the map) seen where the rest or the bent boot has them."""
+        X, s = (self.bent if bent else self.rest), self.seen
+        return self.tr.update(self.T_wc, self.ids[s], self.rest[s], self.cam.project(G.transform(G.inv(self.T_wc),
+                                                                                                 X[s])))
+
+    def errors(self, est) -> tuple[float, float]:
+        """(theta, alpha_z) errors in degrees."""
+        return (float(np.rad2deg(abs(est.values[0] - self.theta))),
+                float(np.rad2deg(abs((est.values[1] - self.alpha + np.pi) % (2 * np.pi) - np.pi))))
+
+
 @pytest.mark.parametrize("search", [0, 24])
 def test_constant_search_finds_how_the_boot_is_turned(search):
     """The boot family's failure (docs/family.md, development seed 3): alpha_z starts far from the boot's turn
@@ -304,31 +337,16 @@ def test_constant_search_finds_how_the_boot_is_turned(search):
     until it is first seen. Synthetic map points on the model's own surface, the boot's and the lever's (the
     mechanics, not the accuracy): turned 150 degrees, lever at 25 degrees. (Without the relinking, a first version
     of the search, the boot's many points linked at the wrong turn outvoted the lever's and it failed here.)"""
-    from simreal_nodes.synth.scenes import default_camera
-
-    model = load_model(cached_model("joint_boot"), fields=["displacement"])
-    params = {"theta": {"mode": "tracked", "initial": 0.2}, "alpha_z": {"mode": "constant", "initial": 0.0}}
-    cam = default_camera(640, 480)
-    tr = DeformableTracker(model, np.eye(4), params, cam, TrackerConfig(measurements="map_points",
-                                                                        constant_search=search))
-    alpha, theta = np.deg2rad(150.0), np.deg2rad(25.0)
-    nodes = tr.cand_nodes[::3]
-    Rz = G.rot_axis("z", alpha)
-    rest = model.points[nodes].astype(np.float64) @ Rz.T
-    bent = np.asarray(model.deformed_points([theta]), np.float64)[nodes] @ Rz.T
-    ids = np.arange(len(nodes))
-    T_wc = G.look_at([0.45, -0.3, 0.3], [0.0, 0.0, 0.08])
-    seen = G.transform(G.inv(T_wc), rest)[:, 2] > 0
+    b = _BootScene(150.0, constant_search=search)
     for _ in range(3):  # the boot at rest: its points are linked
-        tr.update(T_wc, ids[seen], rest[seen], cam.project(G.transform(G.inv(T_wc), rest[seen])))
+        b.show(bent=False)
     for _ in range(6):  # the lever turned: the same map points seen where the bent boot has them
-        est = tr.update(T_wc, ids[seen], rest[seen], cam.project(G.transform(G.inv(T_wc), bent[seen])))
-    err_theta = np.rad2deg(abs(est.values[0] - theta))
-    err_alpha = np.rad2deg(abs((est.values[1] - alpha + np.pi) % (2 * np.pi) - np.pi))
+        est = b.show(bent=True)
+    err_theta, err_alpha = b.errors(est)
     if search:
         assert err_theta < 1.0 and err_alpha < 3.0 and est.state == EstimateState.OK
         # every observed point stays linked, none both linked and static
-        assert not set(tr.links) & tr.static and len(tr.links) == int(seen.sum())
+        assert not set(b.tr.links) & b.tr.static and len(b.tr.links) == int(b.seen.sum())
     else:  # the deadlock the search breaks (the test can fail)
         assert err_theta > 10.0
 
@@ -341,31 +359,17 @@ def test_constant_search_until_frozen_leaves_a_wrong_basin(until):
     frame until the constant is fixed, moves it where the images are explained visibly better and restarts its
     informative frames. Here the tracker is put in that state (alpha_z 100 degrees off, one sample taken there)
     and shown the bent boot."""
-    from simreal_nodes.synth.scenes import default_camera
-
-    model = load_model(cached_model("joint_boot"), fields=["displacement"])
-    params = {"theta": {"mode": "tracked", "initial": 0.2}, "alpha_z": {"mode": "constant", "initial": 0.0}}
-    cam = default_camera(640, 480)
-    tr = DeformableTracker(model, np.eye(4), params, cam, TrackerConfig(
-        measurements="map_points", constant_search=24, constant_search_until=until))
-    alpha, theta = np.deg2rad(40.0), np.deg2rad(25.0)
-    nodes = tr.cand_nodes[::3]
-    Rz = G.rot_axis("z", alpha)
-    rest = model.points[nodes].astype(np.float64) @ Rz.T
-    bent = np.asarray(model.deformed_points([theta]), np.float64)[nodes] @ Rz.T
-    ids = np.arange(len(nodes))
-    T_wc = G.look_at([0.45, -0.3, 0.3], [0.0, 0.0, 0.08])
-    seen = G.transform(G.inv(T_wc), rest)[:, 2] > 0
+    b = _BootScene(40.0, constant_search=24, constant_search_until=until)
+    tr = b.tr
     for _ in range(3):  # the boot at rest: its points are linked
-        tr.update(T_wc, ids[seen], rest[seen], cam.project(G.transform(G.inv(T_wc), rest[seen])))
-    tr.values[1] = alpha - np.deg2rad(100.0)  # a wrong basin, as a reference state read from depth left it
+        b.show(bent=False)
+    tr.values[1] = b.alpha - np.deg2rad(100.0)  # a wrong basin, as a reference state read from depth left it
     tr.relink()
     tr._was_deforming = True
     tr._const_samples.append(tr.values.copy())  # and one informative frame taken there
     for _ in range(6):
-        est = tr.update(T_wc, ids[seen], rest[seen], cam.project(G.transform(G.inv(T_wc), bent[seen])))
-    err_theta = np.rad2deg(abs(est.values[0] - theta))
-    err_alpha = np.rad2deg(abs((est.values[1] - alpha + np.pi) % (2 * np.pi) - np.pi))
+        est = b.show(bent=True)
+    err_theta, err_alpha = b.errors(est)
     if until == "frozen":
         assert err_theta < 1.0 and err_alpha < 3.0
         assert all(abs(s[1] - est.values[1]) < np.deg2rad(3.0) for s in tr._const_samples)  # the old one dropped
