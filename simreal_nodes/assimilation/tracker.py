@@ -692,8 +692,9 @@ class DeformableTracker:
             self.values, self.links, self.static = saved_values, saved_links, saved_static  # as the frame left them
             return res, meas
         r, m = found
-        step = (self.hi[c] - self.lo[c]) / self.cfg.constant_search
-        if self._const_samples and abs(best_g - saved_values[c]) > step:
+        span = self.hi[c] - self.lo[c]  # searched as a turn (the samples leave out the range's end): the gap wraps
+        gap = abs(best_g - saved_values[c]) % span
+        if self._const_samples and min(gap, span - gap) > span / self.cfg.constant_search:
             self._const_samples.clear()  # they were taken in the basin the search left
             est.debug["constant_samples_cleared"] = 1.0
         # the links stay those made at the sample (a relink at the polished value happens as alpha_z is sampled)
