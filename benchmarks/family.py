@@ -1025,7 +1025,8 @@ whole runs: 0.36 mm at the median, 1002, 1005, 1006 and 1011 3.9-4.6 mm off); in
 to the share within 2 %: short of every target the beams meet. What fails now: alpha_z on 1015 (22 degrees, theta 10.5 %
 with every frame called OK) and 1018 (registered 12 mm off on noisy depth at 0.46 m, every frame flagged); theta 8.8-9.8
 % off on 1007 (the measurements lost, 53 % of frames OK), 1009 and 1013 with alpha_z within 1.6-4.7 degrees; 1005 4.4 %.
-Against the spread between identical runs (above) single rows moving by a point or less say little. """
+Against the spread between identical runs (above) single rows moving by a point or less say little.
+"""
 
 
 def main() -> None:
