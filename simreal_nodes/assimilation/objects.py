@@ -121,10 +121,6 @@ class ObjectTrackers:
         """Registration of a registered object not placed yet, fed this frame: '' once it is placed (or needs no
         registration), else why its estimate waits."""
         oid, cfg = o["id"], self.registration
-        if o["anchor"].get("fine", "auto") != "auto":  # the scene file's choices for this object
-            cfg = dataclasses.replace(cfg, fine=o["anchor"]["fine"])
-        if o["anchor"].get("polish_mm", 0.0) > 0:
-            cfg = dataclasses.replace(cfg, polish=1e-3 * float(o["anchor"]["polish_mm"]))
         if o["anchor"]["kind"] != "registration" or oid in self.registrations:
             return ""
         registering = f"registering from {cfg.frames} depth views (in the background)"
@@ -153,6 +149,7 @@ class ObjectTrackers:
         views.clear()
         model = self.models[oid]
         guess = G.pose7_to_matrix(o["anchor"]["guess"])
+        cfg = self._registration_config(o)
         try:
             tr = self._tracker(o)
             if tr.cfg.reference == "depth":
@@ -173,6 +170,16 @@ class ObjectTrackers:
         except RegistrationError as e:
             return f"waiting for registration: {e.args[0]}"
         return self._placed(oid, reg)
+
+    def _registration_config(self, o: dict[str, Any]) -> RegistrationConfig:
+        """The registration settings for object ``o``: the camera's, with the scene file's ``anchor.fine`` and
+        ``anchor.polish_mm`` where it sets them."""
+        cfg, a = self.registration, o["anchor"]
+        if a.get("fine", "auto") != "auto":
+            cfg = dataclasses.replace(cfg, fine=a["fine"])
+        if a.get("polish_mm", 0.0) > 0:
+            cfg = dataclasses.replace(cfg, polish=1e-3 * float(a["polish_mm"]))
+        return cfg
 
     def _placed(self, oid: str, reg: Registration) -> str:
         """A registration found: kept, and the object's tracker built again at its pose on its next frame."""
