@@ -397,15 +397,15 @@ def register_rgbd(cloud: np.ndarray, model: ReducedModel, guess: np.ndarray, cam
        dropped and the guess is levelled onto it (its z axis turned onto the plane normal): two of the three
        angles a user gets wrong by eye are then known;
     2. a crop to the guessed model box grown by ``margin``;
-    3. point-to-plane ICP (Open3D, Tukey-robust) of the cropped points onto samples of the model surface with
-       their exact normals: each measured point finds its nearest model surface point, so the faces the cameras
-       did not see take no part. Coarse (:func:`_icp_upright`, 4 degrees of freedom: translation and a turn
-       about the up axis): on a 5 mm grid from the levelled guess and from starts moved by a third
-       of the margin along each object axis and turned 10 degrees about z either way (a guess centimetres off
-       locks onto a neighbouring structure, a clamp's face, from a single start); of the fits that stay within
-       ``max_turn_deg`` of the guess (a box beam of square section also fits rolled a quarter turn), the one
-       that covers most of the model surface facing the cameras goes on to the fine stage (full cloud, radii
-       down to 4 mm), without the points in the ``contact_band`` above the model's underside;
+    3. point-to-plane ICP (Tukey-robust; :func:`icp_point_to_plane`, Open3D's loop made deterministic) of the
+       cropped points onto samples of the model surface with their exact normals: each measured point finds its
+       nearest model surface point, so the faces the cameras did not see take no part. Coarse (:func:`_icp_upright`,
+       4 degrees of freedom: translation and a turn about the up axis): on a 5 mm grid from the levelled guess and
+       from starts moved by a third of the margin along each object axis and turned 10 degrees about z either way (a
+       guess centimetres off locks onto a neighbouring structure, a clamp's face, from a single start); of the fits
+       that stay within ``max_turn_deg`` of the guess (a box beam of square section also fits rolled a quarter
+       turn), the one that covers most of the model surface facing the cameras goes on to the fine stage (full
+       cloud, radii down to 4 mm), without the points in the ``contact_band`` above the model's underside;
     4. a slide along a direction that no matched face constrains (a prism's axis when its end faces are a few
        noisy pixels) is pinned by the model's cover of its faces turned to the cameras (:func:`_pin_slide`);
     5. the quality (:class:`Registration`), judged on the model faces turned to ``cam_centres`` (the cameras'
@@ -421,7 +421,6 @@ def register_rgbd(cloud: np.ndarray, model: ReducedModel, guess: np.ndarray, cam
     cfg = cfg or RegistrationConfig()
     if cfg.fine not in ("full", "upright"):
         raise ValueError(f"RegistrationConfig.fine: expected 'full' or 'upright'; found '{cfg.fine}'")
-    reg = o3d.pipelines.registration
     o3d.utility.random.seed(seed)
     guess = np.asarray(guess, dtype=np.float64)
     P = _down(np.asarray(cloud, dtype=np.float64), cfg.voxel)
@@ -451,13 +450,11 @@ def register_rgbd(cloud: np.ndarray, model: ReducedModel, guess: np.ndarray, cam
                                 "model box: is the guess (anchor.guess) near the object?")
     S, N = sample_surface(model.points, model.surface, _n_samples(model, 0.0025), seed)
     cams = _views(cam_centres)
-    tgt = _cloud(S, N)
-    crit = reg.ICPConvergenceCriteria(relative_fitness=1e-7, relative_rmse=1e-7, max_iteration=40)
+    tree = cKDTree(S)
 
-    def icp(src: Any, T: np.ndarray, radii: tuple[float, ...]) -> np.ndarray:
+    def icp(T: np.ndarray, radii: tuple[float, ...]) -> np.ndarray:
         for radius in radii:
-            est = reg.TransformationEstimationPointToPlane(reg.TukeyLoss(k=radius))
-            T = np.asarray(reg.registration_icp(src, tgt, radius, T, est, crit).transformation)
+            T = icp_point_to_plane(P, tree, N, T, radius)
         return T
 
     centre = model.points.mean(axis=0)
@@ -465,7 +462,6 @@ def register_rgbd(cloud: np.ndarray, model: ReducedModel, guess: np.ndarray, cam
     starts = [np.zeros(4)] + [np.r_[step * sgn * np.eye(3)[k], 0.0] for k in range(3) for sgn in (-1, 1)]
     starts += [np.r_[0.0, 0.0, 0.0, sgn * np.deg2rad(10.0)] for sgn in (-1, 1)]
     coarse = _down(P, 0.005)
-    tree = cKDTree(S)
     best: tuple[float, np.ndarray] | None = None
     for off in starts:
         # the start: the guess moved by off[:3] (object frame) and turned by off[3] about its z axis through the
@@ -489,7 +485,7 @@ def register_rgbd(cloud: np.ndarray, model: ReducedModel, guess: np.ndarray, cam
     if cfg.fine == "upright" and plane is not None:  # roll and pitch stay the support plane's
         T = _icp_upright(P, tree, N, best[1], centre, (0.012, 0.006, 0.004), iterations=30)
     else:
-        T = icp(_cloud(P), best[1], (0.012, 0.006, 0.004))
+        T = icp(best[1], (0.012, 0.006, 0.004))
     T = _pin_slide(P, T, S, N, cams, cfg)
     if cfg.polish > 0:
         upright = cfg.fine == "upright" and plane is not None
@@ -497,7 +493,7 @@ def register_rgbd(cloud: np.ndarray, model: ReducedModel, guess: np.ndarray, cam
         def fine_icp(T0: np.ndarray) -> np.ndarray:
             if upright:
                 return _icp_upright(P, tree, N, T0, centre, (0.004, 0.002), iterations=30)
-            return icp(_cloud(P), T0, (0.004, 0.002))
+            return icp(T0, (0.004, 0.002))
 
         T = _polished(P, T, S, N, cams, cfg, fine_icp)
     fitness, rmse, hits = _quality(P, T, S, N, cams, cfg.inlier_dist)
@@ -715,6 +711,50 @@ def _icp_upright(P: np.ndarray, tree: cKDTree, N: np.ndarray, T: np.ndarray, cen
             T = step @ T
             if np.linalg.norm(x[:3]) < 1e-5 and abs(x[3]) < 1e-5:
                 break
+    return T
+
+
+def icp_point_to_plane(P: np.ndarray, tree: cKDTree, N: np.ndarray, T: np.ndarray, radius: float,
+                       max_iteration: int = 40, tol: float = 1e-7) -> np.ndarray:
+    """Point-to-plane ICP with Tukey weights (scale ``radius``), 6 degrees of freedom: the loop of Open3D's
+    ``registration_icp`` with ``TransformationEstimationPointToPlane(TukeyLoss(k=radius))``, written out so that
+    it is deterministic. Open3D sums its normal equations over threads, and identical inputs gave transforms 1e-15
+    apart from one run to the next (with one OpenMP thread too; isl-org/Open3D#6225); the boot's tracker amplified
+    that to per-scene medians 1-15 points apart (docs/family.md). Here the sums run in one fixed order.
+
+    Each iteration: every point P (map frame) moved by T (map -> object) pairs with its nearest model sample
+    (``tree``, normals ``N``) within ``radius``; residual r = n . (T p - s); the step x = (omega, t) minimises
+    sum w(r) (r + J x)^2 with J = (T p x n, n) and w the Tukey weight (1 - (r / radius)^2)^2; T <- exp(x) T, with
+    the rotation composed about z, y, x as Open3D does. It stops after ``max_iteration`` steps or when the share
+    of paired points and their RMS distance both change by less than ``tol``. Returns the refined T."""
+
+    def pairs(T: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, float]:
+        Q = P @ T[:3, :3].T + T[:3, 3]
+        d, j = cast(tuple[np.ndarray, np.ndarray], tree.query(Q, distance_upper_bound=radius))
+        ok = np.isfinite(d)
+        fitness = ok.sum() / max(len(P), 1)
+        rmse = float(np.sqrt(np.mean(d[ok] ** 2))) if ok.any() else 0.0
+        return Q[ok], j[ok], fitness, rmse
+
+    q, j, fitness, rmse = pairs(T)
+    for _ in range(max_iteration):
+        if len(q) < 6:
+            break
+        n = N[j]
+        r = np.einsum("ij,ij->i", q - tree.data[j], n)
+        w = np.where(np.abs(r) <= radius, (1 - (r / radius) ** 2) ** 2, 0.0)
+        J = np.c_[np.cross(q, n), n]
+        H = J.T @ (w[:, None] * J)
+        try:
+            x = -np.linalg.solve(H, J.T @ (w * r))
+        except np.linalg.LinAlgError:
+            break
+        R = G.rot_axis("z", x[2]) @ G.rot_axis("y", x[1]) @ G.rot_axis("x", x[0])
+        T = G.make_T(R, x[3:]) @ T
+        before = (fitness, rmse)
+        q, j, fitness, rmse = pairs(T)
+        if abs(fitness - before[0]) < tol and abs(rmse - before[1]) < tol:
+            break
     return T
 
 
