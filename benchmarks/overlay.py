@@ -32,12 +32,29 @@ def _framing_view(m, T_obj, cam, fill=0.6):
     return G.look_at(c + d * np.array([0.3, -0.55, 0.78]) / np.linalg.norm([0.3, -0.55, 0.78]), c)
 
 
+HISTORY = ("History of the aluminium beam, displacement, p50 at 640x480 / 1280x720: 17.2 / 41.2 ms with CPU remaps "
+           "of the whole frame; 17.3 / 37.9 ms with the whole frame composited on the GPU; 7.5 / 15.5 ms drawing "
+           "and reading back only the screen box; about 5.3 / 12.8 ms with back faces culled and the mode "
+           "choice vectorised (run-to-run spread on this shared 2-core machine: about +-1.5 ms). ")
+LABELS = {"aluminium_beam": "aluminium beam", "crossed_beams": "crossed beam", "bunny": "bunny", "dragon": "dragon",
+          "joint_boot": "joint boot"}
+
+
 def main():
+    import argparse
+
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--models", default="crossed_beams,bunny,dragon",
+                    help="models besides the aluminium beam, comma-separated (the bunny and the dragon are built on "
+                         "first use: minutes)")
+    ap.add_argument("--out", default="overlay", help="the result's name (e.g. overlay_gpu for a run on a GPU)")
+    a = ap.parse_args()
     rows = []
     beam = load_model(cached_model("aluminium_beam"), fields=["displacement", "stress"])
     models = [("aluminium beam", beam)]
-    # meshes from 624 to ~10^4 surface triangles (the bunny and the dragon are built on first use: minutes)
-    for label, spec in (("crossed beam", "crossed_beams"), ("bunny", "bunny"), ("dragon", "dragon")):
+    # meshes from 624 to ~10^4 surface triangles
+    for spec in filter(None, a.models.split(",")):
+        label = LABELS.get(spec, spec)
         try:
             models.append((label, load_model(cached_model(spec), fields=["displacement", "stress"])))
         except Exception as e:  # noqa: BLE001
@@ -99,13 +116,10 @@ def main():
              "view hidden by a closer surface), blend over the camera image, colour bar. Only the object's screen box "
              "is drawn, read back and blended (the projection of its vertices; with lens distortion its camera pixels "
              "look the patch up through the distortion map), and the closed surface is drawn without its back faces. "
-             "History of the aluminium beam, displacement, p50 at 640x480 / 1280x720: 17.2 / 41.2 ms with CPU remaps "
-             "of the whole frame; 17.3 / 37.9 ms with the whole frame composited on the GPU; 7.5 / 15.5 ms drawing "
-             "and reading back only the screen box; about 5.3 / 12.8 ms with back faces culled and the mode "
-             "choice vectorised (run-to-run spread on this shared 2-core machine: about +-1.5 ms). "
+             + HISTORY * (a.out == "overlay") +
              "Modes drawn versus distance (aluminium beam, magnification 1, 640x480): " +
              ", ".join(f"{r['distance_m']} m: {r['modes_mean']:.1f} (max {r['modes_max']})" for r in dist_rows) + ".")
-    save("overlay", rows, [("resolution", "resolution", "{}"), ("object", "object", "{}"),
+    save(a.out, rows, [("resolution", "resolution", "{}"), ("object", "object", "{}"),
                            ("triangles", "triangles", "{}"), ("field", "colour", "{}"), ("p50_ms", "p50 ms", "{:.2f}"),
                            ("p95_ms", "p95 ms", "{:.2f}"),
                            ("modes_median", "modes drawn", "{:.0f}"), ("model_modes", "model modes", "{}")],
