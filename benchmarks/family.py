@@ -1125,7 +1125,10 @@ def main() -> None:
 
 def scene_map(fn: Callable[[int], Any], seeds: list[int], jobs: int) -> Iterator[Any]:
     """``fn`` of each seed, in seed order, ``jobs`` scenes at a time in spawned processes (one core each: one OpenCV
-    and one BLAS thread, :func:`_one_thread`), each result as soon as it and those before it are done."""
+    and one BLAS thread, :func:`_one_thread`), each result as soon as it and those before it are done. Each scene
+    starts OpenCV's own random generator (PnP RANSAC draws from it) at its seed (:func:`_seeded`): a worker takes
+    whichever seed is next when it is free, so without that a scene's draws would depend on which scenes the same
+    worker ran before it, and on the timing."""
     if jobs > 1:  # the spawned workers inherit it before numpy loads its BLAS
         for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
             os.environ[var] = "1"
@@ -1133,7 +1136,15 @@ def scene_map(fn: Callable[[int], Any], seeds: list[int], jobs: int) -> Iterator
         _one_thread()
     with multiprocessing.get_context("spawn").Pool(jobs, initializer=_one_thread) if jobs > 1 else \
             contextlib.nullcontext() as pool:
-        yield from (pool.imap(fn, seeds) if pool is not None else map(fn, seeds))
+        job = functools.partial(_seeded, fn)
+        yield from (pool.imap(job, seeds) if pool is not None else map(job, seeds))
+
+
+def _seeded(fn: Callable[[int], Any], seed: int) -> Any:
+    import cv2
+
+    cv2.setRNGSeed(seed)
+    return fn(seed)
 
 
 def _one_thread() -> None:
