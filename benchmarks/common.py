@@ -116,3 +116,11 @@ def replot(name: str, plot_rows) -> Path:
     if md.exists() and f"({name}.png)" not in md.read_text():
         md.write_text(md.read_text().rstrip("\n") + f"\n\n![{doc['title']}]({name}.png)\n")
     return png
+
+
+def most_common(items: list) -> object:
+    """The most frequent item; of several as frequent, the first seen (``max(set(...))`` broke ties by the set's
+    order, which follows Python's per-process string hashing: the same run printed another reason)."""
+    import collections
+
+    return collections.Counter(items).most_common(1)[0][0]

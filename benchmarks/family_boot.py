@@ -27,7 +27,7 @@ import time
 
 import numpy as np
 
-from benchmarks.common import RESULTS, save
+from benchmarks.common import RESULTS, most_common, save
 from benchmarks.family import parse_seeds, scene_map, track
 from benchmarks.thesis_truth import boot_model_error, boot_model_fit, yaw_about
 from simreal_nodes import geometry as G
@@ -104,7 +104,7 @@ def run_scene(seed: int, tracking: dict | None = None, localization: dict | None
         "camera_tracked_pct": float(100 * len(cam_err) / len(seq["rgb"])),
         "step_ms_p50": float(np.median(run["step_ms"])),
         "tracker_ms_p50": float(np.median(run["tracker_ms"])) if run["tracker_ms"] else float("nan"),
-        "render_s": round(t_render, 1), "reason": max(set(not_ok), key=not_ok.count) if not_ok else "",
+        "render_s": round(t_render, 1), "reason": most_common(not_ok) if not_ok else "",
         "refusal": next((r for r in reversed(run["reasons"]) if "refused" in r or "no camera pose" in r), ""),
         "curve": {"truth": th_true.tolist(), "est": th_est.tolist(), "state": states.astype(int).tolist()},
     }

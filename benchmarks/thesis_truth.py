@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from benchmarks.common import save
+from benchmarks.common import most_common, save
 from benchmarks.family import track
 from simreal_nodes import geometry as G
 from simreal_nodes.assimilation.offline import Pipeline
@@ -136,7 +136,7 @@ def run_case(name: str, w: int, h: int, fps: float, tracking: dict, frames: int 
         "thesis_same_positions_mm": _thesis_at(name, pos),
         **me, "step_ms_p50": float(np.median(step_ms)),
         "tracker_ms_p50": float(np.median(tracker_ms)) if tracker_ms else float("nan"),
-        "render_s": round(t_render, 1), "reason": max(set(not_ok), key=not_ok.count) if not_ok else "",
+        "render_s": round(t_render, 1), "reason": most_common(not_ok) if not_ok else "",
         "curve": {"truth": [None if not np.isfinite(v) else float(v) for v in truth_a], "est": est_a.tolist()},
     }
 
@@ -199,7 +199,7 @@ def run_boot(name: str, w: int, h: int, fps: float, tracking: dict, frames: int 
         "alpha_z_true_deg": float(np.rad2deg(a_true)), "alpha_z_err_deg": a_err, **me,
         "step_ms_p50": float(np.median(run["step_ms"])),
         "tracker_ms_p50": float(np.median(run["tracker_ms"])) if run["tracker_ms"] else float("nan"),
-        "render_s": round(t_render, 1), "reason": max(set(not_ok), key=not_ok.count) if not_ok else "",
+        "render_s": round(t_render, 1), "reason": most_common(not_ok) if not_ok else "",
         "curve": {"truth": th_true.tolist(), "est": th_est.tolist()},
     }
 

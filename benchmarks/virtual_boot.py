@@ -19,7 +19,7 @@ import time
 
 import numpy as np
 
-from benchmarks.common import save
+from benchmarks.common import most_common, save
 from benchmarks.family import track
 from simreal_nodes.assimilation.offline import Pipeline
 from simreal_nodes.scene.schema import build_spec_models, validate_scene
@@ -49,7 +49,7 @@ def run(w: int, h: int, fps: float) -> dict:
             "camera_mm": 1e3 * float(np.median(r["cam_err"])) if r["cam_err"] else float("nan"),
             "step_ms_p50": float(np.median(r["step_ms"])),
             "tracker_ms_p50": float(np.median(r["tracker_ms"])) if r["tracker_ms"] else float("nan"),
-            "render_s": round(t_render, 1), "reason": max(set(not_ok), key=not_ok.count) if not_ok else "",
+            "render_s": round(t_render, 1), "reason": most_common(not_ok) if not_ok else "",
             "curve": {"truth": th_true.tolist(), "est": th_est.tolist()}}
 
 

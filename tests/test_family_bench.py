@@ -20,3 +20,11 @@ def test_a_scene_draws_the_same_whatever_ran_before_it_in_its_worker():
     _draws(0)  # a scene that left the generator elsewhere
     assert np.array_equal(_seeded(_draws, 7), first)
     assert not np.array_equal(_seeded(_draws, 8), first)
+
+
+def test_the_most_common_reason_breaks_ties_by_first_seen_not_by_hash():
+    from benchmarks.common import most_common
+
+    assert most_common(["waiting (2 of 3)", "waiting (1 of 3)", "waiting (1 of 3)", "waiting (2 of 3)"]) == \
+        "waiting (2 of 3)"
+    assert most_common(["lost", "lost", "flagged"]) == "lost"
