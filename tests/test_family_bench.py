@@ -1,5 +1,6 @@
 """benchmarks/family.py's scene runner: each scene starts OpenCV's random generator at its seed, so that its RANSAC
-draws do not depend on which scenes the same worker ran before it."""
+draws do not depend on which scenes the same worker ran before it; and the most common reason, picked the same way in
+every process."""
 
 import numpy as np
 
