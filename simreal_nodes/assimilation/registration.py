@@ -413,7 +413,7 @@ def register_rgbd(cloud: np.ndarray, model: ReducedModel, guess: np.ndarray, cam
        step 4); :class:`RegistrationError` (carrying the registration) when it falls short of ``cfg``.
 
     Measured (``python -m benchmarks.family --seeds 0-9 --registration``, three views over the first 0.6 s, SLAM
-    poses, guesses 17-81 mm and 4-15 degrees off): median 0.49 mm and 0.12 degrees, worst 1.3 mm and 0.84 degrees
+    poses, guesses 17-81 mm and 4-15 degrees off): median 0.47 mm and 0.14 degrees, worst 1.3 mm and 0.94 degrees
     (the roll of a 16 mm thin beam about its axis).
     """
     import open3d as o3d
