@@ -724,8 +724,8 @@ def icp_point_to_plane(P: np.ndarray, tree: cKDTree, N: np.ndarray, T: np.ndarra
 
     Each iteration: every point P (map frame) moved by T (map -> object) pairs with its nearest model sample
     (``tree``, normals ``N``) within ``radius``; residual r = n . (T p - s); the step x = (omega, t) minimises
-    sum w(r) (r + J x)^2 with J = (T p x n, n) and w the Tukey weight (1 - (r / radius)^2)^2; T <- exp(x) T, with
-    the rotation composed about z, y, x as Open3D does. It stops after ``max_iteration`` steps or when the share
+    sum w(r) (r + J x)^2 with J = (T p x n, n) and w the Tukey weight (1 - (r / radius)^2)^2; T <- step(x) T, its
+    rotation composed about z, y, x as Open3D does. It stops after ``max_iteration`` steps or when the share
     of paired points and their RMS distance both change by less than ``tol``. Returns the refined T."""
 
     def pairs(T: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, float]:
@@ -758,13 +758,10 @@ def icp_point_to_plane(P: np.ndarray, tree: cKDTree, N: np.ndarray, T: np.ndarra
     return T
 
 
-def _cloud(P: np.ndarray, normals: np.ndarray | None = None) -> Any:
+def _cloud(P: np.ndarray) -> Any:
     import open3d as o3d
 
-    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(P))
-    if normals is not None:
-        pcd.normals = o3d.utility.Vector3dVector(normals)
-    return pcd
+    return o3d.geometry.PointCloud(o3d.utility.Vector3dVector(P))
 
 
 def _down(P: np.ndarray, voxel: float) -> np.ndarray:
