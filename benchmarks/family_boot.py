@@ -38,15 +38,16 @@ AT_REST_RAD = 0.02  # frames whose lever is within about a degree of rest are no
 
 
 def run_scene(seed: int, tracking: dict | None = None, localization: dict | None = None,
-              anchor: dict | None = None) -> dict:
+              anchor: dict | None = None, slam: dict | None = None) -> dict:
     """One boot scene through the offline pipeline; ``tracking``, ``localization``, ``anchor``: keys of the object's
-    ``tracking`` block, of the scene's ``localization`` block or of the object's ``anchor`` changed (a knob's
-    trade)."""
+    ``tracking`` block, of the scene's ``localization`` block or of the object's ``anchor`` changed; ``slam``: fields
+    of the SLAM's :class:`~simreal_nodes.vision.slam.config.SlamConfig` (a knob's trade)."""
     from simreal_nodes.assimilation.offline import Pipeline
     from simreal_nodes.scene.schema import build_spec_models, validate_scene
     from simreal_nodes.states import EstimateState
     from simreal_nodes.synth.scenes import boot_truth
     from simreal_nodes.synth.sequence import sequence
+    from simreal_nodes.vision.slam.config import SlamConfig
 
     t0 = time.perf_counter()
     seq = sequence.__wrapped__(f"family-boot-{seed}", 640, 480, fps=FPS)  # not cached: one scene in memory at a time
@@ -58,7 +59,7 @@ def run_scene(seed: int, tracking: dict | None = None, localization: dict | None
     doc["localization"].update(localization or {})
     doc["objects"][0]["anchor"].update(anchor or {})
     scene = build_spec_models(validate_scene(doc, sc.name, "."))
-    pipe = Pipeline(scene, seq["cam"])
+    pipe = Pipeline(scene, seq["cam"], slam_config=SlamConfig(**slam) if slam else None)
     run = track(pipe, seq, FPS, oid="boot")
     th_true, th_est, states = (np.array(run[k], dtype=float) for k in ("truth", "est", "states"))
     loaded = th_true > AT_REST_RAD
@@ -270,24 +271,27 @@ def main() -> None:
                     help="a knob: a key of the scene's localization block (its value read as JSON, else as text)")
     ap.add_argument("--anchor", nargs="*", default=[], metavar="KEY=VALUE",
                     help="a knob: a key of the object's anchor block (e.g. fine=upright)")
+    ap.add_argument("--slam", nargs="*", default=[], metavar="KEY=VALUE",
+                    help="a knob: a field of the SLAM's SlamConfig (e.g. hold_rest_points=false)")
     ap.add_argument("--registration", action="store_true",
                     help="the registration step alone (results family_boot_registration*)")
     a = ap.parse_args()
     seeds = parse_seeds(a.seeds)
     dev = max(seeds) < 1000
-    tracking, localization, anchor = _knobs(a.tracking), _knobs(a.localization), _knobs(a.anchor)
+    tracking, localization, anchor, slam = _knobs(a.tracking), _knobs(a.localization), _knobs(a.anchor), _knobs(a.slam)
     label = (f"{'development' if dev else 'held-out'} seeds {a.seeds}"
              + "".join(f", tracking.{k}: {v}" for k, v in tracking.items())
              + "".join(f", localization.{k}: {v}" for k, v in localization.items())
-             + "".join(f", anchor.{k}: {v}" for k, v in anchor.items()))
+             + "".join(f", anchor.{k}: {v}" for k, v in anchor.items())
+             + "".join(f", SlamConfig.{k}: {v}" for k, v in slam.items()))
     if a.registration:
         rows = list(scene_map(functools.partial(run_registration, anchor=anchor), seeds, a.jobs))
         write_registration(rows, label, a.out or "family_boot_registration" + ("_dev" if dev else ""))
         return
     name = a.out or ("family_boot_dev" if dev else "family_boot")
     rows = []
-    for row in scene_map(functools.partial(run_scene, tracking=tracking, localization=localization, anchor=anchor),
-                         seeds, a.jobs):
+    for row in scene_map(functools.partial(run_scene, tracking=tracking, localization=localization, anchor=anchor,
+                                           slam=slam), seeds, a.jobs):
         rows.append(row)
         print({k: v for k, v in row.items() if k != "curve"}, flush=True)
         (RESULTS / f"{name}.partial.json").write_text(json.dumps(rows, default=float))

@@ -67,10 +67,11 @@ class Localizer:
     def set_localization_only(self, on: bool) -> None:
         """Freeze (or resume) mapping; without a map there is nothing to freeze."""
 
-    def feedback(self, ids: np.ndarray, predicted: np.ndarray, drop: np.ndarray) -> None:
+    def feedback(self, ids: np.ndarray, predicted: np.ndarray, flags: np.ndarray) -> None:
         """The trackers' word after a frame (:func:`~simreal_nodes.assimilation.tracker.deformable_feedback`):
-        map points ``ids`` lie on a deforming object, ``predicted`` where (map frame), ``drop`` == 1 those whose
-        image tracks the last fit rejected. Only a map has such points."""
+        map points ``ids`` lie on a deforming object, ``predicted`` where (map frame); ``flags`` bit 0: the last
+        fit rejected the point's image track, bit 1: the point was linked at rest (the map keeps it). Only a map
+        has such points."""
 
     def close(self) -> None:
         """Release workers (SLAM's mapping process)."""
@@ -113,9 +114,10 @@ class SlamLocalization(Localizer):
     def set_localization_only(self, on: bool) -> None:
         self.slam.set_localization_only(on)
 
-    def feedback(self, ids: np.ndarray, predicted: np.ndarray, drop: np.ndarray) -> None:
-        self.slam.set_deformable(ids, predicted)
-        self.slam.drop_tracks(ids[drop == 1])
+    def feedback(self, ids: np.ndarray, predicted: np.ndarray, flags: np.ndarray) -> None:
+        flags = np.asarray(flags, np.uint8)
+        self.slam.set_deformable(ids, predicted, held=ids[(flags & 2) > 0])
+        self.slam.drop_tracks(ids[(flags & 1) > 0])
 
     def close(self) -> None:
         self.slam.close()
@@ -233,10 +235,10 @@ class LiveLocalizer:
         if self.core is not None:
             self.core.set_localization_only(self.localization_only)
 
-    def feedback(self, ids: np.ndarray, predicted: np.ndarray, drop: np.ndarray) -> None:
+    def feedback(self, ids: np.ndarray, predicted: np.ndarray, flags: np.ndarray) -> None:
         """:meth:`Localizer.feedback`, once there is a localizer."""
         if self.core is not None:
-            self.core.feedback(ids, predicted, drop)
+            self.core.feedback(ids, predicted, flags)
 
     @property
     def map(self) -> Map | None:

@@ -77,9 +77,9 @@ class Pipeline:
         # split, §4.4.1); they are searched where the current estimate puts them
         self._feedback.append(feedback)
         while len(self._feedback) > self.feedback_delay:
-            ids, P, drop = self._feedback.pop(0)
+            ids, P, flags = self._feedback.pop(0)
             if len(ids):
-                self.loc.feedback(ids, P, drop)
+                self.loc.feedback(ids, P, flags)
         return T_wc, out
 
 

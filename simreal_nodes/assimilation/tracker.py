@@ -489,6 +489,14 @@ class DeformableTracker:
         blind = (np.array([m == "constant" for m in self.mode]) & ~self.frozen
                  & ((not deforming) | (std > 0.05 * (self.hi - self.lo))))
         x = np.where(blind, self.values, x)
+        # a tracked parameter whose standard deviation exceeds that of a value drawn uniformly over its range (range
+        # / sqrt(12)) was not measured by this frame at all: the fit's value is wherever the flat cost let LM stop
+        # (development seed 12 of the boot: its lever at 47 degrees, 17 points left, read 0.4 degree). It keeps the
+        # last value, flagged below, and the next frame starts from there
+        unseen = (np.array([m == "tracked" for m in self.mode]) & ~self.frozen
+                  & (std > (self.hi - self.lo) / np.sqrt(12.0)))
+        x = np.where(unseen, self.values, x)
+        est.values = np.where(unseen, self.values, est.values)
         self.values = x.copy()
         if not est.deforming:
             # barely anything to see (load absent, or near the clamp where the images hardly see its effect):
@@ -504,7 +512,8 @@ class DeformableTracker:
                 if not fr and s > 0.05 * (h - l)]
         if weak:
             est.state = EstimateState.LOW_CONFIDENCE
-            est.reason = "; ".join(f"{nm} barely observable (std {s:.3g}, {100 * s / r:.0f} % of its range)"
+            est.reason = "; ".join(f"{nm} barely observable (std {s:.3g}, {100 * s / r:.0f} % of its range"
+                                   + ("; its last value kept)" if s > r / np.sqrt(12.0) else ")")
                                    for nm, s, r in weak)
         self._update_constants(est)
         est.frozen = self.frozen.copy()
@@ -927,19 +936,29 @@ def tracker_config(obj: dict[str, Any], **overrides: Any) -> TrackerConfig:
     return replace(cfg, **overrides)
 
 
+FLAG_DROP = 1  # the last fit rejected this point: forget its image track
+FLAG_HELD = 2  # linked in the object's rest shape (thesis §4.4: the scanned V_DP): the map keeps it
+
+
 def deformable_feedback(trackers: Iterable[DeformableTracker]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """What the trackers tell the localization after a frame: (ids (N,) uint32, predicted map-frame positions
-    (N, 3), drop (N,) uint8: 1 = the last fit rejected this point, forget its image track)."""
-    ids, P, drop = [], [], []
+    (N, 3), flags (N,) uint8: :data:`FLAG_DROP` | :data:`FLAG_HELD`).
+
+    A point linked while the object was deformed took its material point from the estimate of that moment, and
+    holds whatever error it had: the map may cull it like any young point and make a fresh one at a later
+    keyframe. A point linked at rest names its material point exactly; it is held. (Without ``snap_to_surface``
+    every link is made in the rest shape, so every point is held.)"""
+    ids, P, flags = [], [], []
     for tr in trackers:
         i, p = tr.predicted_points()
         ids.append(i)
         P.append(p)
-        drop.append(np.isin(i, tr.outlier_ids))
+        held = np.array([tr.links[int(k)].mu is None for k in i], bool)
+        flags.append(np.where(np.isin(i, tr.outlier_ids), FLAG_DROP, 0) | np.where(held, FLAG_HELD, 0))
     if not ids:
         return np.zeros(0, np.uint32), np.zeros((0, 3)), np.zeros(0, np.uint8)
     return (np.concatenate(ids).astype(np.uint32), np.concatenate(P).reshape(-1, 3),
-            np.concatenate(drop).astype(np.uint8))
+            np.concatenate(flags).astype(np.uint8))
 
 
 def _project(T_cw: np.ndarray, X: np.ndarray, K: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

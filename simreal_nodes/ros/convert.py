@@ -163,12 +163,15 @@ def cloud_to_array(msg) -> np.ndarray:
 
 
 def deformable_points(msg) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(ids (N,) int64, (N, 3) points, drop (N,) uint8) of the tracker's deformable-points cloud (fields x, y, z,
-    id and optionally drop; absent: nothing dropped); ValueError when malformed."""
+    """(ids (N,) int64, (N, 3) points, flags (N,) uint8) of the tracker's deformable-points cloud (fields x, y, z,
+    id and optionally flags, :func:`~simreal_nodes.assimilation.tracker.deformable_feedback`; a recording's older
+    field drop is flags' bit 0; absent: no flag); ValueError when malformed."""
     ids = cloud_field(msg, "id").astype(np.int64)
     P = cloud_to_array(msg)
-    drop = cloud_field(msg, "drop") if any(f.name == "drop" for f in msg.fields) else np.zeros(len(ids), np.uint8)
-    return ids, P, drop
+    names = [f.name for f in msg.fields]
+    key = "flags" if "flags" in names else "drop" if "drop" in names else None
+    flags = cloud_field(msg, key).astype(np.uint8) if key else np.zeros(len(ids), np.uint8)
+    return ids, P, flags
 
 
 def focus_msg(poly: np.ndarray, index: int, header: Header, frame_id: str) -> PolygonInstanceStamped:

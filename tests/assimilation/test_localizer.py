@@ -67,6 +67,9 @@ def test_slam():
     loc.set_localization_only(False)
     assert not loc.slam.localization_only
     loc.feedback(np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0, np.uint8))
+    # the tracker's flags: bit 0 forget the image track, bit 1 linked at rest (the map keeps the point)
+    loc.feedback(np.array([4, 5, 6, 7]), np.full((4, 3), np.nan), np.array([0, 1, 2, 3], np.uint8))
+    assert loc.slam.ctx.deformable == {4, 5, 6, 7} and loc.slam.ctx.held == {6, 7}
     loc.close()
     with pytest.raises(ValueError, match="baseline"):
         make_localizer(dict(SLAM, mode="stereo"), CAM)

@@ -24,6 +24,20 @@ def test_cloud_with_ids_and_flags_round_trips():
     assert cloud_to_array(empty).shape == (0, 3)
 
 
+def test_deformable_points_read_their_flags_and_a_recording_s_older_drop_field():
+    from simreal_nodes.ros.convert import deformable_points
+
+    P = np.arange(12.0).reshape(4, 3)
+    ids = np.array([5, 6, 7, 8], np.uint32)
+    flags = np.array([0, 1, 2, 3], np.uint8)
+    got = deformable_points(cloud_msg(P, Header(), "map", {"id": ids, "flags": flags}))
+    assert np.array_equal(got[0], ids) and np.allclose(got[1], P) and np.array_equal(got[2], flags)
+    old = deformable_points(cloud_msg(P, Header(), "map", {"id": ids, "drop": np.array([0, 1, 0, 1], np.uint8)}))
+    assert np.array_equal(old[2], [0, 1, 0, 1])  # drop was bit 0
+    bare = deformable_points(cloud_msg(P, Header(), "map", {"id": ids}))
+    assert np.array_equal(bare[2], np.zeros(4))
+
+
 def test_malformed_clouds_are_refused_with_a_reason():
     m = cloud_msg(np.zeros((4, 3)), Header(), "map", {"id": np.arange(4, dtype=np.uint32)})
     with pytest.raises(ValueError, match="'drop'"):

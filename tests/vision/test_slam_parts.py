@@ -602,6 +602,45 @@ def test_deformable_points_never_vote_for_the_pose():
     assert not np.isin(local, flagged).any() and len(local) == len(ctx.map.points) - len(flagged)
 
 
+def test_young_object_points_are_culled_unless_linked_at_rest():
+    """A point on a deforming object gains no keyframes (it never joins the pose's matches nor the fusion):
+    the culling of young points erases it two keyframes on, which suits a point linked while the object was
+    deformed (its link carries that moment's estimate error), and not one the tracker linked at rest (held)."""
+    X, desc = scene()
+    ctx = context()
+    depth_map(ctx, X, desc)
+    m = ctx.map
+    mapper = LocalMapper(ctx, async_mapping=False)
+    kf0 = max(m.keyframes.values(), key=lambda k: k.id)
+    young = [m.new_point(X[i] + 0.001, desc[i], kf0, int(i)).id for i in range(60)]  # seen by one keyframe each
+    mapper._recent_points = [(pid, kf0.id) for pid in young]
+    ctx.deformable, ctx.held = set(young), set(young[:20])
+    later = [m.new_keyframe(k, np.eye(4), Features.empty()) for k in (1, 2)]
+    mapper._cull_points(later[-1])
+    assert later[-1].id - kf0.id == 2
+    assert all(pid in m.points for pid in young[:20])  # held
+    assert not any(pid in m.points for pid in young[20:])  # linked while deformed: culled like any young point
+    assert mapper._recent_points == []
+
+
+def test_a_keyframe_makes_no_second_point_where_a_deformable_point_is_followed():
+    """A followed deformable point is left out of the pose's matches, so its feature looks free to a new keyframe;
+    within ``followed_px`` of where the point was measured no new point is made (it would be a copy)."""
+    X, desc = scene()
+    ctx = context(followed_px=3.0)
+    init = depth_map(ctx, X, desc)
+    obj, obj_desc = scene(60, seed=5)
+    f, idx, z = view(obj * 0.4, obj_desc, np.eye(4))  # an object in front of the mapped scene, no point yet
+    assert len(idx) == 60
+    followed = f.uv[:25].astype(np.float64) + np.array([1.5, -1.0])  # measured 1.8 px from the features
+    ctx.frame_id += 1
+    n0 = len(ctx.map.points)
+    kf = init.mapper.insert_keyframe(1, np.eye(4), f, z, np.zeros((0, 2), np.int64), np.zeros(0, bool),
+                                     followed=followed)
+    assert len(ctx.map.points) - n0 == 35
+    assert np.all(kf.mp[:25] < 0) and np.all(kf.mp[25:] >= 0)
+
+
 def test_deformable_tracks_reacquire_by_descriptor_and_widely_after_a_gap():
     X, desc = scene()
     ctx = context(reacquire_below=8, reacquire_wide_px=80.0, deformable_radius=20.0)

@@ -147,11 +147,11 @@ class LocalizationNode(SimrealNode):
     @guarded
     def on_deformable(self, msg: PointCloud2) -> None:
         try:
-            ids, P, drop = convert.deformable_points(msg)
+            ids, P, flags = convert.deformable_points(msg)
         except ValueError as e:
             self.get_logger().warning(f"ignored malformed deformable points: {e}")
             return
-        self.live.feedback(ids, P, drop)
+        self.live.feedback(ids, P, flags)
 
     @guarded
     def on_focus(self, msg: PolygonInstanceStamped) -> None:

@@ -10,9 +10,10 @@ namespace reaches its own localization node; remappable like any service name). 
 ``anchor: registration`` is placed from the depth images (taken while it waits for them); dense measurements read
 the depth of their reference view. On a stereo camera the node makes that depth itself, by SGBM on the rectified
 pair (``camera.stereo_min_depth_m``), and only in the frames where depth is still read. After every frame it tells
-the localization which map points lie on the object, where the current estimate predicts them and which the fit
-rejected (``/simreal/localization/deformable_points``, PointCloud2 x, y, z, id, drop in the map frame) and where each
-object projects in the image (``/simreal/localization/focus``, PolygonInstanceStamped, id = the object's index).
+the localization which map points lie on the object, where the current estimate predicts them, which the fit
+rejected and which were linked at rest (``/simreal/localization/deformable_points``, PointCloud2 x, y, z, id, flags
+in the map frame) and where each object projects in the image (``/simreal/localization/focus``,
+PolygonInstanceStamped, id = the object's index).
 """
 
 from __future__ import annotations
@@ -170,9 +171,9 @@ class TrackerNode(SimrealNode):
         (``focus``) gets its share of the next frame's features; mapping stops once deformation appears if the scene
         asks for it (§4.4.1)."""
         if feedback is not None:
-            ids, P, drop = feedback
+            ids, P, flags = feedback
             if len(ids):
-                self.pub_deformable.publish(cloud_msg(P, head, self.map_frame, {"id": ids, "drop": drop}))
+                self.pub_deformable.publish(cloud_msg(P, head, self.map_frame, {"id": ids, "flags": flags}))
         for k, poly in focus:
             self.pub_focus.publish(focus_msg(poly, k, head, self.camera_frame))
         if deforming and self.freeze_map and not self._loc_only_requested and self.loc_client.service_is_ready():

@@ -51,6 +51,8 @@ class SlamConfig:
     deformable_radius: float = 20.0  # pixels; ORB re-acquisition radius around a deformable point's prediction
     reacquire_below: int = 8  # fewer flow tracks than this (once more were followed): wide re-acquisition
     reacquire_wide_px: float = 80.0  # pixels; the wide re-acquisition radius (recovers after gaps vs. wrong matches)
+    hold_rest_points: bool = True  # keep the deformable points linked at rest (else culled like any young point)
+    followed_px: float = 3.0  # pixels; no new keyframe point this near a followed deformable point (0: off)
     flow_fb_px: float = 0.5  # pixels; forward-backward flow agreement to keep a track (drift vs. lost tracks)
     flow_win: int = 11  # Lucas-Kanade window (pixels); larger straddles the object's silhouette and drifts
     flow_anchor_px: float = 0.0  # > 0: re-measure tracks on their first image if within this (drift vs. bias)

@@ -37,6 +37,7 @@ class SlamContext:
     last_kf_frame: int = 0  # frame id of the last keyframe (initialization, local mapping)
     kf_inliers: int = 0  # pose inliers of the frame that made the last keyframe (same parts)
     deformable: set[int] = field(default_factory=set)  # points on a deforming object (deformable tracks)
+    held: set[int] = field(default_factory=set)  # those of them linked at rest: never culled (deformable tracks)
 
     def rigid(self, ids: np.ndarray) -> np.ndarray:
         """Mask of the point ids that may vote for the camera pose (not flagged deformable)."""

@@ -71,6 +71,12 @@ class DeformableTracks:
         good = np.all(np.isfinite(P), axis=1)
         self._predicted = {i: P[k].copy() for k, i in enumerate(ids) if good[k]}
 
+    def followed(self) -> np.ndarray:
+        """(N, 2) raw pixels where this frame measured deformable points (empty before :meth:`observe`)."""
+        if self._flow_frame != self.ctx.frame_id or not self._flow:
+            return np.zeros((0, 2))
+        return np.array(list(self._flow.values()), np.float64)
+
     def drop_tracks(self, ids: Iterable[int]) -> None:
         """Forget the frame-to-frame tracks of these deformable points (the deformable tracker found them far
         from the model's fit: a flow track that slid); they are re-acquired by descriptor."""

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
+from scipy.spatial import cKDTree
 
 from simreal_nodes import geometry as G
 from simreal_nodes.vision.orb import Features, hamming, match_descriptors
@@ -88,22 +89,28 @@ class LocalMapper:
         return (few or since > 30) and n_inliers > 15
 
     def insert_keyframe(self, stamp: int, T_cw: np.ndarray, f: Features, z: np.ndarray | None, match: np.ndarray,
-                        inl: np.ndarray) -> KeyFrame:
+                        inl: np.ndarray, followed: np.ndarray | None = None) -> KeyFrame:
         """A keyframe from the tracked frame (linked to its inlier points), mapped at once; it becomes the
-        reference keyframe."""
+        reference keyframe. ``followed``: (N, 2) raw pixels where this frame measured points on a deforming
+        object (:class:`~.deformable.DeformableTracks`); no new point is made from a feature within
+        ``followed_px`` of one: it is that point, which the pose's matches leave out."""
         ctx = self.ctx
         kf = ctx.map.new_keyframe(stamp, G.inv(T_cw), f, z)
         for (kp, pid), ok in zip(match, inl):
             if ok and int(pid) in ctx.map.points:
                 ctx.map.link(ctx.map.points[int(pid)], kf, int(kp))
-        self._local_mapping(kf)
+        taken = np.zeros(len(f), bool)
+        if followed is not None and len(followed) and len(f) and ctx.config.followed_px > 0:
+            d, _ = cKDTree(np.asarray(followed, np.float64).reshape(-1, 2)).query(f.uv, k=1)
+            taken = np.asarray(d) <= ctx.config.followed_px
+        self._local_mapping(kf, taken)
         ctx.ref_kf = kf
         ctx.last_kf_frame = ctx.frame_id
         ctx.kf_inliers = int(inl.sum())
         return kf
 
-    def _local_mapping(self, kf: KeyFrame) -> None:
-        new = self._create_points(kf)
+    def _local_mapping(self, kf: KeyFrame, taken: np.ndarray | None = None) -> None:
+        new = self._create_points(kf, taken)
         for pid in new:
             self._recent_points.append((pid, kf.id))
         if self.ctx.config.fuses(self.ctx.mode):
@@ -113,11 +120,15 @@ class LocalMapper:
         self._cull_points(kf)
         self._cull_keyframes(neighbours)
 
-    def _create_points(self, kf: KeyFrame) -> list[int]:
+    def _create_points(self, kf: KeyFrame, taken: np.ndarray | None = None) -> list[int]:
+        """New map points from the keyframe's features that no point holds (nor ``taken``): RGB-D and stereo
+        from their depth (the 250 closest), monocular by triangulation with covisible keyframes."""
         ctx, m, K = self.ctx, self.ctx.map, self.ctx.K
         created = []
         f = kf.feats
         free = kf.mp < 0
+        if taken is not None:
+            free &= ~taken
         if ctx.mode != "mono" and kf.depth is not None:
             ok = free & np.isfinite(kf.depth)
             idx = np.flatnonzero(ok)
@@ -133,7 +144,7 @@ class LocalMapper:
             med = self._median_depth(other)
             if med <= 0 or base / med < 0.01:
                 continue
-            fa = np.flatnonzero(kf.mp < 0)
+            fa = np.flatnonzero(free & (kf.mp < 0))  # (kf.mp changes as this loop makes points)
             fb = np.flatnonzero(other.mp < 0)
             if len(fa) == 0 or len(fb) == 0:
                 continue
@@ -397,12 +408,19 @@ class LocalMapper:
 
     def _cull_points(self, kf: KeyFrame) -> None:
         """Recent points found in too few of the frames that should see them, or (after two keyframes) seen
-        by too few keyframes, are erased; after three keyframes a point is no longer recent."""
+        by too few keyframes, are erased; after three keyframes a point is no longer recent.
+
+        A point on a deforming object never joins the pose's matches nor a keyframe's fusion, so it gains
+        neither keyframes nor finds: these rules erase it two keyframes later. That suits a point the tracker
+        linked while the object was deformed (its link holds the estimate's error of that moment; a fresh point
+        replaces it), not one linked at rest (``ctx.held``, thesis §4.4's scanned points): with
+        ``config.hold_rest_points`` those are kept. On the joint boot, culling them too erased 556 points in 124
+        frames of development seed 13."""
         m = self.ctx.map
         keep = []
         for pid, kid in self._recent_points:
             p = m.points.get(pid)
-            if p is None:
+            if p is None or (pid in self.ctx.held and self.ctx.config.hold_rest_points):
                 continue
             age = kf.id - kid
             if (p.found_ratio < 0.25 and p.n_visible > 4) or (

@@ -100,9 +100,12 @@ class Slam:
     def set_localization_only(self, on: bool) -> None:
         self.localization_only = bool(on)
 
-    def set_deformable(self, ids: Iterable[int], predicted: ArrayLike | None = None) -> None:
-        """See :meth:`DeformableTracks.set_deformable`."""
+    def set_deformable(self, ids: Iterable[int], predicted: ArrayLike | None = None,
+                       held: Iterable[int] | None = None) -> None:
+        """See :meth:`DeformableTracks.set_deformable`. ``held``: those of them the map keeps (linked at rest:
+        exempt from the culling of young points, :meth:`LocalMapper._cull_points`)."""
         self.tracks.set_deformable(ids, predicted)
+        self.ctx.held = {int(i) for i in held} if held is not None else set()
 
     def drop_tracks(self, ids: Iterable[int]) -> None:
         """See :meth:`DeformableTracks.drop_tracks`."""
@@ -147,7 +150,8 @@ class Slam:
                 self.tracks.observe(feats, fix.T_cw, res, exclude=fix.match[:, 0])
                 if not self.localization_only and self.mapper.need_keyframe(res.n_inliers):
                     t3 = time.perf_counter()
-                    kf = self.mapper.insert_keyframe(stamp, fix.T_cw, feats, z, fix.match, fix.inl)
+                    kf = self.mapper.insert_keyframe(stamp, fix.T_cw, feats, z, fix.match, fix.inl,
+                                                    followed=self.tracks.followed())
                     res.keyframe = True
                     tim["mapping_ms"] = (time.perf_counter() - t3) * 1e3
                     if self.config.loop_closing:
