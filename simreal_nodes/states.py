@@ -3,7 +3,8 @@
 Each enum's values ARE the constants of its message (``simreal_msgs/msg``), so a state goes into a message as
 ``int(state)`` and comes out as ``Enum(msg.state)`` with no table in between; ``tests/test_states.py`` checks
 them against the generated messages. Two numberings exist because two messages do: a tracking node's
-health (TrackingStatus.msg) and one object's parameter estimate (ModelParameters.msg).
+health (TrackingStatus.msg) and one object's parameter estimate (ModelParameters.msg). :class:`PointFlag` is the bit
+layout of a PointCloud2 field, which has no message constants.
 """
 
 from __future__ import annotations
@@ -20,6 +21,14 @@ class TrackingState(IntEnum):
     LOST = 3
     RELOCALIZED = 4
     LOW_CONFIDENCE = 5
+
+
+class PointFlag(IntEnum):
+    """Bits of the ``flags`` field of ``/simreal/localization/deformable_points`` (PointCloud2): the tracker's word on
+    each map point of a deforming object."""
+
+    DROP = 1  # the last fit rejected this point: forget its image track
+    HELD = 2  # linked in the object's rest shape (thesis §4.4: the scanned V_DP): the map keeps it
 
 
 class EstimateState(IntEnum):

@@ -17,7 +17,7 @@ import numpy as np
 
 from simreal_nodes import geometry as G
 from simreal_nodes.camera import CameraModel
-from simreal_nodes.states import TrackingState
+from simreal_nodes.states import PointFlag, TrackingState
 
 if TYPE_CHECKING:
     from simreal_nodes.vision.markers import MarkerLocalizer
@@ -116,8 +116,8 @@ class SlamLocalization(Localizer):
 
     def feedback(self, ids: np.ndarray, predicted: np.ndarray, flags: np.ndarray) -> None:
         flags = np.asarray(flags, np.uint8)
-        self.slam.set_deformable(ids, predicted, held=ids[(flags & 2) > 0])
-        self.slam.drop_tracks(ids[(flags & 1) > 0])
+        self.slam.set_deformable(ids, predicted, held=ids[(flags & PointFlag.HELD) > 0])
+        self.slam.drop_tracks(ids[(flags & PointFlag.DROP) > 0])
 
     def close(self) -> None:
         self.slam.close()

@@ -26,7 +26,7 @@ from simreal_nodes.assimilation.registration import depth_cloud, link, ray_weigh
 from simreal_nodes.camera import CameraModel
 from simreal_nodes.rom.model import ReducedModel
 from simreal_nodes.rom.state import ALPHA_Z, ModelState, StateLayout
-from simreal_nodes.states import EstimateState
+from simreal_nodes.states import EstimateState, PointFlag
 
 # (X map-frame rest positions (N, 3), ideal pixels (N, 2), nodes (N, 3), weights (N, 3)[, map point ids (N,)])
 Measurements = tuple[np.ndarray, ...]
@@ -493,8 +493,8 @@ class DeformableTracker:
         # / sqrt(12)) was not measured by this frame at all: the fit's value is wherever the flat cost let LM stop
         # (development seed 12 of the boot: its lever at 47 degrees, 17 points left, read 0.4 degree). It keeps the
         # last value, flagged below, and the next frame starts from there
-        unseen = (np.array([m == "tracked" for m in self.mode]) & ~self.frozen
-                  & (std > (self.hi - self.lo) / np.sqrt(12.0)))
+        uniform = (self.hi - self.lo) / np.sqrt(12.0)
+        unseen = np.array([m == "tracked" for m in self.mode]) & ~self.frozen & (std > uniform)
         x = np.where(unseen, self.values, x)
         est.values = np.where(unseen, self.values, est.values)
         self.values = x.copy()
@@ -508,13 +508,13 @@ class DeformableTracker:
             return est
         self.deforming_frames += 1
         est.state = EstimateState.OK
-        weak = [(nm, s, h - l) for nm, s, l, h, fr in zip(self.names, std, self.lo, self.hi, self.frozen)
-                if not fr and s > 0.05 * (h - l)]
+        weak = [(nm, s, r, s > u) for nm, s, r, u, fr in zip(self.names, std, self.hi - self.lo, uniform, self.frozen)
+                if not fr and s > 0.05 * r]
         if weak:
             est.state = EstimateState.LOW_CONFIDENCE
             est.reason = "; ".join(f"{nm} barely observable (std {s:.3g}, {100 * s / r:.0f} % of its range"
-                                   + ("; its last value kept)" if s > r / np.sqrt(12.0) else ")")
-                                   for nm, s, r in weak)
+                                   + ("; its last value kept)" if kept else ")")
+                                   for nm, s, r, kept in weak)
         self._update_constants(est)
         est.frozen = self.frozen.copy()
         return est
@@ -936,8 +936,7 @@ def tracker_config(obj: dict[str, Any], **overrides: Any) -> TrackerConfig:
     return replace(cfg, **overrides)
 
 
-FLAG_DROP = 1  # the last fit rejected this point: forget its image track
-FLAG_HELD = 2  # linked in the object's rest shape (thesis §4.4: the scanned V_DP): the map keeps it
+FLAG_DROP, FLAG_HELD = int(PointFlag.DROP), int(PointFlag.HELD)
 
 
 def deformable_feedback(trackers: Iterable[DeformableTracker]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
