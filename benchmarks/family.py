@@ -397,12 +397,24 @@ TABLES = (("family", "Held-out seeds (the accuracy this project reports): the de
            "shading term)"),
           ("family_boot", "The joint boot, held-out seeds (`python -m benchmarks.family_boot`: seeds 1000-1019; "
            "the lever angle theta, the turn alpha_z unknown; alpha_z searched until first seen, the registration "
-           "polished; stop 65: the map keeps the points linked at rest, no copies of followed points, a parameter "
-           "the frame does not measure keeps its value)"),
+           "polished; the map keeps the points linked at rest, no copies of followed points, a parameter the frame "
+           "does not measure keeps its value; stop 66: each frame's Huber fit refitted on its inliers, "
+           "`tracking.outlier_refits` 3)"),
           ("family_boot_dev", "The joint boot, development seeds 0-9 (`python -m benchmarks.family_boot --seeds "
-           "0-9`), stop 65's code"),
+           "0-9`), stop 66's code"),
           ("family_boot_dev_10_19", "The joint boot, development seeds 10-19 (`--seeds 10-19 --out "
-           "family_boot_dev_10_19`), stop 65's code"),
+           "family_boot_dev_10_19`), stop 66's code"),
+          ("family_boot_stop65", "The joint boot, held-out seeds 1000-1019, stop 65's code: Huber alone, what "
+           "`--tracking outlier_refits=0` runs (the same code path)"),
+          ("family_boot_dev_stop65", "The joint boot, development seeds 0-9, stop 65's code (`--tracking "
+           "outlier_refits=0`)"),
+          ("family_boot_dev_10_19_stop65", "The joint boot, development seeds 10-19, stop 65's code (`--tracking "
+           "outlier_refits=0`)"),
+          ("family_boot_dev_outlier_refits_3", "The joint boot, development seeds 0-9, the refits' first version "
+           "(a round that lost inliers was kept; `--tracking outlier_refits=3 --out "
+           "family_boot_dev_outlier_refits_3`)"),
+          ("family_boot_dev_10_19_outlier_refits_3", "The joint boot, development seeds 10-19, the refits' first "
+           "version (a round that lost inliers was kept)"),
           ("family_boot_dev_hold_rest_points_false", "The joint boot, knob: the map culls the points linked at rest "
            "too (`--slam hold_rest_points=false`), development seeds 0-9 (the run was stopped before 10-19; the table "
            "written from its rows), stop 65's code otherwise"),
@@ -1122,6 +1134,35 @@ prediction as the flow's start (1.43), stale viewpoints (points measured only wi
 was lost). Open. The beams (dense measurement, which reads no map point, but the same map) on development seeds 0-19
 (`family_dev_0_19_stop65`): median of the per-scene medians 0.27 %, p90 1.07 %, 85 % within 1 %, 100 % within 2 %
 (`family_dev_0_19`, its last run, 2026-11-27: 0.29 %, 1.08 %, 85 %, 100 %); the beams' held-out tables were not rerun.
+
+**Stop 66: the fit refitted on its inliers.** A trace of development boot 12 (the lever at 7-10 degrees, read 1.1-1.3
+degrees high; alpha_z 3-6 degrees off in the frames it was estimated from, frozen 4.3 off) showed 25-35 % of the
+followed object points more than 3 x Huber (6 px) off once the lever bent, and 40 % on boot 10 at 42 degrees, against 3
+% at rest. Huber bounds each such point's pull but keeps it; a third of the points off the same way bias the fit (in the
+unit test `test_refits_remove_the_bias_of_outliers_off_in_one_direction`, 8 of 26 points 8-20 px off: Huber 34 % of the
+range off, 4.4 standard deviations; refitted 1 %). Each frame's fit is now followed by up to three fits on the
+measurements then within 3 x Huber, re-classified each round, as ORB-SLAM2's pose optimisation does
+(`tracking.outlier_refits`, 3; `lm.solve_generic`); a round that ends with fewer inliers than it was fitted to is undone
+(the first version kept it and lost a frame of the starved unit-test graph: 4 of 13 points agreeing). Development seeds
+0-19 (`family_boot_dev`, `family_boot_dev_10_19`; Huber alone, stop 65's code and what `--tracking outlier_refits=0`
+runs: the `_stop65` tables): median of the per-scene medians **0.62 / 0.63 %** (0.66 / 0.55 %), p90 **0.90 / 1.16 %**
+(2.23 / 1.45 %), **90 / 80 %** within 1 % (80 / 70 %), **100 / 100 %** within 2 % (80 / 90 %); over the 20: 0.62 % (0.63
+%), p90 1.15 % (2.15 %), 85 % (75 %) and 100 % (85 %) within 1 and 2 %. Seeds 2 (3.06 -> 0.49 %), 7 (2.14 -> 0.68 %),
+11, 12 (2.22 -> 1.10 %) and 19 got better; 8 (0.67 -> 1.62 %) and 10 (0.17 -> 1.69 %) worse (10 alone, in a fresh
+process, reads 2.1 % with Huber alone and 1.7 % refitted: its 0.17 % was one draw). The first version
+(`family_boot_dev_outlier_refits_3`, `family_boot_dev_10_19_outlier_refits_3`): 0.59 %, p90 0.97 %, 90 % and 95 %.
+
+**Held-out seeds 1000-1019 on stop 66's code** (`family_boot`, run once after the choice; `family_boot_stop65`): median
+of the per-scene medians **1.98 %** (1.60 %), p90 **6.60 %** (11.35 %), **15 %** within 1 % (20 %), **50 %** within 2 %
+(60 %), alpha_z 1.2 degrees off at the median (1.0). The tail held out, the median did not: the scenes that failed read
+better (1007 11.7 -> 4.3 %, 1009 6.6 -> 1.7 %, 1013 11.6 -> 7.3 %, 1015 11.3 -> 9.5 % with alpha_z 16.5 -> 6.2 degrees
+off, 1018 8.4 -> 2.2 %, 1002's p90 28.8 -> 5.6 %), while 1001 (0.56 -> 2.28 %), 1003 (0.34 -> 1.49 %), 1005 (2.8 -> 5.7
+%), 1010, 1011 and 1017 read worse. 1017's registration landed 17 mm off on noisy depth (flagged; 0 % OK) where the
+stop-65 run placed it within 0.1 mm, and 1018's went the other way (11.8 -> 0.1 mm): a scene's registration depends on
+the SLAM's map, which the tracker's feedback changes, so those two are not the refits' doing alone. The default stays 3,
+as chosen on the development seeds; the held-out median is worse than stop 65's, and this says so. The model's own
+reading of the truth (its bias) is 0.78 % at the median of the held-out scenes; the tracker adds the rest (2.08 %
+against that reading).
 """
 
 

@@ -128,20 +128,21 @@ def predict(p: Problem, x: Vector, with_jacobian: bool = True) -> tuple[Vector, 
 
 
 def solve(p: Problem, x0: ArrayLike, lo: Vector, hi: Vector, huber_px: float = 2.0, max_iter: int = 20,
-          lam0: float = 1e-3, tol: float = 1e-7, cost_tol: float = 1e-6) -> Result:
-    """Levenberg-Marquardt with Huber IRLS weights and box bounds (Eq. 4.8) on image residuals."""
+          lam0: float = 1e-3, tol: float = 1e-7, cost_tol: float = 1e-6, refits: int = 0) -> Result:
+    """Levenberg-Marquardt with Huber IRLS weights and box bounds (Eq. 4.8) on image residuals; ``refits``: see
+    :func:`solve_generic`."""
 
     def model(x: Vector) -> tuple[Vector, Vector, NDArray[np.bool_]]:
         uv, z, J = predict(p, x)
         assert J is not None
         return uv, J, z > 0
 
-    return solve_generic(model, p.uv, x0, lo, hi, p.sigma, huber_px, max_iter, lam0, tol, cost_tol)
+    return solve_generic(model, p.uv, x0, lo, hi, p.sigma, huber_px, max_iter, lam0, tol, cost_tol, refits)
 
 
 def solve_generic(model: MeasurementModel, obs: Vector, x0: ArrayLike, lo: Vector, hi: Vector,
                   sigma: ArrayLike | None = None, huber: float = 2.0, max_iter: int = 20, lam0: float = 1e-3,
-                  tol: float = 1e-7, cost_tol: float = 1e-6) -> Result:
+                  tol: float = 1e-7, cost_tol: float = 1e-6, refits: int = 0) -> Result:
     """LM for any measurement model: ``model(x) -> (prediction (N, 2), Jacobian (N, 2, n), valid (N,))``;
     residual r = (obs - prediction) / sigma; Huber threshold ``huber`` in units of r.
 
@@ -159,7 +160,16 @@ def solve_generic(model: MeasurementModel, obs: Vector, x0: ArrayLike, lo: Vecto
     variance (flagged downstream) instead of the zero that a pseudo-inverse gives it. A parameter pinned by equal
     bounds is given, not estimated: the step and the variance are over the free parameters only, and a pinned one's
     covariance is NaN (as :mod:`.dense` reports it). A free parameter whose standard deviation exceeds its range
-    (the images do not see it) does not end the solve by the 5 %-of-sd test, only by the others."""
+    (the images do not see it) does not end the solve by the 5 %-of-sd test, only by the others.
+
+    ``refits`` > 0: after the Huber solve, up to that many more solves from where it ended, each with only the
+    measurements then within 3 x ``huber`` (the inliers) weighted, re-classified before each round; it stops early
+    when the classification no longer changes. ORB-SLAM2's pose optimisation does the same (four rounds, outliers by
+    a chi-square test, each re-classified): Huber bounds an outlier's pull but does not remove it, and a third of
+    the measurements off in one direction (object points whose tracks or links went wrong as a surface bent) bias
+    the fit by their bounded pull. A round that ends with fewer inliers than it was fitted to is undone and ends the
+    refits. The reported ``cost`` is the Huber cost of every measurement at the final estimate (so that fits compare
+    whatever their rounds); the covariance is that of the last round's measurements."""
     x = np.clip(np.asarray(x0, dtype=np.float64), lo, hi)
     n = len(x)
     sig = np.ones(len(obs)) if sigma is None else np.asarray(sigma, dtype=np.float64)
@@ -169,6 +179,7 @@ def solve_generic(model: MeasurementModel, obs: Vector, x0: ArrayLike, lo: Vecto
     uf = unit[fi]
 
     isig = 1.0 / sig
+    active = np.ones(len(obs), bool)  # the measurements this round weighs (all but in a refit round)
 
     def evaluate(x: Vector) -> tuple[Vector, Vector, Vector, NDArray[np.bool_], float]:
         pred, J, ok = model(x)
@@ -178,9 +189,10 @@ def solve_generic(model: MeasurementModel, obs: Vector, x0: ArrayLike, lo: Vecto
             r = np.where(valid[:, None], r, 0.0)
             J = np.where(valid[:, None, None], J, 0.0)
         rn = np.sqrt(r[:, 0] ** 2 + r[:, 1] ** 2)
-        w = np.where(rn > huber, huber / np.maximum(rn, 1e-300), 1.0) * valid
+        use = valid & active
+        w = np.where(rn > huber, huber / np.maximum(rn, 1e-300), 1.0) * use
         c = np.where(rn <= huber, rn * rn, 2 * huber * rn - huber * huber)
-        return r, J * isig[:, None, None] * unit, w, valid, float(c[valid].sum())
+        return r, J * isig[:, None, None] * unit, w, valid, float(c[use].sum())
 
     def normal(J: Vector, w: Vector, r: Vector) -> tuple[Vector, Vector]:
         """J^T W J and J^T W r over the free parameters (range units)."""
@@ -188,48 +200,68 @@ def solve_generic(model: MeasurementModel, obs: Vector, x0: ArrayLike, lo: Vecto
         wf = np.repeat(w, 2)
         return Jf.T @ (Jf * wf[:, None]), Jf.T @ (wf * r.ravel())
 
-    r, J, w, valid, cost = evaluate(x)
-    lam = lam0
-    it = 0
-    converged = len(fi) == 0  # nothing to estimate
-    while it < max_iter and not converged:
-        it += 1
-        H, g = normal(J, w, r)
-        D = np.maximum(np.diag(H), 1e-12 * max(float(np.trace(H)), 1e-300))
-        try:  # the free parameters' standard deviations at this iterate (x units)
-            s2 = cost / max(2 * int(valid.sum()) - len(fi), 1)
-            sd = uf * np.sqrt(np.clip(s2 * np.diag(np.linalg.inv(H + 1e-12 * np.diag(D))), 0.0, None))
-        except np.linalg.LinAlgError:
-            sd = np.zeros(len(fi))
-        # a parameter the images do not see (sd over its range) stops on the resolution test only: its huge sd
-        # would otherwise end the solve before the combination they do see is fitted
-        seen = sd < np.where(np.isfinite(width[fi]), width[fi], np.inf)
-        accepted = False
-        for _ in range(8):
-            try:
-                step = np.zeros(n)
-                step[fi] = uf * np.linalg.solve(H + lam * np.diag(D), g)
+    def levenberg_marquardt(x: Vector) -> tuple[Vector, Vector, Vector, Vector, NDArray[np.bool_], float, int, bool]:
+        r, J, w, valid, cost = evaluate(x)
+        lam = lam0
+        it = 0
+        converged = len(fi) == 0  # nothing to estimate
+        while it < max_iter and not converged:
+            it += 1
+            H, g = normal(J, w, r)
+            D = np.maximum(np.diag(H), 1e-12 * max(float(np.trace(H)), 1e-300))
+            try:  # the free parameters' standard deviations at this iterate (x units)
+                s2 = cost / max(2 * int((valid & active).sum()) - len(fi), 1)
+                sd = uf * np.sqrt(np.clip(s2 * np.diag(np.linalg.inv(H + 1e-12 * np.diag(D))), 0.0, None))
             except np.linalg.LinAlgError:
+                sd = np.zeros(len(fi))
+            # a parameter the images do not see (sd over its range) stops on the resolution test only: its huge sd
+            # would otherwise end the solve before the combination they do see is fitted
+            seen = sd < np.where(np.isfinite(width[fi]), width[fi], np.inf)
+            accepted = False
+            for _ in range(8):
+                try:
+                    step = np.zeros(n)
+                    step[fi] = uf * np.linalg.solve(H + lam * np.diag(D), g)
+                except np.linalg.LinAlgError:
+                    lam *= 10
+                    continue
+                xn = np.clip(x + step, lo, hi)
+                dx = np.abs(xn - x)[fi]
+                small = dx <= tol * uf
+                if (np.all(small) or np.all(np.where(seen, dx <= 0.05 * sd, small))
+                        or float(g @ ((xn - x)[fi] / uf)) <= cost_tol * max(cost, 1e-300)):
+                    converged = True  # the step is below resolution, blocked by the bounds, or promises nothing
+                    break
+                rn_, Jn, wn, vn, cn = evaluate(xn)
+                if cn < cost:
+                    if cost - cn <= cost_tol * max(cost, 1e-300):
+                        converged = True
+                    x, r, J, w, valid, cost = xn, rn_, Jn, wn, vn, cn
+                    lam = max(lam / 10, 1e-12)
+                    accepted = True
+                    break
                 lam *= 10
-                continue
-            xn = np.clip(x + step, lo, hi)
-            dx = np.abs(xn - x)[fi]
-            small = dx <= tol * uf
-            if (np.all(small) or np.all(np.where(seen, dx <= 0.05 * sd, small))
-                    or float(g @ ((xn - x)[fi] / uf)) <= cost_tol * max(cost, 1e-300)):
-                converged = True  # the step is below resolution, blocked by the bounds, or promises nothing
-                break
-            rn_, Jn, wn, vn, cn = evaluate(xn)
-            if cn < cost:
-                if cost - cn <= cost_tol * max(cost, 1e-300):
-                    converged = True
-                x, r, J, w, valid, cost = xn, rn_, Jn, wn, vn, cn
-                lam = max(lam / 10, 1e-12)
-                accepted = True
-                break
-            lam *= 10
-        if not accepted:
-            converged = True
+            if not accepted:
+                converged = True
+        return x, r, J, w, valid, cost, it, converged
+
+    x, r, J, w, valid, cost, it, converged = levenberg_marquardt(x)
+    for _ in range(refits):
+        keep = valid & (np.linalg.norm(r, axis=1) <= 3 * huber)
+        if np.array_equal(keep, active) or 2 * int(keep.sum()) <= len(fi):
+            break
+        before = (x, r, J, w, valid, cost, converged, active)
+        active = keep
+        x, r, J, w, valid, cost, more, converged = levenberg_marquardt(x)
+        it += more
+        if np.count_nonzero(valid & (np.linalg.norm(r, axis=1) <= 3 * huber)) < np.count_nonzero(keep):
+            # the round lost measurements it was fitted to: its classification came from a fit in the wrong place
+            # (a few points agreeing by chance); the previous round's estimate stands
+            x, r, J, w, valid, cost, converged, active = before
+            break
+    if not active.all():  # the cost of every measurement, as a solve without refits reports it
+        active = np.ones(len(obs), bool)
+        cost = evaluate(x)[4]
     rnorm = np.linalg.norm(r, axis=1)
     inl = valid & (rnorm <= 3 * huber)
     dof = max(2 * int(inl.sum()) - len(fi), 1)

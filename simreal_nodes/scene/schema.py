@@ -157,6 +157,10 @@ TRACKING = Record({
     "huber_px": Number("Huber threshold of the robust loss, pixels", lo=0, lo_open=True, default=2.0),
     "modes": Number("number of PGD modes used (0 = all)", integer=True, lo=0, default=0),
     "max_iterations": Number("Levenberg-Marquardt iterations per frame", integer=True, lo=1, hi=500, default=20),
+    "outlier_refits": Number("measurements 'map_points' and 'dots': after each frame's Huber fit, refit with only the "
+                             "measurements then within 3 x huber_px, re-classified before each of at most this many "
+                             "rounds (ORB-SLAM2's pose optimisation; 0: Huber alone)", integer=True, lo=0, hi=10,
+                             default=3),
     "constant_frames": Number("deformed frames used to estimate 'constant' parameters before freezing", integer=True,
                               lo=1, default=15),
     "constant_std_frac": Number("a frame informs a 'constant' parameter only if its standard deviation is below this "
