@@ -404,12 +404,18 @@ TABLES = (("family", "Held-out seeds (the accuracy this project reports): the de
            "0-9`), stop 66's code"),
           ("family_boot_dev_10_19", "The joint boot, development seeds 10-19 (`--seeds 10-19 --out "
            "family_boot_dev_10_19`), stop 66's code"),
-          ("family_boot_stop65", "The joint boot, held-out seeds 1000-1019, stop 65's code: Huber alone, what "
-           "`--tracking outlier_refits=0` runs (the same code path)"),
-          ("family_boot_dev_stop65", "The joint boot, development seeds 0-9, stop 65's code (`--tracking "
-           "outlier_refits=0`)"),
-          ("family_boot_dev_10_19_stop65", "The joint boot, development seeds 10-19, stop 65's code (`--tracking "
-           "outlier_refits=0`)"),
+          ("family_boot_outlier_refits_0", "The joint boot, knob: Huber alone (`--tracking outlier_refits=0`, stop "
+           "65's code path), held-out seeds 1000-1019 on this host: the like-for-like baseline of `family_boot`, run "
+           "after the default was fixed and not used to choose it"),
+          ("family_boot_dev_outlier_refits_0", "The joint boot, knob: Huber alone (`--tracking outlier_refits=0`), "
+           "development seeds 0-9 on this host"),
+          ("family_boot_dev_10_19_outlier_refits_0", "The joint boot, knob: Huber alone (`--tracking "
+           "outlier_refits=0`), development seeds 10-19 on this host"),
+          ("family_boot_stop65", "The joint boot, held-out seeds 1000-1019, stop 65's run (Huber alone, an earlier "
+           "session's host: the same code path reads otherwise here, see `family_boot_outlier_refits_0`)"),
+          ("family_boot_dev_stop65", "The joint boot, development seeds 0-9, stop 65's run (an earlier host)"),
+          ("family_boot_dev_10_19_stop65", "The joint boot, development seeds 10-19, stop 65's run (an earlier "
+           "host)"),
           ("family_boot_dev_outlier_refits_3", "The joint boot, development seeds 0-9, the refits' first version "
            "(a round that lost inliers was kept; `--tracking outlier_refits=3 --out "
            "family_boot_dev_outlier_refits_3`)"),

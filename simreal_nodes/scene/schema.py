@@ -160,7 +160,7 @@ TRACKING = Record({
     "outlier_refits": Number("measurements 'map_points' and 'dots': after each frame's Huber fit, refit with only the "
                              "measurements then within 3 x huber_px, re-classified before each of at most this many "
                              "rounds (ORB-SLAM2's pose optimisation; 0: Huber alone)", integer=True, lo=0, hi=10,
-                             default=3),
+                             default=0),
     "constant_frames": Number("deformed frames used to estimate 'constant' parameters before freezing", integer=True,
                               lo=1, default=15),
     "constant_std_frac": Number("a frame informs a 'constant' parameter only if its standard deviation is below this "
