@@ -181,14 +181,14 @@ each scene's model error beside its result.
 - *Joint boot* (§4.5.4, its own table): the real boot rendered from an independent neo-Hookean solve
   (`synth/scenes.py:boot_truth`: trilinear hexahedra 72 x 2 x 60, two layers through the wall, Newton every 2 deg of the
   lever; the model: 36 x 1 x 48, NI-PGD), placed by registration from a guess by eye, map points as its scene file says.
-  Stop 66 (each frame's fit refitted on its inliers, `tracking.outlier_refits`; `docs/family.md`): the scene's own view
-  reads theta 1.43 deg off at the median (p90 1.69 deg; stop 65: 1.45 and 1.65; 0.37 and 0.67 before stop 65, when the
-  map culled the object points linked at rest), alpha_z 0.45 deg (0.08), registration 0.43 mm and 0.13 deg off. A third
-  view that nothing was chosen on (another arc, the boot turned by 70 deg, another guess): 0.15 deg (p90 0.64 deg; stop
-  65: 0.24 and 1.04), alpha_z 0.12 deg (0.07). A second view, on which the tracker's handling of alpha_z was fixed: 0.17
-  deg (0.22), alpha_z 0.42 deg (1.58). With the Levenberg-Marquardt solver as it is since stop 34 (normal equations in
-  units of each parameter's range, pinned parameters out of the step; `docs/stability.md`); with the solver before it
-  the three views read 0.26, 0.12 and 0.27 deg: that change cost the boot about 0.1 deg.
+  Stop 66's run (this host; stop 65's host in brackets, the same code): the scene's own view reads theta 1.56 deg off at
+  the median (1.45), p90 1.92 deg (1.65), alpha_z 0.28 deg (0.08), registration 0.43 mm and 0.13 deg off. A third view
+  that nothing was chosen on (another arc, the boot turned by 70 deg, another guess): 0.41 deg (0.24), p90 0.78 deg
+  (1.04), alpha_z 3.25 deg (0.07). A second view, on which the tracker's handling of alpha_z was fixed: 0.13 deg (0.22),
+  alpha_z 0.59 deg (1.58). With the knob `outlier_refits: 3` (commit 319a533's table) the three read 1.43, 0.15 and 0.17
+  deg (alpha_z 0.45, 0.12, 0.42). Before stop 65 (the map then culled the object points linked at rest) the own view
+  read 0.37 deg. With the Levenberg-Marquardt solver before stop 34 the three views read 0.26, 0.12 and 0.27 deg: its
+  change cost the boot about 0.1 deg.
   Model error: 3.2 % of the displacement at the median (6.4 % at the largest angles, where the full-order folds
   buckle more than the one-layer model's; its worst node 17 mm off), a theta bias of 0.4 deg (1.3 deg at most).
   The thesis gives no figure for this example. The boot's table runs OpenCV on one thread: with its worker
@@ -243,11 +243,11 @@ How a frame is measured (thesis ch. 4, `vision/slam/deformable.py`, `assimilatio
 4. **Assimilation** (Eq. 4.7-4.12). LM with Huber weights from the previous frame's estimate; if that fit is poor
    (RMS above 0.75 x Huber or under 85 % inliers) the cost is evaluated on a coarse grid of the free parameters and
    LM restarted from the best sample (a load moved across mid-span passes a larger deflection, a second basin).
-   Then up to `outlier_refits` (3) more solves on the measurements within 3 x Huber, re-classified each round
-   (ORB-SLAM2's pose optimisation); a round that ends with fewer inliers than it was fitted to is undone. Huber keeps
-   every outlier's bounded pull: on the boot a third of the followed points sit over 6 px off once the lever bends,
-   and they biased it (development boots 0-19: p90 of the per-scene medians 2.15 -> 1.15 %; held-out 11.4 -> 6.6 %,
-   the held-out median 1.60 -> 1.98 %; docs/family.md, the stop-66 paragraph).
+   A knob, `outlier_refits` (0 by default), follows the fit with that many more solves on the measurements within 3 x
+   Huber, re-classified each round (ORB-SLAM2's pose optimisation); a round that ends with fewer inliers than it was
+   fitted to is undone. Huber keeps every outlier's bounded pull, and on the boot a third of the followed points sit
+   over 6 px off once the lever bends; 3 rounds helped development boots 0-19 (0.66 -> 0.62 %) but not seeds 20-39
+   nor the held-out ones (1.61 -> 1.98 %; docs/family.md, the stop-66 paragraph).
    Points the fit rejects (> 2 x Huber) lose their flow track and are re-acquired. A tracked parameter whose
    standard deviation exceeds that of a uniform draw over its range (range / sqrt 12) was not measured by the frame:
    it keeps its last value, flagged low-confidence (development boot 12 read 0.4 degree for a lever at 47, from 17
