@@ -442,8 +442,8 @@ class SphereOnSolid:
                 if stepped:
                     break
                 # every damping from the current one up was refused: near the minimum a heavily damped step promises
-                # a fall below the potential's round-off (1e-9 of it on an AVX-512 host), and more damping only
-                # shrinks it; once per iteration the damping starts again at Newton's end, where the fall is larger
+                # a fall below the potential's round-off, and more damping only shrinks it; once per iteration the
+                # damping starts again at Newton's end, where the fall is larger
                 mu = 1e-8
             if not stepped:  # no damping lowers the potential: a minimum to its round-off
                 if res < np.sqrt(tol):

@@ -95,6 +95,18 @@ def test_refits_remove_the_bias_of_outliers_off_in_one_direction():
     assert refit.cost == pytest.approx(again.cost)
 
 
+def test_refits_leave_a_fit_alone_when_no_measurement_agrees():
+    """Every point 100 px off: no inlier to refit on, so the refits change nothing and the fit reports no inliers
+    (the tracker then says the frame is lost) instead of failing."""
+    p, _, _ = _problem(noise=0.2)
+    p.uv = p.uv + 100.0
+    lo, hi = np.r_[0.0], np.r_[0.5]
+    huber = lm.solve(p, np.r_[0.2], lo, hi, huber_px=1.0, max_iter=30)
+    refit = lm.solve(p, np.r_[0.2], lo, hi, huber_px=1.0, max_iter=30, refits=3)
+    assert refit.inliers == huber.inliers == 0
+    assert refit.x[0] == huber.x[0] and refit.cost == huber.cost
+
+
 def test_bounds_hold_when_the_data_pull_outside():
     p, _, _ = _problem()
     uv_far, _, _ = lm.predict(p, np.array([0.5]), False)
