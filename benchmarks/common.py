@@ -19,13 +19,28 @@ def machine() -> dict:
     try:
         with open("/proc/cpuinfo") as f:
             for line in f:
-                if line.startswith("model name"):
+                if line.startswith("model name") and "cpu" not in info:
                     info["cpu"] = line.split(":", 1)[1].strip()
+                elif line.startswith("flags") and "simd" not in info:
+                    info["simd"] = simd_level(line.split(":", 1)[1].split())
+                if "cpu" in info and "simd" in info:
                     break
     except OSError:
         pass
     info["cpu_probe_ms"] = speed_probe()
     return info
+
+
+def simd_level(flags: list[str] | set[str]) -> str:
+    """The widest vector instruction set among a CPU's ``/proc/cpuinfo`` flags. Recorded with every result: the same
+    code reads some scenes differently on hosts with and without AVX-512 (numpy's and OpenCV's kernels round
+    differently), so per-scene rows compare only between hosts of the same level (docs/family.md)."""
+    f = set(flags)
+    for flag, name in (("avx512f", "AVX-512"), ("avx2", "AVX2"), ("avx", "AVX"), ("sse4_2", "SSE4.2"),
+                       ("asimd", "NEON")):
+        if flag in f:
+            return name
+    return "none known"
 
 
 def speed_probe() -> float:
@@ -80,7 +95,8 @@ def save(name: str, rows: list[dict], columns, title: str, notes: str = "", plot
     if notes:
         md += [notes, ""]
     m = doc["machine"]
-    md.append(f"Machine: {m.get('cpu', '?')}, {m['cpus']} CPUs, Python {m['python']}, {m['date']}; CPU probe "
+    simd = f" ({m['simd']})" if m.get("simd") else ""
+    md.append(f"Machine: {m.get('cpu', '?')}{simd}, {m['cpus']} CPUs, Python {m['python']}, {m['date']}; CPU probe "
               f"{m['cpu_probe_ms']:.0f} ms (`benchmarks/common.py:speed_probe`, lower is faster: the host's load "
               "changes this machine's speed).")
     if plot is not None:

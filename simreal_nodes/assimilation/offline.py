@@ -38,6 +38,7 @@ class Pipeline:
         self.feedback_delay = int(feedback_delay)
         self._feedback: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
         self.focus: list[np.ndarray] = []  # where the trackers put their objects in the last frame (image polygons)
+        self.observed: tuple[np.ndarray | None, ...] = (None, None, None)  # the last step's observations (step)
         loc = scene["localization"]
         self.mode = loc["mode"]
         self.freeze_map = bool(loc.get("freeze_map_on_deformation", False))
@@ -62,6 +63,7 @@ class Pipeline:
         T_wc = r.T_wc
         if T_wc is not None and len(r.obs_ids):
             ids, P, uv = np.asarray(r.obs_ids), np.asarray(r.obs_pos), np.asarray(r.obs_uv)
+        self.observed = (ids, P, uv)  # this frame's map point observations the trackers got (None: none)
         t0 = time.perf_counter()
         if depth is None and right is not None:
             depth = self.objects.depth_of_pair(gray, right)

@@ -339,6 +339,14 @@ class DeformableTracker:
             self.static.discard(pid)
 
     # -- measurements ------------------------------------------------------------------------------------------
+    def map_point_measurements(self, ids: np.ndarray, P_map: np.ndarray, uv: np.ndarray) -> Measurements | None:
+        """The measurements a frame's observed map points give once linked (what :meth:`update` fits): (X rest
+        positions, ideal pixels, nodes, weights, point ids), or None where none of them is linked."""
+        P = np.asarray(P_map, dtype=np.float64).reshape(-1, 3)
+        q = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
+        good = np.all(np.isfinite(P), axis=1) & np.all(np.isfinite(q), axis=1)
+        return self._map_point_measurements(np.asarray(ids)[good], P[good], q[good])
+
     def _map_point_measurements(self, ids: np.ndarray, P_map: np.ndarray, uv: np.ndarray) -> Measurements | None:
         sel = [k for k, pid in enumerate(ids) if int(pid) in self.links]
         if self.cfg.max_points and len(sel) > self.cfg.max_points:

@@ -299,6 +299,13 @@ def test_map_points_unseen_for_long_are_forgotten(beam):
     assert set(tr.links) == set(range(10)) and not tr.static
     tr.update(T_wc, np.arange(20), on, uv_on)
     assert set(tr.links) == set(range(20))  # linked anew
+    # what a frame's observations give the fit: the linked ones, rows with a non-finite position or pixel left out
+    P, q = np.r_[on[:5], off[:3]], np.r_[uv_on[:5], uv_off[:3]]
+    P[1], q[2] = np.nan, np.inf
+    X, uvm, nodes, w, mids = tr.map_point_measurements(np.r_[np.arange(5), np.arange(100, 103)], P, q)
+    assert mids.tolist() == [0, 3, 4] and len(X) == len(uvm) == len(nodes) == len(w) == 3
+    np.testing.assert_allclose(uvm, cam.undistort_points(uv_on[[0, 3, 4]]))
+    assert tr.map_point_measurements(np.arange(100, 103), off[:3], uv_off[:3]) is None  # none of them linked
 
 
 class _BootScene:

@@ -665,6 +665,7 @@ def test_deformable_tracks_reacquire_by_descriptor_and_widely_after_a_gap():
 
     res, seen = frame(10, 0.0)  # first frame: no flow yet, every point is re-acquired at its predicted pixel
     assert seen == ids.tolist() and sorted(res.obs_ids.tolist()) == seen and not res.obs_inlier.any()
+    assert tracks.sources == dict.fromkeys(seen, "descriptor")
     expect = CAM.project(moved)[np.argsort(ids)]
     assert np.allclose(res.obs_uv[np.argsort(res.obs_ids)], expect, atol=1e-4)
     assert np.allclose(res.obs_pos, X[res.obs_ids])  # with their rest positions
@@ -675,6 +676,34 @@ def test_deformable_tracks_reacquire_by_descriptor_and_widely_after_a_gap():
     tracks.drop_tracks(ids)
     res, seen = frame(30, 50.0)
     assert len(seen) > 20 and len(res.obs_ids) == 0  # the same gap without the wide radius loses them
+    assert tracks.sources == {}
+
+
+def test_deformable_tracks_follow_the_image_by_flow_from_the_previous_frame():
+    """A point measured in the previous frame is followed by Lucas-Kanade on the images (not by its descriptor):
+    the texture moved 3 px right and 2 px down, the features (and the prediction) stayed: the flow finds it moved."""
+    import cv2
+
+    X, desc = scene()
+    ctx = context()
+    depth_map(ctx, X, desc)
+    tracks = DeformableTracks(ctx)
+    ids = np.arange(0, 30)
+    tracks.set_deformable(ids, X[ids])
+    rng = np.random.default_rng(3)
+    tex = cv2.GaussianBlur((rng.random((480, 640)) * 255).astype(np.uint8), (0, 0), 1.5)
+    f, idx, _ = view(X, desc, np.eye(4), sel=ids)
+    inside = [int(i) for i, q in zip(idx, f.uv) if 20 < q[0] < 620 and 20 < q[1] < 460]
+    results = []
+    for frame_id, gray in ((1, tex), (2, np.roll(tex, (2, 3), axis=(0, 1)))):
+        ctx.frame_id = frame_id
+        tracks.new_frame(gray)
+        res = TrackResult(OK)
+        tracks.observe(f, np.eye(4), res, exclude=np.zeros(0, np.int64))
+        results.append(dict(zip(res.obs_ids.tolist(), res.obs_uv)))
+    assert all(tracks.sources.get(i) == "flow" for i in inside) and len(inside) > 20
+    moved = np.array([results[1][i] - results[0][i] for i in inside])
+    assert np.allclose(moved, [3.0, 2.0], atol=0.2)
 
 
 def test_config_defaults_are_documented_and_checked():

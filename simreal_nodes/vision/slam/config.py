@@ -49,6 +49,8 @@ class SlamConfig:
     interrupt_ba: bool = True  # asynchronous mapping: a keyframe that must wait stops the running local BA after its
     # current iteration (ORB-SLAM2's abort flag; the partial result is applied): a current map vs. converged BAs
     deformable_radius: float = 20.0  # pixels; ORB re-acquisition radius around a deformable point's prediction
+    # (most of what it finds on the bent joint boot is wrong, benchmarks/boot_measurements.py; 6 and 0 px clean the
+    # measurements but lose the lever in fast moves: docs/family.md, stop 67)
     reacquire_below: int = 8  # fewer flow tracks than this (once more were followed): wide re-acquisition
     reacquire_wide_px: float = 80.0  # pixels; the wide re-acquisition radius (recovers after gaps vs. wrong matches)
     hold_rest_points: bool = True  # keep the deformable points linked at rest (else culled like any young point)

@@ -39,6 +39,9 @@ class DeformableTracks:
         self._anchor_gray: dict[int, np.ndarray] = {}  # frame id -> image, for the anchors
         self._frame_obs: dict[int, np.ndarray] = {}  # point id -> raw pixel, every observation of the last frame
         self._peak = 0  # most object points followed in one frame so far
+        # how this frame measured each deformable point it measured: "flow" (followed from the previous frame) or
+        # "descriptor" (re-acquired by ORB); a diagnostic (benchmarks/boot_measurements.py)
+        self.sources: dict[int, str] = {}
 
     def new_frame(self, gray: np.ndarray) -> None:
         self.gray = gray
@@ -106,6 +109,7 @@ class DeformableTracks:
            descriptor (the map's, or that of its last ORB match) within 50 bits.
         The tracker's robust loss catches a flow track that slides onto a neighbour."""
         ctx, cfg, m = self.ctx, self.ctx.config, self.ctx.map
+        self.sources = {}
         if not ctx.deformable:
             return
         ids = [i for i in ctx.deformable if i in m.points]
@@ -141,6 +145,7 @@ class DeformableTracks:
                 for k, good, q in zip(sel, ok, p1):
                     if good:
                         found[int(ids_a[k])] = q.astype(np.float64)
+        self.sources = dict.fromkeys(found, "flow")
         # 2. ORB re-acquisition of the others
         lost_tracks = len(found) < cfg.reacquire_below <= self._peak
         radius = max(cfg.deformable_radius, cfg.reacquire_wide_px) if lost_tracks else cfg.deformable_radius
@@ -171,6 +176,7 @@ class DeformableTracks:
                 if d[j] <= 50:
                     found[pid] = f.uv[c[j]].astype(np.float64)
                     new_desc[pid] = f.desc[c[j]].copy()
+                    self.sources[pid] = "descriptor"
         # 3. every measurement of a point whose track started in an earlier image is taken against that image;
         # a point without one (or whose surface no longer looks like it) starts its track here
         if found and cfg.flow_anchor_px > 0:

@@ -1,0 +1,21 @@
+"""The benchmark harness's record of the machine: the vector instruction set a result was computed with."""
+
+import pytest
+
+from benchmarks.common import simd_level
+
+
+@pytest.mark.parametrize(("flags", "level"), [
+    ("fpu sse sse2 sse4_1 sse4_2 avx avx2 fma avx512f avx512dq avx512bw", "AVX-512"),
+    ("fpu sse sse2 sse4_1 sse4_2 avx avx2 fma", "AVX2"),
+    ("fpu sse sse2 sse4_1 sse4_2", "SSE4.2"),
+    ("fp asimd evtstrm aes pmull sha1", "NEON"),
+    ("fpu vme de", "none known"),
+])
+def test_the_widest_instruction_set_is_named(flags, level):
+    assert simd_level(flags.split()) == level
+
+
+def test_a_flag_that_only_starts_like_avx512_does_not_count():
+    # avx512_bf16 and friends come with avx512f on every real CPU; alone they must not read as AVX-512
+    assert simd_level(["avx2", "avx512_bf16"]) == "AVX2"
