@@ -315,10 +315,7 @@ class DeformableTracker:
                        uv: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """This frame's observed map points with finite positions and pixels, the new ones linked (from their
         pixels' viewing rays): (ids, map positions (N, 3), raw pixels (N, 2))."""
-        P = np.asarray(P_map, dtype=np.float64).reshape(-1, 3)
-        q = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
-        good = np.all(np.isfinite(P), axis=1) & np.all(np.isfinite(q), axis=1)
-        ids, P, q = np.asarray(ids)[good], P[good], q[good]
+        ids, P, q = _finite_observations(ids, P_map, uv)
         self.link_points(ids, P, rays=self.viewing_rays(T_wc, q))
         self._forget_unseen(ids)
         return ids, P, q
@@ -342,10 +339,7 @@ class DeformableTracker:
     def map_point_measurements(self, ids: np.ndarray, P_map: np.ndarray, uv: np.ndarray) -> Measurements | None:
         """The measurements a frame's observed map points give once linked (what :meth:`update` fits): (X rest
         positions, ideal pixels, nodes, weights, point ids), or None where none of them is linked."""
-        P = np.asarray(P_map, dtype=np.float64).reshape(-1, 3)
-        q = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
-        good = np.all(np.isfinite(P), axis=1) & np.all(np.isfinite(q), axis=1)
-        return self._map_point_measurements(np.asarray(ids)[good], P[good], q[good])
+        return self._map_point_measurements(*_finite_observations(ids, P_map, uv))
 
     def _map_point_measurements(self, ids: np.ndarray, P_map: np.ndarray, uv: np.ndarray) -> Measurements | None:
         sel = [k for k, pid in enumerate(ids) if int(pid) in self.links]
@@ -974,6 +968,15 @@ def deformable_feedback(trackers: Iterable[DeformableTracker]) -> tuple[np.ndarr
         return np.zeros(0, np.uint32), np.zeros((0, 3)), np.zeros(0, np.uint8)
     return (np.concatenate(ids).astype(np.uint32), np.concatenate(P).reshape(-1, 3),
             np.concatenate(flags).astype(np.uint8))
+
+
+def _finite_observations(ids: np.ndarray, P_map: np.ndarray, uv: np.ndarray
+                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The observations (ids, map positions (N, 3), raw pixels (N, 2)) whose position and pixel are finite."""
+    P = np.asarray(P_map, dtype=np.float64).reshape(-1, 3)
+    q = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
+    good = np.all(np.isfinite(P), axis=1) & np.all(np.isfinite(q), axis=1)
+    return np.asarray(ids)[good], P[good], q[good]
 
 
 def _project(T_cw: np.ndarray, X: np.ndarray, K: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
