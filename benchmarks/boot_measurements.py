@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import copy
+import functools
 
 import numpy as np
 
@@ -65,10 +66,20 @@ def truth_pixels(truth, T_map_truth: np.ndarray, T_map_cam: np.ndarray, K: np.nd
     return Xc[:, :2] / Xc[:, 2:] * np.diag(K)[:2] + K[:2, 2]
 
 
+def frame_fit(tr, meas: tuple, sel: np.ndarray, T_cw: np.ndarray, x0: np.ndarray, lo: np.ndarray,
+              hi: np.ndarray) -> float:
+    """The tracker's Huber fit of one frame's measurements ``meas`` (those in ``sel``) from ``x0``: the first
+    parameter (theta)."""
+    from simreal_nodes.assimilation import lm
+
+    X, uvm, nodes, w = meas[:4]
+    p = lm.Problem(X[sel], uvm[sel], tr._disp_fn(nodes[sel], w[sel]), T_cw, tr.R_wo, tr.K, tr.layout)
+    return float(lm.solve(p, x0, lo, hi, tr.cfg.huber_px, tr.cfg.max_iterations).x[0])
+
+
 def run_scene(seed: int, slam: dict | None = None, tracking: dict | None = None) -> dict:
     """One boot scene through the offline pipeline, its measurements labelled frame by frame (module docstring)."""
     from simreal_nodes import geometry as G
-    from simreal_nodes.assimilation import lm
     from simreal_nodes.assimilation.offline import Pipeline
     from simreal_nodes.scene.schema import build_spec_models, validate_scene
     from simreal_nodes.synth.sequence import sequence
@@ -100,7 +111,7 @@ def run_scene(seed: int, slam: dict | None = None, tracking: dict | None = None)
         meas = tr.map_point_measurements(ids, P, uv)
         if meas is None:
             continue
-        X, uvm, nodes, w, mids = meas
+        X, uvm, _, _, mids = meas
         theta = float(seq["truth"][i].params["boot"][2][0])
         wrong = np.linalg.norm(uvm - truth_pixels(truth, T_map_truth, seq["T"][i], K, X, theta), axis=1) > WRONG_PX
         bent = theta > AT_REST_RAD
@@ -117,13 +128,9 @@ def run_scene(seed: int, slam: dict | None = None, tracking: dict | None = None)
         lo, hi = tr._free_bounds()
         lo, hi = np.minimum(lo, x_prev), np.maximum(hi, x_prev)
         T_cw = G.inv(T_wc)
-
-        def fit(sel: np.ndarray, tr=tr, X=X, uvm=uvm, nodes=nodes, w=w, T_cw=T_cw, lo=lo, hi=hi,
-                x0=x_prev) -> float:
-            p = lm.Problem(X[sel], uvm[sel], tr._disp_fn(nodes[sel], w[sel]), T_cw, tr.R_wo, tr.K, tr.layout)
-            return float(lm.solve(p, x0, lo, hi, tr.cfg.huber_px, tr.cfg.max_iterations).x[0])
-
-        fits.append((theta, fit(np.ones(len(X), bool)), fit(~wrong)))
+        fits.append((theta, frame_fit(tr, meas, np.ones(len(X), bool), T_cw, x_prev, lo, hi),
+                     frame_fit(tr, meas, ~wrong, T_cw, x_prev, lo, hi)))
+    # per measurement: source index, wrong, bent, its track's start (bit 0: wrong there, bit 1: a descriptor match)
     L = np.array([(SOURCES.index(s), bad, bent, b.endswith("-wrong") + 2 * b.startswith("descriptor"))
                   for s, bad, bent, b in labels], dtype=int).reshape(-1, 4)
     row: dict = {"seed": seed, "speckle": d.speckle_contrast}
@@ -173,8 +180,6 @@ def main() -> None:
     ap.add_argument("--out", default="boot_measurements")
     a = ap.parse_args()
     slam, tracking = _knobs(a.slam), _knobs(a.tracking)
-    import functools
-
     rows = list(scene_map(functools.partial(run_scene, slam=slam, tracking=tracking), parse_seeds(a.seeds), a.jobs))
     knobs = "".join(f", SlamConfig.{k}: {v}" for k, v in slam.items()) + "".join(
         f", tracking.{k}: {v}" for k, v in tracking.items())
