@@ -706,6 +706,28 @@ def test_deformable_tracks_follow_the_image_by_flow_from_the_previous_frame():
     assert np.allclose(moved, [3.0, 2.0], atol=0.2)
 
 
+def test_deformable_measurements_moving_unlike_their_neighbours_are_dropped():
+    """``coherence_px``: a lagging prediction offsets a region's measurements alike (all kept, 12 px off their
+    predictions); a match on another feature moves unlike its neighbours (dropped); a point with too few
+    neighbours is kept whatever its offset."""
+    ctx = context(coherence_px=4.0, coherence_radius_px=40.0, coherence_min=3)
+    tracks = DeformableTracks(ctx)
+    g = np.stack(np.meshgrid(np.arange(6) * 15.0, np.arange(6) * 15.0), -1).reshape(-1, 2) + 100.0
+    pred = {i: q for i, q in enumerate(g)}
+    pred[99] = np.array([500.0, 400.0])  # alone, far from the others
+    lag = np.array([12.0, -5.0])
+    found = {i: q + lag for i, q in pred.items()}
+    tracks.sources = dict.fromkeys(found, "flow")
+    tracks._coherent(found, pred)
+    assert sorted(found) == sorted(pred)  # a uniform lag: nothing dropped
+    wrong = [7, 20, 33]
+    for i in wrong:
+        found[i] = found[i] + np.array([0.0, 9.0])  # re-acquired on a feature 9 px off
+    found[99] = found[99] + 30.0
+    tracks._coherent(found, pred)
+    assert sorted(found) == sorted(set(pred) - set(wrong)) and not set(wrong) & set(tracks.sources)
+
+
 def test_config_defaults_are_documented_and_checked():
     src = inspect.getsource(SlamConfig)
     for f in dataclasses.fields(SlamConfig):

@@ -51,6 +51,13 @@ class SlamConfig:
     deformable_radius: float = 20.0  # pixels; ORB re-acquisition radius around a deformable point's prediction
     # (most of what it finds on the bent joint boot is wrong, benchmarks/boot_measurements.py; 6 and 0 px clean the
     # measurements but lose the lever in fast moves: docs/family.md, stop 67)
+    coherence_px: float = 0.0  # > 0: a deformable measurement whose offset from its prediction differs by more than
+    # this from the median offset of its image neighbours' is dropped (a wrong match moves unlike its neighbours; a
+    # lagging prediction moves them all alike); 0: off. 8 px helped the boot family's development seeds (0.88 against
+    # 0.93 %), not its held-out ones (1.60 against 1.61 %), and broke the foam beam at 640 x 480: a knob
+    # (docs/family.md, stop 68)
+    coherence_radius_px: float = 40.0  # the neighbourhood of the coherence check (pixels)
+    coherence_min: int = 3  # fewest neighbours the check needs; a point with fewer is kept
     reacquire_below: int = 8  # fewer flow tracks than this (once more were followed): wide re-acquisition
     reacquire_wide_px: float = 80.0  # pixels; the wide re-acquisition radius (recovers after gaps vs. wrong matches)
     hold_rest_points: bool = True  # keep the deformable points linked at rest (else culled like any young point)

@@ -107,6 +107,8 @@ class DeformableTracks:
         2. Re-acquisition: any other point is searched among the ORB features within ``deformable_radius``
            pixels of its predicted projection and of its last observation, and matched to the closest
            descriptor (the map's, or that of its last ORB match) within 50 bits.
+        With ``coherence_px`` > 0, the measurements that move unlike their image neighbours are then dropped
+        (:meth:`_coherent`).
         The tracker's robust loss catches a flow track that slides onto a neighbour."""
         ctx, cfg, m = self.ctx, self.ctx.config, self.ctx.map
         self.sources = {}
@@ -177,6 +179,8 @@ class DeformableTracks:
                     found[pid] = f.uv[c[j]].astype(np.float64)
                     new_desc[pid] = f.desc[c[j]].copy()
                     self.sources[pid] = "descriptor"
+        if cfg.coherence_px > 0 and len(found) > cfg.coherence_min:
+            self._coherent(found, {int(pid): raw_pred[k] for k, pid in enumerate(ids_a)})
         # 3. every measurement of a point whose track started in an earlier image is taken against that image;
         # a point without one (or whose surface no longer looks like it) starts its track here
         if found and cfg.flow_anchor_px > 0:
@@ -189,7 +193,7 @@ class DeformableTracks:
         # the measurements and the state for the next frame
         self._peak = max(self._peak, len(found))
         self._flow, self._flow_frame, self._flow_gray = found, ctx.frame_id, self.gray
-        self._last_desc.update(new_desc)
+        self._last_desc.update({p: v for p, v in new_desc.items() if p in found})
         for pid in list(self._last_seen):
             if pid not in found:
                 self._last_seen.pop(pid)
@@ -204,6 +208,26 @@ class DeformableTracks:
         res.obs_uv = np.concatenate([res.obs_uv, raw])
         res.obs_inlier = np.concatenate([res.obs_inlier, np.zeros(len(new_ids), bool)])
         res.obs_pos = np.concatenate([res.obs_pos, m._pos[new_ids]])
+
+    def _coherent(self, found: dict[int, np.ndarray], pred: dict[int, np.ndarray]) -> None:
+        """Drop from ``found`` the measurements that move unlike their image neighbours: each measurement's offset
+        from its predicted pixel against the median offset of the others within ``coherence_radius_px``. A lagging
+        prediction (a fast move) offsets a region's measurements alike; a match on another feature offsets its own.
+        A point with fewer than ``coherence_min`` neighbours is kept."""
+        cfg = self.ctx.config
+        pids = [p for p in found if p in pred and np.all(np.isfinite(pred[p]))]
+        if len(pids) <= cfg.coherence_min:
+            return
+        q = np.array([found[p] for p in pids])
+        off = q - np.array([pred[p] for p in pids])
+        tree = cKDTree(q)
+        for k, nb in enumerate(tree.query_ball_point(q, cfg.coherence_radius_px)):
+            nb = [j for j in nb if j != k]
+            if len(nb) < cfg.coherence_min:
+                continue
+            if np.linalg.norm(off[k] - np.median(off[nb], axis=0)) > cfg.coherence_px:
+                found.pop(pids[k])
+                self.sources.pop(pids[k], None)
 
     def _start_anchor(self, pid: int, raw: np.ndarray) -> None:
         assert self.gray is not None  # anchors start in a frame given to new_frame
