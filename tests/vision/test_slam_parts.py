@@ -707,7 +707,7 @@ def test_deformable_tracks_follow_the_image_by_flow_from_the_previous_frame():
 
 
 def test_deformable_measurements_moving_unlike_their_neighbours_are_dropped():
-    """``coherence_px``: a lagging prediction offsets a region's measurements alike (all kept, 12 px off their
+    """``coherence_px``: a lagging prediction offsets a region's measurements alike (all kept, 13 px off their
     predictions); a match on another feature moves unlike its neighbours (dropped); a point with too few
     neighbours is kept whatever its offset."""
     ctx = context(coherence_px=4.0, coherence_radius_px=40.0, coherence_min=3)
