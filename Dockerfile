@@ -6,7 +6,7 @@ FROM python:3.11-slim-bookworm
 
 RUN apt-get update && apt-get install -y --no-install-recommends \
       libusb-1.0-0 libegl1 libgl1 libgl1-mesa-dri libglu1-mesa libxrender1 libxcursor1 libxft2 libxinerama1 \
-      libfontconfig1 build-essential cmake ninja-build python3-dev python3-venv openfoam \
+      libfontconfig1 libopengl0 libsm6 libice6 build-essential cmake ninja-build python3-dev python3-venv openfoam \
     && rm -rf /var/lib/apt/lists/*
 
 WORKDIR /simreal

@@ -1,0 +1,96 @@
+"""The ORB vocabulary the side-by-side benchmark trains for ORB-SLAM3 (benchmarks/orb_vocabulary.py): DBoW2's tree
+and text format, checked without ORB-SLAM3; and ORB-SLAM3 itself on it where the comparator is installed."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from benchmarks import orb_vocabulary as ov
+
+
+def _clustered(seed: int = 0, centres: int = 6, per: int = 60, flips: int = 6) -> tuple[list[np.ndarray], np.ndarray]:
+    """Binary descriptors around a few random centres (``flips`` bits flipped each), spread over 12 'images'."""
+    rng = np.random.default_rng(seed)
+    C = rng.integers(0, 256, (centres, 32), dtype=np.uint8)
+    bits = np.unpackbits(np.repeat(C, per, axis=0), axis=1)
+    for row in bits:
+        row[rng.choice(256, flips, replace=False)] ^= 1
+    desc = np.packbits(bits, axis=1)
+    order = rng.permutation(len(desc))
+    return np.array_split(desc[order], 12), np.repeat(np.arange(centres), per)[order]
+
+
+def test_hamming_and_majority():
+    a = np.zeros((2, 32), np.uint8)
+    a[1, 0] = 0b1011
+    c = np.full((1, 32), 255, np.uint8)
+    assert ov.hamming_to(a, c)[:, 0].tolist() == [256, 253]
+    m = ov.majority(np.array([[1] + [0] * 31, [1] + [0] * 31, [0] * 32], np.uint8))
+    assert m[0] == 1 and not m[1:].any()
+
+
+def test_k_medians_separates_clusters():
+    images, truth = _clustered()
+    labels = ov.k_medians(np.concatenate(images), 6, np.random.default_rng(1))
+    # each found cluster is one true cluster (purity), whatever the numbering
+    for j in np.unique(labels):
+        assert len(np.unique(truth[labels == j])) == 1
+
+
+def test_vocabulary_tree_round_trips_through_dbow2_text(tmp_path):
+    images, _ = _clustered()
+    voc = ov.train(images, k=3, levels=3, seed=0)
+    parent, leaf = voc["parent"], voc["leaf"]
+    assert parent[0] == -1 and np.all(parent[1:] < np.arange(1, len(parent)))  # parents before children
+    has_child = np.zeros(len(parent), bool)
+    has_child[parent[1:]] = True
+    assert np.array_equal(leaf[1:], ~has_child[1:])  # the words are the nodes without children
+    assert np.bincount(parent[1:]).max() <= 3
+    assert len(parent) <= (3 ** 4 - 1) // 2  # no more nodes than DBoW2 reserves for k 3, L 3 (its word pointers)
+    n_docs = len(images)
+    assert np.all(voc["weight"][leaf] >= 0) and np.all(voc["weight"][leaf] <= np.log(n_docs) + 1e-12)
+    assert not voc["weight"][~leaf].any()
+    path = ov.write_text(voc, tmp_path / "voc.txt")
+    text = path.read_text()
+    assert text.split("\n")[0] == "3 3 0 0" and not text.endswith("\n")
+    back = ov.read_text(path)
+    assert np.array_equal(back["parent"], parent) and np.array_equal(back["leaf"], leaf)
+    assert np.array_equal(back["desc"][1:], voc["desc"][1:])
+    assert np.allclose(back["weight"], voc["weight"], rtol=1e-5)
+    with pytest.raises(ValueError, match="DBoW2"):
+        ov.train(images, k=30)
+
+
+def test_orbslam3_starts_on_the_trained_vocabulary_and_tracks_rgbd(tmp_path):
+    """The comparator loads the vocabulary and settings this benchmark writes and tracks a textured plane seen by a
+    camera sliding sideways (RGB-D); skipped where pyorbslam3 is not installed (it is not a project dependency)."""
+    pos = pytest.importorskip("pyorbslam3")
+    import cv2
+
+    from benchmarks.orbslam3_side import settings_yaml
+    from simreal_nodes.camera import CameraModel
+
+    rng = np.random.default_rng(0)
+    tex = cv2.GaussianBlur((rng.random((600, 1200)) * 255).astype(np.uint8), (0, 0), 2.0)
+    tex = cv2.equalizeHist(tex)
+    frames = [np.ascontiguousarray(tex[60:540, 20 + 4 * i:660 + 4 * i]) for i in range(40)]
+    orb = cv2.ORB_create(1000)
+    voc = ov.train([orb.detectAndCompute(f, None)[1] for f in frames[::4]], k=6, levels=4, seed=0)
+    vocab = ov.write_text(voc, tmp_path / "voc.txt")
+    cam = CameraModel.from_intrinsics(640, 480, 500.0, 500.0, 320.0, 240.0)
+    cfg = settings_yaml(cam, "rgbd", 30.0, tmp_path / "s.yaml")
+    slam = pos.Slam(str(vocab), str(cfg), pos.Sensor.RGBD)
+    depth = np.full((480, 640), 2.0, np.float32)
+    xs = []
+    try:
+        for i, f in enumerate(frames):
+            r = slam.track_rgbd(f, depth, i / 30.0)
+            if r.state == pos.TrackingState.OK:
+                xs.append(np.asarray(r.pose_wc)[:3, 3])
+    finally:
+        slam.shutdown()
+    assert len(xs) >= 35
+    # 4 px a frame at 500 px focal length and 2 m: 16 mm a frame, to the right (the image content moves left)
+    step = np.diff(np.array(xs)[:, 0])
+    assert np.median(step) == pytest.approx(0.016, rel=0.1)
