@@ -38,6 +38,7 @@ import json
 import os
 import tempfile
 import time
+from collections import Counter
 from collections.abc import Iterable
 from pathlib import Path
 
@@ -81,7 +82,7 @@ def settings_yaml(cam, mode: str, fps: float, path: Path, baseline: float = 0.08
     D = np.r_[np.asarray(cam.cv_dist(), float).ravel(), np.zeros(5)]
     if np.any(D[5:] != 0):
         raise ValueError(f"ORB-SLAM3's pinhole model takes k1 k2 p1 p2 k3, not a {cam.distortion_model} distortion")
-    r = lambda v: f"{float(v):.10g}" + ("" if "." in f"{float(v):.10g}" or "e" in f"{float(v):.10g}" else ".0")  # noqa: E731
+    r = lambda v: repr(float(v))  # noqa: E731 - '525.0', '-0.04': a real to OpenCV's YAML reader
     lines = ["%YAML:1.0", 'Camera.type: "PinHole"',
              f"Camera.fx: {r(cam.fx)}", f"Camera.fy: {r(cam.fy)}", f"Camera.cx: {r(cam.cx)}", f"Camera.cy: {r(cam.cy)}",
              f"Camera.k1: {r(D[0])}", f"Camera.k2: {r(D[1])}", f"Camera.p1: {r(D[2])}", f"Camera.p2: {r(D[3])}",
@@ -143,8 +144,7 @@ def run_orbslam3_stream(frames: Iterable[tuple], cam, fps: float, mode: str, voc
 
 def _measures(T_true: np.ndarray, fps: float, est: dict[int, np.ndarray], map_of: dict[int, int], ms: list[float],
               mode: str, wall: float) -> dict:
-    from benchmarks.real_slam import rpe_m
-    from simreal_nodes.vision.trajectory import ate, umeyama
+    from benchmarks.real_slam import accuracy
 
     n = len(T_true)
     n_maps = len(set(map_of.values()))
@@ -152,19 +152,9 @@ def _measures(T_true: np.ndarray, fps: float, est: dict[int, np.ndarray], map_of
            "maps": n_maps, "tracking_ms_p50": float(np.median(ms[5:])),
            "tracking_ms_p95": float(np.percentile(ms[5:], 95)), "fps_wall": n / wall}
     if n_maps > 1:  # align the longest map only
-        counts: dict[int, int] = {}
-        for m in map_of.values():
-            counts[m] = counts.get(m, 0) + 1
-        best = max(counts, key=counts.__getitem__)
+        best = Counter(map_of.values()).most_common(1)[0][0]
         est = {i: p for i, p in est.items() if map_of[i] == best}
-    if len(est) >= 3:
-        idx = sorted(est)
-        E, Tt = np.array([est[i] for i in idx]), T_true[idx, :3, 3]
-        a = ate(E, Tt, with_scale=mode == "mono")
-        R, _t, s = umeyama(E, Tt, mode == "mono")
-        row.update(ate_mm=1e3 * a["rmse"], ate_pct=a["rmse_pct_length"], aligned_frames=len(idx),
-                   rpe_1s_mm=1e3 * rpe_m(est, T_true[:, :3, 3], R, s, round(fps)))
-    return row
+    return {**row, "aligned_frames": len(est), **accuracy(est, T_true, mode, fps)}
 
 
 def run_ours(seq: dict, mode: str) -> dict:
@@ -330,7 +320,8 @@ def main() -> None:
     modes = [m for m in a.modes.split(",") if m]
     seeds = parse_seeds(a.seeds) if a.seeds else []
     rows: list[dict] = []
-    label = " and ".join(([f"held-out family seeds {a.seeds}"] if seeds else []) + ([] if a.no_real else ["7-Scenes"]))
+    kind = "held-out" if all(s >= HELD_OUT_SEEDS.start for s in seeds) else "development"
+    label = " and ".join(([f"{kind} family seeds {a.seeds}"] if seeds else []) + ([] if a.no_real else ["7-Scenes"]))
     scenes: list[tuple[str, int | None]] = [(f"family {s}", s) for s in seeds]
     if not a.no_real:
         scenes.append(("7-Scenes (real)", None))

@@ -51,6 +51,20 @@ def load(folder: Path = DATA, frames: int | None = None) -> dict:
     return {"gray": gray, "depth": depth, "T": np.array(T), "cam": cam, "fps": 30.0}
 
 
+def accuracy(est: dict[int, np.ndarray], T_true: np.ndarray, mode: str, fps: float) -> dict:
+    """The accuracy of estimated camera positions (``est``: frame -> position) against the true camera-to-world poses:
+    ATE after a similarity (monocular) or rigid alignment, in mm and % of the path they cover, the alignment's scale,
+    and the RPE over 1 s under the same alignment. Empty with fewer than 3 estimates."""
+    from simreal_nodes.vision.trajectory import ate
+
+    if len(est) < 3:
+        return {}
+    idx = sorted(est)
+    a = ate(np.array([est[i] for i in idx]), T_true[idx, :3, 3], with_scale=mode == "mono")
+    return {"ate_mm": 1e3 * a["rmse"], "ate_pct": a["rmse_pct_length"], "scale": a["scale"],
+            "rpe_1s_mm": 1e3 * rpe_m(est, T_true[:, :3, 3], a["R"], a["scale"], int(fps))}
+
+
 def rpe_m(est: dict[int, np.ndarray], truth: np.ndarray, R: np.ndarray, s: float, step: int) -> float:
     """RMS translation error of the motion over ``step`` frames, the estimate mapped by the alignment (R, s)."""
     errs = [np.linalg.norm(s * R @ (est[i + step] - est[i]) - (truth[i + step] - truth[i]))
@@ -64,7 +78,6 @@ def run(seq: dict, mode: str, n_features: int = 1000, fuse: str | None = None, l
     closing (``SlamConfig.loop_closing``); ``overrides``: other ``SlamConfig`` fields."""
     from simreal_nodes.vision.slam.config import SlamConfig
     from simreal_nodes.vision.slam.system import Slam
-    from simreal_nodes.vision.trajectory import ate, umeyama
 
     cfg = SlamConfig(loop_closing=loop, **(overrides or {}), **({} if fuse is None else {"fuse_neighbours": fuse}))
     slam = Slam(seq["cam"], mode, n_features, config=cfg)
@@ -90,13 +103,7 @@ def run(seq: dict, mode: str, n_features: int = 1000, fuse: str | None = None, l
            "mapping_ms_per_frame": float(np.sum(kf_ms)) / len(seq["gray"]),
            "first_tracked": min(est) if est else None, "first_lost": lost_at,
            "tracking_ms_p50": float(np.median(ms[5:]))}
-    if len(est) >= 3:
-        idx = sorted(est)
-        E, Tt = np.array([est[i] for i in idx]), seq["T"][idx, :3, 3]
-        a = ate(E, Tt, with_scale=mode == "mono")
-        R, _t, s = umeyama(E, Tt, mode == "mono")
-        row.update(ate_mm=1e3 * a["rmse"], ate_pct=a["rmse_pct_length"], scale=s,
-                   rpe_1s_mm=1e3 * rpe_m(est, seq["T"][:, :3, 3], R, s, int(seq["fps"])))
+    row.update(accuracy(est, seq["T"], mode, seq["fps"]))
     return row
 
 
