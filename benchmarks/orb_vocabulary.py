@@ -64,7 +64,7 @@ def k_medians(desc: np.ndarray, k: int, rng: np.random.Generator, iterations: in
     return labels
 
 
-def train(images: Sequence[np.ndarray], k: int = 10, levels: int = 5, seed: int = 0) -> dict:
+def train(images: Sequence[np.ndarray], k: int = 10, levels: int = 6, seed: int = 0) -> dict:
     """A vocabulary from the ORB descriptors of each training image (``images``: one (n_i, 32) uint8 array each).
     Returns ``parent``, ``leaf``, ``desc`` (one per node, the root first, parents before children: breadth first) and
     ``weight`` (the leaves' inverse document frequency, 0 elsewhere)."""
