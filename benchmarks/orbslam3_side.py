@@ -190,6 +190,9 @@ def long_rows(vocab: Path) -> list[dict]:
     from benchmarks.long_slam import FPS, LAP_S
     from simreal_nodes.synth.sequence import FrameStream
 
+    if not (RESULTS / "long_slam.json").is_file():
+        raise SystemExit("the long sequence's rows of this SLAM come from long_slam.json: run `./run bench long_slam` "
+                         "first, or pass --no-long")
     ours = json.loads((RESULTS / "long_slam.json").read_text())
     laps = round(ours["rows"][0]["frames"] / (LAP_S * FPS))
     rows = []
