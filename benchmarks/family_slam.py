@@ -26,6 +26,7 @@ import functools
 import itertools
 import json
 import time
+from typing import Any
 
 import numpy as np
 
@@ -37,22 +38,29 @@ TARGET_TRACKED = {"mono": 95.0, "rgbd": 99.0, "stereo": 99.0}
 TARGET_ATE_PCT = 0.3
 
 
+def slam_sequence(seed: int) -> tuple[dict, Any]:
+    """One family scene rendered (640 x 480 RGB-D at 15 fps) as the SLAM benchmarks take it: gray frames, depth in
+    metres, the true camera-to-world poses, the camera and the rate; and the scene's draw."""
+    import cv2
+
+    from benchmarks.family import scene_name
+    from simreal_nodes.synth.sequence import sequence
+
+    seq = sequence.__wrapped__(scene_name(seed), 640, 480, fps=FPS, stereo=False)
+    data = {"gray": [cv2.cvtColor(im, cv2.COLOR_RGB2GRAY) for im in seq["rgb"]], "depth": seq["depth"],
+            "T": np.asarray(seq["T"]), "cam": seq["cam"], "fps": FPS}
+    return data, seq["scene"].state["draw"]
+
+
 def run_scene(seed: int, modes: tuple[str, ...] = ("mono", "rgbd"), n_features: int = 1000,
               configs: dict[str, dict] | None = None) -> list[dict]:
     """One family scene rendered once, then the SLAM over it in each mode and configuration (``configs``: label ->
     ``SlamConfig`` fields; default the defaults, labelled "default"): one row per mode and configuration."""
-    import cv2
-
-    from benchmarks.family import scene_name
     from benchmarks.real_slam import run
-    from simreal_nodes.synth.sequence import sequence
 
     t0 = time.perf_counter()
-    seq = sequence.__wrapped__(scene_name(seed), 640, 480, fps=FPS, stereo=False)
+    data, d = slam_sequence(seed)
     render_s = time.perf_counter() - t0
-    d = seq["scene"].state["draw"]
-    data = {"gray": [cv2.cvtColor(im, cv2.COLOR_RGB2GRAY) for im in seq["rgb"]], "depth": seq["depth"],
-            "T": np.asarray(seq["T"]), "cam": seq["cam"], "fps": FPS}
     path = float(np.sum(np.linalg.norm(np.diff(data["T"][:, :3, 3], axis=0), axis=1)))
     rows = []
     for (label, overrides), mode in itertools.product((configs or {"default": {}}).items(), modes):

@@ -171,17 +171,6 @@ def run_ours(seq: dict, mode: str) -> dict:
             "aligned_frames": r["tracked"], "rpe_1s_mm": r.get("rpe_1s_mm", float("nan"))}
 
 
-def family_seq(seed: int) -> dict:
-    import cv2
-
-    from benchmarks.family import scene_name
-    from simreal_nodes.synth.sequence import sequence
-
-    seq = sequence.__wrapped__(scene_name(seed), 640, 480, fps=15.0, stereo=False)
-    return {"gray": [cv2.cvtColor(im, cv2.COLOR_RGB2GRAY) for im in seq["rgb"]], "depth": seq["depth"],
-            "T": np.asarray(seq["T"]), "cam": seq["cam"], "fps": 15.0}
-
-
 def long_rows(vocab: Path) -> list[dict]:
     """The long sequence of `benchmarks/long_slam.py` (the room's lap seven times, 2 100 frames at 30 fps, each of its
     runs' noise seed): ORB-SLAM3 on the same frames, rendered again one at a time; this SLAM's rows are
@@ -295,6 +284,7 @@ def _version() -> str:
 
 def main() -> None:
     from benchmarks.family import HELD_OUT_SEEDS, _one_thread, parse_seeds
+    from benchmarks.family_slam import slam_sequence
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--seeds", default=f"{HELD_OUT_SEEDS.start}-{HELD_OUT_SEEDS.start + 19}",
@@ -337,7 +327,7 @@ def main() -> None:
                 continue
             seq = load()
         else:
-            seq = family_seq(seed)
+            seq = slam_sequence(seed)[0]
         for mode in modes:
             for slam in slams:
                 m = run_ours(seq, mode) if slam == "simreal" else run_orbslam3(seq, mode, vocab)
