@@ -1,0 +1,106 @@
+"""Registration of a body of revolution (the joint boot's bellows): its turn about its own axis is not in the
+depth, so a fit turned any way about that axis is the same fit, and only the axis's tilt from the guess tells
+another basin; a guess that sinks the object under the plane it stands on is lifted onto it. On a depth cloud
+made from the boot model's own surface (the faces three cameras see, 0.5 mm noise), a floor under it and two boxes of
+clutter beside it: no rendering, so the tests run in seconds."""
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+from simreal_nodes import geometry as G
+from simreal_nodes.assimilation.registration import (
+    RegistrationConfig,
+    _n_samples,
+    lifted_onto,
+    register_rgbd,
+    revolves_about_z,
+    sample_surface,
+)
+from simreal_nodes.rom.build import cached_model
+from simreal_nodes.rom.model_file import load_model
+
+# the boot's axis frame in the map: turned about its axis and tilted as a camera frame would see a table
+# the boot scene file's polish (anchor.polish_mm: 4): the fine stage alone can stop a pleat away on the bellows
+CFG = RegistrationConfig(polish=0.004)
+T_TRUE = G.make_T(G.rot_axis("x", np.deg2rad(-110.0)) @ G.rot_axis("z", np.deg2rad(35.0)), [0.05, 0.12, 0.65])
+
+
+@pytest.fixture(scope="module")
+def boot():
+    return load_model(cached_model("joint_boot"), fields=["displacement"])
+
+
+@pytest.fixture(scope="module")
+def beam():
+    return load_model(cached_model("aluminium_beam"), fields=["displacement"])
+
+
+def _faces(rng, centre, size, n: int) -> np.ndarray:
+    """``n`` points on the faces of a box (object frame)."""
+    u = rng.uniform(-0.5, 0.5, (n, 3))
+    k = rng.integers(0, 3, n)
+    u[np.arange(n), k] = rng.choice([-0.5, 0.5], n)
+    return u * np.asarray(size) + np.asarray(centre)
+
+
+def _cloud(model, floor_z: float) -> tuple[np.ndarray, np.ndarray]:
+    """(points in the map, camera centres in the map): the model surface facing three cameras about 0.6 m away, a
+    floor at height ``floor_z`` of the object frame around it and two boxes of clutter a few centimetres from it
+    (which a fit of the bellows alone may turn towards), all with 0.5 mm noise."""
+    rng = np.random.default_rng(3)
+    c = model.points.mean(axis=0)
+    cams = np.array([c + 0.6 * np.array([np.cos(a), np.sin(a), 0.7]) for a in np.deg2rad([-20.0, 0.0, 20.0])])
+    S, N = sample_surface(model.points, model.surface, 40000, seed=1)
+    seen = np.zeros(len(S), bool)
+    for cam in cams:
+        seen |= np.einsum("ij,ij->i", N, cam - S) > 0
+    xy = rng.uniform(-0.25, 0.25, (20000, 2))
+    xy = xy[np.linalg.norm(xy - c[:2], axis=1) > 0.06]  # the floor around the object's footprint
+    rng = np.random.default_rng(5)
+    clutter = np.vstack([_faces(rng, [0.11, 0.03, 0.03], [0.04, 0.05, 0.14], 3000),
+                         _faces(rng, [-0.06, 0.1, 0.02], [0.05, 0.04, 0.1], 3000)])
+    P = np.vstack([S[seen], np.c_[xy, np.full(len(xy), floor_z)], clutter])
+    return G.transform(T_TRUE, P + rng.normal(0.0, 0.0005, P.shape)), G.transform(T_TRUE, cams)
+
+
+def _error(T):
+    D = G.inv(T_TRUE) @ T
+    return 1e3 * np.linalg.norm(D[:3, 3]), np.rad2deg(np.arccos(np.clip(D[2, 2], -1.0, 1.0)))
+
+
+def test_the_boot_is_a_body_of_revolution_a_beam_is_not(boot, beam):
+    for model, expected in ((boot, True), (beam, False)):
+        S, N = sample_surface(model.points, model.surface, _n_samples(model, 0.0025), 0)
+        assert revolves_about_z(S, N, cKDTree(S), model.points.mean(axis=0), 0.002) is expected
+
+
+@pytest.mark.parametrize("turn_deg", [0.0, 70.0, -120.0, 180.0])
+def test_a_guess_turned_any_way_about_the_boot_axis_places_it(boot, turn_deg):
+    """The guess only knows the axis; the boot's turn about it is a tracked constant (alpha_z). Before the turn
+    about the axis was set free, fits the coarse stage turned more than 30 degrees about it were taken for another
+    basin and the registration refused (development seeds 19, 25, 34 and 38 of the boot's family; here the guesses
+    turned -120 and 180 degrees)."""
+    P, cams = _cloud(boot, floor_z=-0.04)  # the boot stands on a 40 mm base, as in its scenes
+    guess = T_TRUE @ G.make_T(G.rot_axis("z", np.deg2rad(turn_deg)) @ G.rot_axis("x", np.deg2rad(4.0)),
+                              [0.02, -0.025, 0.01])
+    reg = register_rgbd(P, boot, guess, cams, CFG)
+    mm, tilt = _error(reg.T_map_obj)
+    assert mm < 1.0 and tilt < 0.3, (mm, tilt)
+
+
+def test_a_guess_under_the_support_plane_is_lifted_onto_it(boot):
+    """A guess whose model dips under the plane is lifted along its normal just onto it (development seed 36 of the
+    boot's family: 113 mm off, its base 42 mm under the table, refused before); one above it stays."""
+    plane = np.r_[T_TRUE[:3, 2], -T_TRUE[:3, 2] @ T_TRUE[:3, 3]]  # the plane of the boot's base
+    under = T_TRUE @ G.make_T(G.rot_axis("z", 0.3), [0.03, -0.02, -0.042])
+    lifted = lifted_onto(under, boot.points, plane)
+    assert np.allclose(lifted[:3, :3], under[:3, :3])
+    assert np.allclose(G.inv(T_TRUE) @ lifted[:, 3], [0.03, -0.02, 0.0, 1.0], atol=1e-9)
+    above = T_TRUE @ G.make_T(t=[0.0, 0.0, 0.01])
+    assert np.array_equal(lifted_onto(above, boot.points, plane), above)
+    P, cams = _cloud(boot, floor_z=0.0)
+    reg = register_rgbd(P, boot, T_TRUE @ G.make_T(G.rot_axis("z", np.deg2rad(20.0)), [-0.066, 0.042, -0.081]),
+                        cams, CFG)
+    mm, tilt = _error(reg.T_map_obj)
+    assert mm < 1.0 and tilt < 0.3, (mm, tilt)
