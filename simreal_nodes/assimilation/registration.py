@@ -234,6 +234,16 @@ def revolves_about_z(S: np.ndarray, N: np.ndarray, tree: cKDTree, centre: np.nda
     return True
 
 
+def turned_like(T_map_obj: np.ndarray, guess: np.ndarray, centre: np.ndarray) -> np.ndarray:
+    """A body of revolution's fit ``T_map_obj`` turned about its own z axis (through ``centre``, object frame) to
+    the turn of ``guess`` about that axis: the same surface, so the same fit, but the turn the user gave rather than
+    the one the ICP drifted to, so that a constant measured from it (the boot's alpha_z, from 0) starts where the
+    scene file says and a rerun on other depth lands on the same turn."""
+    R = guess[:3, :3].T @ T_map_obj[:3, :3]
+    phi = float(np.arctan2(R[1, 0] - R[0, 1], R[0, 0] + R[1, 1]))  # the turn about z of the fit against the guess
+    return T_map_obj @ G.make_T(t=centre) @ G.make_T(G.rot_axis("z", -phi)) @ G.make_T(t=-centre)
+
+
 def lifted_onto(T_map_obj: np.ndarray, points: np.ndarray, plane: np.ndarray) -> np.ndarray:
     """``T_map_obj`` moved along the ``plane``'s normal (n, d: n.x + d = 0, n up) just far enough that none of the
     object's ``points`` (object frame) lies under it: nothing stands under the plane it rests on, so a guess whose
@@ -431,9 +441,9 @@ def register_rgbd(cloud: np.ndarray, model: ReducedModel, guess: np.ndarray, cam
        guess centimetres off locks onto a neighbouring structure, a clamp's face, from a single start); of the fits
        that stay within ``max_turn_deg`` of the guess (a box beam of square section also fits rolled a quarter
        turn; for a body of revolution about its z axis, :func:`revolves_about_z`, only the axis's tilt counts: its
-       turn about the axis is not in the depth), the one that covers most of the model surface facing the cameras
-       goes on to the fine stage (full cloud, radii down to 4 mm), without the points in the ``contact_band`` above
-       the model's underside;
+       turn about the axis is not in the depth, and the fit keeps the guess's turn, :func:`turned_like`), the one
+       that covers most of the model surface facing the cameras goes on to the fine stage (full cloud, radii down
+       to 4 mm), without the points in the ``contact_band`` above the model's underside;
     4. a slide along a direction that no matched face constrains (a prism's axis when its end faces are a few
        noisy pixels) is pinned by the model's cover of its faces turned to the cameras (:func:`_pin_slide`);
     5. the quality (:class:`Registration`), judged on the model faces turned to ``cam_centres`` (the cameras'
@@ -530,6 +540,8 @@ def register_rgbd(cloud: np.ndarray, model: ReducedModel, guess: np.ndarray, cam
             return icp(T0, (0.004, 0.002))
 
         T = _polished(P, T, S, N, cams, cfg, fine_icp)
+    if spin_free:  # the depth does not say how it is turned about its axis: it keeps the guess's turn
+        T = G.inv(turned_like(G.inv(T), guess, centre))
     fitness, rmse, hits = _quality(P, T, S, N, cams, cfg.inlier_dist)
     out = _judged(Registration(G.inv(T), fitness, rmse, hits, plane, slide_spread(P, T, S, N, cams, cfg)),
                   P, T, S, N, cfg)

@@ -1,6 +1,6 @@
 """Registration of a body of revolution (the joint boot's bellows): its turn about its own axis is not in the
-depth, so a fit turned any way about that axis is the same fit, and only the axis's tilt from the guess tells
-another basin; a guess that sinks the object under the plane it stands on is lifted onto it. On a depth cloud
+depth, so a fit turned any way about that axis is the same fit, only the axis's tilt from the guess tells another
+basin, and the fit keeps the guess's turn; a guess that sinks the object under the plane it stands on is lifted onto it. On a depth cloud
 made from the boot model's own surface (the faces three cameras see, 0.5 mm noise), a floor under it and two boxes of
 clutter beside it: no rendering, so the tests run in seconds."""
 
@@ -87,6 +87,9 @@ def test_a_guess_turned_any_way_about_the_boot_axis_places_it(boot, turn_deg):
     reg = register_rgbd(P, boot, guess, cams, CFG)
     mm, tilt = _error(reg.T_map_obj)
     assert mm < 1.0 and tilt < 0.3, (mm, tilt)
+    # and it keeps the guess's turn about the axis (the depth does not say it; alpha_z is measured from it)
+    R = guess[:3, :3].T @ reg.T_map_obj[:3, :3]
+    assert abs(np.rad2deg(np.arctan2(R[1, 0] - R[0, 1], R[0, 0] + R[1, 1]))) < 0.5
 
 
 def test_a_guess_under_the_support_plane_is_lifted_onto_it(boot):
