@@ -1,8 +1,8 @@
-"""Registration of a body of revolution (the joint boot's bellows): its turn about its own axis is not in the
-depth, so a fit turned any way about that axis is the same fit, only the axis's tilt from the guess tells another
-basin, and the fit keeps the guess's turn; a guess that sinks the object under the plane it stands on is lifted onto it. On a depth cloud
-made from the boot model's own surface (the faces three cameras see, 0.5 mm noise), a floor under it and two boxes of
-clutter beside it: no rendering, so the tests run in seconds."""
+"""Registration of a body of revolution (the joint boot's bellows): its turn about its own axis is not in the depth, so
+a fit turned any way about that axis is the same fit, only the axis's tilt from the guess tells another basin, and
+the fit keeps the guess's turn; a guess that sinks the object under the plane it stands on is lifted onto it. On a
+depth cloud made from the boot model's own surface (the faces three cameras see, 0.5 mm noise), a floor under it and
+two boxes of clutter beside it: no rendering, so the tests run in seconds."""
 
 import numpy as np
 import pytest
