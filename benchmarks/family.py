@@ -398,13 +398,23 @@ TABLES = (("family", "Held-out seeds (the accuracy this project reports): the de
           ("family_boot", "The joint boot, held-out seeds (`python -m benchmarks.family_boot`: seeds 1000-1019; "
            "the lever angle theta, the turn alpha_z unknown; alpha_z searched until first seen, the registration "
            "polished; the map keeps the points linked at rest, no copies of followed points, a parameter the frame "
-           "does not measure keeps its value; Huber alone), stop 66's host"),
+           "does not measure keeps its value; Huber alone), stop 70's code: the boot registered as a body of "
+           "revolution (its axis's tilt judged against the guess, the guess's turn about it kept)"),
+          ("family_boot_dev_0_39", "The joint boot, development seeds 0-39 on stop 70's code (`--seeds 0-39 --out "
+           "family_boot_dev_0_39`)"),
+          ("family_boot_dev_0_39_guess_turn_7_5", "The joint boot, development seeds 0-39 with the guess turned 7.5 "
+           "degrees about the boot's axis (`--seeds 0-39 --guess-turn 7.5`: a turn the depth does not show and the "
+           "user does not know; stop 70)"),
+          ("family_boot_dev_0_39_icp_turn", "The joint boot, development seeds 0-39, stop 70's first version: the "
+           "axis's tilt judged against the guess, the fit left at the turn about the axis the ICP drifted to"),
+          ("family_boot_stop66", "The joint boot, held-out seeds 1000-1019 on stop 66's code (before stop 70's "
+           "registration of a body of revolution), stop 66's host"),
           ("family_boot_dev", "The joint boot, development seeds 0-9 (`python -m benchmarks.family_boot --seeds "
-           "0-9`), stop 66's host"),
+           "0-9`), stop 66's code and host (before stop 70's registration of a body of revolution)"),
           ("family_boot_dev_10_19", "The joint boot, development seeds 10-19 (`--seeds 10-19 --out "
-           "family_boot_dev_10_19`), stop 66's host"),
+           "family_boot_dev_10_19`), stop 66's code and host"),
           ("family_boot_dev_20_39", "The joint boot, development seeds 20-39 (`--seeds 20-39 --out "
-           "family_boot_dev_20_39`; new in stop 66)"),
+           "family_boot_dev_20_39`; new in stop 66), stop 66's code"),
           ("family_boot_dev_0_39_coherence_px_8", "The joint boot, knob: object measurements that move unlike their "
            "image neighbours dropped (`--seeds 0-39 --slam coherence_px=8`; default off), development seeds 0-39 "
            "(stop 68)"),
@@ -433,7 +443,7 @@ TABLES = (("family", "Held-out seeds (the accuracy this project reports): the de
            "object points but the wide one after most tracks are lost (`--slam deformable_radius=0`), development "
            "seeds 10, 12 (traced) and 7, 29, 26, 24 (those the 6 px knob lost) (stop 67)"),
           ("family_boot_stop65", "The joint boot, held-out seeds 1000-1019, stop 65's run (the same code as "
-           "`family_boot`, an earlier session's host)"),
+           "`family_boot_stop66`, an earlier session's host)"),
           ("family_boot_dev_stop65", "The joint boot, development seeds 0-9, stop 65's run (an earlier host)"),
           ("family_boot_dev_10_19_stop65", "The joint boot, development seeds 10-19, stop 65's run (an earlier "
            "host)"),
@@ -1174,19 +1184,19 @@ contact-truth test failed on round-off) reads the same code otherwise, scene by 
 0.55 % here). Run like for like on this host, Huber alone (`family_boot_dev`, `family_boot_dev_10_19`) read 0.66 %, p90
 1.47 %, 85 % within 1 %, 90 % within 2 % over seeds 0-19, and the refits (`..._outlier_refits_3`) 0.62 %, 1.15 %, 85 %,
 100 %. The held-out seeds then ran once with the refits (`family_boot_outlier_refits_3`): **1.98 %**, p90 6.60 %, 15 %
-within 1 %, 50 % within 2 %. Huber alone on the same seeds and host (`family_boot`, run after the default was fixed):
-**1.61 %**, p90 6.74 %, 30 %, 60 %. The development gain did not hold out. Before any change to the default, the rule
-was written down: grow the development set to seeds 0-39 (`family_boot_dev_20_39`, new), and keep 3 only if its median
-of the per-scene medians is no worse and its share within 2 % no smaller than Huber alone's there. Seeds 20-39 read 1.75
-% with the refits and 1.89 % without (p90 25.3 and 19.0 %, 60 and 50 % within 2 %); over 0-39, **0.96 %** with the
-refits against **0.93 %** without, 80 % against 70 % within 2 %. The median rule failed, so the default is Huber alone
-again and the refits are a knob. The held-out table `family_boot` is Huber alone's run on this host: **1.61 %** of the
-lever's range at the median (stop 65's host: 1.60 %), p90 **6.74 %** (11.35 %), **30 %** within 1 % (20 %), **60 %**
-within 2 % (60 %), alpha_z 1.3 degrees off at the median (1.0). Per scene the two hosts differ widely (1007 11.7 -> 4.1
-%, 1018 8.4 -> 0.6 %, 1009 6.6 -> 5.7 %, 1017 1.35 -> 6.3 %: its registration lands 17 mm off on noisy depth here,
-flagged, 0 % OK). The model's own reading of the truth is 0.78 % off at the median of the held-out scenes; the tracker
-adds the rest (2.11 % against that reading). Development seeds 20-39 are as hard as the held-out ones (1.89 % against
-1.61 %); seeds 0-19, on which earlier stops chose the boot's settings, read 0.66 %.
+within 1 %, 50 % within 2 %. Huber alone on the same seeds and host (`family_boot_stop66`, run after the default was
+fixed): **1.61 %**, p90 6.74 %, 30 %, 60 %. The development gain did not hold out. Before any change to the default, the
+rule was written down: grow the development set to seeds 0-39 (`family_boot_dev_20_39`, new), and keep 3 only if its
+median of the per-scene medians is no worse and its share within 2 % no smaller than Huber alone's there. Seeds 20-39
+read 1.75 % with the refits and 1.89 % without (p90 25.3 and 19.0 %, 60 and 50 % within 2 %); over 0-39, **0.96 %** with
+the refits against **0.93 %** without, 80 % against 70 % within 2 %. The median rule failed, so the default is Huber
+alone again and the refits are a knob. The held-out table `family_boot_stop66` is Huber alone's run on this host: **1.61
+%** of the lever's range at the median (stop 65's host: 1.60 %), p90 **6.74 %** (11.35 %), **30 %** within 1 % (20 %),
+**60 %** within 2 % (60 %), alpha_z 1.3 degrees off at the median (1.0). Per scene the two hosts differ widely (1007
+11.7 -> 4.1 %, 1018 8.4 -> 0.6 %, 1009 6.6 -> 5.7 %, 1017 1.35 -> 6.3 %: its registration lands 17 mm off on noisy depth
+here, flagged, 0 % OK). The model's own reading of the truth is 0.78 % off at the median of the held-out scenes; the
+tracker adds the rest (2.11 % against that reading). Development seeds 20-39 are as hard as the held-out ones (1.89 %
+against 1.61 %); seeds 0-19, on which earlier stops chose the boot's settings, read 0.66 %.
 
 **Stop 67: where the wrong measurements come from.** `python -m benchmarks.boot_measurements` (new:
 `benchmarks/results/boot_measurements.md`) labels every object measurement of a boot scene against the independent
@@ -1251,7 +1261,51 @@ image its track began in, `SlamConfig.flow_anchor_px`) the best row on both of i
 1.55 degrees, the foam beam 1.4 against 3.0 mm). It had never run on the family. On development seeds 0-39
 (`family_boot_dev_0_39_flow_anchor_px_1`) it reads **1.17 %** against 0.93 %, 62.5 % within 2 % against 70 % (15 scenes
 better, 21 worse; seed 25 25.9 against 14.6 %, 26 4.04 against 1.47 %): it stays off, and the held-out seeds were not
-run."""
+run.
+
+**Stop 70: the boot registered as a body of revolution.** The registration alone (`python -m benchmarks.family_boot
+--registration --seeds 0-39`, scratch) refused its first try on 5 of the 40 development boots (19, 25, 34, 36, 38). Four
+times because every coarse fit had turned more than 30 degrees from the guess: the bellows is a body of revolution about
+its axis (its surface turned by 17, 45, 90 or 151 degrees lies on itself within 2 mm; a beam's, a plate's and the
+bunny's do not), so the ICP turns it about that axis freely, and the turn check took the right fits for another basin.
+Once because the guess (seed 36: 113 mm off, its base 42 mm under the table) was beyond every coarse start. A refused
+registration collects its views again, and by then the lever is loaded: the loaded fit matched 16-18 % of the faces and
+seed 36 was never placed (25.5 %), seeds 25 and 38 were placed late (14.6 and 24.7 %). Now
+(`registration.revolves_about_z`, `turned_like`, `lifted_onto`) a body of revolution is judged by its axis's tilt alone
+and keeps the guess's turn about the axis (the fine stage had left seed 0's 52 degrees from the guess: the turn the
+tracker's alpha_z is measured from was a draw of the ICP), and a guess that sinks the model under the support plane is
+lifted onto it. The first registration on development seeds 0-39: 0 refused (5 before), 0.14 mm and 0.05 degrees at the
+median as before, worst 0.49 mm and 0.31 degrees. The beams' registration (`python -m benchmarks.family --seeds 0-9
+--registration`) reads as before in every row. Tests (`tests/assimilation/test_registration_revolution.py`, a boot cloud
+made from its model's surface with clutter beside it): guesses turned -120 and 180 degrees about the axis (refused
+before) and one 11 cm off under the floor are placed within 1 mm and 0.3 degrees, with the guess's turn.
+
+Development seeds 0-39 (`family_boot_dev_0_39`): **0.98 %** of the lever's range at the median of the scene medians
+against 0.93 % on stop 66's code (`family_boot_dev`, `_10_19`, `_20_39`), p90 **3.65 %** against 6.30 %, 52.5 % within 1
+% against 50 %, 65 % within 2 % against 70 %. The four scenes whose registration had been refused: 18.4 -> 3.2 % (seed
+22), 14.6 -> 4.3 % (25), 25.5 -> 0.74 % (36), 24.7 -> 4.3 % (38). Every other scene's registration moved by at most 0.2
+mm and by its turn about the axis, and their errors moved both ways (18 scenes better and 17 worse by more than 0.05
+points; seed 7 0.81 -> 4.33 % with alpha_z 6.9 degrees off, seed 8 1.40 -> 3.43 %). The first version of the change
+(`family_boot_dev_0_39_icp_turn`: the tilt check, the fit left at the turn the ICP drifted to) read 1.02 %, p90 4.0 %,
+50 % and 77.5 %, with its own scene-by-scene spread (seed 7 1.23 %, seed 26 7.16 %). Turning the guess 7.5 degrees about
+the axis (`family_boot_dev_0_39_guess_turn_7_5`, `--guess-turn 7.5`: a turn the depth does not show and the user does
+not know, half a step of the alpha_z search) reads 0.91 %, p90 3.05 %, 52.5 % within 1 % and 75 % within 2 %: the scene
+medians moved by 0.28 points at the median, by more than a point in 7 of the 40 scenes and by up to 4.7 (seed 38 4.29 ->
+8.97 %, seed 7 4.33 -> 2.17 %). Over these three draws of a turn nothing can see, the development summary spans
+0.91-1.02 % at the median and 65-77.5 % within 2 %; stop 66's 0.93 % and 70 % lie inside that spread. That a boot
+scene's error hangs on it by several points is a fault of the tracker (the alpha_z search's grid, the model's 48 facets
+around the axis), left for a later stop. By stop 66's rule for a default (median no worse, share within 2 % no smaller)
+the change would fail; it is kept because it is not a knob: a registration that refuses the right fit is a fault, and
+which way the ICP left an invisible turn is a draw, not a setting.
+
+Held-out seeds 1000-1019 (`family_boot`, run once on this code; stop 66's is `family_boot_stop66`): **1.42 %** against
+1.61 %, p90 **3.92 %** against 6.74 %, 20 % within 1 % against 30 %, **70 %** within 2 % against 60 %, alpha_z 0.83
+degrees off at the median against 1.25. The registration: 0.12 mm and 0.04 degrees at the median, **worst 0.24 mm and
+0.10 degrees** (1017 was 17.1 mm off on noisy depth before, 1013 1.06 mm with its axis tilted 4.4 degrees). Eleven
+scenes better and six worse by more than 0.05 points (1015 12.5 -> 5.0 %, 1013 10.7 -> 3.8 %, 1017 6.3 -> 1.6 %, 1009
+5.7 -> 3.0 %; 1007 4.1 -> 8.7 %, 1018 0.60 -> 1.34 %, 1000 0.57 -> 0.95 %). The beams' targets (< 1 %, p90 < 3 %, >= 90
+% within 2 %) are still not met; the model's own reading of the truth is 0.78 % off at the median, the tracker's
+estimate 1.52 % off that reading."""
 
 
 def main() -> None:

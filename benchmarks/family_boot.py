@@ -38,10 +38,12 @@ AT_REST_RAD = 0.02  # frames whose lever is within about a degree of rest are no
 
 
 def run_scene(seed: int, tracking: dict | None = None, localization: dict | None = None,
-              anchor: dict | None = None, slam: dict | None = None) -> dict:
+              anchor: dict | None = None, slam: dict | None = None, guess_turn_deg: float = 0.0) -> dict:
     """One boot scene through the offline pipeline; ``tracking``, ``localization``, ``anchor``: keys of the object's
     ``tracking`` block, of the scene's ``localization`` block or of the object's ``anchor`` changed; ``slam``: fields
-    of the SLAM's :class:`~simreal_nodes.vision.slam.config.SlamConfig` (a knob's trade)."""
+    of the SLAM's :class:`~simreal_nodes.vision.slam.config.SlamConfig` (a knob's trade); ``guess_turn_deg``: the
+    guess turned about its own axis by this much, a turn the user does not know and the depth does not show (the
+    registration keeps the guess's turn about the boot's axis, and alpha_z is measured from it)."""
     from simreal_nodes.assimilation.offline import Pipeline
     from simreal_nodes.scene.schema import build_spec_models, validate_scene
     from simreal_nodes.states import EstimateState
@@ -58,6 +60,10 @@ def run_scene(seed: int, tracking: dict | None = None, localization: dict | None
     doc["objects"][0]["tracking"].update(tracking or {})
     doc["localization"].update(localization or {})
     doc["objects"][0]["anchor"].update(anchor or {})
+    if guess_turn_deg:
+        guess = G.pose7_to_matrix(doc["objects"][0]["anchor"]["guess"]) @ G.make_T(G.rot_axis("z", np.deg2rad(
+            guess_turn_deg)))
+        doc["objects"][0]["anchor"]["guess"] = G.matrix_to_pose7(guess).tolist()
     scene = build_spec_models(validate_scene(doc, sc.name, "."))
     pipe = Pipeline(scene, seq["cam"], slam_config=SlamConfig(**slam) if slam else None)
     run = track(pipe, seq, FPS, oid="boot")
@@ -273,6 +279,8 @@ def main() -> None:
                     help="a knob: a key of the object's anchor block (e.g. fine=upright)")
     ap.add_argument("--slam", nargs="*", default=[], metavar="KEY=VALUE",
                     help="a knob: a field of the SLAM's SlamConfig (e.g. hold_rest_points=false)")
+    ap.add_argument("--guess-turn", type=float, default=0.0, metavar="DEG",
+                    help="turn the scene file's guess about the boot's axis by DEG (the turn the depth cannot show)")
     ap.add_argument("--registration", action="store_true",
                     help="the registration step alone (results family_boot_registration*)")
     a = ap.parse_args()
@@ -283,7 +291,8 @@ def main() -> None:
              + "".join(f", tracking.{k}: {v}" for k, v in tracking.items())
              + "".join(f", localization.{k}: {v}" for k, v in localization.items())
              + "".join(f", anchor.{k}: {v}" for k, v in anchor.items())
-             + "".join(f", SlamConfig.{k}: {v}" for k, v in slam.items()))
+             + "".join(f", SlamConfig.{k}: {v}" for k, v in slam.items())
+             + (f", the guess turned {a.guess_turn:g} deg about the axis" if a.guess_turn else ""))
     if a.registration:
         rows = list(scene_map(functools.partial(run_registration, anchor=anchor), seeds, a.jobs))
         write_registration(rows, label, a.out or "family_boot_registration" + ("_dev" if dev else ""))
@@ -291,7 +300,7 @@ def main() -> None:
     name = a.out or ("family_boot_dev" if dev else "family_boot")
     rows = []
     for row in scene_map(functools.partial(run_scene, tracking=tracking, localization=localization, anchor=anchor,
-                                           slam=slam), seeds, a.jobs):
+                                           slam=slam, guess_turn_deg=a.guess_turn), seeds, a.jobs):
         rows.append(row)
         print({k: v for k, v in row.items() if k != "curve"}, flush=True)
         (RESULTS / f"{name}.partial.json").write_text(json.dumps(rows, default=float))

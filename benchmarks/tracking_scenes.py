@@ -186,11 +186,13 @@ each scene's model error beside its result.
 - *Joint boot* (§4.5.4, its own table): the real boot rendered from an independent neo-Hookean solve
   (`synth/scenes.py:boot_truth`: trilinear hexahedra 72 x 2 x 60, two layers through the wall, Newton every 2 deg of the
   lever; the model: 36 x 1 x 48, NI-PGD), placed by registration from a guess by eye, map points as its scene file says.
-  Stop 66's run (this host; stop 65's host in brackets, the same code): the scene's own view reads theta 1.56 deg off at
-  the median (1.45), p90 1.92 deg (1.65), alpha_z 0.28 deg (0.08), registration 0.43 mm and 0.13 deg off. A third view
-  that nothing was chosen on (another arc, the boot turned by 70 deg, another guess): 0.41 deg (0.24), p90 0.78 deg
-  (1.04), alpha_z 3.25 deg (0.07). A second view, on which the tracker's handling of alpha_z was fixed: 0.13 deg (0.22),
-  alpha_z 0.59 deg (1.58). With the knob `outlier_refits: 3` (commit 319a533's table) the three read 1.43, 0.15 and 0.17
+  Stop 70's run (the registration polished as the boot's family scene file has it, `anchor.polish_mm: 4`, and the boot
+  registered as a body of revolution; stop 66's run on this host in brackets): the scene's own view reads theta 1.12 deg
+  off at the median (1.56), p90 1.36 deg (1.92), alpha_z 0.86 deg (0.28), registration 0.09 mm and 0.04 deg off (0.43
+  mm, 0.13 deg; unpolished, stop 70's code placed it 1.3 mm and 1.9 deg off). A third view that nothing was chosen on
+  (another arc, the boot turned by 70 deg, another guess): 0.20 deg (0.41), p90 0.75 deg (0.78), alpha_z 0.39 deg
+  (3.25). A second view, on which the tracker's handling of alpha_z was fixed: 0.44 deg (0.13), alpha_z 1.68 deg (0.59).
+  With the knob `outlier_refits: 3` (commit 319a533's table) the three read 1.43, 0.15 and 0.17
   deg (alpha_z 0.45, 0.12, 0.42). Before stop 65 (the map then culled the object points linked at rest) the own view
   read 0.37 deg. With the Levenberg-Marquardt solver before stop 34 the three views read 0.26, 0.12 and 0.27 deg: its
   change cost the boot about 0.1 deg.
