@@ -143,7 +143,7 @@ def run_case(name: str, w: int, h: int, fps: float, tracking: dict, frames: int 
 
 def yaw_about(T: np.ndarray) -> float:
     """The turn (rad) about z of a transform whose z axis is (nearly) vertical."""
-    return float(np.arctan2(T[1, 0] - T[0, 1], T[0, 0] + T[1, 1]))
+    return G.turn_about_z(T)
 
 
 def run_boot(name: str, w: int, h: int, fps: float, tracking: dict, frames: int | None) -> dict:

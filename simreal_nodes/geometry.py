@@ -129,6 +129,13 @@ def rot_axis(axis: str, angle: float) -> NDArray[np.float64]:
     raise ValueError(f"axis must be 'x', 'y' or 'z', not {axis!r}")
 
 
+def turn_about_z(R: ArrayLike) -> float:
+    """The turn (radians) about z of a rotation (or the rotation block of a transform) whose z axis is (nearly)
+    that of its frame: exact for a pure turn about z, the best fitting turn when the axis is tilted a little."""
+    M = np.asarray(R, dtype=np.float64)
+    return float(np.arctan2(M[1, 0] - M[0, 1], M[0, 0] + M[1, 1]))
+
+
 def look_at(eye: ArrayLike, target: ArrayLike, up: ArrayLike = (0, 0, 1)) -> NDArray[np.float64]:
     """Camera pose T_world_cam (optical frame: z forward, x right, y down) looking at target."""
     eye, target, up = (np.asarray(v, dtype=np.float64) for v in (eye, target, up))

@@ -1,6 +1,7 @@
-"""Mesh helpers of the ROS-free geometry module: vertex normals and the winding of closed surfaces."""
+"""Helpers of the ROS-free geometry module: vertex normals, the winding of closed surfaces, a turn about z."""
 
 import numpy as np
+import pytest
 
 from simreal_nodes import geometry as G
 
@@ -31,3 +32,10 @@ def test_outward_triangles_keeps_flips_or_refuses():
     mixed = CUBE_F.copy()
     mixed[0] = mixed[0, ::-1]
     assert G.outward_triangles(CUBE_V, mixed) is None  # inconsistent winding
+
+
+def test_turn_about_z_is_exact_for_a_turn_and_close_under_a_small_tilt():
+    for a in (-3.0, -0.4, 0.0, 1.2, 3.1):
+        assert G.turn_about_z(G.rot_axis("z", a)) == pytest.approx(a, abs=1e-12)
+        T = G.make_T(G.rot_axis("x", np.deg2rad(2.0)) @ G.rot_axis("z", a), [0.1, 0.2, 0.3])
+        assert G.turn_about_z(T) == pytest.approx(a, abs=np.deg2rad(0.05))

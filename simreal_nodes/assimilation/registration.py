@@ -239,8 +239,7 @@ def turned_like(T_map_obj: np.ndarray, guess: np.ndarray, centre: np.ndarray) ->
     the turn of ``guess`` about that axis: the same surface, so the same fit, but the turn the user gave rather than
     the one the ICP drifted to, so that a constant measured from it (the boot's alpha_z, from 0) starts where the
     scene file says and a rerun on other depth lands on the same turn."""
-    R = guess[:3, :3].T @ T_map_obj[:3, :3]
-    phi = float(np.arctan2(R[1, 0] - R[0, 1], R[0, 0] + R[1, 1]))  # the turn about z of the fit against the guess
+    phi = G.turn_about_z(guess[:3, :3].T @ T_map_obj[:3, :3])  # the fit's turn about z against the guess's
     return T_map_obj @ G.make_T(t=centre) @ G.make_T(G.rot_axis("z", -phi)) @ G.make_T(t=-centre)
 
 

@@ -88,8 +88,7 @@ def test_a_guess_turned_any_way_about_the_boot_axis_places_it(boot, turn_deg):
     mm, tilt = _error(reg.T_map_obj)
     assert mm < 1.0 and tilt < 0.3, (mm, tilt)
     # and it keeps the guess's turn about the axis (the depth does not say it; alpha_z is measured from it)
-    R = guess[:3, :3].T @ reg.T_map_obj[:3, :3]
-    assert abs(np.rad2deg(np.arctan2(R[1, 0] - R[0, 1], R[0, 0] + R[1, 1]))) < 0.5
+    assert abs(np.rad2deg(G.turn_about_z(guess[:3, :3].T @ reg.T_map_obj[:3, :3]))) < 0.5
 
 
 def test_a_guess_under_the_support_plane_is_lifted_onto_it(boot):
