@@ -1267,8 +1267,8 @@ run.
 **Stop 70: the boot registered as a body of revolution.** The registration alone (`python -m benchmarks.family_boot
 --registration --seeds 0-39`, scratch) refused its first try on 5 of the 40 development boots (19, 25, 34, 36, 38). Four
 times because every coarse fit had turned more than 30 degrees from the guess: the bellows is a body of revolution about
-its axis (its surface turned by 17, 45, 90 or 151 degrees lies on itself within 2 mm; a beam's, a plate's and the
-bunny's do not), so the ICP turns it about that axis freely, and the turn check took the right fits for another basin.
+its axis (its surface turned by 17, 45, 90 or 151 degrees lies on itself within 2 mm; the beams', the bunny's and the
+dragon's do not), so the ICP turns it about that axis freely, and the turn check took the right fits for another basin.
 Once because the guess (seed 36: 113 mm off, its base 42 mm under the table) was beyond every coarse start. A refused
 registration collects its views again, and by then the lever is loaded: the loaded fit matched 16-18 % of the faces and
 seed 36 was never placed (25.5 %), seeds 25 and 38 were placed late (14.6 and 24.7 %). Now
