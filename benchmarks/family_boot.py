@@ -29,7 +29,7 @@ import numpy as np
 
 from benchmarks.common import RESULTS, most_common, save
 from benchmarks.family import parse_seeds, scene_map, track
-from benchmarks.thesis_truth import boot_model_error, boot_model_fit, yaw_about
+from benchmarks.thesis_truth import boot_model_error, boot_model_fit
 from simreal_nodes import geometry as G
 from simreal_nodes.synth.boot_family import THETA_RANGE_DEG
 
@@ -82,7 +82,7 @@ def run_scene(seed: int, tracking: dict | None = None, localization: dict | None
         D = G.inv(T_true) @ reg.T_map_obj
         reg_mm = float(1e3 * np.linalg.norm(D[:3, 3]))
         reg_tilt = float(np.rad2deg(np.arccos(np.clip(D[2, 2], -1.0, 1.0))))
-        a_err = float(np.rad2deg(abs((yaw_about(D) + a_est - a_true + np.pi) % (2 * np.pi) - np.pi)))
+        a_err = float(np.rad2deg(abs((G.turn_about_z(D) + a_est - a_true + np.pi) % (2 * np.pi) - np.pi)))
     else:
         reg_mm = reg_tilt = a_err = float("nan")
     # the model's own reading of the truth at each scored frame's angle: its bias there, and the tracker's error

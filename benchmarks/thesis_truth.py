@@ -141,11 +141,6 @@ def run_case(name: str, w: int, h: int, fps: float, tracking: dict, frames: int 
     }
 
 
-def yaw_about(T: np.ndarray) -> float:
-    """The turn (rad) about z of a transform whose z axis is (nearly) vertical."""
-    return G.turn_about_z(T)
-
-
 def run_boot(name: str, w: int, h: int, fps: float, tracking: dict, frames: int | None) -> dict:
     """The real joint boot (§4.5.4) on independent physics: the lever angle theta per frame and the boot's turn about
     its own axis, alpha_z, a constant of the sequence; the boot placed by registration (the thesis: "we identify
@@ -182,7 +177,7 @@ def run_boot(name: str, w: int, h: int, fps: float, tracking: dict, frames: int 
         D = G.inv(T_true) @ placed
         reg_mm = float(1e3 * np.linalg.norm(D[:3, 3]))
         reg_tilt = float(np.rad2deg(np.arccos(np.clip(D[2, 2], -1.0, 1.0))))
-        a_total = yaw_about(D) + a_est  # the registration's turn about the axis, then the tracker's alpha_z
+        a_total = G.turn_about_z(D) + a_est  # the registration's turn about the axis, then the tracker's alpha_z
     else:
         reg_mm = reg_tilt = a_total = float("nan")
     a_err = float(np.rad2deg(abs((a_total - a_true + np.pi) % (2 * np.pi) - np.pi)))
