@@ -224,7 +224,9 @@ def revolves_about_z(S: np.ndarray, N: np.ndarray, tree: cKDTree, centre: np.nda
     """Whether the surface samples ``S`` (object frame, unit normals ``N``, indexed by ``tree``) map onto the
     surface when turned about the z axis through ``centre``: at each of ``angles_deg``, 95 % of the turned samples
     lie within ``tol`` of the tangent plane of their nearest sample, itself within ``4 tol``. A body of revolution
-    passes at every angle; a beam, a plate or a bunny fails at the first."""
+    passes at every angle; a beam, a plate or a bunny fails at the first; no samples, no body of revolution."""
+    if len(S) == 0:
+        return False
     for deg in angles_deg:
         Q = (S - centre) @ G.rot_axis("z", np.deg2rad(deg)).T + centre
         d, i = tree.query(Q)

@@ -73,6 +73,8 @@ def test_the_boot_is_a_body_of_revolution_a_beam_is_not(boot, beam):
     for model, expected in ((boot, True), (beam, False)):
         S, N = sample_surface(model.points, model.surface, _n_samples(model, 0.0025), 0)
         assert revolves_about_z(S, N, cKDTree(S), model.points.mean(axis=0), 0.002) is expected
+    empty = np.zeros((0, 3))
+    assert revolves_about_z(empty, empty, cKDTree(empty), np.zeros(3), 0.002) is False
 
 
 @pytest.mark.parametrize("turn_deg", [0.0, 70.0, -120.0, 180.0])
