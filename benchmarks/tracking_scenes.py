@@ -186,13 +186,14 @@ each scene's model error beside its result.
 - *Joint boot* (§4.5.4, its own table): the real boot rendered from an independent neo-Hookean solve
   (`synth/scenes.py:boot_truth`: trilinear hexahedra 72 x 2 x 60, two layers through the wall, Newton every 2 deg of the
   lever; the model: 36 x 1 x 48, NI-PGD), placed by registration from a guess by eye, map points as its scene file says.
-  Stop 70's run (the registration polished as the boot's family scene file has it, `anchor.polish_mm: 4`, and the boot
-  registered as a body of revolution; stop 66's run on this host in brackets): the scene's own view reads theta 1.12 deg
-  off at the median (1.56), p90 1.36 deg (1.92), alpha_z 0.86 deg (0.28), registration 0.09 mm and 0.04 deg off (0.43
-  mm, 0.13 deg; unpolished, stop 70's code placed it 1.3 mm and 1.9 deg off). A third view that nothing was chosen on
-  (another arc, the boot turned by 70 deg, another guess): 0.20 deg (0.41), p90 0.75 deg (0.78), alpha_z 0.39 deg
-  (3.25). A second view, on which the tracker's handling of alpha_z was fixed: 0.44 deg (0.13), alpha_z 1.68 deg (0.59).
-  With the knob `outlier_refits: 3` (commit 319a533's table) the three read 1.43, 0.15 and 0.17
+  Stop 71's run: the lever read from every depth image as the boot's family scene file has it (`tracking.depth_fit`,
+  chosen on the family's development seeds, `docs/family.md`; the registration polished, `anchor.polish_mm: 4`, the
+  boot registered as a body of revolution; stop 70's run, the images alone, in brackets): the scene's own view reads
+  theta **0.37 deg** off at the median (1.12), p90 1.41 deg (1.36), alpha_z 0.33 deg (0.86), registration 0.09 mm and
+  0.04 deg off. A third view that nothing was chosen on (another arc, the boot turned by 70 deg, another guess): **0.22
+  deg** (0.20), p90 0.69 deg (0.75), alpha_z 0.86 deg (0.39). A second view, on which the tracker's handling of alpha_z
+  was fixed: 0.19 deg (0.44), alpha_z 1.82 deg (1.68). The tracker's time per frame: 68-81 ms (9-16 ms). With
+  the knob `outlier_refits: 3` (commit 319a533's table, the images alone) the three read 1.43, 0.15 and 0.17
   deg (alpha_z 0.45, 0.12, 0.42). Before stop 65 (the map then culled the object points linked at rest) the own view
   read 0.37 deg. With the Levenberg-Marquardt solver before stop 34 the three views read 0.26, 0.12 and 0.27 deg: its
   change cost the boot about 0.1 deg.
@@ -203,8 +204,8 @@ each scene's model error beside its result.
 - The boot's *model* was too coarse around its axis. With 24 cells, the polygon lay 0.43 mm inside the round boot
   at its base, and registration from a one-sided depth view tilted the boot 1.9 deg to split the difference. The
   spec now has 48 cells around. That choice was made on the scene's own view. The knob rows keep the old model:
-  theta 3.00 deg and alpha_z 1.2 deg on the scene's own view, and 0.26 deg and 3.2 deg on the held-out one (stop 65;
-  1.76 / 2.2 and 0.39 / 3.0 before).
+  theta 0.37 deg and alpha_z 0.85 deg on the scene's own view, and 0.25 deg and 0.76 deg on the held-out one (stop 71,
+  the lever read from depth; 1.58 / 0.01 and 0.26 / 1.04 on the images alone in stop 70).
 - alpha_z (a constant of the sequence, Fig. 4.19) keeps its value in frames that cannot see it: a frame judged
   undeformed, or one where its standard deviation exceeds 5 % of its range. A global restart no longer searches
   a constant that earlier frames have already pinned. Before this, on the second view, alpha_z drifted while

@@ -21,7 +21,7 @@ from scipy.spatial import cKDTree
 from simreal_nodes import geometry as G
 from simreal_nodes.assimilation import lm
 from simreal_nodes.assimilation.dense import DenseAligner, DenseResult, DenseSettings
-from simreal_nodes.assimilation.depth_state import DepthStateConfig, fit_state
+from simreal_nodes.assimilation.depth_state import DepthFollower, DepthStateConfig, fit_state
 from simreal_nodes.assimilation.registration import depth_cloud, link, ray_weights, surface_nodes
 from simreal_nodes.camera import CameraModel
 from simreal_nodes.rom.model import ReducedModel
@@ -95,6 +95,11 @@ class TrackerConfig:
     # or "rest"
     reference: str = "depth"
     depth_state: DepthStateConfig = field(default_factory=DepthStateConfig)
+    # measurements 'map_points' with a depth image (RGB-D): the tracked state is read from every frame's depth
+    # (:class:`.depth_state.DepthFollower`; the boot's tracker took 8 -> 130 ms a frame on 2 cores), the image fit
+    # giving its start, the constants (alpha_z) and whether a deformation is seen. A knob: the boot's family scene
+    # file sets it (docs/family.md, stop 71)
+    depth_fit: bool = False
 
 
 @dataclass
@@ -176,6 +181,11 @@ class DeformableTracker:
         # sparse measurements: whether the object's state was read from a depth image yet (see needs_depth)
         self._reference_read = self.cfg.reference != "depth" or self.cfg.measurements != "map_points"
         self._reference_tries = 0
+        self.depth: DepthFollower | None = None
+        if self.cfg.depth_fit and self.cfg.measurements == "map_points":
+            n_mu = len(model.axes)
+            self.depth = DepthFollower(model, self.cfg.depth_state, self.cfg.n_modes or None, self.lo[:n_mu],
+                                       self.hi[:n_mu])
         if self.cfg.measurements == "dense":
             if self.rigid_z:
                 raise ValueError("measurements 'dense' do not estimate alpha_z: use map_points for this object")
@@ -458,6 +468,8 @@ class DeformableTracker:
                 self.shift = res.x[n:].copy()
                 est.debug["object_shift_m"] = self.shift.copy()
                 res.x, res.cov = res.x[:n], res.cov[:n, :n]
+            if self.depth is not None and depth is not None:
+                self._depth_state(res, T_wc, depth, lo, hi, est, meas, T_cw)
             if res.inliers >= 0.85 * len(X) and np.isfinite(res.rms_px):
                 self._rms_ref = res.rms_px if self._rms_ref is None else 0.9 * self._rms_ref + 0.1 * res.rms_px
             rest_rms = self._rest_rms(X, uvm, T_cw)
@@ -466,15 +478,36 @@ class DeformableTracker:
         est.rms_px, est.inliers, est.iterations = res.rms_px, res.inliers, res.iterations
         est.debug["rest_rms_px"] = rest_rms
         self.outlier_ids = np.zeros(0, np.int64)
-        if len(meas) > 4 and res.inliers >= 0.6 * len(X):  # a fit the majority agrees with judges the rest
+        # a fit the majority agrees with judges the rest, and so does the depth's state (measured without them)
+        if len(meas) > 4 and (res.inliers >= 0.6 * len(X) or "image_mu" in est.debug):
             self.outlier_ids = meas[4][np.linalg.norm(res.residuals, axis=1) > 2 * self.cfg.huber_px]
-        if res.inliers < self.cfg.min_measurements or not np.isfinite(res.rms_px):
+        if (res.inliers < self.cfg.min_measurements or not np.isfinite(res.rms_px)) and "image_mu" not in est.debug:
             est.state = EstimateState.LOST
             est.reason = f"only {res.inliers} of {len(X)} measurements agree with the model (all outliers?)"
             return est
         gain = rest_rms - res.rms_px
         return self._conclude(est, res.x, bool(gain > self.cfg.min_deformation_px),
                               f"residual {res.rms_px:.2f} px vs {rest_rms:.2f} px undeformed")
+
+    def _depth_state(self, res: lm.Result, T_wc: np.ndarray, depth: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+                     est: Estimate, meas: Measurements, T_cw: np.ndarray) -> None:
+        """``cfg.depth_fit``: the tracked state read from this frame's depth, placed with the image fit's alpha_z
+        (:class:`.depth_state.DepthFollower`), replaces the image fit's mu in ``res``; where the depth gives no sound
+        fit the image fit's stands (``est.debug['depth']`` says why). The measurements' residuals are then those at
+        the depth's state: the tracks that slid from it are dropped (:attr:`outlier_ids`) and found again."""
+        assert self.depth is not None
+        n_mu = len(self.model.axes)
+        T = self.T_map_obj @ G.make_T(self.layout.state(res.x).rotation())
+        cloud = depth_cloud(self.cam, np.asarray(depth), T_wc, stride=2)
+        fit = self.depth.fit(cloud, T, lo[:n_mu], hi[:n_mu], res.x[:n_mu])
+        est.debug["depth"] = fit.reason
+        if fit.mu is not None:
+            est.debug["image_mu"] = res.x[:n_mu].copy()
+            res.x = res.x.copy()
+            res.x[:n_mu] = fit.mu
+            X, uvm, nodes, w = meas[:4]
+            p = lm.Problem(X, uvm, self._disp_fn(nodes, w), T_cw, self.R_wo, self.K, self.layout)
+            res.residuals = uvm - lm.predict(p, res.x, with_jacobian=False)[0]
 
     def _free_bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """This frame's bounds: fixed and frozen parameters pinned at their values (lo == hi)."""
@@ -625,8 +658,9 @@ class DeformableTracker:
     @property
     def needs_depth(self) -> bool:
         """Sparse measurements with ``reference: depth``: the object's state is read from the first depth image
-        that shows it (points first seen on a loaded object are then linked where they are)."""
-        return not self._reference_read
+        that shows it (points first seen on a loaded object are then linked where they are); with ``depth_fit``
+        from every one."""
+        return not self._reference_read or self.depth is not None
 
     def _read_reference(self, est: Estimate, T_wc: np.ndarray, depth: np.ndarray | None) -> None:
         """Sparse measurements: the state the depth shows the object in, once (see :attr:`needs_depth`); a
@@ -933,7 +967,7 @@ def tracker_config(obj: dict[str, Any], **overrides: Any) -> TrackerConfig:
                         constant_search_until=t["constant_search_until"],
                         min_measurements=t["min_measurements"], max_points=t["points"], anchor=t["anchor"],
                         object_shift_m=t["object_shift_m"], rest_frames=t["rest_frames"],
-                        reference=t["reference"],
+                        reference=t["reference"], depth_fit=t["depth_fit"],
                         dense=DenseSettings(step_px=t["dense_step_px"], rigid=t["dense_rigid"],
                                           static_ring_px=t["dense_surroundings_px"], refine=t["dense_refine"],
                                           camera_first=t["dense_camera_first"],

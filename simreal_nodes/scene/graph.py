@@ -80,13 +80,15 @@ def tracker_reads_depth(scene: dict) -> bool:
     """Whether the tracker node takes depth (optional in its frame; the depth image of an RGB-D camera, or the
     stereo pair it matches itself, see :func:`tracker_stereo_depth`): an object placed by registration (its depth
     views), or dense measurements (the static surroundings of the reference view), or sparse ones with
-    ``tracking.reference: depth`` (the state they start from), the last two where the camera gives depth."""
+    ``tracking.reference: depth`` (the state they start from) or ``tracking.depth_fit`` (the state of every frame),
+    the last two where the camera gives depth."""
     tracked = [o for o in scene["objects"] if o["tracking"]["enabled"]]
     cam = scene["camera"]
     return any(o["anchor"]["kind"] == "registration" for o in tracked) or (
         (cam["depth"] is not None or cam["right_image"] is not None) and any(
             o["tracking"]["measurements"] == "dense"
-            or (o["tracking"]["measurements"] == "map_points" and o["tracking"]["reference"] == "depth")
+            or (o["tracking"]["measurements"] == "map_points"
+                and (o["tracking"]["reference"] == "depth" or o["tracking"]["depth_fit"]))
             for o in tracked))
 
 

@@ -154,6 +154,10 @@ TRACKING = Record({
                       "dense reference view, a registered object's fit): read from the depth image where there is "
                       "one (the model's deformed surface fitted to it; a scene loaded from its first frame), or "
                       "taken to be the rest shape", default="depth"),
+    "depth_fit": Bool("measurements 'map_points' with a depth image (RGB-D or stereo): read the tracked parameters "
+                      "from every frame's depth (the model's deformed surface fitted to it, warm-started from the "
+                      "image fit; about 130 ms a frame on the joint boot, 2 cores); the images still give the "
+                      "constants (alpha_z) and whether a deformation is seen", default=False),
     "huber_px": Number("Huber threshold of the robust loss, pixels", lo=0, lo_open=True, default=2.0),
     "modes": Number("number of PGD modes used (0 = all)", integer=True, lo=0, default=0),
     "max_iterations": Number("Levenberg-Marquardt iterations per frame", integer=True, lo=1, hi=500, default=20),
@@ -326,6 +330,11 @@ def _cross_checks(scene: dict, ctx: Context) -> None:
                 o["id"] in p["collision"]["pushes"] for p in scene["objects"]):
             raise SceneError(f"{src}: objects[{i}].collision.enabled: collision needs camera.depth or a stereo pair "
                              "(or another object that pushes it); found neither")
+        if o["tracking"]["depth_fit"] and (o["tracking"]["measurements"] != "map_points"
+                                           or loc["mode"] not in ("rgbd", "stereo")):
+            raise SceneError(f"{src}: objects[{i}].tracking.depth_fit: needs measurements 'map_points' and depth "
+                             f"images (localization.mode 'rgbd' or 'stereo'); found measurements "
+                             f"'{o['tracking']['measurements']}', mode '{loc['mode']}'")
         if o["anchor"]["kind"] == "registration" and loc["mode"] not in ("rgbd", "stereo"):
             # registration works on depth images (assimilation.registration.register_rgbd: RGB-D, or SGBM on a
             # stereo pair); a monocular map's sparse points alone do not place a model to millimetres

@@ -544,7 +544,10 @@ def _joint_boot_scene(real_boot: bool, width, height, duration, fps, alpha_z: fl
                 "id": "boot", "model": "spec:joint_boot",
                 "anchor": anchor,
                 "parameters": params,
-                "tracking": {"enabled": True, "measurements": "map_points", "huber_px": 2.0, "constant_frames": 40},
+                # the real boot rendered from the independent truth (RGB-D): its lever read from every depth image,
+                # as the boot's family scene file has it (stop 71, chosen on the family's development seeds)
+                "tracking": {"enabled": True, "measurements": "map_points", "huber_px": 2.0, "constant_frames": 40,
+                             **({"depth_fit": True} if independent and sc.depth else {})},
                 "overlay": {"field": "von_mises"},
             }],
             "overlay": {"enabled": True},
