@@ -496,9 +496,14 @@ class DeformableTracker:
         fit the image fit's stands (``est.debug['depth']`` says why). The measurements' residuals are then those at
         the depth's state: the tracks that slid from it are dropped (:attr:`outlier_ids`) and found again."""
         assert self.depth is not None
+        depth = np.asarray(depth)
+        if depth.shape != (self.cam.height, self.cam.width):
+            est.debug["depth"] = (f"depth image {depth.shape} is not the camera's {self.cam.height} x "
+                                  f"{self.cam.width}: the image fit stands")
+            return
         n_mu = len(self.model.axes)
         T = self.T_map_obj @ G.make_T(self.layout.state(res.x).rotation())
-        cloud = depth_cloud(self.cam, np.asarray(depth), T_wc, stride=2)
+        cloud = depth_cloud(self.cam, depth, T_wc, stride=2)
         fit = self.depth.fit(cloud, T, lo[:n_mu], hi[:n_mu], res.x[:n_mu])
         est.debug["depth"] = fit.reason
         if fit.mu is not None:

@@ -104,3 +104,23 @@ def test_scene_switch_is_refused_where_it_cannot_work(mode, measurements):
     with pytest.raises(SceneError, match=r"objects\[0\]\.tracking\.depth_fit: needs measurements 'map_points' and "
                                          r"depth images"):
         validate_scene(_doc(mode, measurements), "boot", ".")
+
+
+@pytest.mark.parametrize("shape, fill, why", [((240, 320), 0.6, "is not the camera's 480 x 640"),
+                                              ((480, 640), np.nan, "only 0 depth points on the object")])
+def test_a_depth_image_that_cannot_be_read_leaves_the_image_fit(boot, shape, fill, why):
+    """A depth image of another size, or one with no valid return (NaN), changes nothing: the image fit's lever
+    stands, and the estimate's debug says why."""
+    from simreal_nodes.assimilation import lm
+    from simreal_nodes.assimilation.tracker import Estimate
+
+    cam = CameraModel.from_intrinsics(640, 480, 525.0, 525.0, 320.0, 240.0)
+    params = {"theta": {"mode": "tracked", "initial": 0.3}}
+    tr = DeformableTracker(boot, T_TRUE, params, cam, TrackerConfig(depth_fit=True))
+    x = np.array([0.3])
+    res = lm.Result(x=x.copy(), cov=np.eye(1), rms_px=1.0, inliers=10, iterations=1, converged=True)
+    est = Estimate(tr.names, tr.units, x.copy(), tr.frozen.copy(), np.eye(1))
+    meas = (np.zeros((0, 3)), np.zeros((0, 2)), np.zeros((0, 3), int), np.zeros((0, 3)), np.zeros(0, int))
+    tr._depth_state(res, np.eye(4), np.full(shape, fill), np.zeros(1), np.ones(1), est, meas, np.eye(4))
+    assert why in est.debug["depth"]
+    assert res.x.tolist() == [0.3] and "image_mu" not in est.debug
