@@ -74,9 +74,7 @@ def run_scene(seed: int, tracking: dict | None = None, localization: dict | None
     ok = states[loaded] == EstimateState.OK
     tracker = pipe.trackers["boot"]
     a_true = np.deg2rad(d.alpha_z_deg)
-    # the alpha_z the estimate reports: the images' value with the depth fit's turn about the axis (depth_fit)
-    a_est = float(tracker.values[tracker.names.index("alpha_z")]) + tracker.depth_turn if "alpha_z" in tracker.names \
-        else 0.0
+    a_est = float(tracker.values[tracker.names.index("alpha_z")]) if "alpha_z" in tracker.names else 0.0
     a_frozen = bool(tracker.frozen[tracker.names.index("alpha_z")]) if "alpha_z" in tracker.names else False
     T_true = seq["truth"][0].object_poses["boot"]  # the boot's axis frame, before its turn alpha_z
     reg = pipe.objects.registrations.get("boot")

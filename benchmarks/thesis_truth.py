@@ -167,9 +167,7 @@ def run_boot(name: str, w: int, h: int, fps: float, tracking: dict, frames: int 
     err = np.rad2deg(np.abs(th_est[loaded] - th_true[loaded]))
     tracker = pipe.trackers["boot"]
     a_true = float(dict(zip(seq["truth"][0].params["boot"][0], seq["truth"][0].params["boot"][2]))["alpha_z"])
-    # the alpha_z the estimate reports: the images' value with the depth fit's turn about the axis (depth_fit)
-    a_est = float(tracker.values[tracker.names.index("alpha_z")]) + tracker.depth_turn if "alpha_z" in tracker.names \
-        else 0.0
+    a_est = float(tracker.values[tracker.names.index("alpha_z")]) if "alpha_z" in tracker.names else 0.0
     T_true = seq["truth"][0].object_poses["boot"]  # the boot's axis frame, before its turn alpha_z
     reg = pipe.objects.registrations.get("boot")
     anchor = doc["objects"][0]["anchor"]

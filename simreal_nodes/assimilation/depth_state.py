@@ -364,9 +364,6 @@ class DepthFollower:
         self.rigid = np.zeros(N_RIGID)
         self.mu: Array | None = None
         self.min_inliers = 0.5  # a fit that explains fewer of the object's points is not taken
-        # the rigid correction's turn (about the model's centroid) is a turn about the object's z axis: a body of
-        # revolution about it, such as the boot, whose alpha_z it then corrects (DeformableTracker.depth_turn)
-        self.turns_about_axis = bool(np.hypot(*self.surf.c[:2]) < 1e-3)
 
     def fit(self, cloud: Array, T_map_obj: Array, lo: Array, hi: Array, mu_image: Array) -> DepthFit:
         """The state in this depth ``cloud`` (map frame) with the object at ``T_map_obj``, mu in [lo, hi], starting

@@ -97,8 +97,8 @@ class TrackerConfig:
     depth_state: DepthStateConfig = field(default_factory=DepthStateConfig)
     # measurements 'map_points' with a depth image (RGB-D): the tracked state is read from every frame's depth
     # (:class:`.depth_state.DepthFollower`; the boot's tracker took 8 -> 130 ms a frame on 2 cores), the image fit
-    # giving its start, the constants (alpha_z, reported with the depth fit's turn: depth_turn) and whether a
-    # deformation is seen. A knob: the boot's scene files set it (docs/family.md, stop 71)
+    # giving its start, the constants (alpha_z) and whether a deformation is seen. A knob: the boot's family scene
+    # file sets it (docs/family.md, stop 71)
     depth_fit: bool = False
 
 
@@ -486,24 +486,8 @@ class DeformableTracker:
             est.reason = f"only {res.inliers} of {len(X)} measurements agree with the model (all outliers?)"
             return est
         gain = rest_rms - res.rms_px
-        est = self._conclude(est, res.x, bool(gain > self.cfg.min_deformation_px),
-                             f"residual {res.rms_px:.2f} px vs {rest_rms:.2f} px undeformed")
-        if self.rigid_z and self.depth_turn:
-            i = self.layout.alpha_index
-            est.values[i] = _wrap(est.values[i] + self.depth_turn, self.lo[i], self.hi[i])
-            est.debug["depth_turn"] = self.depth_turn
-        return est
-
-    @property
-    def depth_turn(self) -> float:
-        """With ``depth_fit`` on a body of revolution about its z axis (the boot): the turn about that axis the depth
-        fit adds to the images' alpha_z (its upright rigid correction turns the model about its centroid, which lies
-        on the axis). The estimate reports alpha_z with it: the depth sees which way the bellows bends, the images
-        (its ORB map points) see it only as well as they follow the material; the images' own alpha_z stays what the
-        links, the search and the freezing use. 0.0 otherwise."""
-        if self.depth is None or not self.depth.turns_about_axis:
-            return 0.0
-        return float((self.depth.rigid[3] + np.pi) % (2 * np.pi) - np.pi)
+        return self._conclude(est, res.x, bool(gain > self.cfg.min_deformation_px),
+                              f"residual {res.rms_px:.2f} px vs {rest_rms:.2f} px undeformed")
 
     def _depth_state(self, res: lm.Result, T_wc: np.ndarray, depth: np.ndarray, lo: np.ndarray, hi: np.ndarray,
                      est: Estimate, meas: Measurements, T_cw: np.ndarray) -> None:
@@ -1023,13 +1007,6 @@ def deformable_feedback(trackers: Iterable[DeformableTracker]) -> tuple[np.ndarr
         return np.zeros(0, np.uint32), np.zeros((0, 3)), np.zeros(0, np.uint8)
     return (np.concatenate(ids).astype(np.uint32), np.concatenate(P).reshape(-1, 3),
             np.concatenate(flags).astype(np.uint8))
-
-
-def _wrap(a: float, lo: float, hi: float) -> float:
-    """An angle brought into [lo, hi) by whole turns where that range spans one (alpha_z), else clipped."""
-    if hi - lo >= 2 * np.pi - 1e-9:
-        return float(lo + (a - lo) % (2 * np.pi))
-    return float(np.clip(a, lo, hi))
 
 
 def _finite_observations(ids: np.ndarray, P_map: np.ndarray, uv: np.ndarray

@@ -157,8 +157,7 @@ TRACKING = Record({
     "depth_fit": Bool("measurements 'map_points' with a depth image (RGB-D or stereo): read the tracked parameters "
                       "from every frame's depth (the model's deformed surface fitted to it, warm-started from the "
                       "image fit; about 130 ms a frame on the joint boot, 2 cores); the images still give the "
-                      "constants (alpha_z: on a body of revolution the estimate adds the depth fit's turn about its "
-                      "axis) and whether a deformation is seen", default=False),
+                      "constants (alpha_z) and whether a deformation is seen", default=False),
     "huber_px": Number("Huber threshold of the robust loss, pixels", lo=0, lo_open=True, default=2.0),
     "modes": Number("number of PGD modes used (0 = all)", integer=True, lo=0, default=0),
     "max_iterations": Number("Levenberg-Marquardt iterations per frame", integer=True, lo=1, hi=500, default=20),
