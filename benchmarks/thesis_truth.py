@@ -167,7 +167,9 @@ def run_boot(name: str, w: int, h: int, fps: float, tracking: dict, frames: int 
     err = np.rad2deg(np.abs(th_est[loaded] - th_true[loaded]))
     tracker = pipe.trackers["boot"]
     a_true = float(dict(zip(seq["truth"][0].params["boot"][0], seq["truth"][0].params["boot"][2]))["alpha_z"])
-    a_est = float(tracker.values[tracker.names.index("alpha_z")]) if "alpha_z" in tracker.names else 0.0
+    # the alpha_z the estimate reports: the images' value with the depth fit's turn about the axis (depth_turn)
+    a_est = float(tracker.values[tracker.names.index("alpha_z")]) + tracker.depth_turn if "alpha_z" in tracker.names \
+        else 0.0
     T_true = seq["truth"][0].object_poses["boot"]  # the boot's axis frame, before its turn alpha_z
     reg = pipe.objects.registrations.get("boot")
     anchor = doc["objects"][0]["anchor"]
@@ -181,6 +183,8 @@ def run_boot(name: str, w: int, h: int, fps: float, tracking: dict, frames: int 
     else:
         reg_mm = reg_tilt = a_total = float("nan")
     a_err = float(np.rad2deg(abs((a_total - a_true + np.pi) % (2 * np.pi) - np.pi)))
+    # the images' own alpha_z (without the depth's turn): what depth_turn changes
+    a_img_err = float(np.rad2deg(abs((a_total - tracker.depth_turn - a_true + np.pi) % (2 * np.pi) - np.pi)))
     me = boot_model_error(pipe.objects.models["boot"], boot_truth())
     not_ok = [r for r, st in zip(np.array(run["reasons"])[loaded], states[loaded]) if st != EstimateState.OK and r]
     return {
@@ -191,7 +195,8 @@ def run_boot(name: str, w: int, h: int, fps: float, tracking: dict, frames: int 
         "theta_median_deg": float(np.median(err)), "theta_mean_deg": float(np.mean(err)),
         "theta_p90_deg": float(np.percentile(err, 90)),
         "theta_median_pct": float(100 * np.median(err) / 52.0),
-        "alpha_z_true_deg": float(np.rad2deg(a_true)), "alpha_z_err_deg": a_err, **me,
+        "alpha_z_true_deg": float(np.rad2deg(a_true)), "alpha_z_err_deg": a_err, "alpha_z_image_err_deg": a_img_err,
+        **me,
         "step_ms_p50": float(np.median(run["step_ms"])),
         "tracker_ms_p50": float(np.median(run["tracker_ms"])) if run["tracker_ms"] else float("nan"),
         "render_s": round(t_render, 1), "reason": most_common(not_ok) if not_ok else "",
@@ -326,6 +331,7 @@ BOOT_COLS = [("knob", "setting", "{}"), ("scene", "scene", "{}"), ("resolution",
              ("theta_median_deg", "theta: median error (deg)", "{:.2f}"), ("theta_mean_deg", "mean (deg)", "{:.2f}"),
              ("theta_p90_deg", "p90 (deg)", "{:.2f}"), ("theta_median_pct", "median (% of 52 deg)", "{:.2f}"),
              ("alpha_z_err_deg", "alpha_z error (deg)", "{:.2f}"),
+             ("alpha_z_image_err_deg", "images' alpha_z error (deg)", "{:.2f}"),
              ("model_bias_median_deg", "model bias, median (deg)", "{:.2f}"),
              ("model_bias_max_deg", "max (deg)", "{:.2f}"),
              ("model_rel_l2_median_pct", "model error |u|, median (%)", "{:.1f}"),

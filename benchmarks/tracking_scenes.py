@@ -186,13 +186,17 @@ each scene's model error beside its result.
 - *Joint boot* (§4.5.4, its own table): the real boot rendered from an independent neo-Hookean solve
   (`synth/scenes.py:boot_truth`: trilinear hexahedra 72 x 2 x 60, two layers through the wall, Newton every 2 deg of the
   lever; the model: 36 x 1 x 48, NI-PGD), placed by registration from a guess by eye, map points as its scene file says.
-  Stop 71's run: the lever read from every depth image as the boot's family scene file has it (`tracking.depth_fit`,
-  chosen on the family's development seeds, `docs/family.md`; the registration polished, `anchor.polish_mm: 4`, the
-  boot registered as a body of revolution; stop 70's run, the images alone, in brackets): the scene's own view reads
-  theta **0.37 deg** off at the median (1.12), p90 1.41 deg (1.36), alpha_z 0.33 deg (0.86), registration 0.09 mm and
-  0.04 deg off. A third view that nothing was chosen on (another arc, the boot turned by 70 deg, another guess): **0.22
-  deg** (0.20), p90 0.69 deg (0.75), alpha_z 0.86 deg (0.39). A second view, on which the tracker's handling of alpha_z
-  was fixed: 0.19 deg (0.44), alpha_z 1.82 deg (1.68). The tracker's time per frame: 68-81 ms (9-16 ms). With
+  Stop 72's run: the lever read from every depth image and alpha_z reported with the depth fit's turn, as the boot's
+  family scene file has it (`tracking.depth_fit` and `depth_turn`, chosen on the family's development seeds,
+  `docs/family.md`; the registration polished, `anchor.polish_mm: 4`, the boot registered as a body of revolution; stop
+  71's run, commit 5873fc0's table, in brackets): the scene's own view reads theta **0.38 deg** off at the median
+  (0.37), p90 1.29 deg (1.41), alpha_z 0.26 deg (0.33; the images' own alpha_z, the table's next column: 0.07),
+  registration 0.09 mm and 0.04 deg off. A third view that nothing was chosen on (another arc, the boot turned by 70
+  deg, another guess): **0.22 deg** (0.22), p90 0.68 deg (0.69), alpha_z **0.11 deg** (0.86; the images' own: 0.93). A
+  second view, on which the tracker's handling of alpha_z was fixed: 0.21 deg (0.19), alpha_z 0.43 deg (1.82; the
+  images' own: 0.53). The lever moved by up to 0.02 deg from stop 71 with the same settings: the depth fit's sped-up
+  code differs in the last bits of a displacement, and these scenes amplify that much (`docs/family.md`, stop 72). The
+  tracker's time per frame: 37-45 ms (stop 71: 68-81; the images alone 9-16 ms). With
   the knob `outlier_refits: 3` (commit 319a533's table, the images alone) the three read 1.43, 0.15 and 0.17
   deg (alpha_z 0.45, 0.12, 0.42). Before stop 65 (the map then culled the object points linked at rest) the own view
   read 0.37 deg. With the Levenberg-Marquardt solver before stop 34 the three views read 0.26, 0.12 and 0.27 deg: its

@@ -100,20 +100,11 @@ class _Surface:
         self.view: DeformationView = model.deformation_view(smp.nodes, n_modes, smp.weights)
         self.c = np.asarray(model.points, np.float64).mean(axis=0)
 
-    def place(self, mu: Array | None, rigid: Array, jac: bool) -> tuple[Array, Array, Array | None]:
-        """Samples y (N, 3), normals (N, 3) and dy/d(mu) (N, 3, n_mu) (None: no Jacobian or mu None)."""
-        du = None
-        if mu is None:
-            x = self.x
-        elif jac:
-            u, du = self.view.with_jacobian(mu)
-            x = self.x + u
-        else:
-            x = self.x + self.view.field.evaluate(mu)
+    def place(self, mu: Array | None, rigid: Array) -> tuple[Array, Array]:
+        """Samples y (N, 3) and their normals (N, 3) at the state mu (None: at rest) and the rigid correction."""
+        x = self.x if mu is None else self.x + self.view.field.evaluate(mu)
         Rz = G.rot_axis("z", rigid[3])
-        y = (x - self.c) @ Rz.T + self.c + rigid[:3]
-        d = None if du is None else np.einsum("ij,njk->nik", Rz, du)
-        return y, self.n @ Rz.T, d
+        return (x - self.c) @ Rz.T + self.c + rigid[:3], self.n @ Rz.T
 
 
 def _rho(r: Array, c: float) -> Array:
@@ -123,18 +114,41 @@ def _rho(r: Array, c: float) -> Array:
 
 
 class _Problem:
+    """The fit's residuals over the measured points ``q`` (object frame). The association of a state (the samples
+    placed, their KD-tree, each point's nearest sample) is kept for the last few states asked for: Gauss-Newton
+    asks for the residuals at a trial state, then for their Jacobian at the same state once the trial is taken, and
+    the association (a KD-tree over the samples, most of the cost) is the same both times."""
+
+    _KEEP = 4
+
     def __init__(self, surf: _Surface, q: Array, cfg: DepthStateConfig, hold: Array | None = None) -> None:
         self.s, self.q, self.cfg = surf, q, cfg
         self.hold = hold  # a unit direction (object frame) along which the translation stays as given
+        self._assoc: dict[bytes, tuple[Array, Array, NDArray[np.int64], NDArray[np.bool_]]] = {}
+
+    def _associate(self, mu: Array | None, rigid: Array) -> tuple[Array, Array, NDArray[np.int64], NDArray[np.bool_]]:
+        """Samples placed at (mu, rigid), their normals, each measured point's nearest sample and whether it lies
+        within the radius."""
+        key = (b"" if mu is None else np.asarray(mu, np.float64).tobytes()) + b"|" + rigid.tobytes()
+        hit = self._assoc.get(key)
+        if hit is not None:
+            return hit
+        y, n = self.s.place(mu, rigid)
+        # an unbalanced tree builds in half the time and answers the same nearest neighbours
+        dist, k = cast(tuple[Array, NDArray[np.int64]],
+                       cKDTree(y, balanced_tree=False, compact_nodes=False).query(
+                           self.q, distance_upper_bound=self.cfg.radius))
+        out = (y, n, k, np.isfinite(dist))
+        if len(self._assoc) >= self._KEEP:
+            self._assoc.pop(next(iter(self._assoc)))
+        self._assoc[key] = out
+        return out
 
     def residuals(self, mu: Array | None, rigid: Array, jac: bool = False
                   ) -> tuple[Array, NDArray[np.bool_], Array | None]:
         """Point-to-plane residuals (one per measured point; NaN beyond the radius) and their Jacobian over
         (mu, delta, psi)."""
-        y, n, dy = self.s.place(mu, rigid, jac)
-        dist, k = cast(tuple[Array, NDArray[np.int64]],
-                       cKDTree(y).query(self.q, distance_upper_bound=self.cfg.radius))
-        ok: NDArray[np.bool_] = np.isfinite(dist)
+        y, n, k, ok = self._associate(mu, rigid)
         kk = k[ok]
         d = self.q[ok] - y[kk]
         r = np.full(len(self.q), np.nan)
@@ -143,8 +157,9 @@ class _Problem:
             return r, ok, None
         nk = n[kk]
         cols = []
-        if dy is not None:
-            cols.append(-np.einsum("nd,ndp->np", nk, dy[kk]))
+        if mu is not None:
+            dy = np.einsum("ij,njk->nik", G.rot_axis("z", rigid[3]), self.s.view.with_jacobian(mu)[1][kk])
+            cols.append(-np.einsum("nd,ndp->np", nk, dy))
         cols.append(-nk)  # delta
         # psi turns the sample about c + delta (d y / d psi = e_z x (y - c - delta)) and its normal
         # (d n / d psi = e_z x n): d r / d psi = (e_z x n) . (q - y) - n . (e_z x (y - c - delta))
@@ -153,12 +168,29 @@ class _Problem:
                      + np.sum(np.cross([0.0, 0.0, 1.0], nk) * d, axis=1))[:, None])
         return r, ok, np.concatenate(cols, axis=1)
 
-    def cost(self, mu: Array | None, rigid: Array, c: float) -> float:
-        """Mean Tukey cost per measured point; a point with no sample within the radius costs the most."""
-        r, ok, _ = self.residuals(mu, rigid)
+    @staticmethod
+    def _mean_cost(r: Array, ok: NDArray[np.bool_], c: float) -> float:
         out = np.full(len(r), c * c / 6.0)
         out[ok] = _rho(r[ok], c)
         return float(out.mean())
+
+    def turn_std(self, mu: Array | None, rigid: Array) -> float:
+        """The standard deviation of the turn psi at (mu, rigid) for unit residuals (the rigid block of Gauss-Newton's
+        covariance, (J^T J)^-1, over the points within the radius): how well the shape holds the turn, to be
+        compared between shapes on the same points. inf where the normal equations do not hold it."""
+        _, _, J = self.residuals(mu, rigid, jac=True)
+        assert J is not None
+        Jr = J[:, J.shape[1] - N_RIGID:]
+        try:
+            var = float(np.linalg.inv(Jr.T @ Jr)[-1, -1])
+        except np.linalg.LinAlgError:
+            return float("inf")
+        return float(np.sqrt(var)) if np.isfinite(var) and var > 0 else float("inf")
+
+    def cost(self, mu: Array | None, rigid: Array, c: float) -> float:
+        """Mean Tukey cost per measured point; a point with no sample within the radius costs the most."""
+        r, ok, _ = self.residuals(mu, rigid)
+        return self._mean_cost(r, ok, c)
 
     def solve(self, mu: Array | None, rigid: Array, lo: Array, hi: Array, c: float | None
               ) -> tuple[Array | None, Array, float]:
@@ -192,7 +224,7 @@ class _Problem:
                 stiff = 1e6 * max(float(np.trace(H)) / len(H), 1e-12)
                 H[k:k + 3, k:k + 3] += stiff * np.outer(self.hold, self.hold)
                 g[k:k + 3] += stiff * self.hold * float(self.hold @ rigid[:3])
-            c0 = self.cost(mu, rigid, thr)
+            c0 = self._mean_cost(r, ok, thr)  # the residuals just computed are at (mu, rigid)
             improved = False
             for _try in range(5):
                 try:
@@ -312,9 +344,8 @@ def fit_state(cloud: Array, model: ReducedModel, T_map_obj: Array, lo: Array, hi
         c_t = prob.cost(mu_t, rig_t, thr)
         if c_t < cost:
             mu, rig, cost = mu_t, rig_t, c_t
-    _, ok, _ = prob.residuals(mu, rig)
-    y, _, _ = surf.place(mu, rig, False)
-    k = cast(NDArray[np.int64], cKDTree(y).query(q[ok])[1])
+    _, _, k_all, ok = prob._associate(mu, rig)
+    k = k_all[ok]
     u = surf.view.field.evaluate(mu)
     motion = float(np.percentile(np.linalg.norm(u[np.unique(k)], axis=1), 90)) if len(k) else 0.0
     T_fit = T @ G.make_T(G.rot_axis("z", rig[3]), surf.c - G.rot_axis("z", rig[3]) @ surf.c + rig[:3])
@@ -332,13 +363,18 @@ def fit_state(cloud: Array, model: ReducedModel, T_map_obj: Array, lo: Array, hi
 class DepthFit:
     """One frame's state read from depth by :class:`DepthFollower`. ``mu``: the fitted state (None: no sound fit this
     frame, ``reason`` says why); ``points``: measured points on the object; ``inliers``: their share within the
-    Tukey threshold; ``sigma``: the robust residual scale (m)."""
+    Tukey threshold; ``sigma``: the robust residual scale (m); ``turn``: the fit's turn psi about the object's z axis
+    (rad, on the pose given); ``turn_held``: how well the fitted shape holds that turn, as the ratio of its standard
+    deviation to the rest shape's on the same points (about 1 for a body of revolution at rest, smaller the more its
+    bend shows the turn; inf: not computed)."""
 
     mu: Array | None
     points: int
     inliers: float
     sigma: float
     reason: str
+    turn: float = 0.0
+    turn_held: float = float("inf")
 
 
 class DepthFollower:
@@ -364,6 +400,14 @@ class DepthFollower:
         self.rigid = np.zeros(N_RIGID)
         self.mu: Array | None = None
         self.min_inliers = 0.5  # a fit that explains fewer of the object's points is not taken
+        # the rigid correction's turn (about the model's centroid) is a turn about the object's z axis: a body of
+        # revolution about it, such as the boot, whose alpha_z it then corrects (DeformableTracker.depth_turn)
+        self.turns_about_axis = bool(np.hypot(*self.surf.c[:2]) < 1e-3)
+        # a body of revolution shows that turn only while it is bent; a fit of the round shape lets it drift. A fit
+        # holds its turn where the turn's standard deviation on the fitted shape is under turn_ratio_max of what the
+        # rest shape gives on the same points (the same pose, unit residuals): the ratio, not the deviation itself,
+        # so that it does not depend on how many points the camera sees (DepthFit.turn_held)
+        self.turn_ratio_max = 0.5
 
     def fit(self, cloud: Array, T_map_obj: Array, lo: Array, hi: Array, mu_image: Array) -> DepthFit:
         """The state in this depth ``cloud`` (map frame) with the object at ``T_map_obj``, mu in [lo, hi], starting
@@ -390,5 +434,6 @@ class DepthFollower:
             return DepthFit(None, len(q), inl, sigma, f"the depth fit explains {100 * inl:.0f} % of the object's "
                                                       f"{len(q)} depth points (need {100 * self.min_inliers:.0f} %)")
         self.mu, self.rigid = mu.copy(), rig.copy()
+        turn_held = prob.turn_std(mu, rig) / prob.turn_std(None, rig) if self.turns_about_axis else float("inf")
         return DepthFit(mu, len(q), inl, sigma, f"depth: {len(q)} points, {100 * inl:.0f} % within the threshold, "
-                                                f"sigma {1e3 * sigma:.1f} mm")
+                                                f"sigma {1e3 * sigma:.1f} mm", float(rig[3]), turn_held)

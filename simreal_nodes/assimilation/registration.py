@@ -37,14 +37,32 @@ class Links:
     on_object: np.ndarray  # (N,) bool
 
 
+class LinkIndex:
+    """The search structures :func:`link` needs for one configuration of the model's nodes (``model_points``):
+    a KD-tree over the candidate nodes, the surface triangles whose corners are all candidates and a KD-tree over
+    their centroids. Built once and handed to every :func:`link` against the same configuration (a tracker's
+    alpha_z search relinks its points against the same few configurations two dozen times a frame)."""
+
+    def __init__(self, model_points: np.ndarray, candidate_nodes: np.ndarray,
+                 triangles: np.ndarray | None = None) -> None:
+        self.cand = np.asarray(candidate_nodes, dtype=np.int64)
+        self.nodes = cKDTree(model_points[self.cand])
+        F = np.zeros((0, 3), np.int64) if triangles is None else np.asarray(triangles, dtype=np.int64)
+        self.F = F[np.isin(F, self.cand).all(axis=1)] if len(F) else F
+        self.centroids = cKDTree(model_points[self.F].mean(axis=1)) if len(self.F) else None
+
+
 def link(points_obj: np.ndarray, model_points: np.ndarray, candidate_nodes: np.ndarray, max_dist: float,
-         k: int = 3, triangles: np.ndarray | None = None, method: str = "barycentric") -> Links:
+         k: int = 3, triangles: np.ndarray | None = None, method: str = "barycentric",
+         index: LinkIndex | None = None) -> Links:
     """Link points (object frame) to 3 model nodes with weights (Eq. 4.10). ``triangles``: the model's
     surface (M, 3); without it, or where a node that is on no triangle is nearer than every triangle (a
-    lever's embedded nodes), the k nearest candidate nodes with inverse-distance weights."""
+    lever's embedded nodes), the k nearest candidate nodes with inverse-distance weights. ``index``: the
+    :class:`LinkIndex` of these ``model_points``, candidates and triangles (None: built here)."""
     P = np.asarray(points_obj, dtype=np.float64).reshape(-1, 3)
-    cand = np.asarray(candidate_nodes, dtype=np.int64)
-    tree = cKDTree(model_points[cand])
+    index = index or LinkIndex(model_points, candidate_nodes, triangles)
+    cand = index.cand
+    tree = index.nodes
     # an array of points: arrays of distances and indices (the stubs also allow scalars)
     d, idx = cast(tuple[np.ndarray, np.ndarray], tree.query(P, k=k))
     d = d.reshape(len(P), k)
@@ -56,16 +74,13 @@ def link(points_obj: np.ndarray, model_points: np.ndarray, candidate_nodes: np.n
         raise ValueError(f"link method must be 'barycentric' or 'idw', not '{method}'")
     if method == "barycentric" and k == 3 and len(P):
         on_surface = np.zeros(len(P), bool)
-        if triangles is not None and len(triangles):
-            F = np.asarray(triangles, dtype=np.int64)
-            F = F[np.isin(F, cand).all(axis=1)]
-            if len(F):
-                tn, tb, td = closest_triangles(P, model_points, F)
-                on_surface = td <= dist + 1e-9
-                nodes[on_surface], w[on_surface], dist[on_surface] = tn[on_surface], tb[on_surface], td[on_surface]
+        if len(index.F):
+            tn, tb, td = closest_triangles(P, model_points, index.F, tree=index.centroids)
+            on_surface = td <= dist + 1e-9
+            nodes[on_surface], w[on_surface], dist[on_surface] = tn[on_surface], tb[on_surface], td[on_surface]
         rest = np.flatnonzero(~on_surface)
         if len(rest):  # nodes on no surface triangle (a lever's grid): the best triangle of near nodes
-            tn, tb, td = _near_node_triangles(P[rest], model_points, cand)
+            tn, tb, td = _near_node_triangles(P[rest], model_points, cand, tree=index.nodes)
             use = np.isfinite(td)
             nodes[rest[use]], w[rest[use]] = tn[use], tb[use]
     return Links(nodes, w, dist, dist <= max_dist)
@@ -95,53 +110,52 @@ def ray_weights(origin: np.ndarray, directions: np.ndarray, corners: np.ndarray,
     return out
 
 
-def _near_node_triangles(P: np.ndarray, V: np.ndarray, cand: np.ndarray,
-                         k: int = 6) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _near_node_triangles(P: np.ndarray, V: np.ndarray, cand: np.ndarray, k: int = 6,
+                         tree: cKDTree | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Among the triangles of each point's k nearest candidate nodes that hold the point's foot, the one
     nearest the point (ties: the smallest): its nodes and the foot's barycentric coordinates, which
     reproduce any linear displacement field (a rigid motion) exactly at the foot; distance inf where no
-    triangle holds it."""
+    triangle holds it. ``tree``: a KD-tree over ``V[cand]`` (None: built here)."""
     from itertools import combinations
 
-    tree = cKDTree(V[cand])
+    tree = tree if tree is not None else cKDTree(V[cand])
     k = min(k, len(cand))
     _, idx = tree.query(P, k=k)
     idx = idx.reshape(len(P), k)
-    best_n = np.zeros((len(P), 3), np.int64)
-    best_b = np.zeros((len(P), 3))
-    best_key = np.full(len(P), np.inf)
-    best_d = np.full(len(P), np.inf)
-    for c in combinations(range(k), 3):
-        tri = cand[idx[:, list(c)]]  # (N, 3)
-        A, B, C = V[tri[:, 0]], V[tri[:, 1]], V[tri[:, 2]]
-        e0, e1, q = B - A, C - A, P - A
-        d00, d01, d11 = (e0 * e0).sum(1), (e0 * e1).sum(1), (e1 * e1).sum(1)
-        d20, d21 = (q * e0).sum(1), (q * e1).sum(1)
-        den = d00 * d11 - d01 * d01
-        ok = den > 1e-6 * np.maximum(d00 * d11, 1e-300)  # not collinear
-        den = np.where(ok, den, 1.0)
-        v = (d11 * d20 - d01 * d21) / den
-        ww = (d00 * d21 - d01 * d20) / den
-        u = 1 - v - ww
-        ok &= (u >= -1e-9) & (v >= -1e-9) & (ww >= -1e-9)
-        foot = u[:, None] * A + v[:, None] * B + ww[:, None] * C
-        dist = np.linalg.norm(foot - P, axis=1)
-        per = np.linalg.norm(e0, axis=1) + np.linalg.norm(e1, axis=1) + np.linalg.norm(C - B, axis=1)
-        key = dist + 1e-3 * per
-        take = ok & (key < best_key)
-        best_key[take] = key[take]
-        best_n[take] = tri[take]
-        best_b[take] = np.c_[u, v, ww][take]
-        best_d[take] = dist[take]
+    combos = np.array(list(combinations(range(k), 3)), np.int64).reshape(-1, 3)
+    tri = cand[idx[:, combos]]  # (N, C, 3): every triangle of three of the k nodes
+    A, B, C = V[tri[..., 0]], V[tri[..., 1]], V[tri[..., 2]]
+    Q = P[:, None, :]
+    e0, e1, q = B - A, C - A, Q - A
+    d00, d01, d11 = (e0 * e0).sum(-1), (e0 * e1).sum(-1), (e1 * e1).sum(-1)
+    d20, d21 = (q * e0).sum(-1), (q * e1).sum(-1)
+    den = d00 * d11 - d01 * d01
+    ok = den > 1e-6 * np.maximum(d00 * d11, 1e-300)  # not collinear
+    den = np.where(ok, den, 1.0)
+    v = (d11 * d20 - d01 * d21) / den
+    ww = (d00 * d21 - d01 * d20) / den
+    u = 1 - v - ww
+    ok &= (u >= -1e-9) & (v >= -1e-9) & (ww >= -1e-9)
+    foot = u[..., None] * A + v[..., None] * B + ww[..., None] * C
+    dist = np.linalg.norm(foot - Q, axis=-1)
+    per = np.linalg.norm(e0, axis=-1) + np.linalg.norm(e1, axis=-1) + np.linalg.norm(C - B, axis=-1)
+    key = np.where(ok, dist + 1e-3 * per, np.inf)
+    key[np.isnan(key)] = np.inf
+    j = np.argmin(key, axis=1)  # the first of equal keys, as a scan in combination order would keep
+    r = np.arange(len(P))
+    held = np.isfinite(key[r, j])
+    best_n = np.where(held[:, None], tri[r, j], 0)
+    best_b = np.where(held[:, None], np.stack([u, v, ww], axis=-1)[r, j], 0.0)
+    best_d = np.where(held, dist[r, j], np.inf)
     return best_n, best_b, best_d
 
 
-def closest_triangles(P: np.ndarray, V: np.ndarray, F: np.ndarray,
-                      n_candidates: int = 12) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def closest_triangles(P: np.ndarray, V: np.ndarray, F: np.ndarray, n_candidates: int = 12,
+                      tree: cKDTree | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """For each point, the closest of the triangles F (among the ``n_candidates`` with the nearest
     centroids): its corner nodes (N, 3), the barycentric coordinates of the closest point (N, 3) and the
-    distance (N,)."""
-    tree = cKDTree(V[F].mean(axis=1))
+    distance (N,). ``tree``: a KD-tree over the centroids ``V[F].mean(axis=1)`` (None: built here)."""
+    tree = tree if tree is not None else cKDTree(V[F].mean(axis=1))
     m = min(n_candidates, len(F))
     _, ti = tree.query(P, k=m)
     ti = ti.reshape(len(P), m)
@@ -402,17 +416,33 @@ def _views(cams: np.ndarray | DepthViews | _Centres) -> DepthViews | _Centres:
     return cams if isinstance(cams, (DepthViews, _Centres)) else _Centres(cams)
 
 
+_GRIDS: dict[bytes, np.ndarray] = {}
+
+
+def _pixel_grid(cam: CameraModel, shape: tuple[int, ...], stride: int) -> np.ndarray:
+    """The ideal (undistorted) pixels of every ``stride``-th pixel of an image of ``shape``, row-major (N, 2): the
+    same for every frame of a camera, so undone once (the lens model's iterative inverse took 8 ms a frame at
+    640 x 480, stride 2). Kept for the last few cameras asked for."""
+    key = np.r_[cam.K.ravel(), cam.D, shape, stride].astype(np.float64).tobytes()
+    grid = _GRIDS.get(key)
+    if grid is None:
+        v, u = np.mgrid[0:shape[0]:stride, 0:shape[1]:stride]
+        grid = np.c_[u.ravel(), v.ravel()].astype(np.float64)
+        if cam.has_distortion:
+            grid = cam.undistort_points(grid)
+        if len(_GRIDS) >= 4:
+            _GRIDS.pop(next(iter(_GRIDS)))
+        _GRIDS[key] = grid
+    return grid
+
+
 def depth_cloud(cam: CameraModel, depth: np.ndarray, T_wc: np.ndarray, stride: int = 2,
                 max_range: float = 4.0) -> np.ndarray:
     """A depth image (z along the optical axis, metres; NaN or 0: no return) back-projected with the camera model
     (lens distortion undone) into the map frame by ``T_wc``: (N, 3)."""
-    v, u = np.mgrid[0:depth.shape[0]:stride, 0:depth.shape[1]:stride]
-    z = np.asarray(depth, dtype=np.float64)[v, u].ravel()
+    z = np.asarray(depth, dtype=np.float64)[0::stride, 0::stride].ravel()
     ok = np.isfinite(z) & (z > 0) & (z < max_range)
-    uv = np.c_[u.ravel()[ok], v.ravel()[ok]].astype(np.float64)
-    if cam.has_distortion:
-        uv = cam.undistort_points(uv)
-    P = cam.backproject(uv, z[ok])
+    P = cam.backproject(_pixel_grid(cam, depth.shape[:2], stride)[ok], z[ok])
     out: np.ndarray = P @ T_wc[:3, :3].T + T_wc[:3, 3]
     return out
 

@@ -10,6 +10,7 @@ alpha_z of §4.5.4) are estimated jointly over the first frames with deformation
 
 from __future__ import annotations
 
+from collections import deque
 from collections.abc import Iterable
 from dataclasses import dataclass, field, replace
 from typing import Any, NamedTuple, cast
@@ -22,7 +23,7 @@ from simreal_nodes import geometry as G
 from simreal_nodes.assimilation import lm
 from simreal_nodes.assimilation.dense import DenseAligner, DenseResult, DenseSettings
 from simreal_nodes.assimilation.depth_state import DepthFollower, DepthStateConfig, fit_state
-from simreal_nodes.assimilation.registration import depth_cloud, link, ray_weights, surface_nodes
+from simreal_nodes.assimilation.registration import LinkIndex, depth_cloud, link, ray_weights, surface_nodes
 from simreal_nodes.camera import CameraModel
 from simreal_nodes.rom.model import ReducedModel
 from simreal_nodes.rom.state import ALPHA_Z, ModelState, StateLayout
@@ -96,10 +97,13 @@ class TrackerConfig:
     reference: str = "depth"
     depth_state: DepthStateConfig = field(default_factory=DepthStateConfig)
     # measurements 'map_points' with a depth image (RGB-D): the tracked state is read from every frame's depth
-    # (:class:`.depth_state.DepthFollower`; the boot's tracker took 8 -> 130 ms a frame on 2 cores), the image fit
-    # giving its start, the constants (alpha_z) and whether a deformation is seen. A knob: the boot's family scene
-    # file sets it (docs/family.md, stop 71)
+    # (:class:`.depth_state.DepthFollower`; the boot's tracker: 9 -> 62 ms a frame on 2 cores), the image fit
+    # giving its start, the constants (alpha_z) and whether a deformation is seen. A knob: the boot's scene files
+    # set it (docs/family.md, stop 71)
     depth_fit: bool = False
+    # with depth_fit on a body of revolution about its z axis (the boot): alpha_z reported with the depth fit's turn
+    # about that axis, taken from the frames whose depth holds it (DeformableTracker.depth_turn)
+    depth_turn: bool = False
 
 
 @dataclass
@@ -159,6 +163,10 @@ class DeformableTracker:
         self._const_samples: list[np.ndarray] = []
         self._was_deforming = False  # constants move only once deformation makes them observable
         self.cand_nodes = surface_nodes(model)
+        # the nodes' configuration a map point is linked in (rest, or the deformation it was mapped in) -> those
+        # positions and their :class:`LinkIndex`: the alpha_z search relinks every point two dozen times a frame
+        self._link_geometry: dict[bytes, tuple[np.ndarray, LinkIndex]] = {}
+        self._cand_view = model.deformation_view(self.cand_nodes, self.cfg.n_modes or None)
         # map point id -> its link (nodes, weights, rest position, position as mapped, mu it was mapped in, ray)
         self.links: dict[int, Link] = {}
         self.static: set[int] = set()
@@ -182,6 +190,7 @@ class DeformableTracker:
         self._reference_read = self.cfg.reference != "depth" or self.cfg.measurements != "map_points"
         self._reference_tries = 0
         self.depth: DepthFollower | None = None
+        self._turns: deque[float] = deque(maxlen=300)  # the object's turn in the frames whose depth held it
         if self.cfg.depth_fit and self.cfg.measurements == "map_points":
             n_mu = len(model.axes)
             self.depth = DepthFollower(model, self.cfg.depth_state, self.cfg.n_modes or None, self.lo[:n_mu],
@@ -235,16 +244,10 @@ class DeformableTracker:
         T_om = G.inv(self.T_map_obj)
         Rz = self.model_state.rotation()
         X = G.transform(T_om, P) @ Rz  # R_z(-a) applied: row vectors
-        V = self.model.points
         if isinstance(mu, str):
             mu = self.model_state.mu.copy() if (self._was_deforming and self.cfg.snap_to_surface) else None
-        if mu is not None:
-            # a point first mapped while the object is deformed sits on the deformed surface: link it there
-            # and carry its weights back to the rest configuration (the inverse of Eq. 4.10's interpolation)
-            u = self.model.deformation_view(self.cand_nodes, self.cfg.n_modes or None).with_jacobian(mu)[0]
-            V = V.copy()
-            V[self.cand_nodes] += u
-        L = link(X, V, self.cand_nodes, self.cfg.link_dist, triangles=self.model.surface)
+        V, index = self._linked_in(mu)
+        L = link(X, V, self.cand_nodes, self.cfg.link_dist, triangles=self.model.surface, index=index)
         R = None if rays is None else np.asarray(rays, np.float64)[new]
         if self.cfg.snap_to_surface and self.cfg.anchor == "ray" and R is not None:
             # the material point a track follows is the one under its pixel: where that pixel's viewing ray
@@ -264,6 +267,25 @@ class DeformableTracker:
                                        None if R is None else R[k].copy())
             else:
                 self.static.add(pid)
+
+    def _linked_in(self, mu: np.ndarray | None) -> tuple[np.ndarray, LinkIndex]:
+        """The nodes' positions a point is linked against (object frame, alpha undone) and their search index:
+        the rest shape (``mu`` None), or the deformation ``mu`` a point was first mapped in (it sits on the deformed
+        surface: linked there, its weights carry it back to the rest configuration, the inverse of Eq. 4.10's
+        interpolation). Kept for the last 32 configurations asked for."""
+        key = b"rest" if mu is None else np.asarray(mu, np.float64).tobytes()
+        hit = self._link_geometry.get(key)
+        if hit is not None:
+            return hit
+        V = self.model.points
+        if mu is not None:
+            V = V.copy()
+            V[self.cand_nodes] += self._cand_view.with_jacobian(mu)[0]
+        out = (V, LinkIndex(V, self.cand_nodes, self.model.surface))
+        if len(self._link_geometry) >= 32:
+            self._link_geometry.pop(next(iter(self._link_geometry)))
+        self._link_geometry[key] = out
+        return out
 
     def relink(self) -> None:
         """alpha changed: the same map points now sit at other material points (each relinked in the
@@ -486,8 +508,29 @@ class DeformableTracker:
             est.reason = f"only {res.inliers} of {len(X)} measurements agree with the model (all outliers?)"
             return est
         gain = rest_rms - res.rms_px
-        return self._conclude(est, res.x, bool(gain > self.cfg.min_deformation_px),
-                              f"residual {res.rms_px:.2f} px vs {rest_rms:.2f} px undeformed")
+        est = self._conclude(est, res.x, bool(gain > self.cfg.min_deformation_px),
+                             f"residual {res.rms_px:.2f} px vs {rest_rms:.2f} px undeformed")
+        if self.rigid_z and self.depth_turn:
+            i = self.layout.alpha_index
+            est.values[i] = _wrap(est.values[i] + self.depth_turn, self.lo[i], self.hi[i])
+            est.debug["depth_turn"] = self.depth_turn
+        return est
+
+    @property
+    def depth_turn(self) -> float:
+        """With ``depth_fit`` and ``depth_turn`` on a body of revolution about its z axis (the boot): what the depth
+        adds to the images' alpha_z. Each frame whose depth holds the turn (:attr:`.depth_state.DepthFit.turn_held`:
+        the bellows bent) gives the object's whole turn about its axis, the images' alpha_z of that frame's fit plus
+        the depth fit's turn on it (its upright rigid correction turns the model about its centroid, which lies on
+        the axis); the estimate reports the median of those turns (the last 300 such frames). The depth sees which
+        way the bellows bends, the images (its ORB map points) see it only as well as they follow the material; the
+        images' own alpha_z stays what the links, the search and the freezing use. 0.0 otherwise, and until such a
+        frame."""
+        if not self._turns:
+            return 0.0
+        t = np.array(self._turns)
+        total = t[-1] + float(np.median((t - t[-1] + np.pi) % (2 * np.pi) - np.pi))
+        return float((total - self.values[self.layout.alpha_index] + np.pi) % (2 * np.pi) - np.pi)
 
     def _depth_state(self, res: lm.Result, T_wc: np.ndarray, depth: np.ndarray, lo: np.ndarray, hi: np.ndarray,
                      est: Estimate, meas: Measurements, T_cw: np.ndarray) -> None:
@@ -506,6 +549,9 @@ class DeformableTracker:
         cloud = depth_cloud(self.cam, depth, T_wc, stride=2)
         fit = self.depth.fit(cloud, T, lo[:n_mu], hi[:n_mu], res.x[:n_mu])
         est.debug["depth"] = fit.reason
+        if (self.cfg.depth_turn and self.rigid_z and self.depth.turns_about_axis and fit.mu is not None
+                and fit.turn_held < self.depth.turn_ratio_max):
+            self._turns.append(float(res.x[self.layout.alpha_index]) + fit.turn)
         if fit.mu is not None:
             est.debug["image_mu"] = res.x[:n_mu].copy()
             res.x = res.x.copy()
@@ -972,7 +1018,7 @@ def tracker_config(obj: dict[str, Any], **overrides: Any) -> TrackerConfig:
                         constant_search_until=t["constant_search_until"],
                         min_measurements=t["min_measurements"], max_points=t["points"], anchor=t["anchor"],
                         object_shift_m=t["object_shift_m"], rest_frames=t["rest_frames"],
-                        reference=t["reference"], depth_fit=t["depth_fit"],
+                        reference=t["reference"], depth_fit=t["depth_fit"], depth_turn=t["depth_turn"],
                         dense=DenseSettings(step_px=t["dense_step_px"], rigid=t["dense_rigid"],
                                           static_ring_px=t["dense_surroundings_px"], refine=t["dense_refine"],
                                           camera_first=t["dense_camera_first"],
@@ -1007,6 +1053,13 @@ def deformable_feedback(trackers: Iterable[DeformableTracker]) -> tuple[np.ndarr
         return np.zeros(0, np.uint32), np.zeros((0, 3)), np.zeros(0, np.uint8)
     return (np.concatenate(ids).astype(np.uint32), np.concatenate(P).reshape(-1, 3),
             np.concatenate(flags).astype(np.uint8))
+
+
+def _wrap(a: float, lo: float, hi: float) -> float:
+    """An angle brought into [lo, hi) by whole turns where that range spans one (alpha_z), else clipped."""
+    if hi - lo >= 2 * np.pi - 1e-9:
+        return float(lo + (a - lo) % (2 * np.pi))
+    return float(np.clip(a, lo, hi))
 
 
 def _finite_observations(ids: np.ndarray, P_map: np.ndarray, uv: np.ndarray

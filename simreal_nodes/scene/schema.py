@@ -156,8 +156,11 @@ TRACKING = Record({
                       "taken to be the rest shape", default="depth"),
     "depth_fit": Bool("measurements 'map_points' with a depth image (RGB-D or stereo): read the tracked parameters "
                       "from every frame's depth (the model's deformed surface fitted to it, warm-started from the "
-                      "image fit; about 130 ms a frame on the joint boot, 2 cores); the images still give the "
+                      "image fit; about 62 ms a frame on the joint boot, 2 cores); the images still give the "
                       "constants (alpha_z) and whether a deformation is seen", default=False),
+    "depth_turn": Bool("with depth_fit, on a body of revolution about its z axis (the joint boot): alpha_z reported "
+                       "with the depth fit's turn about that axis, as of the last frame whose depth held it (the "
+                       "bent shape holds the turn at least twice as well as the round rest shape)", default=False),
     "huber_px": Number("Huber threshold of the robust loss, pixels", lo=0, lo_open=True, default=2.0),
     "modes": Number("number of PGD modes used (0 = all)", integer=True, lo=0, default=0),
     "max_iterations": Number("Levenberg-Marquardt iterations per frame", integer=True, lo=1, hi=500, default=20),
@@ -335,6 +338,9 @@ def _cross_checks(scene: dict, ctx: Context) -> None:
             raise SceneError(f"{src}: objects[{i}].tracking.depth_fit: needs measurements 'map_points' and depth "
                              f"images (localization.mode 'rgbd' or 'stereo'); found measurements "
                              f"'{o['tracking']['measurements']}', mode '{loc['mode']}'")
+        if o["tracking"]["depth_turn"] and not o["tracking"]["depth_fit"]:
+            raise SceneError(f"{src}: objects[{i}].tracking.depth_turn: takes the turn from the depth fit of every "
+                             "frame: needs tracking.depth_fit true; found false")
         if o["anchor"]["kind"] == "registration" and loc["mode"] not in ("rgbd", "stereo"):
             # registration works on depth images (assimilation.registration.register_rgbd: RGB-D, or SGBM on a
             # stereo pair); a monocular map's sparse points alone do not place a model to millimetres

@@ -544,10 +544,11 @@ def _joint_boot_scene(real_boot: bool, width, height, duration, fps, alpha_z: fl
                 "id": "boot", "model": "spec:joint_boot",
                 "anchor": anchor,
                 "parameters": params,
-                # the real boot rendered from the independent truth (RGB-D): its lever read from every depth image,
-                # as the boot's family scene file has it (stop 71, chosen on the family's development seeds)
+                # the real boot rendered from the independent truth (RGB-D): its lever read from every depth image and
+                # alpha_z reported with the depth's turn, as the boot's family scene file has it (stops 71 and 72,
+                # chosen on the family's development seeds)
                 "tracking": {"enabled": True, "measurements": "map_points", "huber_px": 2.0, "constant_frames": 40,
-                             **({"depth_fit": True} if independent and sc.depth else {})},
+                             **({"depth_fit": True, "depth_turn": True} if independent and sc.depth else {})},
                 "overlay": {"field": "von_mises"},
             }],
             "overlay": {"enabled": True},

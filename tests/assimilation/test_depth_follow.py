@@ -60,6 +60,39 @@ def test_follows_the_lever_through_jumps_with_the_pose_off(boot):
         assert fit.inliers > 0.8
 
 
+def test_the_turn_is_held_by_bent_frames_only(boot):
+    """The pose is turned 3 degrees about the boot's axis (an alpha_z 3 degrees off). A bent bellows shows which way
+    it is turned: the fit's turn takes the 3 degrees back, and the fitted shape holds it (its standard deviation a
+    third or less of the round rest shape's on the same points). At rest the bellows is round: the two are about the
+    same, and the turn is not taken."""
+    lo, hi = _bounds(boot)
+    f = DepthFollower(boot, DepthStateConfig(), None, lo, hi)
+    assert f.turns_about_axis
+    T_off = T_TRUE @ G.make_T(G.rot_axis("z", np.deg2rad(3.0)), [0.002, -0.001, 0.0])
+    for k, th in enumerate([0.0, 0.6, 0.8, 0.0]):
+        fit = f.fit(_cloud(boot, th, 10 + k), T_off, lo, hi, np.array([th]))
+        assert fit.mu is not None, fit.reason
+        if th > 0.3:
+            assert fit.turn_held < 0.3 and abs(np.rad2deg(fit.turn) + 3.0) < 0.5, (k, fit.turn_held, fit.turn)
+        else:
+            assert 0.8 < fit.turn_held < 1.25 and fit.turn_held > f.turn_ratio_max, (k, fit.turn_held)
+    beam = load_model(cached_model("aluminium_beam"), fields=["displacement"])
+    assert not DepthFollower(beam, DepthStateConfig(), None, *_bounds(beam)).turns_about_axis
+
+
+def test_the_reported_alpha_z_is_the_median_turn_of_the_held_frames(boot):
+    """The estimate's alpha_z with ``depth_turn``: the median of the object's whole turn over the frames whose depth
+    held it, across the wrap at +-180 degrees (one frame far off does not move it); nothing without such a frame."""
+    cam = CameraModel.from_intrinsics(640, 480, 525.0, 525.0, 320.0, 240.0)
+    params = {"theta": {"mode": "tracked"}, "alpha_z": {"mode": "constant", "initial": 0.0}}
+    tr = DeformableTracker(boot, T_TRUE, params, cam, TrackerConfig(depth_fit=True, depth_turn=True))
+    i = tr.layout.alpha_index
+    tr.values[i] = np.deg2rad(170.0)
+    assert tr.depth_turn == 0.0
+    tr._turns.extend(np.deg2rad([178.0, -178.0, 179.0, 90.0, -179.5]))
+    assert np.rad2deg(tr.values[i] + tr.depth_turn) % 360 == pytest.approx(179.0)
+
+
 def test_no_fit_where_the_depth_does_not_show_the_object(boot):
     lo, hi = _bounds(boot)
     f = DepthFollower(boot, DepthStateConfig(), None, lo, hi)
@@ -104,6 +137,15 @@ def test_scene_switch_is_refused_where_it_cannot_work(mode, measurements):
     with pytest.raises(SceneError, match=r"objects\[0\]\.tracking\.depth_fit: needs measurements 'map_points' and "
                                          r"depth images"):
         validate_scene(_doc(mode, measurements), "boot", ".")
+
+
+def test_depth_turn_reaches_the_tracker_and_needs_depth_fit():
+    doc = _doc()
+    doc["objects"][0]["tracking"]["depth_turn"] = True
+    assert tracker_config(validate_scene(doc, "boot", ".")["objects"][0]).depth_turn
+    doc["objects"][0]["tracking"]["depth_fit"] = False
+    with pytest.raises(SceneError, match=r"objects\[0\]\.tracking\.depth_turn: .* needs tracking\.depth_fit true"):
+        validate_scene(doc, "boot", ".")
 
 
 @pytest.mark.parametrize("shape, fill, why", [((240, 320), 0.6, "is not the camera's 480 x 640"),

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from simreal_nodes import geometry as G
-from simreal_nodes.assimilation.depth_state import fit_state
+from simreal_nodes.assimilation.depth_state import N_RIGID, DepthStateConfig, _Problem, _Surface, crop, fit_state
 from simreal_nodes.assimilation.objects import ObjectTrackers
 from simreal_nodes.assimilation.registration import (
     RegistrationConfig,
@@ -67,6 +67,31 @@ def test_one_depth_image_gives_the_load_position(loaded):
     assert st.cost < 0.7 * st.rest_cost
     mm, deg = _error(st.T_map_obj, s["truth"])
     assert mm < 2.0 and deg < 0.3, (mm, deg)  # the upright correction took the offset out
+
+
+def test_the_fit_jacobian_matches_finite_differences(loaded):
+    """The Gauss-Newton Jacobian over (mu, delta, psi): the residuals reuse the association of a state asked for
+    before (the trial then its Jacobian), so the Jacobian is checked here against central differences of the
+    residuals on the points whose nearest sample stays the same."""
+    s = loaded
+    cfg = DepthStateConfig()
+    cloud = depth_cloud(s["seq"]["cam"], s["seq"]["depth"][0], s["seq"]["T"][0], stride=1)
+    q = crop(cloud, s["model"], _off(s["truth"]), cfg)
+    prob = _Problem(_Surface(s["model"], cfg, None), q, cfg)
+    mu = 0.5 * (s["lo"] + s["hi"])
+    rigid = np.array([0.001, -0.002, 0.0005, np.deg2rad(0.7)])
+    _, ok, J = prob.residuals(mu, rigid, jac=True)
+    assert J is not None and ok.sum() > 1000 and J.shape == (ok.sum(), len(mu) + N_RIGID)
+    x = np.r_[mu, rigid]
+    for j, h in enumerate([1e-6 * (s["hi"][0] - s["lo"][0])] * len(mu) + [1e-7] * 3 + [1e-6]):
+        e = np.zeros(len(x))
+        e[j] = h
+        (rp, okp, _), (rm, okm, _) = (prob.residuals(z[:len(mu)], z[len(mu):]) for z in (x + e, x - e))
+        k0, kp, km = (prob._associate(z[:len(mu)], z[len(mu):])[2] for z in (x, x + e, x - e))
+        same = (ok & okp & okm & (k0 == kp) & (k0 == km))[ok]
+        assert same.mean() > 0.9
+        fd = ((rp - rm) / (2 * h))[ok][same]
+        np.testing.assert_allclose(J[same, j], fd, rtol=1e-4, atol=1e-6 * np.abs(fd).max() + 1e-12)
 
 
 def test_an_unloaded_object_reads_at_rest(unloaded):
