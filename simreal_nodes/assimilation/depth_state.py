@@ -408,6 +408,7 @@ class DepthFollower:
         # rest shape gives on the same points (the same pose, unit residuals): the ratio, not the deviation itself,
         # so that it does not depend on how many points the camera sees (DepthFit.turn_held)
         self.turn_ratio_max = 0.5
+        self.judge_turn = True  # False: turn_held is not computed (its rest-shape search costs a KD-tree a frame)
 
     def fit(self, cloud: Array, T_map_obj: Array, lo: Array, hi: Array, mu_image: Array) -> DepthFit:
         """The state in this depth ``cloud`` (map frame) with the object at ``T_map_obj``, mu in [lo, hi], starting
@@ -434,6 +435,7 @@ class DepthFollower:
             return DepthFit(None, len(q), inl, sigma, f"the depth fit explains {100 * inl:.0f} % of the object's "
                                                       f"{len(q)} depth points (need {100 * self.min_inliers:.0f} %)")
         self.mu, self.rigid = mu.copy(), rig.copy()
-        turn_held = prob.turn_std(mu, rig) / prob.turn_std(None, rig) if self.turns_about_axis else float("inf")
+        turn_held = (prob.turn_std(mu, rig) / prob.turn_std(None, rig) if self.turns_about_axis and self.judge_turn
+                     else float("inf"))
         return DepthFit(mu, len(q), inl, sigma, f"depth: {len(q)} points, {100 * inl:.0f} % within the threshold, "
                                                 f"sigma {1e3 * sigma:.1f} mm", float(rig[3]), turn_held)

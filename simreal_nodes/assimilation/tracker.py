@@ -195,6 +195,7 @@ class DeformableTracker:
             n_mu = len(model.axes)
             self.depth = DepthFollower(model, self.cfg.depth_state, self.cfg.n_modes or None, self.lo[:n_mu],
                                        self.hi[:n_mu])
+            self.depth.judge_turn = self.cfg.depth_turn
         if self.cfg.measurements == "dense":
             if self.rigid_z:
                 raise ValueError("measurements 'dense' do not estimate alpha_z: use map_points for this object")
@@ -510,10 +511,11 @@ class DeformableTracker:
         gain = rest_rms - res.rms_px
         est = self._conclude(est, res.x, bool(gain > self.cfg.min_deformation_px),
                              f"residual {res.rms_px:.2f} px vs {rest_rms:.2f} px undeformed")
-        if self.rigid_z and self.depth_turn:
+        turn = self.depth_turn if self.rigid_z else 0.0
+        if turn:
             i = self.layout.alpha_index
-            est.values[i] = _wrap(est.values[i] + self.depth_turn, self.lo[i], self.hi[i])
-            est.debug["depth_turn"] = self.depth_turn
+            est.values[i] = _wrap(est.values[i] + turn, self.lo[i], self.hi[i])
+            est.debug["depth_turn"] = turn
         return est
 
     @property
