@@ -99,6 +99,7 @@ class _Surface:
         self.n = smp.normal
         self.view: DeformationView = model.deformation_view(smp.nodes, n_modes, smp.weights)
         self.c = np.asarray(model.points, np.float64).mean(axis=0)
+        self.rest_tree = cKDTree(self.x)  # the rest samples' search tree (:func:`_weak_direction`, every frame)
 
     def place(self, mu: Array | None, rigid: Array) -> tuple[Array, Array]:
         """Samples y (N, 3) and their normals (N, 3) at the state mu (None: at rest) and the rigid correction."""
@@ -292,7 +293,7 @@ def _weak_direction(surf: _Surface, q: Array, cfg: DepthStateConfig) -> Array | 
     the same way fits its depth almost as well (6 mm on development seeds 10, 11, 18 where the registration's
     cover of the faces had it within 3 mm); the pose given (a registration pins that slide by its cover) holds
     it."""
-    d, k = cast(tuple[Array, NDArray[np.int64]], cKDTree(surf.x).query(q, distance_upper_bound=cfg.radius))
+    d, k = cast(tuple[Array, NDArray[np.int64]], surf.rest_tree.query(q, distance_upper_bound=cfg.radius))
     ok = np.isfinite(d)
     if ok.sum() < cfg.min_points:
         return None
@@ -435,7 +436,10 @@ class DepthFollower:
             return DepthFit(None, len(q), inl, sigma, f"the depth fit explains {100 * inl:.0f} % of the object's "
                                                       f"{len(q)} depth points (need {100 * self.min_inliers:.0f} %)")
         self.mu, self.rigid = mu.copy(), rig.copy()
-        turn_held = (prob.turn_std(mu, rig) / prob.turn_std(None, rig) if self.turns_about_axis and self.judge_turn
-                     else float("inf"))
+        turn_held = float("inf")
+        if self.turns_about_axis and self.judge_turn:
+            held, rest = prob.turn_std(mu, rig), prob.turn_std(None, rig)
+            if np.isfinite(held) and np.isfinite(rest):  # a shape that holds no turn, or a rest shape that meets
+                turn_held = held / rest  # none of the points: nothing to compare
         return DepthFit(mu, len(q), inl, sigma, f"depth: {len(q)} points, {100 * inl:.0f} % within the threshold, "
                                                 f"sigma {1e3 * sigma:.1f} mm", float(rig[3]), turn_held)
