@@ -192,7 +192,8 @@ each scene's model error beside its result.
   71's run, commit 5873fc0's table, in brackets): the scene's own view reads theta **0.38 deg** off at the median
   (0.37), p90 1.29 deg (1.41), alpha_z 0.26 deg (0.33; the images' own alpha_z, the table's next column: 0.07),
   registration 0.09 mm and 0.04 deg off. A third view that nothing was chosen on (another arc, the boot turned by 70
-  deg, another guess): **0.22 deg** (0.22), p90 0.68 deg (0.69), alpha_z **0.11 deg** (0.86; the images' own: 0.93). A
+  deg, another guess): **0.22 deg** (0.22), p90 0.68 deg (0.69), alpha_z **0.11 deg** (0.86; the images' own: 0.93; this
+  view also ran with a first version of `depth_turn`, dropped on the own view, so it is not blind to that choice). A
   second view, on which the tracker's handling of alpha_z was fixed: 0.21 deg (0.19), alpha_z 0.43 deg (1.82; the
   images' own: 0.53). The lever moved by up to 0.02 deg from stop 71 with the same settings: the depth fit's sped-up
   code differs in the last bits of a displacement, and these scenes amplify that much (`docs/family.md`, stop 72). The
