@@ -60,7 +60,8 @@ def link(points_obj: np.ndarray, model_points: np.ndarray, candidate_nodes: np.n
     lever's embedded nodes), the k nearest candidate nodes with inverse-distance weights. ``index``: the
     :class:`LinkIndex` of these ``model_points``, candidates and triangles (None: built here)."""
     P = np.asarray(points_obj, dtype=np.float64).reshape(-1, 3)
-    index = index or LinkIndex(model_points, candidate_nodes, triangles)
+    if index is None:
+        index = LinkIndex(model_points, candidate_nodes, triangles)
     cand = index.cand
     tree = index.nodes
     # an array of points: arrays of distances and indices (the stubs also allow scalars)

@@ -531,8 +531,8 @@ class DeformableTracker:
         if not self._turns:
             return 0.0
         t = np.array(self._turns)
-        total = t[-1] + float(np.median((t - t[-1] + np.pi) % (2 * np.pi) - np.pi))
-        return float((total - self.values[self.layout.alpha_index] + np.pi) % (2 * np.pi) - np.pi)
+        total = t[-1] + float(np.median(_signed_angle(t - t[-1])))
+        return float(_signed_angle(total - self.values[self.layout.alpha_index]))
 
     def _depth_state(self, res: lm.Result, T_wc: np.ndarray, depth: np.ndarray, lo: np.ndarray, hi: np.ndarray,
                      est: Estimate, meas: Measurements, T_cw: np.ndarray) -> None:
@@ -1055,6 +1055,11 @@ def deformable_feedback(trackers: Iterable[DeformableTracker]) -> tuple[np.ndarr
         return np.zeros(0, np.uint32), np.zeros((0, 3)), np.zeros(0, np.uint8)
     return (np.concatenate(ids).astype(np.uint32), np.concatenate(P).reshape(-1, 3),
             np.concatenate(flags).astype(np.uint8))
+
+
+def _signed_angle(a: Any) -> Any:
+    """Angles (rad, scalar or array) brought into [-pi, pi) by whole turns."""
+    return (a + np.pi) % (2 * np.pi) - np.pi
 
 
 def _wrap(a: float, lo: float, hi: float) -> float:
