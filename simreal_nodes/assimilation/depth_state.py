@@ -116,16 +116,71 @@ def _rho(r: Array, c: float) -> Array:
 
 class _Problem:
     """The fit's residuals over the measured points ``q`` (object frame). The association of a state (the samples
-    placed, their KD-tree, each point's nearest sample) is kept for the last few states asked for: Gauss-Newton
-    asks for the residuals at a trial state, then for their Jacobian at the same state once the trial is taken, and
-    the association (a KD-tree over the samples, most of the cost) is the same both times."""
+    placed, each point's nearest sample) is kept for the last few states asked for: Gauss-Newton asks for the
+    residuals at a trial state, then for their Jacobian at the same state once the trial is taken.
+
+    The nearest samples come from a KD-tree over the samples at an earlier placement, kept while no sample has moved
+    half the sample ``spacing`` from it (most of a solve's steps, which move the surface by fractions of a
+    millimetre).
+    The answer is the one a tree over the samples where they are now would give: a sample that has moved by at most
+    delta is now no nearer to a point than its distance there less delta (:meth:`_nearest`)."""
 
     _KEEP = 4
+    _CANDIDATES = 8  # each point's nearest samples at the tree's placement, which decide most points
 
     def __init__(self, surf: _Surface, q: Array, cfg: DepthStateConfig, hold: Array | None = None) -> None:
         self.s, self.q, self.cfg = surf, q, cfg
         self.hold = hold  # a unit direction (object frame) along which the translation stays as given
         self._assoc: dict[bytes, tuple[Array, Array, NDArray[np.int64], NDArray[np.bool_]]] = {}
+        # the tree's placement: its samples, the tree, each point's candidates and the distance beyond which lie
+        # the samples that are not its candidates (both filled in when the tree is first reused)
+        self._tree: tuple[Array, cKDTree, NDArray[np.int64] | None, Array | None, Array | None] | None = None
+
+    def _nearest(self, y: Array) -> tuple[Array, NDArray[np.int64]]:
+        """Each measured point's distance to its nearest sample among ``y`` and that sample's index, as
+        ``cKDTree(y).query(q, distance_upper_bound=radius)`` answers it (inf and len(y) where no sample is nearer
+        than the radius). With the samples moved by at most delta since the kept tree's placement, a sample that was
+        not among a point's candidates (all at least d_k away there) is now at least d_k - delta away. So where the
+        nearest candidate now is nearer than that, or the radius is, the candidates decide; the other points search
+        the kept tree for every sample that was within their nearest candidate's distance (or the radius) plus
+        delta."""
+        R = self.cfg.radius
+        if self._tree is not None:
+            y0, tree, K, d1, dk = self._tree
+            delta = float(np.sqrt(np.max(np.einsum("ij,ij->i", y - y0, y - y0))))
+            if delta < 0.5 * self.cfg.spacing:
+                if K is None or d1 is None or dk is None:  # the tree is reused: each point's candidates there
+                    bound = R + 2 * self.cfg.spacing
+                    dK, K = cast(tuple[Array, NDArray[np.int64]],
+                                 tree.query(self.q, k=self._CANDIDATES, distance_upper_bound=bound))
+                    K = np.minimum(K, len(y0) - 1)  # a missing candidate (inf) stands in as any sample
+                    d1, dk = np.minimum(dK[:, 0], bound), np.minimum(dK[:, -1], bound)
+                    self._tree = (y0, tree, K, d1, dk)
+                dist, k = np.full(len(self.q), np.inf), np.full(len(self.q), len(y), np.int64)
+                # a point with no sample within the radius plus delta there has none within the radius now
+                cand = np.flatnonzero(d1 - delta - 1e-9 < R)  # (1 nm for rounding)
+                Kc = K[cand]
+                D = np.sqrt(np.sum((self.q[cand, None, :] - y[Kc]) ** 2, axis=2))
+                j = np.argmin(D, axis=1)
+                dc, kc = D[np.arange(len(cand)), j], Kc[np.arange(len(cand)), j]
+                beyond = dk[cand] - delta - 1e-9  # every other sample is at least this far now
+                open_ = ~((dc < beyond) | (beyond >= R))
+                if np.any(open_):
+                    io = np.flatnonzero(open_)
+                    balls = tree.query_ball_point(self.q[cand[io]], np.minimum(dc[io], R) + delta + 1e-9)
+                    for i, near in zip(io, balls, strict=True):
+                        if len(near):
+                            near = np.asarray(near, np.int64)
+                            d = np.sqrt(np.sum((self.q[cand[i]] - y[near]) ** 2, axis=1))
+                            m = int(np.argmin(d))
+                            dc[i], kc[i] = d[m], near[m]
+                dist[cand], k[cand] = dc, kc
+                out = dist >= R
+                dist[out], k[out] = np.inf, len(y)
+                return dist, k
+        tree = cKDTree(y, balanced_tree=False, compact_nodes=False)  # unbalanced: half the build time
+        self._tree = (y, tree, None, None, None)
+        return cast(tuple[Array, NDArray[np.int64]], tree.query(self.q, distance_upper_bound=R))
 
     def _associate(self, mu: Array | None, rigid: Array) -> tuple[Array, Array, NDArray[np.int64], NDArray[np.bool_]]:
         """Samples placed at (mu, rigid), their normals, each measured point's nearest sample and whether it lies
@@ -135,10 +190,7 @@ class _Problem:
         if hit is not None:
             return hit
         y, n = self.s.place(mu, rigid)
-        # an unbalanced tree builds in half the time and answers the same nearest neighbours
-        dist, k = cast(tuple[Array, NDArray[np.int64]],
-                       cKDTree(y, balanced_tree=False, compact_nodes=False).query(
-                           self.q, distance_upper_bound=self.cfg.radius))
+        dist, k = self._nearest(y)
         out = (y, n, k, np.isfinite(dist))
         if len(self._assoc) >= self._KEEP:
             self._assoc.pop(next(iter(self._assoc)))

@@ -94,6 +94,38 @@ def test_the_fit_jacobian_matches_finite_differences(loaded):
         np.testing.assert_allclose(J[same, j], fd, rtol=1e-4, atol=1e-6 * np.abs(fd).max() + 1e-12)
 
 
+def test_the_kept_tree_finds_the_nearest_samples_a_new_tree_would(loaded):
+    """The association reuses the KD-tree of an earlier placement while the samples have moved less than half the
+    sample spacing (``_Problem._nearest``). Along a path of states that moves them by up to a few millimetres (the
+    steps of a solve), each point's nearest sample and whether it lies within the radius are those of a tree built
+    over the samples where they are, for every point: the measured points and points up to 2 cm off the surface."""
+    from scipy.spatial import cKDTree
+
+    s = loaded
+    cfg = DepthStateConfig()
+    cloud = depth_cloud(s["seq"]["cam"], s["seq"]["depth"][0], s["seq"]["T"][0], stride=1)
+    q = crop(cloud, s["model"], _off(s["truth"]), cfg)
+    rng = np.random.default_rng(0)
+    q = np.r_[q, q[rng.integers(0, len(q), 2000)] + rng.uniform(-0.02, 0.02, (2000, 3))]
+    surf = _Surface(s["model"], cfg, None)
+    prob = _Problem(surf, q, cfg)
+    m, rigid = 0.5 * (s["lo"] + s["hi"]), np.zeros(N_RIGID)
+    span = s["hi"] - s["lo"]
+    reused = 0
+    for i in range(40):  # a walk of small steps, a jump of a few millimetres every tenth
+        size = 10.0 if i % 10 == 9 else 1.0
+        rigid = rigid + size * np.r_[rng.normal(0.0, 1e-4, 3), rng.normal(0.0, np.deg2rad(0.01))]
+        m = np.clip(m + size * rng.normal(0.0, 0.001, len(m)) * span, s["lo"], s["hi"])
+        y, _ = surf.place(m, rigid)
+        dist, k = prob._nearest(y)
+        reused += prob._tree is not None and prob._tree[0] is not y
+        d_ref, k_ref = cKDTree(y).query(q, distance_upper_bound=cfg.radius)
+        np.testing.assert_array_equal(k, k_ref)
+        np.testing.assert_array_equal(np.isfinite(dist), np.isfinite(d_ref))
+        np.testing.assert_allclose(dist[np.isfinite(dist)], d_ref[np.isfinite(d_ref)], rtol=0, atol=1e-12)
+    assert reused > 20  # the kept tree answered most of them
+
+
 def test_an_unloaded_object_reads_at_rest(unloaded):
     s = unloaded
     assert not np.isfinite(s["s"])  # no load in the first frames
