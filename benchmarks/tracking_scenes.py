@@ -197,7 +197,8 @@ each scene's model error beside its result.
   second view, on which the tracker's handling of alpha_z was fixed: 0.21 deg (0.19), alpha_z 0.43 deg (1.82; the
   images' own: 0.53). The lever moved by up to 0.02 deg from stop 71 with the same settings: the depth fit's sped-up
   code differs in the last bits of a displacement, and these scenes amplify that much (`docs/family.md`, stop 72). The
-  tracker's time per frame: 37-45 ms (stop 71: 68-81; the images alone 9-16 ms). With
+  tracker's time per frame: 31-35 ms (stop 73: the depth fit's search trees kept while its samples move little, the
+  same fits to the bit; stop 72: 37-45 ms; stop 71: 68-81; the images alone 9-16 ms). With
   the knob `outlier_refits: 3` (commit 319a533's table, the images alone) the three read 1.43, 0.15 and 0.17
   deg (alpha_z 0.45, 0.12, 0.42). Before stop 65 (the map then culled the object points linked at rest) the own view
   read 0.37 deg. With the Levenberg-Marquardt solver before stop 34 the three views read 0.26, 0.12 and 0.27 deg: its

@@ -97,10 +97,13 @@ class TrackerConfig:
     reference: str = "depth"
     depth_state: DepthStateConfig = field(default_factory=DepthStateConfig)
     # measurements 'map_points' with a depth image (RGB-D): the tracked state is read from every frame's depth
-    # (:class:`.depth_state.DepthFollower`; the boot's tracker: 9 -> 62 ms a frame on 2 cores), the image fit
+    # (:class:`.depth_state.DepthFollower`; the boot's tracker: 9 -> 58 ms a frame on 2 cores), the image fit
     # giving its start, the constants (alpha_z) and whether a deformation is seen. A knob: the boot's scene files
     # set it (docs/family.md, stop 71)
     depth_fit: bool = False
+    # with depth_fit: the depth image's pixels taken, one in depth_stride along each axis (2: a quarter of them). The
+    # fit's time goes with the points it matches; fewer points, a noisier fit (docs/family.md, stop 73)
+    depth_stride: int = 2
     # with depth_fit on a body of revolution about its z axis (the boot): alpha_z reported with the depth fit's turn
     # about that axis, taken from the frames whose depth holds it (DeformableTracker.depth_turn)
     depth_turn: bool = False
@@ -548,7 +551,7 @@ class DeformableTracker:
             return
         n_mu = len(self.model.axes)
         T = self.T_map_obj @ G.make_T(self.layout.state(res.x).rotation())
-        cloud = depth_cloud(self.cam, depth, T_wc, stride=2)
+        cloud = depth_cloud(self.cam, depth, T_wc, stride=self.cfg.depth_stride)
         fit = self.depth.fit(cloud, T, lo[:n_mu], hi[:n_mu], res.x[:n_mu])
         est.debug["depth"] = fit.reason
         if (self.cfg.depth_turn and self.rigid_z and self.depth.turns_about_axis and fit.mu is not None
@@ -1021,6 +1024,7 @@ def tracker_config(obj: dict[str, Any], **overrides: Any) -> TrackerConfig:
                         min_measurements=t["min_measurements"], max_points=t["points"], anchor=t["anchor"],
                         object_shift_m=t["object_shift_m"], rest_frames=t["rest_frames"],
                         reference=t["reference"], depth_fit=t["depth_fit"], depth_turn=t["depth_turn"],
+                        depth_stride=t["depth_stride"],
                         dense=DenseSettings(step_px=t["dense_step_px"], rigid=t["dense_rigid"],
                                           static_ring_px=t["dense_surroundings_px"], refine=t["dense_refine"],
                                           camera_first=t["dense_camera_first"],

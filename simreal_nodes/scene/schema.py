@@ -156,11 +156,15 @@ TRACKING = Record({
                       "taken to be the rest shape", default="depth"),
     "depth_fit": Bool("measurements 'map_points' with a depth image (RGB-D or stereo): read the tracked parameters "
                       "from every frame's depth (the model's deformed surface fitted to it, warm-started from the "
-                      "image fit; about 62 ms a frame on the joint boot, 2 cores); the images still give the "
+                      "image fit; about 58 ms a frame on the joint boot, 2 cores); the images still give the "
                       "constants (alpha_z) and whether a deformation is seen", default=False),
+    "depth_stride": Number("with depth_fit: one depth pixel in this many along each axis is matched to the model "
+                           "(2: a quarter of the pixels); larger is faster and matches fewer points", integer=True,
+                           lo=1, hi=8, default=2),
     "depth_turn": Bool("with depth_fit, on a body of revolution about its z axis (the joint boot): alpha_z reported "
-                       "with the depth fit's turn about that axis, as of the last frame whose depth held it (the "
-                       "bent shape holds the turn at least twice as well as the round rest shape)", default=False),
+                       "with the depth fit's turn about that axis: the median over the frames whose depth held it "
+                       "(the last 300; the bent shape holds the turn at least twice as well as the round rest "
+                       "shape)", default=False),
     "huber_px": Number("Huber threshold of the robust loss, pixels", lo=0, lo_open=True, default=2.0),
     "modes": Number("number of PGD modes used (0 = all)", integer=True, lo=0, default=0),
     "max_iterations": Number("Levenberg-Marquardt iterations per frame", integer=True, lo=1, hi=500, default=20),

@@ -148,6 +148,17 @@ def test_depth_turn_reaches_the_tracker_and_needs_depth_fit():
         validate_scene(doc, "boot", ".")
 
 
+def test_depth_stride_reaches_the_tracker_within_its_range():
+    doc = _doc()
+    assert tracker_config(validate_scene(doc, "boot", ".")["objects"][0]).depth_stride == 2
+    doc["objects"][0]["tracking"]["depth_stride"] = 3
+    assert tracker_config(validate_scene(doc, "boot", ".")["objects"][0]).depth_stride == 3
+    for bad in (0, 9, 2.5):
+        doc["objects"][0]["tracking"]["depth_stride"] = bad
+        with pytest.raises(SceneError, match=r"objects\[0\]\.tracking\.depth_stride"):
+            validate_scene(doc, "boot", ".")
+
+
 @pytest.mark.parametrize("shape, fill, why", [((240, 320), 0.6, "is not the camera's 480 x 640"),
                                               ((480, 640), np.nan, "only 0 depth points on the object")])
 def test_a_depth_image_that_cannot_be_read_leaves_the_image_fit(boot, shape, fill, why):
