@@ -121,9 +121,8 @@ class _Problem:
 
     The nearest samples come from a KD-tree over the samples at an earlier placement, kept while no sample has moved
     half the sample ``spacing`` from it (most of a solve's steps, which move the surface by fractions of a
-    millimetre).
-    The answer is the one a tree over the samples where they are now would give: a sample that has moved by at most
-    delta is now no nearer to a point than its distance there less delta (:meth:`_nearest`)."""
+    millimetre). The answer is the one a tree over the samples where they are now would give: a sample that has
+    moved by at most delta is now no nearer to a point than its distance there less delta (:meth:`_nearest`)."""
 
     _KEEP = 4
     _CANDIDATES = 8  # each point's nearest samples at the tree's placement, which decide most points
