@@ -346,3 +346,41 @@ def test_a_registration_repeats_to_the_bit(scene3):
     a, b = (register_rgbd(s["cloud"].copy(), s["model"], s["guess"], s["cams"], replace(CFG, polish=0.004))
             for _ in range(2))
     assert np.array_equal(a.T_map_obj, b.T_map_obj) and a.fitness == b.fitness
+
+
+def _thin_plate_scene(rng: np.random.Generator, L: float = 0.5, W: float = 0.33, h: float = 0.036):
+    """A plate L x W x h (object frame: a corner of its underside at the origin) on a block 12 cm above a floor,
+    sampled as depth would see it from three cameras in front and above (top, front and free end, the block's
+    faces, the floor), 0.5 mm of noise; the plate's true pose in the map and the cameras' positions."""
+    from types import SimpleNamespace
+
+    from simreal_nodes.synth.world import box
+
+    V, F = box((L, W, h), (L / 2, W / 2, h / 2))
+    plate = SimpleNamespace(points=V, surface=F)
+    T_true = G.make_T(G.rot_axis("z", np.deg2rad(20.0)), [0.3, -0.2, 0.12])
+
+    def face(n, x, y, z):  # n points uniformly on an axis-aligned rectangle: x, y, z are (lo, hi) or a value
+        return np.column_stack([rng.uniform(*v, n) if isinstance(v, tuple) else np.full(n, v) for v in (x, y, z)])
+
+    P_obj = np.vstack([face(6000, (0, L), (0, W), h), face(1500, (0, L), 0.0, (0, h)), face(1000, L, (0, W), (0, h)),
+                       face(800, (-0.06, 0), (-0.02, W + 0.02), 0.0), face(1500, (-0.06, 0), -0.02, (-0.12, 0)),
+                       face(12000, (-0.4, L + 0.4), (-0.5, W + 0.1), -0.12)])
+    P_obj += rng.normal(0.0, 0.0005, P_obj.shape)
+    cams_obj = np.array([[L / 2 + dx, -0.8, 0.7] for dx in (-0.3, 0.0, 0.3)])
+    return plate, G.transform(T_true, P_obj), T_true, G.transform(T_true, cams_obj)
+
+
+def test_a_thin_plate_guessed_too_high_is_not_placed_on_its_own_top_face():
+    """With every model face a candidate for each measured point, a plate guessed more than half its thickness too
+    high settles with the points of its top face on its underside (placed a thickness above the object, covering
+    none of its faces: refused). The coarse stage run again with the points paired only with the faces turned to the
+    cameras places it."""
+    plate, cloud, T_true, cams = _thin_plate_scene(np.random.default_rng(3))
+    guess = T_true @ G.make_T(G.rot_axis("z", np.deg2rad(4.0)), [0.01, 0.015, 0.072])
+    with pytest.raises(RegistrationError, match="refused") as e:
+        register_rgbd(cloud, plate, guess, cams, RegistrationConfig(coarse_gain=0.0))
+    assert _error(e.value.args[1].T_map_obj, T_true)[0] > 30.0  # a thickness (36 mm) too high
+    reg = register_rgbd(cloud, plate, guess, cams)
+    mm, deg = _error(reg.T_map_obj, T_true)
+    assert mm < 2.0 and deg < 0.3 and reg.fitness > 0.9
