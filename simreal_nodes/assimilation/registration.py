@@ -562,14 +562,14 @@ def register_rgbd(cloud: np.ndarray, model: ReducedModel, guess: np.ndarray, cam
 
     best = coarse_fits(tree, N)
     # the same starts again, each measured point paired only with model samples turned to some camera at the guess
-    # (:func:`_turned_to`): with every face a candidate, the points on a thin object's top face pair with its
-    # underside once the guess sits more than half the thickness too high, and ICP settles there, a thickness
-    # above the object (development plate 13, 36 mm thick, guessed 72 mm high: 0 % of its faces covered, never
-    # placed). Run only where the first pass's best fit covers under ``min_fitness`` of the faces (a fit that covers
-    # more is in the object's basin: its time is not spent), and taken where its cover beats the first by
-    # ``cfg.coarse_gain``: a fit in the same basin stands as it was
+    # (:func:`_facing`, within about 105 degrees of their normal): with every face a candidate, the points on a thin
+    # object's top face pair with its underside once the guess sits more than half the thickness too high, and ICP
+    # settles there, a thickness above the object (development plate 13, 36 mm thick, guessed 72 mm high: 0 % of its
+    # faces covered, never placed). Run only where the first pass's best fit covers under ``min_fitness`` of the faces
+    # (a fit that covers more is in the object's basin: its time is not spent), and taken where its cover beats the
+    # first by ``cfg.coarse_gain``: a fit in the same basin stands as it was
     if cfg.coarse_gain > 0 and (best is None or best[0] < cfg.min_fitness):
-        seen = _turned_to(S, N, (cams.centres - guess[:3, 3]) @ guess[:3, :3])
+        seen = _facing(S, N, (cams.centres - guess[:3, 3]) @ guess[:3, :3], cos_min=-0.25)
         other = coarse_fits(cKDTree(S[seen]), N[seen]) if 100 <= seen.sum() < len(S) else None
         if other is not None and (best is None or other[0] > best[0] + cfg.coarse_gain):
             best = other
@@ -878,23 +878,16 @@ def _n_samples(model: ReducedModel, spacing: float) -> int:
     return int(np.clip(area / spacing ** 2, 5000, 100_000))
 
 
-def _facing(S: np.ndarray, N: np.ndarray, cams_obj: np.ndarray) -> np.ndarray:
-    """Which model samples S (normals N) face at least one camera (positions in the object frame)."""
+def _facing(S: np.ndarray, N: np.ndarray, cams_obj: np.ndarray, cos_min: float = 0.0) -> np.ndarray:
+    """Which model samples S (normals N) face at least one camera (positions in the object frame). ``cos_min`` < 0
+    counts a camera up to arccos(cos_min) from the normal too: room for a pose turned by some degrees (-0.25: about
+    105 degrees, a guess ten degrees off; a face seen edge-on at the guess may face the camera in truth)."""
     facing = np.zeros(len(S), bool)
     for c in cams_obj:
-        facing |= np.einsum("ij,ij->i", N, c - S) > 0
-    return facing
-
-
-def _turned_to(S: np.ndarray, N: np.ndarray, cams_obj: np.ndarray, cos_min: float = -0.25) -> np.ndarray:
-    """Which model samples S (normals N) some camera (positions in the object frame) sees at less than about 105
-    degrees from their normal: :func:`_facing` with room for a guess turned by ten degrees or so (a face seen
-    edge-on at the guess may face the camera in truth)."""
-    out = np.zeros(len(S), bool)
-    for c in cams_obj:
         v = c - S
-        out |= np.einsum("ij,ij->i", N, v) > cos_min * np.linalg.norm(v, axis=1)
-    return out
+        dots = np.einsum("ij,ij->i", N, v)
+        facing |= dots > (cos_min * np.linalg.norm(v, axis=1) if cos_min else 0.0)
+    return facing
 
 
 def _noise(P: np.ndarray, T: np.ndarray, S: np.ndarray, N: np.ndarray, band: float) -> float:
