@@ -3,6 +3,7 @@ subscribe to, and what the nodes make of it.
 
     ./run bench fuzz_graph                                  # 25 000 messages into each of four graphs
     python -m benchmarks.fuzz_graph --messages 2000 --seed 1 --graphs rgbd
+    python -m benchmarks.fuzz_graph --messages 20000 --graphs rgbd --memory-detail --name fuzz_graph_rgbd_20k_memory
 
 Graphs (each from a scene file and a short bag made here, launched as `simreal launch` would, with **no respawn**
 and no standby, so that a node that dies stays dead and is counted):
@@ -35,10 +36,12 @@ import argparse
 import array
 import contextlib
 import math
+import os
 import re
 import tempfile
 import time
 from collections import Counter, defaultdict
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -315,8 +318,10 @@ def prepare(graph: str, d: Path) -> tuple[Path, Path]:
 
 
 def fuzz_graph(graph: str, n_messages: int, seed: int, work: Path, valid_every: int = 50, rate_hz: float = 600.0,
-               echo=print) -> dict:
-    """Launch one graph, fuzz every topic its nodes subscribe to, and account for what happened."""
+               echo=print, memory_detail: bool = False) -> dict:
+    """Launch one graph, fuzz every topic its nodes subscribe to, and account for what happened; with
+    ``memory_detail`` the nodes run under the memory probe (``benchmarks/memprobe``: tracemalloc in every node, slower)
+    and each RSS sample also splits the nodes' memory into Python's and the C allocator's."""
     import psutil
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
@@ -338,6 +343,12 @@ def fuzz_graph(graph: str, n_messages: int, seed: int, work: Path, valid_every: 
     names = [n.name for n in nodes]
     lines: list[str] = []
     launcher = Launcher(nodes, respawn=0, standby=False, echo=lines.append, log_dir=work / f"log-{graph}")
+    probe_dir = work / f"mem-{graph}"
+    if memory_detail:
+        probe_dir.mkdir()
+        here = str(Path(__file__).resolve().parent / "memprobe")
+        launcher.env = launcher.env | {"SIMREAL_MEMPROBE": str(probe_dir), "PYTHONPATH": os.pathsep.join(
+            x for x in (here, launcher.env.get("PYTHONPATH", "")) if x)}
     by_stamp: dict[int, dict[str, bytes]] = defaultdict(dict)  # the bag's messages (raw CDR) per header stamp
     for m in bags.read_bag(bag):
         header = getattr(deserialize_message(m.raw, message_class(m.msgtype)), "header", None)
@@ -393,6 +404,9 @@ def fuzz_graph(graph: str, n_messages: int, seed: int, work: Path, valid_every: 
         capturing = False
         rss0 = node_rss(launcher, psutil)
         rss_series: list[tuple[int, dict[str, float]]] = [(0, rss0)]
+        mem_series: list[tuple[int, dict[str, dict]]] = []
+        if memory_detail:
+            mem_series.append((0, memory_probe(launcher, probe_dir, lambda: spin_for(ex, 1.0))))
         done0 = {n: reports[n][""] for n in names}
         topics = sorted(pubs)
         sent: Counter = Counter()
@@ -424,6 +438,8 @@ def fuzz_graph(graph: str, n_messages: int, seed: int, work: Path, valid_every: 
                 spin_for(ex, lag)
             if (i + 1) % max(n_messages // 5, 1) == 0:
                 rss_series.append((i + 1, node_rss(launcher, psutil)))
+                if memory_detail:
+                    mem_series.append((i + 1, memory_probe(launcher, probe_dir, lambda: spin_for(ex, 1.0))))
                 echo(f"[fuzz] {graph}: {i + 1}/{n_messages}; alive: {launcher.alive()}")
         fuzz_s = time.monotonic() - t0
         spin_for(ex, 3.0)
@@ -436,6 +452,8 @@ def fuzz_graph(graph: str, n_messages: int, seed: int, work: Path, valid_every: 
         alive = launcher.alive()
         rss1 = node_rss(launcher, psutil)
         out.update(fuzz_s=fuzz_s, sent=dict(sent), kinds=dict(kinds), topics=topics, rss_series=rss_series)
+        if memory_detail:
+            out["mem_series"] = mem_series
         out["per_node"] = {}
         for n in names:
             why = reports[n]
@@ -483,6 +501,29 @@ def subscribed_topics(node, names: list[str]) -> dict[str, tuple[str, object]]:
     return out
 
 
+def memory_probe(launcher, probe_dir: Path, wait: Callable[[], None]) -> dict[str, dict]:
+    """Each live node's memory as the probe in it reports it (``benchmarks/memprobe/sitecustomize.py``): SIGUSR1 to
+    the nodes whose probe said it is in place, ``wait()`` (the fuzzer spins meanwhile), then each one's newest line.
+    A node that did not answer in time is left out."""
+    import json
+    import signal
+
+    asked = {}
+    for p in launcher.procs:
+        if p.popen is not None and p.popen.poll() is None and (probe_dir / f"{p.popen.pid}.jsonl").is_file():
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(p.popen.pid, signal.SIGUSR1)
+                asked[p.spec.name] = p.popen.pid
+    wait()
+    out = {}
+    for name, pid in asked.items():
+        lines = (probe_dir / f"{pid}.jsonl").read_text().splitlines()
+        rec = json.loads(lines[-1]) if lines else {}
+        if rec.get("event") == "probe":
+            out[name] = rec
+    return out
+
+
 def node_rss(launcher, psutil) -> dict[str, float]:
     out = {}
     for p in launcher.procs:
@@ -490,6 +531,20 @@ def node_rss(launcher, psutil) -> dict[str, float]:
             with contextlib.suppress(psutil.Error):
                 out[p.spec.name] = psutil.Process(p.popen.pid).memory_info().rss / 2 ** 20
     return out
+
+
+def memory_cell(series: list, node: str) -> str:
+    """The probe's first and last reading of ``node``: Python's allocations (tracemalloc), the C allocator's bytes in
+    use (Python's numpy buffers among them) and its free bytes, in MB."""
+    recs = [m[node] for _, m in series if node in m]
+    if not recs:
+        return ""
+
+    def one(r: dict) -> str:
+        return (f"{r['python_mb']:.0f} / {r.get('malloc_in_use_mb', math.nan):.0f} / "
+                f"{r.get('malloc_free_mb', math.nan):.0f}")
+
+    return f"{one(recs[0])} -> {one(recs[-1])}"
 
 
 def main() -> None:
@@ -500,6 +555,8 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--graphs", default=",".join(GRAPHS), help=f"comma-separated, of {', '.join(GRAPHS)}")
     ap.add_argument("--report", action="store_true", help="rewrite table and plot from the results JSON")
+    ap.add_argument("--memory-detail", action="store_true",
+                    help="the nodes under the memory probe (benchmarks/memprobe): Python's and the C allocator's share")
     ap.add_argument("--name", default="fuzz_graph",
                     help="results name (benchmarks/results/NAME.md): a longer run beside the default one")
     a = ap.parse_args()
@@ -509,7 +566,7 @@ def main() -> None:
         runs = []
         with tempfile.TemporaryDirectory() as d:
             for g in a.graphs.split(","):
-                r = fuzz_graph(g, a.messages, a.seed, Path(d))
+                r = fuzz_graph(g, a.messages, a.seed, Path(d), memory_detail=a.memory_detail)
                 r["messages"] = a.messages
                 runs.append(r)
                 print(json.dumps({k: v for k, v in r.items() if k != "log_tail"})[:3000], flush=True)
@@ -522,13 +579,17 @@ def main() -> None:
                          "reasons": len(s["rejected"]), "done_during": s["done_during_fuzz"],
                          "hang": "no" if s["done_after_fuzz"] > 0 else "YES",
                          "rss": " -> ".join(f"{x.get(n, math.nan):.0f}" for _, x in r.get("rss_series", []))
-                         or f"{s['rss_mb_before']:.0f} -> {s['rss_mb_after']:.0f}"})
+                         or f"{s['rss_mb_before']:.0f} -> {s['rss_mb_after']:.0f}",
+                         "memory": memory_cell(r.get("mem_series", []), n)})
     cols = [("graph", "graph", "{}"), ("node", "node", "{}"), ("inputs", "hostile messages into the graph", "{}"),
             ("exits", "node exits (crashes)", "{}"), ("unexpected", "unexpected exceptions (caught)", "{}"),
             ("rejected", "frames rejected with a reason", "{}"), ("reasons", "distinct reasons", "{}"),
             ("done_during", "frames finished during the fuzz", "{}"),
             ("hang", "hang (no valid frame out after)", "{}"),
             ("rss", "RSS MB: before, then after each fifth of the messages", "{}")]
+    if any(r.get("mem_series") for r in runs):
+        cols.append(("memory", "MB before -> after (--memory-detail): Python's / C allocator's in use / its free",
+                     "{}"))
     lines = []
     for r in runs:
         lines.append(f"\n**{r['graph']}** ({', '.join(r['nodes'])}): {sum(r['sent'].values())} messages in "
@@ -539,8 +600,15 @@ def main() -> None:
             for w, c in sorted(s["rejected"].items(), key=lambda x: -x[1])[:12]:
                 lines.append(f"- {n}, rejected ({c}x): {w[:200]}")
     n_msg = runs[0].get("messages", a.messages) if runs else a.messages
+    detail = any(r.get("mem_series") for r in runs)
     args = "" if a.name == "fuzz_graph" else \
-        f" --messages {n_msg} --graphs {','.join(r['graph'] for r in runs)} --name {a.name}"
+        f" --messages {n_msg} --graphs {','.join(r['graph'] for r in runs)}" + (" --memory-detail" if detail else "") \
+        + f" --name {a.name}"
+    memory_note = (" The last column (`--memory-detail`): each node under the memory probe of `benchmarks/memprobe` "
+                   "(tracemalloc in the node, which slows it), before the fuzz and after it: what Python holds "
+                   "(numpy's buffers included), what glibc's allocator has handed out and not had back (Python's "
+                   "buffers among it), and what it holds free in its arenas. In use less Python is at least what "
+                   "native code holds (the DDS, rclpy's C layer, OpenCV)." if detail else "")
     save(a.name, rows, cols, "Hostile messages into the live node graph",
          f"`python -m benchmarks.fuzz_graph{args}` (see its docstring): per graph, seeded hostile messages on every "
          "topic "
@@ -549,7 +617,7 @@ def main() -> None:
          "next, so not every message reaches its callback: the frames rejected and finished are what the nodes "
          "handled. 'unexpected': an exception the node's guard caught (an input that should have met a clear "
          "rejection); 'hang': no valid frame finished by the node after the fuzz. The rejections' reasons, most "
-         "frequent first (12 per node at most):\n" + "\n".join(lines), None, extra={"runs": runs})
+         "frequent first (12 per node at most):" + memory_note + "\n" + "\n".join(lines), None, extra={"runs": runs})
 
 
 if __name__ == "__main__":
