@@ -1542,10 +1542,12 @@ failure has at most 0.0142 px (1000 0.0039, 1001 0.0124, 1008 0.0127, 1009 0.007
 development split (0.0120 px) is not sharp there: three failures lie just over it and two shelves under it read within 2
 % (1004 1.33 %, 1016 1.45 %). A 2 % reading of s_y on those shelves asks the images for a few hundredths of a pixel,
 about what digital image correlation resolves on a good speckle, and these are faint ones. What it suggests, not tried:
-flag s_y as barely observable where the estimate's own sensitivity is that small. Also measured and left (scratch):
-reading s_y from the depth image too, by fusing the depth follower's fit with the image fit's by their information, made
-plate 1's s_y worse (8.55 -> 11.5 %) and plate 15's better (3.53 -> 2.76 %, its s_x 0.48 -> 1.51 %); per frame the depth
-holds s_y less tightly than the images (1-sigma 4.4-7.8 % of the range against 2.0-3.0 %)."""
+flag s_y as barely observable where the estimate's own sensitivity is that small. Such a flag would leave the beams
+alone: the held-out beams' s moves the image by 0.022-0.99 px per 1 % of its range (`beam_observability.md`, `--object
+beam`), none under the plates' split. Also measured and left (scratch): reading s_y from the depth image too, by fusing
+the depth follower's fit with the image fit's by their information, made plate 1's s_y worse (8.55 -> 11.5 %) and plate
+15's better (3.53 -> 2.76 %, its s_x 0.48 -> 1.51 %); per frame the depth holds s_y less tightly than the images
+(1-sigma 4.4-7.8 % of the range against 2.0-3.0 %)."""
 
 
 def main() -> None:

@@ -1,6 +1,7 @@
 """How much of the image a plate's load position moves: the family plates' observability against their errors.
 
-    python -m benchmarks.plate_observability      # development plates 0-29 and held-out 1000-1019, about 2 minutes
+    python -m benchmarks.plate_observability                  # development plates 0-29, held-out 1000-1019 (2 min)
+    python -m benchmarks.plate_observability --object beam    # the held-out beams 1000-1099 against the plates' split
 
 No tracking runs here. For each family plate (its draw and its reduced model, as `benchmarks/family.py` builds them)
 and each of its load positions, the model's top-face displacement is evaluated at the position and at the position
@@ -31,13 +32,14 @@ RUNS = {"development": ("family_plate_dev_stop74", "family_plate_dev_10_29", "fa
 SEEDS = {"development": range(0, 30), "held-out": range(1000, 1020)}
 
 
-def sensitivity(seed: int) -> dict:
-    """The plate's per-parameter sensitivity (pixels per 1 % of the range; median over its positions, and the least)."""
+def sensitivity(seed: int, object: str = "plate") -> dict:
+    """The plate's (or beam's) per-parameter sensitivity (pixels per 1 % of the range; median over its positions, and
+    the least)."""
     from benchmarks import family as F
     from simreal_nodes.rom.model_file import load_model
     from simreal_nodes.synth import family as SF
 
-    sc = SF.family_scene(seed, object="plate")
+    sc = SF.family_scene(seed, object=object)
     d = sc.state["draw"]
     scene = F.build_spec_models(F.validate_scene(copy.deepcopy(sc.scene_yaml(sc)), sc.name, "."))
     model = load_model(scene["objects"][0]["model"], fields=["displacement"])
@@ -46,7 +48,9 @@ def sensitivity(seed: int) -> dict:
     field = model.deformation_view(top, None).field
     spans = np.array([a.range[1] - a.range[0] for a in model.axes])
     hi = np.array([a.range[1] for a in model.axes])
-    pos = [np.asarray(s, np.float64) for s in d.positions]
+    lo = np.array([a.range[0] for a in model.axes])
+    # a beam's drawn load may lie a little beyond the model's range: read where the range ends
+    pos = [np.clip(np.atleast_1d(np.asarray(s, np.float64)), lo, hi) for s in d.positions]
     u = [field.evaluate(s) for s in pos]
     px_per_m = d.peak_px / max(float(np.linalg.norm(v, axis=1).max()) for v in u)
     per = np.zeros((len(pos), len(spans)))
@@ -68,7 +72,38 @@ def errors(kind: str) -> dict[int, dict]:
     return out
 
 
+def beams(split: float) -> None:
+    """The held-out beams' s against the plates' development split (a check that a flag at it would leave the beams
+    alone; no split is chosen here)."""
+    rows = []
+    for r in json.loads((RESULTS / "family.json").read_text())["rows"]:
+        s = sensitivity(int(r["seed"]), "beam")
+        rows.append({"seed": int(r["seed"]), "support": s["support"], "peak_px": s["peak_px"],
+                     "contrast": s["contrast"], "s_sens": s["sens_px"][0], "s_sens_min": s["sens_min_px"][0],
+                     "s_err": float(r["median_err_pct"])})
+        print(rows[-1], flush=True)
+    under = [r for r in rows if r["s_sens"] < split]
+    sens = np.array([r["s_sens"] for r in rows])
+    notes = (f"Held-out beams 1000-1099 (`family.json`'s errors): s sensitivity {sens.min():.4f}-{sens.max():.4f} px "
+             f"per 1 % of the range (median {np.median(sens):.4f}); {len(under)} under the plates' development split "
+             f"({split:.4f} px, `plate_observability.md`)"
+             + (": " + ", ".join(f"{r['seed']} ({r['s_sens']:.4f} px, {r['s_err']:.2f} %)" for r in under)
+                if under else "") + ". Sensitivity as in `plate_observability.md` (the module docstring).")
+    cols = [("seed", "seed", "{}"), ("support", "support", "{}"), ("peak_px", "peak (px)", "{:.1f}"),
+            ("contrast", "texture contrast", "{:.2f}"), ("s_sens", "s: px per 1 % of range", "{:.4f}"),
+            ("s_sens_min", "least over its positions", "{:.4f}"), ("s_err", "median error (%)", "{:.2f}")]
+    save("beam_observability", rows, cols, "Family beams: how far the load position moves the image, and the error",
+         notes, extra={"split_px": split})
+
+
 def main() -> None:
+    import argparse
+
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--object", choices=("plate", "beam"), default="plate")
+    if ap.parse_args().object == "beam":
+        beams(float(json.loads((RESULTS / "plate_observability.json").read_text())["split_px"]))
+        return
     rows = []
     for kind, seeds in SEEDS.items():
         err = errors(kind)
