@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from benchmarks import memprobe
 from benchmarks.common import save
 
 TOPIC = "/simreal_bench/dds_pool/image"
@@ -71,8 +72,7 @@ def run_case(sizes: str, reliability: str, depth: int, work: Path) -> dict:
 
     probe = work / f"{sizes}-{reliability}-{depth}".replace(" ", "_")
     probe.mkdir()
-    env = ros_environment() | {"SIMREAL_MEMPROBE": str(probe), "PYTHONPATH": os.pathsep.join(
-        [str(Path(__file__).resolve().parent / "memprobe"), str(Path(__file__).resolve().parents[1])])}
+    env = memprobe.probe_env(ros_environment() | {"PYTHONPATH": str(Path(__file__).resolve().parents[1])}, probe)
     sub = subprocess.Popen([sys.executable, "-m", "benchmarks.dds_pool_memory", "--subscriber", reliability,
                             str(depth)], env=env, stdout=subprocess.PIPE, text=True)
     node = rclpy.create_node("dds_pool_publisher")
@@ -80,14 +80,13 @@ def run_case(sizes: str, reliability: str, depth: int, work: Path) -> dict:
     readings: list[dict] = []
 
     def read() -> None:
-        os.kill(sub.pid, signal.SIGUSR1)
+        memprobe.ask(sub.pid)
         time.sleep(0.5)
-        lines = (probe / f"{sub.pid}.jsonl").read_text().splitlines()
-        readings.append(json.loads(lines[-1]))
+        readings.append(memprobe.latest(sub.pid, probe))
 
     try:
         t_end = time.monotonic() + 60
-        while (pub.get_subscription_count() == 0 or not (probe / f"{sub.pid}.jsonl").is_file()) \
+        while (pub.get_subscription_count() == 0 or not memprobe.ready(sub.pid, probe)) \
                 and time.monotonic() < t_end:
             time.sleep(0.1)
         if pub.get_subscription_count() == 0:

@@ -36,7 +36,6 @@ import argparse
 import array
 import contextlib
 import math
-import os
 import re
 import tempfile
 import time
@@ -46,6 +45,7 @@ from pathlib import Path
 
 import numpy as np
 
+from benchmarks import memprobe
 from benchmarks.common import RESULTS, save
 
 GRAPHS = ("rgbd", "stereo", "probe", "markers")
@@ -346,9 +346,7 @@ def fuzz_graph(graph: str, n_messages: int, seed: int, work: Path, valid_every: 
     probe_dir = work / f"mem-{graph}"
     if memory_detail:
         probe_dir.mkdir()
-        here = str(Path(__file__).resolve().parent / "memprobe")
-        launcher.env = launcher.env | {"SIMREAL_MEMPROBE": str(probe_dir), "PYTHONPATH": os.pathsep.join(
-            x for x in (here, launcher.env.get("PYTHONPATH", "")) if x)}
+        launcher.env = memprobe.probe_env(launcher.env, probe_dir)
     by_stamp: dict[int, dict[str, bytes]] = defaultdict(dict)  # the bag's messages (raw CDR) per header stamp
     for m in bags.read_bag(bag):
         header = getattr(deserialize_message(m.raw, message_class(m.msgtype)), "header", None)
@@ -505,20 +503,16 @@ def memory_probe(launcher, probe_dir: Path, wait: Callable[[], None]) -> dict[st
     """Each live node's memory as the probe in it reports it (``benchmarks/memprobe/sitecustomize.py``): SIGUSR1 to
     the nodes whose probe said it is in place, ``wait()`` (the fuzzer spins meanwhile), then each one's newest line.
     A node that did not answer in time is left out."""
-    import json
-    import signal
-
     asked = {}
     for p in launcher.procs:
-        if p.popen is not None and p.popen.poll() is None and (probe_dir / f"{p.popen.pid}.jsonl").is_file():
+        if p.popen is not None and p.popen.poll() is None and memprobe.ready(p.popen.pid, probe_dir):
             with contextlib.suppress(ProcessLookupError):
-                os.kill(p.popen.pid, signal.SIGUSR1)
+                memprobe.ask(p.popen.pid)
                 asked[p.spec.name] = p.popen.pid
     wait()
     out = {}
     for name, pid in asked.items():
-        lines = (probe_dir / f"{pid}.jsonl").read_text().splitlines()
-        rec = json.loads(lines[-1]) if lines else {}
+        rec = memprobe.latest(pid, probe_dir)
         if rec.get("event") == "probe":
             out[name] = rec
     return out

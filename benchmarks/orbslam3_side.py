@@ -157,7 +157,11 @@ def _child(conn: Any, fn: Callable[..., dict], args: tuple) -> None:
     except Exception as e:  # noqa: BLE001 - the parent raises it with its message
         msg = [False, f"{type(e).__name__}: {e}"]
     try:
-        conn.send_bytes(json.dumps(msg, default=plain).encode())
+        try:
+            data = json.dumps(msg, default=plain)
+        except TypeError as e:  # a result that is not plain data: the parent raises with this
+            data = json.dumps([False, f"the result is not plain data: {e}"])
+        conn.send_bytes(data.encode())
     finally:
         conn.close()
 

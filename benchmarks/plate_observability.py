@@ -19,6 +19,7 @@ images barely hold s_y there. This table says by how much.
 
 from __future__ import annotations
 
+import argparse
 import copy
 import json
 
@@ -97,8 +98,6 @@ def beams(split: float) -> None:
 
 
 def main() -> None:
-    import argparse
-
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--object", choices=("plate", "beam"), default="plate")
     if ap.parse_args().object == "beam":
