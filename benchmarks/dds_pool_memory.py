@@ -8,8 +8,10 @@ the depth named, reliable as the nodes' camera inputs under a lossless replay, o
 probe of `benchmarks/memprobe` while this process publishes 8 000 images at 600 a second, either all of one size
 (320 x 240 x 3 bytes, the fuzz's camera) or of random sizes up to 3 MB (the fuzz's huge payloads). The probe reads the
 subscriber before, after each quarter and at the end: resident size, Python's allocations, the C allocator's bytes in
-use. The transport and discovery are the nodes' (`simreal_nodes.launch.ros_environment`: the shared-memory profile,
-this host only).
+use, and its CPU time (per message it received). The transport and discovery are the nodes'
+(`simreal_nodes.launch.ros_environment`: the shared-memory profile, this host only). The subscriber's history memory
+policy is rmw_fastrtps's own (PREALLOCATED_WITH_REALLOC: ``RMW_FASTRTPS_USE_QOS_FROM_XML=0``) or the project
+profile's DYNAMIC (``=1``); the publisher keeps rmw_fastrtps's own.
 """
 
 from __future__ import annotations
@@ -30,8 +32,14 @@ from benchmarks import memprobe
 from benchmarks.common import save
 
 TOPIC = "/simreal_bench/dds_pool/image"
-CASES = (("one size", "reliable", 10), ("random sizes", "reliable", 10), ("random sizes", "best effort", 10),
-         ("random sizes", "reliable", 1))
+# (image sizes, reliability, history depth, the reader's history memory policy)
+CASES = (("one size", "reliable", 10, "rmw default"), ("random sizes", "reliable", 10, "rmw default"),
+         ("random sizes", "best effort", 10, "rmw default"), ("random sizes", "reliable", 1, "rmw default"),
+         ("one size", "reliable", 10, "dynamic"), ("random sizes", "reliable", 10, "dynamic"),
+         ("random sizes", "best effort", 10, "dynamic"))
+# the reader's history memory policy -> RMW_FASTRTPS_USE_QOS_FROM_XML: 0, rmw_fastrtps's PREALLOCATED_WITH_REALLOC;
+# 1, the profile's (simreal_nodes/ros/fastdds_shm.xml: DYNAMIC)
+POLICY_ENV = {"rmw default": "0", "dynamic": "1"}
 MESSAGES = 8000
 MAX_BYTES = 3_000_000
 RATE_HZ = 600.0
@@ -64,15 +72,24 @@ def subscriber(reliability: str, depth: int) -> None:
     print(json.dumps({"received": count[0]}), flush=True)
 
 
-def run_case(sizes: str, reliability: str, depth: int, work: Path) -> dict:
+def cpu_s(pid: int) -> float:
+    """Process ``pid``'s CPU time so far (user + system), seconds."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rpartition(")")[2].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def run_case(sizes: str, reliability: str, depth: int, policy: str, work: Path, messages: int = MESSAGES) -> dict:
+    """One subscriber process under the probe, ``messages`` images published at RATE_HZ from this process (rclpy
+    already initialised in the nodes' environment): the row of the table."""
     import rclpy
     from sensor_msgs.msg import Image
 
     from simreal_nodes.launch import ros_environment
 
-    probe = work / f"{sizes}-{reliability}-{depth}".replace(" ", "_")
+    probe = work / f"{sizes}-{reliability}-{depth}-{policy}".replace(" ", "_")
     probe.mkdir()
-    env = memprobe.probe_env(ros_environment() | {"PYTHONPATH": str(Path(__file__).resolve().parents[1])}, probe)
+    env = memprobe.probe_env(ros_environment() | {"PYTHONPATH": str(Path(__file__).resolve().parents[1]),
+                                                  "RMW_FASTRTPS_USE_QOS_FROM_XML": POLICY_ENV[policy]}, probe)
     sub = subprocess.Popen([sys.executable, "-m", "benchmarks.dds_pool_memory", "--subscriber", reliability,
                             str(depth)], env=env, stdout=subprocess.PIPE, text=True)
     node = rclpy.create_node("dds_pool_publisher")
@@ -82,7 +99,7 @@ def run_case(sizes: str, reliability: str, depth: int, work: Path) -> dict:
     def read() -> None:
         memprobe.ask(sub.pid)
         time.sleep(0.5)
-        readings.append(memprobe.latest(sub.pid, probe))
+        readings.append(memprobe.latest(sub.pid, probe) | {"cpu_s": cpu_s(sub.pid)})
 
     try:
         t_end = time.monotonic() + 60
@@ -96,12 +113,12 @@ def run_case(sizes: str, reliability: str, depth: int, work: Path) -> dict:
         rng = np.random.default_rng(0)
         blob = rng.bytes(MAX_BYTES)
         t0 = time.monotonic()
-        for i in range(MESSAGES):
+        for i in range(messages):
             n = int(rng.integers(0, MAX_BYTES)) if sizes == "random sizes" else 320 * 240 * 3
             msg = Image(height=1, width=n, encoding="mono8", step=n)
             msg.data = blob[:n]
             pub.publish(msg)
-            if (i + 1) % (MESSAGES // 4) == 0:
+            if (i + 1) % max(messages // 4, 1) == 0:
                 read()
             lag = (i + 1) / RATE_HZ - (time.monotonic() - t0)
             if lag > 0:
@@ -114,7 +131,11 @@ def run_case(sizes: str, reliability: str, depth: int, work: Path) -> dict:
         node.destroy_node()
     received = next((json.loads(x)["received"] for x in out.splitlines() if x.startswith("{")), None)
     a, b = readings[0], readings[-1]
-    return {"sizes": sizes, "reliability": reliability, "depth": depth, "messages": MESSAGES, "received": received,
+    return {"sizes": sizes, "reliability": reliability, "depth": depth, "policy": policy, "messages": messages,
+            "received": received,
+            # the subscriber's CPU time from the first reading to the last, per message it received (its probe's
+            # readings are inside this window too: a few ms each)
+            "cpu_ms_per_message": 1e3 * (b["cpu_s"] - a["cpu_s"]) / received if received else float("nan"),
             "rss_before": a["rss_mb"], "rss_after": b["rss_mb"], "python_before": a["python_mb"],
             "python_after": b["python_mb"], "in_use_before": a["malloc_in_use_mb"],
             "in_use_after": b["malloc_in_use_mb"], "in_use_growth": b["malloc_in_use_mb"] - a["malloc_in_use_mb"],
@@ -137,13 +158,14 @@ def main() -> None:
     rows = []
     try:
         with tempfile.TemporaryDirectory() as d:
-            for sizes, reliability, depth in CASES:
-                rows.append(run_case(sizes, reliability, depth, Path(d)))
+            for sizes, reliability, depth, policy in CASES:
+                rows.append(run_case(sizes, reliability, depth, policy, Path(d)))
                 print(rows[-1], flush=True)
     finally:
         rclpy.shutdown()
     cols = [("sizes", "image sizes", "{}"), ("reliability", "reliability", "{}"), ("depth", "history depth", "{}"),
-            ("messages", "published", "{}"), ("received", "received", "{}"),
+            ("policy", "reader's history memory", "{}"), ("messages", "published", "{}"),
+            ("received", "received", "{}"), ("cpu_ms_per_message", "subscriber CPU per message (ms)", "{:.3f}"),
             ("rss_before", "RSS before (MB)", "{:.0f}"), ("rss_after", "RSS after (MB)", "{:.0f}"),
             ("python_before", "Python before (MB)", "{:.1f}"), ("python_after", "Python after (MB)", "{:.1f}"),
             ("in_use_series", "C allocator in use (MB): before, each quarter, after", "{}"),
@@ -152,8 +174,9 @@ def main() -> None:
              f"{MESSAGES} `sensor_msgs/Image` messages at {RATE_HZ:.0f} a second, of one size (230 400 bytes) or of "
              f"random sizes up to {MAX_BYTES / 1e6:.0f} MB; the subscriber's memory by the probe of "
              "`benchmarks/memprobe` (Python's allocations by tracemalloc, the C allocator's bytes in use by glibc's "
-             "mallinfo2). Python's own allocations do not move; what grows is native, and it stops growing once the "
-             "largest messages have been seen.")
+             "mallinfo2). Python's own allocations do not move. Under rmw_fastrtps's own policy what grows is native, "
+             "and it stops growing once the largest messages have been seen; under DYNAMIC each sample's buffer is "
+             "freed once taken.")
     save("dds_pool_memory", rows, cols, "A subscription alone: memory after large messages", notes)
 
 

@@ -63,6 +63,7 @@ def node_modules(pyproject: Path = PYPROJECT) -> dict[str, str]:
             if name.startswith(NODE_SCRIPT_PREFIX)}
 
 
+QOS_FROM_XML = "RMW_FASTRTPS_USE_QOS_FROM_XML"  # 1: rmw_fastrtps takes the history memory policies from the profile
 DISCOVERY_RANGE = "ROS_AUTOMATIC_DISCOVERY_RANGE"
 DISCOVERY_RANGES = ("LOCALHOST", "SUBNET", "SYSTEM_DEFAULT", "OFF")  # the values rmw accepts (ROS 2 Jazzy)
 
@@ -83,6 +84,11 @@ def ros_environment(base: dict | None = None, discovery_range: str | None = None
     elif not env.get(DISCOVERY_RANGE):
         env[DISCOVERY_RANGE] = "LOCALHOST"
     env.setdefault("FASTRTPS_DEFAULT_PROFILES_FILE", str(FASTDDS_PROFILE))
+    if env["FASTRTPS_DEFAULT_PROFILES_FILE"] == str(FASTDDS_PROFILE):
+        # the profile's history memory policies apply (DYNAMIC readers: a subscription does not keep (depth + 1)
+        # buffers as large as the largest message it has seen; benchmarks/results/dds_memory_policy.md); a user's
+        # own profile, or this variable set to 0, leaves rmw_fastrtps's own
+        env.setdefault(QOS_FROM_XML, "1")
     prefix = sys.prefix
     ament = env.get("AMENT_PREFIX_PATH", "")
     if prefix not in ament.split(os.pathsep):

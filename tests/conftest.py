@@ -15,6 +15,7 @@ SHARED_DATA = ROOT.parent / "shared" / "data"
 os.environ["ROS_DOMAIN_ID"] = os.environ.get("SIMREAL_TEST_DOMAIN_ID", str(random.Random(os.getpid()).randint(20, 100)))
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
 os.environ.setdefault("FASTRTPS_DEFAULT_PROFILES_FILE", str(ROOT / "simreal_nodes" / "ros" / "fastdds_shm.xml"))
+os.environ.setdefault("RMW_FASTRTPS_USE_QOS_FROM_XML", "1")  # as the nodes run (simreal_nodes.launch.ros_environment)
 os.environ.setdefault("MPLBACKEND", "Agg")
 
 

@@ -16,7 +16,7 @@ from rclpy.signals import SignalHandlerOptions
 
 from simreal_nodes.errors import BagError, SimrealError
 from simreal_nodes.io import bags
-from simreal_nodes.launch import DISCOVERY_RANGE, Launcher, ros_environment
+from simreal_nodes.launch import DISCOVERY_RANGE, QOS_FROM_XML, Launcher, ros_environment
 from simreal_nodes.ros.bagplay import Player, Recorder
 from simreal_nodes.scene.graph import image_topic, output_topics, required_nodes
 from simreal_nodes.scene.schema import build_spec_models, load_scene
@@ -41,7 +41,8 @@ def _share_node_environment() -> None:
     """This process's own node (player, recorder) uses the nodes' transport profile and discovery range: with
     another range it would not meet them, or would announce itself beyond this host."""
     env = ros_environment()
-    os.environ.update({k: env[k] for k in ("FASTRTPS_DEFAULT_PROFILES_FILE", DISCOVERY_RANGE)})
+    os.environ.update({k: env[k] for k in ("FASTRTPS_DEFAULT_PROFILES_FILE", DISCOVERY_RANGE, QOS_FROM_XML)
+                       if k in env})
 
 
 def replay(bag: str, scene_file: str, rate: float = 1.0, lossless: bool = False, record: str | None = None,
