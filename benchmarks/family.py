@@ -128,6 +128,9 @@ def run_scene(seed: int, width: int = 640, height: int = 480, preloaded: bool = 
                   "other": [None if not np.isfinite(v) else float(v) for v in run["other"]],
                   "warm": [int(v) for v in run["warm"]],
                   "ms": [None if not np.isfinite(v) else round(v, 1) for v in run["frame_ms"]],
+                  # each parameter's standard deviation from the fit's normal equations, % of its range
+                  "std_pct": [[None if not np.isfinite(v) else round(100 * v / sp, 3) for v, sp in zip(f, d.spans)]
+                              for f in run["std_all"]],
                   **({"truth_y": [None if not np.isfinite(v) else float(v) for v in tv[:, 1]],
                       "est_y": ev[:, 1].tolist()} if tv.shape[1] > 1 else {})},
     }
@@ -147,7 +150,7 @@ def track(pipe: Pipeline, seq: dict, fps: float, oid: str = "beam") -> dict[str,
     ``DenseSettings.basin_warm``) and the tracker's time (``frame_ms``: NaN where the camera had no pose)."""
     run: dict[str, list] = {k: [] for k in ("truth", "est", "states", "reasons", "step_ms", "cam_err", "solve_ms",
                                             "tracker_ms", "truth_all", "est_all", "gain", "margin", "basin",
-                                            "switched", "other", "warm", "frame_ms")}
+                                            "switched", "other", "warm", "frame_ms", "std_all")}
     for i in range(len(seq["rgb"])):
         bgr = np.ascontiguousarray(seq["rgb"][i][:, :, ::-1])
         t1 = time.perf_counter()
@@ -165,6 +168,8 @@ def track(pipe: Pipeline, seq: dict, fps: float, oid: str = "beam") -> dict[str,
         run["est"].append(float(e.values[0]))
         run["truth_all"].append([float(v) for v in tp])
         run["est_all"].append([float(v) for v in e.values[:len(tp)]])
+        run["std_all"].append([float(v) for v in np.sqrt(np.clip(np.diag(e.cov), 0, None))[:len(tp)]]
+                              if np.shape(e.cov) and len(e.cov) >= len(tp) else [float("nan")] * len(tp))
         run["states"].append(int(e.state))
         run["reasons"].append(e.reason)
         run["gain"].append(float(e.debug.get("gain", float("nan"))))
@@ -381,13 +386,21 @@ TABLES = (("family", "Held-out seeds (the accuracy this project reports): the de
            "candidate's brightness: what `--tracking dense_grid_brightness=never` gives, on the SLAM of stop 39)"),
           ("family_stop38", "Held-out seeds on the code of stop 38 (the shading term, each frame's g alone: what "
            "`--tracking dense_shading_frames=0` gives)"),
-          ("family_plate_stop74", "Plates, held-out seeds on this code (`--object plate --seeds 1000-1019 --out "
-           "family_plate_stop74`: a load anywhere on the top face, s_x and s_y; stop 74, with the registration's "
-           "second coarse pass)"),
+          ("family_plate_stop76", "Plates, held-out seeds on this code (`--object plate --seeds 1000-1019 --out "
+           "family_plate_stop76`: a load anywhere on the top face, s_x and s_y; stop 76, with the flag of a load held "
+           "too loosely, `DenseSettings.max_std_frac`)"),
+          ("family_plate_stop74", "Plates, held-out seeds on the code of stop 74 (`--object plate --seeds 1000-1019 "
+           "--out family_plate_stop74`, with the registration's second coarse pass; before stop 76's flag)"),
+          ("family_plate_dev_std_stop76", "Plates, development seeds (every shelf of 0-29 and the plates bolted at "
+           "both ends 0, 2, 3, 14, 18, 19) rerun in stop 76 with each parameter's standard deviation recorded, before "
+           "the flag was set on them (composed of `family_plate_dev_0_3_stop76`, `family_plate_dev_shelves_stop76` and "
+           "`family_plate_dev_clamped_stop76`)"),
+          ("family_dev_0_19_std", "Beams, development seeds 0-19 rerun in stop 76 with the standard deviation "
+           "recorded, before the flag (`--seeds 0-19 --out family_dev_0_19_std`)"),
           ("family_plate", "Plates, held-out seeds 1000-1019 on the code of stop 49 (before the SLAM and tracker "
            "changes of stops 50-73 and the registration's second coarse pass: 1016 never placed)"),
-          ("family_plate_dev_stop74", "Plates, development seeds 0-9 on this code (`--object plate --seeds 0-9 "
-           "--out family_plate_dev_stop74`, stop 74)"),
+          ("family_plate_dev_stop74", "Plates, development seeds 0-9 on the code of stop 74 (`--object plate --seeds "
+           "0-9 --out family_plate_dev_stop74`)"),
           ("family_plate_dev", "Plates, development seeds 0-9 on the code of stop 49 (`--object plate --seeds 0-9`)"),
           ("family_plate_dev_10_29", "Plates, development seeds 10-29 (`--object plate --seeds 10-29`; stop 73's code, "
            "before the registration's second coarse pass: seed 13 never placed)"),

@@ -17,9 +17,12 @@
 - ``--ambiguity``: per loaded frame of the development beams (``family_dev_0_19_other``: stop 58's rerun, which
   records where the other basin's fit ended), where that fit (``DenseSettings.basin_check``) ended more than
   ``ambiguity_apart`` of the range from the kept one, how much more it cost at full resolution (``basin_gap``;
-  flagged under ``DenseSettings.max_ambiguity_gap``): two loads the image cannot tell apart.
+  flagged under ``DenseSettings.max_ambiguity_gap``): two loads the image cannot tell apart;
+- ``--std``: per loaded frame of the development beams and plates (``STD_RUNS``: stop 76's reruns, which record each
+  parameter's standard deviation), the largest load parameter's standard deviation in % of its range (flagged over
+  ``DenseSettings.max_std_frac``): a load the images hold too loosely to vouch for (the shelves' s_y).
 
-    ./run bench flag_calibration                      # all four, on the sets the thresholds were chosen on
+    ./run bench flag_calibration                      # all of them, on the sets the thresholds were chosen on
     python -m benchmarks.flag_calibration --registration --plan "1:-d0.5"   # one registration
     python -m benchmarks.flag_calibration --camera --plan "1:-el5"          # one scene's frames
     python -m benchmarks.flag_calibration --gain --plan "0:-az65-arc20,1:+noise16"
@@ -60,6 +63,11 @@ MARGIN_LEVELS = (0.005, 0.01, 0.02, 0.05)
 AMBIGUITY_LEVELS = (0.001, 0.002, 0.005, 0.01, 0.02)
 # stop 58: the development beams rerun with the other basin's end point recorded (``other`` in the curves)
 AMBIGUITY_RUNS = "family_dev_0_19_other"
+STD_LEVELS = (0.5, 1.0, 1.5, 2.0, 3.0)
+# stop 76: the development beams 0-19 and plates rerun with each parameter's standard deviation recorded (``std_pct``
+# in the curves), before the flag: every shelf of plates 0-29 and the plates bolted at both ends 0, 2, 3, 14, 18 and
+# 19 (``family_plate_dev_std_stop76``, composed of three runs)
+STD_RUNS = "family_dev_0_19_std,family_plate_dev_std_stop76"
 
 
 def parse_plan(plan: str) -> list[tuple[int, str]]:
@@ -124,6 +132,11 @@ QUANTITIES: dict[str, dict[str, Any]] = {
     "ambiguity": dict(debug="basin_gap", levels=AMBIGUITY_LEVELS, nan_flagged=False, setting="max_ambiguity_gap",
                       title="other basin's cost gap at full resolution (where it ended apart)",
                       label="other basin's full-resolution cost gap (ended apart)", clip=(1e-5, 2.0), xlog=True),
+    # the largest standard deviation of a load parameter (the fit's normal equations scaled by its residual), % of
+    # its range: flagged over the level (``above``); the family curves' key is ``std_pct`` (one per parameter)
+    "std": dict(debug=None, levels=STD_LEVELS, nan_flagged=False, above=True, setting="max_std_frac", scale=100.0,
+                title="largest load parameter's standard deviation (% of its range)",
+                label="largest load parameter's std (% of its range)", clip=(1e-3, 50.0), xlog=True),
     "margin": dict(debug="grid_margin", levels=MARGIN_LEVELS, nan_flagged=False, setting=None,
                    title="coarse search's runner-up margin (other basin)",
                    label="coarse search's runner-up margin (other basin)", clip=(-0.05, 2.0)),
@@ -145,7 +158,7 @@ def quantity_row(q: str, seed: int, view: str, vals: list, errs: list, states: l
            "values": [None if not np.isfinite(v) else round(float(v), 4) for v in g],
            "errs": [round(float(v), 4) for v in err]}
     for t in spec["levels"]:
-        flagged = ~(g >= t) if spec["nan_flagged"] else (g < t)
+        flagged = (g > t) if spec.get("above") else ~(g >= t) if spec["nan_flagged"] else (g < t)
         row[f"caught_{t:g}"] = int((bad & flagged).sum())
         row[f"good_{t:g}"] = int((~bad & flagged).sum())
     return row
@@ -161,7 +174,8 @@ def frames_from_runs(name: str, quantities: tuple[str, ...] = tuple(QUANTITIES))
     out = []
     for r in doc["rows"]:
         c = doc["curves"][str(r["seed"])]
-        missing = [q for q in quantities if q not in c and not (q == "ambiguity" and "other" in c)]
+        missing = [q for q in quantities if q not in c and not (q == "ambiguity" and "other" in c)
+                   and not (q == "std" and "std_pct" in c)]
         if missing:
             raise SystemExit(f"{name} has no per-frame {missing} (rerun it with the current benchmarks/family.py)")
         spans = (draw_plate if r["object"] == "plate" else draw)(r["seed"]).spans
@@ -178,6 +192,9 @@ def frames_from_runs(name: str, quantities: tuple[str, ...] = tuple(QUANTITIES))
                     o, b = c["other"][i], c["basin"][i]
                     apart = o is not None and abs(o - e) / spans[0] > DenseSettings().ambiguity_apart
                     fr[q].append(b if apart and b is not None and len(spans) == 1 else np.nan)
+                elif q == "std":
+                    fin = [v for v in c["std_pct"][i] if v is not None]
+                    fr[q].append(max(fin) if fin else np.nan)
                 else:
                     fr[q].append(np.nan if c[q][i] is None else c[q][i])
             fr["errs"].append(err)
@@ -203,7 +220,8 @@ def frames_from_views(specs: list[tuple[int, str]]) -> list[tuple[int, str, dict
             if not np.isfinite(truth) or not np.isfinite(float(e.debug.get("gain", np.nan))):
                 continue
             for q, spec in QUANTITIES.items():
-                fr[q].append(float(e.debug.get(spec["debug"], np.nan)))
+                fr[q].append(100 * float(np.sqrt(max(e.cov[0, 0], 0.0))) / span if q == "std"
+                             else float(e.debug.get(spec["debug"], np.nan)))
             if not float(e.debug.get("basin_apart", 0.0)) > DenseSettings().ambiguity_apart:
                 fr["ambiguity"][-1] = np.nan
             fr["errs"].append(100 * abs(float(e.values[0]) - truth) / span)
@@ -238,6 +256,25 @@ def unloaded_ties(names: list[str]) -> str:
             f"{g[-1]:.4f}).")
 
 
+def std_note(scenes: list[tuple[int, str, dict]]) -> str:
+    """What DenseSettings.max_std_frac flags on each object's frames (a sentence for the table's notes): the frames
+    more than 2 % off it catches, the OK frames within 2 % it would take, the OK frames' std."""
+    t = 100 * DenseSettings().max_std_frac
+    out = []
+    for obj in ("beam", "plate"):
+        fr = [f for _, label, f in scenes if f"({obj})" in label]
+        if not fr:
+            continue
+        g, err = (np.concatenate([np.asarray(f[k], float) for f in fr]) for k in ("std", "errs"))
+        ok = np.concatenate([np.asarray(f["states"]) == int(EstimateState.OK) for f in fr])
+        bad, over = err > 2.0, g > t
+        out.append(f"{obj}s ({len(fr)} scenes): {int((bad & over).sum())} of {int(bad.sum())} frames more than 2 % "
+                   f"off flagged, {int((~bad & ok & over).sum())} of {int((~bad & ok).sum())} OK frames within 2 % "
+                   f"(the OK frames' std: median {np.nanmedian(g[ok]):.2f} %, the most {np.nanmax(g[ok]):.2f} %)")
+    return (f"At max_std_frac {t:g} %: " + "; ".join(out) + ". The runs predate the flag: their OK frames are those "
+            "the tracker called OK without it.") if out else ""
+
+
 def save_quantity(q: str, scenes: list[tuple[int, str, dict]], note: str = "") -> None:
     """flag_calibration_<q>: per scene the quantity against the load error, the totals, the scatter plot (``note``
     joins the table's notes)."""
@@ -247,9 +284,10 @@ def save_quantity(q: str, scenes: list[tuple[int, str, dict]], note: str = "") -
             ("ok_frames", "OK", "{}"), (f"{q}_min", f"{q} min", "{:.2f}"), (f"{q}_p10", "p10", "{:.2f}"),
             (f"{q}_median", "median", "{:.2f}"), ("err_median_pct", "load error median (% span)", "{:.2f}"),
             ("frames_over_2pct", "frames > 2 % off", "{}")]
+    rel = ">" if spec.get("above") else "<"
     for t in spec["levels"]:
-        cols += [(f"caught_{t:g}", f"of those, {q} < {t:g}", "{}"),
-                 (f"good_{t:g}", f"frames <= 2 % with {q} < {t:g}", "{}")]
+        cols += [(f"caught_{t:g}", f"of those, {q} {rel} {t:g}", "{}"),
+                 (f"good_{t:g}", f"frames <= 2 % with {q} {rel} {t:g}", "{}")]
     tot = {k: sum(r[k] for r in rows) for k in ["frames", "frames_over_2pct"]
            + [f"{p}_{t:g}" for t in spec["levels"] for p in ("caught", "good")]}
     nan = float("nan")
@@ -258,8 +296,9 @@ def save_quantity(q: str, scenes: list[tuple[int, str, dict]], note: str = "") -
              f"{q}_p10": nan, f"{q}_median": nan, "err_median_pct": nan, **tot}],
          cols, f"Dense fit: the {spec['title']} per frame against the load error (development seeds)",
          f"`python -m benchmarks.flag_calibration --{q}` (see its docstring). "
-         + (f"A frame is flagged under DenseSettings.{spec['setting']}"
-            f"{' (or where it is not finite)' if spec['nan_flagged'] else ''}. " if spec["setting"]
+         + (f"A frame is flagged {'over' if spec.get('above') else 'under'} DenseSettings.{spec['setting']}"
+            + (f" (x {spec['scale']:g})" if "scale" in spec else "")
+            + f"{' (or where it is not finite)' if spec['nan_flagged'] else ''}. " if spec["setting"]
             else "No flag reads it (a diagnostic: the counts say what a threshold would catch). ")
          + "The "
          "frames are every loaded frame with a dense fit, whatever the tracker called it (a frame flagged for "
@@ -275,12 +314,13 @@ def main() -> None:
     ap.add_argument("--gain", action="store_true")
     ap.add_argument("--margin", action="store_true")
     ap.add_argument("--ambiguity", action="store_true")
+    ap.add_argument("--std", action="store_true")
     ap.add_argument("--plan", help="SEED:SUFFIX,... (default: the set each threshold was chosen on)")
     ap.add_argument("--runs", default=GAIN_RUNS,
                     help="--gain, --margin: family results (development seeds) whose frames join")
     a = ap.parse_args()
-    if not (a.registration or a.camera or a.gain or a.margin or a.ambiguity):
-        a.registration = a.camera = a.gain = a.margin = a.ambiguity = True
+    if not (a.registration or a.camera or a.gain or a.margin or a.ambiguity or a.std):
+        a.registration = a.camera = a.gain = a.margin = a.ambiguity = a.std = True
     if a.registration:
         rows = registration_rows(parse_plan(a.plan or REGISTRATION_PLAN))
         save("flag_calibration_registration", rows,
@@ -304,7 +344,11 @@ def main() -> None:
              "Dense fit: the camera's gap to the surroundings alone, per frame (development seeds)",
              "`python -m benchmarks.flag_calibration --camera` (see its docstring). A frame is flagged past "
              "DenseSettings.max_camera_gap sigma.", lambda plt: _plot_gap(plt, rows))
-    qs = [q for q in QUANTITIES if getattr(a, q) and q != "ambiguity"]
+    qs = [q for q in QUANTITIES if getattr(a, q) and q not in ("ambiguity", "std")]
+    if a.std:  # the development beams and plates rerun with each parameter's std (no views unless --plan)
+        runs = a.runs if a.runs != GAIN_RUNS else STD_RUNS
+        scenes = [sc for n in runs.split(",") for sc in frames_from_runs(n, ("std",))]
+        save_quantity("std", scenes + frames_from_views(parse_plan(a.plan or "")), std_note(scenes))
     if a.ambiguity:  # the development beams rerun with the other basin's end point (no views unless --plan)
         runs = a.runs if a.runs != GAIN_RUNS else AMBIGUITY_RUNS
         save_quantity("ambiguity", [sc for n in runs.split(",") for sc in frames_from_runs(n, ("ambiguity",))]
@@ -324,7 +368,7 @@ def _plot_quantity(plt, q: str, rows: list[dict]):
     e = np.concatenate([r["errs"] for r in rows])
     ax.plot(np.clip(g, *spec["clip"]), np.clip(e, 1e-3, 100), ".", ms=2, alpha=0.5)
     if spec["setting"]:
-        ax.axvline(getattr(DenseSettings(), spec["setting"]), color="grey", lw=0.8)
+        ax.axvline(getattr(DenseSettings(), spec["setting"]) * spec.get("scale", 1.0), color="grey", lw=0.8)
     ax.axhline(2.0, color="grey", lw=0.5, ls=":")
     ax.set_yscale("log")
     if spec.get("xlog"):

@@ -46,3 +46,26 @@ def test_the_ambiguity_counts_only_other_fits_that_ended_apart(tmp_path, monkeyp
     assert np.isnan(fr["ambiguity"][0]) and fr["ambiguity"][1] == 0.004 and np.isnan(fr["ambiguity"][2])
     note = fc.unloaded_ties(["runs"])
     assert "2 frames had a second fit that ended apart: 1 read under 0.01" in note, note
+
+
+def test_the_std_is_the_largest_parameters_and_flags_above_the_level(tmp_path, monkeypatch):
+    """``--std`` from a family run's curves: per loaded frame with a dense fit, the larger of a plate's two standard
+    deviations (None where the fit gave none); a frame is flagged when it is over the level, not under it."""
+    import json
+
+    import benchmarks.flag_calibration as fc
+    from simreal_nodes.synth.family import draw_plate
+
+    sx, sy = draw_plate(3).spans
+    c = {"truth": [None, 0.5 * sx, 0.5 * sx, 0.5 * sx], "est": [0.1, 0.5 * sx, 0.5 * sx, 0.5 * sx],
+         "truth_y": [None, 0.5 * sy, 0.5 * sy, 0.5 * sy], "est_y": [0.1, 0.5 * sy, 0.55 * sy, 0.5 * sy],
+         "state": [1, 0, 0, 0], "gain": [0.9] * 4,
+         "std_pct": [[9.0, 9.0], [0.2, 0.4], [0.3, 2.5], [None, None]]}
+    doc = {"rows": [{"seed": 3, "object": "plate"}], "curves": {"3": c}}
+    (tmp_path / "runs.json").write_text(json.dumps(doc))
+    monkeypatch.setattr(fc, "RESULTS", tmp_path)
+    [(_, _, fr)] = fc.frames_from_runs("runs", ("std",))
+    assert fr["std"][:2] == [0.4, 2.5] and np.isnan(fr["std"][2])  # the loaded frames, each's largest
+    assert fr["errs"][1] > 2.0 >= fr["errs"][0]  # s_y 5 % of its range off on the second
+    row = quantity_row("std", 3, "", fr["std"], fr["errs"], fr["states"])
+    assert row["caught_1"] == 1 and row["good_1"] == 0 and row["caught_3"] == 0

@@ -158,6 +158,16 @@ class DenseSettings:
     # development beams hold no ambiguous frame, so what it catches is measured on held-out seeds only. It changes no
     # estimate, only its state (and so whether its shading is fused); 0: no flag
     max_ambiguity_gap: float = 0.01
+    # the tracker flags a fit where a tracked parameter's standard deviation (the normal equations scaled by the
+    # residual) exceeds this share of its range (:func:`~simreal_nodes.assimilation.tracker.loosely_held`): the
+    # images hold it too loosely to vouch for (a shelf's s_y). Set on the development beams 0-19 and 24 development
+    # plates (stop 76's reruns, before the flag; ``python -m benchmarks.flag_calibration --std``): 1 % flags 487 of the
+    # plates' 781 frames more than 2 % off: all of those of the shelves whose s_y is over 3 % off (1, 13, 15, 21, 28)
+    # but 16's (51 of 59) and 29's (2.95 %: 9 of 39); 105 of their 1081 OK frames within 2 %; none of the beams' 1465
+    # OK frames within 2 %
+    # (their OK frames' std: median 0.08 %, at most 0.86 %). 1.5 % would miss most frames of 13, 15 and 16. It changes
+    # no estimate, only its state, after the shading is fused; 0: no flag
+    max_std_frac: float = 0.01
     # with ``basin_check``: where the warm start (the last frame's estimate) lies more than a quarter of a range from
     # where both the winner's and the runner-up's fits ended, fit from it as well (a third fit) and keep the cheapest:
     # the coarse search can lead both into one wrong basin while the last frame's is right (held-out beam 1041, stop

@@ -686,6 +686,11 @@ class DeformableTracker:
             _doubt(est, why)
         if est.state == EstimateState.OK:  # a sound fit's shading joins the next frames' prior (shading_frames)
             self.dense.accept_shading()
+        # after the shading is fused: this flag changes the frame's state only, not its estimate or the next frames'
+        free = np.array([m == "tracked" for m in self.mode]) & ~self.frozen
+        why = loosely_held(est, free, self.hi - self.lo, self.cfg.dense.max_std_frac)
+        if est.state == EstimateState.OK and why:
+            _doubt(est, why)
         return est
 
     def reference_from_depth(self, T_wc: np.ndarray, depth: np.ndarray | None
@@ -1005,6 +1010,22 @@ def ambiguity(debug: dict[str, float], s: DenseSettings, names: list[str]) -> st
     alt = ", ".join(f"{n}={debug[f'basin_other_{i}']:.3g}" for i, n in enumerate(names) if f"basin_other_{i}" in debug)
     return (f"another load ({alt}) explains the image as well: its fit costs {100 * gap:.2f} % more at full "
             f"resolution (at least {100 * s.max_ambiguity_gap:g} % tells them apart)")
+
+
+def loosely_held(est: Estimate, free: np.ndarray, ranges: np.ndarray, max_frac: float) -> str:
+    """Why a fit's estimate is held too loosely to vouch for, or "": a parameter of ``free`` (tracked, not frozen)
+    whose standard deviation (``est.cov``: the fit's normal equations scaled by its residual) exceeds ``max_frac`` of
+    its range. What the model does not explain (shading, texture, the camera's error) moves such a parameter as
+    readily as noise does. A shelf (a plate clamped along one edge) bends nearly alike wherever across its width the
+    load sits: 1 % of s_y's range moves its image by about 0.01 px, and its fits hold s_y to 2-3 % of the range
+    (docs/family.md, stop 76)."""
+    n = len(free)
+    if not max_frac > 0 or np.ndim(est.cov) != 2 or len(est.cov) < n:
+        return ""
+    std = np.sqrt(np.clip(np.diag(est.cov)[:n], 0, None))
+    loose = [(nm, 100 * sd / r) for nm, sd, r, f in zip(est.names, std, ranges, free) if f and sd > max_frac * r > 0]
+    return "; ".join(f"{nm} loosely held by the images (std {pct:.1f} % of its range, at most {100 * max_frac:g} %)"
+                     for nm, pct in loose)
 
 
 def _doubt(est: Estimate, why: str) -> None:

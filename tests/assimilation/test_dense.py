@@ -345,6 +345,52 @@ def test_the_tracker_reports_a_fit_that_sees_the_texture_decorrelated(model):
             assert "reference view's contrast" in e.reason, e.reason
 
 
+def test_the_tracker_reports_a_load_the_images_hold_too_loosely(model):
+    """A fit whose load parameter has a standard deviation over ``max_std_frac`` of its range (the normal equations
+    of a view that barely sees it) is reported low-confidence, saying which parameter and how loosely; the estimate
+    itself is the one the unflagged fit gives (the flag changes the state only)."""
+    tex = texture(0.5)
+    bgr = lambda img: cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)  # noqa: E731
+    limit = DenseSettings().max_std_frac
+    assert 0.0 < limit < 0.05  # under the 5 % past which a parameter already counts as barely observable
+    values = {}
+    for inflate, state in ((None, EstimateState.OK), (2.0, EstimateState.LOW_CONFIDENCE)):
+        tr, solve = _dense_tracker_with_reference(model, tex)
+
+        def loose(*a, solve=solve, inflate=inflate, **k):
+            r = solve(*a, **k)
+            if inflate is not None:  # as a view that barely sees s would report it: std = inflate x the limit
+                r.cov_mu = np.array([[(inflate * limit * 1.0) ** 2]])
+            return r
+
+        tr.dense.solve = loose
+        e = tr.update(pose(0.02), image_bgr=bgr(render(tex, pose(0.02), 0.7)))
+        assert e.state == state, (e.state, e.reason)
+        values[inflate] = e.values.copy()
+        if inflate is None:
+            assert np.sqrt(e.cov[0, 0]) < 0.2 * limit, e.cov  # a clear view holds s far tighter than the limit
+        else:
+            assert f"s loosely held by the images (std {200 * limit:.1f} % of its range" in e.reason, e.reason
+    assert np.array_equal(values[None], values[2.0]) and abs(values[None][0] - 0.7) < 0.02
+
+
+def test_loosely_held_reads_only_free_tracked_parameters():
+    """Only a free parameter is judged, against its own range; a fixed or frozen one (std 0 or not estimated) and
+    a missing covariance say nothing."""
+    from simreal_nodes.assimilation.tracker import Estimate, loosely_held
+
+    est = Estimate(["s_x", "s_y"], ["", ""], np.array([0.3, 0.1]), np.zeros(2, bool),
+                   np.diag([0.004**2, 0.006**2]))
+    ranges = np.array([0.5, 0.2])  # std: 0.8 % and 3 % of the ranges
+    assert loosely_held(est, np.array([True, True]), ranges, 0.015) == \
+        "s_y loosely held by the images (std 3.0 % of its range, at most 1.5 %)"
+    assert loosely_held(est, np.array([True, False]), ranges, 0.015) == ""
+    assert "s_x" in loosely_held(est, np.array([True, True]), ranges, 0.005)
+    assert loosely_held(est, np.array([True, True]), ranges, 0.0) == ""
+    est.cov = np.zeros(0)
+    assert loosely_held(est, np.array([True, True]), ranges, 0.015) == ""
+
+
 BEND = 0.01  # metres at the far edge for s = 1: u_z = BEND s (x / SIZE)^2 (a slope of 0.1 there)
 LIGHT = np.array([-0.8, 0.0, 0.6])
 
@@ -480,8 +526,10 @@ def test_the_tracker_fuses_the_shading_of_sound_frames_only():
     model = bend_model()
     tex = texture(0.05, seed=3)
     bgr = lambda img: cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)  # noqa: E731
+    # this faint texture holds s to 1.3 % of its range, which max_std_frac would flag (after the shading is fused):
+    # off here, so that the state says which frames the shading came from
     tr = DeformableTracker(model, np.eye(4), {"s": {"mode": "tracked", "initial": 0.3}}, CAM,
-                           TrackerConfig(measurements="dense"))
+                           TrackerConfig(measurements="dense", dense=DenseSettings(max_std_frac=0.0)))
     tr.update(pose(), image_bgr=bgr(render_lit(tex, pose(), 0.0, 0.0, seed=1)))
     assert tr.dense is not None and tr.dense.s.shading_frames > 0  # on by default
     e = tr.update(pose(0.03), image_bgr=bgr(render_lit(tex, pose(0.03), 0.6, 0.0, seed=2)))
