@@ -169,7 +169,7 @@ def track(pipe: Pipeline, seq: dict, fps: float, oid: str = "beam") -> dict[str,
         run["truth_all"].append([float(v) for v in tp])
         run["est_all"].append([float(v) for v in e.values[:len(tp)]])
         run["std_all"].append([float(v) for v in np.sqrt(np.clip(np.diag(e.cov), 0, None))[:len(tp)]]
-                              if np.shape(e.cov) and len(e.cov) >= len(tp) else [float("nan")] * len(tp))
+                              if np.ndim(e.cov) == 2 and len(e.cov) >= len(tp) else [float("nan")] * len(tp))
         run["states"].append(int(e.state))
         run["reasons"].append(e.reason)
         run["gain"].append(float(e.debug.get("gain", float("nan"))))
