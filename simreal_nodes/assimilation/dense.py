@@ -188,6 +188,15 @@ class DenseSettings:
     # into the next frames' prior, so that a frame whose deformation is barely seen cannot pass its signal off as
     # shading; 0: each frame's g alone, under the prior above
     shading_frames: int = 50
+    # the template is one image, and its noise is in every later comparison: the same error on every frame, which
+    # no number of frames averages out (development plate 1 rendered with a noiseless reference frame: s_y 11.5 ->
+    # 7.6 % of its range). Each frame the tracker judges at rest before any deformation was seen (the frames that
+    # also measure the placement error, :meth:`DenseAligner.hold_rest`) is aligned to the template at the reference
+    # state and its intensities, brought to the template's brightness, are averaged into it (the surroundings' too),
+    # up to this many frames in all; 0: the first view alone (:meth:`DenseAligner.refine_template`). A knob, not a
+    # default (stop 77, docs/family.md): with 20 the 24 development plates read 1.42 -> 1.30 % at the median, p90
+    # 7.20 -> 4.69 %, but development beams 0-9 p90 0.78 -> 1.28 % (cantilevers 4, 5, 8 worse)
+    template_frames: int = 0
 
     def __post_init__(self) -> None:
         if self.grid_brightness not in GRID_BRIGHTNESS:
@@ -232,6 +241,12 @@ def pyramid(gray: NDArray[np.generic], levels: int) -> list[NDArray[np.float32]]
     for _ in range(1, levels):
         out.append(np.asarray(cv2.pyrDown(out[-1]), np.float32))
     return out
+
+
+def _gradients(pyr: list[NDArray[np.float32]]) -> list[Grad]:
+    """Each level's image gradients by central differences, [-1, 0, 1] / 2."""
+    return [(np.asarray(cv2.Sobel(p, cv2.CV_32F, 1, 0, ksize=1, scale=0.5), np.float32),
+             np.asarray(cv2.Sobel(p, cv2.CV_32F, 0, 1, ksize=1, scale=0.5), np.float32)) for p in pyr]
 
 
 def _at_level(uv: Array, level: int) -> Array:
@@ -437,6 +452,11 @@ class DenseAligner:
         self.n_modes = n_modes
         self.levels: list[Level] = []
         self.static: list[StaticLevel] = []  # empty: no depth in the reference view (the object alone)
+        # the views averaged into the template (:meth:`refine_template`) and each sample's count of them
+        self.template_views = 0
+        self._counts: list[Array] = []
+        self._static_counts: list[Array] = []
+        self._mu_ref: Array | None = None
         self.rigid = np.zeros(N_RIGID)  # rho of the last fit: the next frame's start
         self.cam_corr = np.zeros(N_RIGID)  # epsilon of the last fit
         self.rest_rigid = np.zeros(N_RIGID)  # the same for the zero-displacement fit
@@ -536,6 +556,10 @@ class DenseAligner:
                                      v[good], normals))
         if depth is not None and self.s.rigid and self.s.static_ring_px > 0:
             self.static = self._surroundings(pyr, T_cw, uv, depth, int(self.s.static_share * len(idx)))
+        self.template_views = 1
+        self._counts = [np.ones(len(L.values)) for L in self.levels]
+        self._static_counts = [np.ones(len(S.values)) for S in self.static]
+        self._mu_ref = None if mu_ref is None else np.asarray(mu_ref, np.float64).copy()
         self.rigid[:] = 0.0
         self.cam_corr[:] = 0.0
         self.rest_rigid[:] = 0.0
@@ -597,6 +621,59 @@ class DenseAligner:
             good = np.isfinite(vals)
             out.append(StaticLevel(X[sub][good], vals[good]))
         return out
+
+    def refine_template(self, gray: NDArray[np.generic], T_cw: Array) -> int:
+        """Average this view into the template (:attr:`DenseSettings.template_frames`): the caller judged the object
+        at rest here, in the reference state, before any deformation was seen. The zero-displacement fit (rigid
+        correction, camera error and brightness; every level, from the last rest fit's values) aligns the template's
+        samples with this image; each sample's intensity there, brought to the template's brightness ((I - b) / a),
+        joins its running mean. A sample more than three robust standard deviations off the fit (an occluder, a
+        highlight) is left out, as is every sample of a view whose gain is under a half. The static surroundings'
+        template is averaged the same way with their own brightness. Returns the samples averaged at the finest
+        level (0: none; a template taken in a deformed state, which the zero-displacement fit does not describe, is
+        not refined)."""
+        if self.s.template_frames <= self.template_views or not self.levels or self._mu_ref is not None:
+            return 0
+        T_cw = np.asarray(T_cw, np.float64)
+        pyr = pyramid(self.ideal(gray), len(self.levels))
+        grads = _gradients(pyr)
+        use_s = bool(self.static) and self.s.rigid
+        zero = np.zeros(0)
+        f = _Fit(None, np.zeros(0, bool), self.rest_rigid, self.rest_cam, self.rest_photo, self.rest_photo_s,
+                 (np.zeros(N_RIGID), self._wide()), self.s.rigid and not (use_s and self.s.placement_measured), use_s)
+        self._run(pyr, grads, f, T_cw, zero, zero, finest=0)
+        if not f.photo[0] >= 0.5 or (use_s and not f.photo_s[0] >= 0.5):
+            return 0
+        done = 0
+        for lvl, L in enumerate(self.levels):
+            rows = self._visible_rows(L, None, f.total, T_cw)
+            uv, _ = self._geometry(L, rows, None, f.total, T_cw, jac=False)
+            v = bilinear(pyr[lvl], _at_level(uv, lvl)).astype(np.float64)
+            r = v - self._predicted(L, rows, None, f.photo)
+            ok = np.isfinite(r)
+            if ok.sum() < 10:
+                continue
+            ok[ok] = np.abs(r[ok]) <= 3.0 * self._scale(r[ok])
+            sel = rows[ok]
+            n = self._counts[lvl][sel]
+            L.values[sel] += ((v[ok] - f.photo[1]) / f.photo[0] - L.values[sel]) / (n + 1.0)
+            self._counts[lvl][sel] = n + 1.0
+            done = len(sel) if lvl == 0 else done
+            if use_s:
+                S = self.static[lvl]
+                srows = self._static_rows(lvl, f, T_cw, rows)
+                uvs, _, _ = self._rigid_project(S.X[srows], f.cam, T_cw, jac=False)
+                vs = bilinear(pyr[lvl], _at_level(uvs, lvl)).astype(np.float64)
+                rs = vs - (f.photo_s[0] * S.values[srows] + f.photo_s[1])
+                oks = np.isfinite(rs)
+                if oks.sum() >= 10:
+                    oks[oks] = np.abs(rs[oks]) <= 3.0 * self._scale(rs[oks])
+                    ss = srows[oks]
+                    ns = self._static_counts[lvl][ss]
+                    S.values[ss] += ((vs[oks] - f.photo_s[1]) / f.photo_s[0] - S.values[ss]) / (ns + 1.0)
+                    self._static_counts[lvl][ss] = ns + 1.0
+        self.template_views += 1
+        return done
 
     def hold_rest(self) -> None:
         """The last frame showed no deformation: its zero-displacement fit's rho is the object's placement error
@@ -1174,9 +1251,7 @@ class DenseAligner:
         self.grid_margin = float("nan")
         self.grid_runner_up = None
         pyr = pyramid(self.ideal(gray), len(self.levels))
-        # central differences: [-1, 0, 1] / 2
-        grads = [(np.asarray(cv2.Sobel(p, cv2.CV_32F, 1, 0, ksize=1, scale=0.5), np.float32),
-                  np.asarray(cv2.Sobel(p, cv2.CV_32F, 0, 1, ksize=1, scale=0.5), np.float32)) for p in pyr]
+        grads = _gradients(pyr)
         free = hi > lo
         wide = self._wide()
         held = np.repeat([self.s.held_rot_rad, self.s.held_trans_m], 3)

@@ -664,8 +664,9 @@ class DeformableTracker:
             res.motion_px > self.cfg.min_deformation_px
         if not deforming and self.deforming_frames == 0:
             # at rest before any load was seen: the placement error as the images see it (later frames judged
-            # undeformed may carry a small load the rigid fit would absorb)
+            # undeformed may carry a small load the rigid fit would absorb), and another view of the template
             self.dense.hold_rest()
+            est.debug["template_samples"] = float(self.dense.refine_template(gray, T_cw))
         est = self._conclude(est, res.mu, bool(deforming),
                              f"photometric residual {fit:.2f} vs {res.rest_rms:.2f} undeformed, "
                              f"motion {res.motion_px:.2f} px")
@@ -1051,6 +1052,7 @@ def tracker_config(obj: dict[str, Any], **overrides: Any) -> TrackerConfig:
                                           camera_first=t["dense_camera_first"],
                                           camera_check=t["dense_camera_check"], shading=t["dense_shading"],
                                           shading_frames=t["dense_shading_frames"],
+                                          template_frames=t["dense_template_frames"],
                                           grid_brightness=t["dense_grid_brightness"],
                                           basin_check=t["dense_basin_check"], basin_warm=t["dense_basin_warm"],
                                           placement_measured=obj["anchor"]["kind"] == "registration"),

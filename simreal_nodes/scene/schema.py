@@ -130,6 +130,11 @@ TRACKING = Record({
                                    "shading (a property of the light, the same in every frame) over about this "
                                    "many frames the tracker judged sound into the next frames' prior (about 3 s at "
                                    "15 fps); 0: each frame alone", integer=True, lo=0, hi=100000, default=50),
+    "dense_template_frames": Number("measurements 'dense': average the object's texture (and its surroundings') "
+                                    "over up to this many views judged at rest before any deformation, the "
+                                    "reference view included, so that one image's noise is not in every "
+                                    "comparison; 0: the reference view alone", integer=True, lo=0, hi=100000,
+                                    default=0),
     "dense_grid_brightness": Enum(("auto", "always", "never"), "measurements 'dense': how the coarse search "
                                   "compares its candidates: always with the object's brightness fitted to each; "
                                   "never at the last frame's brightness (which a misaligned frame drags towards "

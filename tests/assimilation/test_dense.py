@@ -720,3 +720,73 @@ def test_the_coarse_search_keeps_a_sound_brightness_when_auto():
     assert not np.allclose(out["always"][1], start)  # the fitted brightness: the test tells the modes apart
     with pytest.raises(ValueError, match="grid_brightness"):
         DenseSettings(grid_brightness="sometimes")
+
+
+def _template_error(al: DenseAligner, clean: DenseAligner) -> float:
+    """RMS difference of the finest level's template intensities from another template's (the same samples)."""
+    a, b = al.levels[0].values, clean.levels[0].values
+    assert a.shape == b.shape
+    return float(np.sqrt(np.mean((a - b) ** 2)))
+
+
+def _rest_views(model, tex: np.ndarray, noise: float, frames: int, views: int = 12) -> tuple[DenseAligner, list]:
+    """An aligner whose template is refined with ``views`` views of the plate at rest (``template_frames``
+    ``frames``): a camera that moves 4 mm a view, its pose given 1 mm off, the images brighter and of more
+    contrast than the reference view. Returns the aligner and what each refinement averaged."""
+    al = _aligner(model, template_frames=frames)
+    assert al.set_reference(render(tex, pose(), 0.0, noise, seed=1), G.inv(pose()))
+    done = []
+    for k in range(views):
+        T = pose(0.004 * (k + 1))
+        img = np.clip(1.1 * render(tex, T, 0.0, noise, seed=10 + k).astype(np.float32) - 8.0, 0, 255).astype(np.uint8)
+        T_given = G.make_T(t=[0.001, 0.0, 0.0]) @ T
+        al.solve(img, G.inv(T_given), np.array([0.0]), np.zeros(1), np.ones(1))
+        done.append(al.refine_template(img, G.inv(T_given)))
+    return al, done
+
+
+def test_views_at_rest_average_the_templates_noise_away(model):
+    """The reference view's noise is in every comparison. Views judged at rest averaged into the template (each
+    aligned by the fit, brought to the template's brightness): the template's noise, measured against the same
+    views rendered without noise, falls with the views averaged, to under half with 9 (1 / sqrt(9) = 0.33 where
+    nothing else differs); the averaging stops at ``template_frames`` views; with 0 the template is the reference
+    view's."""
+    tex = texture(0.1)
+    errs = {}
+    for frames in (0, 4, 9):
+        al, done = _rest_views(model, tex, 2.0, frames)
+        clean, _ = _rest_views(model, tex, 0.0, frames)
+        assert [d > 0 for d in done] == [k < frames - 1 for k in range(len(done))], done
+        assert al.template_views == max(frames, 1)
+        errs[frames] = _template_error(al, clean)
+    assert errs[0] > 1.0  # the noise of one view, 2 levels, as the samples' bilinear reading sees it
+    assert errs[9] < errs[4] < 0.7 * errs[0] and errs[9] < 0.5 * errs[0], errs
+
+
+def test_a_template_taken_in_a_deformed_state_is_not_averaged(model):
+    """The zero-displacement fit does not describe a template taken with the object deformed (its state measured
+    from depth): such a template stays the reference view's."""
+    tex = texture(0.5)
+    al = _aligner(model, template_frames=9)
+    assert al.set_reference(render(tex, pose(), 0.4, 1.0, seed=1), G.inv(pose()), mu_ref=np.array([0.4]))
+    before = al.levels[0].values.copy()
+    img = render(tex, pose(0.01), 0.4, 1.0, seed=2)
+    al.solve(img, G.inv(pose(0.01)), np.array([0.4]), np.zeros(1), np.ones(1))
+    assert al.refine_template(img, G.inv(pose(0.01))) == 0
+    assert np.array_equal(al.levels[0].values, before)
+
+
+def test_the_tracker_averages_views_at_rest_into_the_template_until_a_deformation(model):
+    """The tracker refines its template on the frames it judges at rest before any deformation, and stops at the
+    first deformed one."""
+    tex = texture(0.5)
+    bgr = lambda img: cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)  # noqa: E731
+    tr = DeformableTracker(model, np.eye(4), {"s": {"mode": "tracked", "initial": 0.5}}, CAM,
+                           TrackerConfig(measurements="dense", dense=DenseSettings(template_frames=20)))
+    tr.update(pose(), image_bgr=bgr(render(tex, pose(), 0.0, 1.0, seed=1)))
+    assert tr.dense is not None and tr.dense.template_views == 1
+    for k, s in enumerate((0.0, 0.0, 0.0, 0.7, 0.0)):
+        e = tr.update(pose(0.005 * (k + 1)), image_bgr=bgr(render(tex, pose(0.005 * (k + 1)), s, 1.0, seed=2 + k)))
+        assert (e.debug.get("template_samples", 0.0) > 0) == (s == 0.0 and k < 3), (k, e.debug, e.reason)
+    assert tr.dense.template_views == 4
+    assert abs(e.values[0] - 0.0) < 0.05 or e.state != EstimateState.OK
