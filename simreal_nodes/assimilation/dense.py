@@ -649,31 +649,35 @@ class DenseAligner:
             rows = self._visible_rows(L, None, f.total, T_cw)
             uv, _ = self._geometry(L, rows, None, f.total, T_cw, jac=False)
             v = bilinear(pyr[lvl], _at_level(uv, lvl)).astype(np.float64)
-            r = v - self._predicted(L, rows, None, f.photo)
-            ok = np.isfinite(r)
-            if ok.sum() < 10:
-                continue
-            ok[ok] = np.abs(r[ok]) <= 3.0 * self._scale(r[ok])
-            sel = rows[ok]
-            n = self._counts[lvl][sel]
-            L.values[sel] += ((v[ok] - f.photo[1]) / f.photo[0] - L.values[sel]) / (n + 1.0)
-            self._counts[lvl][sel] = n + 1.0
-            done = len(sel) if lvl == 0 else done
-            if use_s:
+            n = self._average_in(L.values, self._counts[lvl], rows, v, self._predicted(L, rows, None, f.photo),
+                                 f.photo[:2])
+            done = n if lvl == 0 else done
+            if use_s and n:
                 S = self.static[lvl]
                 srows = self._static_rows(lvl, f, T_cw, rows)
                 uvs, _, _ = self._rigid_project(S.X[srows], f.cam, T_cw, jac=False)
                 vs = bilinear(pyr[lvl], _at_level(uvs, lvl)).astype(np.float64)
-                rs = vs - (f.photo_s[0] * S.values[srows] + f.photo_s[1])
-                oks = np.isfinite(rs)
-                if oks.sum() >= 10:
-                    oks[oks] = np.abs(rs[oks]) <= 3.0 * self._scale(rs[oks])
-                    ss = srows[oks]
-                    ns = self._static_counts[lvl][ss]
-                    S.values[ss] += ((vs[oks] - f.photo_s[1]) / f.photo_s[0] - S.values[ss]) / (ns + 1.0)
-                    self._static_counts[lvl][ss] = ns + 1.0
+                self._average_in(S.values, self._static_counts[lvl], srows, vs,
+                                 f.photo_s[0] * S.values[srows] + f.photo_s[1], f.photo_s)
         self.template_views += 1
         return done
+
+    def _average_in(self, values: Array, counts: Array, rows: NDArray[np.int64], seen: Array, predicted: Array,
+                    photo: Array) -> int:
+        """Join the intensities ``seen`` at the template samples ``rows``, brought to the template's brightness
+        ((I - b) / a, ``photo`` = (a, b)), to their running means in ``values`` (``counts`` views each so far), but
+        those more than three robust standard deviations from ``predicted``; returns how many joined (0 where fewer
+        than 10 were finite)."""
+        r = seen - predicted
+        ok = np.isfinite(r)
+        if ok.sum() < 10:
+            return 0
+        ok[ok] = np.abs(r[ok]) <= 3.0 * self._scale(r[ok])
+        sel = rows[ok]
+        n = counts[sel]
+        values[sel] += ((seen[ok] - photo[1]) / photo[0] - values[sel]) / (n + 1.0)
+        counts[sel] = n + 1.0
+        return len(sel)
 
     def hold_rest(self) -> None:
         """The last frame showed no deformation: its zero-displacement fit's rho is the object's placement error
