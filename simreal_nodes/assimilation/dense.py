@@ -193,10 +193,18 @@ class DenseSettings:
     # 7.6 % of its range). Each frame the tracker judges at rest before any deformation was seen (the frames that
     # also measure the placement error, :meth:`DenseAligner.hold_rest`) is aligned to the template at the reference
     # state and its intensities, brought to the template's brightness, are averaged into it (the surroundings' too),
-    # up to this many frames in all; 0: the first view alone (:meth:`DenseAligner.refine_template`). A knob, not a
-    # default (stop 77, docs/family.md): with 20 the 24 development plates read 1.42 -> 1.30 % at the median, p90
-    # 7.20 -> 4.69 %, but development beams 0-9 p90 0.78 -> 1.28 % (cantilevers 4, 5, 8 worse)
-    template_frames: int = 0
+    # up to this many frames in all; 0: the first view alone (:meth:`DenseAligner.refine_template`). The default
+    # since stop 78 (docs/family.md), with the stop below: development beams 0-19 p90 of the scene medians 1.07 ->
+    # 0.79 %, stop 77's 24 development plates 7.20 -> 4.69 % (without the stop; it changed no plate it was rerun on
+    # for the worse)
+    template_frames: int = 20
+    # a load too small to pass as a deformation still bends the object a little, and a view of it averaged into the
+    # template puts that bend into every later comparison (development cantilevers 4 and 8: their first load near
+    # the clamp was judged "no measurable deformation" for 16 frames, 5 of them averaged in; the deformed fit's
+    # image motion there rose from 0.14 to 0.22-0.36 px). The averaging closes for good at the first view whose
+    # deformed fit moves the image more than this many pixels beyond the least motion of the views so far (at rest
+    # it varied by 0.013 px at most on development plates 13 and 21 and cantilever 4)
+    template_motion_px: float = 0.05
 
     def __post_init__(self) -> None:
         if self.grid_brightness not in GRID_BRIGHTNESS:
@@ -454,6 +462,8 @@ class DenseAligner:
         self.static: list[StaticLevel] = []  # empty: no depth in the reference view (the object alone)
         # the views averaged into the template (:meth:`refine_template`) and each sample's count of them
         self.template_views = 0
+        self.template_closed = False  # a view moved beyond the rest state's motion: no more averaging
+        self._rest_motion = float("inf")  # the least image motion of the deformed fit in the views averaged
         self._counts: list[Array] = []
         self._static_counts: list[Array] = []
         self._mu_ref: Array | None = None
@@ -556,7 +566,7 @@ class DenseAligner:
                                      v[good], normals))
         if depth is not None and self.s.rigid and self.s.static_ring_px > 0:
             self.static = self._surroundings(pyr, T_cw, uv, depth, int(self.s.static_share * len(idx)))
-        self.template_views = 1
+        self.template_views, self.template_closed, self._rest_motion = 1, False, float("inf")
         self._counts = [np.ones(len(L.values)) for L in self.levels]
         self._static_counts = [np.ones(len(S.values)) for S in self.static]
         self._mu_ref = None if mu_ref is None else np.asarray(mu_ref, np.float64).copy()
@@ -622,7 +632,7 @@ class DenseAligner:
             out.append(StaticLevel(X[sub][good], vals[good]))
         return out
 
-    def refine_template(self, gray: NDArray[np.generic], T_cw: Array) -> int:
+    def refine_template(self, gray: NDArray[np.generic], T_cw: Array, motion_px: float = 0.0) -> int:
         """Average this view into the template (:attr:`DenseSettings.template_frames`): the caller judged the object
         at rest here, in the reference state, before any deformation was seen. The zero-displacement fit (rigid
         correction, camera error and brightness; every level, from the last rest fit's values) aligns the template's
@@ -631,8 +641,14 @@ class DenseAligner:
         highlight) is left out, as is every sample of a view whose gain is under a half. The static surroundings'
         template is averaged the same way with their own brightness. Returns the samples averaged at the finest
         level (0: none; a template taken in a deformed state, which the zero-displacement fit does not describe, is
-        not refined)."""
-        if self.s.template_frames <= self.template_views or not self.levels or self._mu_ref is not None:
+        not refined). ``motion_px``: the image motion of this frame's deformed fit (:attr:`DenseResult.motion_px`);
+        more than :attr:`DenseSettings.template_motion_px` beyond the least of the views averaged so far, a load too
+        small to be judged a deformation is bending the object, and the averaging closes for good."""
+        if self.s.template_frames <= self.template_views or not self.levels or self._mu_ref is not None \
+                or self.template_closed:
+            return 0
+        if not motion_px <= self._rest_motion + self.s.template_motion_px:  # NaN closes it too
+            self.template_closed = True
             return 0
         T_cw = np.asarray(T_cw, np.float64)
         pyr = pyramid(self.ideal(gray), len(self.levels))
@@ -660,6 +676,7 @@ class DenseAligner:
                 self._average_in(S.values, self._static_counts[lvl], srows, vs,
                                  f.photo_s[0] * S.values[srows] + f.photo_s[1], f.photo_s)
         self.template_views += 1
+        self._rest_motion = min(self._rest_motion, float(motion_px))
         return done
 
     def _average_in(self, values: Array, counts: Array, rows: NDArray[np.int64], seen: Array, predicted: Array,

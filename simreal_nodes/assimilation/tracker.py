@@ -666,7 +666,7 @@ class DeformableTracker:
             # at rest before any load was seen: the placement error as the images see it (later frames judged
             # undeformed may carry a small load the rigid fit would absorb), and another view of the template
             self.dense.hold_rest()
-            est.debug["template_samples"] = float(self.dense.refine_template(gray, T_cw))
+            est.debug["template_samples"] = float(self.dense.refine_template(gray, T_cw, res.motion_px))
         est = self._conclude(est, res.mu, bool(deforming),
                              f"photometric residual {fit:.2f} vs {res.rest_rms:.2f} undeformed, "
                              f"motion {res.motion_px:.2f} px")

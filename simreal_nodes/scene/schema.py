@@ -133,8 +133,10 @@ TRACKING = Record({
     "dense_template_frames": Number("measurements 'dense': average the object's texture (and its surroundings') "
                                     "over up to this many views judged at rest before any deformation, the "
                                     "reference view included, so that one image's noise is not in every "
-                                    "comparison; 0: the reference view alone", integer=True, lo=0, hi=100000,
-                                    default=0),
+                                    "comparison (the averaging closes at the first view whose fit moves the "
+                                    "image beyond the rest state's, a load too small to be called a "
+                                    "deformation); 0: the reference view alone", integer=True, lo=0, hi=100000,
+                                    default=20),
     "dense_grid_brightness": Enum(("auto", "always", "never"), "measurements 'dense': how the coarse search "
                                   "compares its candidates: always with the object's brightness fitted to each; "
                                   "never at the last frame's brightness (which a misaligned frame drags towards "

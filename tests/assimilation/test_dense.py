@@ -790,3 +790,27 @@ def test_the_tracker_averages_views_at_rest_into_the_template_until_a_deformatio
         assert (e.debug.get("template_samples", 0.0) > 0) == (s == 0.0 and k < 3), (k, e.debug, e.reason)
     assert tr.dense.template_views == 4
     assert abs(e.values[0] - 0.0) < 0.05 or e.state != EstimateState.OK
+
+
+@pytest.mark.parametrize("small", [0.0, 0.06])
+def test_a_load_too_small_to_be_a_deformation_closes_the_templates_averaging(model, small):
+    """A load too small to pass as a deformation (s = 0.06: the fit moves the image 0.16 px, the tracker reports
+    no measurable deformation) still bends the object: its view would put the bend into the template. The averaging
+    closes for good there (:attr:`DenseSettings.template_motion_px`), even for the views at rest after it; without
+    that load every view joins."""
+    tex = texture(0.5)
+    bgr = lambda img: cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)  # noqa: E731
+    tr = DeformableTracker(model, np.eye(4), {"s": {"mode": "tracked", "initial": 0.5}}, CAM,
+                           TrackerConfig(measurements="dense", dense=DenseSettings(template_frames=20)))
+    tr.update(pose(), image_bgr=bgr(render(tex, pose(), 0.0, 1.0, seed=1)))
+    joined = []
+    for k, s in enumerate((0.0, 0.0, small, 0.0, 0.0)):
+        e = tr.update(pose(0.005 * (k + 1)), image_bgr=bgr(render(tex, pose(0.005 * (k + 1)), s, 1.0, seed=2 + k)))
+        assert "no measurable deformation" in e.reason, e.reason
+        joined.append(e.debug.get("template_samples", 0.0) > 0)
+    assert tr.dense is not None
+    if small:
+        assert joined == [True, True, False, False, False] and tr.dense.template_closed
+        assert tr.dense.template_views == 3
+    else:
+        assert all(joined) and not tr.dense.template_closed and tr.dense.template_views == 6
