@@ -195,8 +195,8 @@ class DenseSettings:
     # state and its intensities, brought to the template's brightness, are averaged into it (the surroundings' too),
     # up to this many frames in all; 0: the first view alone (:meth:`DenseAligner.refine_template`). The default
     # since stop 78 (docs/family.md), with the stop below: development beams 0-19 p90 of the scene medians 1.07 ->
-    # 0.79 %, stop 77's 24 development plates 7.20 -> 4.69 % (without the stop; it changed no plate it was rerun on
-    # for the worse)
+    # 0.79 %, stop 77's 24 development plates 7.20 -> 4.69 % (without the stop; rerun with it, plates 0-4 and 17
+    # level or better, 21 20.0 -> 22.5 %, a failure with either template)
     template_frames: int = 20
     # a load too small to pass as a deformation still bends the object a little, and a view of it averaged into the
     # template puts that bend into every later comparison (development cantilevers 4 and 8: their first load near
