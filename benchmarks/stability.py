@@ -239,8 +239,9 @@ What it shows, for someone choosing a model spec's mesh (`mesh: {cells, element,
 
 The sections after this benchmark's table come from their own benchmarks: hyperelastic laws into compression
 and the load-step count (`hyperelastic`), mode counts against an independent truth (`mode_count`), the
-Levenberg-Marquardt conditioning (`lm_conditioning`), depth noise and holes (`depth_quality`), and the camera's
-image noise, blur, distance and viewing angle (`camera_quality`).
+Levenberg-Marquardt conditioning (`lm_conditioning`), depth noise and holes (`depth_quality`), the marker
+localization under blur and noise (`marker_quality`), and the camera's image noise, blur, distance and viewing angle
+(`camera_quality`).
 """
 
 
@@ -337,6 +338,32 @@ frames registered with its depth made worse in one way, for the SLAM and the reg
 """),
     ("depth_quality_heldout", """**Held-out seeds** (`python -m benchmarks.depth_quality --seeds 1000-1009 --held-out`):
 """),
+    ("marker_quality", """## Marker localization under blur and noise: the loose-pose check (stop 79)
+
+`./run bench marker_quality`: the demo's scene (four 60 mm ArUco markers, the camera on a 0.45 m arc, 150 frames)
+with image noise and blur added, the camera pose from the markers alone against the renderer's. **Found in stop 79:
+under a blur of 2-4 px (640 x 480) one or two markers are still detected, their corners rounded inward, and their pose
+read 2-7 cm off with a reprojection rms under a pixel** (a square's four corners fit a pose near the right one
+whatever its size). Without a check every such frame was given as a pose: 373 of the development views' 1 350
+frames more than 5 mm off. The check (`localization.markers.max_std_pct`, 2.5 %) refuses a pose whose camera
+position the corners hold more loosely than that share of the distance to the markers (the standard deviation from
+the PnP's normal equations at the corners' rms, at least 0.5 px); the frame is LOST with a reason naming the knob.
+The 2.5 % was chosen on the development rows (640 x 480, noise seed 0; 2 % refused 13 poses within 5 mm, 2.5 % 2):
+at it, 21 poses more than 5 mm off were still given there. The held-out rows (never run while choosing): at 640 x 480
+with noise seed 1, poses more than 5 mm off 130 -> 11 and no pose within 5 mm refused. **Where it falls short:** at
+1280 x 720 with a 3-px blur, three or four markers are seen, the check passes them, and 49 of 150 poses are more
+than 5 mm off (the worst 47 mm): blur's inward bias of the corners is not noise, and no covariance shows it. A
+single 10 cm marker seen face on from 0.5 m is refused too (7 % of the distance: its tilt trades against its
+offset); a scene that relies on one marker sets the knob higher. Four sharp markers hold the camera to 0.3 % and
+three to 0.6-0.8 %.
+
+The rows with threshold windows "3, 23" are issue 18's cheaper detection (OpenCV's adaptive threshold at two window
+sizes instead of three): about 40 % less time per frame at 640 x 480, the same on the sharp and noisy views, but
+more poses more than 5 mm off given on two of the four blurred views with wrong poses (development blur 2: 11 -> 18;
+held-out 1280 x 720 blur 3: 49 -> 63), fewer on one (held-out blur 1.75: 9 -> 0). Not adopted: issue 18 asks that
+accuracy not get worse. The times in this table are not quiet-host figures (the family benchmark shared the 2
+cores).
+"""),
     ("camera_quality", """## The camera at the extremes: image noise, blur, distance, viewing angle
 
 `./run bench camera_quality`: development seeds 0 and 1 of the family (two-support beams 0.77 m and 0.63 m long,
@@ -407,8 +434,12 @@ with earlier runs: this one shared the 2 cores with the held-out family for its 
     the current dense fit (the shading term came after the choice): the good views stay at most 0.56 sigma except seed
     1 as drawn (one frame at 1.24, a false alarm) and seed 1 at 2 m (up to 3.5, 26 good frames over 1); on the
     failing view all 60 bad frames are over 1 (median 3.85). The threshold was not changed. Those calibration
-    frames predate stop 48's coarse search, which mended the failing view itself; the calibration was not rerun
-    (stop 49 reran the gain's, `flag_calibration_gain`, not the camera check's).
+    frames predated stop 48's coarse search, which mended the failing view itself. **Rerun in stop 60** on the
+    current defaults (`flag_calibration_camera`): the failing view is now 0.32 % off at the median (8.65 % before)
+    with no frame over 2 %, so the set has nothing left that the check should catch. Seed 1 at 5 degrees has 9 good
+    frames over 1 sigma (max 2.0), seed 1 at 2 m has 27 (max 4.2) and catches 2 of its 4 frames over 2 %, and every
+    other view stays under 0.6 sigma. On these scenes the check now raises false alarms (36 of 737 frames) and catches
+    2 of 33 frames over 2 %. The threshold was not changed: a new one would need development scenes that fail.
   - **What it costs.** Time: the tracker went from 66 to 81 ms per frame on development seed 3, measured alone
     (`dense_camera_check: false` against true). False alarms: in this table frames of scenes tracked within
     0.13-0.77 % (their medians) are flagged: seed 1 with 4 px of blur 55 % of its frames, from 2 m 45 %, with 2 px of

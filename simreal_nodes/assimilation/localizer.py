@@ -89,7 +89,8 @@ class MarkerLocalization(Localizer):
              right: np.ndarray | None = None, focus: Sequence[np.ndarray] = ()) -> Localization:
         res = self.markers.locate(gray)
         state = TrackingState.OK if res.T_wc is not None else TrackingState.LOST
-        reason = res.reason if res.T_wc is None else f"{len(res.ids)} markers, {res.rms_px:.2f} px"
+        reason = (res.reason if res.T_wc is None
+                  else f"{len(res.ids)} markers, {res.rms_px:.2f} px, position +-{res.std_pct:.2f} % of the distance")
         return Localization(res.T_wc, state, reason, features=4 * len(res.ids))
 
 
@@ -147,11 +148,12 @@ def make_localizer(loc: dict[str, Any], cam: CameraModel, baseline: float | None
     overrides its field)."""
     mode = loc["mode"]
     if mode == "markers":
-        from simreal_nodes.vision.markers import MarkerLocalizer
+        from simreal_nodes.vision.markers import MAX_STD_PCT, MarkerLocalizer
 
         mk = loc["markers"]
         return MarkerLocalization(MarkerLocalizer(cam, mk["dictionary"], mk["size_m"],
-                                                  {int(k): G.pose7_to_matrix(v) for k, v in mk["poses"].items()}))
+                                                  {int(k): G.pose7_to_matrix(v) for k, v in mk["poses"].items()},
+                                                  max_std_pct=mk.get("max_std_pct", MAX_STD_PCT)))
     if mode == "static":
         return StaticLocalization(G.pose7_to_matrix(loc["static_pose"]))
     from simreal_nodes.vision.slam.map import Map

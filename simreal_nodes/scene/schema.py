@@ -61,6 +61,10 @@ MARKERS = Record({
     "size_m": Number("marker side length, metres", lo=0, lo_open=True, default=0.05),
     "poses": MapOf(Vector(7, what=POSE7), key=Number(integer=True, lo=0),
                    doc="marker id -> pose of its centre in the map frame", default={}),
+    "max_std_pct": Number("refuse a pose whose camera position the markers hold more loosely than this share of the "
+                          "distance to them (standard deviation at the corners' reprojection rms, at least 0.5 px; "
+                          "%; 0: never refuse). One or two small markers in a blurred image read centimetres off "
+                          "without it (benchmarks/marker_quality.py)", lo=0, default=2.5),
 })
 
 LOCALIZATION = Record({

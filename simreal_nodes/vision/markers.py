@@ -2,6 +2,12 @@
 
 All corners of all visible markers of the layout go into one PnP (IPPE on the best marker for the
 initial guess, then Levenberg-Marquardt on every corner), so the pose uses every marker in view.
+
+A pose the corners hold too loosely is refused rather than passed on: the camera position's standard deviation from
+the PnP's normal equations, at the corners' reprojection rms (no less than ``CORNER_FLOOR_PX``), in % of the
+distance to the markers, over ``max_std_pct``. One or two small markers in a blurred image read 2-7 cm off with a
+reprojection rms under a pixel (a square's four corners fit any pose near the right one), and the check is what
+tells (``benchmarks/marker_quality.py``).
 """
 
 from __future__ import annotations
@@ -24,6 +30,15 @@ class MarkerResult:
     rms_px: float = float("nan")
     reason: str = ""
     corners: dict = field(default_factory=dict)  # id -> (4, 2) detected corners (distorted pixels)
+    # the camera position's standard deviation, % of the distance to the markers (at the corners' rms, floored)
+    std_pct: float = float("nan")
+
+
+# the least corner error the pose's uncertainty assumes (px): a sharp 30-px marker's corners are good to a tenth of a
+# pixel, but motion blur and defocus round them off by more without raising the rms of a pose that fits only them
+CORNER_FLOOR_PX = 0.5
+# the default of max_std_pct, chosen on development views (benchmarks/marker_quality.py)
+MAX_STD_PCT = 2.5
 
 
 def marker_corners(size: float) -> np.ndarray:
@@ -33,11 +48,15 @@ def marker_corners(size: float) -> np.ndarray:
 
 
 class MarkerLocalizer:
-    def __init__(self, cam: CameraModel, dictionary: str, size: float, poses: dict[int, np.ndarray]):
+    def __init__(self, cam: CameraModel, dictionary: str, size: float, poses: dict[int, np.ndarray],
+                 max_std_pct: float = MAX_STD_PCT):
+        """``max_std_pct``: refuse a pose whose camera position is held more loosely than this share of the
+        distance to the markers (standard deviation, %; 0 or less: never)."""
         if not hasattr(cv2.aruco, dictionary):
             raise SimrealError(f"unknown marker dictionary '{dictionary}' (e.g. DICT_4X4_50, DICT_APRILTAG_36h11)")
         self.cam = cam
         self.size = float(size)
+        self.max_std_pct = float(max_std_pct)
         self.poses = {int(k): np.asarray(v, dtype=np.float64) for k, v in poses.items()}
         params = cv2.aruco.DetectorParameters()
         params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
@@ -97,5 +116,41 @@ class MarkerLocalizer:
             res.reason = (f"markers inconsistent with the layout (reprojection {res.rms_px:.1f} px): "
                           "moved marker or wrong size?")
             return res
+        std_m, distance = position_std(obj, K, rvec, tvec, max(res.rms_px, CORNER_FLOOR_PX))
+        res.std_pct = 100.0 * std_m / distance
+        if not res.std_pct <= self.max_std_pct and self.max_std_pct > 0:
+            n = len(res.ids)
+            res.reason = (f"pose refused: {n} marker{'s hold' if n > 1 else ' holds'} the camera position only to "
+                          f"+-{1e3 * std_m:.0f} mm ({res.std_pct:.1f} % of the {distance:.2f} m to them, over "
+                          f"{self.max_std_pct:g} %): too few, too small or too blurred "
+                          "(localization.markers.max_std_pct)")
+            return res
         res.T_wc = G.inv(T_cw)
         return res
+
+
+def position_std(obj: np.ndarray, K: np.ndarray, rvec: np.ndarray, tvec: np.ndarray,
+                 sigma_px: float) -> tuple[float, float]:
+    """The camera centre's standard deviation (metres, the root of the covariance's trace) from the Gauss-Newton
+    normal equations of the reprojection of ``obj`` (map points, (N, 3)) at pose (``rvec``, ``tvec``: map -> camera)
+    with ``sigma_px`` of pixel noise per coordinate, and the points' mean distance along the optical axis (m)."""
+    _, J = cv2.projectPoints(obj, rvec, tvec, K, None)
+    J = J[:, :6]  # d(u, v) / d(rvec, tvec)
+    JtJ = J.T @ J
+    if not np.all(np.isfinite(JtJ)) or np.linalg.cond(JtJ) > 1e14:
+        return float("inf"), float("nan")
+    cov = sigma_px ** 2 * np.linalg.inv(JtJ)
+    # the centre c = -R(r)^T t: its Jacobian by central differences in the six pose parameters
+    p0 = np.r_[np.ravel(rvec), np.ravel(tvec)]
+
+    def centre(p: np.ndarray) -> np.ndarray:
+        return -cv2.Rodrigues(p[:3].reshape(3, 1))[0].T @ p[3:]
+
+    Jc = np.zeros((3, 6))
+    for i in range(6):
+        d = np.zeros(6)
+        d[i] = 1e-7
+        Jc[:, i] = (centre(p0 + d) - centre(p0 - d)) / 2e-7
+    R = cv2.Rodrigues(np.reshape(rvec, (3, 1)))[0]
+    depth = float(np.mean(obj @ R[2] + float(np.ravel(tvec)[2])))
+    return float(np.sqrt(max(np.trace(Jc @ cov @ Jc.T), 0.0))), depth

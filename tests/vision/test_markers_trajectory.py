@@ -1,8 +1,10 @@
+import cv2
 import numpy as np
 import pytest
 
 from simreal_nodes import geometry as G
-from simreal_nodes.vision.markers import MarkerLocalizer
+from simreal_nodes.scene.schema import MARKERS
+from simreal_nodes.vision.markers import MAX_STD_PCT, MarkerLocalizer
 from simreal_nodes.vision.trajectory import ate, read_tum, rpe, umeyama, write_tum
 from tests.synthdata import sequence
 
@@ -20,6 +22,33 @@ def test_markers_mode_within_two_millimetres():
     assert np.sqrt(np.mean(np.square(err))) < 0.002
     r = loc.locate(np.zeros_like(seq["gray"][0]))
     assert r.T_wc is None and "no marker" in r.reason
+
+
+def test_a_pose_few_blurred_markers_hold_loosely_is_refused_not_given():
+    """A 3-px blur leaves one or two markers detected, their corners rounded inward: the unchecked pose reads
+    centimetres off with a reprojection rms under a pixel. The check refuses those frames with its reason and
+    gives only poses within 5 mm."""
+    seq = sequence("aluminium_beam", 640, 480, duration=2.0, fps=15.0)
+    doc = seq["scene"].scene_yaml(seq["scene"])["localization"]["markers"]
+    poses = {k: G.pose7_to_matrix(v) for k, v in doc["poses"].items()}
+    checked = MarkerLocalizer(seq["cam"], doc["dictionary"], doc["size_m"], poses)
+    unchecked = MarkerLocalizer(seq["cam"], doc["dictionary"], doc["size_m"], poses, max_std_pct=0.0)
+    assert MARKERS.fields["max_std_pct"].default == MAX_STD_PCT == checked.max_std_pct
+    far_unchecked, refused = 0, 0
+    for g, T in zip(seq["gray"], seq["T"]):
+        blurred = cv2.GaussianBlur(g, (0, 0), 3.0)
+        u = unchecked.locate(blurred)
+        if u.T_wc is not None and np.linalg.norm(u.T_wc[:3, 3] - T[:3, 3]) > 0.02:
+            far_unchecked += 1
+        r = checked.locate(blurred)
+        if r.T_wc is None:
+            refused += "pose refused" in r.reason
+            continue
+        assert np.linalg.norm(r.T_wc[:3, 3] - T[:3, 3]) < 0.005, r
+        assert r.std_pct <= MAX_STD_PCT
+    assert far_unchecked >= 10 and refused >= far_unchecked
+    r = checked.locate(cv2.GaussianBlur(seq["gray"][0], (0, 0), 3.0))
+    assert "% of the" in r.reason and "marker" in r.reason
 
 
 def test_umeyama_recovers_a_similarity_and_ate_rpe(tmp_path):
