@@ -69,3 +69,19 @@ def test_the_std_is_the_largest_parameters_and_flags_above_the_level(tmp_path, m
     assert fr["errs"][1] > 2.0 >= fr["errs"][0]  # s_y 5 % of its range off on the second
     row = quantity_row("std", 3, "", fr["std"], fr["errs"], fr["states"])
     assert row["caught_1"] == 1 and row["good_1"] == 0 and row["caught_3"] == 0
+
+
+def test_the_std_note_counts_what_a_lower_level_would_flag_among_the_frames_the_flag_passed():
+    """Runs made with the loose-hold flag on: its OK frames are those it passed, so a lower level flags exactly the
+    OK frames over it; the note counts them per group (a plate's group from its support). A run whose OK frames go
+    over the level predates the flag and says so instead."""
+    import benchmarks.flag_calibration as fc
+    from simreal_nodes.synth.family import draw_plate
+
+    assert draw_plate(3).support == "clamped_ends"
+    fr = {"std": [0.4, 0.8, 0.6, 2.0], "errs": [0.5, 3.0, 1.0, 4.0], "states": [0, 0, 0, 1]}
+    note = fc.std_note([(3, "runs (plate)", fr)])
+    assert ("plates bolted at both ends: of 1 OK frames more than 2 % off and 2 within, 0.5 % would flag 1 and 1, "
+            "0.7 % would flag 1 and 0") in note
+    old = {**fr, "states": [0, 0, 0, 0]}  # an OK frame at 2 %: no flag was on
+    assert "predate the flag" in fc.std_note([(3, "runs (plate)", old)])
