@@ -401,9 +401,9 @@ TABLES = (("family", "Held-out seeds (the accuracy this project reports): the de
            "above (stop 78; the run was stopped there for time)"),
           ("family_plate_dev_template_gate_17_21", "Plates, development seeds 17 and 21 (two of the three that stop "
            "77's averaging made worse) with the averaging closed as above (stop 78)"),
-          ("family_plate_dev_default", "Plates, development seeds (stop 76's 24) on the defaults of stop 78 (`--compose "
-           "family_plate_dev_template_gate,family_plate_dev_template_gate_17_21,family_plate_dev_template_gate_rest`: "
-           "the last the other 17 seeds, run in stop 79)"),
+          ("family_plate_dev_default", "Plates, development seeds (stop 76's 24) on the defaults of stop 78 "
+           "(`--compose family_plate_dev_template_gate,family_plate_dev_template_gate_17_21,"
+           "family_plate_dev_template_gate_rest`: the last the other 17 seeds, run in stop 79)"),
           ("family_plate_stop76", "Plates, held-out seeds on the code of stop 76 (`--object plate --seeds 1000-1019 "
            "--out family_plate_stop76`: a load anywhere on the top face, s_x and s_y; stop 76, with the flag of a "
            "load held too loosely, `DenseSettings.max_std_frac`)"),
