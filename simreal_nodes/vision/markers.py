@@ -118,6 +118,10 @@ class MarkerLocalizer:
             return res
         std_m, distance = position_std(obj, K, rvec, tvec, max(res.rms_px, CORNER_FLOOR_PX))
         res.std_pct = 100.0 * std_m / distance
+        if not np.isfinite(res.std_pct) and self.max_std_pct > 0:
+            res.reason = ("pose refused: the markers' corners do not determine the camera position (degenerate "
+                          "view; localization.markers.max_std_pct)")
+            return res
         if not res.std_pct <= self.max_std_pct and self.max_std_pct > 0:
             n = len(res.ids)
             res.reason = (f"pose refused: {n} marker{'s hold' if n > 1 else ' holds'} the camera position only to "
