@@ -1,5 +1,5 @@
 """Marker localization at the extremes (issues 20 and 18): image blur and noise against the camera pose's error, the
-poses refused as too loosely held (``MarkerLocalizer.max_std_pct``), and the detector's time.
+poses refused as too loosely held (``MarkerLocalizer.max_std_pct``), the corner refinement, and the detector's time.
 
     ./run bench marker_quality                      # development and held-out views, about 6 minutes alone
     python -m benchmarks.marker_quality --views dev --checks 0,2,2.5,3
@@ -15,10 +15,14 @@ sees it.
 - ``heldout``: never run while choosing: 640 x 480 with noise seed 1 (noise 12, blur 1.75, 3.5) and 1280 x 720
   (as drawn, noise 12, blur 1.5, 3).
 
-Per view and check level (0: no check): frames, poses given, poses refused, the given poses' position error (rms,
-median, worst) and how many of them are more than 5 mm off, the refused ones' median error (had they been given),
-and the localizer's time per frame. ``--windows`` adds the detector with two adaptive-threshold windows (3 and 23 px)
-instead of OpenCV's three (3, 13, 23): issue 18's cheaper detection, measured and not adopted (see the notes).
+Corner refinement (``--refinements``): ``edges`` (the default since stop 80: lines fitted to the markers' sides,
+intersected; ``vision/markers.py:refine_by_edges``) at every check level, and OpenCV's ``subpix`` (the default until
+stop 80) at no check and the default check. The refinement was chosen on the development views.
+
+Per view, refinement and check level (0: no check): frames, poses given, poses refused, the given poses' position
+error (rms, median, worst) and how many of them are more than 5 mm off, the refused ones' median error (had they been
+given), and the localizer's time per frame. ``--windows`` adds the detector with two adaptive-threshold windows (3 and
+23 px) instead of OpenCV's three (3, 13, 23): issue 18's cheaper detection, measured and not adopted (see the notes).
 """
 
 from __future__ import annotations
@@ -46,10 +50,12 @@ VIEWS = {
 FAR_MM = 5.0  # a pose this far off is counted as wrong
 
 
-def localizer(seq: dict, max_std_pct: float, windows: tuple[int, int, int] | None = None) -> MarkerLocalizer:
+def localizer(seq: dict, max_std_pct: float, windows: tuple[int, int, int] | None = None,
+              refinement: str = "edges") -> MarkerLocalizer:
     doc = seq["scene"].scene_yaml(seq["scene"])["localization"]["markers"]
     loc = MarkerLocalizer(seq["cam"], doc["dictionary"], doc["size_m"],
-                          {k: G.pose7_to_matrix(v) for k, v in doc["poses"].items()}, max_std_pct=max_std_pct)
+                          {k: G.pose7_to_matrix(v) for k, v in doc["poses"].items()}, max_std_pct=max_std_pct,
+                          corner_refinement=refinement)
     if windows is not None:
         p = loc.detector.getDetectorParameters()
         p.adaptiveThreshWinSizeMin, p.adaptiveThreshWinSizeMax, p.adaptiveThreshWinSizeStep = windows
@@ -57,10 +63,10 @@ def localizer(seq: dict, max_std_pct: float, windows: tuple[int, int, int] | Non
     return loc
 
 
-def run_view(seq: dict, check: float, windows: tuple[int, int, int] | None = None) -> dict:
+def run_view(seq: dict, check: float, windows: tuple[int, int, int] | None = None, refinement: str = "edges") -> dict:
     """One view through the localizer at one check level; a refused pose's error is measured from the pose the check
     turned down (the same solve without the check)."""
-    loc, unchecked = localizer(seq, check, windows), localizer(seq, 0.0, windows)
+    loc, unchecked = localizer(seq, check, windows, refinement), localizer(seq, 0.0, windows, refinement)
     given, refused, ms, markers = [], [], [], []
     for g, T in zip(seq["gray"], seq["T"]):
         t0 = time.perf_counter()
@@ -88,10 +94,13 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--views", default="dev,heldout", help="comma-separated: dev, heldout")
     ap.add_argument("--checks", default=f"0,2,{MAX_STD_PCT:g},3", help="max_std_pct levels (0: no check)")
+    ap.add_argument("--refinements", default="edges,subpix",
+                    help="corner refinements: the first at every check level, the others at 0 and the default")
     ap.add_argument("--windows", action="store_true", help="also the detector with threshold windows 3 and 23 px")
     ap.add_argument("--out", default="marker_quality")
     a = ap.parse_args()
     checks = [float(c) for c in a.checks.split(",")]
+    refinements = a.refinements.split(",")
     rows: list[dict] = []
     bases: dict[str, dict] = {}
     for group in a.views.split(","):
@@ -101,16 +110,18 @@ def main() -> None:
                 bases[res] = sequence("aluminium_beam", w, h, duration=DURATION, fps=FPS)
             seq = made_worse(bases[res], kind, level, seed)
             view = "as drawn" if kind == "none" else f"{kind} {level:g}"
-            variants = [(c, None, "3, 13, 23") for c in checks]
+            variants = [(refinements[0], c, None, "3, 13, 23") for c in checks]
+            variants += [(r, c, None, "3, 13, 23") for r in refinements[1:] for c in (0.0, MAX_STD_PCT) if c in checks]
             if a.windows:
-                variants += [(MAX_STD_PCT, (3, 23, 20), "3, 23")]
-            for check, windows, label in variants:
+                variants += [(refinements[0], MAX_STD_PCT, (3, 23, 20), "3, 23")]
+            for refinement, check, windows, label in variants:
                 row = {"set": group, "resolution": res, "seed": seed, "view": view, "kind": kind, "level": level,
-                       "check_pct": check, "windows": label, **run_view(seq, check, windows)}
+                       "refinement": refinement, "check_pct": check, "windows": label,
+                       **run_view(seq, check, windows, refinement)}
                 rows.append(row)
                 print(row, flush=True)
     cols = [("set", "set", "{}"), ("resolution", "resolution", "{}"), ("seed", "noise seed", "{}"),
-            ("view", "view", "{}"), ("windows", "threshold windows (px)", "{}"),
+            ("view", "view", "{}"), ("refinement", "corners", "{}"), ("windows", "threshold windows (px)", "{}"),
             ("check_pct", "max_std_pct (0: off)", "{:g}"), ("frames", "frames", "{}"), ("given", "poses given", "{}"),
             ("refused", "refused", "{}"), ("markers_mean", "markers per pose", "{:.2f}"),
             ("rms_mm", "error rms (mm)", "{:.2f}"), ("median_mm", "median", "{:.2f}"), ("worst_mm", "worst", "{:.1f}"),
@@ -121,19 +132,22 @@ def main() -> None:
     def plot(plt):
         fig, ax = plt.subplots(1, 2, figsize=(12, 4.2))
         for group, mk in (("dev", "o"), ("heldout", "s")):
-            for c in checks:
-                sel = [r for r in rows if r["set"] == group and r["check_pct"] == c and r["windows"] == "3, 13, 23"]
-                if not sel:
-                    continue
-                lab = [f"{r['resolution']} {r['view']}" for r in sel]
-                ax[0].plot(lab, [r["far_given"] for r in sel], mk + "-", label=f"{group}, check {c:g} %")
-                ax[1].plot(lab, [r["given"] for r in sel], mk + "-", label=f"{group}, check {c:g} %")
+            for ref, ls in zip(refinements, ("-", "--", ":")):
+                for c in checks:
+                    sel = [r for r in rows if r["set"] == group and r["check_pct"] == c and r["windows"] == "3, 13, 23"
+                           and r["refinement"] == ref]
+                    if not sel:
+                        continue
+                    lab = [f"{r['resolution']} {r['view']}" for r in sel]
+                    ax[0].plot(lab, [r["far_given"] for r in sel], mk + ls, label=f"{group}, {ref}, check {c:g} %")
+                    ax[1].plot(lab, [r["given"] for r in sel], mk + ls, label=f"{group}, {ref}, check {c:g} %")
         ax[0].set_ylabel(f"poses given more than {FAR_MM:g} mm off")
         ax[1].set_ylabel("poses given")
         for x in ax:
             x.tick_params(axis="x", rotation=75)
             x.legend(fontsize=7)
-        fig.suptitle("Marker localization: blur and noise against wrong poses given and poses refused")
+        fig.suptitle("Marker localization: blur and noise against wrong poses given and poses refused "
+                     "(solid: edges, dashed: subpix)")
         return fig
 
     save(a.out, rows, cols, "Marker localization at the extremes: blur, noise, the loose-pose check, the detector",

@@ -153,7 +153,8 @@ def make_localizer(loc: dict[str, Any], cam: CameraModel, baseline: float | None
         mk = loc["markers"]
         return MarkerLocalization(MarkerLocalizer(cam, mk["dictionary"], mk["size_m"],
                                                   {int(k): G.pose7_to_matrix(v) for k, v in mk["poses"].items()},
-                                                  max_std_pct=mk.get("max_std_pct", MAX_STD_PCT)))
+                                                  max_std_pct=mk.get("max_std_pct", MAX_STD_PCT),
+                                                  corner_refinement=mk.get("corner_refinement", "edges")))
     if mode == "static":
         return StaticLocalization(G.pose7_to_matrix(loc["static_pose"]))
     from simreal_nodes.vision.slam.map import Map

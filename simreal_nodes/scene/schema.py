@@ -65,6 +65,9 @@ MARKERS = Record({
                           "distance to them (standard deviation at the corners' reprojection rms, at least 0.5 px; "
                           "%; 0: never refuse). One or two small markers in a blurred image read centimetres off "
                           "without it (benchmarks/marker_quality.py)", lo=0, default=2.5),
+    "corner_refinement": Enum(("edges", "subpix"), "edges: each corner where lines fitted to the marker's sides' "
+                              "edges meet (holds under blur); subpix: OpenCV's corner search, which blur pulls "
+                              "inward (benchmarks/marker_quality.py)", default="edges"),
 })
 
 LOCALIZATION = Record({

@@ -8,6 +8,13 @@ the PnP's normal equations, at the corners' reprojection rms (no less than ``COR
 distance to the markers, over ``max_std_pct``. One or two small markers in a blurred image read 2-7 cm off with a
 reprojection rms under a pixel (a square's four corners fit any pose near the right one), and the check is what
 tells (``benchmarks/marker_quality.py``).
+
+Corners are refined from the marker's edges (``corner_refinement: edges``, the default): OpenCV's sub-pixel corner
+search looks at a window round the corner itself, where blur rounds the square off, and reads it 0.2 px inward when
+sharp and about 1 px inward under a 2-px blur (640 x 480, markers 40 px wide). Each side's outer edge is located
+across the side away from its ends (the steepest dark-inside descent in a profile no wider than the black border),
+a line is fitted through those points, and the corners are the lines' intersections: blur spreads a straight edge
+symmetrically, so the line stays where it is. ``subpix`` keeps OpenCV's corners.
 """
 
 from __future__ import annotations
@@ -39,6 +46,104 @@ class MarkerResult:
 CORNER_FLOOR_PX = 0.5
 # the default of max_std_pct, chosen on development views (benchmarks/marker_quality.py)
 MAX_STD_PCT = 2.5
+# corner refinements: "edges" (lines fitted to the sides' edges, intersected) or "subpix" (OpenCV's corner search)
+CORNER_REFINEMENTS = ("edges", "subpix")
+# the edge search: the share of a side searched (its ends are rounded by blur), the profile's half-width as a share
+# of the black border's width (the bits inside have edges of their own), its step (px), and the most a corner may
+# move from OpenCV's (in border widths; beyond it the marker keeps OpenCV's corners)
+EDGE_SPAN = (0.2, 0.8)
+EDGE_HALF_WIDTH = 0.6
+EDGE_STEP_PX = 0.25
+EDGE_MAX_SHIFT = 1.5
+# OpenCV's sub-pixel corner search ("subpix", and the fall-back of "edges"): half-window (px) and stop criteria
+SUBPIX_WIN = 4
+SUBPIX_CRITERIA = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 50, 0.01)
+
+
+def refine_by_edges(gray: np.ndarray, corners: np.ndarray, cells: int, iterations: int = 3) -> np.ndarray | None:
+    """Corners (4, 2), clockwise in the image as OpenCV gives them, of a marker ``cells`` cells wide (its bits and
+    its black border), refined as the intersections of lines fitted to its four sides' outer edges; None when a side
+    is too short or too faint to fit or a corner would move further than ``EDGE_MAX_SHIFT`` border widths. One
+    marker of :func:`refine_markers_by_edges`."""
+    return refine_markers_by_edges(gray, [corners], cells, iterations)[0]
+
+
+def refine_markers_by_edges(gray: np.ndarray, corners: list[np.ndarray], cells: int,
+                            iterations: int = 3) -> list[np.ndarray | None]:
+    """:func:`refine_by_edges` for every marker of an image at once (one array computation for all of them).
+
+    Along each side, at points from ``EDGE_SPAN[0]`` to ``EDGE_SPAN[1]`` of its length, the image is sampled
+    across it (bilinear, about ``EDGE_STEP_PX``); the edge is the centroid of the intensity's fall from the light
+    outside into the black border (weights: the fall above a fifth of its largest, over a profile
+    ``EDGE_HALF_WIDTH`` border widths either side), recentred ``iterations`` times. A line through those points
+    (total least squares; points more than three median deviations off dropped, at most twice) is that side's edge,
+    and a corner is where its two sides' lines meet."""
+    if not len(corners):
+        return []
+    c = np.asarray(corners, dtype=np.float64).reshape(-1, 4, 2)
+    M = len(c)
+    nxt = np.roll(c, -1, axis=1)
+    side = np.linalg.norm(nxt - c, axis=2)  # (M, 4): side i runs from corner i to corner i + 1
+    valid = side.min(axis=1) >= 2 * cells
+    side = np.maximum(side, 1e-6)
+    d = (nxt - c) / side[..., None]
+    n = np.stack([-d[..., 1], d[..., 0]], axis=2)
+    n *= np.where(np.sum(n * (c.mean(axis=1, keepdims=True) - c), axis=2) < 0, -1.0, 1.0)[..., None]  # inward
+    # the black border's width across each side: a cell of the two sides that meet it
+    border = np.minimum(np.roll(side, 1, axis=1), np.roll(side, -1, axis=1)) / cells
+    half = np.maximum(EDGE_HALF_WIDTH * border, 1.0)
+    k = int(np.clip(side.max() / 2, 6, 40))
+    m = int(np.ceil(2 * half.max() / EDGE_STEP_PX)) + 1
+    t = np.linspace(EDGE_SPAN[0], EDGE_SPAN[1], k)
+    prof_s = np.linspace(-1.0, 1.0, m) * half[..., None]  # (M, 4, m): each side's profile
+    mid = 0.5 * (prof_s[..., 1:] + prof_s[..., :-1])
+    base = c[:, :, None, :] + (t[:, None] * side[:, :, None, None]) * d[:, :, None, :]  # (M, 4, k, 2)
+    # only the pixels the profiles can reach (room for the recentring), as floats
+    reach = 2.5 * border.max() + 2.0
+    x0, y0 = np.floor(c.reshape(-1, 2).min(axis=0) - reach).astype(int).clip(0)
+    x1, y1 = np.ceil(c.reshape(-1, 2).max(axis=0) + reach).astype(int) + 1
+    img = gray[y0:y1, x0:x1].astype(np.float32)
+    if img.size == 0:
+        return [None] * M
+    off = np.zeros((M, 4, k))
+    for _ in range(iterations):
+        P = base[..., None, :] + (off[..., None, None] + prof_s[:, :, None, :, None]) * n[:, :, None, None, :]
+        prof = cv2.remap(img, (P[..., 0] - x0).reshape(-1, m).astype(np.float32),
+                         (P[..., 1] - y0).reshape(-1, m).astype(np.float32), cv2.INTER_LINEAR,
+                         borderMode=cv2.BORDER_REPLICATE).reshape(M, 4, k, m)
+        fall = np.clip(prof[..., :-1] - prof[..., 1:], 0.0, None)  # light outside -> dark border along n
+        w = np.clip(fall - 0.2 * fall.max(axis=3, keepdims=True), 0.0, None)
+        sw = w.sum(axis=3)
+        off = off + np.where(sw > 1e-6, (w * mid[:, :, None, :]).sum(axis=3) / np.maximum(sw, 1e-9), 0.0)
+    good = (sw > 1e-6) & (np.abs(off) < border[..., None])
+    pts = base + off[..., None] * n[:, :, None, :]  # (M, 4, k, 2): the edge points
+    for _ in range(3):
+        valid &= (good.sum(axis=2) >= 4).all(axis=1)
+        wgt = good.astype(np.float64)
+        mean = (pts * wgt[..., None]).sum(axis=2) / np.maximum(wgt.sum(axis=2), 1.0)[..., None]
+        dev = (pts - mean[:, :, None, :]) * wgt[..., None]
+        sxx, syy = (dev[..., 0] ** 2).sum(axis=2), (dev[..., 1] ** 2).sum(axis=2)
+        sxy = (dev[..., 0] * dev[..., 1]).sum(axis=2)
+        theta = 0.5 * np.arctan2(2 * sxy, sxx - syy)  # the points' main direction (total least squares)
+        normal = np.stack([-np.sin(theta), np.cos(theta)], axis=-1)  # (M, 4, 2)
+        dist = np.abs(np.sum((pts - mean[:, :, None, :]) * normal[:, :, None, :], axis=3))
+        ranked = np.sort(np.where(good, dist, np.inf), axis=2)
+        spread = np.take_along_axis(ranked, ((good.sum(axis=2) - 1) // 2).clip(0)[..., None], axis=2)[..., 0]
+        keep = good & (dist <= 3 * np.maximum(spread, 0.02)[..., None])
+        if (keep == good).all():
+            break
+        good = keep
+    offset = np.sum(normal * mean, axis=2)  # (M, 4): each line is normal . x = offset
+    # corner i is where side i - 1 meets side i
+    A = np.stack([np.roll(normal, 1, axis=1), normal], axis=2)  # (M, 4, 2, 2)
+    b = np.stack([np.roll(offset, 1, axis=1), offset], axis=2)
+    det = np.linalg.det(A)
+    valid &= (np.abs(det) >= 1e-3).all(axis=1)
+    A[np.abs(det) < 1e-3] = np.eye(2)
+    out = np.linalg.solve(A, b[..., None])[..., 0]
+    room = EDGE_MAX_SHIFT * np.maximum(np.roll(border, 1, axis=1), border)
+    valid &= (np.linalg.norm(out - c, axis=2) <= room).all(axis=1)
+    return [out[i] if valid[i] else None for i in range(M)]
 
 
 def marker_corners(size: float) -> np.ndarray:
@@ -49,22 +154,31 @@ def marker_corners(size: float) -> np.ndarray:
 
 class MarkerLocalizer:
     def __init__(self, cam: CameraModel, dictionary: str, size: float, poses: dict[int, np.ndarray],
-                 max_std_pct: float = MAX_STD_PCT):
+                 max_std_pct: float = MAX_STD_PCT, corner_refinement: str = "edges"):
         """``max_std_pct``: refuse a pose whose camera position is held more loosely than this share of the
-        distance to the markers (standard deviation, %; 0 or less: never)."""
+        distance to the markers (standard deviation, %; 0 or less: never). ``corner_refinement``: "edges" (lines
+        fitted to the sides, :func:`refine_by_edges`) or "subpix" (OpenCV's corners)."""
         if not hasattr(cv2.aruco, dictionary):
             raise SimrealError(f"unknown marker dictionary '{dictionary}' (e.g. DICT_4X4_50, DICT_APRILTAG_36h11)")
+        if corner_refinement not in CORNER_REFINEMENTS:
+            raise SimrealError(f"unknown corner refinement '{corner_refinement}' "
+                               f"(one of {', '.join(CORNER_REFINEMENTS)})")
+        self.corner_refinement = corner_refinement
         self.cam = cam
         self.size = float(size)
         self.max_std_pct = float(max_std_pct)
         self.poses = {int(k): np.asarray(v, dtype=np.float64) for k, v in poses.items()}
         params = cv2.aruco.DetectorParameters()
-        params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
-        params.cornerRefinementWinSize = 4
-        params.cornerRefinementMaxIterations = 50
-        params.cornerRefinementMinAccuracy = 0.01
-        self.detector = cv2.aruco.ArucoDetector(cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, dictionary)),
-                                                params)
+        # the edges start from the detector's unrefined corners (as accurate, and cheaper); a marker whose edges
+        # cannot be fitted gets OpenCV's sub-pixel search in detect()
+        params.cornerRefinementMethod = (cv2.aruco.CORNER_REFINE_NONE if corner_refinement == "edges"
+                                         else cv2.aruco.CORNER_REFINE_SUBPIX)
+        params.cornerRefinementWinSize = SUBPIX_WIN
+        params.cornerRefinementMaxIterations = SUBPIX_CRITERIA[1]
+        params.cornerRefinementMinAccuracy = SUBPIX_CRITERIA[2]
+        dictionary_ = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, dictionary))
+        self.detector = cv2.aruco.ArucoDetector(dictionary_, params)
+        self._cells = int(dictionary_.markerSize) + 2 * int(params.markerBorderBits)
         self._local = marker_corners(self.size)
         self._world = {k: G.transform(T, self._local) for k, T in self.poses.items()}
 
@@ -72,7 +186,15 @@ class MarkerLocalizer:
         corners, ids, _ = self.detector.detectMarkers(gray)
         if ids is None:
             return {}
-        return {int(i): c.reshape(4, 2).astype(np.float64) for i, c in zip(ids.ravel(), corners)}
+        out = {int(i): c.reshape(4, 2).astype(np.float64) for i, c in zip(ids.ravel(), corners)}
+        if self.corner_refinement == "edges":
+            refined_all = refine_markers_by_edges(gray, list(out.values()), self._cells)
+            for (k, c), refined in zip(list(out.items()), refined_all):
+                if refined is None:
+                    refined = cv2.cornerSubPix(gray, c.astype(np.float32).reshape(-1, 1, 2), (SUBPIX_WIN, SUBPIX_WIN),
+                                               (-1, -1), SUBPIX_CRITERIA).reshape(4, 2).astype(np.float64)
+                out[k] = refined
+        return out
 
     def locate(self, gray: np.ndarray) -> MarkerResult:
         det = self.detect(gray)
