@@ -156,33 +156,37 @@ P2 tetrahedra on twice the model's grid, the weight as a pressure on its footpri
 Venant-Kirchhoff P2 tetrahedra, Newton at each position of the disk), the object's pose not taken from the truth,
 each scene's model error beside its result.
 
-- *Foam beam*, the defaults (dense) and registration (0.1-0.2 mm, 0.02 deg off): median error 1.3 mm (0.17 % of
-  the span), mean 1.9 mm at the thesis's 1280 x 720, where the thesis reports a mean "on the order of 1.5 mm": we
-  are about 0.4 mm worse (our camera: 15 fps on a hand-held arc about 1 m away; the thesis's path is not given).
-  640 x 480: median 1.4 mm, mean 2.2 mm. Model error: 1.7 % of the displacement, a load-position bias of 0.9 % of
-  the span when fitted to every surface node.
+- *Foam beam*, the defaults (dense) and registration (0.1-0.2 mm, 0.02 deg off): median error 1.3 mm (0.18 % of the
+  span), mean 1.8 mm at the thesis's 1280 x 720, where the thesis reports a mean "on the order of 1.5 mm": we are
+  about 0.3 mm worse (our camera: 15 fps on a hand-held arc about 1 m away; the thesis's path is not given). 640 x
+  480: median 1.6 mm, mean 2.2 mm. (Rerun in stop 80 on the current tracker; the foam has no markers. The rows of
+  2026-11-27 read 1.3 / 1.9 mm and 1.4 / 2.2 mm.) Model error: 1.7 % of the displacement, a load-position bias of 0.9
+  % of the span when fitted to every surface node.
 - The foam *model* was wrong before this table existed: the spec's 32 linear hexahedra along the beam resolved the
   40 mm support strips as 25 mm, and its deflection was 26 % larger than the converged full-order solve (model bias
   11.8 % of the span; the tracker read the load 11 % of the span off, the model's error, not the tracker's). Its
   spec now has 40 cells (a node at each strip's end) of quadratic hexahedra (linear ones lock: 10 % too stiff at
   40 x 8 x 4); the truth's own grid is within 1 % of the converged linear deflection.
-- *Aluminium bar* with the thesis's glued dots: its pose measured by hand (2.0 mm and 0.9 deg off) is fatal as
-  given (median 89 mm: a cantilever's bending looks like a turn about its clamp). With `tracking.rest_frames: 10`
-  the pose is corrected from the first frames, where the bar is at rest (by 0.4 deg and 2.5 mm; the dots' rms 2.1
-  -> 0.14 px), and then held: median 2.7 mm (0.56 % of the 480 mm range), mean 3.3 mm; Table 4.1's own measure
-  (at each position the weight rests at, |mean estimate - position|; the median over the six positions) 1.9 mm
-  against the thesis's 2.2 mm at the same positions (the thesis does not state its camera resolution; ours is
-  640 x 480 at 0.45-0.65 m). What stays of the pose error (0.8 deg) is the roll about the row of dots, which
-  does not move them. The rest correction fits the undeformed bar's small rigid motion over the first
-  `rest_frames` frames with a camera pose (Huber, a weak prior of 2 deg / 5 mm for the directions the dots cannot
-  see; the estimate is 'initializing' meanwhile) and is refused, with its reason, when it does not lower the
-  residual or leaves it above 1.5 x Huber, when it is larger than 5 deg / 3 cm, and when the frames were not at
-  rest: a bent cantilever fits a rigid turn to a fraction of a pixel (0.35 px in the unit test), so the same
-  frames are fitted with the deformation free too, and a fit under half the rigid residual (above 0.2 px) refuses
-  it. Off by default: a user who starts the recording unloaded turns it on. The corrected pose lives in the
-  tracker; the overlay and collision nodes still place the object at the scene file's pose. The project's default
-  measurement, dense, cannot read this bar: its surface is plain metal, and every loaded frame is flagged 'no
-  measurable deformation' (0 % OK) rather than reported.
+- *Aluminium bar* with the thesis's glued dots: its pose measured by hand (2.0 mm and 0.9 deg off) is fatal as given
+  (median 91 mm: a cantilever's bending looks like a turn about its clamp). With `tracking.rest_frames: 10` the pose
+  is corrected from the first frames, where the bar is at rest (by 0.4 deg and 2.7 mm; the dots' rms 2.1 -> 0.11 px),
+  and then held: median 2.9 mm (0.60 % of the 480 mm range), mean 3.0 mm; Table 4.1's own measure (at each position
+  the weight rests at, |mean estimate - position|; the median over the six positions) 2.1 mm against the thesis's 2.2
+  mm at the same positions (the thesis does not state its camera resolution; ours is 640 x 480 at 0.45-0.65 m). Rerun
+  in stop 80 with the markers' corners from their edges (the camera from the markers, docs/stability.md): the
+  corrected pose's position 0.24 -> 0.04 mm off; the load's median 2.7 -> 2.9 mm, mean 3.3 -> 3.0 mm, p90 6.7 -> 5.8
+  mm, Table 4.1's measure 1.9 -> 2.1 mm. Position by position it moves by up to 1.5 mm both ways (0.36 m: 6.2 -> 4.7
+  mm; 0.30 m: 2.4 -> 3.8 mm): one recording's per-position means, not a trend. What stays of the pose error (0.8 deg)
+  is the roll about the row of dots, which does not move them. The rest correction fits the undeformed bar's small
+  rigid motion over the first `rest_frames` frames with a camera pose (Huber, a weak prior of 2 deg / 5 mm for the
+  directions the dots cannot see; the estimate is 'initializing' meanwhile) and is refused, with its reason, when it
+  does not lower the residual or leaves it above 1.5 x Huber, when it is larger than 5 deg / 3 cm, and when the frames
+  were not at rest: a bent cantilever fits a rigid turn to a fraction of a pixel (0.35 px in the unit test), so the
+  same frames are fitted with the deformation free too, and a fit under half the rigid residual (above 0.2 px) refuses
+  it. Off by default: a user who starts the recording unloaded turns it on. The corrected pose lives in the tracker;
+  the overlay and collision nodes still place the object at the scene file's pose. The project's default measurement,
+  dense, cannot read this bar: its surface is plain metal, and every loaded frame is flagged 'no measurable
+  deformation' (0 % OK) rather than reported.
 - *Joint boot* (§4.5.4, its own table): the real boot rendered from an independent neo-Hookean solve
   (`synth/scenes.py:boot_truth`: trilinear hexahedra 72 x 2 x 60, two layers through the wall, Newton every 2 deg of the
   lever; the model: 36 x 1 x 48, NI-PGD), placed by registration from a guess by eye, map points as its scene file says.
