@@ -55,7 +55,7 @@ EDGE_SPAN = (0.2, 0.8)
 EDGE_HALF_WIDTH = 0.6
 EDGE_STEP_PX = 0.25
 EDGE_MAX_SHIFT = 1.5
-# OpenCV's sub-pixel corner search ("subpix", and the fall-back of "edges"): half-window (px) and stop criteria
+# OpenCV's sub-pixel corner search ("subpix", and the start and fall-back of "edges"): half-window (px), criteria
 SUBPIX_WIN = 4
 SUBPIX_CRITERIA = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 50, 0.01)
 
@@ -169,10 +169,9 @@ class MarkerLocalizer:
         self.max_std_pct = float(max_std_pct)
         self.poses = {int(k): np.asarray(v, dtype=np.float64) for k, v in poses.items()}
         params = cv2.aruco.DetectorParameters()
-        # the edges start from the detector's unrefined corners (as accurate, and cheaper); a marker whose edges
-        # cannot be fitted gets OpenCV's sub-pixel search in detect()
-        params.cornerRefinementMethod = (cv2.aruco.CORNER_REFINE_NONE if corner_refinement == "edges"
-                                         else cv2.aruco.CORNER_REFINE_SUBPIX)
+        # the edges start from OpenCV's sub-pixel corners: from the unrefined ones, a marker under 20 px (320 x 240)
+        # can be more than the search's reach off, and its lines land on the wrong edge
+        params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
         params.cornerRefinementWinSize = SUBPIX_WIN
         params.cornerRefinementMaxIterations = SUBPIX_CRITERIA[1]
         params.cornerRefinementMinAccuracy = SUBPIX_CRITERIA[2]
@@ -189,11 +188,9 @@ class MarkerLocalizer:
         out = {int(i): c.reshape(4, 2).astype(np.float64) for i, c in zip(ids.ravel(), corners)}
         if self.corner_refinement == "edges":
             refined_all = refine_markers_by_edges(gray, list(out.values()), self._cells)
-            for (k, c), refined in zip(list(out.items()), refined_all):
-                if refined is None:
-                    refined = cv2.cornerSubPix(gray, c.astype(np.float32).reshape(-1, 1, 2), (SUBPIX_WIN, SUBPIX_WIN),
-                                               (-1, -1), SUBPIX_CRITERIA).reshape(4, 2).astype(np.float64)
-                out[k] = refined
+            for k, refined in zip(list(out), refined_all):
+                if refined is not None:
+                    out[k] = refined
         return out
 
     def locate(self, gray: np.ndarray) -> MarkerResult:
