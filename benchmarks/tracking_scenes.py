@@ -176,17 +176,19 @@ each scene's model error beside its result.
   in stop 80 with the markers' corners from their edges (the camera from the markers, docs/stability.md): the
   corrected pose's position 0.24 -> 0.04 mm off; the load's median 2.7 -> 2.9 mm, mean 3.3 -> 3.0 mm, p90 6.7 -> 5.8
   mm, Table 4.1's measure 1.9 -> 2.1 mm. Position by position it moves by up to 1.5 mm both ways (0.36 m: 6.2 -> 4.7
-  mm; 0.30 m: 2.4 -> 3.8 mm): one recording's per-position means, not a trend. What stays of the pose error (0.8 deg)
-  is the roll about the row of dots, which does not move them. The rest correction fits the undeformed bar's small
-  rigid motion over the first `rest_frames` frames with a camera pose (Huber, a weak prior of 2 deg / 5 mm for the
-  directions the dots cannot see; the estimate is 'initializing' meanwhile) and is refused, with its reason, when it
-  does not lower the residual or leaves it above 1.5 x Huber, when it is larger than 5 deg / 3 cm, and when the frames
-  were not at rest: a bent cantilever fits a rigid turn to a fraction of a pixel (0.35 px in the unit test), so the
-  same frames are fitted with the deformation free too, and a fit under half the rigid residual (above 0.2 px) refuses
-  it. Off by default: a user who starts the recording unloaded turns it on. The corrected pose lives in the tracker;
-  the overlay and collision nodes still place the object at the scene file's pose. The project's default measurement,
-  dense, cannot read this bar: its surface is plain metal, and every loaded frame is flagged 'no measurable
-  deformation' (0 % OK) rather than reported.
+  mm; 0.30 m: 2.4 -> 3.8 mm): one recording's per-position means, not a trend. (Run on commit 9b5de31, whose lines
+  started from the unrefined corners; the current code starts them from OpenCV's corners, which moved
+  `marker_quality`'s median pose errors by at most 0.05 mm on views with more than one pose given (its runs at 9b5de31
+  and after); not rerun for time.) What stays of the pose error (0.8 deg) is the roll about the row of dots, which
+  does not move them. The rest correction fits the undeformed bar's small rigid motion over the first `rest_frames`
+  frames with a camera pose (Huber, a weak prior of 2 deg / 5 mm for the directions the dots cannot see; the estimate
+  is 'initializing' meanwhile) and is refused, with its reason, when it does not lower the residual or leaves it above
+  1.5 x Huber, when it is larger than 5 deg / 3 cm, and when the frames were not at rest: a bent cantilever fits a
+  rigid turn to a fraction of a pixel (0.35 px in the unit test), so the same frames are fitted with the deformation
+  free too, and a fit under half the rigid residual (above 0.2 px) refuses it. Off by default: a user who starts the
+  recording unloaded turns it on. The corrected pose lives in the tracker; the overlay and collision nodes still place
+  the object at the scene file's pose. The project's default measurement, dense, cannot read this bar: its surface is
+  plain metal, and every loaded frame is flagged 'no measurable deformation' (0 % OK) rather than reported.
 - *Joint boot* (§4.5.4, its own table): the real boot rendered from an independent neo-Hookean solve
   (`synth/scenes.py:boot_truth`: trilinear hexahedra 72 x 2 x 60, two layers through the wall, Newton every 2 deg of the
   lever; the model: 36 x 1 x 48, NI-PGD), placed by registration from a guess by eye, map points as its scene file says.
