@@ -345,28 +345,27 @@ with image noise and blur added, the camera pose from the markers alone against 
 
 **Stop 80: the corners from the markers' edges** (`localization.markers.corner_refinement: edges`, the default now;
 `vision/markers.py:refine_markers_by_edges`). OpenCV's sub-pixel corner search (`subpix`, the default until stop 80)
-looks at a window round the corner itself, where blur rounds the square off: on the demo's renders it reads the
-corners 0.2 px inward when sharp and about 1 px inward under a 2-px blur (40-px markers at 640 x 480), a bias no
-covariance shows. The edges' refinement samples each side across its outer edge away from its ends (the steepest
-light-to-dark fall within 0.6 of the black border's width), fits a line through those points and intersects the lines:
-blur spreads a straight edge symmetrically, so the line stays put. The lines start from OpenCV's corners (from the
-unrefined ones, as first built, the 20-px markers of the 320 x 240 demo bag lost a marker on some frames), and a
-marker whose edges cannot be fitted keeps them. The unit test draws a tilted, foreshortened marker at 8x
-supersampling: OpenCV's corners are 0.2 px off sharp and 0.6 px under a 2-px blur, the edges' within 0.03 px and 0.005
-px (`tests/vision/test_marker_corners.py`). Chosen on the development rows (640 x 480, noise seed 0), at the check's
-2.5 %: poses more than 5 mm off given 21 -> 6 over the nine views, poses given 870 -> 952, poses within 5 mm refused 2
--> 1; blur 1.5 px median 1.72 -> 0.31 mm, blur 2 px 2.08 -> 0.58 mm (117 -> 144 poses given). **Held out** (run after
-the choice): 640 x 480 with noise seed 1, poses more than 5 mm off 11 -> 2, given 280 -> 299 (blur 1.75: median 2.07
--> 0.48 mm); **1280 x 720, where stop 79 fell short: with a 3-px blur 49 -> 0 poses more than 5 mm off, median 3.75 ->
-0.60 mm, worst 46.9 -> 3.9 mm**; as drawn 1.00 -> 0.28 mm at the median (the 1280 x 720 demo's poses read 1.0 mm
-against 0.28 mm at 640 x 480: that was this bias), noise 12 1.09 -> 0.30 mm, blur 1.5 px 1.19 -> 0.07 mm. **The
-cost:** in this table, about 6 ms more per frame at 640 x 480 with four sharp markers in view (the `ms per frame`
-column as drawn: 23 against 17 ms); the times are not quiet-host figures (this run shared the 2 cores with the test
-suite, and on the blur-1 view the two read 13 against 15 ms). `subpix` stays a knob for a scene that needs that time
-back. At 3 px of blur and more at 640 x 480 one or two markers are left, and the check below refuses them as before.
-The check's level was not moved: at 2 % the development rows give 3 fewer wrong poses (6 -> 3) and refuse no right one
-more, but the committed demo bag's three-marker frames at 320 x 240 come close to the level, and three frames of one
-view are too thin a reason.
+looks at a window round the corner itself, where blur rounds the square off: it reads the corners inward (on the unit
+test's drawn marker, below: 0.2 px off when sharp, 0.6 px under a 2-px blur), a bias no covariance shows. The edges'
+refinement samples each side across its outer edge away from its ends (the steepest light-to-dark fall within 0.6 of
+the black border's width), fits a line through those points and intersects the lines: blur spreads a straight edge
+symmetrically, so the line stays put. The lines start from OpenCV's corners (from the unrefined ones, as first built,
+the 20-px markers of the 320 x 240 demo bag lost a marker on some frames), and a marker whose edges cannot be fitted
+keeps them. The unit test draws a tilted, foreshortened marker at 8x supersampling: OpenCV's corners are 0.2 px off
+sharp and 0.6 px under a 2-px blur, the edges' within 0.03 px and 0.005 px (`tests/vision/test_marker_corners.py`).
+Chosen on the development rows (640 x 480, noise seed 0), at the check's 2.5 %: poses more than 5 mm off given 21 -> 6
+over the nine views, poses given 870 -> 952, poses within 5 mm refused 2 -> 1; blur 1.5 px median 1.72 -> 0.31 mm,
+blur 2 px 2.08 -> 0.58 mm (117 -> 144 poses given). **Held out** (run after the choice): 640 x 480 with noise seed 1,
+poses more than 5 mm off 11 -> 2, given 280 -> 299 (blur 1.75: median 2.07 -> 0.48 mm); **1280 x 720, where stop 79
+fell short: with a 3-px blur 49 -> 0 poses more than 5 mm off, median 3.75 -> 0.60 mm, worst 46.9 -> 3.9 mm**; as
+drawn 1.00 -> 0.28 mm at the median (the 1280 x 720 demo's poses read 1.0 mm against 0.28 mm at 640 x 480: that was
+this bias), noise 12 1.09 -> 0.30 mm, blur 1.5 px 1.19 -> 0.07 mm. **The cost:** in this table, about 6 ms more per
+frame at 640 x 480 with four sharp markers in view (the `ms per frame` column as drawn: 23 against 17 ms); the times
+are not quiet-host figures (this run shared the 2 cores with the test suite, and on the blur-1 view the two read 13
+against 15 ms). `subpix` stays a knob for a scene that needs that time back. At 3 px of blur and more at 640 x 480 one
+or two markers are left, and the check below refuses them as before. The check's level was not moved: at 2 % the
+development rows give 3 fewer wrong poses (6 -> 3) and refuse no right one more, but the committed demo bag's
+three-marker frames at 320 x 240 come close to the level, and three frames of one view are too thin a reason.
 
 **Stop 79: the loose-pose check.** Under a blur of 2-4 px (640 x 480) one or two markers are still detected, their
 corners rounded inward, and their pose read 2-7 cm off with a reprojection rms under a pixel (a square's four

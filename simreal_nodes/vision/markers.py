@@ -10,8 +10,8 @@ reprojection rms under a pixel (a square's four corners fit any pose near the ri
 tells (``benchmarks/marker_quality.py``).
 
 Corners are refined from the marker's edges (``corner_refinement: edges``, the default): OpenCV's sub-pixel corner
-search looks at a window round the corner itself, where blur rounds the square off, and reads it 0.2 px inward when
-sharp and about 1 px inward under a 2-px blur (640 x 480, markers 40 px wide). Each side's outer edge is located
+search looks at a window round the corner itself, where blur rounds the square off, and reads it inward (0.2 px when
+sharp, 0.6 px under a 2-px blur on ``tests/vision/test_marker_corners.py``'s marker). Each side's outer edge is located
 across the side away from its ends (the steepest dark-inside descent in a profile no wider than the black border),
 a line is fitted through those points, and the corners are the lines' intersections: blur spreads a straight edge
 symmetrically, so the line stays where it is. ``subpix`` keeps OpenCV's corners.
