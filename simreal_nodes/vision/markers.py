@@ -55,9 +55,11 @@ EDGE_SPAN = (0.2, 0.8)
 EDGE_HALF_WIDTH = 0.6
 EDGE_STEP_PX = 0.25
 EDGE_MAX_SHIFT = 1.5
-# OpenCV's sub-pixel corner search ("subpix", and the start and fall-back of "edges"): half-window (px), criteria
+# OpenCV's sub-pixel corner search ("subpix", and the start and fall-back of "edges"): half-window (px), iterations,
+# the step (px) it stops at
 SUBPIX_WIN = 4
-SUBPIX_CRITERIA = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 50, 0.01)
+SUBPIX_MAX_ITER = 50
+SUBPIX_MIN_ACCURACY = 0.01
 
 
 def refine_by_edges(gray: np.ndarray, corners: np.ndarray, cells: int, iterations: int = 3) -> np.ndarray | None:
@@ -173,8 +175,8 @@ class MarkerLocalizer:
         # can be more than the search's reach off, and its lines land on the wrong edge
         params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
         params.cornerRefinementWinSize = SUBPIX_WIN
-        params.cornerRefinementMaxIterations = SUBPIX_CRITERIA[1]
-        params.cornerRefinementMinAccuracy = SUBPIX_CRITERIA[2]
+        params.cornerRefinementMaxIterations = SUBPIX_MAX_ITER
+        params.cornerRefinementMinAccuracy = SUBPIX_MIN_ACCURACY
         dictionary_ = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, dictionary))
         self.detector = cv2.aruco.ArucoDetector(dictionary_, params)
         self._cells = int(dictionary_.markerSize) + 2 * int(params.markerBorderBits)
