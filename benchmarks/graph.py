@@ -27,6 +27,7 @@ import numpy as np
 
 from benchmarks.common import markdown_table, save
 from simreal_nodes.demo import node_metrics, sample_bag
+from simreal_nodes.launch import executor_kind
 from simreal_nodes.metrics import STAGES
 from simreal_nodes.ros.commands import replay
 
@@ -47,11 +48,12 @@ def main():
     report(rows)
 
 
-def run_case(scene, res, bag, scene_yaml, lossless, one_process) -> dict:
+def run_case(scene, res, bag, scene_yaml, lossless, one_process, executor=None) -> dict:
+    """One replay; ``executor``: the nodes' and the player's (None: the default)."""
     with tempfile.TemporaryDirectory() as tmp:
         t0 = time.monotonic()
         stats, _, counts = replay(str(bag), str(scene_yaml), lossless=lossless, record=str(Path(tmp) / "run"),
-                                  echo=lambda *a: None, one_process=one_process)
+                                  echo=lambda *a: None, one_process=one_process, executor=executor)
         wall = time.monotonic() - t0
         nodes = node_metrics(Path(tmp) / "run")
     d = stats.as_dict()
@@ -59,7 +61,7 @@ def run_case(scene, res, bag, scene_yaml, lossless, one_process) -> dict:
     last = lat.get("overlay") or next(iter(lat.values()), {"p50": float("nan"), "p95": float("nan")})
     cpu = d["cpu_ms_per_frame"]
     return dict(scene=scene, resolution=res, mode="lossless" if lossless else "real time (30 fps)",
-                launch="one process" if one_process else "process per node",
+                launch="one process" if one_process else "process per node", executor=executor or executor_kind(),
                 fps=d["fps_through"], delivered_pct=100 * d["frames_completed"] / max(d["frames_published"], 1),
                 # the localization's own output (pose, TF): what a robot stack reads, whatever the later nodes do
                 pose_pct=100 * counts.get(POSE_TOPIC, 0) / max(d["frames_published"], 1),

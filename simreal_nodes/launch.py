@@ -68,14 +68,28 @@ DISCOVERY_RANGE = "ROS_AUTOMATIC_DISCOVERY_RANGE"
 DISCOVERY_RANGES = ("LOCALHOST", "SUBNET", "SYSTEM_DEFAULT", "OFF")  # the values rmw accepts (ROS 2 Jazzy)
 
 
-def ros_environment(base: dict | None = None, discovery_range: str | None = None) -> dict:
+def executor_kind(env: dict | None = None) -> str:
+    """The executor named by :data:`EXECUTOR_ENV` in ``env`` (default: this process's environment), else
+    :data:`DEFAULT_EXECUTOR`; :class:`SimrealError` for a name not in :data:`EXECUTORS`."""
+    kind = (os.environ if env is None else env).get(EXECUTOR_ENV) or DEFAULT_EXECUTOR
+    if kind not in EXECUTORS:
+        raise SimrealError(f"{EXECUTOR_ENV}={kind!r}: the executor must be one of {', '.join(EXECUTORS)}")
+    return kind
+
+
+def ros_environment(base: dict | None = None, discovery_range: str | None = None,
+                    executor: str | None = None) -> dict:
     """Environment for node processes: SHM transport profile, ament prefix of the venv, DDS discovery range.
 
     Discovery stays on this host unless widened: ROS 2's own default (SUBNET) would announce every node, its camera
     images included, to the whole network, and take commands from it. ``discovery_range`` (one of
     :data:`DISCOVERY_RANGES`) sets it explicitly; otherwise a range already set in ``base`` (the user's environment)
-    is kept; otherwise LOCALHOST."""
+    is kept; otherwise LOCALHOST. ``executor`` (one of :data:`EXECUTORS`) sets the nodes' executor; otherwise
+    ``base``'s :data:`EXECUTOR_ENV`, else :data:`DEFAULT_EXECUTOR`."""
     env = dict(os.environ if base is None else base)
+    if executor is not None:
+        env[EXECUTOR_ENV] = executor
+    env[EXECUTOR_ENV] = executor_kind(env)
     if discovery_range is not None:
         if discovery_range not in DISCOVERY_RANGES:
             raise SimrealError(f"DDS discovery range: expected one of {', '.join(DISCOVERY_RANGES)}; "
@@ -102,6 +116,9 @@ LAUNCHER_PID_ENV = "SIMREAL_LAUNCHER_PID"  # a node ends when the process of thi
 PROMOTE = "go"  # the line written to a standby's stdin to make it the node
 STANDBY_DELAY_S = 5.0  # a standby starts this long after the node it stands behind (start or restart)
 WATCH_PERIOD_S = 0.05  # how often the launcher looks for exited nodes
+EXECUTOR_ENV = "SIMREAL_EXECUTOR"  # the executor node processes (and the replay's player) spin on: EXECUTORS
+EXECUTORS = ("events", "single")  # rclpy's EventsExecutor (C++), its SingleThreadedExecutor (Python)
+DEFAULT_EXECUTOR = "events"
 ONE_PROCESS = "nodes"  # the name (log, CPU figures) of the process that runs every node in the one-process launch
 
 
@@ -120,19 +137,21 @@ class _Proc:
 class Launcher:
     """Start, watch and stop a set of node processes.
 
-    ``env`` and ``discovery_range``: as :func:`ros_environment` takes them (DDS discovery on this host unless
-    widened). ``namespace`` (e.g. ``/cell2``): every node is started in it, so node names and the services they
-    address by relative names (the tracker's call to ``localization/set_localization_only``) do not collide with a
-    second graph; the data topics are absolute (:mod:`simreal_nodes.scene.graph`) and move only by ``remaps``."""
+    ``env``, ``discovery_range`` and ``executor``: as :func:`ros_environment` takes them (DDS discovery on this
+    host unless widened). ``namespace`` (e.g. ``/cell2``): every node is started in it, so node names and the
+    services they address by relative names (the tracker's call to ``localization/set_localization_only``) do not
+    collide with a second graph; the data topics are absolute (:mod:`simreal_nodes.scene.graph`) and move only by
+    ``remaps``."""
 
     def __init__(self, nodes: list[NodeSpec], remaps: dict[str, str] | None = None, respawn: int = 2,
                  env: dict | None = None, echo=print, log_dir: str | Path | None = None, namespace: str = "",
-                 discovery_range: str | None = None, standby: bool = False, one_process: bool = False):
+                 discovery_range: str | None = None, standby: bool = False, one_process: bool = False,
+                 executor: str | None = None):
         self.nodes = nodes
         self.remaps = remaps or {}
         self.respawn = respawn
         self.standby = standby and respawn > 0
-        self.env = ros_environment(env, discovery_range)
+        self.env = ros_environment(env, discovery_range, executor)
         self.echo = echo
         self._tmp = tempfile.TemporaryDirectory(prefix="simreal-launch-")
         if log_dir is None:

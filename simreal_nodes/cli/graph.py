@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from simreal_nodes.errors import SimrealError
-from simreal_nodes.launch import DISCOVERY_RANGES
+from simreal_nodes.launch import DISCOVERY_RANGES, EXECUTORS
 
 
 def _remaps(items: list[str] | None) -> dict[str, str]:
@@ -26,6 +26,14 @@ def _launch_mode(s: argparse.ArgumentParser) -> None:
     g.add_argument("--process-per-node", dest="one_process", action="store_false",
                    help="each node in its own process: a fault in one node leaves the others (and the SLAM map) "
                         "running")
+    add_executor(s)
+
+
+def add_executor(s: argparse.ArgumentParser) -> None:
+    s.add_argument("--executor", choices=EXECUTORS, default=None,
+                   help="the rclpy executor the nodes spin on: events (C++, the default) or single (rclpy's Python "
+                        "SingleThreadedExecutor); default: $SIMREAL_EXECUTOR, else events "
+                        "(benchmarks/results/executor.md)")
 
 
 def cmd_launch(a: argparse.Namespace) -> int:
@@ -38,7 +46,7 @@ def cmd_launch(a: argparse.Namespace) -> int:
     print(f"[launch] scene '{scene['name']}': starting {', '.join(n.name for n in nodes)}")
     return run_until_signal(Launcher(nodes, remaps=_remaps(a.remap), respawn=a.respawn, namespace=a.namespace,
                                      discovery_range=a.discovery_range, standby=not a.no_standby,
-                                     one_process=a.one_process))
+                                     one_process=a.one_process, executor=a.executor))
 
 
 def cmd_replay(a: argparse.Namespace) -> int:
@@ -47,7 +55,8 @@ def cmd_replay(a: argparse.Namespace) -> int:
     stats, _report, _ = replay(a.bag, a.scene, rate=a.rate, lossless=a.lossless, record=a.record,
                               storage=a.storage, launch=not a.no_launch, frame_timeout_s=a.frame_timeout,
                               metrics_json=a.metrics, namespace=a.namespace,
-                              standby=False if a.no_standby else None, one_process=a.one_process)
+                              standby=False if a.no_standby else None, one_process=a.one_process,
+                              executor=a.executor)
     return 0 if stats is not None and not stats.record_error else 1
 
 

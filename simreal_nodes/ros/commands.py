@@ -10,14 +10,14 @@ import time
 from pathlib import Path
 
 import rclpy
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
 from simreal_nodes.errors import BagError, SimrealError
 from simreal_nodes.io import bags
-from simreal_nodes.launch import DISCOVERY_RANGE, QOS_FROM_XML, Launcher, ros_environment
+from simreal_nodes.launch import DISCOVERY_RANGE, EXECUTORS, QOS_FROM_XML, Launcher, executor_kind, ros_environment
 from simreal_nodes.ros.bagplay import Player, Recorder
+from simreal_nodes.ros.node import make_executor
 from simreal_nodes.scene.graph import image_topic, output_topics, required_nodes
 from simreal_nodes.scene.schema import build_spec_models, load_scene
 
@@ -48,12 +48,16 @@ def _share_node_environment() -> None:
 def replay(bag: str, scene_file: str, rate: float = 1.0, lossless: bool = False, record: str | None = None,
            storage: str = "mcap", launch: bool = True, frame_timeout_s: float = 30.0, ready_timeout_s: float = 90.0,
            metrics_json: str | None = None, echo=print, extra_params: dict | None = None, namespace: str = "",
-           standby: bool | None = None, one_process: bool = False):
+           standby: bool | None = None, one_process: bool = False, executor: str | None = None):
     """Replay ``bag`` into the graph of ``scene_file``; returns (PlayStats, BagReport, recorder counts).
     ``namespace``: the nodes' namespace; ``standby``: a standby process per node (:class:`~simreal_nodes.launch.
     Launcher`), by default in a live replay and not in a lossless one (a node that exits there is a fault to see,
     and time does not press); ``one_process``: every node in one process on one executor (the CLI's default; here
-    a process per node unless asked, so that a caller says which it runs)."""
+    a process per node unless asked, so that a caller says which it runs); ``executor``: the nodes' and the
+    player's (one of :data:`~simreal_nodes.launch.EXECUTORS`; None: :func:`~simreal_nodes.launch.executor_kind`)."""
+    executor = executor_kind() if executor is None else executor
+    if executor not in EXECUTORS:
+        raise SimrealError(f"executor: expected one of {', '.join(EXECUTORS)}; found {executor!r}")
     scene = load_scene(scene_file)
     if launch:
         build_spec_models(scene)  # before the nodes start: they find the built spec:NAME models in the cache
@@ -81,11 +85,11 @@ def replay(bag: str, scene_file: str, rate: float = 1.0, lossless: bool = False,
     if standby is None:
         standby = not lossless
     launcher = Launcher(nodes, echo=echo, namespace=namespace, standby=standby,
-                        one_process=one_process) if launch else None
+                        one_process=one_process, executor=executor) if launch else None
     _share_node_environment()
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     node = Node("simreal_player")
-    ex = SingleThreadedExecutor()
+    ex = make_executor(executor)
     ex.add_node(node)
     recorder = None
     stats = None
@@ -141,7 +145,7 @@ def record(out: str, topics: list[str] | None = None, storage: str = "mcap", ech
     _share_node_environment()
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     node = Node("simreal_recorder")
-    ex = SingleThreadedExecutor()
+    ex = make_executor()
     ex.add_node(node)
     rec = None
     try:

@@ -6,7 +6,7 @@
 the node module (its ``NODE_CLASS`` is built) and the node's own ROS arguments (``--ros-args -r __node:=NAME
 --params-file FILE ...``), exactly the command line the node would have in its own process. Each node gets them as
 node-specific arguments (rclpy's ``cli_args``), so names, namespaces, parameter files and remaps behave as in
-separate processes; the nodes share one DDS participant and one SingleThreadedExecutor
+separate processes; the nodes share one DDS participant and one executor
 (:func:`~simreal_nodes.ros.node.run_nodes`), and their topics stay visible to other processes.
 
 The trade, measured by ``./run bench graph`` (``benchmarks/results/graph.md``): one process saves the per-process

@@ -3,6 +3,7 @@ publish (no cv_bridge, no sensor_msgs_py)."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -40,6 +41,59 @@ def ns_to_stamp(ns: int, msg=None):
     t = msg or Time()
     t.sec, t.nanosec = int(ns // 1_000_000_000), int(ns % 1_000_000_000)
     return t
+
+
+@dataclass(frozen=True, slots=True)
+class ImageView:
+    """A ``sensor_msgs/Image`` read from its CDR bytes (:func:`image_view`): the fields
+    :func:`~simreal_nodes.io.images.image_to_array` reads, ``data`` a read-only numpy view on the bytes, ``header``
+    an rclpy Header (output messages take its stamp)."""
+
+    header: Header
+    height: int
+    width: int
+    encoding: str
+    is_bigendian: int
+    step: int
+    data: np.ndarray
+
+
+IMAGE_TYPE = "sensor_msgs/msg/Image"
+
+
+def read_image_cdr(raw: bytes | bytearray | memoryview):
+    """An Image subscription's serialized message (``raw=True``) read by rosbags' CDR deserializer (its message
+    class; ``data`` a read-only numpy view on ``raw``), instead of rclpy's conversion into a message object, which
+    copies ``data`` into a Python array (`./run bench executor` measures a subscriber's CPU both ways). rosbags'
+    SerdeError for bytes that are not a serialized Image."""
+    from simreal_nodes.io.bags import typestore
+
+    return typestore().deserialize_cdr(raw, IMAGE_TYPE)
+
+
+def image_view(raw) -> ImageView:
+    """An Image's serialized bytes, or rosbags' message of them (:func:`read_image_cdr`), as an :class:`ImageView`
+    with an rclpy Header."""
+    m = read_image_cdr(raw) if isinstance(raw, (bytes, bytearray, memoryview)) else raw
+    h = Header(frame_id=m.header.frame_id)
+    h.stamp.sec, h.stamp.nanosec = m.header.stamp.sec, m.header.stamp.nanosec
+    return ImageView(h, m.height, m.width, m.encoding, m.is_bigendian, m.step, m.data)
+
+
+def image_cdr(m, frame_id: str, pixels: np.ndarray | None = None) -> bytes:
+    """Serialized bytes (to publish as they are) of rosbags' Image ``m`` with the frame ``frame_id`` and, if given,
+    ``pixels`` (in ``m``'s encoding) instead of its own, by rosbags' serializer (no rclpy message object is built)."""
+    from dataclasses import replace
+
+    from simreal_nodes.io.bags import typestore
+    from simreal_nodes.io.images import array_to_image_fields
+
+    out = replace(m, header=replace(m.header, frame_id=frame_id))
+    if pixels is not None:
+        f = array_to_image_fields(pixels, m.encoding)
+        out = replace(out, height=f.height, width=f.width, is_bigendian=f.is_bigendian, step=f.step,
+                      data=np.frombuffer(f.data, np.uint8))
+    return bytes(typestore().serialize_cdr(out, IMAGE_TYPE))
 
 
 def camera_info_msg(cam: CameraModel, stamp, frame_id: str) -> CameraInfo:

@@ -20,12 +20,14 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
+from sensor_msgs.msg import Image
 from std_msgs.msg import Header
 
-from simreal_nodes.launch import LAUNCHER_PID_ENV, PROMOTE, STANDBY_ENV
+from simreal_nodes.errors import SimrealError
+from simreal_nodes.launch import EXECUTOR_ENV, EXECUTORS, LAUNCHER_PID_ENV, PROMOTE, STANDBY_ENV, executor_kind
 from simreal_nodes.lifetime import end_with_parent
 from simreal_nodes.metrics import StageMetrics
-from simreal_nodes.ros.convert import ns_to_stamp, stamp_ns
+from simreal_nodes.ros.convert import image_view, ns_to_stamp, stamp_ns
 from simreal_nodes.ros.qos import reliable_qos
 from simreal_nodes.scene import graph
 
@@ -51,6 +53,27 @@ def parse_progress(frame_id: str) -> tuple[str, float | None, str]:
         return name, float(t), why
     except ValueError:
         return name, None, why
+
+
+def guarded(fn):
+    """Decorator for callbacks: an exception is logged and counted, never kills the node."""
+
+    @functools.wraps(fn)
+    def wrapper(self, *a, **kw):
+        try:
+            return fn(self, *a, **kw)
+        except Exception as e:  # noqa: BLE001
+            what = f"{type(e).__name__}: {e}"
+            self.metrics.error(what)
+            self.set_status("error", what)
+            self.get_logger().error(f"{fn.__name__} failed: {what}\n{traceback.format_exc(limit=4)}",
+                                    throttle_duration_sec=1.0)
+            stamp = _stamp_of(a)
+            if stamp is not None:
+                self.progress(stamp, dropped=what)
+            return None
+
+    return wrapper
 
 
 class SimrealNode(Node):
@@ -134,6 +157,15 @@ class SimrealNode(Node):
         for _, frame in ready:
             process(frame)
 
+    def subscribe_image(self, topic: str, key: str, qos):
+        """An Image input of the node's ``sync`` taken serialized and read without rclpy's message conversion
+        (:func:`~simreal_nodes.ros.convert.image_view`): for a node that reads the pixels and the header only."""
+        return self.create_subscription(Image, topic, functools.partial(self.on_raw_image, key), qos, raw=True)
+
+    @guarded
+    def on_raw_image(self, key: str, raw: bytes) -> None:
+        self.on_input(key, image_view(raw))
+
     def on_input(self, key: str, msg) -> None:
         """Subscription callback of an input synchronised by stamp: :meth:`feed` into the node's ``sync``, the
         frames it completes to the node's ``process``."""
@@ -183,27 +215,6 @@ class SimrealNode(Node):
         return (self.get_clock().now().nanoseconds - stamp_ns(stamp)) * 1e-6
 
 
-def guarded(fn):
-    """Decorator for callbacks: an exception is logged and counted, never kills the node."""
-
-    @functools.wraps(fn)
-    def wrapper(self, *a, **kw):
-        try:
-            return fn(self, *a, **kw)
-        except Exception as e:  # noqa: BLE001
-            what = f"{type(e).__name__}: {e}"
-            self.metrics.error(what)
-            self.set_status("error", what)
-            self.get_logger().error(f"{fn.__name__} failed: {what}\n{traceback.format_exc(limit=4)}",
-                                    throttle_duration_sec=1.0)
-            stamp = _stamp_of(a)
-            if stamp is not None:
-                self.progress(stamp, dropped=what)
-            return None
-
-    return wrapper
-
-
 def _stamp_of(args):
     """The stamp of the message a callback was given, or of a synchronized frame's (a dict of messages): the
     frame a failure is reported for."""
@@ -247,16 +258,49 @@ def _end_with_launcher() -> bool:
     return end_with_parent(int(launcher), signal.SIGTERM)
 
 
+def make_executor(kind: str | None = None):
+    """The executor of a node process (``kind`` None: :func:`~simreal_nodes.launch.executor_kind`'s).
+
+    ``single``: rclpy's SingleThreadedExecutor, in Python, which rebuilds its wait set (every subscription, timer
+    and service of every node) on each wake-up. ``events``: rclpy's EventsExecutor (``rclpy.experimental``, in
+    C++), to which the middleware's listeners queue events; cheaper per message (``./run bench executor``).
+    :class:`SimrealError` for another name."""
+    kind = executor_kind() if kind is None else kind
+    if kind == "single":
+        return SingleThreadedExecutor()
+    if kind == "events":
+        from rclpy.experimental import EventsExecutor
+
+        return EventsExecutor()
+    raise SimrealError(f"{EXECUTOR_ENV}={kind!r}: the executor must be one of {', '.join(EXECUTORS)}")
+
+
+def spin(ex) -> None:
+    """Spin until the context shuts down (SIGINT, SIGTERM: ExternalShutdownException), in ``spin_once`` steps: the
+    EventsExecutor of this rclpy wheel (7.1.5) never fires a timer in its own ``spin()`` (measured here). A shutdown
+    that lands between the context's check and the wait set's construction raises RCLError ("the given context is
+    not valid") in either executor; with the context down, that is the end of the spin, not a failure."""
+    from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+
+    while ex.context.ok():
+        try:
+            ex.spin_once(timeout_sec=1.0)
+        except _rclpy.RCLError:
+            if ex.context.ok():
+                raise
+
+
 def run_node(node_cls, args=None) -> int:
-    """main() body for every node: one process, one SingleThreadedExecutor, clean shutdown."""
+    """main() body for every node: one process, one executor (:func:`make_executor`), clean shutdown."""
     return run_nodes([node_cls], args)
 
 
 def run_nodes(builders: list[Callable[[], Node]], args=None) -> int:
-    """Build the nodes (a node class, or any callable returning a node) and spin them all on one
-    SingleThreadedExecutor until shutdown; then close and destroy each, in the reverse order of their building.
-    One builder is a node's own process (:func:`run_node`); several are the one-process launch
-    (:mod:`simreal_nodes.ros.compose`). A node that fails to build ends the process (the launcher restarts it)."""
+    """Build the nodes (a node class, or any callable returning a node) and spin them all on one executor
+    (:func:`make_executor`, as ``SIMREAL_EXECUTOR`` names it) until shutdown; then close and destroy each, in the
+    reverse order of their building. One builder is a node's own process (:func:`run_node`); several are the
+    one-process launch (:mod:`simreal_nodes.ros.compose`). A node that fails to build ends the process (the launcher
+    restarts it)."""
     if not _end_with_launcher():
         return 0
     rclpy.init(args=args)
@@ -273,7 +317,7 @@ def run_nodes(builders: list[Callable[[], Node]], args=None) -> int:
             nodes.append(build())
         if placeholder is not None:
             placeholder.destroy_node()
-        ex = SingleThreadedExecutor()
+        ex = make_executor()
         for node in nodes:
             ex.add_node(node)
         if profile_dir:
@@ -281,7 +325,7 @@ def run_nodes(builders: list[Callable[[], Node]], args=None) -> int:
 
             prof = cProfile.Profile()
             prof.enable()
-        ex.spin()
+        spin(ex)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:

@@ -168,3 +168,62 @@ def test_the_message_helpers_do_not_pull_scipy_into_every_node():
     code = "import sys, simreal_nodes.ros.convert; print('scipy' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
+
+
+@pytest.mark.parametrize("encoding, dtype, channels, pad", [("rgb8", np.uint8, 3, 0), ("32FC1", np.float32, 1, 0),
+                                                            ("16UC1", np.uint16, 1, 6), ("mono8", np.uint8, 1, 3)])
+def test_an_image_read_from_its_serialized_bytes_equals_rclpy_s_message(encoding, dtype, channels, pad):
+    """The nodes take images serialized (``subscribe_image``): the pixels, stamp and frame must be rclpy's own."""
+    from rclpy.serialization import deserialize_message, serialize_message
+    from sensor_msgs.msg import Image
+
+    from simreal_nodes.io.images import image_to_array
+    from simreal_nodes.ros.convert import image_view
+
+    rng = np.random.default_rng(1)
+    h, w = 5, 7
+    px = (rng.random((h, w, channels)) * 1000).astype(dtype).reshape((h, w) if channels == 1 else (h, w, channels))
+    step = w * channels * np.dtype(dtype).itemsize + pad
+    rows = np.zeros((h, step), np.uint8)
+    rows[:, :step - pad] = px.reshape(h, -1).view(np.uint8)
+    msg = Image(height=h, width=w, encoding=encoding, step=step, data=rows.tobytes())
+    msg.header.stamp.sec, msg.header.stamp.nanosec, msg.header.frame_id = 1700000000, 123456789, "camera_optical"
+    raw = serialize_message(msg)
+    view = image_view(raw)
+    assert isinstance(view.header, Header)  # output messages take its stamp as rclpy's
+    assert (view.header.stamp.sec, view.header.stamp.nanosec, view.header.frame_id) == (1700000000, 123456789,
+                                                                                         "camera_optical")
+    assert np.array_equal(image_to_array(view), px)
+    assert np.array_equal(image_to_array(view), image_to_array(deserialize_message(raw, Image)))
+
+
+def test_bytes_that_are_no_serialized_image_are_refused():
+    from rosbags.serde import SerdeError
+
+    from simreal_nodes.ros.convert import image_view
+
+    with pytest.raises(SerdeError):
+        image_view(b"\x00\x01\x00\x00" + b"\xff" * 30)
+
+
+def test_an_image_passed_on_serialized_keeps_its_pixels_or_takes_new_ones_and_the_camera_frame():
+    """The ingest node passes raw images on serialized (``image_cdr``): rclpy must read back the frame it set and
+    the pixels, its own or the undistorted ones, with their size, encoding and step."""
+    from rclpy.serialization import deserialize_message, serialize_message
+    from sensor_msgs.msg import Image
+
+    from simreal_nodes.io.images import image_to_array
+    from simreal_nodes.ros.convert import image_cdr, read_image_cdr
+
+    px = np.arange(4 * 6 * 3, dtype=np.uint8).reshape(4, 6, 3)
+    padded = np.pad(px.reshape(4, 18), ((0, 0), (0, 2)))  # rows of 18 bytes in a step of 20
+    msg = Image(height=4, width=6, encoding="rgb8", step=20, data=padded.tobytes())
+    msg.header.stamp.sec, msg.header.frame_id = 42, "sensor"
+    m = read_image_cdr(serialize_message(msg))
+    same = deserialize_message(image_cdr(m, "camera_optical_frame"), Image)
+    assert (same.header.stamp.sec, same.header.frame_id, same.step) == (42, "camera_optical_frame", 20)
+    assert np.array_equal(image_to_array(same), px)
+    new = np.full((3, 5, 3), 7, np.uint8)
+    other = deserialize_message(image_cdr(m, "camera_optical_frame", new), Image)
+    assert (other.height, other.width, other.encoding, other.step, other.header.stamp.sec) == (3, 5, "rgb8", 15, 42)
+    assert np.array_equal(image_to_array(other), new)

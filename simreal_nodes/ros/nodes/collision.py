@@ -15,7 +15,7 @@ scale that the overlay draws).
 from __future__ import annotations
 
 import numpy as np
-from sensor_msgs.msg import CameraInfo, Image
+from sensor_msgs.msg import CameraInfo
 from simreal_msgs.msg import ContactState as ContactMsg
 from simreal_msgs.msg import FeatureObservations, ModelParameters
 
@@ -63,11 +63,11 @@ class CollisionNode(SimrealNode):
         trigger = data_qos(self.lossless, depth=1)
         qi = q if need_pose else trigger
         if self.stereo:
-            self.create_subscription(Image, graph.CAM_IMAGE, lambda m: self.on_input("image", m), qi)
-            self.create_subscription(Image, graph.CAM_RIGHT_IMAGE, lambda m: self.on_input("right", m), q)
+            self.subscribe_image(graph.CAM_IMAGE, "image", qi)
+            self.subscribe_image(graph.CAM_RIGHT_IMAGE, "right", q)
             self.create_subscription(CameraInfo, graph.CAM_RIGHT_INFO, self.on_right_info, q)
         else:
-            self.create_subscription(Image, graph.CAM_DEPTH, lambda m: self.on_input("depth", m), qi)
+            self.subscribe_image(graph.CAM_DEPTH, "depth", qi)
         if need_pose:
             self.create_subscription(FeatureObservations, graph.LOC_OBS, lambda m: self.on_input("obs", m), trigger)
         self.pub_contact = {o["id"]: self.create_publisher(ContactMsg, graph.contact_topic(o["id"]), reliable_qos(50))

@@ -14,6 +14,7 @@ from sensor_msgs.msg import CameraInfo, CompressedImage, Image
 from simreal_nodes.camera import CameraModel
 from simreal_nodes.errors import ImageFormatError
 from simreal_nodes.io import images, sources
+from simreal_nodes.ros import convert
 from simreal_nodes.ros.convert import camera_info_msg, ns_to_stamp
 from simreal_nodes.ros.node import SimrealNode, guarded, run_node
 from simreal_nodes.ros.qos import data_qos
@@ -52,13 +53,12 @@ class IngestNode(SimrealNode):
         if self.source == "topic":
             trigger = data_qos(self.lossless, depth=1)  # live: a busy ingest takes the newest image next
             self.create_subscription(CameraInfo, self.info_topic, self.on_info, q)
-            msg_t, suffix = (CompressedImage, "/compressed") if compressed else (Image, "")
-            self.create_subscription(msg_t, self.image_topic + suffix, lambda m: self.on_image("image", m), trigger)
+            self._subscribe_image("image", self.image_topic, compressed, trigger)
             if self.depth_topic:
-                self.create_subscription(Image, self.depth_topic, lambda m: self.on_image("depth", m), q)
+                self._subscribe_image("depth", self.depth_topic, False, q)
             if right_topic:
                 self.create_subscription(CameraInfo, right_info, self.on_right_info, q)
-                self.create_subscription(msg_t, right_topic + suffix, lambda m: self.on_image("right", m), q)
+                self._subscribe_image("right", right_topic, compressed, q)
         else:
             self._open = functools.partial(sources.open_source, self.source, self.path, self.rate_hz, self.image_topic,
                                            self.info_topic, self.depth_topic or None)
@@ -79,6 +79,32 @@ class IngestNode(SimrealNode):
     def on_right_info(self, msg: CameraInfo) -> None:
         if why := self.core.right_info(msg):
             self.set_status("error", f"unusable right CameraInfo: {why}")
+
+    def _subscribe_image(self, kind: str, topic: str, compressed: bool, qos) -> None:
+        """Compressed images come as messages (OpenCV decodes them); raw ones serialized, read and passed on by
+        rosbags' CDR code (:meth:`on_serialized`) without rclpy's message conversion either way."""
+        if compressed:
+            self.create_subscription(CompressedImage, topic + "/compressed", functools.partial(self.on_image, kind),
+                                     qos)
+        else:
+            self.create_subscription(Image, topic, functools.partial(self.on_serialized, kind), qos, raw=True)
+
+    @guarded
+    def on_serialized(self, kind: str, raw: bytes) -> None:
+        """One serialized image of stream ``kind``: checked and undistorted as :meth:`on_image` does, and published
+        serialized (its bytes re-serialized by rosbags with the camera's frame and any new pixels)."""
+        t0 = self.metrics.arrived() if kind == "image" else None
+        m = convert.read_image_cdr(raw)
+        view = convert.image_view(m)
+        if t0 is not None:
+            self.metrics.lap("decode")
+        checked = self.core.check(kind, view)
+        if checked.why:
+            return self._left_out(kind, view.header.stamp, checked.why)
+        if t0 is not None:
+            self.metrics.lap("work")
+        frame_id = m.header.frame_id if kind == "right" else self.camera_frame
+        self._publish(kind, convert.image_cdr(m, frame_id, checked.pixels), view.header.stamp, frame_id, t0)
 
     @guarded
     def on_image(self, kind: str, msg: Image | CompressedImage) -> None:
@@ -104,18 +130,22 @@ class IngestNode(SimrealNode):
             msg = images.fill_image_msg(Image(header=msg.header), checked.pixels, msg.encoding)
         if kind != "right":
             msg.header.frame_id = self.camera_frame
+        self._publish(kind, msg, msg.header.stamp, msg.header.frame_id, t0)
+
+    def _publish(self, kind: str, msg: Image | bytes, stamp, frame_id: str, t0: float | None) -> None:
+        """The image (a message or its serialized bytes) with its CameraInfo (the depth without)."""
         if kind != "depth":
             cam = self.core.right if kind == "right" else self.core.out_camera
-            info = camera_info_msg(cam, msg.header.stamp, msg.header.frame_id)
+            info = camera_info_msg(cam, stamp, frame_id)
             if kind == "right" and self.core.right_P is not None:  # the baseline lives in P: pass it on unchanged
                 info.p = [float(x) for x in self.core.right_P.ravel()]
             self.pub_info[kind].publish(info)
         self.pubs[kind].publish(msg)
         if t0 is not None:
             self.metrics.lap("encode")
-            self.metrics.done(t0, self.age_ms(msg.header.stamp))
+            self.metrics.done(t0, self.age_ms(stamp))
             self.set_status("ok", "ok")
-            self.progress(msg.header.stamp)
+            self.progress(stamp)
 
     def _left_out(self, kind: str, stamp, why: str) -> None:
         if kind == "image":

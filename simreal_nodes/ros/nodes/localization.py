@@ -13,7 +13,7 @@ tracker) is where each object projects: a share of the next frames' ORB features
 from __future__ import annotations
 
 from geometry_msgs.msg import PolygonInstanceStamped, PoseStamped
-from sensor_msgs.msg import CameraInfo, Image, PointCloud2
+from sensor_msgs.msg import CameraInfo, PointCloud2
 from simreal_msgs.msg import FeatureObservations, TrackingStatus
 from std_msgs.msg import Header
 from std_srvs.srv import SetBool
@@ -70,12 +70,11 @@ class LocalizationNode(SimrealNode):
                            "live: images kept while busy (1 = newest first, least latency; SLAM modes default to 5: "
                            "smaller gaps between the frames tracked keep their features, a few frames of lag; "
                            "markers need no continuity)", read_only=True)
-        self.create_subscription(Image, graph.CAM_IMAGE, lambda m: self.on_input("image", m),
-                                 data_qos(self.lossless, depth=max(1, int(depth))))
+        self.subscribe_image(graph.CAM_IMAGE, "image", data_qos(self.lossless, depth=max(1, int(depth))))
         if self.mode == "rgbd":
-            self.create_subscription(Image, graph.CAM_DEPTH, lambda m: self.on_input("depth", m), q)
+            self.subscribe_image(graph.CAM_DEPTH, "depth", q)
         if self.mode == "stereo":
-            self.create_subscription(Image, graph.CAM_RIGHT_IMAGE, lambda m: self.on_input("right", m), q)
+            self.subscribe_image(graph.CAM_RIGHT_IMAGE, "right", q)
             self.create_subscription(CameraInfo, graph.CAM_RIGHT_INFO, self.on_right_info, q)
         self.create_subscription(PointCloud2, graph.LOC_DEFORMABLE, self.on_deformable, reliable_qos(10))
         self.create_subscription(PolygonInstanceStamped, graph.LOC_FOCUS, self.on_focus, reliable_qos(10))

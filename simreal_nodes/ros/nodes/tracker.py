@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 from geometry_msgs.msg import PolygonInstanceStamped
-from sensor_msgs.msg import CameraInfo, Image, PointCloud2
+from sensor_msgs.msg import CameraInfo, PointCloud2
 from simreal_msgs.msg import FeatureObservations, ModelParameters, TrackingStatus
 from std_srvs.srv import SetBool
 
@@ -78,14 +78,13 @@ class TrackerNode(SimrealNode):
         if "obs" in keys:
             self.create_subscription(FeatureObservations, graph.LOC_OBS, lambda m: self.on_input("obs", m), trigger)
         if "image" in keys:
-            self.create_subscription(Image, graph.CAM_IMAGE, lambda m: self.on_input("image", m),
-                                     q if "obs" in keys else trigger)
+            self.subscribe_image(graph.CAM_IMAGE, "image", q if "obs" in keys else trigger)
         if reads_depth and not self.stereo:
-            self.create_subscription(Image, graph.CAM_DEPTH, lambda m: self.on_input("depth", m), q)
+            self.subscribe_image(graph.CAM_DEPTH, "depth", q)
         if self.stereo:
             if "image" not in keys:
-                self.create_subscription(Image, graph.CAM_IMAGE, lambda m: self.on_input("image", m), q)
-            self.create_subscription(Image, graph.CAM_RIGHT_IMAGE, lambda m: self.on_input("right", m), q)
+                self.subscribe_image(graph.CAM_IMAGE, "image", q)
+            self.subscribe_image(graph.CAM_RIGHT_IMAGE, "right", q)
             self.create_subscription(CameraInfo, graph.CAM_RIGHT_INFO, self.on_right_info, q)
         service = self.param("localization_service", "localization/set_localization_only",
                              "the localization node's SetBool freezing its map; relative: in this node's namespace",
