@@ -15,7 +15,7 @@ from rclpy.signals import SignalHandlerOptions
 
 from simreal_nodes.errors import BagError, SimrealError
 from simreal_nodes.io import bags
-from simreal_nodes.launch import DISCOVERY_RANGE, EXECUTORS, QOS_FROM_XML, Launcher, executor_kind, ros_environment
+from simreal_nodes.launch import DISCOVERY_RANGE, EXECUTOR_ENV, QOS_FROM_XML, Launcher, executor_kind, ros_environment
 from simreal_nodes.ros.bagplay import Player, Recorder
 from simreal_nodes.ros.node import make_executor
 from simreal_nodes.scene.graph import image_topic, output_topics, required_nodes
@@ -55,9 +55,7 @@ def replay(bag: str, scene_file: str, rate: float = 1.0, lossless: bool = False,
     and time does not press); ``one_process``: every node in one process on one executor (the CLI's default; here
     a process per node unless asked, so that a caller says which it runs); ``executor``: the nodes' and the
     player's (one of :data:`~simreal_nodes.launch.EXECUTORS`; None: :func:`~simreal_nodes.launch.executor_kind`)."""
-    executor = executor_kind() if executor is None else executor
-    if executor not in EXECUTORS:
-        raise SimrealError(f"executor: expected one of {', '.join(EXECUTORS)}; found {executor!r}")
+    executor = executor_kind(None if executor is None else {EXECUTOR_ENV: executor})
     scene = load_scene(scene_file)
     if launch:
         build_spec_models(scene)  # before the nodes start: they find the built spec:NAME models in the cache

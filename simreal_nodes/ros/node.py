@@ -23,8 +23,7 @@ from rclpy.node import Node
 from sensor_msgs.msg import Image
 from std_msgs.msg import Header
 
-from simreal_nodes.errors import SimrealError
-from simreal_nodes.launch import EXECUTOR_ENV, EXECUTORS, LAUNCHER_PID_ENV, PROMOTE, STANDBY_ENV, executor_kind
+from simreal_nodes.launch import EXECUTOR_ENV, LAUNCHER_PID_ENV, PROMOTE, STANDBY_ENV, executor_kind
 from simreal_nodes.lifetime import end_with_parent
 from simreal_nodes.metrics import StageMetrics
 from simreal_nodes.ros.convert import image_view, ns_to_stamp, stamp_ns
@@ -264,15 +263,12 @@ def make_executor(kind: str | None = None):
     ``single``: rclpy's SingleThreadedExecutor, in Python, which rebuilds its wait set (every subscription, timer
     and service of every node) on each wake-up. ``events``: rclpy's EventsExecutor (``rclpy.experimental``, in
     C++), to which the middleware's listeners queue events; cheaper per message (``./run bench executor``).
-    :class:`SimrealError` for another name."""
-    kind = executor_kind() if kind is None else kind
-    if kind == "single":
+    :class:`~simreal_nodes.errors.SimrealError` for another name."""
+    if executor_kind(None if kind is None else {EXECUTOR_ENV: kind}) == "single":
         return SingleThreadedExecutor()
-    if kind == "events":
-        from rclpy.experimental import EventsExecutor
+    from rclpy.experimental import EventsExecutor
 
-        return EventsExecutor()
-    raise SimrealError(f"{EXECUTOR_ENV}={kind!r}: the executor must be one of {', '.join(EXECUTORS)}")
+    return EventsExecutor()
 
 
 def spin(ex) -> None:
