@@ -3,6 +3,7 @@ publish (no cv_bridge, no sensor_msgs_py)."""
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -61,14 +62,21 @@ class ImageView:
 IMAGE_TYPE = "sensor_msgs/msg/Image"
 
 
+@functools.lru_cache(maxsize=1)
+def _jazzy_types():
+    """rosbags' ROS 2 Jazzy type store (sensor_msgs among them; simreal's own messages are not needed here)."""
+    from rosbags.typesys import Stores, get_typestore
+
+    return get_typestore(Stores.ROS2_JAZZY)
+
+
 def read_image_cdr(raw: bytes | bytearray | memoryview):
     """An Image subscription's serialized message (``raw=True``) read by rosbags' CDR deserializer (its message
-    class; ``data`` a read-only numpy view on ``raw``), instead of rclpy's conversion into a message object, which
-    copies ``data`` into a Python array (`./run bench executor` measures a subscriber's CPU both ways). rosbags'
-    SerdeError for bytes that are not a serialized Image."""
-    from simreal_nodes.io.bags import typestore
-
-    return typestore().deserialize_cdr(raw, IMAGE_TYPE)
+    class; ``data`` a read-only numpy view on ``raw``, not a copy), instead of rclpy's conversion into a message
+    object, which copies ``data`` into a Python array (`./run bench executor` measures a subscriber's CPU both ways).
+    rosbags' SerdeError for bytes that are not a serialized Image (rosbags reads the classic CDR that ROS 2's
+    middlewares write for messages)."""
+    return _jazzy_types().deserialize_cdr(memoryview(raw), IMAGE_TYPE)
 
 
 def image_view(raw) -> ImageView:
@@ -85,7 +93,6 @@ def image_cdr(m, frame_id: str, pixels: np.ndarray | None = None) -> bytes:
     ``pixels`` (in ``m``'s encoding) instead of its own, by rosbags' serializer (no rclpy message object is built)."""
     from dataclasses import replace
 
-    from simreal_nodes.io.bags import typestore
     from simreal_nodes.io.images import array_to_image_fields
 
     out = replace(m, header=replace(m.header, frame_id=frame_id))
@@ -93,7 +100,7 @@ def image_cdr(m, frame_id: str, pixels: np.ndarray | None = None) -> bytes:
         f = array_to_image_fields(pixels, m.encoding)
         out = replace(out, height=f.height, width=f.width, is_bigendian=f.is_bigendian, step=f.step,
                       data=np.frombuffer(f.data, np.uint8))
-    return bytes(typestore().serialize_cdr(out, IMAGE_TYPE))
+    return bytes(_jazzy_types().serialize_cdr(out, IMAGE_TYPE))
 
 
 def camera_info_msg(cam: CameraModel, stamp, frame_id: str) -> CameraInfo:

@@ -273,7 +273,7 @@ def make_executor(kind: str | None = None):
 
 def spin(ex) -> None:
     """Spin until the context shuts down (SIGINT, SIGTERM: ExternalShutdownException), in ``spin_once`` steps: the
-    EventsExecutor of this rclpy wheel (7.1.5) never fires a timer in its own ``spin()`` (measured here). A shutdown
+    EventsExecutor of this rclpy wheel (7.1.6) never fires a timer in its own ``spin()`` (measured here). A shutdown
     that lands between the context's check and the wait set's construction raises RCLError ("the given context is
     not valid") in either executor; with the context down, that is the end of the spin, not a failure."""
     from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy

@@ -95,9 +95,13 @@ class IngestNode(SimrealNode):
         serialized (its bytes re-serialized by rosbags with the camera's frame and any new pixels)."""
         t0 = self.metrics.arrived() if kind == "image" else None
         m = convert.read_image_cdr(raw)
-        view = convert.image_view(m)
         if t0 is not None:
             self.metrics.lap("decode")
+        self._pass_on(kind, convert.image_view(m), m, t0)
+
+    @guarded
+    def _pass_on(self, kind: str, view: convert.ImageView, m, t0: float | None) -> None:
+        """:meth:`on_serialized` once the image is read (a failure here is reported with the frame's stamp)."""
         checked = self.core.check(kind, view)
         if checked.why:
             return self._left_out(kind, view.header.stamp, checked.why)
