@@ -121,11 +121,11 @@ class BackgroundRegistration:
             self.start()  # a new worker, importing while the views are collected again
 
     def _drop_pipe(self) -> None:
+        """Let go of a dead worker's pipe. The feeder closes it, once its write has ended: closed from here while the
+        feeder was still writing a large job, the descriptor could be reused by the next worker's pipe and the
+        rest of the old job written into it (the new worker then read garbage)."""
         if self._jobs is not None:
-            self._jobs.put(None)  # the feeder ends (after the job it may be writing)
-        if self._conn is not None:
-            with contextlib.suppress(OSError):
-                self._conn.close()
+            self._jobs.put(None)  # the feeder ends (after the job it may be writing) and closes the connection
         self._conn = self._jobs = None
 
     def close(self, wait: bool = True) -> None:
@@ -146,13 +146,15 @@ class BackgroundRegistration:
 def _feed(jobs: queue.SimpleQueue[Any], conn: Connection) -> None:
     """Write the queued jobs to the worker, in order; None (from close) is written on as the worker's end, then the
     thread closes the connection and ends."""
-    while True:
-        job = jobs.get()
-        try:
-            conn.send(job)
-        except (OSError, ValueError):  # the worker is gone (its death is found by poll) or the pipe was closed
-            return
-        if job is None:
-            with contextlib.suppress(OSError):
-                conn.close()
-            return
+    try:
+        while True:
+            job = jobs.get()
+            try:
+                conn.send(job)
+            except (OSError, ValueError):  # the worker is gone (its death is found by poll) or the pipe was closed
+                return
+            if job is None:
+                return
+    finally:
+        with contextlib.suppress(OSError):
+            conn.close()
