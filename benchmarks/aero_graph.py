@@ -65,8 +65,9 @@ def main(argv: list[str] | None = None) -> None:
             nodes = node_metrics(run)
             flow_msgs = list(bags.read_bag(run, topics=["/simreal/aero/flow"]))
             flows = [bags.decode(m) for m in flow_msgs]
-            # when the first flow came: the camera frames recorded before it (the bag's frames are 1/30 s apart)
-            images = [m.log_time_ns for m in bags.read_bag(run, topics=["/simreal/camera/image"])]
+            # when the first flow came: the overlay's frames recorded before it (the bag's frames are 1/30 s apart;
+            # its raw images need no ingest, whose outputs this counted until stop 82)
+            images = [m.log_time_ns for m in bags.read_bag(run, topics=["/simreal/overlay/image_raw"])]
             first_flow_s = (sum(t < flow_msgs[0].log_time_ns for t in images) / 30.0) if flow_msgs else None
             # the overlay's processing time while it draws the flow: its diagnostics reports after the first flow
             ov_p50, ov_p95 = [], []

@@ -48,14 +48,16 @@ def main():
     report(rows)
 
 
-def run_case(scene, res, bag, scene_yaml, lossless, one_process, executor=None) -> dict:
-    """One replay; ``executor``: the nodes' and the player's (None: the default)."""
+def run_case(scene, res, bag, scene_yaml, lossless, one_process, executor=None, evaluate=None) -> dict:
+    """One replay; ``executor``: the nodes' and the player's (None: the default); ``evaluate(record) -> dict``:
+    more of the row, read from the replay's record."""
     with tempfile.TemporaryDirectory() as tmp:
         t0 = time.monotonic()
         stats, _, counts = replay(str(bag), str(scene_yaml), lossless=lossless, record=str(Path(tmp) / "run"),
                                   echo=lambda *a: None, one_process=one_process, executor=executor)
         wall = time.monotonic() - t0
         nodes = node_metrics(Path(tmp) / "run")
+        extra = evaluate(Path(tmp) / "run") if evaluate else {}
     d = stats.as_dict()
     lat = d["latency_ms"]
     last = lat.get("overlay") or next(iter(lat.values()), {"p50": float("nan"), "p95": float("nan")})
@@ -71,7 +73,8 @@ def run_case(scene, res, bag, scene_yaml, lossless, one_process, executor=None) 
                 nodes_work_ms=float(np.nansum([_num(v.get("processing_ms_p50")) for v in nodes.values()])),
                 **{f"{n}_p50_ms": v.get("processing_ms_p50") for n, v in nodes.items()},
                 **{f"cpu_{n.split(' ')[0]}_ms": v for n, v in cpu.items()},
-                budget={n: {k: _num(v.get(f"{k}_ms_p50")) for k in (*STAGES, "processing")} for n, v in nodes.items()})
+                budget={n: {k: _num(v.get(f"{k}_ms_p50")) for k in (*STAGES, "processing")} for n, v in nodes.items()},
+                **extra)
 
 
 def _num(x) -> float:

@@ -38,12 +38,13 @@ def add_executor(s: argparse.ArgumentParser) -> None:
 
 def cmd_launch(a: argparse.Namespace) -> int:
     from simreal_nodes.launch import Launcher, run_until_signal
-    from simreal_nodes.scene.graph import required_nodes
+    from simreal_nodes.scene.graph import ingest_note, required_nodes
     from simreal_nodes.scene.schema import build_spec_models, load_scene
 
     scene = build_spec_models(load_scene(a.scene))  # before the nodes start: they load the built models
     nodes = required_nodes(scene, lossless=a.lossless)
-    print(f"[launch] scene '{scene['name']}': starting {', '.join(n.name for n in nodes)}")
+    print(f"[launch] scene '{scene['name']}': starting {', '.join(n.name for n in nodes)} "
+          f"({ingest_note(scene, nodes)})")
     return run_until_signal(Launcher(nodes, remaps=_remaps(a.remap), respawn=a.respawn, namespace=a.namespace,
                                      discovery_range=a.discovery_range, standby=not a.no_standby,
                                      one_process=a.one_process, executor=a.executor))

@@ -9,13 +9,13 @@ from simreal_nodes.errors import SimrealError
 
 
 def cmd_check_scene(a: argparse.Namespace) -> int:
-    from simreal_nodes.scene.graph import required_nodes
+    from simreal_nodes.scene.graph import ingest_note, required_nodes
     from simreal_nodes.scene.schema import load_scene
 
     scene = load_scene(a.scene)  # spec:NAME models are named, not built
     nodes = required_nodes(scene)
     print(f"{a.scene}: valid scene '{scene['name']}' with {len(scene['objects'])} object(s); "
-          f"nodes: {', '.join(n.name for n in nodes)}")
+          f"nodes: {', '.join(n.name for n in nodes)} ({ingest_note(scene, nodes)})")
     for n in nodes:
         print(f"  {n.name}: in {', '.join(n.inputs) or '-'}; out {', '.join(n.outputs)}")
     return 0

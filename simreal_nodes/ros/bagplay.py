@@ -207,7 +207,8 @@ class Player:
             self.stats.latency_ms[name].append(((t_done or time.monotonic()) - self._t_pub[s]) * 1e3)
 
     def wait_ready(self, timeout_s: float = 60.0) -> bool:
-        """Wait until every node is up and the ingest subscribes to the image topic."""
+        """Wait until every node is up and subscribes to its inputs (the image topic: the ingest, or the nodes that
+        read the camera themselves)."""
         t_end = time.monotonic() + timeout_s
         want = set(self.nodes)
         while time.monotonic() < t_end:

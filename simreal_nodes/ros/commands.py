@@ -60,10 +60,8 @@ def replay(bag: str, scene_file: str, rate: float = 1.0, lossless: bool = False,
     if launch:
         build_spec_models(scene)  # before the nodes start: they find the built spec:NAME models in the cache
     cam = scene["camera"]
-    nodes = required_nodes(scene, lossless=lossless)
+    nodes = required_nodes(scene, lossless=lossless, source="topic")  # the player is the source
     for n in nodes:
-        if n.name == "ingest":
-            n.parameters["source"] = "topic"  # the player is the source
         n.parameters.update((extra_params or {}).get(n.name, {}))
     report = bags.BagReport()
     topics = bags.bag_topics(bag)
@@ -98,7 +96,9 @@ def replay(bag: str, scene_file: str, rate: float = 1.0, lossless: bool = False,
             player = Player(node, ex, inputs, img, [n.name for n in nodes if n.per_frame], lossless, rate,
                             frame_timeout_s, echo=echo)
             player.should_stop = stop.event.is_set
-            player.node_inputs = {n.name: [t for t in n.inputs if t.startswith("/simreal/")] for n in nodes}
+            # what the nodes must have subscribed to before the first frame: the graph's topics and the player's
+            player.node_inputs = {n.name: [t for t in n.inputs if t.startswith("/simreal/") or t in inputs]
+                                  for n in nodes}
             if recorder:
                 player.extra_ready = recorder.ready
             if launcher:

@@ -88,6 +88,9 @@ class SimrealNode(Node):
         self.scene_file = self.param("scene_file", "", "scene YAML this node serves")
         self.map_frame = self.param("map_frame", "map", "fixed frame (REP-105)")
         self.camera_frame = self.param("camera_frame", "camera_optical_frame", "camera optical frame (REP-103)")
+        self.camera_direct = self.param("camera_direct", False, "read the camera's own topics (the scene's camera "
+                                        "block): the graph has no ingest node; false: the ingest's outputs",
+                                        read_only=True)
         self.metrics = StageMetrics()
         self._diag_pub = self.create_publisher(DiagnosticArray, graph.DIAGNOSTICS, reliable_qos(10))
         self._progress_pub = self.create_publisher(Header, graph.PROGRESS, reliable_qos(1000))
@@ -155,6 +158,11 @@ class SimrealNode(Node):
             ready = ready[-1:]
         for _, frame in ready:
             process(frame)
+
+    def camera_topics(self, camera: dict | None) -> dict[str, str]:
+        """The camera topics this node reads (:func:`~simreal_nodes.scene.graph.camera_topics`): the camera's own
+        when ``camera_direct``, else the ingest's outputs. ``camera``: the scene's ``camera`` block."""
+        return graph.camera_topics(camera, self.camera_direct)
 
     def subscribe_image(self, topic: str, key: str, qos):
         """An Image input of the node's ``sync`` taken serialized and read without rclpy's message conversion

@@ -41,6 +41,52 @@ def image_topic(camera: dict, right: bool = False) -> str | None:
     return t
 
 
+def ingest_work(scene: dict, source: str | None = None) -> list[str]:
+    """What the ingest node would do that no other node does ([] = nothing: the nodes read the camera topics
+    themselves). ``source``: where the frames come from when not the scene's ``camera.source`` (a replay's player
+    publishes them on the camera topics: ``"topic"``). Every node that reads the camera checks its CameraInfo and
+    its images' format and size itself; what only the ingest does is reading files, decompressing, undistorting,
+    taking the intrinsics from a calibration file, and, with ``camera.ingest: always``, everything."""
+    cam = scene["camera"]
+    src = source or cam["source"]
+    why = []
+    if cam.get("ingest", "auto") == "always":
+        why.append("camera.ingest: always")
+    if src != "topic":
+        why.append(f"reads frames from a {src} file")
+    if cam["compressed"]:
+        why.append("decompresses the images")
+    if cam["undistort"]:
+        why.append("undistorts the images")
+    if cam["calibration"]:
+        why.append("publishes the calibration file's intrinsics")
+    return why
+
+
+def ingest_note(scene: dict, nodes: list[NodeSpec], source: str | None = None) -> str:
+    """One line for the user: why the graph ``nodes`` of ``scene`` has an ingest node, or which topics its nodes
+    read instead."""
+    if any(n.name == "ingest" for n in nodes):
+        return "ingest: " + (", ".join(ingest_work(scene, source)) or "the scene's only node")
+    return f"no ingest: the nodes read {image_topic(scene['camera'])} and its CameraInfo themselves"
+
+
+def camera_topics(camera: dict | None, direct: bool) -> dict[str, str]:
+    """The camera topics a node reads, those of the streams the camera has (``image``, ``info``; ``depth``;
+    ``right``, ``right_info``): the camera's own (``direct``: no ingest in the graph) or the ingest's outputs.
+    ``camera``: the scene's ``camera`` block (None: the schema's defaults)."""
+    cam = camera or {}
+    if direct:
+        t = {"image": cam.get("image") or "/camera/image_raw", "info": cam.get("camera_info") or "/camera/camera_info",
+             "depth": cam.get("depth"), "right": cam.get("right_image"), "right_info": cam.get("right_camera_info")}
+    else:
+        t = {"image": CAM_IMAGE, "info": CAM_INFO, "depth": CAM_DEPTH if cam.get("depth") else None,
+             "right": CAM_RIGHT_IMAGE, "right_info": CAM_RIGHT_INFO}
+    if not cam.get("right_image"):
+        t["right"] = t["right_info"] = None
+    return {k: v for k, v in t.items() if v}
+
+
 def params_topic(object_id: str) -> str:
     return f"/simreal/objects/{object_id}/parameters"
 
@@ -99,31 +145,43 @@ def tracker_stereo_depth(scene: dict) -> bool:
     return tracker_reads_depth(scene) and cam["depth"] is None and cam["right_image"] is not None
 
 
-def required_nodes(scene: dict, lossless: bool = False) -> list[NodeSpec]:
-    """The nodes the scene requires, in pipeline order. Only those are started."""
+def required_nodes(scene: dict, lossless: bool = False, source: str | None = None) -> list[NodeSpec]:
+    """The nodes the scene requires, in pipeline order. Only those are started. ``source``: where the frames come
+    from when not the scene's ``camera.source`` (see :func:`ingest_work`). The ingest node is among them when it has
+    work (:func:`ingest_work`) or is the only node; the others then read its outputs, else the camera's topics
+    (their parameter ``camera_direct``)."""
+    cam, loc, objs = scene["camera"], scene["localization"], scene["objects"]
+    readers = loc["mode"] != "static" or scene["overlay"]["enabled"] or any(
+        o["tracking"]["enabled"] or o["collision"]["enabled"] for o in objs)
+    with_ingest = bool(ingest_work(scene, source)) or not readers
     common = {"scene_file": scene["_source"], "lossless": lossless,
               "map_frame": scene["frames"]["map"], "camera_frame": scene["frames"]["camera"]}
-    cam, loc, objs = scene["camera"], scene["localization"], scene["objects"]
+    t = camera_topics(cam, direct=not with_ingest)
+    image, info = t["image"], t["info"]
     stereo = cam["right_image"] is not None
     depth = cam["depth"] is not None
     nodes: list[NodeSpec] = []
 
-    ingest_out = {CAM_IMAGE: "sensor_msgs/msg/Image", CAM_INFO: "sensor_msgs/msg/CameraInfo"}
-    if depth:
-        ingest_out[CAM_DEPTH] = "sensor_msgs/msg/Image"
-    if stereo:
-        ingest_out[CAM_RIGHT_IMAGE] = "sensor_msgs/msg/Image"
-        ingest_out[CAM_RIGHT_INFO] = "sensor_msgs/msg/CameraInfo"
-    ingest_in = [t for t in (image_topic(cam), cam["camera_info"], cam["depth"], image_topic(cam, right=True),
-                             cam["right_camera_info"]) if t] if cam["source"] == "topic" else []
-    nodes.append(NodeSpec("ingest", dict(common), ingest_in, ingest_out))
+    if with_ingest:
+        ingest_out = {CAM_IMAGE: "sensor_msgs/msg/Image", CAM_INFO: "sensor_msgs/msg/CameraInfo"}
+        if depth:
+            ingest_out[CAM_DEPTH] = "sensor_msgs/msg/Image"
+        if stereo:
+            ingest_out[CAM_RIGHT_IMAGE] = "sensor_msgs/msg/Image"
+            ingest_out[CAM_RIGHT_INFO] = "sensor_msgs/msg/CameraInfo"
+        ingest_in = [x for x in (image_topic(cam), cam["camera_info"], cam["depth"], image_topic(cam, right=True),
+                                 cam["right_camera_info"]) if x] if (source or cam["source"]) == "topic" else []
+        nodes.append(NodeSpec("ingest", dict(common, **({"source": source} if source else {})), ingest_in,
+                              ingest_out))
+    else:
+        common["camera_direct"] = True
 
     aero = scene.get("aero", {}).get("enabled", False)
     if loc["mode"] != "static":
         nodes.append(NodeSpec(
             "localization", dict(common),
-            [CAM_IMAGE, CAM_INFO] + ([CAM_DEPTH] if depth else [])
-            + ([CAM_RIGHT_IMAGE, CAM_RIGHT_INFO] if stereo else [])
+            [image, info] + ([t["depth"]] if depth else [])
+            + ([t["right"], t["right_info"]] if stereo else [])
             + ([LOC_DEFORMABLE, LOC_FOCUS] if any(o["tracking"]["enabled"] for o in objs) else []),
             {POSE: "geometry_msgs/msg/PoseStamped", TF: "tf2_msgs/msg/TFMessage",
              LOC_STATUS: "simreal_msgs/msg/TrackingStatus", LOC_MAP: "sensor_msgs/msg/PointCloud2",
@@ -138,9 +196,9 @@ def required_nodes(scene: dict, lossless: bool = False) -> list[NodeSpec]:
     if tracked:
         nodes.append(NodeSpec(
             "tracker", dict(common),
-            list(dict.fromkeys([LOC_OBS if k == "obs" else CAM_IMAGE for k in tracker_inputs(scene)] + [CAM_INFO]
-                               + ([CAM_DEPTH] if depth and tracker_reads_depth(scene) else [])
-                               + ([CAM_IMAGE, CAM_RIGHT_IMAGE, CAM_RIGHT_INFO] if tracker_stereo_depth(scene)
+            list(dict.fromkeys([LOC_OBS if k == "obs" else image for k in tracker_inputs(scene)] + [info]
+                               + ([t["depth"]] if depth and tracker_reads_depth(scene) else [])
+                               + ([image, t["right"], t["right_info"]] if tracker_stereo_depth(scene)
                                   else []))),
             {**{params_topic(o["id"]): "simreal_msgs/msg/ModelParameters" for o in tracked},
              TRACKER_STATUS: "simreal_msgs/msg/TrackingStatus",
@@ -153,12 +211,12 @@ def required_nodes(scene: dict, lossless: bool = False) -> list[NodeSpec]:
         for o in colliding:
             out[contact_topic(o["id"])] = "simreal_msgs/msg/ContactState"
             out[params_topic(o["id"])] = "simreal_msgs/msg/ModelParameters"
-        depth_in = [CAM_DEPTH] if depth else [CAM_IMAGE, CAM_RIGHT_IMAGE, CAM_RIGHT_INFO]  # stereo: SGBM in the node
+        depth_in = [t["depth"]] if depth else [image, t["right"], t["right_info"]]  # stereo: SGBM in the node
         nodes.append(NodeSpec("collision", dict(common),
-                              depth_in + [CAM_INFO] + ([LOC_OBS] if loc["mode"] != "static" else []), out))
+                              depth_in + [info] + ([LOC_OBS] if loc["mode"] != "static" else []), out))
 
     if scene["overlay"]["enabled"]:
-        ins = [CAM_IMAGE, CAM_INFO] + ([CAM_DEPTH] if depth else []) + ([LOC_OBS] if loc["mode"] != "static" else [])
+        ins = [image, info] + ([t["depth"]] if depth else []) + ([LOC_OBS] if loc["mode"] != "static" else [])
         ins += [params_topic(o["id"]) for o in objs if o["tracking"]["enabled"] or o["collision"]["enabled"]]
         ins += [AERO_FLOW] if aero else []
         nodes.append(NodeSpec("overlay", dict(common), ins,

@@ -54,6 +54,10 @@ CAMERA = Record({
     "path": FilePath("bag, video file or image folder for non-topic sources", nullable=True),
     "rate_hz": Number("publishing rate for video / image-folder sources", lo=0, lo_open=True, default=30.0),
     "loop": Bool("restart a bag / video / folder source at its end", default=False),
+    "ingest": Enum(("auto", "always"), "auto: the ingest node starts only when it has work (a file source, "
+                   "compressed images, undistortion, a calibration file) or is the scene's only node; otherwise the "
+                   "nodes read the camera topics themselves, one hop less per frame. always: every frame goes "
+                   "through the ingest (its /diagnostics name each frame it refuses)", default="auto"),
 })
 
 MARKERS = Record({

@@ -26,10 +26,18 @@ def test_a_case_is_reproduced_from_its_number():
         assert made[0].count(repr(t)) <= 2  # a mutation may set a value the template had
 
 
-def test_the_graph_survives_hostile_messages(tmp_path):
-    r = fuzz_graph.fuzz_graph("markers", 600, seed=0, work=tmp_path, echo=lambda *_: None)
+@pytest.mark.parametrize("graph", ["markers", "rgbd"])
+def test_the_graph_survives_hostile_messages(tmp_path, graph):
+    """``markers``: JPEG input, so the ingest decodes it and the nodes read its outputs; ``rgbd``: raw images, no
+    ingest node, the hostile camera messages reach the SLAM, the tracker and the overlay themselves."""
+    r = fuzz_graph.fuzz_graph(graph, 600, seed=0, work=tmp_path, echo=lambda *_: None)
     assert sum(r["sent"].values()) >= 550
-    assert "/camera/image_raw/compressed" in r["sent"] and "/simreal/camera/camera_info" in r["sent"]
+    if graph == "markers":
+        assert r["nodes"][0] == "ingest"
+        assert "/camera/image_raw/compressed" in r["sent"] and "/simreal/camera/camera_info" in r["sent"]
+    else:
+        assert "ingest" not in r["nodes"] and not any(t.startswith("/simreal/camera") for t in r["sent"])
+        assert {"/camera/image_raw", "/camera/depth/image_raw", "/camera/camera_info"} <= set(r["sent"])
     for name, s in r["per_node"].items():
         assert s["alive"] and not s["exit_codes"], (name, r["log_tail"])
         assert not s["unexpected"], (name, s["unexpected"])

@@ -67,7 +67,7 @@ def test_probe_pushes_crossed_beams_through_the_graph(tmp_path):
     assert sum(est_b[s][0] for s in pressed_b) >= 0.7 * len(pressed_b)
     # the overlay shows the deformation: |u| colours above the colour map's zero end appear on the beams while
     # pressed, none before the press (the undeformed beams are drawn in the zero colour)
-    warm = _coloured_pixels(out)
+    warm = _coloured_pixels(out, bag)
     assert len(warm) == n
     tru_a = read_contacts(bag, "/ground_truth/objects/beam_a/contact")
     before = [warm[s] for s in sorted(warm) if not tru_a[s][0]]
@@ -77,7 +77,7 @@ def test_probe_pushes_crossed_beams_through_the_graph(tmp_path):
     assert np.median(before) <= 20 and np.median(deep) >= 200  # measured 6 and 578 (320x240)
 
 
-def _coloured_pixels(run) -> dict[int, int]:
+def _coloured_pixels(run, bag) -> dict[int, int]:
     """Per overlay frame of ``run``: pixels the overlay painted (they differ from the camera image) in a colour
     above the zero end of the colour map (green > 120: the map runs violet -> blue -> green -> red), the colour
     bar left out (the pixels painted alike in every frame, dilated 3 px over its anti-aliased labels)."""
@@ -85,11 +85,12 @@ def _coloured_pixels(run) -> dict[int, int]:
 
     from simreal_nodes.io.images import image_to_array
 
-    def frames(topic):
+    def frames(topic, path=run):
         return {bags.stamp_ns(m): image_to_array(m).astype(int)
-                for m in (bags.decode(x) for x in bags.read_bag(run, topics=[topic]))}
+                for m in (bags.decode(x) for x in bags.read_bag(path, topics=[topic]))}
 
-    ov, cam = frames("/simreal/overlay/image_raw"), frames("/simreal/camera/image")
+    # the camera image the overlay was drawn on: the ingest's, or the bag's where the nodes read it themselves
+    ov, cam = frames("/simreal/overlay/image_raw"), frames("/simreal/camera/image") or frames("/camera/image_raw", bag)
     stamps = sorted(ov)
     stack = np.stack([ov[s] for s in stamps])
     bar = (stack == stack[:1]).all(axis=(0, 3)).astype(np.uint8)

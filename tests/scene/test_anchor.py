@@ -38,9 +38,11 @@ def test_registration_anchor_is_accepted_on_a_stereo_pair_whose_tracker_reads_bo
 
     s = validate_scene(_doc({"kind": "registration", "guess": GUESS}, mode="stereo"), "reg", ".")
     assert s["camera"]["stereo_min_depth_m"] == pytest.approx(0.4)
-    tracker = {n.name: n for n in graph.required_nodes(s)}["tracker"]
-    assert graph.CAM_DEPTH not in tracker.inputs
-    assert {graph.CAM_IMAGE, graph.CAM_RIGHT_IMAGE, graph.CAM_RIGHT_INFO} <= set(tracker.inputs)
+    nodes = {n.name: n for n in graph.required_nodes(s)}
+    assert "ingest" not in nodes  # nothing to do for it: the nodes read the camera topics themselves
+    cam, tracker = s["camera"], nodes["tracker"]
+    assert {cam["image"], cam["right_image"], cam["right_camera_info"]} <= set(tracker.inputs)
+    assert not any("depth" in t for t in tracker.inputs)
 
 
 def test_pose_anchor_needs_no_guess():
@@ -62,7 +64,8 @@ def test_a_registering_tracker_subscribes_to_depth():
         doc["objects"][0]["tracking"] = tracking
         s = validate_scene(doc, "reg", ".")
         nodes = {n.name: n for n in graph.required_nodes(s)}
-        assert (graph.CAM_DEPTH in nodes["tracker"].inputs) == wants == graph.tracker_reads_depth(s), (anchor, tracking)
+        reads = s["camera"]["depth"] in nodes["tracker"].inputs
+        assert reads == wants == graph.tracker_reads_depth(s), (anchor, tracking)
 
 
 @pytest.mark.parametrize("fine, want", [(None, "full"), ("auto", "full"), ("upright", "upright"), ("full", "full")])

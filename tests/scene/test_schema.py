@@ -22,10 +22,50 @@ def write(tmp_path, text):
 
 
 def test_minimal_scene_gets_defaults_and_starts_only_ingest(tmp_path):
+    from simreal_nodes.scene.graph import ingest_note
+
     s = load_scene(write(tmp_path, BASE))
     assert s["camera"]["image"] == "/camera/image_raw"
     assert s["camera"]["depth"] is None
-    assert [n.name for n in required_nodes(s)] == ["ingest"]
+    nodes = required_nodes(s)
+    assert [n.name for n in nodes] == ["ingest"]  # no other node: the camera stream, validated, is the graph
+    assert ingest_note(s, nodes) == "ingest: the scene's only node"
+
+
+@pytest.mark.parametrize("camera,source,why", [
+    ("{}", None, []),
+    ("{compressed: true}", None, ["decompresses the images"]),
+    ("{undistort: true}", None, ["undistorts the images"]),
+    ("{ingest: always}", None, ["camera.ingest: always"]),
+    ("{source: video, path: CALIB}", None, ["reads frames from a video file"]),
+    ("{source: video, path: CALIB}", "topic", []),  # a replay: the player publishes the frames
+    ("{calibration: CALIB, depth: /d}", "topic", ["publishes the calibration file's intrinsics"]),
+])
+def test_the_ingest_starts_only_when_it_has_work(tmp_path, camera, source, why):
+    """Issue 18: no hop that does nothing. Without decompression, undistortion, a calibration file or a file to read,
+    the nodes subscribe to the camera's own topics and no ingest node starts; with any, every node reads the
+    ingest's outputs and none reads the camera's."""
+    from simreal_nodes.scene import graph
+
+    (tmp_path / "cal.yaml").write_text("")
+    camera = camera.replace("CALIB", str(tmp_path / "cal.yaml"))
+    text = BASE.replace("enabled: false", "enabled: true") + f"camera: {camera}\n"
+    s = load_scene(write(tmp_path, text))
+    assert graph.ingest_work(s, source) == why
+    nodes = required_nodes(s, source=source)
+    cam = s["camera"]
+    raw = {graph.image_topic(cam), cam["camera_info"], cam["depth"]} - {None}
+    ours = {graph.CAM_IMAGE, graph.CAM_INFO, graph.CAM_DEPTH}
+    ins = {t for n in nodes if n.name != "ingest" for t in n.inputs}
+    if why:
+        assert nodes[0].name == "ingest" and not ins & raw and graph.CAM_IMAGE in ins
+        assert all("camera_direct" not in n.parameters for n in nodes)
+        assert graph.ingest_note(s, nodes, source).startswith("ingest: " + why[0])
+    else:
+        assert "ingest" not in [n.name for n in nodes] and not ins & ours and cam["image"] in ins
+        assert all(n.parameters["camera_direct"] for n in nodes)
+        assert graph.ingest_note(s, nodes, source) == (
+            "no ingest: the nodes read /camera/image_raw and its CameraInfo themselves")
 
 
 @pytest.mark.parametrize("text,match", [
@@ -81,7 +121,8 @@ def test_tracker_inputs_are_what_it_subscribes(name, needs_image):
         sc = make_scene(name, 320, 240, None, 30.0)
         s = validate_scene(sc.scene_yaml(sc), name, ".")
     nodes = {n.name: n for n in required_nodes(s)}
-    assert (graph.CAM_IMAGE in nodes["tracker"].inputs) == needs_image
+    image = graph.camera_topics(s["camera"], direct="ingest" not in nodes)["image"]
+    assert (image in nodes["tracker"].inputs) == needs_image
     assert graph.LOC_DEFORMABLE in nodes["localization"].inputs
     assert graph.LOC_DEFORMABLE in nodes["tracker"].outputs
     assert graph.LOC_FOCUS in nodes["localization"].inputs and graph.LOC_FOCUS in nodes["tracker"].outputs
@@ -154,7 +195,7 @@ def test_an_aero_scene_starts_the_aero_node_and_wires_its_flow(tmp_path):
     (tmp_path / "db.h5").write_bytes(b"")  # existence is what the scene checks; the node reads the file
     s = load_scene(write(tmp_path, AERO))
     nodes = {n.name: n for n in required_nodes(s)}
-    assert list(nodes) == ["ingest", "localization", "aero", "overlay"]
+    assert list(nodes) == ["localization", "aero", "overlay"]  # a raw camera topic: no ingest
     assert "/simreal/localization/capture_cloud" in nodes["localization"].outputs
     assert nodes["aero"].inputs == ["/simreal/localization/capture_cloud"]
     assert nodes["aero"].outputs == {"/simreal/aero/flow": "visualization_msgs/msg/MarkerArray"}

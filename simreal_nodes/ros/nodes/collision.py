@@ -57,17 +57,18 @@ class CollisionNode(SimrealNode):
         need_pose = self.static_pose is None
         keys = (("depth",) if not self.stereo else ("image", "right")) + (("obs",) if need_pose else ())
         self.sync = StampSync(keys, (), wait=2)
-        self.create_subscription(CameraInfo, graph.CAM_INFO, self.on_info, q)
+        topics = self.camera_topics(cam)
+        self.create_subscription(CameraInfo, topics["info"], self.on_info, q)
         # live, the input that completes a frame last (the pose if needed, else the images) is the trigger:
         # depth 1, so the newest frame is taken first
         trigger = data_qos(self.lossless, depth=1)
         qi = q if need_pose else trigger
         if self.stereo:
-            self.subscribe_image(graph.CAM_IMAGE, "image", qi)
-            self.subscribe_image(graph.CAM_RIGHT_IMAGE, "right", q)
-            self.create_subscription(CameraInfo, graph.CAM_RIGHT_INFO, self.on_right_info, q)
+            self.subscribe_image(topics["image"], "image", qi)
+            self.subscribe_image(topics["right"], "right", q)
+            self.create_subscription(CameraInfo, topics["right_info"], self.on_right_info, q)
         else:
-            self.subscribe_image(graph.CAM_DEPTH, "depth", qi)
+            self.subscribe_image(topics["depth"], "depth", qi)
         if need_pose:
             self.create_subscription(FeatureObservations, graph.LOC_OBS, lambda m: self.on_input("obs", m), trigger)
         self.pub_contact = {o["id"]: self.create_publisher(ContactMsg, graph.contact_topic(o["id"]), reliable_qos(50))

@@ -64,18 +64,19 @@ class LocalizationNode(SimrealNode):
         self.pub_map = self.create_publisher(PointCloud2, graph.LOC_MAP, reliable_qos(1))
         self.pub_capture = (self.create_publisher(PointCloud2, graph.LOC_CAPTURE, reliable_qos(1)) if self.capture
                             else None)
+        cam = self.camera_topics(scene.get("camera"))
         self.sync = StampSync(("image",), {"rgbd": ("depth",), "stereo": ("right",)}.get(self.mode, ()), wait=2)
-        self.create_subscription(CameraInfo, graph.CAM_INFO, self.on_info, q)
+        self.create_subscription(CameraInfo, cam["info"], self.on_info, q)
         depth = self.param("live_queue", 1 if self.mode in ("markers", "static") else 5,
                            "live: images kept while busy (1 = newest first, least latency; SLAM modes default to 5: "
                            "smaller gaps between the frames tracked keep their features, a few frames of lag; "
                            "markers need no continuity)", read_only=True)
-        self.subscribe_image(graph.CAM_IMAGE, "image", data_qos(self.lossless, depth=max(1, int(depth))))
+        self.subscribe_image(cam["image"], "image", data_qos(self.lossless, depth=max(1, int(depth))))
         if self.mode == "rgbd":
-            self.subscribe_image(graph.CAM_DEPTH, "depth", q)
+            self.subscribe_image(cam["depth"], "depth", q)
         if self.mode == "stereo":
-            self.subscribe_image(graph.CAM_RIGHT_IMAGE, "right", q)
-            self.create_subscription(CameraInfo, graph.CAM_RIGHT_INFO, self.on_right_info, q)
+            self.subscribe_image(cam["right"], "right", q)
+            self.create_subscription(CameraInfo, cam["right_info"], self.on_right_info, q)
         self.create_subscription(PointCloud2, graph.LOC_DEFORMABLE, self.on_deformable, reliable_qos(10))
         self.create_subscription(PolygonInstanceStamped, graph.LOC_FOCUS, self.on_focus, reliable_qos(10))
         self.create_service(SetBool, "~/set_localization_only", self.on_set_localization_only)

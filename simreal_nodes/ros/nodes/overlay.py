@@ -58,10 +58,11 @@ class OverlayNode(SimrealNode):
                            for name, block in (("tracker", "tracking"), ("collision", "collision"))}
         self.pub_image = self.create_publisher(Image, graph.OVERLAY_IMAGE, q if self.lossless else data_qos(False))
         self.pub_markers = self.create_publisher(MarkerArray, graph.OVERLAY_MARKERS, reliable_qos(2))
-        self.create_subscription(CameraInfo, graph.CAM_INFO, self.on_info, q)
-        self.subscribe_image(graph.CAM_IMAGE, "image", trigger if self.static_pose is not None else q)
+        cam = self.camera_topics(self.scene["camera"])
+        self.create_subscription(CameraInfo, cam["info"], self.on_info, q)
+        self.subscribe_image(cam["image"], "image", trigger if self.static_pose is not None else q)
         if has_depth:
-            self.subscribe_image(graph.CAM_DEPTH, "depth", q)
+            self.subscribe_image(cam["depth"], "depth", q)
         if self.static_pose is None:
             self.create_subscription(FeatureObservations, graph.LOC_OBS, lambda m: self.on_input("obs", m), trigger)
         for oid in self.param_objects:

@@ -73,19 +73,20 @@ class TrackerNode(SimrealNode):
         self.pub_deformable = self.create_publisher(PointCloud2, graph.LOC_DEFORMABLE, reliable_qos(10))
         self.pub_focus = self.create_publisher(PolygonInstanceStamped, graph.LOC_FOCUS, reliable_qos(10))
         self.freeze_map = bool(loc.get("freeze_map_on_deformation", False))
-        self.create_subscription(CameraInfo, graph.CAM_INFO, self.on_info, q)
+        cam = self.camera_topics(self.scene["camera"])
+        self.create_subscription(CameraInfo, cam["info"], self.on_info, q)
         trigger = data_qos(self.lossless, depth=1)  # the newest frame first (live)
         if "obs" in keys:
             self.create_subscription(FeatureObservations, graph.LOC_OBS, lambda m: self.on_input("obs", m), trigger)
         if "image" in keys:
-            self.subscribe_image(graph.CAM_IMAGE, "image", q if "obs" in keys else trigger)
+            self.subscribe_image(cam["image"], "image", q if "obs" in keys else trigger)
         if reads_depth and not self.stereo:
-            self.subscribe_image(graph.CAM_DEPTH, "depth", q)
+            self.subscribe_image(cam["depth"], "depth", q)
         if self.stereo:
             if "image" not in keys:
-                self.subscribe_image(graph.CAM_IMAGE, "image", q)
-            self.subscribe_image(graph.CAM_RIGHT_IMAGE, "right", q)
-            self.create_subscription(CameraInfo, graph.CAM_RIGHT_INFO, self.on_right_info, q)
+                self.subscribe_image(cam["image"], "image", q)
+            self.subscribe_image(cam["right"], "right", q)
+            self.create_subscription(CameraInfo, cam["right_info"], self.on_right_info, q)
         service = self.param("localization_service", "localization/set_localization_only",
                              "the localization node's SetBool freezing its map; relative: in this node's namespace",
                              read_only=True)
