@@ -1,24 +1,25 @@
-"""The ingest hop (issue 18, item 1): a graph whose camera needs no decompression, undistortion, calibration file
-or file source starts no ingest node; its nodes read the camera topics themselves (``camera.ingest: auto``, the
-default). Measured against the same graph with every frame through the ingest (``camera.ingest: always``, what
-every graph did before).
+"""The ingest hop (issue 18, item 1): a graph whose camera needs no decompression, undistortion, calibration file or
+file source starts no ingest node; its nodes read the camera topics themselves (``camera.ingest: auto``, the
+default). Measured against the same graph with every frame through the ingest (``camera.ingest: always``, what every
+graph did before).
 
-    ./run bench ingest_hop                      # about 15 minutes on 2 cores
-    python -m benchmarks.ingest_hop --reps 1    # one pair per case
+    ./run bench ingest_hop                      # about 10 minutes on 2 cores
+    python -m benchmarks.ingest_hop --reps 2    # two pairs per case
 
 Input: the sample bags of the demo (``aluminium_beam``, markers, glued dots) and of the RGB-D SLAM scene
 (``foam_beam``), 640 x 480, with their JPEG images decoded once into raw ``rgb8`` Images (a raw camera, as a
-RealSense's or a USB camera's driver publishes them): both arms see the same pixels. Each case runs as pairs
-(always, then auto, back to back), repeated (``--reps``), so that a host whose speed drifts moves both runs of a
-pair alike; lossless replays (:func:`benchmarks.graph.run_case`). Reported per case and arm: the median of its runs
-of frames through per second, latency p50 / p95, the nodes' CPU per frame (summed over their processes) and the
-player's, and the load estimate's median error (% of its range, against the bag's truth): it must not change, since
-the nodes get the same bytes either way. On the auto rows, the median of the pairs' changes.
+RealSense's or a USB camera's driver publishes them): both arms see the same pixels. Each case runs as pairs (always
+and auto back to back, the order alternating), repeated (``--reps``), so that a host whose speed drifts moves both
+runs of a pair alike; lossless replays (:func:`benchmarks.graph.run_case`). Reported per case and arm: the median of
+its runs of frames through per second, latency p50 / p95, the nodes' CPU per frame (summed over their processes) and
+the player's, and the load estimate's median error (% of its range, against the bag's truth): it must not change,
+since the nodes get the same bytes either way. On the auto rows, the median of the pairs' changes.
 """
 
 from __future__ import annotations
 
 import argparse
+import functools
 import os
 from pathlib import Path
 
@@ -70,25 +71,24 @@ def raw_bag(scene: str) -> tuple[Path, dict[str, Path]]:
     return out, scenes
 
 
-def load_error(scene_yaml: Path, truth: Path):
-    """``evaluate`` for :func:`benchmarks.graph.run_case`: the median error of each tracked parameter, % of range."""
+def load_error(scene_yaml: Path, truth: Path, record: Path) -> dict:
+    """``evaluate`` for :func:`benchmarks.graph.run_case` (bound to a scene and its truth with ``partial``): the
+    median error of each tracked parameter, % of its range, and their median."""
     from simreal_nodes.demo import evaluate_run
     from simreal_nodes.scene.schema import load_scene
 
-    def evaluate(record: Path) -> dict:
-        res = evaluate_run(record, truth, load_scene(scene_yaml), record.parent)
-        pct = [r["median_pct_of_range"] for r in res.values() if r.get("median_pct_of_range") is not None]
-        return {"error_pct": float(np.median(pct)) if pct else float("nan"),
-                "errors": {k: r.get("median_pct_of_range", r.get("error")) for k, r in res.items()}}
-
-    return evaluate
+    res = evaluate_run(record, truth, load_scene(scene_yaml), record.parent)
+    pct = [r["median_pct_of_range"] for r in res.values() if r.get("median_pct_of_range") is not None]
+    return {"error_pct": float(np.median(pct)) if pct else float("nan"),
+            "errors": {k: r.get("median_pct_of_range", r.get("error")) for k, r in res.items()}}
 
 
 def graph_run(scene: str, one_process: bool, arm: str) -> dict:
     from benchmarks.graph import PLAYER, run_case
 
     bag, scenes = raw_bag(scene)
-    r = run_case(scene, "640x480", bag, scenes[arm], True, one_process, evaluate=load_error(scenes[arm], bag))
+    r = run_case(scene, "640x480", bag, scenes[arm], True, one_process,
+                 evaluate=functools.partial(load_error, scenes[arm], bag))
     return dict(case=f"{scene} 640x480 raw lossless, {r['launch']}", arm=arm, fps=r["fps"],
                 latency_p50=r["latency_p50"], latency_p95=r["latency_p95"], cpu_ms=r["nodes_cpu_ms"],
                 player_cpu_ms=r.get(f"cpu_{PLAYER.split(' ')[0]}_ms", float("nan")),
@@ -107,9 +107,14 @@ def summarize(runs: list[dict]) -> list[dict]:
                        **{k: float(np.median([r[k] for r in rs]))
                           for k in ("fps", "latency_p50", "latency_p95", "cpu_ms", "player_cpu_ms", "delivered_pct",
                                     "error_pct")})
+            ingest = [r["cpu_by_node"]["ingest"] for r in rs if "ingest" in r["cpu_by_node"]]
+            if ingest:  # its own process's, where each node has one
+                row["ingest_cpu_ms"] = float(np.median(ingest))
             if a == "auto":
                 pairs = list(zip(by["always"], rs, strict=False))
-                row["cpu_change_pct"] = float(np.median([100 * (b["cpu_ms"] / x["cpu_ms"] - 1) for x, b in pairs]))
+                change = [100 * (b["cpu_ms"] / x["cpu_ms"] - 1) for x, b in pairs]
+                row["cpu_change_pct"] = float(np.median(change))
+                row["cpu_change_range"] = f"{min(change):+.0f} to {max(change):+.0f}"
                 row["fps_change_pct"] = float(np.median([100 * (b["fps"] / x["fps"] - 1) for x, b in pairs]))
                 row["p50_change_pct"] = float(np.median([100 * (b["latency_p50"] / x["latency_p50"] - 1)
                                                          for x, b in pairs]))
@@ -122,6 +127,8 @@ COLUMNS = [("case", "case", "{}"), ("arm", "camera.ingest", "{}"), ("runs", "run
            ("fps_change_pct", "fps change, pairs' median (%)", "{:+.0f}"),
            ("cpu_ms", "nodes' CPU per frame (ms)", "{:.1f}"),
            ("cpu_change_pct", "CPU change, pairs' median (%)", "{:+.0f}"),
+           ("cpu_change_range", "pairs' range (%)", "{}"),
+           ("ingest_cpu_ms", "the ingest's own CPU per frame (ms)", "{:.1f}"),
            ("latency_p50", "latency p50 (ms)", "{:.0f}"), ("p50_change_pct", "p50 change (%)", "{:+.0f}"),
            ("latency_p95", "p95 (ms)", "{:.0f}"), ("player_cpu_ms", "player CPU per frame (ms)", "{:.1f}"),
            ("error_pct", "load error, median (% of range)", "{:.2f}")]
@@ -149,12 +156,14 @@ def report(runs: list[dict], probes: list[float]) -> None:
         fig.tight_layout()
         return fig
 
-    notes = ("Each case ran as pairs (always, then auto, back to back); the table gives the median of each case's "
-             "runs and, on the auto rows, the median of the pairs' changes. Lossless replays of the sample bags with "
-             "raw images (`benchmarks/graph.py`'s `run_case`); the nodes' CPU per frame is summed over their "
-             "processes (with `always` it includes the ingest's), the player's is the replay's own process. The "
-             "load error: the median over the tracked parameters of each one's median error against the bag's "
-             "truth, % of its range (the demo's load position; the foam beam's load). 2-core CPU; the host's CPU "
+    notes = ("Each case ran as pairs (always and auto back to back, the order alternating); the table gives the "
+             "median of each case's runs and, on the auto rows, the median of the pairs' changes. Lossless replays "
+             "of the sample bags with raw images (`benchmarks/graph.py`'s `run_case`, each replay in a fresh "
+             "process); the nodes' CPU per frame is summed over their processes (with `always` it includes the "
+             "ingest's), the player's is the replay's own process. The ingest's own CPU: its process's, where each "
+             "node has one. The load error: the median over the tracked parameters of each one's median error "
+             "against the bag's truth, % of its range (the demo's load position; the foam beam's load; its RGB-D "
+             "SLAM maps in a worker process, so its runs differ a little run to run). 2-core CPU; the host's CPU "
              f"probe read {min(probes):.0f}-{max(probes):.0f} ms over the run (the graph table's host read 14 ms), "
              "so the absolute figures are slower than `graph.md`'s; the pairs' changes are what this table is for.")
     save("ingest_hop", rows, COLUMNS, "The ingest hop: nodes reading a raw camera's topics themselves "
@@ -164,16 +173,16 @@ def report(runs: list[dict], probes: list[float]) -> None:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--reps", type=int, default=3, help="pairs per case (default 3)")
+    ap.add_argument("--reps", type=int, default=4, help="pairs per case (default 4; the order alternates)")
     a = ap.parse_args()
     from simreal_nodes.launch import ros_environment
 
     os.environ.update(ros_environment())
     probes = [speed_probe()]
     runs = []
-    for _ in range(a.reps):
+    for rep in range(a.reps):
         for scene, one in CASES:
-            for arm in ARMS:
+            for arm in ARMS if rep % 2 == 0 else ARMS[::-1]:  # ABBA: a drift in the host's speed favours neither
                 runs.append(graph_run(scene, one, arm))
                 print({k: v for k, v in runs[-1].items() if k != "errors"}, flush=True)
         probes.append(speed_probe())
