@@ -76,6 +76,11 @@ def replay(bag: str, scene_file: str, rate: float = 1.0, lossless: bool = False,
     right = image_topic(cam, right=True)
     wanted = [img, cam["camera_info"], cam["depth"], right, cam["right_camera_info"]]
     inputs = {t: topics[t] for t in wanted if t and t in topics}
+    for t, key in ((cam["camera_info"], "camera_info"), (cam["depth"], "depth"), (right, "right_image"),
+                   (cam["right_camera_info"], "right_camera_info")):
+        if t and t not in topics:  # the nodes that need it wait for it: every frame would time out in lossless
+            echo(f"[replay] warning: bag {bag} has no topic {t} (the scene's camera.{key}); the nodes that read it "
+                 "will wait for it")
     hold_for = tuple(t for t in (cam["depth"], right, cam["right_camera_info"]) if t and t in topics)
 
     if standby is None:

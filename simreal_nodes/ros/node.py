@@ -92,6 +92,7 @@ class SimrealNode(Node):
                                         "block): the graph has no ingest node; false: the ingest's outputs",
                                         read_only=True)
         self.metrics = StageMetrics()
+        self.info_error = ""  # why the last CameraInfo was unusable ('' = it was not; see camera_model)
         self._diag_pub = self.create_publisher(DiagnosticArray, graph.DIAGNOSTICS, reliable_qos(10))
         self._progress_pub = self.create_publisher(Header, graph.PROGRESS, reliable_qos(1000))
         self._diag_level = DiagnosticStatus.OK
@@ -201,10 +202,18 @@ class SimrealNode(Node):
         from simreal_nodes.errors import CameraInfoError
 
         try:
-            return CameraModel.from_camera_info(msg)
+            cam = CameraModel.from_camera_info(msg)
         except CameraInfoError as e:
+            self.info_error = str(e)
             self.set_status("error", f"unusable CameraInfo: {e}")
             return None
+        self.info_error = ""
+        return cam
+
+    def no_camera(self, waiting: str = "waiting for a valid CameraInfo") -> str:
+        """Why a frame cannot be taken while the node has no camera: the last CameraInfo's fault if it had one
+        (a node that reads the camera's topics itself says what the ingest would have said), else ``waiting``."""
+        return f"unusable CameraInfo: {self.info_error}" if self.info_error else waiting
 
     def stereo_baseline(self, msg, current: float | None) -> float | None:
         """Stereo baseline (metres) of the right camera's CameraInfo, or ``current`` (status set to error with the

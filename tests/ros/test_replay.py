@@ -75,6 +75,29 @@ def test_malformed_images_and_zero_camera_info_are_dropped_with_reasons(tmp_path
     assert any("CameraInfo" in m for m in msgs)
 
 
+def test_without_an_ingest_the_nodes_drop_malformed_frames_with_reasons(tmp_path):
+    """A raw camera needs no ingest node (issue 18): the overlay reads the camera's topics itself. A malformed
+    image or an unusable CameraInfo is then its drop, with the reason the ingest would have given, and the lossless
+    player accounts for every frame without waiting out a timeout."""
+    f = tmp_path / "overlay.yaml"
+    f.write_text(textwrap.dedent(SCENE.replace("overlay: {enabled: false}", "overlay: {enabled: true}")))
+    write_camera_bag(tmp_path / "bad", n=20, w=160, h=120, bad_step=(3, 7, 8), depth=True)
+    out = tmp_path / "out_bad"
+    stats, _, counts = replay(str(tmp_path / "bad"), str(f), lossless=True, record=str(out), echo=lambda *_: None,
+                              frame_timeout_s=10)
+    assert stats.frames_published == 20
+    assert stats.frames_dropped == 3 and stats.frames_completed == 17 and stats.frames_timed_out == 0
+    assert any("step" in why for why in stats.drop_reasons)
+    assert counts["/simreal/overlay/image_raw"] == 17 and "/simreal/camera/image" not in counts  # no ingest ran
+    assert {s.name for d in recorded(out, "/diagnostics") for s in d.status} == {"simreal/overlay"}
+
+    write_camera_bag(tmp_path / "zero", n=10, w=160, h=120, zero_info=True, depth=True)
+    stats, _, _ = replay(str(tmp_path / "zero"), str(f), lossless=True, record=str(tmp_path / "out_zero"),
+                         echo=lambda *_: None, frame_timeout_s=10)
+    assert stats.frames_dropped == 10 and stats.frames_timed_out == 0
+    assert any("unusable CameraInfo: " in why and "focal lengths must be positive" in why for why in stats.drop_reasons)
+
+
 def test_sigint_during_a_lossless_replay_closes_a_readable_record(tmp_path, scene):
     """Ctrl-C in the middle of `simreal replay --lossless --record`: the player stops at the next frame, the nodes
     stop, and the record holds every output written so far, readable, with no damage."""

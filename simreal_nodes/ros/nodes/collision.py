@@ -102,7 +102,8 @@ class CollisionNode(SimrealNode):
         head = next(iter(frame.values())).header
         t0 = self.metrics.arrived()
         if self.cam is None or (self.stereo and self.baseline is None):
-            self.drop(head.stamp, "waiting for CameraInfo" + (" of both cameras" if self.stereo else ""))
+            self.drop(head.stamp, self.no_camera("waiting for CameraInfo" + (" of both cameras" if self.stereo
+                                                                             else "")))
             return
         T_wc = self.static_pose
         if "obs" in frame:

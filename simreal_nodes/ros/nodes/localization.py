@@ -101,7 +101,7 @@ class LocalizationNode(SimrealNode):
         header = frame["image"].header
         t0 = self.metrics.arrived()
         if why := self.live.not_ready():
-            self.drop(header.stamp, why)
+            self.drop(header.stamp, self.no_camera(why) if self.live.cam is None else why)
             return
         try:
             gray = images.gray8_of(frame["image"])

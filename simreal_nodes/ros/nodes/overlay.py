@@ -137,7 +137,7 @@ class OverlayNode(SimrealNode):
     def process(self, frame: dict) -> None:
         head, t0 = frame["image"].header, self.metrics.arrived()
         if self.core.cam is None:
-            self.drop(head.stamp, "waiting for a valid CameraInfo")
+            self.drop(head.stamp, self.no_camera())
             return
         if self.core.comp is None:
             self.get_logger().info(f"overlay renderer: {self.core.build().renderer.gl_renderer}")

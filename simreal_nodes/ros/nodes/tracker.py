@@ -123,7 +123,7 @@ class TrackerNode(SimrealNode):
         head = first.header
         t0 = self.metrics.arrived()
         if self.core.cam is None:
-            self.drop(head.stamp, "waiting for a valid CameraInfo")
+            self.drop(head.stamp, self.no_camera())
             return
         T_wc, ids, P, uv = None, None, None, None
         if "obs" in frame:
