@@ -26,10 +26,11 @@ def test_a_case_is_reproduced_from_its_number():
         assert made[0].count(repr(t)) <= 2  # a mutation may set a value the template had
 
 
-@pytest.mark.parametrize("graph", ["markers", "rgbd"])
+@pytest.mark.parametrize("graph", ["markers", "rgbd", "stereo"])
 def test_the_graph_survives_hostile_messages(tmp_path, graph):
-    """``markers``: JPEG input, so the ingest decodes it and the nodes read its outputs; ``rgbd``: raw images, no
-    ingest node, the hostile camera messages reach the SLAM, the tracker and the overlay themselves."""
+    """``markers``: JPEG input, so the ingest decodes it and the nodes read its outputs; ``rgbd`` and ``stereo``: raw
+    images, no ingest node, the hostile camera messages (the right image and CameraInfo too) reach the SLAM, the
+    tracker and the overlay themselves."""
     r = fuzz_graph.fuzz_graph(graph, 600, seed=0, work=tmp_path, echo=lambda *_: None)
     assert sum(r["sent"].values()) >= 550
     if graph == "markers":
@@ -37,7 +38,8 @@ def test_the_graph_survives_hostile_messages(tmp_path, graph):
         assert "/camera/image_raw/compressed" in r["sent"] and "/simreal/camera/camera_info" in r["sent"]
     else:
         assert "ingest" not in r["nodes"] and not any(t.startswith("/simreal/camera") for t in r["sent"])
-        assert {"/camera/image_raw", "/camera/depth/image_raw", "/camera/camera_info"} <= set(r["sent"])
+        cams = {"rgbd": {"/camera/depth/image_raw"}, "stereo": {"/camera/right/image_raw", "/camera/right/camera_info"}}
+        assert {"/camera/image_raw", "/camera/camera_info"} | cams[graph] <= set(r["sent"])
     for name, s in r["per_node"].items():
         assert s["alive"] and not s["exit_codes"], (name, r["log_tail"])
         assert not s["unexpected"], (name, s["unexpected"])
