@@ -53,10 +53,10 @@ def run_case(scene, res, bag, scene_yaml, lossless, one_process, executor=None, 
     """One replay; ``executor``: the nodes' and the player's (None: the default); ``evaluate(record) -> dict``:
     more of the row, read from the replay's record (picklable: a top-level function or a partial of one).
 
-    ``isolated``: the replay runs in a fresh process, as ``simreal replay`` does. Replays one after another in one
-    process keep native memory (the middleware's; Python's own stays flat): 0.2, 0.4, 0.8 GB after one, two,
-    three lossless replays of a raw 640 x 480 bag with a record (stop 82), which on a long benchmark ran the host
-    out of memory and slowed every later case."""
+    ``isolated``: the replay runs in a fresh process, as ``simreal replay`` does, so that no case inherits another's
+    process state. (Until stop 82 the replay never shut its EventsExecutor down, which kept the native memory of
+    what it had received: 0.2, 0.4, 0.8 GB after one, two, three lossless replays of a raw 640 x 480 bag with a
+    record; a long benchmark ran the host out of memory and slowed every later case. Fixed in ``replay``.)"""
     if isolated:
         import multiprocessing
         from concurrent.futures import ProcessPoolExecutor

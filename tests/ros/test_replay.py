@@ -98,6 +98,25 @@ def test_without_an_ingest_the_nodes_drop_malformed_frames_with_reasons(tmp_path
     assert any("unusable CameraInfo: " in why and "focal lengths must be positive" in why for why in stats.drop_reasons)
 
 
+def test_replays_one_after_another_in_one_process_keep_no_memory(tmp_path, scene):
+    """Each replay shuts its executor down: rclpy's EventsExecutor kept the native memory of what it had received
+    until then, and four lossless replays of 90 images of 640x480 with a record grew the process from 185 to 818 MB
+    (with the shutdown: 141 to 148 MB; stop 82)."""
+    import gc
+
+    import psutil
+
+    write_camera_bag(tmp_path / "in", n=90, w=640, h=480)
+    rss = []
+    for i in range(3):
+        stats, _, _ = replay(str(tmp_path / "in"), scene, lossless=True, record=str(tmp_path / f"out{i}"),
+                             echo=lambda *_: None, executor="events")
+        assert stats.frames_completed == 90
+        gc.collect()
+        rss.append(psutil.Process().memory_info().rss / 1e6)
+    assert rss[2] - rss[0] < 60, rss  # measured +5 MB; without the shutdown +340 MB
+
+
 def test_sigint_during_a_lossless_replay_closes_a_readable_record(tmp_path, scene):
     """Ctrl-C in the middle of `simreal replay --lossless --record`: the player stops at the next frame, the nodes
     stop, and the record holds every output written so far, readable, with no damage."""
