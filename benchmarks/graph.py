@@ -55,8 +55,8 @@ def run_case(scene, res, bag, scene_yaml, lossless, one_process, executor=None, 
 
     ``isolated``: the replay runs in a fresh process, as ``simreal replay`` does, so that no case inherits another's
     process state. (Until stop 82 the replay never shut its EventsExecutor down, which kept the native memory of
-    what it had received: 0.2, 0.4, 0.8 GB after one, two, three lossless replays of a raw 640 x 480 bag with a
-    record; a long benchmark ran the host out of memory and slowed every later case. Fixed in ``replay``.)"""
+    what it had received, replay after replay: a long benchmark filled the host's memory and slowed every later
+    case. Fixed in ``replay``; ``tests/ros/test_replay.py`` keeps the measure.)"""
     if isolated:
         import multiprocessing
         from concurrent.futures import ProcessPoolExecutor

@@ -123,8 +123,8 @@ def replay(bag: str, scene_file: str, rate: float = 1.0, lossless: bool = False,
             recorder.close()
         if launcher:
             launcher.stop()
-        # the EventsExecutor keeps native memory (what it received) until shut down: replays one after another in
-        # one process grew by 0.2, 0.4, 0.8 GB without this (stop 82; tests/ros/test_replay.py)
+        # the EventsExecutor keeps the native memory of what it received until shut down: replays one after another
+        # in one process grew without this (stop 82; tests/ros/test_replay.py keeps the measure)
         ex.shutdown()
         node.destroy_node()
         rclpy.shutdown()
