@@ -18,7 +18,7 @@ from simreal_nodes.io import bags
 from simreal_nodes.launch import DISCOVERY_RANGE, EXECUTOR_ENV, QOS_FROM_XML, Launcher, executor_kind, ros_environment
 from simreal_nodes.ros.bagplay import Player, Recorder
 from simreal_nodes.ros.node import make_executor
-from simreal_nodes.scene.graph import image_topic, output_topics, required_nodes
+from simreal_nodes.scene.graph import image_topic, ingest_note, output_topics, required_nodes
 from simreal_nodes.scene.schema import build_spec_models, load_scene
 
 
@@ -61,6 +61,7 @@ def replay(bag: str, scene_file: str, rate: float = 1.0, lossless: bool = False,
         build_spec_models(scene)  # before the nodes start: they find the built spec:NAME models in the cache
     cam = scene["camera"]
     nodes = required_nodes(scene, lossless=lossless, source="topic")  # the player is the source
+    echo(f"[replay] nodes: {', '.join(n.name for n in nodes)} ({ingest_note(scene, nodes, 'topic')})")
     for n in nodes:
         n.parameters.update((extra_params or {}).get(n.name, {}))
     report = bags.BagReport()
