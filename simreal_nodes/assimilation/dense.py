@@ -264,14 +264,28 @@ def _at_level(uv: Array, level: int) -> Array:
     return out
 
 
+_REMAP_ROWS = 32000
+
+
 def bilinear(img: NDArray[np.float32], uv: Array) -> NDArray[np.float32]:
     """Bilinear samples of ``img`` at (N, 2) pixel coordinates; outside the image: NaN."""
     if uv.size == 0:
         return np.zeros(0, np.float32)
+    if len(uv) > _REMAP_ROWS:  # OpenCV's maps hold fewer than 2^15 rows: in pieces (each sample is its own lookup)
+        return np.concatenate([bilinear(img, uv[k:k + _REMAP_ROWS]) for k in range(0, len(uv), _REMAP_ROWS)])
     m = np.ascontiguousarray(uv.reshape(-1, 1, 2), np.float32)
     v = cv2.remap(img, m, None, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,  # type: ignore[call-overload]
                   borderValue=np.nan)
     return np.asarray(v, np.float32).reshape(-1)
+
+
+def _cross(a: Array, b: Array) -> Array:
+    """Row-wise cross product of (N, 3) arrays (np.cross's arithmetic, without its generality's overhead)."""
+    out = np.empty(a.shape)
+    out[:, 0] = a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1]
+    out[:, 1] = a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2]
+    out[:, 2] = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+    return out
 
 
 def _unit(v: Array) -> Array:
@@ -302,6 +316,8 @@ class SmoothNormals:
     corner_ref: Array  # (3 F, 3) the corners' normals in the reference view's state (set by :meth:`set_reference`)
     # the last two corners() (a solve asks again for the mu it accepted)
     cache: dict[bytes, Array] = field(default_factory=dict, repr=False)
+    # the barycentric blend as a sparse (M, 3 F) matrix (built on first use by :meth:`blend_rows`)
+    _blend_samples: Any = field(default=None, repr=False)
 
     @classmethod
     def build(cls, model: ReducedModel, face: NDArray[np.int64], weights: Array, towards: Array,
@@ -352,10 +368,23 @@ class SmoothNormals:
             return cache[key]
         X = self.rest if mu is None else self.rest + self.view.field.evaluate(mu)
         t = self.tris
-        out = _unit(np.asarray(self.blend @ np.cross(X[t[:, 1]] - X[t[:, 0]], X[t[:, 2]] - X[t[:, 0]])))
+        out = _unit(np.asarray(self.blend @ _cross(X[t[:, 1]] - X[t[:, 0]], X[t[:, 2]] - X[t[:, 0]])))
         if len(cache) >= 2:
             cache.pop(next(iter(cache)))
         cache[key] = out
+        return out
+
+    def corners_many(self, mus: Array) -> Array:
+        """:meth:`corners` for each row of ``mus`` (K, n_mu): (K, 3 F, 3), the same arithmetic in one pass (not
+        cached)."""
+        X = self.rest + self.view.field.evaluate_many(mus)  # (K, C, 3)
+        t = self.tris
+        K, T = len(X), len(t)
+        a = (X[:, t[:, 1]] - X[:, t[:, 0]]).reshape(K * T, 3)
+        b = (X[:, t[:, 2]] - X[:, t[:, 0]]).reshape(K * T, 3)
+        cr = _cross(a, b).reshape(K, T, 3).transpose(1, 0, 2).reshape(T, 3 * K)
+        n = np.asarray(self.blend @ cr).reshape(-1, K, 3).transpose(1, 0, 2)  # (K, 3 F, 3)
+        out: Array = _unit(n.reshape(-1, 3)).reshape(n.shape)
         return out
 
     def set_reference(self, mu: Array | None) -> None:
@@ -363,12 +392,15 @@ class SmoothNormals:
 
     def blend_rows(self, per_corner: Array, rows: NDArray[np.int64] | None = None) -> Array:
         """A per-corner quantity (3 F, ...) at the samples ``rows`` (None: all), by their barycentric weights."""
-        sl = self.slot if rows is None else self.slot[rows]
-        w = self.weights if rows is None else self.weights[rows]
-        if per_corner.ndim == 2:
-            w = w[:, :, None]
-        out: Array = w[:, 0] * per_corner[3 * sl] + w[:, 1] * per_corner[3 * sl + 1] + w[:, 2] * per_corner[3 * sl + 2]
-        return out
+        if self._blend_samples is None:
+            from scipy.sparse import csr_matrix
+
+            m = len(self.slot)  # each row: the sample's three corners, in order (the sum as w0 a + w1 b + w2 c)
+            cols = 3 * self.slot[:, None] + np.arange(3)
+            self._blend_samples = csr_matrix((self.weights.ravel(), cols.ravel(), np.arange(0, 3 * m + 1, 3)),
+                                             shape=(m, 3 * (int(self.slot.max()) + 1 if m else 0)))
+        out: Array = np.asarray(self._blend_samples @ per_corner)
+        return out if rows is None else out[rows]
 
     def at(self, mu: Array | None, rows: NDArray[np.int64] | None = None) -> Array:
         """The normals (M, 3) of the samples ``rows`` (None: all) of the surface deformed by ``mu``."""
@@ -447,6 +479,37 @@ class StaticLevel:
     values: NDArray[np.float64]
 
 
+@dataclass
+class _Chain:
+    """The projection's derivatives at N points, kept to be chained with the image gradients there: for a point
+    X = c + R(omega) d + t (map frame; ``d0`` = R(omega) d, ``Xc`` its camera-frame position, ``R_cw`` the camera's
+    rotation) and, for the object's samples, d = R_mo (x + u(mu)) + ... with ``du`` = du/dmu (N, 3, n_mu).
+
+    For image gradients g (n, 2) at the points ``sel``, v = g^T d(pixel)/dX (n, 3) is a row vector per point, and
+    d(intensity)/d(omega) = d0 x v (a left increment moves X by omega x d0), d/dt = v, d/dmu = v R(omega) R_mo du:
+    each a product of (n, 3) rows, never the (n, 2, p) pixel Jacobian itself."""
+
+    Xc: Array
+    d0: Array
+    R_cw: Array
+    Rr: Array
+    fx: float
+    fy: float
+    du: Array | None = None
+    R_mo: Array | None = None
+
+    def __call__(self, g: Array, sel: NDArray[np.bool_]) -> Array:
+        """d(intensity)/d(mu, omega, t) (n, n_mu + 6) at the points ``sel`` (a mask) with image gradients g there."""
+        Xc, z = self.Xc[sel], self.Xc[sel, 2]
+        gu, gv = g[:, 0] * self.fx / z, g[:, 1] * self.fy / z
+        v = np.stack([gu, gv, -(gu * Xc[:, 0] + gv * Xc[:, 1]) / z], axis=1) @ self.R_cw
+        cols = [_cross(self.d0[sel], v), v]
+        if self.du is not None:
+            assert self.R_mo is not None
+            cols.insert(0, np.einsum("nc,ncp->np", v @ (self.Rr @ self.R_mo), self.du[sel]))
+        return np.concatenate(cols, axis=1)
+
+
 class DenseAligner:
     """One object's dense measurement: the template and the current rigid / brightness nuisances."""
 
@@ -485,6 +548,7 @@ class DenseAligner:
         self.grid_margin = float("nan")  # the last coarse search's runner-up margin (see :meth:`_grid_start`)
         self.grid_runner_up: Array | None = None  # and that runner-up's parameters
         self.c = G.transform(self.T_mo, np.asarray(model.points, np.float64).mean(axis=0, keepdims=True))[0]
+        self._rot_cache: dict[bytes, Array] = {}
         # images are undistorted once per frame (one remap) so that the hot loop projects with the pinhole alone
         self._maps = None
         if cam.has_distortion:
@@ -671,7 +735,7 @@ class DenseAligner:
             if use_s and n:
                 S = self.static[lvl]
                 srows = self._static_rows(lvl, f, T_cw, rows)
-                uvs, _, _ = self._rigid_project(S.X[srows], f.cam, T_cw, jac=False)
+                uvs, _ = self._rigid_project(S.X[srows], f.cam, T_cw, jac=False)
                 vs = bilinear(pyr[lvl], _at_level(uvs, lvl)).astype(np.float64)
                 self._average_in(S.values, self._static_counts[lvl], srows, vs,
                                  f.photo_s[0] * S.values[srows] + f.photo_s[1], f.photo_s)
@@ -703,34 +767,49 @@ class DenseAligner:
         self.held = self.rest_rigid.copy()
 
     # -- geometry -------------------------------------------------------------------------------------------
-    def _rigid_project(self, X: Array, rigid: Array, T_cw: Array, jac: bool) -> tuple[Array, Array | None, Array]:
-        """Ideal pixels (N, 2) of map-frame points X moved by the rigid correction about the object's centre,
-        d(pixel)/d(omega, t) (N, 2, 6) and d(pixel)/d(moved point) (N, 2, 3)."""
-        Rr = G.exp_so3(rigid[:3])
+    def _rotation(self, omega: Array) -> Array:
+        """exp(omega) for the rigid correction, remembered for the last few omegas (a solve asks for the same one
+        many times)."""
+        key = np.asarray(omega, np.float64).tobytes()
+        R = self._rot_cache.get(key)
+        if R is None:
+            if len(self._rot_cache) >= 4:
+                self._rot_cache.pop(next(iter(self._rot_cache)))
+            R = self._rot_cache[key] = G.exp_so3(omega)
+        return R
+
+    def _to_camera(self, rigid: Array, T_cw: Array) -> tuple[Array, Array]:
+        """(A, a): the camera-frame point A X + a of a map-frame point X moved by the rigid correction about the
+        object's centre, c + R(omega) (X - c) + t, composed into one affine map."""
+        A = T_cw[:3, :3] @ self._rotation(rigid[:3])
+        a = A @ -self.c + T_cw[:3, :3] @ (self.c + rigid[3:]) + T_cw[:3, 3]
+        return A, a
+
+    def _pinhole(self, Xc: Array) -> Array:
+        """Ideal pixels (N, 2) of camera-frame points; behind the camera: NaN."""
+        z = Xc[:, 2]
+        uv = np.empty((len(z), 2))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            uv[:, 0] = self.K[0, 0] * Xc[:, 0] / z + self.K[0, 2]
+            uv[:, 1] = self.K[1, 1] * Xc[:, 1] / z + self.K[1, 2]
+        uv[z <= 0] = np.nan
+        return uv
+
+    def _rigid_project(self, X: Array, rigid: Array, T_cw: Array, jac: bool) -> tuple[Array, _Chain | None]:
+        """Ideal pixels (N, 2) of map-frame points X moved by the rigid correction about the object's centre and,
+        with ``jac``, what chains image gradients at them through the projection (:class:`_Chain`)."""
+        if not jac:
+            A, a = self._to_camera(rigid, T_cw)
+            return self._pinhole(X @ A.T + a), None
+        Rr = self._rotation(rigid[:3])
         d0 = (X - self.c) @ Rr.T
         Xc = (self.c + d0 + rigid[3:]) @ T_cw[:3, :3].T + T_cw[:3, 3]
-        z = Xc[:, 2]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            uv = np.stack([self.K[0, 0] * Xc[:, 0] / z + self.K[0, 2], self.K[1, 1] * Xc[:, 1] / z + self.K[1, 2]],
-                          axis=1)
-        uv[z <= 0] = np.nan
-        if not jac:
-            return uv, None, np.zeros((0, 2, 3))
-        fx, fy = self.K[0, 0], self.K[1, 1]
-        P = np.zeros((len(z), 2, 3))
-        P[:, 0, 0] = fx / z
-        P[:, 0, 2] = -fx * Xc[:, 0] / z**2
-        P[:, 1, 1] = fy / z
-        P[:, 1, 2] = -fy * Xc[:, 1] / z**2
-        PR = P @ T_cw[:3, :3]  # d pixel / d X (map), (N, 2, 3)
-        # d X / d omega for a left increment is -[d0]x, and a^T (-[d0]x) = (d0 x a)^T for each row a of PR
-        J_omega = np.cross(d0[:, None, :], PR)
-        return uv, np.concatenate([J_omega, PR], axis=2), PR @ Rr
+        return self._pinhole(Xc), _Chain(Xc, d0, T_cw[:3, :3], Rr, self.K[0, 0], self.K[1, 1])
 
     def _geometry(self, L: Level, rows: NDArray[np.int64], mu: Array | None, rigid: Array, T_cw: Array,
-                  jac: bool) -> tuple[Array, Array | None]:
-        """Ideal pixels (N, 2) of the level's samples ``rows`` and d(pixel)/d(mu, omega, t)
-        (N, 2, n_mu + 6); ``mu`` None: zero displacement (no mu columns)."""
+                  jac: bool) -> tuple[Array, _Chain | None]:
+        """Ideal pixels (N, 2) of the level's samples ``rows`` and, with ``jac``, what chains image gradients at
+        them to d(intensity)/d(mu, omega, t) (:class:`_Chain`; ``mu`` None: zero displacement, no mu columns)."""
         x = L.x[rows]
         du: Array | None = None
         if mu is not None and jac:
@@ -740,16 +819,17 @@ class DenseAligner:
         elif mu is not None:
             x = x + L.view.field.evaluate(mu)[rows]
         R_mo = self.T_mo[:3, :3]
-        uv, J_rigid, PRr = self._rigid_project(x @ R_mo.T + self.T_mo[:3, 3], rigid, T_cw, jac)
-        if J_rigid is None:
-            return uv, None
-        if du is None:
-            return uv, J_rigid
-        return uv, np.concatenate([PRr @ np.einsum("ij,njk->nik", R_mo, du), J_rigid], axis=2)
+        if not jac:  # object frame -> camera frame as one affine map
+            A, a = self._to_camera(rigid, T_cw)
+            return self._pinhole(x @ (A @ R_mo).T + (A @ self.T_mo[:3, 3] + a)), None
+        uv, chain = self._rigid_project(x @ R_mo.T + self.T_mo[:3, 3], rigid, T_cw, jac=True)
+        assert chain is not None
+        chain.du, chain.R_mo = du, R_mo
+        return uv, chain
 
     def _visible_rows(self, L: Level, mu: Array | None, rigid: Array, T_cw: Array) -> NDArray[np.int64]:
         x = L.x if mu is None else L.x + L.view.field.evaluate(mu)
-        Rr = G.exp_so3(rigid[:3])
+        Rr = self._rotation(rigid[:3])
         X = (x @ self.T_mo[:3, :3].T + self.T_mo[:3, 3] - self.c) @ Rr.T + self.c + rigid[3:]
         return np.flatnonzero(self.visible(T_cw, X, L.normal @ (Rr @ self.T_mo[:3, :3]).T))
 
@@ -758,7 +838,7 @@ class DenseAligner:
         if not self.static or not f.cam_free:
             return np.zeros(0, np.int64)
         S, L = self.static[lvl], self.levels[lvl]
-        uv, _, _ = self._rigid_project(S.X, f.cam, T_cw, jac=False)
+        uv, _ = self._rigid_project(S.X, f.cam, T_cw, jac=False)
         q = _at_level(uv, lvl)
         h, w = int(np.ceil(self.cam.height * 0.5**lvl)), int(np.ceil(self.cam.width * 0.5**lvl))
         ok = np.all(np.isfinite(q), axis=1) & (q[:, 0] >= 1) & (q[:, 1] >= 1) & (q[:, 0] <= w - 2) & (q[:, 1] <= h - 2)
@@ -857,10 +937,22 @@ class DenseAligner:
         r: Array = bilinear(img, _at_level(uv, lvl)).astype(np.float64) - self._predicted(L, rows, f.mu, f.photo)
         return r
 
+    def _residuals_many(self, lvl: int, img: NDArray[np.float32], rows: NDArray[np.int64], f: _Fit, mus: Array,
+                        T_cw: Array) -> Array:
+        """:meth:`_residuals` with f's mu replaced by each row of ``mus`` (K, N), in one pass."""
+        L = self.levels[lvl]
+        ref = L.values[rows]
+        pred = np.broadcast_to(f.photo[0] * ref + f.photo[1], (len(mus), len(rows)))
+        dn = self._normals_change_many(L, mus)
+        if dn is not None:
+            pred = pred + ref * np.stack([L.normals.blend_rows(d @ f.photo[2:], rows) for d in dn])
+        out: Array = self._sampled_many(lvl, img, rows, f, mus, T_cw) - pred
+        return out
+
     def _static_residuals(self, lvl: int, img: NDArray[np.float32], rows: NDArray[np.int64], f: _Fit,
                           T_cw: Array) -> Array:
         S = self.static[lvl]
-        uv, _, _ = self._rigid_project(S.X[rows], f.cam, T_cw, jac=False)
+        uv, _ = self._rigid_project(S.X[rows], f.cam, T_cw, jac=False)
         r: Array = (bilinear(img, _at_level(uv, lvl)).astype(np.float64)
                     - (f.photo_s[0] * S.values[rows] + f.photo_s[1]))
         return r
@@ -916,8 +1008,12 @@ class DenseAligner:
             rs = self._static_residuals(lvl, img, srows, f, T_cw) / sig[1]
             oks = np.isfinite(rs)
             c += self._rho(rs[oks], TUKEY) * counts[1] / max(int(oks.sum()), 1)
+        return float(c) + self._prior_cost(f)
+
+    def _prior_cost(self, f: _Fit) -> float:
+        """The rigid parts' and g's priors in the units of :meth:`_cost`."""
         pw, px = self._priors(f)
-        return float(c) + 0.5 * float(np.sum(pw * px * px)) + self._g_prior_cost(f.photo[2:])
+        return 0.5 * float(np.sum(pw * px * px)) + self._g_prior_cost(f.photo[2:])
 
     def _solve_level(self, lvl: int, pyr: list[NDArray[np.float32]], grads: list[Grad],
                      f: _Fit, T_cw: Array, lo: Array, hi: Array) -> tuple[Array, Array, float, NDArray[np.int64]]:
@@ -939,8 +1035,8 @@ class DenseAligner:
         r = np.zeros(0)
         sigma = 1.0
         for _ in range(self.s.iterations):
-            uv, Jg = self._geometry(L, rows, f.mu, f.total, T_cw, jac=True)
-            assert Jg is not None
+            uv, chain = self._geometry(L, rows, f.mu, f.total, T_cw, jac=True)
+            assert chain is not None
             q = _at_level(uv, lvl)
             img, (gx, gy) = pyr[lvl], grads[lvl]
             # the shading's normals at this iteration's mu (their own change with mu is left out of the Jacobian:
@@ -953,7 +1049,7 @@ class DenseAligner:
             rr = r[ok]
             sigma = self._scale(rr)
             g = np.stack([bilinear(gx, q[ok]), bilinear(gy, q[ok])], axis=1).astype(np.float64) * 0.5**lvl
-            Jgeo = np.einsum("nc,ncp->np", g, Jg[ok])  # (N, n_mu + 6)
+            Jgeo = chain(g, ok)  # (N, n_mu + 6)
             Jr = Jgeo[:, n_mu:]
             cols = [Jgeo[:, free_mu]]
             if self.s.rigid and f.rho_free:
@@ -966,8 +1062,8 @@ class DenseAligner:
             sigma_s, n_s = 1.0, 0
             if use_s:
                 S = self.static[lvl]
-                uvs, Js, _ = self._rigid_project(S.X[srows], f.cam, T_cw, jac=True)
-                assert Js is not None
+                uvs, chain_s = self._rigid_project(S.X[srows], f.cam, T_cw, jac=True)
+                assert chain_s is not None
                 qs = _at_level(uvs, lvl)
                 rs = bilinear(img, qs).astype(np.float64) - (f.photo_s[0] * S.values[srows] + f.photo_s[1])
                 oks = np.isfinite(rs)
@@ -975,7 +1071,7 @@ class DenseAligner:
                 if n_s >= 10:
                     sigma_s = self._scale(rs[oks])
                     gs = np.stack([bilinear(gx, qs[oks]), bilinear(gy, qs[oks])], axis=1).astype(np.float64) * 0.5**lvl
-                    Jsg = np.einsum("nc,ncp->np", gs, Js[oks])
+                    Jsg = chain_s(gs, oks)
                     n_rho = 6 if f.rho_free else 0
                     Jstat = np.zeros((n_s, J.shape[1] + 2))
                     Jstat[:, n_f + n_rho:n_f + n_rho + 6] = Jsg
@@ -1000,7 +1096,9 @@ class DenseAligner:
             counts = (int(ok.sum()), n_s)
             sig = (sigma, sigma_s)
             s_fit = srows if n_s >= 10 else srows[:0]  # the surroundings' rows that entered this iteration
-            c0 = self._cost(lvl, img, rows, s_fit, f, T_cw, sig, counts)
+            # the cost at the start of the iteration from its own residuals (:meth:`_cost` at f)
+            c0 = self._rho(res[:counts[0]], TUKEY) + (self._rho(res[counts[0]:], TUKEY) if len(s_fit) else 0.0) \
+                + self._prior_cost(f)
             improved = False
             for _try in range(4):
                 A = H + lam * np.diag(np.maximum(np.diag(H), 1e-9))
@@ -1041,8 +1139,8 @@ class DenseAligner:
             img, (gx, gy) = pyr[lvl], grads[lvl]
             lam = 1e-3
             for _ in range(self.s.iterations):
-                uv, Js, _ = self._rigid_project(S.X[srows], cam, T_cw, jac=True)
-                assert Js is not None
+                uv, chain = self._rigid_project(S.X[srows], cam, T_cw, jac=True)
+                assert chain is not None
                 q = _at_level(uv, lvl)
                 r = bilinear(img, q).astype(np.float64) - (photo_s[0] * S.values[srows] + photo_s[1])
                 ok = np.isfinite(r)
@@ -1050,7 +1148,7 @@ class DenseAligner:
                     break
                 sig = self._scale(r[ok])
                 g = np.stack([bilinear(gx, q[ok]), bilinear(gy, q[ok])], axis=1).astype(np.float64) * 0.5**lvl
-                J = np.concatenate([np.einsum("nc,ncp->np", g, Js[ok]),
+                J = np.concatenate([chain(g, ok),
                                     np.stack([-S.values[srows][ok], -np.ones(ok.sum())], axis=1)], axis=1) / sig
                 res = r[ok] / sig
                 w = self._weights(res, TUKEY)
@@ -1086,7 +1184,7 @@ class DenseAligner:
     def _camera_cost(self, lvl: int, img: NDArray[np.float32], S: StaticLevel, srows: NDArray[np.int64], cam: Array,
                      photo_s: Array, T_cw: Array, sig: float, count: int) -> float:
         """The surroundings' robust cost (mean loss scaled to ``count``, as :meth:`_cost`) plus epsilon's prior."""
-        uv, _, _ = self._rigid_project(S.X[srows], cam, T_cw, jac=False)
+        uv, _ = self._rigid_project(S.X[srows], cam, T_cw, jac=False)
         r = bilinear(img, _at_level(uv, lvl)).astype(np.float64) - (photo_s[0] * S.values[srows] + photo_s[1])
         ok = np.isfinite(r)
         wide = self._wide()
@@ -1134,7 +1232,52 @@ class DenseAligner:
         n = int(ok.sum())
         if n < 10:
             return float("inf"), f.photo.copy(), n
-        v, B = v[ok], self._brightness_basis(L, rows[ok], mu)
+        cost, p = self._best_brightness(v[ok], self._brightness_basis(L, rows[ok], mu), f, sigma, cold)
+        return cost, p, n
+
+    def _profile_many(self, lvl: int, img: NDArray[np.float32], rows: NDArray[np.int64], f: _Fit, mus: Array,
+                      T_cw: Array, sigma: float) -> list[float]:
+        """:meth:`_profile_cost` at each row of ``mus`` (K, n_mu): the samples of every candidate placed and read
+        in one pass, the brightness fitted to each."""
+        L = self.levels[lvl]
+        v = self._sampled_many(lvl, img, rows, f, mus, T_cw)
+        dn = self._normals_change_many(L, mus)
+        out = []
+        for k in range(len(mus)):
+            ok = np.isfinite(v[k])
+            if ok.sum() < 10:
+                out.append(float("inf"))
+                continue
+            ref = L.values[rows[ok]]
+            cols = [ref, np.ones(len(ref))]
+            if dn is not None:
+                cols.append(ref[:, None] * L.normals.blend_rows(dn[k], rows[ok]))
+            out.append(self._best_brightness(v[k][ok], np.column_stack(cols), f, sigma, False)[0])
+        return out
+
+    def _sampled_many(self, lvl: int, img: NDArray[np.float32], rows: NDArray[np.int64], f: _Fit, mus: Array,
+                      T_cw: Array) -> Array:
+        """The image at the level's samples ``rows`` deformed by each row of ``mus`` (K, N; NaN outside): as
+        :meth:`_geometry` without the Jacobian, every candidate in one product and one lookup."""
+        L = self.levels[lvl]
+        x = L.x[rows][None] + L.view.field.evaluate_many(mus)[:, rows]  # (K, N, 3)
+        A, a = self._to_camera(f.total, T_cw)
+        R_mo = self.T_mo[:3, :3]
+        uv = self._pinhole(x.reshape(-1, 3) @ (A @ R_mo).T + (A @ self.T_mo[:3, 3] + a))
+        out: Array = bilinear(img, _at_level(uv, lvl)).astype(np.float64).reshape(len(mus), len(rows))
+        return out
+
+    def _normals_change_many(self, L: Level, mus: Array) -> Array | None:
+        """n(mu) - n_ref at the samples' triangles' corners for each row of ``mus`` (K, 3 F, 3); None without the
+        shading."""
+        if self.n_photo <= 2:
+            return None
+        out: Array = L.normals.corners_many(mus) - L.normals.corner_ref
+        return out
+
+    def _best_brightness(self, v: Array, B: Array, f: _Fit, sigma: float, cold: bool) -> tuple[float, Array]:
+        """The profile's inner fit (:meth:`_profile`): the brightness at its best for the intensities ``v`` of the
+        samples in view and their basis ``B``, and the mean robust cost there."""
         prior = np.zeros((self.n_photo, self.n_photo))
         pull = np.zeros(self.n_photo)
         g_mean = np.zeros(self.n_photo - 2)
@@ -1148,19 +1291,19 @@ class DenseAligner:
             try:
                 p = np.asarray(np.linalg.solve(B.T @ B + prior, B.T @ v + pull), np.float64)
             except np.linalg.LinAlgError:
-                return float("inf"), f.photo.copy(), n
+                return float("inf"), f.photo.copy()
             scales = [max(sigma, self._scale(v - B @ p)), sigma, sigma]
         for sc in scales:
             w = self._weights((v - B @ p) / sc, TUKEY)
             if float(w.sum()) <= 0:
-                return float("inf"), f.photo.copy(), n
+                return float("inf"), f.photo.copy()
             A = B.T @ (B * w[:, None]) + prior
             try:
                 p = np.asarray(np.linalg.solve(A, B.T @ (w * v) + pull), np.float64)
             except np.linalg.LinAlgError:
                 p = np.r_[1.0, float(w @ v) / float(w.sum()), g_mean]
         cost = self._rho((v - B @ p) / sigma, TUKEY) + self._g_prior_cost(p[2:])
-        return cost / len(v), p, n
+        return cost / len(v), p
 
     def _refine(self, lvl: int, img: NDArray[np.float32], rows: NDArray[np.int64], f: _Fit, T_cw: Array,
                 lo: Array, hi: Array, sigma: float) -> Array:
@@ -1180,14 +1323,14 @@ class DenseAligner:
                 width = self.s.refine_span * (hi[i] - lo[i])
                 for _round in range(3):  # a grid of 7 about the best so far, narrowed by 3 each round
                     grid = np.clip(mu[i] + np.linspace(-width, width, 7), lo[i], hi[i])
-                    for g in grid:
-                        if g == mu[i]:
-                            continue
-                        trial = mu.copy()
-                        trial[i] = g
-                        c = self._profile_cost(lvl, img, rows, f, trial, T_cw, sigma)
+                    trials = np.repeat(mu[None], len(grid), axis=0)
+                    trials[:, i] = grid
+                    trials = trials[grid != mu[i]]
+                    # the candidates differ in mu[i] alone: taking the first cheaper one in order is the same
+                    # whether they are costed one by one or together
+                    for trial, c in zip(trials, self._profile_many(lvl, img, rows, f, trials, T_cw, sigma)):
                         if c < best:
-                            best, mu = c, trial
+                            best, mu = c, trial.copy()
                     width /= 3.0
         return mu
 
@@ -1216,14 +1359,17 @@ class DenseAligner:
             best_c, best_p = self._rho(r0[ok0], TUKEY * sigma) / ok0.sum(), f.photo
         best = None
         seen: list[tuple[Array, float]] = []  # the valid candidates and their costs
-        for cnd in cands:
+        mus = np.repeat(f.mu[None], len(cands), axis=0)
+        mus[:, free] = cands
+        resid = None if fitted else self._residuals_many(lvl, pyr[lvl], rows, f, mus, T_cw)
+        for k, cnd in enumerate(cands):
             t = f.copy()
             assert t.mu is not None
             t.mu[free] = cnd
-            if fitted:  # one sampling per candidate: the profile counts the samples in view
+            if resid is None:  # one sampling per candidate: the profile counts the samples in view
                 c, p, n = self._profile(lvl, pyr[lvl], rows, t, t.mu, T_cw, sigma, cold=True)
             else:
-                r = self._residuals(lvl, pyr[lvl], rows, t, T_cw)
+                r = resid[k]
                 ok = np.isfinite(r)
                 n = int(ok.sum())
                 c, p = (self._rho(r[ok], TUKEY * sigma) / n if n else float("inf")), f.photo

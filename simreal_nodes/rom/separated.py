@@ -294,6 +294,13 @@ class FieldView:
         c = self.field.coefficients(mu, m)
         return (c @ self.S[:m]).reshape(self.n_sel, self.n_comp)
 
+    def evaluate_many(self, mus: ArrayLike) -> NDArray[np.float64]:
+        """u at the view's points for each row of ``mus`` (K, n_params): (K, n_sel, n_comp), one product for all
+        (a search over candidate parameters)."""
+        mus = np.atleast_2d(np.asarray(mus, np.float64))
+        C = np.array([self.field.coefficients(mu, self.n_modes) for mu in mus]).reshape(len(mus), self.n_modes)
+        return (C @ self.S).reshape(len(mus), self.n_sel, self.n_comp)
+
     def evaluate_with_jacobian(self, mu: ArrayLike, checked: bool = False
                                ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """u (n_sel, n_comp) and du/dmu (n_sel, n_comp, n_params) in one product."""

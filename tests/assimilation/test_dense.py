@@ -461,6 +461,21 @@ def test_smooth_normals_follow_a_bending_surface():
     assert np.max(np.linalg.norm(sn.at(None) - [0, 0, 1], axis=1)) < 1e-12
 
 
+def test_smooth_normals_of_many_states_at_once_are_each_states_own():
+    """corners_many (the search's candidates in one pass) against corners, one state at a time."""
+    from simreal_nodes.assimilation.dense import SmoothNormals
+
+    model = bend_model(n=11)
+    smp = sample_surface(model, 0.01, 100000)
+    sn = SmoothNormals.build(model, smp.face, smp.weights, smp.x + [0, 0, 1.0], None)
+    mus = np.array([[0.0], [0.3], [1.0]])
+    many = sn.corners_many(mus)
+    assert many.shape == (3, *sn.corners(mus[0]).shape)
+    for k, mu in enumerate(mus):
+        np.testing.assert_allclose(many[k], sn.corners(mu), rtol=1e-12, atol=1e-14)
+    assert np.abs(many[2] - many[0]).max() > 1e-3  # the bent state's normals did turn
+
+
 def test_smooth_normals_do_not_smooth_across_an_edge_and_face_the_camera():
     """A cube whose triangles are wound either way (each face's two apart): samples on its top and on a side keep
     their own face's normal (the neighbouring faces meet at 90 degrees, beyond the crease angle), turned towards the
@@ -814,3 +829,90 @@ def test_a_load_too_small_to_be_a_deformation_closes_the_templates_averaging(mod
         assert tr.dense.template_views == 3
     else:
         assert all(joined) and not tr.dense.template_closed and tr.dense.template_views == 6
+
+
+def test_the_chained_jacobian_matches_finite_differences_of_the_projection(model):
+    """The solve's rows d(intensity)/d(mu, omega, t) = g^T d(pixel)/d(.) (built from (n, 3) products, never the
+    pixel Jacobian itself) against central differences of the pixels the cost evaluates (the one-affine-map path),
+    for the object's samples (with a rigid offset and a load) and the surroundings' points."""
+    al = _aligner(model)
+    tex = texture(1.0)
+    assert al.set_reference(render(tex, pose(), 0.0), G.inv(pose()))
+    T_cw = G.inv(pose(0.02))
+    L = al.levels[0]
+    rows = np.arange(len(L.x))
+    mu = np.array([0.4])
+    rigid = np.r_[0.0, 0.0, 0.0, 0.002, -0.001, 0.003]
+    uv, chain = al._geometry(L, rows, mu, rigid, T_cw, jac=True)
+    uv_plain, _ = al._geometry(L, rows, mu, rigid, T_cw, jac=False)
+    np.testing.assert_allclose(uv, uv_plain, atol=1e-9)  # the two paths put the samples at the same pixels
+    g = np.random.default_rng(0).normal(size=(len(rows), 2))
+    sel = np.ones(len(rows), bool)
+    sel[::7] = False
+    J = chain(g[sel], sel)
+    assert J.shape == (sel.sum(), 7)
+    h = 1e-6
+
+    def numeric(k: int) -> np.ndarray:
+        m, r = mu.copy(), rigid.copy()
+        (m if k == 0 else r)[max(k - 1, 0)] += h
+        up, _ = al._geometry(L, rows, m, r, T_cw, jac=False)
+        (m if k == 0 else r)[max(k - 1, 0)] -= 2 * h
+        dn, _ = al._geometry(L, rows, m, r, T_cw, jac=False)
+        return np.sum(g * (up - dn) / (2 * h), axis=1)[sel]
+
+    for k in range(7):  # omega at zero: its finite difference is the left increment's derivative
+        np.testing.assert_allclose(J[:, k], numeric(k), rtol=1e-5, atol=1e-6 * np.abs(J[:, k]).max())
+    X = np.random.default_rng(1).uniform([0.0, 0.0, -0.01], [0.2, 0.2, 0.0], (50, 3))  # surroundings, map frame
+    uv_s, chain_s = al._rigid_project(X, rigid, T_cw, jac=True)
+    np.testing.assert_allclose(uv_s, al._rigid_project(X, rigid, T_cw, jac=False)[0], atol=1e-9)
+    gs = g[:50]
+    Js = chain_s(gs, np.ones(50, bool))
+    for k in range(6):
+        r1, r2 = rigid.copy(), rigid.copy()
+        r1[k] += h
+        r2[k] -= h
+        d = (al._rigid_project(X, r1, T_cw, jac=False)[0] - al._rigid_project(X, r2, T_cw, jac=False)[0]) / (2 * h)
+        np.testing.assert_allclose(Js[:, k], np.sum(gs * d, axis=1), rtol=1e-5, atol=1e-6 * np.abs(Js[:, k]).max())
+
+
+def test_bilinear_reads_more_samples_than_an_opencv_map_holds():
+    """cv2.remap refuses maps of 2^15 rows or more; a batch of candidates' samples is longer than that."""
+    from simreal_nodes.assimilation.dense import bilinear
+
+    img = texture(1.0)[:200, :300].copy()
+    uv = np.random.default_rng(0).uniform([-2, -2], [302, 202], (70000, 2))
+    v = bilinear(img, uv)
+    assert v.shape == (70000,)
+    np.testing.assert_array_equal(v[40000:40100], bilinear(img, uv[40000:40100]))
+    inside = (uv[:, 0] >= 0) & (uv[:, 1] >= 0) & (uv[:, 0] <= 298) & (uv[:, 1] <= 198)
+    assert np.all(np.isfinite(v[inside])) and np.all(np.isnan(v[(uv[:, 0] < -1.5) | (uv[:, 1] > 200.5)]))
+
+
+def test_candidates_costed_together_cost_what_each_costs_alone():
+    """The search's batched costs (the refinement's profile, the coarse search's residuals) against the one-by-one
+    evaluations they replace, on a bending plate whose normals turn (the shading's columns differ per candidate)."""
+    from simreal_nodes.assimilation.dense import _Fit
+
+    al = DenseAligner(bend_model(), np.eye(4), CAM, None, DenseSettings())
+    tex = texture(0.5)
+    assert al.set_reference(render_lit(tex, pose(), 0.0, 0.0, 1), G.inv(pose()))
+    T = pose(0.02)
+    img = np.asarray(render_lit(tex, T, 0.6, 1.0, 3), np.float32)
+    T_cw = G.inv(T)
+    f = _Fit(np.array([0.5]), np.array([True]), np.zeros(6), np.zeros(6), np.r_[1.02, -1.5, 0.3, -0.2, 0.1],
+             np.array([1.0, 0.0]), (np.zeros(6), np.ones(6)), False, False)
+    assert al.n_photo == 5
+    rows = al._visible_rows(al.levels[0], f.mu, f.total, T_cw)
+    mus = np.array([[0.0], [0.35], [0.6], [0.61], [1.0]])
+    many = al._profile_many(0, img, rows, f, mus, T_cw, 2.0)
+    alone = [al._profile_cost(0, img, rows, f, mu, T_cw, 2.0) for mu in mus]
+    np.testing.assert_allclose(many, alone, rtol=1e-10)
+    assert int(np.argmin(many)) in (2, 3)  # the load is at 0.6
+    lvl = len(al.levels) - 1
+    rows_c = al._visible_rows(al.levels[lvl], f.mu, f.total, T_cw)
+    r_many = al._residuals_many(lvl, img, rows_c, f, mus, T_cw)
+    for k, mu in enumerate(mus):
+        t = f.copy()
+        t.mu = mu.copy()
+        np.testing.assert_allclose(r_many[k], al._residuals(lvl, img, rows_c, t, T_cw), rtol=1e-10, atol=1e-9)

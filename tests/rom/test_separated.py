@@ -34,6 +34,17 @@ def test_sensitivities_match_finite_differences_off_grid(field):
     np.testing.assert_allclose(J[:, :, 0], field.sensitivity(mu, 0, nodes, 4))
 
 
+def test_a_view_evaluates_many_parameter_sets_in_one_product(field):
+    """evaluate_many (a search's candidates at once) gives each row's evaluate, in its order."""
+    view = field.view(np.array([3, 17, 29, 5]), n_modes=5)
+    mus = np.array([[0.01, 52e9], [0.2137, 61.3e9], [0.49, 89e9]])
+    many = view.evaluate_many(mus)
+    assert many.shape == (3, 4, 3)
+    for k, mu in enumerate(mus):
+        np.testing.assert_allclose(many[k], view.evaluate(mu), rtol=1e-13, atol=1e-15)
+    np.testing.assert_allclose(view.evaluate_many(mus[1]), view.evaluate(mus[1])[None], rtol=1e-13, atol=1e-15)
+
+
 def test_grid_values_are_reproduced_exactly(field):
     i, j = 7, 3
     mu = [field.axes[0].values[i], field.axes[1].values[j]]
