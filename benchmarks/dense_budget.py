@@ -134,7 +134,7 @@ def summary(doc: dict, first: dict | None) -> dict:
         b = np.array([f["est"] for f in doc["frames"]], float)
         span = np.asarray(doc["spans"], float)
         n = len(span)
-        out["est_diff_pct"] = float(np.max(np.abs(a[:, :n] - b[:, :n]) / span))
+        out["est_diff_pct"] = float(100 * np.max(np.abs(a[:, :n] - b[:, :n]) / span))
         out["states_differ"] = int(sum(x["state"] != y["state"] for x, y in zip(first["frames"], doc["frames"])))
     return out
 
