@@ -265,6 +265,7 @@ def _at_level(uv: Array, level: int) -> Array:
 
 
 _REMAP_ROWS = 32000
+_CANDIDATES = 64  # candidates costed in one pass at most
 
 
 def bilinear(img: NDArray[np.float32], uv: Array) -> NDArray[np.float32]:
@@ -317,7 +318,7 @@ class SmoothNormals:
     # the last two corners() (a solve asks again for the mu it accepted)
     cache: dict[bytes, Array] = field(default_factory=dict, repr=False)
     # the barycentric blend as a sparse (M, 3 F) matrix (built on first use by :meth:`blend_rows`)
-    _blend_samples: Any = field(default=None, repr=False)
+    _blend_samples: Any = field(default=None, init=False, repr=False, compare=False)
 
     @classmethod
     def build(cls, model: ReducedModel, face: NDArray[np.int64], weights: Array, towards: Array,
@@ -383,7 +384,7 @@ class SmoothNormals:
         a = (X[:, t[:, 1]] - X[:, t[:, 0]]).reshape(K * T, 3)
         b = (X[:, t[:, 2]] - X[:, t[:, 0]]).reshape(K * T, 3)
         cr = _cross(a, b).reshape(K, T, 3).transpose(1, 0, 2).reshape(T, 3 * K)
-        n = np.asarray(self.blend @ cr).reshape(-1, K, 3).transpose(1, 0, 2)  # (K, 3 F, 3)
+        n = np.asarray(self.blend @ cr).reshape(self.blend.shape[0], K, 3).transpose(1, 0, 2)  # (K, 3 F, 3)
         out: Array = _unit(n.reshape(-1, 3)).reshape(n.shape)
         return out
 
@@ -776,6 +777,7 @@ class DenseAligner:
             if len(self._rot_cache) >= 4:
                 self._rot_cache.pop(next(iter(self._rot_cache)))
             R = self._rot_cache[key] = G.exp_so3(omega)
+            R.flags.writeable = False  # shared by every caller of this omega
         return R
 
     def _to_camera(self, rigid: Array, T_cw: Array) -> tuple[Array, Array]:
@@ -939,7 +941,7 @@ class DenseAligner:
 
     def _residuals_many(self, lvl: int, img: NDArray[np.float32], rows: NDArray[np.int64], f: _Fit, mus: Array,
                         T_cw: Array) -> Array:
-        """:meth:`_residuals` with f's mu replaced by each row of ``mus`` (K, N), in one pass."""
+        """:meth:`_residuals` with f's mu replaced by each row of ``mus`` (K, n_mu): (K, N), in one pass."""
         L = self.levels[lvl]
         ref = L.values[rows]
         pred = np.broadcast_to(f.photo[0] * ref + f.photo[1], (len(mus), len(rows)))
@@ -1326,9 +1328,10 @@ class DenseAligner:
                     trials = np.repeat(mu[None], len(grid), axis=0)
                     trials[:, i] = grid
                     trials = trials[grid != mu[i]]
-                    # the candidates differ in mu[i] alone: taking the first cheaper one in order is the same
-                    # whether they are costed one by one or together
-                    for trial, c in zip(trials, self._profile_many(lvl, img, rows, f, trials, T_cw, sigma)):
+                    # a candidate's cost depends on f, not on the best so far: costed together, then kept as the
+                    # running minimum in order, they pick what the one-by-one loop picked
+                    costs = self._profile_many(lvl, img, rows, f, trials, T_cw, sigma) if len(trials) else []
+                    for trial, c in zip(trials, costs):
                         if c < best:
                             best, mu = c, trial.copy()
                     width /= 3.0
@@ -1361,7 +1364,9 @@ class DenseAligner:
         seen: list[tuple[Array, float]] = []  # the valid candidates and their costs
         mus = np.repeat(f.mu[None], len(cands), axis=0)
         mus[:, free] = cands
-        resid = None if fitted else self._residuals_many(lvl, pyr[lvl], rows, f, mus, T_cw)
+        resid = None if fitted else np.concatenate([  # in chunks: a fine grid must not hold every candidate's samples
+            self._residuals_many(lvl, pyr[lvl], rows, f, mus[k:k + _CANDIDATES], T_cw)
+            for k in range(0, len(mus), _CANDIDATES)])
         for k, cnd in enumerate(cands):
             t = f.copy()
             assert t.mu is not None

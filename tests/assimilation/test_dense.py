@@ -916,3 +916,15 @@ def test_candidates_costed_together_cost_what_each_costs_alone():
         t = f.copy()
         t.mu = mu.copy()
         np.testing.assert_allclose(r_many[k], al._residuals(lvl, img, rows_c, t, T_cw), rtol=1e-10, atol=1e-9)
+    assert al._profile_many(0, img, rows, f, np.zeros((0, 1)), T_cw, 2.0) == []  # no candidates: no costs
+    assert al.levels[0].normals.corners_many(np.zeros((0, 1))).shape[0] == 0
+
+
+def test_a_refinement_without_width_keeps_the_gauss_newton_solution(model):
+    """refine_span 0: every grid point is the solution itself, no candidate is left to cost."""
+    tex = texture(1.0)
+    al = _aligner(model, refine_span=0.0)
+    assert al.set_reference(render(tex, pose(), 0.0, 1.0, seed=1), G.inv(pose()))
+    T = pose(0.03)
+    r = al.solve(render(tex, T, 0.6, 1.0, seed=2), G.inv(T), np.array([0.5]), np.zeros(1), np.ones(1))
+    assert abs(r.mu[0] - 0.6) < 0.05
