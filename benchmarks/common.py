@@ -140,3 +140,16 @@ def most_common(items: list) -> object:
     import collections
 
     return collections.Counter(items).most_common(1)[0][0]
+
+
+def pair_ratios(first: list[dict], second: list[dict], key: str) -> list[float]:
+    """Each pair's ``second[i][key] / first[i][key]``: runs made as pairs (the two arms back to back, the order
+    alternating) so that a host whose speed drifts moves both runs of a pair alike (``benchmarks.executor``,
+    ``benchmarks.ingest_hop``, ``benchmarks.dense_budget``). Pairs are matched by position; a run without its
+    partner is left out."""
+    return [float(b[key]) / float(a[key]) for a, b in zip(first, second, strict=False)]
+
+
+def pair_changes(first: list[dict], second: list[dict], key: str) -> list[float]:
+    """Each pair's change of ``key`` in % of the first arm's run (see :func:`pair_ratios`)."""
+    return [100.0 * (x - 1.0) for x in pair_ratios(first, second, key)]

@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.common import save
+from benchmarks.common import pair_ratios, save
 
 ROOT = Path(__file__).resolve().parents[1]
 CACHE = ROOT / "cache" / "bench" / "dense_budget"
@@ -178,10 +178,11 @@ def main() -> None:
              "from the scene's first run (this checkout's). Median over the runs of the tracker's p50: "
              + "; ".join(f"{c} {np.median(v):.0f} ms" for c, v in by_code.items()) + ".")
     if len(arms) == 2:
-        pairs = {}
+        pairs: dict[tuple, dict[str, dict]] = {}
         for r in rows:
-            pairs.setdefault((r["seed"], r["rep"]), {})[r["code"]] = r["tracker_ms_p50"]
-        ratio = [p[arms[0][0]] / p[arms[1][0]] for p in pairs.values() if len(p) == 2]
+            pairs.setdefault((r["seed"], r["rep"]), {})[r["code"]] = r
+        whole = [p for p in pairs.values() if len(p) == 2]
+        ratio = pair_ratios([p[arms[1][0]] for p in whole], [p[arms[0][0]] for p in whole], "tracker_ms_p50")
         notes += (f" Pairs' ratio this checkout / the other: median {np.median(ratio):.2f} (from {min(ratio):.2f} "
                   f"to {max(ratio):.2f}, {len(ratio)} pairs).")
 

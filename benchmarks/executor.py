@@ -30,7 +30,7 @@ import time
 
 import numpy as np
 
-from benchmarks.common import save, speed_probe
+from benchmarks.common import pair_changes, save, speed_probe
 
 N_MESSAGES = 600
 RATE_HZ = 60.0
@@ -136,10 +136,9 @@ def summarize(runs: list[dict]) -> list[dict]:
                 if k in rs[0]:
                     row[k] = float(np.median([r[k] for r in rs]))
             if e == "events":
-                pairs = list(zip(by["single"], rs, strict=False))
-                row["cpu_change_pct"] = float(np.median([100 * (b["cpu_ms"] / a["cpu_ms"] - 1) for a, b in pairs]))
+                row["cpu_change_pct"] = float(np.median(pair_changes(by["single"], rs, "cpu_ms")))
                 if "fps" in rs[0]:
-                    row["fps_change_pct"] = float(np.median([100 * (b["fps"] / a["fps"] - 1) for a, b in pairs]))
+                    row["fps_change_pct"] = float(np.median(pair_changes(by["single"], rs, "fps")))
             rows.append(row)
     return rows
 

@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from benchmarks.common import save, speed_probe
+from benchmarks.common import pair_changes, save, speed_probe
 
 CASES = (("aluminium_beam", True), ("aluminium_beam", False), ("foam_beam", True))  # (scene, one process)
 ARMS = ("always", "auto")
@@ -111,13 +111,11 @@ def summarize(runs: list[dict]) -> list[dict]:
             if ingest:  # its own process's, where each node has one
                 row["ingest_cpu_ms"] = float(np.median(ingest))
             if a == "auto":
-                pairs = list(zip(by["always"], rs, strict=False))
-                change = [100 * (b["cpu_ms"] / x["cpu_ms"] - 1) for x, b in pairs]
+                change = pair_changes(by["always"], rs, "cpu_ms")
                 row["cpu_change_pct"] = float(np.median(change))
                 row["cpu_change_range"] = f"{min(change):+.0f} to {max(change):+.0f}"
-                row["fps_change_pct"] = float(np.median([100 * (b["fps"] / x["fps"] - 1) for x, b in pairs]))
-                row["p50_change_pct"] = float(np.median([100 * (b["latency_p50"] / x["latency_p50"] - 1)
-                                                         for x, b in pairs]))
+                row["fps_change_pct"] = float(np.median(pair_changes(by["always"], rs, "fps")))
+                row["p50_change_pct"] = float(np.median(pair_changes(by["always"], rs, "latency_p50")))
             rows.append(row)
     return rows
 

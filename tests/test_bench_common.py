@@ -1,8 +1,9 @@
-"""The benchmark harness's record of the machine: the vector instruction set a result was computed with."""
+"""The benchmark harness: its record of the machine (the vector instruction set a result was computed with) and
+the pairs that the A/B benchmarks summarize."""
 
 import pytest
 
-from benchmarks.common import simd_level
+from benchmarks.common import pair_changes, pair_ratios, simd_level
 
 
 @pytest.mark.parametrize(("flags", "level"), [
@@ -19,3 +20,10 @@ def test_the_widest_instruction_set_is_named(flags, level):
 def test_a_flag_that_only_starts_like_avx512_does_not_count():
     # avx512_bf16 and friends come with avx512f on every real CPU; alone they must not read as AVX-512
     assert simd_level(["avx2", "avx512_bf16"]) == "AVX2"
+
+
+def test_pairs_are_matched_by_position_and_read_second_over_first():
+    first = [{"ms": 10.0}, {"ms": 20.0}, {"ms": 40.0}]
+    second = [{"ms": 5.0}, {"ms": 30.0}]  # the third run has no partner: left out
+    assert pair_ratios(first, second, "ms") == [0.5, 1.5]
+    assert pair_changes(first, second, "ms") == pytest.approx([-50.0, 50.0])
