@@ -27,6 +27,7 @@ object is reported at rest.
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 from typing import cast
 
@@ -102,10 +103,25 @@ class _Surface:
         self.rest_tree = cKDTree(self.x)  # the rest samples' search tree (:func:`_weak_direction`, every frame)
 
     def place(self, mu: Array | None, rigid: Array) -> tuple[Array, Array]:
-        """Samples y (N, 3) and their normals (N, 3) at the state mu (None: at rest) and the rigid correction."""
+        """Samples y (N, 3) at the state mu (None: at rest) and the rigid correction, and the correction's rotation
+        R_z(psi) (3, 3), which turns a sample's rest normal (:meth:`normals`)."""
         x = self.x if mu is None else self.x + self.view.field.evaluate(mu)
         Rz = G.rot_axis("z", rigid[3])
-        return (x - self.c) @ Rz.T + self.c + rigid[:3], self.n @ Rz.T
+        return (x - self.c) @ Rz.T + self.c + rigid[:3], Rz
+
+    def normals(self, k: NDArray[np.int64], Rz: Array) -> Array:
+        """The normals of samples ``k`` turned by ``Rz``: only the samples that some point matched, rather than all
+        of them at every placement (a row's product does not depend on the others')."""
+        out: Array = self.n[k] @ Rz.T
+        return out
+
+
+def _lengths(d: Array) -> Array:
+    """The lengths of vectors along the last axis (3), summed in the order ``np.sum`` takes (the same values), without
+    its temporary of squares."""
+    sq = d * d
+    out: Array = np.sqrt(sq[..., 0] + sq[..., 1] + sq[..., 2])
+    return out
 
 
 def _rho(r: Array, c: float) -> Array:
@@ -146,7 +162,8 @@ class _Problem:
         R = self.cfg.radius
         if self._tree is not None:
             y0, tree, K, d1, dk = self._tree
-            delta = float(np.sqrt(np.max(np.einsum("ij,ij->i", y - y0, y - y0))))
+            moved = y - y0
+            delta = float(np.sqrt(np.max(np.einsum("ij,ij->i", moved, moved))))
             if delta < 0.5 * self.cfg.spacing:
                 if K is None or d1 is None or dk is None:  # the tree is reused: each point's candidates there
                     bound = R + 2 * self.cfg.spacing
@@ -159,7 +176,7 @@ class _Problem:
                 # a point with no sample within the radius plus delta there has none within the radius now
                 cand = np.flatnonzero(d1 - delta - 1e-9 < R)  # (1 nm for rounding)
                 Kc = K[cand]
-                D = np.sqrt(np.sum((self.q[cand, None, :] - y[Kc]) ** 2, axis=2))
+                D = _lengths(self.q[cand, None, :] - y[Kc])
                 j = np.argmin(D, axis=1)
                 dc, kc = D[np.arange(len(cand)), j], Kc[np.arange(len(cand)), j]
                 beyond = dk[cand] - delta - 1e-9  # every other sample is at least this far now
@@ -167,12 +184,16 @@ class _Problem:
                 if np.any(open_):
                     io = np.flatnonzero(open_)
                     balls = tree.query_ball_point(self.q[cand[io]], np.minimum(dc[io], R) + delta + 1e-9)
-                    for i, near in zip(io, balls, strict=True):
-                        if len(near):
-                            near = np.asarray(near, np.int64)
-                            d = np.sqrt(np.sum((self.q[cand[i]] - y[near]) ** 2, axis=1))
-                            m = int(np.argmin(d))
-                            dc[i], kc[i] = d[m], near[m]
+                    # every ball's samples in one pass: each point's nearest is the first of its ball's least
+                    # distance, in the ball's order (a stable sort by point, then distance)
+                    sizes = np.fromiter(map(len, balls), np.int64, len(balls))
+                    if sizes.sum():
+                        near = np.fromiter(itertools.chain.from_iterable(balls), np.int64, int(sizes.sum()))
+                        owner = np.repeat(io, sizes)
+                        d = _lengths(self.q[cand[owner]] - y[near])
+                        order = np.lexsort((d, owner))
+                        first = order[np.r_[0, np.cumsum(sizes[sizes > 0])[:-1]]]
+                        dc[owner[first]], kc[owner[first]] = d[first], near[first]
                 dist[cand], k[cand] = dc, kc
                 out = dist >= R
                 dist[out], k[out] = np.inf, len(y)
@@ -182,15 +203,15 @@ class _Problem:
         return cast(tuple[Array, NDArray[np.int64]], tree.query(self.q, distance_upper_bound=R))
 
     def _associate(self, mu: Array | None, rigid: Array) -> tuple[Array, Array, NDArray[np.int64], NDArray[np.bool_]]:
-        """Samples placed at (mu, rigid), their normals, each measured point's nearest sample and whether it lies
-        within the radius."""
+        """Samples placed at (mu, rigid), the rigid correction's rotation, each measured point's nearest sample and
+        whether it lies within the radius."""
         key = (b"" if mu is None else np.asarray(mu, np.float64).tobytes()) + b"|" + rigid.tobytes()
         hit = self._assoc.get(key)
         if hit is not None:
             return hit
-        y, n = self.s.place(mu, rigid)
+        y, Rz = self.s.place(mu, rigid)
         dist, k = self._nearest(y)
-        out = (y, n, k, np.isfinite(dist))
+        out = (y, Rz, k, np.isfinite(dist))
         if len(self._assoc) >= self._KEEP:
             self._assoc.pop(next(iter(self._assoc)))
         self._assoc[key] = out
@@ -200,17 +221,17 @@ class _Problem:
                   ) -> tuple[Array, NDArray[np.bool_], Array | None]:
         """Point-to-plane residuals (one per measured point; NaN beyond the radius) and their Jacobian over
         (mu, delta, psi)."""
-        y, n, k, ok = self._associate(mu, rigid)
+        y, Rz, k, ok = self._associate(mu, rigid)
         kk = k[ok]
         d = self.q[ok] - y[kk]
+        nk = self.s.normals(kk, Rz)
         r = np.full(len(self.q), np.nan)
-        r[ok] = np.sum(n[kk] * d, axis=1)
+        r[ok] = np.sum(nk * d, axis=1)
         if not jac:
             return r, ok, None
-        nk = n[kk]
         cols = []
         if mu is not None:
-            dy = np.einsum("ij,njk->nik", G.rot_axis("z", rigid[3]), self.s.view.with_jacobian(mu)[1][kk])
+            dy = np.einsum("ij,njk->nik", Rz, self.s.view.with_jacobian(mu)[1][kk])
             cols.append(-np.einsum("nd,ndp->np", nk, dy))
         cols.append(-nk)  # delta
         # psi turns the sample about c + delta (d y / d psi = e_z x (y - c - delta)) and its normal
@@ -329,9 +350,9 @@ def crop(cloud: Array, model: ReducedModel, T_map_obj: Array, cfg: DepthStateCon
     more keeps a support's face beside the object out (a clamp block's top face drew a cantilever 14 mm along its
     axis on development seed 11)."""
     q = G.transform(G.inv(np.asarray(T_map_obj, np.float64)), np.asarray(cloud, np.float64).reshape(-1, 3))
-    q = q[np.all(np.isfinite(q), axis=1)]
     V = np.asarray(model.points, np.float64)
     b_lo, b_hi = box if box is not None else (V.min(axis=0), V.max(axis=0))
+    # a NaN coordinate fails both comparisons and an infinite one fails one: no separate test of finiteness
     q = q[np.all((q > b_lo - cfg.margin) & (q < b_hi + cfg.margin), axis=1)]
     out: Array = q[q[:, 2] > V[:, 2].min() + cfg.band]
     return out
@@ -461,6 +482,14 @@ class DepthFollower:
         # so that it does not depend on how many points the camera sees (DepthFit.turn_held)
         self.turn_ratio_max = 0.5
         self.judge_turn = True  # False: turn_held is not computed (its rest-shape search costs a KD-tree a frame)
+
+    def corners(self, T_map_obj: Array) -> Array:
+        """The corners (map frame, (8, 3)) of the box that :meth:`fit` crops the cloud to with the object at
+        ``T_map_obj``: what :func:`.registration.depth_cloud` needs to back-project only the pixels that may hold
+        it (``within``)."""
+        b_lo, b_hi = self.box[0] - self.cfg.margin, self.box[1] + self.cfg.margin
+        c = np.array([[(b_lo, b_hi)[i >> a & 1][a] for a in range(3)] for i in range(8)])
+        return G.transform(np.asarray(T_map_obj, np.float64), c)
 
     def fit(self, cloud: Array, T_map_obj: Array, lo: Array, hi: Array, mu_image: Array) -> DepthFit:
         """The state in this depth ``cloud`` (map frame) with the object at ``T_map_obj``, mu in [lo, hi], starting

@@ -424,6 +424,9 @@ def _views(cams: np.ndarray | DepthViews | _Centres) -> DepthViews | _Centres:
 _GRIDS: dict[bytes, np.ndarray] = {}
 
 
+_WITHIN_SLACK = (1e-3, 0.5)  # depth_cloud's ``within``: its tests widened by 1 mm and half a pixel
+
+
 def _pixel_grid(cam: CameraModel, shape: tuple[int, ...], stride: int) -> np.ndarray:
     """The ideal (undistorted) pixels of every ``stride``-th pixel of an image of ``shape``, row-major (N, 2): the
     same for every frame of a camera, so undone once (the lens model's iterative inverse took 8 ms a frame at
@@ -442,12 +445,29 @@ def _pixel_grid(cam: CameraModel, shape: tuple[int, ...], stride: int) -> np.nda
 
 
 def depth_cloud(cam: CameraModel, depth: np.ndarray, T_wc: np.ndarray, stride: int = 2,
-                max_range: float = 4.0) -> np.ndarray:
+                max_range: float = 4.0, within: np.ndarray | None = None) -> np.ndarray:
     """A depth image (z along the optical axis, metres; NaN or 0: no return) back-projected with the camera model
-    (lens distortion undone) into the map frame by ``T_wc``: (N, 3)."""
+    (lens distortion undone) into the map frame by ``T_wc``: (N, 3).
+
+    ``within``: the corners (map frame, (M, 3)) of a box that a later crop keeps (:func:`.depth_state.crop`); the
+    pixels that cannot hold a point of it are not back-projected. A point of the box (the corners' convex hull) has
+    its depth, the camera's z, between the corners' least and greatest z, since z is linear; with every corner in
+    front of the camera, its ideal pixel lies within the corners' ideal pixels' bounds too, since u and v are
+    linear-fractional with a positive denominator. Both tests are widened by ``_WITHIN_SLACK`` so that rounding
+    drops no point the crop would keep: the crop's result is unchanged, the rest of the image costs nothing (the
+    joint boot's depth fit, ``benchmarks/depth_budget.py``)."""
     z = np.asarray(depth, dtype=np.float64)[0::stride, 0::stride].ravel()
     ok = np.isfinite(z) & (z > 0) & (z < max_range)
-    P = cam.backproject(_pixel_grid(cam, depth.shape[:2], stride)[ok], z[ok])
+    grid = _pixel_grid(cam, depth.shape[:2], stride)
+    if within is not None:
+        C = G.transform(G.inv(np.asarray(T_wc, np.float64)), np.asarray(within, np.float64).reshape(-1, 3))
+        m, px = _WITHIN_SLACK
+        ok &= (z > C[:, 2].min() - m) & (z < C[:, 2].max() + m)
+        if np.all(C[:, 2] > m):
+            uv = C[:, :2] / C[:, 2:] @ cam.K[:2, :2].T + cam.K[:2, 2]  # ideal pixels (the pinhole; skew kept)
+            lo, hi = uv.min(axis=0) - px, uv.max(axis=0) + px
+            ok &= (grid[:, 0] > lo[0]) & (grid[:, 0] < hi[0]) & (grid[:, 1] > lo[1]) & (grid[:, 1] < hi[1])
+    P = cam.backproject(grid[ok], z[ok])
     out: np.ndarray = P @ T_wc[:3, :3].T + T_wc[:3, 3]
     return out
 

@@ -551,7 +551,7 @@ class DeformableTracker:
             return
         n_mu = len(self.model.axes)
         T = self.T_map_obj @ G.make_T(self.layout.state(res.x).rotation())
-        cloud = depth_cloud(self.cam, depth, T_wc, stride=self.cfg.depth_stride)
+        cloud = depth_cloud(self.cam, depth, T_wc, stride=self.cfg.depth_stride, within=self.depth.corners(T))
         fit = self.depth.fit(cloud, T, lo[:n_mu], hi[:n_mu], res.x[:n_mu])
         est.debug["depth"] = fit.reason
         if (self.cfg.depth_turn and self.rigid_z and self.depth.turns_about_axis and fit.mu is not None
