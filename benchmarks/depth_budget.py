@@ -17,10 +17,10 @@ residuals with their Jacobians less that search (``_Problem.residuals``); the li
 (``link_points``, outside the search below); the search of alpha_z over its range (``_constant_search``, on the few
 frames until the turn is first seen, so its median is usually 0 and its mean is given; it links the points anew for
 each value it tries). The tracker column is the tracker's whole time per frame (the pipeline's ``tracker_ms``); its
-first frame, which places the object (``anchor: registration``) and reads its state from the depth
-(``tracking.reference: depth``) before any tracking, is given apart. Also per run: the lever angle's median error
-against the truth (% of its 52 degree range) and the largest difference of the estimates from the scene's first run,
-in % of the range (a change meant to be pure speed must leave them where they were).
+slowest frame is given apart (on these scenes the registration's: the object placed, ``anchor: registration``, and its
+state read from the depth, ``tracking.reference: depth``, before any tracking). Also per run: the lever angle's median
+error against the truth (% of its 52 degree range) and the largest difference of the estimates from the scene's first
+run, in % of the range (a change meant to be pure speed must leave them where they were).
 """
 
 from __future__ import annotations
@@ -154,7 +154,7 @@ def summary(doc: dict, first: dict | None) -> dict:
     err = [100 * abs(np.rad2deg(f["est"][0] - f["theta"])) / THETA_RANGE_DEG for f in loaded]
     out = {"frames_tracked": len(fr), "tracker_ms_p50": med(lambda f: f["tracker_ms"]),
            "tracker_ms_mean": float(np.mean(tr)) if tr else float("nan"),
-           "first_ms": float(tr[0]) if tr else float("nan"),
+           "slowest_ms": float(np.max(tr)) if tr else float("nan"),
            "depth_fit_ms_p50": med(lambda f: f["depth_fit"]), "nearest_ms_p50": med(lambda f: f["nearest"]),
            "residuals_ms_p50": med(lambda f: f["residuals"] - f["nearest"]),
            "links_ms_p50": med(lambda f: f["links"]),
@@ -197,7 +197,7 @@ def main() -> None:
                 rows.append(row)
     columns = [("seed", "seed", "{}"), ("code", "code", "{}"), ("rep", "run", "{}"),
                ("tracker_ms_p50", "tracker (ms, p50)", "{:.0f}"), ("tracker_ms_mean", "mean", "{:.0f}"),
-               ("first_ms", "first frame", "{:.0f}"),
+               ("slowest_ms", "slowest frame", "{:.0f}"),
                ("depth_fit_ms_p50", "depth fit", "{:.1f}"), ("nearest_ms_p50", "of it: nearest samples", "{:.1f}"),
                ("residuals_ms_p50", "residuals, Jacobians", "{:.1f}"), ("links_ms_p50", "links", "{:.1f}"),
                ("constant_search_ms_mean", "alpha_z search (mean)", "{:.1f}"),
