@@ -23,7 +23,7 @@ from simreal_nodes import geometry as G
 from simreal_nodes.assimilation import lm
 from simreal_nodes.assimilation.dense import DenseAligner, DenseResult, DenseSettings
 from simreal_nodes.assimilation.depth_state import DepthFollower, DepthStateConfig, fit_state
-from simreal_nodes.assimilation.registration import LinkIndex, depth_cloud, link, ray_weights, surface_nodes
+from simreal_nodes.assimilation.registration import LinkIndex, Links, depth_cloud, link, ray_weights, surface_nodes
 from simreal_nodes.camera import CameraModel
 from simreal_nodes.rom.model import ReducedModel
 from simreal_nodes.rom.state import ALPHA_Z, ModelState, StateLayout
@@ -244,33 +244,54 @@ class DeformableTracker:
         new = [i for i, pid in enumerate(ids) if int(pid) not in self.links and int(pid) not in self.static]
         if not new:
             return
-        P = P_map[new]
-        T_om = G.inv(self.T_map_obj)
-        Rz = self.model_state.rotation()
-        X = G.transform(T_om, P) @ Rz  # R_z(-a) applied: row vectors
         if isinstance(mu, str):
             mu = self.model_state.mu.copy() if (self._was_deforming and self.cfg.snap_to_surface) else None
+        P = P_map[new]
+        R = None if rays is None else np.asarray(rays, np.float64)[new]
+        ((L, X_rest),) = self._links_of(P, mu, R, [self.model_state.rotation()])
+        self._keep_links(self.links, self.static, [int(ids[i]) for i in new], P, L, X_rest, mu, R)
+
+    def _links_of(self, P: np.ndarray, mu: np.ndarray | None, rays: np.ndarray | None,
+                  turns: list[np.ndarray]) -> list[tuple[Links, np.ndarray]]:
+        """The links of map points ``P`` (map frame, (N, 3)) that were mapped in the deformation ``mu`` (None: the
+        rest shape), seen along ``rays`` ((N, 2, 3) or None), with the object turned by each rotation of ``turns``
+        (alpha, undone: object frame X = T_om P R_z): per turn the links and the rest positions kept with them (map
+        frame). Every turn's points go through one :func:`link` (a point's link does not depend on the others'):
+        the search of alpha_z relinks the same points at every value it tries (:meth:`_relinked_at`). The rest
+        positions: see :meth:`link_points`."""
+        T_om = G.inv(self.T_map_obj)
+        Po = G.transform(T_om, P)
+        X = np.concatenate([Po @ Rz for Rz in turns])  # R_z(-a) applied: row vectors
         V, index = self._linked_in(mu)
         L = link(X, V, self.cand_nodes, self.cfg.link_dist, triangles=self.model.surface, index=index)
-        R = None if rays is None else np.asarray(rays, np.float64)[new]
-        if self.cfg.snap_to_surface and self.cfg.anchor == "ray" and R is not None:
+        if self.cfg.snap_to_surface and self.cfg.anchor == "ray" and rays is not None:
             # the material point a track follows is the one under its pixel: where that pixel's viewing ray
             # crosses the link's triangle (a depth error along the ray then moves nothing)
-            O = G.transform(T_om, R[:, 0]) @ Rz
-            D = R[:, 1] @ T_om[:3, :3].T @ Rz
+            O0, D0 = G.transform(T_om, rays[:, 0]), rays[:, 1] @ T_om[:3, :3].T
+            O, D = np.concatenate([O0 @ Rz for Rz in turns]), np.concatenate([D0 @ Rz for Rz in turns])
             L.weights = ray_weights(O, D, V[L.nodes], L.weights)
-        if self.cfg.snap_to_surface:
-            foot = np.einsum("nk,nkd->nd", L.weights, self.model.points[L.nodes])  # rest configuration
-            X_rest = G.transform(self.T_map_obj, foot @ Rz.T)
-        else:
-            X_rest = P
-        for k, i in enumerate(new):
-            pid = int(ids[i])
-            if L.on_object[k]:
-                self.links[pid] = Link(L.nodes[k], L.weights[k], X_rest[k].copy(), P_map[i].copy(), mu,
-                                       None if R is None else R[k].copy())
+        out = []
+        for j, Rz in enumerate(turns):
+            part = slice(j * len(P), (j + 1) * len(P))
+            Lj = Links(L.nodes[part], L.weights[part], L.dist[part], L.on_object[part])
+            if self.cfg.snap_to_surface:
+                foot = np.einsum("nk,nkd->nd", Lj.weights, self.model.points[Lj.nodes])  # rest configuration
+                out.append((Lj, G.transform(self.T_map_obj, foot @ Rz.T)))
             else:
-                self.static.add(pid)
+                out.append((Lj, P))
+        return out
+
+    @staticmethod
+    def _keep_links(links: dict[int, Link], static: set[int], pids: list[int], P: np.ndarray, L: Links,
+                    X_rest: np.ndarray, mu: np.ndarray | None, rays: np.ndarray | None) -> None:
+        """Points ``pids`` (map positions ``P``) into ``links`` with their links ``L`` and rest positions ``X_rest``,
+        or, off the object, into ``static``."""
+        for k, pid in enumerate(pids):
+            if L.on_object[k]:
+                links[pid] = Link(L.nodes[k], L.weights[k], X_rest[k].copy(), P[k].copy(), mu,
+                                  None if rays is None else rays[k].copy())
+            else:
+                static.add(pid)
 
     def _linked_in(self, mu: np.ndarray | None) -> tuple[np.ndarray, LinkIndex]:
         """The nodes' positions a point is linked against (object frame, alpha undone) and their search index:
@@ -296,15 +317,42 @@ class DeformableTracker:
         deformation it was mapped in)."""
         if not self.links:
             return
+        groups = self._link_groups()
+        old = dict(self.links)
+        self.links.clear()
+        for pids in groups:
+            rays = np.array([np.full((2, 3), np.nan) if old[i].ray is None else old[i].ray for i in pids])
+            self.link_points(np.array(pids), np.array([old[i].P_map for i in pids]), old[pids[0]].mu, rays)
+
+    def _link_groups(self) -> list[list[int]]:
+        """The linked points grouped by the deformation they were mapped in (as :meth:`relink` links them)."""
         groups: dict[tuple[Any, ...] | None, list[int]] = {}
         for pid, lk in self.links.items():
             key = None if lk.mu is None else tuple(np.round(lk.mu, 12))
             groups.setdefault(key, []).append(pid)
+        return list(groups.values())
+
+    def _relinked_at(self, c: int, values: list[float]) -> list[tuple[dict[int, Link], set[int]]]:
+        """What :meth:`relink` would leave (the links and the static points) with the constant ``c`` (alpha_z) at
+        each of ``values``, each time from the present links: the same links, each group's points linked for every
+        value in one call (:meth:`_links_of`) instead of one call per group and value."""
+        turns = []
+        for g in values:
+            v = self.values.copy()
+            v[c] = g
+            turns.append(self.layout.state(v).rotation())
         old = dict(self.links)
-        self.links.clear()
-        for pids in groups.values():
-            rays = np.array([np.full((2, 3), np.nan) if old[i].ray is None else old[i].ray for i in pids])
-            self.link_points(np.array(pids), np.array([old[i].P_map for i in pids]), old[pids[0]].mu, rays)
+        out: list[tuple[dict[int, Link], set[int]]] = [({}, set(self.static)) for _ in values]
+        for pids in self._link_groups():
+            new = [p for p in pids if p not in self.static]  # link_points' test (the links are cleared first)
+            if not new:
+                continue
+            mu = old[pids[0]].mu
+            P = np.array([old[i].P_map for i in new])
+            rays = np.array([np.full((2, 3), np.nan) if old[i].ray is None else old[i].ray for i in new])
+            for (links, static), (L, X_rest) in zip(out, self._links_of(P, mu, rays, turns), strict=True):
+                self._keep_links(links, static, new, P, L, X_rest, mu, rays)
+        return out
 
     @property
     def deformable_ids(self) -> list[int]:
@@ -776,11 +824,14 @@ class DeformableTracker:
         lo_s, hi_s = lo.copy(), hi.copy()
         lo_s[tracked], hi_s[tracked] = self.lo[tracked], self.hi[tracked]
 
+        values = [float(g) for g in np.linspace(self.lo[c], self.hi[c], self.cfg.constant_search, endpoint=False)]
+        relinked = dict(zip(values, self._relinked_at(c, values), strict=True))
+
         def fit_at(g: float, free: bool) -> tuple[lm.Result, Measurements] | None:
             self.values = saved_values.copy()
             self.values[c] = g
-            self.links, self.static = dict(saved_links), set(saved_static)  # a point off the surface at this turn
-            self.relink()  # is marked static by the relink: for this sample only
+            links, static = relinked[g]  # relinked at this turn; a point off the surface at it is static for this
+            self.links, self.static = dict(links), set(static)  # sample only
             m = self._map_point_measurements(ids, P_map, uv)
             if m is None or len(m[0]) < max(self.cfg.min_measurements, 0.8 * n0):
                 return None
@@ -796,8 +847,8 @@ class DeformableTracker:
                             refits=self.cfg.outlier_refits), m
 
         best_g, best_score = None, res.cost / max(n0, 1)
-        for g in np.linspace(self.lo[c], self.hi[c], self.cfg.constant_search, endpoint=False):
-            out = fit_at(float(g), False)
+        for g in values:
+            out = fit_at(g, False)
             if out is not None and np.isfinite(out[0].cost) and out[0].cost / len(out[1][0]) < best_score:
                 best_g, best_score = float(g), out[0].cost / len(out[1][0])
         found = fit_at(best_g, True) if best_g is not None else None
