@@ -34,8 +34,9 @@ def test_a_stage_counts_its_calls_only_where_its_rule_says():
 
 
 def _frame(tracker, fit, nearest, residuals, links, search, est, theta=0.5, state=1):
-    return {"tracker_ms": tracker, "depth_fit": fit, "nearest": nearest, "residuals": residuals, "links": links,
-            "constant_search": search, "est": est, "theta": theta, "state": state}
+    return {"tracker_ms": tracker, "cpu_ms": 0.9 * (tracker or 0.0), "depth_fit": fit, "nearest": nearest,
+            "residuals": residuals, "links": links, "constant_search": search, "est": est, "theta": theta,
+            "state": state}
 
 
 def test_the_stages_split_the_frame_and_the_estimates_are_compared_in_percent_of_range():
@@ -52,6 +53,7 @@ def test_the_stages_split_the_frame_and_the_estimates_are_compared_in_percent_of
     assert s["frames_tracked"] == 3  # a frame without a camera pose is left out
     assert s["slowest_ms"] == 400.0
     assert s["tracker_ms_p50"] == pytest.approx(40.0)
+    assert s["cpu_ms_p50"] == pytest.approx(36.0)
     assert s["residuals_ms_p50"] == pytest.approx(np.median([10 - 8, 12 - 10, 10 - 9]))  # less the nearest search
     assert s["other_ms_p50"] == pytest.approx(np.median([400 - 20 - 4 - 350, 40 - 25 - 4, 30 - 20 - 3]))
     assert s["constant_search_ms_mean"] == pytest.approx(350 / 3)

@@ -367,6 +367,39 @@ def test_constant_search_finds_how_the_boot_is_turned(search):
         assert err_theta > 10.0
 
 
+def test_the_search_relinks_every_value_as_relink_does():
+    """The search of alpha_z links each group of points for all its values in one call (``_relinked_at``): for
+    every value, the same links (order, nodes, weights, rest and map positions, rays, the deformation they were
+    mapped in) and the same static points as setting alpha_z there and calling ``relink``. Two groups (points mapped
+    at rest and in the bent boot, whose lever points leave the surface at some turns) and a static point."""
+    b = _BootScene(150.0, constant_search=24)
+    for _ in range(3):
+        b.show(bent=False)
+    tr = b.tr
+    theta = np.array([b.theta])
+    for pid in list(tr.links)[::3]:  # mapped in the bent boot, where the bent boot has them
+        tr.links[pid] = tr.links[pid]._replace(P_map=b.bent[pid].copy(), mu=theta.copy())
+    tr.static.add(10_000)
+    values = [float(g) for g in np.linspace(tr.lo[1], tr.hi[1], 24, endpoint=False)]
+    saved = dict(tr.links), set(tr.static), tr.values.copy()
+    batched = tr._relinked_at(1, values)
+    assert (dict(tr.links), set(tr.static)) == saved[:2] and np.array_equal(tr.values, saved[2])  # left as it was
+    static_sizes = set()
+    for g, (links, static) in zip(values, batched, strict=True):
+        tr.links, tr.static, tr.values = dict(saved[0]), set(saved[1]), saved[2].copy()
+        tr.values[1] = g
+        tr.relink()
+        assert list(links) == list(tr.links) and static == tr.static
+        for pid, lk in links.items():
+            ref = tr.links[pid]
+            for a, r in zip(lk, ref, strict=True):
+                assert (a is None) == (r is None)
+                if a is not None:
+                    np.testing.assert_array_equal(a, r)
+        static_sizes.add(len(static))
+    assert len(static_sizes) > 1  # some turns leave points off the surface: the static path is exercised
+
+
 @pytest.mark.parametrize("until", ["seen", "frozen"])
 def test_constant_search_until_frozen_leaves_a_wrong_basin(until):
     """Development seed 2 of the boot family: the depth image's reference state put alpha_z 63 degrees off, that
