@@ -1506,6 +1506,9 @@ own error, its best fit to the truth's surface reads 2.2 % off at the scene's le
 is 0.6 % from that best fit. The next two (1026 1.8 %, 1027 1.8 %) are of the same kind: the model's best fit 2.0 and
 1.7 % off, the tracker 0.4 % from it. The tracker takes **58 ms** a frame at the median of the scenes (p90 115 ms), the
 step 93 ms: six times the issue's 10 ms for map points, which the boot meets only with `depth_fit` off (9 ms).
+Stop 84 made the same fits cheaper, with identical estimates (`benchmarks/results/depth_budget.md`,
+`docs/tracking.md`): 0.90 of the tracker's time at the pairs' median on development seeds 0, 8 and 22; this table
+was not rerun.
 
 The depth fit's trade (`tracking.depth_stride`, new in stop 73: one depth pixel in so many along each axis is matched
 to the model; 2 by default). Development seeds 0-39 with 3 (`family_boot_dev_0_39_depth_stride_3`, about 520 points on
