@@ -153,3 +153,55 @@ def pair_ratios(first: list[dict], second: list[dict], key: str) -> list[float]:
 def pair_changes(first: list[dict], second: list[dict], key: str) -> list[float]:
     """Each pair's change of ``key`` in % of the first arm's run (see :func:`pair_ratios`)."""
     return [100.0 * (x - 1.0) for x in pair_ratios(first, second, key)]
+
+
+def commit(checkout: Path) -> str:
+    """The checkout's commit, and '+' where its tracked files differ from it ('?': not a git checkout)."""
+    import subprocess
+
+    try:
+        rev = subprocess.run(["git", "-C", str(checkout), "describe", "--always", "--dirty=+", "--abbrev=7"],
+                             capture_output=True, text=True, check=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return "?"
+    return rev
+
+
+def run_worker(script: Path, seed: int, checkout: Path) -> dict:
+    """``script --worker SEED OUT`` in a fresh process whose ``simreal_nodes`` and ``benchmarks`` come from
+    ``checkout`` (one BLAS thread): the JSON it wrote to OUT. The script itself is this checkout's, so the other
+    checkout need not have it; its module-level imports must exist there (import newer helpers in ``main``)."""
+    import subprocess
+    import sys
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "run.json"
+        env = {**os.environ, "PYTHONPATH": str(checkout), "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1",
+               "MKL_NUM_THREADS": "1"}
+        subprocess.run([sys.executable, str(Path(script).resolve()), "--worker", str(seed), str(out)],
+                       cwd=checkout, env=env, check=True)
+        result: dict = json.loads(out.read_text())
+        return result
+
+
+def checkout_pairs(script: Path, root: Path, against: Path | None, seeds: list[int], reps: int,
+                   summary) -> list[dict]:
+    """Every seed run ``reps`` times per checkout (this one, ``root``, and ``against`` where given) with
+    :func:`run_worker`, the two checkouts back to back and their order alternating (ABBA, :func:`pair_ratios`). Per
+    run a row: seed, ``code`` (which checkout, by :func:`commit`), ``rep`` and ``summary(doc, first)``, with
+    ``first`` the seed's first run (this checkout's)."""
+    arms = [(f"this checkout ({commit(root)})", root)] + (
+        [(f"other ({commit(against)})", against.resolve())] if against is not None else [])
+    rows = []
+    for seed in seeds:
+        reference = None
+        for rep in range(reps):
+            for label, path in (arms if rep % 2 == 0 else arms[::-1]):
+                doc = run_worker(script, seed, path)
+                if reference is None:
+                    reference = doc
+                row = {"seed": seed, "code": label, "rep": rep, **summary(doc, reference)}
+                print(json.dumps(row), flush=True)
+                rows.append(row)
+    return rows

@@ -23,16 +23,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import subprocess
-import sys
-import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
-from benchmarks.common import pair_ratios, save
+from benchmarks.common import save
 
 ROOT = Path(__file__).resolve().parents[1]
 CACHE = ROOT / "cache" / "bench" / "dense_budget"
@@ -95,28 +91,6 @@ def worker(seed: int, out: Path) -> None:
     out.write_text(json.dumps({"seed": seed, "frames": rows, "spans": spans}))
 
 
-def run(seed: int, checkout: Path) -> dict:
-    """One run in a fresh process with ``checkout``'s code."""
-    with tempfile.TemporaryDirectory() as tmp:
-        out = Path(tmp) / "run.json"
-        env = {**os.environ, "PYTHONPATH": str(checkout), "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1",
-               "MKL_NUM_THREADS": "1"}
-        # this file run as a script: the other checkout need not have it
-        subprocess.run([sys.executable, str(Path(__file__).resolve()), "--worker", str(seed), str(out)],
-                       cwd=checkout, env=env, check=True)
-        return json.loads(out.read_text())
-
-
-def commit(checkout: Path) -> str:
-    """The checkout's commit, and '+' where its tracked files differ from it."""
-    try:
-        rev = subprocess.run(["git", "-C", str(checkout), "describe", "--always", "--dirty=+", "--abbrev=7"],
-                             capture_output=True, text=True, check=True).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return "?"
-    return rev
-
-
 def summary(doc: dict, first: dict | None) -> dict:
     """Per-frame medians of the stages over the frames where the tracker solved; the estimates' largest difference
     from ``first``'s (% of range)."""
@@ -150,20 +124,14 @@ def main() -> None:
     if args.worker:
         worker(int(args.worker[0]), Path(args.worker[1]))
         return
-    arms = [(f"this checkout ({commit(ROOT)})", ROOT)] + (
-        [(f"other ({commit(args.against)})", args.against.resolve())] if args.against else [])
-    rows = []
-    for seed in [int(s) for s in args.seeds.split(",")]:
+    # here, not at the top: a worker run with an older checkout's benchmarks need not have them
+    from benchmarks.common import checkout_pairs, pair_ratios
+
+    seeds = [int(s) for s in args.seeds.split(",")]
+    for seed in seeds:
         frames(seed)
-        reference = None
-        for rep in range(args.reps):
-            for label, path in (arms if rep % 2 == 0 else arms[::-1]):
-                doc = run(seed, path)
-                if reference is None:
-                    reference = doc
-                row = {"seed": seed, "code": label, "rep": rep, **summary(doc, reference)}
-                print(json.dumps(row), flush=True)
-                rows.append(row)
+    rows = checkout_pairs(Path(__file__), ROOT, args.against, seeds, args.reps, summary)
+    arms = sorted({r["code"] for r in rows}, key=lambda c: not c.startswith("this"))
     columns = [("seed", "seed", "{}"), ("code", "code", "{}"), ("rep", "run", "{}"),
                ("tracker_ms_p50", "tracker (ms, p50)", "{:.0f}"), ("tracker_ms_mean", "mean", "{:.0f}"),
                ("solve_ms_p50", "solve", "{:.0f}"), ("grid_ms_p50", "coarse search", "{:.1f}"),
@@ -182,7 +150,7 @@ def main() -> None:
         for r in rows:
             pairs.setdefault((r["seed"], r["rep"]), {})[r["code"]] = r
         whole = [p for p in pairs.values() if len(p) == 2]
-        ratio = pair_ratios([p[arms[1][0]] for p in whole], [p[arms[0][0]] for p in whole], "tracker_ms_p50")
+        ratio = pair_ratios([p[arms[1]] for p in whole], [p[arms[0]] for p in whole], "tracker_ms_p50")
         notes += (f" Pairs' ratio this checkout / the other: median {np.median(ratio):.2f} (from {min(ratio):.2f} "
                   f"to {max(ratio):.2f}, {len(ratio)} pairs).")
 

@@ -6,7 +6,8 @@ import subprocess
 import numpy as np
 import pytest
 
-from benchmarks.dense_budget import commit, summary
+from benchmarks.common import commit
+from benchmarks.dense_budget import summary
 
 
 def _frame(solve, grid, fit_from, refine, camera, est, state=1, tracker=None):
