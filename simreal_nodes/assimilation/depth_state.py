@@ -111,7 +111,11 @@ class _Surface:
 
     def normals(self, k: NDArray[np.int64], Rz: Array) -> Array:
         """The normals of samples ``k`` turned by ``Rz``: only the samples that some point matched, rather than all
-        of them at every placement (a row's product does not depend on the others')."""
+        of them at every placement (a row's product does not depend on the others'). A single row goes to BLAS's
+        matrix-vector product, which may round differently: it is taken from the whole product."""
+        if len(k) < 2:
+            few: Array = (self.n @ Rz.T)[k]
+            return few
         out: Array = self.n[k] @ Rz.T
         return out
 

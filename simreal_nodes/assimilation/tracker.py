@@ -336,6 +336,8 @@ class DeformableTracker:
         """What :meth:`relink` would leave (the links and the static points) with the constant ``c`` (alpha_z) at
         each of ``values``, each time from the present links: the same links, each group's points linked for every
         value in one call (:meth:`_links_of`) instead of one call per group and value."""
+        if not values:
+            return []
         turns = []
         for g in values:
             v = self.values.copy()

@@ -371,7 +371,8 @@ def test_the_search_relinks_every_value_as_relink_does():
     """The search of alpha_z links each group of points for all its values in one call (``_relinked_at``): for
     every value, the same links (order, nodes, weights, rest and map positions, rays, the deformation they were
     mapped in) and the same static points as setting alpha_z there and calling ``relink``. Two groups (points mapped
-    at rest and in the bent boot, whose lever points leave the surface at some turns) and a static point."""
+    at rest and in the bent boot, whose lever points leave the surface at some turns), a static point and a point
+    both linked and static (``link_points`` skips it)."""
     b = _BootScene(150.0, constant_search=24)
     for _ in range(3):
         b.show(bent=False)
@@ -380,6 +381,8 @@ def test_the_search_relinks_every_value_as_relink_does():
     for pid in list(tr.links)[::3]:  # mapped in the bent boot, where the bent boot has them
         tr.links[pid] = tr.links[pid]._replace(P_map=b.bent[pid].copy(), mu=theta.copy())
     tr.static.add(10_000)
+    both = next(iter(tr.links))
+    tr.static.add(both)  # linked and static: link_points' test skips it, so a relink drops it
     values = [float(g) for g in np.linspace(tr.lo[1], tr.hi[1], 24, endpoint=False)]
     saved = dict(tr.links), set(tr.static), tr.values.copy()
     batched = tr._relinked_at(1, values)
@@ -398,6 +401,7 @@ def test_the_search_relinks_every_value_as_relink_does():
                     np.testing.assert_array_equal(a, r)
         static_sizes.add(len(static))
     assert len(static_sizes) > 1  # some turns leave points off the surface: the static path is exercised
+    assert not any(both in links for links, _ in batched)
 
 
 @pytest.mark.parametrize("until", ["seen", "frozen"])
