@@ -205,3 +205,27 @@ def checkout_pairs(script: Path, root: Path, against: Path | None, seeds: list[i
                 print(json.dumps(row), flush=True)
                 rows.append(row)
     return rows
+
+
+def checkout_notes(rows: list[dict], keys: list[tuple[str, str]]) -> str:
+    """Sentences on :func:`checkout_pairs`'s rows: each checkout's median over its runs of ``keys[0]``, and with two
+    checkouts, for each (key, what) of ``keys``, the pairs' ratio this checkout / the other (median and range)."""
+    import numpy as np
+
+    first, what0 = keys[0]
+    by_code: dict[str, list[float]] = {}
+    for r in rows:
+        by_code.setdefault(r["code"], []).append(float(r[first]))
+    out = (f"Median over the runs of {what0}: " + "; ".join(f"{c} {np.median(v):.0f} ms" for c, v in by_code.items())
+           + ".")
+    arms = sorted(by_code, key=lambda c: not c.startswith("this"))
+    if len(arms) == 2:
+        pairs: dict[tuple, dict[str, dict]] = {}
+        for r in rows:
+            pairs.setdefault((r["seed"], r["rep"]), {})[r["code"]] = r
+        whole = [p for p in pairs.values() if len(p) == 2]
+        for key, what in keys:
+            ratio = pair_ratios([p[arms[1]] for p in whole], [p[arms[0]] for p in whole], key)
+            out += (f" Pairs' ratio this checkout / the other, {what}: median {np.median(ratio):.2f} (from "
+                    f"{min(ratio):.2f} to {max(ratio):.2f}, {len(ratio)} pairs).")
+    return out

@@ -183,13 +183,12 @@ def main() -> None:
         worker(int(args.worker[0]), Path(args.worker[1]))
         return
     # here, not at the top: a worker run with an older checkout's benchmarks need not have them
-    from benchmarks.common import checkout_pairs, pair_ratios
+    from benchmarks.common import checkout_notes, checkout_pairs
 
     seeds = [int(s) for s in args.seeds.split(",")]
     for seed in seeds:
         frames(seed)
     rows = checkout_pairs(Path(__file__), ROOT, args.against, seeds, args.reps, summary)
-    arms = sorted({r["code"] for r in rows}, key=lambda c: not c.startswith("this"))
     columns = [("seed", "seed", "{}"), ("code", "code", "{}"), ("rep", "run", "{}"),
                ("tracker_ms_p50", "tracker (ms, p50)", "{:.0f}"), ("tracker_ms_mean", "mean", "{:.0f}"),
                ("cpu_ms_p50", "its CPU (ms, p50)", "{:.0f}"),
@@ -200,21 +199,9 @@ def main() -> None:
                ("other_ms_p50", "other", "{:.1f}"), ("theta_err_pct_p50", "lever error (% range, p50)", "{:.2f}"),
                ("est_diff_pct", "estimates' largest difference (% range)", "{:.2g}"),
                ("states_differ", "frames whose state differs", "{}")]
-    by_code: dict[str, list[float]] = {}
-    for r in rows:
-        by_code.setdefault(r["code"], []).append(r["tracker_ms_p50"])
     notes = ("Per frame where the tracker ran: the stages' medians (ms). The estimates' difference is from the "
-             "scene's first run (this checkout's). Median over the runs of the tracker's p50: "
-             + "; ".join(f"{c} {np.median(v):.0f} ms" for c, v in by_code.items()) + ".")
-    if len(arms) == 2:
-        pairs: dict[tuple, dict[str, dict]] = {}
-        for r in rows:
-            pairs.setdefault((r["seed"], r["rep"]), {})[r["code"]] = r
-        whole = [p for p in pairs.values() if len(p) == 2]
-        for key, what in (("tracker_ms_p50", "the tracker's p50"), ("cpu_ms_p50", "its CPU time's p50")):
-            ratio = pair_ratios([p[arms[1]] for p in whole], [p[arms[0]] for p in whole], key)
-            notes += (f" Pairs' ratio this checkout / the other, {what}: median {np.median(ratio):.2f} (from "
-                      f"{min(ratio):.2f} to {max(ratio):.2f}, {len(ratio)} pairs).")
+             "scene's first run (this checkout's). " + checkout_notes(rows, [("tracker_ms_p50", "the tracker's p50"),
+                                                                            ("cpu_ms_p50", "its CPU time's p50")]))
 
     def plot(plt):
         fig, ax = plt.subplots(figsize=(8, 4))

@@ -3,7 +3,7 @@ the pairs that the A/B benchmarks summarize."""
 
 import pytest
 
-from benchmarks.common import pair_changes, pair_ratios, simd_level
+from benchmarks.common import checkout_notes, pair_changes, pair_ratios, simd_level
 
 
 @pytest.mark.parametrize(("flags", "level"), [
@@ -27,3 +27,14 @@ def test_pairs_are_matched_by_position_and_read_second_over_first():
     second = [{"ms": 5.0}, {"ms": 30.0}]  # the third run has no partner: left out
     assert pair_ratios(first, second, "ms") == [0.5, 1.5]
     assert pair_changes(first, second, "ms") == pytest.approx([-50.0, 50.0])
+
+
+def test_checkout_notes_give_each_checkouts_median_and_the_pairs_ratios():
+    this, other = "this checkout (abc1234)", "other (def5678)"
+    rows = [{"seed": 0, "rep": 0, "code": this, "ms": 50.0}, {"seed": 0, "rep": 0, "code": other, "ms": 100.0},
+            {"seed": 0, "rep": 1, "code": other, "ms": 80.0}, {"seed": 0, "rep": 1, "code": this, "ms": 60.0},
+            {"seed": 3, "rep": 0, "code": this, "ms": 90.0}]  # its partner never ran: no pair
+    text = checkout_notes(rows, [("ms", "the time")])
+    assert f"{this} 60 ms; {other} 90 ms" in text
+    assert "median 0.62 (from 0.50 to 0.75, 2 pairs)" in text
+    assert "Pairs'" not in checkout_notes([r for r in rows if r["code"] == this], [("ms", "the time")])
