@@ -229,3 +229,21 @@ def checkout_notes(rows: list[dict], keys: list[tuple[str, str]]) -> str:
             out += (f" Pairs' ratio this checkout / the other, {what}: median {np.median(ratio):.2f} (from "
                     f"{min(ratio):.2f} to {max(ratio):.2f}, {len(ratio)} pairs).")
     return out
+
+
+def budget_runs(doc: str, seeds: str, out: str, script: Path, root: Path, frames, summary) -> tuple:
+    """The command line of a budget benchmark (``benchmarks.dense_budget``, ``benchmarks.depth_budget``) past its
+    ``--worker`` form: ``--seeds`` (default ``seeds``), ``--against``, ``--reps``, ``--out`` (default ``out``); each
+    seed's frames made (``frames(seed)``), then :func:`checkout_pairs`. Returns (arguments, rows)."""
+    import argparse
+
+    ap = argparse.ArgumentParser(description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--seeds", default=seeds, help="development scenes of the family")
+    ap.add_argument("--against", type=Path, help="another checkout, run in pairs with this one")
+    ap.add_argument("--reps", type=int, default=2, help="runs (pairs with --against) per scene; the order alternates")
+    ap.add_argument("--out", default=out)
+    args = ap.parse_args()
+    chosen = [int(s) for s in args.seeds.split(",")]
+    for seed in chosen:
+        frames(seed)
+    return args, checkout_pairs(script, root, args.against, chosen, args.reps, summary)

@@ -21,8 +21,8 @@ parameter's range (a change meant to be pure speed must leave them where they we
 
 from __future__ import annotations
 
-import argparse
 import json
+import sys
 import time
 from pathlib import Path
 
@@ -114,23 +114,13 @@ def summary(doc: dict, first: dict | None) -> dict:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--seeds", default="0,3,12", help="development scenes of the family")
-    ap.add_argument("--against", type=Path, help="another checkout, run in pairs with this one")
-    ap.add_argument("--reps", type=int, default=2, help="runs (pairs with --against) per scene; the order alternates")
-    ap.add_argument("--out", default="dense_budget")
-    ap.add_argument("--worker", nargs=2, metavar=("SEED", "OUT"), help=argparse.SUPPRESS)
-    args = ap.parse_args()
-    if args.worker:
-        worker(int(args.worker[0]), Path(args.worker[1]))
+    if sys.argv[1:2] == ["--worker"]:  # one run, in a fresh process (benchmarks.common.run_worker)
+        worker(int(sys.argv[2]), Path(sys.argv[3]))
         return
     # here, not at the top: a worker run with an older checkout's benchmarks need not have them
-    from benchmarks.common import checkout_notes, checkout_pairs
+    from benchmarks.common import budget_runs, checkout_notes
 
-    seeds = [int(s) for s in args.seeds.split(",")]
-    for seed in seeds:
-        frames(seed)
-    rows = checkout_pairs(Path(__file__), ROOT, args.against, seeds, args.reps, summary)
+    args, rows = budget_runs(__doc__, "0,3,12", "dense_budget", Path(__file__), ROOT, frames, summary)
     columns = [("seed", "seed", "{}"), ("code", "code", "{}"), ("rep", "run", "{}"),
                ("tracker_ms_p50", "tracker (ms, p50)", "{:.0f}"), ("tracker_ms_mean", "mean", "{:.0f}"),
                ("solve_ms_p50", "solve", "{:.0f}"), ("grid_ms_p50", "coarse search", "{:.1f}"),

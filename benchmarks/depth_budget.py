@@ -26,8 +26,8 @@ first run, in % of the range (a change meant to be pure speed must leave them wh
 
 from __future__ import annotations
 
-import argparse
 import json
+import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -172,23 +172,13 @@ def summary(doc: dict, first: dict | None) -> dict:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--seeds", default="0,8,22", help="development scenes of the boot family")
-    ap.add_argument("--against", type=Path, help="another checkout, run in pairs with this one")
-    ap.add_argument("--reps", type=int, default=2, help="runs (pairs with --against) per scene; the order alternates")
-    ap.add_argument("--out", default="depth_budget")
-    ap.add_argument("--worker", nargs=2, metavar=("SEED", "OUT"), help=argparse.SUPPRESS)
-    args = ap.parse_args()
-    if args.worker:
-        worker(int(args.worker[0]), Path(args.worker[1]))
+    if sys.argv[1:2] == ["--worker"]:  # one run, in a fresh process (benchmarks.common.run_worker)
+        worker(int(sys.argv[2]), Path(sys.argv[3]))
         return
     # here, not at the top: a worker run with an older checkout's benchmarks need not have them
-    from benchmarks.common import checkout_notes, checkout_pairs
+    from benchmarks.common import budget_runs, checkout_notes
 
-    seeds = [int(s) for s in args.seeds.split(",")]
-    for seed in seeds:
-        frames(seed)
-    rows = checkout_pairs(Path(__file__), ROOT, args.against, seeds, args.reps, summary)
+    args, rows = budget_runs(__doc__, "0,8,22", "depth_budget", Path(__file__), ROOT, frames, summary)
     columns = [("seed", "seed", "{}"), ("code", "code", "{}"), ("rep", "run", "{}"),
                ("tracker_ms_p50", "tracker (ms, p50)", "{:.0f}"), ("tracker_ms_mean", "mean", "{:.0f}"),
                ("cpu_ms_p50", "its CPU (ms, p50)", "{:.0f}"),
