@@ -36,18 +36,21 @@ def test_depth_cloud_within_a_box_keeps_every_point_of_the_box():
     """``depth_cloud(..., within=corners)`` back-projects only the pixels that may hold a point of the box: the points
     in the box are exactly those of the whole cloud (same values, same order). Each depth image shows the box itself
     (its faces just inside the corners given, so that points lie at its nearest corner and along its outline) before
-    a random background, through a strongly distorted lens (the bounds are taken on the undistorted pixels), for
-    boxes inside the view, across its edge and reaching behind the camera; a box in view leaves out most of the
-    image."""
+    a random background, through a strongly distorted lens (the bounds are taken on the undistorted pixels), with and
+    without skew in K, at strides 1 to 3, for boxes inside the view, across its edge and reaching behind the camera; a
+    box in view that fills under 40 % of it leaves out most of the image."""
     from simreal_nodes.assimilation.registration import _pixel_grid
     from simreal_nodes.camera import CameraModel
 
     rng = np.random.default_rng(1)
-    cam = CameraModel.from_intrinsics(128, 96, 100.0, 102.0, 63.5, 47.5, D=[0.25, -0.3, 0.004, -0.003, 0.1])
+    D = [0.25, -0.3, 0.004, -0.003, 0.1]
+    plain = CameraModel.from_intrinsics(128, 96, 100.0, 102.0, 63.5, 47.5, D=D)
+    skewed = CameraModel(128, 96, np.array([[100.0, 6.0, 63.5], [0.0, 102.0, 47.5], [0.0, 0.0, 1.0]]), np.array(D))
     T_wc = G.make_T(G.rot_axis("y", 0.4) @ G.rot_axis("x", -0.2), [0.3, 0.1, -0.2])
-    rays = cam.backproject(_pixel_grid(cam, (96, 128), 1), np.ones(96 * 128))  # camera frame, z = 1
     in_view = 0
-    for _ in range(40):
+    for i in range(60):
+        cam, stride = (plain, skewed)[i // 3 % 2], 1 + i % 3
+        rays = cam.backproject(_pixel_grid(cam, (96, 128), 1), np.ones(96 * 128))  # camera frame, z = 1
         T_co = G.make_T(G.rot_axis("z", rng.uniform(-np.pi, np.pi)) @ G.rot_axis("x", rng.uniform(-1, 1)),
                         [rng.uniform(-0.8, 0.8), rng.uniform(-0.6, 0.6), rng.uniform(-0.3, 2.0)])
         half = rng.uniform(0.05, 0.5, 3)
@@ -64,17 +67,18 @@ def test_depth_cloud_within_a_box_keeps_every_point_of_the_box():
         depth[rng.random(depth.shape) < 0.05] = np.nan
         T_mo = T_wc @ T_co
         corners = G.transform(T_mo, np.array([[(-1) ** (j >> a & 1) for a in range(3)] for j in range(8)]) * half)
-        full = depth_cloud(cam, depth, T_wc, stride=1)
-        part = depth_cloud(cam, depth, T_wc, stride=1, within=corners)
+        full = depth_cloud(cam, depth, T_wc, stride=stride)
+        part = depth_cloud(cam, depth, T_wc, stride=stride, within=corners)
 
         def inside(P, T_mo=T_mo, half=half):
             return P[np.all(np.abs(G.transform(G.inv(T_mo), P)) < half, axis=1)]
 
         np.testing.assert_array_equal(inside(part), inside(full))
-        if np.all(T_co[2, 3] - np.abs(T_co[2, :3]) @ half > 0.1) and len(inside(full)) > 200:
+        seen = len(inside(full))
+        if np.all(T_co[2, 3] - np.abs(T_co[2, :3]) @ half > 0.1) and 200 / stride ** 2 < seen < 0.4 * len(full):
             in_view += 1
             assert len(part) < 0.8 * len(full)
-    assert in_view >= 5
+    assert in_view >= 8
 
 
 def test_depth_cloud_undoes_the_lens():
