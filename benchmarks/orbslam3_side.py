@@ -113,18 +113,23 @@ def run_orbslam3_stream(frames: Iterable[tuple], cam, fps: float, mode: str, voc
     return isolated(_run_orbslam3_here, frames, cam, fps, mode, vocab)
 
 
-def isolated(fn: Callable[..., dict], *args: Any) -> dict:
-    """``fn(*args)`` in a child process forked for it, its dict returned (as JSON: numbers, strings, lists).
+def isolated(fn: Callable[..., dict], *args: Any, start: str = "fork") -> dict:
+    """``fn(*args)`` in a child process forked for it (``start="spawn"``: a fresh interpreter, ``fn`` and ``args``
+    pickled), its dict returned (as JSON: numbers, strings, lists).
 
     Why: ORB-SLAM3 keeps the camera in static members of its ``Frame`` class (fx, fy, cx, cy, their inverses, the
     undistorted image bounds and the feature grid's cell size), set by the first frame a process makes and never
     again. A second ``Slam`` in the same process with another camera tracks with the first one's: the real 7-Scenes
     frames (fx 585) run after a family scene (fx 525, barrel distortion) read 105-108 mm of ATE in RGB-D against
     36-37 mm alone (stop 75, scratch), and this benchmark published the 100 mm. The parent never makes a ``Slam``,
-    so every child starts from a clean class."""
+    so every child starts from a clean class.
+
+    A child that renders must be spawned: a forked child of a process that has rendered (the family's frames, through
+    Mesa's EGL) inherits a GL state whose worker threads were not forked, and its first frame waits on them forever
+    (stop 85: the long room's first run hung so after the family's scenes; stop 75's run had no family scenes)."""
     import multiprocessing
 
-    ctx = multiprocessing.get_context("fork")
+    ctx = multiprocessing.get_context(start)
     recv, send = ctx.Pipe(duplex=False)
     child = ctx.Process(target=_child, args=(send, fn, args), daemon=True)
     child.start()
@@ -203,6 +208,16 @@ def _run_orbslam3_here(frames: Iterable[tuple], cam, fps: float, mode: str, voca
     return _measures(np.array(truth), fps, est, map_of, ms, mode, wall)
 
 
+def _run_orbslam3_rendered(scene: str, frame_kw: dict, mode: str, vocab: Path) -> dict:
+    """ORB-SLAM3 over the frames of ``FrameStream(scene, **frame_kw)``, rendered one at a time in this process (a
+    spawned child: :func:`isolated`)."""
+    from simreal_nodes.synth.sequence import FrameStream
+
+    fs = FrameStream(scene, **frame_kw)
+    return _run_orbslam3_here(((f["gray"], f["depth"], f["T"]) for f in fs), fs.cam, float(frame_kw["fps"]), mode,
+                              vocab)
+
+
 def _measures(T_true: np.ndarray, fps: float, est: dict[int, np.ndarray], map_of: dict[int, int], ms: list[float],
               mode: str, wall: float) -> dict:
     from benchmarks.real_slam import accuracy
@@ -238,7 +253,6 @@ def long_rows(vocab: Path) -> list[dict]:
     `long_slam.json`'s (the same frames, its mapping in a process as live), not rerun here."""
     from benchmarks.common import RESULTS
     from benchmarks.long_slam import FPS, LAP_S
-    from simreal_nodes.synth.sequence import FrameStream
 
     if not (RESULTS / "long_slam.json").is_file():
         raise SystemExit("the long sequence's rows of this SLAM come from long_slam.json: run `./run bench long_slam` "
@@ -253,8 +267,8 @@ def long_rows(vocab: Path) -> list[dict]:
                      "tracking_ms_p50": o["tracking_ms_p50"], "tracking_ms_p95": o["tracking_ms_p95"],
                      "fps_wall": o["fps_wall"], "ate_mm": o["ate_mm"], "ate_pct": o["ate_pct"],
                      "aligned_frames": o["tracked"], "rpe_1s_mm": o["rpe_mm"], "from": "long_slam.json"})
-        fs = FrameStream("slam_room_laps", 640, 480, duration=laps * LAP_S, fps=FPS, ssaa=1, seed=o["seed"])
-        m = run_orbslam3_stream(((f["gray"], f["depth"], f["T"]) for f in fs), fs.cam, FPS, o["mode"], vocab)
+        kw = {"width": 640, "height": 480, "duration": laps * LAP_S, "fps": FPS, "ssaa": 1, "seed": o["seed"]}
+        m = isolated(_run_orbslam3_rendered, "slam_room_laps", kw, o["mode"], vocab, start="spawn")
         rows.append({"scene": name, "mode": o["mode"], "slam": "ORB-SLAM3", **m})
         print({k: (round(v, 3) if isinstance(v, float) else v) for k, v in rows[-1].items()}, flush=True)
     return rows
