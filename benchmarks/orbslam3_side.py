@@ -23,7 +23,8 @@ keyframes and local BA on the frame that makes them, deterministic); ORB-SLAM3 a
 loop closing in their own threads (the 2 cores), so its rows vary a little from run to run. Each scene is run by
 both, one after the other, nothing else on the host: this SLAM in the benchmark's process, ORB-SLAM3 in a process
 forked for each run (:func:`isolated`: ORB-SLAM3 keeps the first camera a process saw; until stop 75 the 7-Scenes
-rows ran with the family's camera).
+rows ran with the family's camera), or spawned for the long room's, which render their own frames (a forked child
+of a process that has rendered hangs, stop 85).
 
 Per scene and SLAM: frames tracked (ORB-SLAM3: state OK; this SLAM: ok or relocalized; the frames before a
 monocular map count as not tracked), ATE RMSE after a similarity (monocular) or rigid (RGB-D) alignment of the
@@ -108,8 +109,9 @@ def run_orbslam3(seq: dict, mode: str, vocab: Path) -> dict:
 
 
 def run_orbslam3_stream(frames: Iterable[tuple], cam, fps: float, mode: str, vocab: Path) -> dict:
-    """ORB-SLAM3 over (gray, depth, true camera-to-world pose) frames as they come (a long sequence is rendered
-    one frame at a time): the row's measures. Each run is a process of its own (:func:`isolated`)."""
+    """ORB-SLAM3 over (gray, depth, true camera-to-world pose) frames as they come: the row's measures. Each run is
+    a process of its own, forked (:func:`isolated`), so the frames must not be rendered in it: a sequence rendered
+    one frame at a time goes through :func:`_run_orbslam3_rendered` in a spawned child instead."""
     return isolated(_run_orbslam3_here, frames, cam, fps, mode, vocab)
 
 
@@ -210,9 +212,11 @@ def _run_orbslam3_here(frames: Iterable[tuple], cam, fps: float, mode: str, voca
 
 def _run_orbslam3_rendered(scene: str, frame_kw: dict, mode: str, vocab: Path) -> dict:
     """ORB-SLAM3 over the frames of ``FrameStream(scene, **frame_kw)``, rendered one at a time in this process (a
-    spawned child: :func:`isolated`)."""
+    spawned child: :func:`isolated`), on one OpenCV and one BLAS thread as the forked runs inherit from the parent."""
+    from benchmarks.family import _one_thread
     from simreal_nodes.synth.sequence import FrameStream
 
+    _one_thread()
     fs = FrameStream(scene, **frame_kw)
     return _run_orbslam3_here(((f["gray"], f["depth"], f["T"]) for f in fs), fs.cam, float(frame_kw["fps"]), mode,
                               vocab)

@@ -213,8 +213,9 @@ def main():
          "(all runs in the JSON). Standby: the launcher's standby process for the node (imports done, DDS "
          "participant up) is promoted; cold: a new process (`--no-standby`). 'nodes': the one-process launch "
          "(`--one-process`) killed whole, the tracker's output measured. The issue's target: tracking back "
-         "within 1 s. `--victims` reruns some rows and keeps the others' runs from the JSON (the 'nodes' rows were "
-         "added in stop 44, the localization's rerun in stop 47, the others are stop 33's).", plot,
+         "within 1 s. `--victims` reruns some rows and keeps the others' runs from the JSON"
+         + (f" (kept here: every victim's but {', '.join(a.victims)})" if set(a.victims) != set(VICTIMS) else "")
+         + ".", plot,
          extra={"runs": rows})
 
 
