@@ -53,6 +53,7 @@ from benchmarks.common import save
 CACHE = Path(__file__).resolve().parents[1] / "cache" / "orbslam3"
 VOCAB_SEEDS = range(0, 6)  # development scenes of the family: never the held-out ones
 N_FEATURES = 1000
+CHILD_TIMEOUT_S = 3600.0  # an hour for one ORB-SLAM3 run: far beyond the longest (the long room's 2 100 frames)
 VOCAB_LEVELS = 6  # the vocabulary tree's depth (k 10), as the authors' ORBvoc.txt (BoW matches grouped at L - 4)
 
 
@@ -115,9 +116,10 @@ def run_orbslam3_stream(frames: Iterable[tuple], cam, fps: float, mode: str, voc
     return isolated(_run_orbslam3_here, frames, cam, fps, mode, vocab)
 
 
-def isolated(fn: Callable[..., dict], *args: Any, start: str = "fork") -> dict:
+def isolated(fn: Callable[..., dict], *args: Any, start: str = "fork", timeout_s: float = CHILD_TIMEOUT_S) -> dict:
     """``fn(*args)`` in a child process forked for it (``start="spawn"``: a fresh interpreter, ``fn`` and ``args``
-    pickled), its dict returned (as JSON: numbers, strings, lists).
+    pickled), its dict returned (as JSON: numbers, strings, lists). A child that has not answered after
+    ``timeout_s`` is killed and the run fails with that reason instead of waiting forever.
 
     Why: ORB-SLAM3 keeps the camera in static members of its ``Frame`` class (fx, fy, cx, cy, their inverses, the
     undistorted image bounds and the feature grid's cell size), set by the first frame a process makes and never
@@ -137,7 +139,11 @@ def isolated(fn: Callable[..., dict], *args: Any, start: str = "fork") -> dict:
     child.start()
     send.close()
     try:
-        ok, value = json.loads(recv.recv_bytes())
+        if recv.poll(timeout_s):
+            ok, value = json.loads(recv.recv_bytes())
+        else:
+            child.kill()
+            ok, value = False, f"no answer after {timeout_s:.0f} s (killed)"
     except EOFError:
         ok, value = False, "it died before it answered"
     finally:

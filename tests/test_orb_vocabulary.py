@@ -152,3 +152,21 @@ def test_the_long_room_run_renders_in_a_spawned_child(tmp_path):
     assert row["frames"] == len(grays)
     assert row["aligned_frames"] >= 0.8 * len(grays), row
     assert row["ate_mm"] < 5.0, row
+
+
+def test_a_child_that_does_not_answer_is_stopped():
+    """A comparator run whose child hangs (stop 85's long room waited about 40 minutes on it) is killed after
+    ``timeout_s`` and fails with that reason, instead of holding the benchmark forever."""
+    import time
+
+    from benchmarks.orbslam3_side import isolated
+
+    def stuck() -> dict:
+        time.sleep(60)
+        return {}
+
+    t0 = time.monotonic()
+    with pytest.raises(RuntimeError, match="no answer after 1 s"):
+        isolated(stuck, timeout_s=1.0)
+    assert time.monotonic() - t0 < 30
+    assert isolated(lambda: {"x": 1}, timeout_s=30.0) == {"x": 1}  # one that answers in time is unaffected
