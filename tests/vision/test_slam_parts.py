@@ -355,7 +355,7 @@ def test_local_bundle_adjustment_optimizes_every_point_its_keyframes_see(monkeyp
     assert len(req["pt_ids"]) == in_ba
     assert np.array_equal(A.T_wc, np.eye(4))
     assert np.max(np.abs(B.T_cw - T_b)) < 1e-4
-    moved = np.linalg.norm(m._pos[np.asarray(sorted(m.points))] - X[ia], axis=1)
+    moved = np.linalg.norm(m._pos[m.rows(np.asarray(sorted(m.points)))] - X[ia], axis=1)
     assert moved.max() < 1e-4  # exact observations: the optimized points stay on the truth, the others untouched
 
 
@@ -449,7 +449,7 @@ def test_a_depth_camera_s_disparity_noise_weighs_its_depth_in_the_bundle_adjustm
         LocalMapper(ctx, async_mapping=False).bundle_adjust(kfs, None)
         pid = np.array(sorted(i for i, p in m.points.items() if kfs[0].id in p.obs))
         assert len(pid) > 250
-        Pc = m._pos[pid] @ kfs[0].T_cw[:3, :3].T + kfs[0].T_cw[:3, 3]  # in the held first keyframe's camera
+        Pc = m._pos[m.rows(pid)] @ kfs[0].T_cw[:3, :3].T + kfs[0].T_cw[:3, 3]  # in the held first keyframe's camera
         fi = np.array([m.points[int(i)].obs[kfs[0].id] for i in pid])
         errs[sd] = np.median(np.abs(Pc[:, 2] - kfs[0].depth[fi]))
     assert errs[0.05] < 0.3 * errs[0.0] and errs[0.05] < 0.003

@@ -194,6 +194,8 @@ class DeformableTracks:
         self._peak = max(self._peak, len(found))
         self._flow, self._flow_frame, self._flow_gray = found, ctx.frame_id, self.gray
         self._last_desc.update({p: v for p, v in new_desc.items() if p in found})
+        if len(self._last_desc) > 2 * len(m.points):  # bounded memory: the descriptors of points the map erased go
+            self._last_desc = {p: v for p, v in self._last_desc.items() if p in m.points}
         for pid in list(self._last_seen):
             if pid not in found:
                 self._last_seen.pop(pid)
@@ -207,7 +209,7 @@ class DeformableTracks:
         res.obs_ids = np.concatenate([res.obs_ids, new_ids])
         res.obs_uv = np.concatenate([res.obs_uv, raw])
         res.obs_inlier = np.concatenate([res.obs_inlier, np.zeros(len(new_ids), bool)])
-        res.obs_pos = np.concatenate([res.obs_pos, m._pos[new_ids]])
+        res.obs_pos = np.concatenate([res.obs_pos, m._pos[m.rows(new_ids)]])
 
     def _coherent(self, found: dict[int, np.ndarray], pred: dict[int, np.ndarray]) -> None:
         """Drop from ``found`` the measurements that move unlike their image neighbours: each measurement's offset

@@ -227,7 +227,7 @@ class LocalMapper:
         ids = ids[~np.isin(ids, kf.mp)]  # not observed by kf already (kf.mp and the points' obs agree)
         if len(ids) == 0:
             return set()
-        P = m._pos[ids]
+        P = m._pos[m.rows(ids)]
         uv, z = project(kf.T_cw, P, K)
         W, H = self.ctx.cam.width, self.ctx.cam.height
         vis = (z > 0) & (uv[:, 0] >= 0) & (uv[:, 0] < W) & (uv[:, 1] >= 0) & (uv[:, 1] < H)
@@ -260,7 +260,7 @@ class LocalMapper:
         rows, cols = rows[ok], cols[ok]
         if len(rows) == 0:
             return set()
-        dist = hamming(m._desc[ids[rows]], f.desc[cols])
+        dist = hamming(m._desc[m.rows(ids[rows])], f.desc[cols])
         good = dist <= 50
         rows, cols, dist = rows[good], cols[good], dist[good]
         if len(rows) == 0:
@@ -328,13 +328,13 @@ class LocalMapper:
         pid, kid, _ = m.observations()
         max_points = cfg.max_ba_points if max_points is None else max_points
         if 0 < max_points < len(pts):  # the most observed (stable: first seen first among equals)
-            n_obs = np.bincount(pid, minlength=len(m._alive))
-            pts = pts[np.argsort(-n_obs[pts], kind="stable")[:max_points]]
+            n_obs = np.bincount(m.rows(pid), minlength=m.n_rows)
+            pts = pts[np.argsort(-n_obs[m.rows(pts)], kind="stable")[:max_points]]
         if kfs_fixed is None:
             # keyframes outside the window that see the points, most shared first (ties: the newest), at most 10
-            inside = np.zeros(len(m._alive), bool)
-            inside[pts] = True
-            outer = kid[inside[pid] & ~np.isin(kid, list(opt_ids))]
+            inside = np.zeros(m.n_rows, bool)
+            inside[m.rows(pts)] = True
+            outer = kid[inside[m.rows(pid)] & ~np.isin(kid, list(opt_ids))]
             fixed = m.ranked(outer)
             kfs_fixed = [m.keyframes[k] for k in fixed if k in m.keyframes][:10]
             # gauge: 6 dof need one fixed keyframe; a monocular map's scale needs a second one
@@ -392,11 +392,11 @@ class LocalMapper:
                     continue
                 C = moved.get(m.reference_keyframe(q))
                 if C is not None:
-                    m._pos[pid] = C[:3, :3] @ m._pos[pid] + C[:3, 3]
+                    q.pos = C[:3, :3] @ q.pos + C[:3, 3]
             m.version += 1
         for pid, P in zip(res["pt_ids"], res["pos"]):
-            if int(pid) in m.points:
-                m._pos[int(pid)] = P
+            if (p := m.points.get(int(pid))) is not None:
+                p.pos = P
         for pid, kid in res["outliers"]:
             p = m.points.get(pid)
             kf = m.keyframes.get(kid)

@@ -166,11 +166,11 @@ class LoopCloser:
         qi = self._mapped(kf, 10 ** 6)
         if len(B) < MIN_RANSAC or len(qi) < MIN_RANSAC:
             return None
-        mt = match_descriptors(kf.feats.desc[qi], m._desc[B], max_dist=50, ratio=0.75)
+        mt = match_descriptors(kf.feats.desc[qi], m._desc[m.rows(B)], max_dist=50, ratio=0.75)
         if len(mt) < MIN_RANSAC:
             return None
         fa = qi[mt[:, 0]]
-        XA, XB = m._pos[kf.mp[fa]], m._pos[B[mt[:, 1]]]
+        XA, XB = m._pos[m.rows(kf.mp[fa])], m._pos[m.rows(B[mt[:, 1]])]
         uv, sig2 = kf.feats.und[fa], kf.feats.sigma2()[fa]
         scaled = ctx.mode == "mono"
 
@@ -209,7 +209,7 @@ class LoopCloser:
         (within ``radius`` x the level's scale, descriptor within 50 bits, each feature once)."""
         ctx, m, f = self.ctx, self.ctx.map, kf.feats
         T, _ = self._corrected_cam(kf, S)
-        uv, z = project(T, m._pos[B], ctx.K)
+        uv, z = project(T, m._pos[m.rows(B)], ctx.K)
         W, H = ctx.cam.width, ctx.cam.height
         vis = (z > 0) & (uv[:, 0] >= 0) & (uv[:, 0] < W) & (uv[:, 1] >= 0) & (uv[:, 1] < H)
         if not np.any(vis):
@@ -223,7 +223,7 @@ class LoopCloser:
         cols = nn[valid]
         ok = dpix[valid] <= radius * f.scale_factor ** f.octave[cols].astype(np.float64)
         rows, cols = rows[ok], cols[ok]
-        good = hamming(m._desc[ids[rows]], f.desc[cols]) <= 50
+        good = hamming(m._desc[m.rows(ids[rows])], f.desc[cols]) <= 50
         return len(np.unique(cols[good]))
 
     # -- 3. correction ---------------------------------------------------------------------------------------
@@ -244,8 +244,9 @@ class LoopCloser:
         init = dict(old)
         pts = np.unique(np.concatenate([k.mp[k.mp >= 0] for k in connected]))
         pts = pts[m.alive(pts)]
-        m._pos[pts] = sim_apply(S, m._pos[pts])
-        m._dist0[pts] *= s
+        rows = m.rows(pts)
+        m._pos[rows] = sim_apply(S, m._pos[rows])
+        m._dist0[rows] *= s
         for k in connected:
             sc, Rk, C = old[k.id]
             init[k.id] = (s * sc, R @ Rk, s * R @ C + t)
@@ -273,9 +274,10 @@ class LoopCloser:
             s1, R1, C1 = final[k.id]
             ids = np.array(ref.get(k.id, []), np.int64)
             if len(ids):
-                Xc = (m._pos[ids] - C0) @ R0 / s0  # in the keyframe's camera (initial-value units)
-                m._pos[ids] = s1 * Xc @ R1.T + C1
-                m._dist0[ids] *= s1 / s0
+                rows = m.rows(ids)
+                Xc = (m._pos[rows] - C0) @ R0 / s0  # in the keyframe's camera (initial-value units)
+                m._pos[rows] = s1 * Xc @ R1.T + C1
+                m._dist0[rows] *= s1 / s0
             k.T_wc = G.make_T(R1, C1)
         # the tracker continues from the corrected keyframe (this frame); its motion in the new units (camera-frame
         # lengths at this keyframe grew by its node's scale)

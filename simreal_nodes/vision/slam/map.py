@@ -17,50 +17,51 @@ MAP_VERSION = 1
 
 
 class MapPoint:
-    """A map point; its position and descriptor live in the map's arrays (fast batch access)."""
+    """A map point; its position and descriptor live in the map's arrays (fast batch access), in its row ``row``
+    (:meth:`Map.rows`; the map renumbers the rows of its live points when it compacts them)."""
 
-    __slots__ = ("_m", "bad", "deformable", "first_kf", "id", "obs")
+    __slots__ = ("_m", "bad", "deformable", "first_kf", "id", "obs", "row")
 
-    def __init__(self, id: int, store: Map, obs=None, deformable: bool = False):
-        self.id, self._m = id, store
+    def __init__(self, id: int, store: Map, row: int, obs=None, deformable: bool = False):
+        self.id, self._m, self.row = id, store, row
         self.obs: dict = obs if obs is not None else {}  # keyframe id -> feature index
-        store._nvis[id] = 1
-        store._nfound[id] = 1
+        store._nvis[row] = 1
+        store._nfound[row] = 1
         self.first_kf = -1
         self.bad = False
         self.deformable = deformable
 
     @property
     def pos(self) -> np.ndarray:
-        return self._m._pos[self.id]
+        return self._m._pos[self.row]
 
     @pos.setter
     def pos(self, v) -> None:
-        self._m._pos[self.id] = v
+        self._m._pos[self.row] = v
 
     @property
     def desc(self) -> np.ndarray:
-        return self._m._desc[self.id]
+        return self._m._desc[self.row]
 
     @desc.setter
     def desc(self, v) -> None:
-        self._m._desc[self.id] = v
+        self._m._desc[self.row] = v
 
     @property
     def n_visible(self) -> int:
-        return int(self._m._nvis[self.id])
+        return int(self._m._nvis[self.row])
 
     @n_visible.setter
     def n_visible(self, v) -> None:
-        self._m._nvis[self.id] = v
+        self._m._nvis[self.row] = v
 
     @property
     def n_found(self) -> int:
-        return int(self._m._nfound[self.id])
+        return int(self._m._nfound[self.row])
 
     @n_found.setter
     def n_found(self, v) -> None:
-        self._m._nfound[self.id] = v
+        self._m._nfound[self.row] = v
 
     @property
     def found_ratio(self) -> float:
@@ -104,6 +105,12 @@ class Map:
         self._next_pt = 0
         self._next_kf = 0
         self.scale_known = False
+        # the points' arrays, one row per point made since the last compaction, in the order of their ids (ids only
+        # grow, so a point's row is found by bisection: rows()); the rows of erased points are dropped by compact(),
+        # so memory follows the live map, not every point ever made (a map that keeps culling what it makes:
+        # about nine points a frame on the joint boot's ping-pong soak)
+        self._ids = np.zeros(1024, np.int64)  # the point id of each row
+        self._n = 0  # rows in use
         self._pos = np.zeros((1024, 3))
         self._desc = np.zeros((1024, 32), np.uint8)
         self._nvis = np.zeros(1024, np.int64)
@@ -118,8 +125,10 @@ class Map:
         self._obs: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
     def _reserve(self, n: int) -> None:
+        """Room for ``n`` rows."""
         if n > len(self._pos):
             cap = max(n, 2 * len(self._pos))
+            self._ids = np.resize(self._ids, cap)
             self._pos = np.resize(self._pos, (cap, 3))
             self._desc = np.resize(self._desc, (cap, 32))
             self._nvis = np.resize(self._nvis, cap)
@@ -131,10 +140,53 @@ class Map:
             dist0[: len(self._dist0)] = self._dist0
             self._dist0 = dist0
 
+    @property
+    def n_rows(self) -> int:
+        """Rows in use (live points and erased ones not yet compacted): the size of a per-row array."""
+        return self._n
+
+    def _find(self, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(row, held) of each id: ``held`` where the map has a row for it (live, or erased since the last
+        compaction)."""
+        rows = np.searchsorted(self._ids[: self._n], ids)
+        held = rows < self._n
+        held[held] = self._ids[rows[held]] == ids[held]
+        return rows, held
+
+    def rows(self, ids) -> np.ndarray:
+        """The array rows of the points ``ids`` (each must have a row: a live point, or one erased since the last
+        :meth:`compact`; KeyError otherwise)."""
+        ids = np.asarray(ids, np.int64)
+        rows, held = self._find(ids)
+        if not np.all(held):
+            raise KeyError(f"map points without a row: {ids[~held][:5].tolist()}")
+        return rows
+
     def alive(self, ids: np.ndarray) -> np.ndarray:
         """Mask of the ids that are live points."""
         ids = np.asarray(ids, np.int64)
-        return self._alive[ids] if len(ids) else np.zeros(0, bool)
+        if not len(ids):
+            return np.zeros(0, bool)
+        rows, held = self._find(ids)
+        held[held] = self._alive[rows[held]]
+        return held
+
+    def compact(self, min_rows: int = 4096, min_dead_share: float = 0.5) -> bool:
+        """Drop the rows of erased points once they are over ``min_dead_share`` of the rows (and there are
+        ``min_rows`` rows or more); live points keep their order and get their new rows. Call it where no row
+        numbers are held (the SLAM: at a frame's start). True when it compacted."""
+        n, live = self._n, len(self.points)
+        if n < min_rows or n == live or n - live <= min_dead_share * n:
+            return False
+        keep = np.flatnonzero(self._alive[:n])
+        for a in (self._ids, self._pos, self._desc, self._nvis, self._nfound, self._alive, self._dist0):
+            a[: len(keep)] = a[keep]
+        self._alive[len(keep):n] = False
+        self._dist0[len(keep):n] = np.nan
+        self._n = len(keep)
+        for r, pid in enumerate(self._ids[: self._n].tolist()):
+            self.points[pid].row = r
+        return True
 
     # -- editing --------------------------------------------------------------------------------------------
     def new_keyframe(self, stamp, T_wc, feats, depth=None) -> KeyFrame:
@@ -147,16 +199,19 @@ class Map:
         return kf
 
     def new_point(self, pos, desc, kf: KeyFrame | None = None, idx: int | None = None) -> MapPoint:
-        self._reserve(self._next_pt + 1)
-        p = MapPoint(self._next_pt, self)
+        self._reserve(self._n + 1)
+        row = self._n
+        self._ids[row] = self._next_pt
+        self._n += 1
+        p = MapPoint(self._next_pt, self, row)
         p.pos, p.desc = pos, desc
-        self._alive[p.id] = True
+        self._alive[row] = True
         self._next_pt += 1
         self.points[p.id] = p
         if kf is not None:
             assert idx is not None  # every caller that links to a keyframe names the feature
             p.first_kf = kf.id
-            self._dist0[p.id] = np.linalg.norm(np.asarray(pos) - kf.center) * kf.feats.scale_factor ** int(
+            self._dist0[row] = np.linalg.norm(np.asarray(pos) - kf.center) * kf.feats.scale_factor ** int(
                 kf.feats.octave[idx])
             self.link(p, kf, idx)
         return p
@@ -186,7 +241,7 @@ class Map:
         p = self.points.pop(pid, None)
         if p is None:
             return
-        self._alive[pid] = False
+        self._alive[p.row] = False
         self._obs = None
         for kid, idx in p.obs.items():
             kf = self.keyframes.get(kid)
@@ -205,14 +260,15 @@ class Map:
                 p.obs.pop(kid, None)
                 if len(p.obs) == 0:
                     self.points.pop(pid)
-                    self._alive[pid] = False
+                    self._alive[p.row] = False
 
     def predicted_level(self, ids: np.ndarray, center: np.ndarray, scale_factor: float) -> np.ndarray:
         """The pyramid level (float) at which the points ``ids`` should be detected from a camera at ``center``;
         NaN where unknown."""
-        d = np.linalg.norm(self._pos[ids] - center, axis=1)
+        rows = self.rows(ids)
+        d = np.linalg.norm(self._pos[rows] - center, axis=1)
         with np.errstate(divide="ignore", invalid="ignore"):
-            return np.log(self._dist0[ids] / np.maximum(d, 1e-9)) / np.log(scale_factor)
+            return np.log(self._dist0[rows] / np.maximum(d, 1e-9)) / np.log(scale_factor)
 
     def fuse(self, keep: MapPoint, drop: MapPoint) -> None:
         """Replace ``drop`` by ``keep`` in every keyframe that observes it."""
@@ -228,7 +284,7 @@ class Map:
         keep.n_visible += drop.n_visible
         keep.n_found += drop.n_found
         self.points.pop(drop.id, None)
-        self._alive[drop.id] = False
+        self._alive[drop.row] = False
         self._obs = None
 
     # -- queries --------------------------------------------------------------------------------------------
@@ -245,7 +301,7 @@ class Map:
                 kid = np.repeat(np.array([k.id for k in kfs], np.int64), [len(k.mp) for k in kfs])
                 idx = np.concatenate([np.arange(len(k.mp), dtype=np.int64) for k in kfs])
                 keep = mp >= 0
-                keep[keep] = self._alive[mp[keep]]
+                keep[keep] = self.alive(mp[keep])
                 self._obs = (mp[keep], kid[keep], idx[keep])
         return self._obs
 
@@ -253,11 +309,11 @@ class Map:
         """Keyframe id -> how many of the points ``ids`` it observes (a point listed twice counts twice; points no
         longer in the map are skipped), ordered by count, most first, then by keyframe id, newest first."""
         ids = np.asarray(ids, np.int64).ravel()
-        ids = ids[(ids >= 0) & (ids < len(self._alive))]
+        ids = ids[self.alive(ids)]
         pid, kid, _ = self.observations()
         if len(ids) == 0 or len(pid) == 0:
             return {}
-        weight = np.bincount(ids, minlength=len(self._alive))[pid]
+        weight = np.bincount(self.rows(ids), minlength=self._n)[self.rows(pid)]
         sel = weight > 0
         if not np.any(sel):
             return {}
@@ -295,7 +351,8 @@ class Map:
             ids = ids[self.alive(ids)]
         if len(ids) == 0:
             return np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 32), np.uint8)
-        return ids, self._pos[ids], self._desc[ids]
+        rows = self.rows(ids)
+        return ids, self._pos[rows], self._desc[rows]
 
     def update_descriptor(self, p: MapPoint) -> None:
         """Representative descriptor: the observation with the least median distance to the others."""
@@ -363,12 +420,21 @@ class Map:
                     m.keyframes[kf.id] = kf
                 g = f["points"]
                 ids = g["id"][()]
-                m._reserve(int(ids.max()) + 1 if len(ids) else 1)
-                for pid, pos, desc, dfm in zip(ids, g["pos"][()], g["desc"][()], g["deformable"][()]):
-                    p = MapPoint(int(pid), m, deformable=bool(dfm))
-                    p.pos, p.desc = pos, desc
-                    m._alive[int(pid)] = True
-                    m.points[int(pid)] = p
+                pos_all, desc_all, dfm_all = g["pos"][()], g["desc"][()], g["deformable"][()]
+                if not len(ids) == len(pos_all) == len(desc_all) == len(dfm_all):
+                    raise SimrealError(f"{path}: the points' datasets differ in length")
+                order = np.argsort(ids, kind="stable")
+                if len(ids) and (ids[order[0]] < 0 or np.any(np.diff(ids[order]) == 0)):
+                    raise SimrealError(f"{path}: negative or repeated point ids")
+                m._reserve(max(len(ids), 1))
+                for row, k in enumerate(order):
+                    pid = int(ids[k])
+                    m._ids[row] = pid
+                    m._n = row + 1
+                    p = MapPoint(pid, m, row, deformable=bool(dfm_all[k]))
+                    p.pos, p.desc = pos_all[k], desc_all[k]
+                    m._alive[row] = True
+                    m.points[pid] = p
                 for pid, kid, idx in g["obs"][()]:
                     if int(pid) in m.points and int(kid) in m.keyframes:
                         m.points[int(pid)].obs[int(kid)] = int(idx)

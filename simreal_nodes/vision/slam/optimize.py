@@ -64,12 +64,13 @@ def ba_request(m, kfs_opt, kfs_fixed, pt_ids: np.ndarray) -> dict:
     kfs = list(kfs_opt) + list(kfs_fixed)
     pt_ids = np.asarray(pt_ids, np.int64)
     pid, kid, idx = m.observations()
-    jmap = np.full(len(m._alive), -1, np.int64)
-    jmap[pt_ids] = np.arange(len(pt_ids))
+    jmap = np.full(m.n_rows, -1, np.int64)  # row -> the point's index in pt_ids
+    jmap[m.rows(pt_ids)] = np.arange(len(pt_ids))
     kmap = np.full(max([k.id for k in kfs] + [int(kid.max()) if len(kid) else 0]) + 1, -1, np.int64)
     kmap[[k.id for k in kfs]] = np.arange(len(kfs))
-    sel = (jmap[pid] >= 0) & (kmap[kid] >= 0)
-    obs_p, obs_k, fi = jmap[pid[sel]], kmap[kid[sel]], idx[sel]
+    prow = m.rows(pid)
+    sel = (jmap[prow] >= 0) & (kmap[kid] >= 0)
+    obs_p, obs_k, fi = jmap[prow[sel]], kmap[kid[sel]], idx[sel]
     order = np.lexsort((obs_k, obs_p))
     obs_p, obs_k, fi = obs_p[order], obs_k[order], fi[order]
     uv = np.zeros((len(fi), 2))
@@ -85,7 +86,7 @@ def ba_request(m, kfs_opt, kfs_fixed, pt_ids: np.ndarray) -> dict:
             z[at] = kf.depth[fi[at]]
     return {"kf_ids": np.array([kf.id for kf in kfs], np.int64), "poses": np.array([kf.T_wc for kf in kfs]),
             "fixed": np.array([False] * len(kfs_opt) + [True] * len(kfs_fixed)),
-            "pt_ids": pt_ids, "pos": m._pos[pt_ids].copy().reshape(-1, 3),
+            "pt_ids": pt_ids, "pos": m._pos[m.rows(pt_ids)].reshape(-1, 3),
             "obs_p": obs_p, "obs_k": obs_k, "uv": uv, "z": z, "sigma": sig}
 
 

@@ -94,7 +94,7 @@ class Relocalizer:
         m, ids = m[alive], ids[alive]
         if len(m) < 15:
             return no_matches()
-        T0 = pnp_ransac(self.ctx.map._pos[ids], f.und[m[:, 0]], self.ctx.K)
+        T0 = pnp_ransac(self.ctx.map._pos[self.ctx.map.rows(ids)], f.und[m[:, 0]], self.ctx.K)
         if T0 is None:
             return no_matches()
         match = np.c_[m[:, 0], ids]

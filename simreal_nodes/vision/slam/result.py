@@ -39,6 +39,6 @@ def frame_result(m: Map, state: int, reason: str, T_wc: np.ndarray, f: Features,
     """A tracked frame's result: feature ``kp[k]`` observes map point ``ids[k]`` (a pose inlier where ``inl``)."""
     ids = np.asarray(ids, np.int64)
     kp = np.asarray(kp, np.int64)
-    pos = m._pos[ids].copy() if len(ids) else np.zeros((0, 3))
+    pos = m._pos[m.rows(ids)] if len(ids) else np.zeros((0, 3))
     return TrackResult(state, reason, T_wc, len(f), len(ids), int(np.sum(inl)), ids, f.uv[kp], np.asarray(inl, bool),
                        pos)

@@ -128,6 +128,7 @@ class Slam:
         self.tracks.new_frame(gray)
         tim: dict[str, float] = {}
         self.mapper.poll()
+        ctx.map.compact()  # the rows of points the mapping erased go, once they outnumber the live ones
         quality = image_problem(gray)
         feats = Features.empty() if quality else self.extractor.extract(gray, self.cam, focus=focus,
                                                                            focus_share=self.config.focus_share)

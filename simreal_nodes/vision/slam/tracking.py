@@ -86,7 +86,7 @@ class Tracker:
             ctx.lose()
             return TrackResult(LOST, f"lost: only {int(inl.sum())} inliers after tracking the local map (need {need})",
                                None, n_matches=len(match), timings=tim), None
-        ctx.map._nfound[match[inl, 1]] += 1
+        ctx.map._nfound[ctx.map.rows(match[inl, 1])] += 1
         ctx.state = OK
         ctx.velocity = T @ G.inv(ctx.T_cw_last)
         ctx.T_cw_last = T
@@ -98,7 +98,7 @@ class Tracker:
         """Motion-only optimization of the pose on the matches, from ``T_init``; (T_cw, inlier mask)."""
         if len(match) == 0:
             return T_init, np.zeros(0, bool)
-        P = self.ctx.map._pos[match[:, 1]]
+        P = self.ctx.map._pos[self.ctx.map.rows(match[:, 1])]
         return refine_pose(T_init, P, f.und[match[:, 0]], f.sigma2()[match[:, 0]], self.ctx.K)
 
     def _pnp_local_map(self, f: Features, ids: np.ndarray) -> tuple[np.ndarray | None, np.ndarray, np.ndarray]:
@@ -164,11 +164,12 @@ class Tracker:
             ids = ids[~np.isin(ids, np.asarray(exclude_pt, np.int64))]
         if len(ids) == 0 or len(f) == 0:
             return np.zeros((0, 2), np.int64)
-        P, D = m._pos[ids], m._desc[ids]
+        rows = m.rows(ids)
+        P, D = m._pos[rows], m._desc[rows]
         uv, zc = project(T_cw, P, self.ctx.K)
         W, H = self.ctx.cam.width, self.ctx.cam.height
         vis = (zc > 0) & (uv[:, 0] >= -10) & (uv[:, 0] < W + 10) & (uv[:, 1] >= -10) & (uv[:, 1] < H + 10)
-        m._nvis[ids[vis]] += 1
+        m._nvis[rows[vis]] += 1
         if not np.any(vis):
             return np.zeros((0, 2), np.int64)
         ids, uv, D = ids[vis], uv[vis], D[vis]

@@ -1,0 +1,105 @@
+"""The SLAM map's point store: rows that follow the live map, not every point ever made (issue 20's soak)."""
+
+import h5py
+import numpy as np
+import pytest
+
+from simreal_nodes.errors import SimrealError
+from simreal_nodes.vision.slam.map import Map
+from simreal_nodes.vision.slam.system import Slam
+from tests.synthdata import sequence
+
+
+def test_a_map_that_keeps_culling_what_it_makes_keeps_its_rows_bounded():
+    """Points made and erased as a long live run does (ten made a step, most erased a few steps later, a few kept
+    for good): the rows stay within a few times the live points while the ids keep growing, every live point keeps
+    its own position, descriptor and counts through the compactions, and an erased id reads as dead."""
+    m = Map()
+    rng = np.random.default_rng(0)
+    truth: dict[int, tuple[np.ndarray, np.ndarray, int]] = {}
+    compactions, most_rows = 0, 0
+    for step in range(3000):
+        compactions += m.compact(min_rows=256)
+        for _ in range(10):
+            p = m.new_point(rng.normal(size=3), rng.integers(0, 256, 32, dtype=np.uint8))
+            p.n_visible = int(rng.integers(1, 100))
+            truth[p.id] = (p.pos.copy(), p.desc.copy(), p.n_visible)
+        for pid in [i for i in m.points if i >= m._next_pt - 60 and i % 7 != 0 and rng.random() < 0.3]:
+            m.erase_point(pid)
+            truth.pop(pid)
+        most_rows = max(most_rows, m.n_rows)
+    assert m._next_pt == 30000 and compactions > 10
+    assert len(m.points) == len(truth) and len(m.points) > 4000  # the kept seventh, and the young ones
+    assert most_rows <= 2 * len(m.points) + 256 and len(m._pos) <= 4 * len(m.points) + 1024
+    ids = np.array(sorted(truth), np.int64)
+    got_ids, P, D = m.point_arrays()
+    assert np.array_equal(np.sort(got_ids), ids)
+    order = np.argsort(got_ids)
+    assert np.array_equal(P[order], np.array([truth[i][0] for i in ids]))
+    assert np.array_equal(D[order], np.array([truth[i][1] for i in ids]))
+    assert [m.points[i].n_visible for i in ids[:50]] == [truth[i][2] for i in ids[:50]]
+    dead = np.setdiff1d(np.arange(30000), ids)[:100]
+    assert not m.alive(dead).any() and m.alive(ids).all()
+    assert m.alive(np.array([10**12, -5])).tolist() == [False, False]  # ids never made
+    with pytest.raises(KeyError, match="without a row"):
+        m.rows(dead[:3])  # compacted away: reading one is a bug, never another point's row
+
+
+@pytest.fixture(scope="module")
+def room():
+    return sequence("slam_room", 640, 480, duration=3.0, fps=30.0, ssaa=1)
+
+
+@pytest.mark.parametrize("mode", ["rgbd", "mono"])
+def test_compacting_after_every_frame_changes_no_result(room, mode, monkeypatch):
+    """The rows are storage only: a SLAM run that compacts whenever one erased point's row is left gives the same
+    poses and the same observed points (ids and positions) to the bit as one that never compacts."""
+    real, compacted = Map.compact, []
+
+    def every_frame(m: Map, *_args) -> bool:
+        compacted.append(real(m, 0, 0.0))
+        return compacted[-1]
+
+    def run(compact_every_frame: bool):
+        monkeypatch.setattr(Map, "compact", every_frame if compact_every_frame else lambda *_: False)
+        slam = Slam(room["cam"], mode, 1000)
+        out = []
+        for i in range(len(room["gray"])):
+            r = slam.track(room["gray"][i], i, depth=room["depth"][i] if mode == "rgbd" else None)
+            out.append((r.T_wc, r.obs_ids.copy(), r.obs_pos.copy()))
+        return slam, out
+
+    slam_a, a = run(False)
+    slam_b, b = run(True)
+    assert sum(compacted) >= 3  # points were erased and their rows dropped, several times
+    assert slam_b.map.n_rows < slam_a.map.n_rows
+    for (Ta, ia, Pa), (Tb, ib, Pb) in zip(a, b):
+        assert (Ta is None) == (Tb is None)
+        if Ta is not None:
+            assert np.array_equal(Ta, Tb)
+        assert np.array_equal(ia, ib) and np.array_equal(Pa, Pb)
+    assert sum(T is not None for T, _, _ in a) >= 30  # poses to compare (mono starts after a while)
+
+
+def test_a_map_file_is_read_into_as_many_rows_as_it_has_points(tmp_path):
+    """A point id far beyond the file's point count (a corrupt or hostile file) costs no memory by its size;
+    repeated or negative ids are refused with a reason."""
+    m = Map()
+    rng = np.random.default_rng(1)
+    for _ in range(5):
+        m.new_point(rng.normal(size=3), rng.integers(0, 256, 32, dtype=np.uint8))
+    f = tmp_path / "map.h5"
+    m.save(f)
+    with h5py.File(f, "r+") as h:
+        ids = h["points/id"][()]
+        ids[-1] = 2**40
+        h["points/id"][...] = ids
+    m2 = Map.load(f)
+    assert m2.n_rows == 5 and len(m2._pos) < 2048
+    assert np.array_equal(m2.points[2**40].pos, m.points[4].pos)
+    assert m2._next_pt == 2**40 + 1
+    with h5py.File(f, "r+") as h:
+        ids[0] = ids[1]
+        h["points/id"][...] = ids
+    with pytest.raises(SimrealError, match="repeated point ids"):
+        Map.load(f)
