@@ -18,7 +18,7 @@ def test_a_map_that_keeps_culling_what_it_makes_keeps_its_rows_bounded():
     rng = np.random.default_rng(0)
     truth: dict[int, tuple[np.ndarray, np.ndarray, int]] = {}
     compactions, most_rows = 0, 0
-    for step in range(3000):
+    for _ in range(3000):
         compactions += m.compact(min_rows=256)
         for _ in range(10):
             p = m.new_point(rng.normal(size=3), rng.integers(0, 256, 32, dtype=np.uint8))
