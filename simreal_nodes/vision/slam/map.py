@@ -107,8 +107,8 @@ class Map:
         self.scale_known = False
         # the points' arrays, one row per point made since the last compaction, in the order of their ids (ids only
         # grow, so a point's row is found by bisection: rows()); the rows of erased points are dropped by compact(),
-        # so memory follows the live map, not every point ever made (a map that keeps culling what it makes:
-        # about nine points a frame on the joint boot's ping-pong soak)
+        # so memory follows the live map, not every point ever made (a map that keeps culling what it makes, as
+        # the soak's camera sweeping back and forth over the boot)
         self._ids = np.zeros(1024, np.int64)  # the point id of each row
         self._n = 0  # rows in use
         self._pos = np.zeros((1024, 3))
