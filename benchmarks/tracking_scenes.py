@@ -298,7 +298,8 @@ iterations, the normals) and changes the beams' accuracy by nothing measurable o
 table below was rerun with it in stop 46: the foam beam's errors moved by 0.1 mm at most, its tracker time rose from 109
 to 152 ms a frame at 640 x 480 and from 140 to 189 ms at 1280 x 720, and the aluminium bar stays unreadable by dense;
 the boot's table measures map points, which it does not touch; the scenes rendered by their own model,
-`tracking_scenes.md`, were rerun after it in stop 68). g belongs to the light and the object, the same in every frame: what each frame the tracker judged sound measured
+`tracking_scenes.md`, were rerun after it in stop 68). g belongs to the light and the object, the same in every frame:
+what each frame the tracker judged sound measured
 of it (its information with the frame's other unknowns marginalised out, a Schur complement) is fused over about 50 such
 frames into the next frames' prior (`tracking.dense_shading_frames`, 50; 0: each frame alone), so that a barely bent
 frame cannot pass its deformation off as shading (`docs/family.md`, "Plates"). Frames the tracker did not judge sound
@@ -479,7 +480,8 @@ cheaper in four ways. Each projection is now one affine map (object frame to cam
 Image gradients are chained through (n, 3) rows, so the (n, 2, p) pixel Jacobian is never built. The search's
 candidates (the refinement's grid, the coarse search's) are costed in one pass. And the cost at an iteration's start
 comes from that iteration's own residuals. Against the code before it (8b92757), on a host whose CPU probe read 25 ms
-(stop 44's graph table's host read 14 ms), the tracker's time per frame fell to 0.73 of it (pairs' median; 0.63-0.88 over
+(stop 44's graph table's host read 14 ms), the tracker's time per frame fell to 0.73 of it (pairs' median; 0.63-0.88
+over
 six pairs). The median over the runs of each run's p50 was 268 ms against 366 ms. The estimates did not move: at most
 1.7e-12 % of the load's range apart, and no frame's state differs. What remains is spread over the stages:
 Gauss-Newton 92-149 ms, the refinement 52-74 ms, the camera's check on the surroundings 33-37 ms, and the
