@@ -114,6 +114,7 @@ def ros_environment(base: dict | None = None, discovery_range: str | None = None
 STANDBY_ENV = "SIMREAL_STANDBY"  # "1" in a standby process's environment
 LAUNCHER_PID_ENV = "SIMREAL_LAUNCHER_PID"  # a node ends when the process of this pid (its launcher) does
 PROMOTE = "go"  # the line written to a standby's stdin to make it the node
+STANDBY_READY = b"standby ready"  # how a standby's ready line starts (:func:`simreal_nodes.ros.node.run_node`)
 STANDBY_DELAY_S = 5.0  # a standby starts this long after the node it stands behind (start or restart)
 WATCH_PERIOD_S = 0.05  # how often the launcher looks for exited nodes
 EXECUTOR_ENV = "SIMREAL_EXECUTOR"  # the executor node processes (and the replay's player) spin on: EXECUTORS
@@ -132,6 +133,7 @@ class _Proc:
     standby: subprocess.Popen[bytes] | None = None
     standby_due: float | None = None  # time.monotonic() at which to start the next standby
     standby_failures: int = 0
+    standby_ready: bool = False  # the standby printed its ready line (imports done, participant up)
 
 
 class Launcher:
@@ -202,6 +204,8 @@ class Launcher:
         env = self.env | {LAUNCHER_PID_ENV: str(os.getpid())} | ({STANDBY_ENV: "1"} if standby else {})
         popen = subprocess.Popen(p.cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                                  stdin=subprocess.PIPE if standby else subprocess.DEVNULL, start_new_session=True)
+        if standby:
+            p.standby_ready = False
         pump = threading.Thread(target=self._pump, args=(p, popen, log), daemon=True)
         pump.start()
         self._pumps.append(pump)
@@ -234,6 +238,8 @@ class Launcher:
         assert popen.stdout is not None  # started with stdout=PIPE
         with log:
             for line in iter(popen.stdout.readline, b""):
+                if popen is p.standby and line.startswith(STANDBY_READY):
+                    p.standby_ready = True
                 log.write(line)
                 log.flush()
                 self.echo(f"[{p.spec.name}] {line.decode(errors='replace').rstrip()}")
@@ -282,6 +288,26 @@ class Launcher:
             p.standby_due = None
             p.standby = self._popen(p, standby=True)
             self.echo(f"[launch] standby for {p.spec.name} started (pid {p.standby.pid})")
+
+    def start_standbys(self, timeout_s: float) -> bool:
+        """Start every standby still waiting for its delay now and wait until each is ready (False: not all within
+        ``timeout_s``). For a replay, before its first frame: on 2 cores the standbys' imports, started by the delay
+        a few seconds into the bag, took CPU from the nodes just as they built their map (stop 87: the joint boot's
+        localization got 77 of 240 frames instead of 136, with gaps of up to 21 frames while it started, and lost
+        its map). A live camera has no first frame to hold back; there the delay stands."""
+        if not self.standby:
+            return True
+        with self._lock:
+            for p in self.procs:
+                if p.standby_due is not None:
+                    p.standby_due = time.monotonic()
+                self._watch_standby(p)
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            if all(p.standby is None or p.standby_ready for p in self.procs):
+                return True
+            time.sleep(0.05)
+        return False
 
     @staticmethod
     def _end_standby(p: _Proc) -> subprocess.Popen[bytes] | None:

@@ -97,6 +97,24 @@ def test_a_node_that_exits_is_replaced_by_its_standby(tmp_path, monkeypatch):
     assert "[ingest] standby ends" in lines
 
 
+def test_a_replay_starts_the_standbys_before_its_first_frame(tmp_path):
+    """``start_standbys`` starts a standby due only after the (default, 5 s) delay at once and returns when it has
+    said it is ready: a replay plays its first frame only then (the standbys' imports took the nodes' CPU in the
+    first seconds of the bag, stop 87). A launcher without standbys has none to wait for."""
+    launcher, lines = fake_launcher(tmp_path, respawn=2, standby=True)
+    p = launcher.procs[0]
+    with launcher:
+        assert p.standby is None and p.standby_due is not None  # waiting for its delay
+        t0 = time.monotonic()
+        assert launcher.start_standbys(timeout_s=20.0)
+        assert time.monotonic() - t0 < 4.0  # not the delay
+        assert p.standby is not None and p.standby_ready and "[ingest] standby ready" in lines
+        assert p.standby.poll() is None
+    plain, _ = fake_launcher(tmp_path, respawn=2, standby=False)
+    with plain:
+        assert plain.start_standbys(timeout_s=0.0)
+
+
 def test_without_standby_a_restart_is_a_new_process(tmp_path):
     launcher, lines = fake_launcher(tmp_path, respawn=1, standby=False)
     p = launcher.procs[0]

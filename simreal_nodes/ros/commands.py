@@ -114,6 +114,8 @@ def replay(bag: str, scene_file: str, rate: float = 1.0, lossless: bool = False,
                                              if p.popen is None and p.restarts >= launcher.respawn]
             if not player.wait_ready(ready_timeout_s):
                 raise SimrealError("the graph did not come up; see the node output above")
+            if launcher and not launcher.start_standbys(ready_timeout_s):
+                echo(f"[replay] warning: not every standby was ready within {ready_timeout_s:.0f} s; playing anyway")
             cpu0, own0 = (launcher.cpu_seconds() if launcher else {}), time.process_time()
             stats = player.play(bags.read_bag(bag, report, topics=inputs.keys()), hold_for=hold_for)
             cpu1 = launcher.cpu_seconds() if launcher else {}

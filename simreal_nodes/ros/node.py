@@ -23,7 +23,7 @@ from rclpy.node import Node
 from sensor_msgs.msg import Image
 from std_msgs.msg import Header
 
-from simreal_nodes.launch import EXECUTOR_ENV, LAUNCHER_PID_ENV, PROMOTE, STANDBY_ENV, executor_kind
+from simreal_nodes.launch import EXECUTOR_ENV, LAUNCHER_PID_ENV, PROMOTE, STANDBY_ENV, STANDBY_READY, executor_kind
 from simreal_nodes.lifetime import end_with_parent
 from simreal_nodes.metrics import StageMetrics
 from simreal_nodes.ros.convert import image_view, ns_to_stamp, stamp_ns
@@ -254,7 +254,7 @@ def _standby_until_promoted() -> Node | None:
     exists, because the participant goes with the context's last node."""
     placeholder = Node(f"_simreal_standby_{os.getpid()}", use_global_arguments=False,
                        start_parameter_services=False, enable_rosout=False)
-    print(f"standby ready (pid {os.getpid()})", flush=True)
+    print(f"{STANDBY_READY.decode()} (pid {os.getpid()})", flush=True)
     line = sys.stdin.readline()
     if line.strip() != PROMOTE:
         placeholder.destroy_node()

@@ -455,6 +455,35 @@ def test_a_depth_camera_s_disparity_noise_weighs_its_depth_in_the_bundle_adjustm
     assert errs[0.05] < 0.3 * errs[0.0] and errs[0.05] < 0.003
 
 
+def test_a_point_flagged_deformable_while_the_bundle_adjustment_ran_keeps_the_tracker_s_word():
+    """Asynchronous mapping: the BA request holds a point rigid; before its result comes back the tracker flags the
+    point deformable (it lies on the turning lever) and moves it to its estimate. The result neither moves it back
+    nor, where the BA found it an outlier (its depth twice what it was), unlinks or erases it; the rigid points get
+    the BA's positions. Stop 87: applied anyway, the live joint boot's lever points were erased as the lever
+    turned, and the tracker lost every measurement on it."""
+    from simreal_nodes.vision.slam import optimize as O
+
+    ctx = context("rgbd")
+    kfs = four_keyframes(ctx)
+    m = ctx.map
+    k = kfs[2]
+    fis = np.flatnonzero(k.mp >= 0)
+    fi, rigid = int(fis[7]), int(k.mp[fis[20]])
+    pid = int(k.mp[fi])
+    k.depth[fi] *= 2.0
+    req = O.ba_request(m, kfs[2:], kfs[:2], np.array(sorted(m.points)))
+    res = O.bundle_adjust(req, ctx.K, ctx.baseline, 10)
+    assert (pid, k.id) in res["outliers"]  # what the result would do to it, had it stayed rigid
+    P_tracker = m.points[pid].pos + np.array([0.0, 0.05, 0.0])
+    m.points[pid].deformable = True
+    m.points[pid].pos = P_tracker
+    LocalMapper(ctx, async_mapping=False)._apply_ba(res, req)
+    assert pid in m.points and k.id in m.points[pid].obs
+    np.testing.assert_array_equal(m.points[pid].pos, P_tracker)
+    j = int(np.flatnonzero(np.asarray(res["pt_ids"]) == rigid)[0])
+    np.testing.assert_allclose(m.points[rigid].pos, res["pos"][j])
+
+
 @pytest.mark.parametrize("interrupt", [True, False])
 def test_a_waiting_keyframe_stops_the_running_asynchronous_bundle_adjustment(interrupt):
     """Asynchronous mapping: a second local BA asked for while the mapping process runs the first waits; with

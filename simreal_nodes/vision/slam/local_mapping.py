@@ -394,13 +394,18 @@ class LocalMapper:
                 if C is not None:
                     q.pos = C[:3, :3] @ q.pos + C[:3, 3]
             m.version += 1
+        # a point flagged deformable while an asynchronous BA ran (the request held it rigid) is the tracker's now:
+        # its position follows the tracker's estimate and its keyframe links are the object's rest observations.
+        # The BA's word on it (moved as if rigid, or an outlier because it deformed) is dropped. Applied anyway, it
+        # unlinked and erased the joint boot's lever points as the lever turned: live on 2 cores the tracker lost
+        # every measurement on it for seconds (stop 87); the same run with synchronous BA tracked.
         for pid, P in zip(res["pt_ids"], res["pos"]):
-            if (p := m.points.get(int(pid))) is not None:
+            if (p := m.points.get(int(pid))) is not None and not p.deformable:
                 p.pos = P
         for pid, kid in res["outliers"]:
             p = m.points.get(pid)
             kf = m.keyframes.get(kid)
-            if p is None or kf is None:
+            if p is None or kf is None or p.deformable:
                 continue
             m.unlink(p, kf)
             if len(p.obs) < (1 if self.ctx.mode != "mono" else 2):
