@@ -146,6 +146,14 @@ def test_joint_boot_lever_angle_and_unknown_rotation_from_map_points():
           f"p90 {np.percentile(err_theta, 90):.2f}, states {np.bincount(states, minlength=4)}")
     assert np.median(err_theta) < 1.5 and np.percentile(err_theta, 90) < 8.0
     assert not np.any(states == EstimateState.LOST)
+    # every 3rd frame (a graph taking 10 of 30 frames a second): fewer informative frames than constant_frames
+    # counts, so alpha_z is never frozen; seen well once, it is held at the median of those frames, not moved by the
+    # weaker ones. Stop 87: 0.5 degree off at the end; 138 before, left free while the lever came back to rest
+    truth, est, states = _track_map_points("joint_boot", "boot", seq=seq, every=3, feedback_delay=1)
+    err_alpha = np.degrees(np.abs(est[:, 1] - truth[:, 1]))
+    print(f"joint boot, every 3rd frame: alpha_z {err_alpha[-1]:.2f} deg off at the end, "
+          f"median {np.median(err_alpha):.2f}")
+    assert err_alpha[-1] < 1.5
     truth, est, states = _track_map_points("joint_boot", "boot", seq=seq)
     loaded = truth[:, 0] > 0.02  # the lever is moving
     err_theta = np.abs(est[loaded, 0] - truth[loaded, 0])
