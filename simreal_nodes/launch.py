@@ -206,7 +206,7 @@ class Launcher:
                                  stdin=subprocess.PIPE if standby else subprocess.DEVNULL, start_new_session=True)
         if standby:
             p.standby_ready = False
-        pump = threading.Thread(target=self._pump, args=(p, popen, log), daemon=True)
+        pump = threading.Thread(target=self._pump, args=(p, popen, log, standby), daemon=True)
         pump.start()
         self._pumps.append(pump)
         return popen
@@ -234,11 +234,11 @@ class Launcher:
         self._schedule_standby(p)
         return True
 
-    def _pump(self, p: _Proc, popen: subprocess.Popen[bytes], log: IO[bytes]) -> None:
+    def _pump(self, p: _Proc, popen: subprocess.Popen[bytes], log: IO[bytes], standby: bool = False) -> None:
         assert popen.stdout is not None  # started with stdout=PIPE
         with log:
             for line in iter(popen.stdout.readline, b""):
-                if popen is p.standby and line.startswith(STANDBY_READY):
+                if standby and line.startswith(STANDBY_READY):  # (p.standby is set only after this thread starts)
                     p.standby_ready = True
                 log.write(line)
                 log.flush()
@@ -293,8 +293,8 @@ class Launcher:
         """Start every standby still waiting for its delay now and wait until each is ready (False: not all within
         ``timeout_s``). For a replay, before its first frame: on 2 cores the standbys' imports, started by the delay
         a few seconds into the bag, took CPU from the nodes just as they built their map (stop 87: the joint boot's
-        localization got 77 of 240 frames instead of 136, with gaps of up to 21 frames while it started, and lost
-        its map). A live camera has no first frame to hold back; there the delay stands."""
+        localization got few frames, far apart, in those seconds and lost its map). A live camera has no first frame
+        to hold back; there the delay stands."""
         if not self.standby:
             return True
         with self._lock:

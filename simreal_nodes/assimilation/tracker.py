@@ -1015,8 +1015,8 @@ class DeformableTracker:
             if self._const_samples:
                 # seen well before, not by this frame: held at the median of the frames that saw it, not moved by
                 # weaker evidence. A graph that takes fewer frames a second gathers fewer informative frames than
-                # constant_frames counts; left free between them and after them, the live joint boot's alpha_z
-                # wandered 2-6 degrees from the truth (stop 87: 0.1 lossless)
+                # constant_frames counts; left free between them and after them, alpha_z wandered (stop 87: the boot
+                # sample's every 3rd frame, tests/assimilation/test_tracker.py, ended 138 degrees off; 0.5 held)
                 held = np.median(np.array(self._const_samples), axis=0)
                 self.values[const] = held[const]
                 est.values = np.where(const, held, est.values)
