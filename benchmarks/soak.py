@@ -2,6 +2,7 @@
 
     ./run bench soak                      # 10 000 frames at the bag's 30 fps (about 6 minutes)
     python -m benchmarks.soak --frames 2000
+    python -m benchmarks.soak --param localization.async_mapping=false --out soak_sync_mapping   # a knob row
 
 Scene: the joint boot sample (`bags/joint_boot`, 640x480 RGB-D, 240 frames at 30 fps; the graph ingest ->
 RGB-D SLAM -> tracker -> overlay), played forward, then backward, then forward again (the camera's path stays
@@ -59,7 +60,7 @@ def ping_pong(bag: Path, n_frames: int, fps: float):
             yield bags.BagMessage(m.topic, m.msgtype, ns, restamp(m.raw, ns))
 
 
-def run(n_frames: int, fps: float) -> dict:
+def run(n_frames: int, fps: float, params: dict | None = None) -> dict:
     bag, scene = sample_bag("joint_boot", echo=print)
     pids: dict[str, int] = {}
     rss: list[tuple[float, str, float]] = []
@@ -100,13 +101,15 @@ def run(n_frames: int, fps: float) -> dict:
     bags.read_bag = read_bag
     try:
         with tempfile.TemporaryDirectory() as d:
-            stats, _, _ = replay(str(bag), str(scene), rate=1.0, echo=echo, metrics_json=str(Path(d) / "m.json"))
+            stats, _, _ = replay(str(bag), str(scene), rate=1.0, echo=echo, metrics_json=str(Path(d) / "m.json"),
+                                 extra_params=params)
     finally:
         bags.read_bag = READ_BAG
         bagplay.Player._publish_image = original
         stop.set()
         th.join(5)
-    return {"frames": n_frames, "fps": fps, "stats": stats.as_dict(), "rss": rss, "exits": restarts,
+    return {"frames": n_frames, "fps": fps, "params": params or {}, "stats": stats.as_dict(), "rss": rss,
+            "exits": restarts,
             "latency_ms": {n: list(v) for n, v in stats.latency_ms.items()}}
 
 
@@ -136,9 +139,19 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--frames", type=int, default=10_000)
     ap.add_argument("--fps", type=float, default=30.0)
+    ap.add_argument("--param", action="append", default=[], metavar="NODE.NAME=VALUE",
+                    help="a node parameter for this run (a knob; JSON value), e.g. localization.async_mapping=false")
+    ap.add_argument("--out", default="soak", help="results name (default: soak)")
     ap.add_argument("--report", action="store_true", help="rewrite table and plot from the results JSON")
     a = ap.parse_args()
-    r = json.loads((RESULTS / "soak.json").read_text())["run"] if a.report else run(a.frames, a.fps)
+    params: dict = {}
+    for p in a.param:
+        key, _, value = p.partition("=")
+        node, _, name = key.partition(".")
+        if not (node and name and value):
+            ap.error(f"--param {p!r}: expected NODE.NAME=VALUE")
+        params.setdefault(node, {})[name] = json.loads(value)
+    r = json.loads((RESULTS / f"{a.out}.json").read_text())["run"] if a.report else run(a.frames, a.fps, params)
     rows = summarize(r)
     cols = [("node", "node", "{}"), ("rss_start", "RSS after 1000 frames (MB)", "{:.0f}"),
             ("rss_end", "RSS at the end (MB)", "{:.0f}"), ("slope", "growth, 2nd half (MB / 1000 frames)", "{:.2f}"),
@@ -166,8 +179,14 @@ def main() -> None:
         fig.tight_layout()
         return fig
 
-    save("soak", rows, cols, f"Soak: {r['frames']} frames of RGB-D SLAM -> tracker -> overlay, live",
-         f"`python -m benchmarks.soak --frames {r['frames']}` (see its docstring): the joint boot sample played "
+    knob = ", ".join(f"{n}.{k}: {json.dumps(v)}" for n, kv in sorted(r.get("params", {}).items())
+                     for k, v in sorted(kv.items()))
+    save(a.out, rows, cols, f"Soak: {r['frames']} frames of RGB-D SLAM -> tracker -> overlay, live"
+         + (f" ({knob})" if knob else ""),
+         f"`python -m benchmarks.soak --frames {r['frames']}"
+         + "".join(f" --param {n}.{k}={json.dumps(v)}" for n, kv in sorted(r.get("params", {}).items())
+                   for k, v in sorted(kv.items()))
+         + (f" --out {a.out}" if a.out != "soak" else "") + "` (see its docstring): the joint boot sample played "
          f"forward and backward at {r['fps']:.0f} fps, live. Frames published {st['frames_published']}, finished "
          f"by every node {st['frames_completed']} ({st.get('fps_through', float('nan')):.1f} fps through), the rest "
          f"skipped as live load shedding. Node exits during the run: {len(r.get('exits', [])) or 'none'}. RSS "

@@ -107,6 +107,11 @@ class TrackerConfig:
     # with depth_fit on a body of revolution about its z axis (the boot): alpha_z reported with the depth fit's turn
     # about that axis, taken from the frames whose depth holds it (DeformableTracker.depth_turn)
     depth_turn: bool = False
+    # with depth_fit: a frame with too few image measurements on the object (its map points lost while a busy
+    # localization skipped frames, or the object moved before it was placed) is read from its depth alone, the
+    # constants (alpha_z) held, and reported low-confidence, instead of lost with its last values (stop 88: the live
+    # joint boot, benchmarks/live_slam.py; measured on the boot family's development seeds, docs/family.md)
+    depth_alone: bool = True
 
 
 @dataclass
@@ -482,7 +487,11 @@ class DeformableTracker:
         if self.cfg.measurements == "map_points":
             self._read_reference(est, T_wc, depth)
             if ids is None or len(ids) == 0 or P_map is None or uv is None:
-                est.state, est.reason = EstimateState.LOST, "no measurements: no map points observed on the object"
+                why = "no map points observed on the object"
+                alone = self._depth_alone(est, T_wc, depth, why)
+                if alone is not None:
+                    return alone
+                est.state, est.reason = EstimateState.LOST, f"no measurements: {why}"
                 return est
             ids, P_map, uv = self._link_observed(T_wc, ids, P_map, uv)
             meas = self._map_point_measurements(ids, P_map, uv)
@@ -508,9 +517,14 @@ class DeformableTracker:
                 est.debug["rest_correction"] = self.rest_correction
         if meas is None or len(meas[0]) < self.cfg.min_measurements:
             n = 0 if meas is None else len(meas[0])
+            why = (f"too few measurements on the object ({n}, need {self.cfg.min_measurements}; "
+                   f"{found} candidates seen)")
+            alone = self._depth_alone(est, T_wc, depth, why) if self.cfg.measurements == "map_points" else None
+            if alone is not None:
+                alone.measurements = n
+                return alone
             est.state = EstimateState.LOST
-            est.reason = (f"too few measurements on the object ({n}, need {self.cfg.min_measurements}; "
-                          f"{found} candidates seen)")
+            est.reason = why
             est.measurements = n
             return est
         X, uvm, nodes, w = meas[:4]
@@ -614,6 +628,38 @@ class DeformableTracker:
             X, uvm, nodes, w = meas[:4]
             p = lm.Problem(X, uvm, self._disp_fn(nodes, w), T_cw, self.R_wo, self.K, self.layout)
             res.residuals = uvm - lm.predict(p, res.x, with_jacobian=False)[0]
+
+    def _depth_alone(self, est: Estimate, T_wc: np.ndarray, depth: np.ndarray | None, why: str) -> Estimate | None:
+        """``cfg.depth_alone`` (with ``depth_fit``): a frame whose images give too few measurements on the object
+        (``why``) is read from its depth alone: the depth fit (:class:`.depth_state.DepthFollower`) from the last
+        values, the constants held (the depth does not see alpha_z's sign; the images give it), reported
+        low-confidence with why. The new values also say where the object's map points are searched next frame. None
+        where the fit cannot run or gives no sound fit (the caller reports the frame lost, as without it)."""
+        if not self.cfg.depth_alone or self.depth is None or depth is None or not self._reference_read:
+            return None
+        depth = np.asarray(depth)
+        if depth.shape != (self.cam.height, self.cam.width):
+            return None
+        n_mu = len(self.model.axes)
+        lo, hi = self._free_bounds()
+        T = self.T_map_obj @ G.make_T(self.layout.state(self.values).rotation())
+        cloud = depth_cloud(self.cam, depth, T_wc, stride=self.cfg.depth_stride, within=self.depth.corners(T))
+        fit = self.depth.fit(cloud, T, lo[:n_mu], hi[:n_mu], self.values[:n_mu])
+        est.debug["depth"] = fit.reason
+        if fit.mu is None:
+            return None
+        self.values = self.values.copy()
+        self.values[:n_mu] = fit.mu
+        est.values = self.values.copy()
+        turn = self.depth_turn if self.rigid_z else 0.0
+        if turn:
+            i = self.layout.alpha_index
+            est.values[i] = _wrap(est.values[i] + turn, self.lo[i], self.hi[i])
+            est.debug["depth_turn"] = turn
+        est.deforming = self._was_deforming
+        est.state = EstimateState.LOW_CONFIDENCE
+        est.reason = f"{why}: read from the depth alone, the constants held ({fit.reason})"
+        return est
 
     def _free_bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """This frame's bounds: fixed and frozen parameters pinned at their values (lo == hi)."""
@@ -1108,6 +1154,7 @@ def tracker_config(obj: dict[str, Any], **overrides: Any) -> TrackerConfig:
                         min_measurements=t["min_measurements"], max_points=t["points"], anchor=t["anchor"],
                         object_shift_m=t["object_shift_m"], rest_frames=t["rest_frames"],
                         reference=t["reference"], depth_fit=t["depth_fit"], depth_turn=t["depth_turn"],
+                        depth_alone=t["depth_alone"],
                         depth_stride=t["depth_stride"],
                         dense=DenseSettings(step_px=t["dense_step_px"], rigid=t["dense_rigid"],
                                           static_ring_px=t["dense_surroundings_px"], refine=t["dense_refine"],

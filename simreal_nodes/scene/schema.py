@@ -179,6 +179,9 @@ TRACKING = Record({
     "depth_stride": Number("with depth_fit: one depth pixel in this many along each axis is matched to the model "
                            "(2: a quarter of the pixels); larger is faster and matches fewer points", integer=True,
                            lo=1, hi=8, default=2),
+    "depth_alone": Bool("with depth_fit: a frame whose images give too few measurements on the object (its map "
+                        "points lost) is read from its depth alone, the constants (alpha_z) held, and reported "
+                        "low-confidence instead of lost (docs/family.md, stop 88)", default=True),
     "depth_turn": Bool("with depth_fit, on a body of revolution about its z axis (the joint boot): alpha_z reported "
                        "with the depth fit's turn about that axis: the median over the frames whose depth held it "
                        "(the last 300; the bent shape holds the turn at least twice as well as the round rest "

@@ -475,12 +475,12 @@ BOOT_VIEWS = {"": (-130.0, -50.0, 31, 43, 20.0), "_second": (-170.0, -80.0, 37, 
 
 
 def _joint_boot_scene(real_boot: bool, width, height, duration, fps, alpha_z: float,
-                      physics: str = "model", view: str = "") -> SynthScene:
-    t_free = 1.5
+                      physics: str = "model", view: str = "", t_free: float = 1.5,
+                      name: str | None = None) -> SynthScene:
     if physics not in ("model", "truth") or (physics == "truth" and not real_boot):
         raise ValueError(f"physics must be 'model' or (a real boot) 'truth', got '{physics}'")
     independent = physics == "truth"
-    name = ("joint_boot_truth" if independent else "joint_boot") + view if real_boot else "virtual_boot_lever"
+    name = name or (("joint_boot_truth" if independent else "joint_boot") + view if real_boot else "virtual_boot_lever")
     az0, az1, path_seed, guess_seed, _ = BOOT_VIEWS[view]
 
     def build(sc, r, models):
@@ -572,6 +572,14 @@ def joint_boot_view(view: str, width=640, height=480, duration=8.0, fps=30.0) ->
     (:data:`BOOT_VIEWS`)."""
     return _joint_boot_scene(True, width, height, duration, fps, alpha_z=np.deg2rad(BOOT_VIEWS[view][4]),
                              physics="truth", view=view)
+
+
+def joint_boot_live(width=640, height=480, duration=14.0, fps=30.0) -> SynthScene:
+    """The real boot of ``joint_boot_truth`` (independent physics, placed by registration, the same arc, turn and
+    guess) with the lever at rest for its first 7.5 s, as a camera streaming before anything moves sees it: a live
+    graph places the boot in a background worker on cores the SLAM is using (benchmarks/live_slam.py)."""
+    return _joint_boot_scene(True, width, height, duration, fps, alpha_z=np.deg2rad(BOOT_VIEWS[""][4]),
+                             physics="truth", t_free=7.5, name="joint_boot_truth_live")
 
 
 def virtual_boot_lever(width=640, height=480, duration=8.0, fps=30.0) -> SynthScene:
@@ -1096,6 +1104,7 @@ SCENES: dict[str, Callable[..., SynthScene]] = {
     "joint_boot": joint_boot,
     "joint_boot_truth": lambda **kw: joint_boot(physics="truth", **kw),
     "joint_boot_truth_second": functools.partial(joint_boot_view, "_second"),
+    "joint_boot_truth_live": joint_boot_live,
     "joint_boot_truth_heldout": functools.partial(joint_boot_view, "_heldout"),
     "crossed_beams_probe": crossed_beams_probe,
     "crossed_beams_probe_heldout": crossed_beams_probe_heldout,

@@ -177,3 +177,47 @@ def test_a_depth_image_that_cannot_be_read_leaves_the_image_fit(boot, shape, fil
     tr._depth_state(res, np.eye(4), np.full(shape, fill), np.zeros(1), np.ones(1), est, meas, np.eye(4))
     assert why in est.debug["depth"]
     assert res.x.tolist() == [0.3] and "image_mu" not in est.debug
+
+
+def _depth_image(model, theta: float, cam: CameraModel) -> np.ndarray:
+    """The depth image (metres, NaN where nothing) of the model's surface deformed at ``theta`` on a floor, placed at
+    :data:`T_TRUE` in front of a camera at the map's origin: a z-buffer of dense surface samples."""
+    V = model.points + model.displacement([theta])
+    S, _ = sample_surface(V, model.surface, 400_000, seed=4)
+    g = np.linspace(-0.25, 0.25, 700)
+    floor = np.c_[np.meshgrid(g, g)[0].ravel(), np.meshgrid(g, g)[1].ravel(), np.zeros(700 * 700)]
+    floor = floor[np.linalg.norm(floor[:, :2] - V[:, :2].mean(axis=0), axis=1) > 0.05]
+    X = G.transform(T_TRUE, np.vstack([S, floor]))
+    X = X[X[:, 2] > 0.1]
+    u = np.round(cam.K[0, 0] * X[:, 0] / X[:, 2] + cam.K[0, 2]).astype(int)
+    v = np.round(cam.K[1, 1] * X[:, 1] / X[:, 2] + cam.K[1, 2]).astype(int)
+    ok = (u >= 0) & (u < cam.width) & (v >= 0) & (v < cam.height)
+    z = np.full(cam.height * cam.width, np.inf)
+    np.minimum.at(z, v[ok] * cam.width + u[ok], X[ok, 2])
+    return np.where(np.isfinite(z), z, np.nan).reshape(cam.height, cam.width)
+
+
+@pytest.mark.parametrize("alone", [True, False])
+def test_a_frame_without_image_measurements_is_read_from_its_depth_alone(boot, alone):
+    """With ``depth_fit``, a frame whose images give no measurement on the boot (its map points lost in a live
+    graph's skipped frames, stop 88) still has its depth: the lever is read from it alone, alpha_z held, the estimate
+    low-confidence and saying so; with ``depth_alone`` off the frame is lost and the values stay."""
+    from simreal_nodes.states import EstimateState
+
+    cam = CameraModel.from_intrinsics(640, 480, 525.0, 525.0, 320.0, 240.0)
+    params = {"theta": {"mode": "tracked", "initial": 0.3}, "alpha_z": {"mode": "constant", "initial": 0.0}}
+    tr = DeformableTracker(boot, T_TRUE, params, cam, TrackerConfig(depth_fit=True, depth_alone=alone))
+    tr._reference_read = True  # placed, its state at rest read
+    depth = _depth_image(boot, 0.4, cam)
+    for ids in (None, np.zeros(0, np.int64)):  # no map point observed on the object at all, or none of them linked
+        est = tr.update(np.eye(4), ids=ids, P_map=None if ids is None else np.zeros((0, 3)),
+                        uv=None if ids is None else np.zeros((0, 2)), depth=depth)
+        if alone:
+            assert est.state == EstimateState.LOW_CONFIDENCE and "read from the depth alone" in est.reason, est.reason
+            assert abs(np.rad2deg(est.values[0] - 0.4)) < 1.0, (np.rad2deg(est.values[0]), est.reason)
+            assert est.values[1] == 0.0 and tr.values[1] == 0.0
+        else:
+            assert est.state == EstimateState.LOST and "depth" not in est.reason
+            assert est.values.tolist() == [0.3, 0.0]
+    # no depth image: lost either way
+    assert tr.update(np.eye(4), ids=None, depth=None).state == EstimateState.LOST

@@ -140,3 +140,26 @@ def test_the_depth_noise_about_a_fit_is_measured_where_the_fit_residual_cannot_s
         assert noise == pytest.approx(sigma, rel=0.15 if sigma < 0.01 else 0.35)
         out = _judged(Registration(T, 1.0, rmse, len(P), None), P, T, S, N, cfg)
         assert bool(out.doubt) == (sigma > cfg.max_noise), (sigma, out.noise)
+
+
+def test_the_support_plane_from_a_subset_of_the_points_counts_its_inliers_among_all_of_them():
+    """RANSAC on 5000 of 80 000 points (a floor under clutter, as a fused depth cloud is) finds the same floor as on
+    them all, and its inliers are counted over the whole cloud; a floor that is only a fifth of the cloud still wins
+    in the subset."""
+    from simreal_nodes.assimilation.registration import support_inliers
+
+    rng = np.random.default_rng(3)
+    floor = np.c_[rng.uniform(-1, 1, (50_000, 2)), rng.normal(0.0, 0.001, 50_000)]
+    floor = floor @ G.rot_axis("x", np.deg2rad(4.0)).T  # tilted: not an axis plane
+    clutter = rng.uniform([-1, -1, 0.03], [1, 1, 1.0], (30_000, 3))
+    P = np.r_[floor, clutter]
+    on = np.abs(P @ G.rot_axis("x", np.deg2rad(4.0))[:, 2]) <= 0.008  # within the distance of the true floor
+    whole = support_inliers(P, 0.008, 0)
+    sub = support_inliers(P, 0.008, 5000)
+    assert len(sub) > 49_000 and np.mean(on[sub]) > 0.99  # all of the floor's points, nearly nothing else
+    assert len(np.intersect1d(sub, whole)) > 0.99 * max(len(sub), len(whole))
+    # a floor of 10 000 points under 40 000 of clutter is still the dominant plane in a 5000-point subset
+    P2 = np.r_[floor[:10_000], rng.uniform([-1, -1, 0.03], [1, 1, 1.0], (40_000, 3))]
+    on2 = np.abs(P2 @ G.rot_axis("x", np.deg2rad(4.0))[:, 2]) <= 0.008
+    sub2 = support_inliers(P2, 0.008, 5000)
+    assert np.sum(sub2 < 10_000) > 9_800 and np.mean(on2[sub2]) > 0.99
