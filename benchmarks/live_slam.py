@@ -143,8 +143,8 @@ def report(rows, machine: dict | None = None):
          "640x480, 30 fps, RGB-D, 7.5 s at rest)",
          f"Runs that kept tracking (theta median error < 2 deg): {kept}. Runs within every target (theta <= 0.5 deg "
          f"and alpha_z <= 1 deg at the median): {good}. {ref}The live graph takes {fps:.0f} of the 30 frames a "
-         "second through at the median on these 2 shared cores. The scene (`joint_boot_truth_live`) is rendered from an "
-         "independent full-order solve (neo-Hookean hexahedra on a finer mesh than the model's, two layers through "
+         "second through at the median on these 2 shared cores. The scene (`joint_boot_truth_live`) is rendered from "
+         "an independent full-order solve (neo-Hookean hexahedra on a finer mesh than the model's, two layers through "
          "the wall; `synth/truth.py:boot_lever_truth`), the boot placed by registration from a guess by eye, the "
          "lever read from every depth image (the scene file's settings). Model error: the angle whose model "
          "displacement is closest to the truth's is 0.40 degrees off at the median over the solved angles "
