@@ -22,7 +22,7 @@ from scipy.spatial import cKDTree
 from simreal_nodes import geometry as G
 from simreal_nodes.assimilation import lm
 from simreal_nodes.assimilation.dense import DenseAligner, DenseResult, DenseSettings
-from simreal_nodes.assimilation.depth_state import DepthFollower, DepthStateConfig, fit_state
+from simreal_nodes.assimilation.depth_state import DepthFit, DepthFollower, DepthStateConfig, fit_state
 from simreal_nodes.assimilation.registration import LinkIndex, Links, depth_cloud, link, ray_weights, surface_nodes
 from simreal_nodes.camera import CameraModel
 from simreal_nodes.rom.model import ReducedModel
@@ -578,12 +578,26 @@ class DeformableTracker:
         gain = rest_rms - res.rms_px
         est = self._conclude(est, res.x, bool(gain > self.cfg.min_deformation_px),
                              f"residual {res.rms_px:.2f} px vs {rest_rms:.2f} px undeformed")
+        self._report_turn(est)
+        return est
+
+    def _report_turn(self, est: Estimate) -> None:
+        """alpha_z reported with the depth's turn (:attr:`depth_turn`, ``cfg.depth_turn`` on the boot)."""
         turn = self.depth_turn if self.rigid_z else 0.0
         if turn:
             i = self.layout.alpha_index
             est.values[i] = _wrap(est.values[i] + turn, self.lo[i], self.hi[i])
             est.debug["depth_turn"] = turn
-        return est
+
+    def _fit_depth(self, x: np.ndarray, T_wc: np.ndarray, depth: np.ndarray, lo: np.ndarray,
+                   hi: np.ndarray) -> DepthFit:
+        """The depth follower's fit of this frame's depth image from state ``x`` (its crop around the object posed
+        with ``x``'s rotation; ``lo`` / ``hi``: this frame's bounds)."""
+        assert self.depth is not None
+        n_mu = len(self.model.axes)
+        T = self.T_map_obj @ G.make_T(self.layout.state(x).rotation())
+        cloud = depth_cloud(self.cam, depth, T_wc, stride=self.cfg.depth_stride, within=self.depth.corners(T))
+        return self.depth.fit(cloud, T, lo[:n_mu], hi[:n_mu], x[:n_mu])
 
     @property
     def depth_turn(self) -> float:
@@ -614,9 +628,7 @@ class DeformableTracker:
                                   f"{self.cam.width}: the image fit stands")
             return
         n_mu = len(self.model.axes)
-        T = self.T_map_obj @ G.make_T(self.layout.state(res.x).rotation())
-        cloud = depth_cloud(self.cam, depth, T_wc, stride=self.cfg.depth_stride, within=self.depth.corners(T))
-        fit = self.depth.fit(cloud, T, lo[:n_mu], hi[:n_mu], res.x[:n_mu])
+        fit = self._fit_depth(res.x, T_wc, depth, lo, hi)
         est.debug["depth"] = fit.reason
         if (self.cfg.depth_turn and self.rigid_z and self.depth.turns_about_axis and fit.mu is not None
                 and fit.turn_held < self.depth.turn_ratio_max):
@@ -640,22 +652,14 @@ class DeformableTracker:
         depth = np.asarray(depth)
         if depth.shape != (self.cam.height, self.cam.width):
             return None
-        n_mu = len(self.model.axes)
-        lo, hi = self._free_bounds()
-        T = self.T_map_obj @ G.make_T(self.layout.state(self.values).rotation())
-        cloud = depth_cloud(self.cam, depth, T_wc, stride=self.cfg.depth_stride, within=self.depth.corners(T))
-        fit = self.depth.fit(cloud, T, lo[:n_mu], hi[:n_mu], self.values[:n_mu])
+        fit = self._fit_depth(self.values, T_wc, depth, *self._free_bounds())
         est.debug["depth"] = fit.reason
         if fit.mu is None:
             return None
         self.values = self.values.copy()
-        self.values[:n_mu] = fit.mu
+        self.values[:len(fit.mu)] = fit.mu
         est.values = self.values.copy()
-        turn = self.depth_turn if self.rigid_z else 0.0
-        if turn:
-            i = self.layout.alpha_index
-            est.values[i] = _wrap(est.values[i] + turn, self.lo[i], self.hi[i])
-            est.debug["depth_turn"] = turn
+        self._report_turn(est)
         est.deforming = self._was_deforming
         est.state = EstimateState.LOW_CONFIDENCE
         est.reason = f"{why}: read from the depth alone, the constants held ({fit.reason})"
