@@ -219,5 +219,9 @@ def test_a_frame_without_image_measurements_is_read_from_its_depth_alone(boot, a
         else:
             assert est.state == EstimateState.LOST and "depth" not in est.reason
             assert est.values.tolist() == [0.3, 0.0]
-    # no depth image: lost either way
+    # no depth image, or one with no valid return: lost either way, with the values kept
+    before = tr.values.copy()
     assert tr.update(np.eye(4), ids=None, depth=None).state == EstimateState.LOST
+    est = tr.update(np.eye(4), ids=None, depth=np.full((480, 640), np.nan))
+    assert est.state == EstimateState.LOST and np.all(np.isfinite(est.values))
+    np.testing.assert_array_equal(tr.values, before)
