@@ -179,13 +179,11 @@ def main() -> None:
         fig.tight_layout()
         return fig
 
-    knob = ", ".join(f"{n}.{k}: {json.dumps(v)}" for n, kv in sorted(r.get("params", {}).items())
-                     for k, v in sorted(kv.items()))
+    knobs = [(f"{n}.{k}", json.dumps(v)) for n, kv in sorted(r.get("params", {}).items())
+             for k, v in sorted(kv.items())]
     save(a.out, rows, cols, f"Soak: {r['frames']} frames of RGB-D SLAM -> tracker -> overlay, live"
-         + (f" ({knob})" if knob else ""),
-         f"`python -m benchmarks.soak --frames {r['frames']}"
-         + "".join(f" --param {n}.{k}={json.dumps(v)}" for n, kv in sorted(r.get("params", {}).items())
-                   for k, v in sorted(kv.items()))
+         + (f" ({', '.join(f'{k}: {v}' for k, v in knobs)})" if knobs else ""),
+         f"`python -m benchmarks.soak --frames {r['frames']}" + "".join(f" --param {k}={v}" for k, v in knobs)
          + (f" --out {a.out}" if a.out != "soak" else "") + "` (see its docstring): the joint boot sample played "
          f"forward and backward at {r['fps']:.0f} fps, live. Frames published {st['frames_published']}, finished "
          f"by every node {st['frames_completed']} ({st.get('fps_through', float('nan')):.1f} fps through), the rest "

@@ -519,7 +519,7 @@ class DeformableTracker:
             n = 0 if meas is None else len(meas[0])
             why = (f"too few measurements on the object ({n}, need {self.cfg.min_measurements}; "
                    f"{found} candidates seen)")
-            alone = self._depth_alone(est, T_wc, depth, why) if self.cfg.measurements == "map_points" else None
+            alone = self._depth_alone(est, T_wc, depth, why)  # None but with map points and depth_fit
             if alone is not None:
                 alone.measurements = n
                 return alone
