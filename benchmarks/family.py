@@ -824,21 +824,22 @@ camera ATE median 2.06 mm (2.02 mm). At or over 2 %: 1003 (2.25 %), 1056 (2.12 %
 registered), as before; 1070 2.01 -> 1.79 %. 15 scenes moved by more than 0.1 points, both ways (1001 0.52 -> 0.69 %,
 1014 0.66 -> 0.88 %, 1085 1.14 -> 1.37 %; 1008 1.24 -> 0.96 %, 1023 1.86 -> 1.49 %, 1089 1.58 -> 1.39 %): a wash. Stop
 56's RGB-D outlier test in the BA came after this run (on the development orbit it changed nothing before a loop). Its
-tracker times ran beside other benchmarks (about twice stop 49's).
+tracker times ran beside other benchmarks (about 1.5 times stop 49's at the median of the rows).
 
 Stop 49 fits the candidates' brightness in the coarse search only when the warm start's gain is under 0.5
 (`dense_grid_brightness: auto`): fitted on every frame (`always`, stop 48's default), a camera-sweep view of development
 seed 1 at 80 degrees of azimuth picked wrong candidates (the 90th percentile of its frames called OK 0.34 % -> 9.8 % of
 the span; docs/stability.md). On the development beams 0-19 (`family_dev_0_19`) `auto` reads as `never`
 (`family_dev_0_19_dense_grid_brightness_false`, the defaults before stop 48) in every row to the hundredth, states and
-all; `always` (`family_dev_0_19_dense_grid_brightness_always`, stop 48's run) was better on seeds 6, 7, 12 and 19 (their
-90th percentile by 0.04-0.27 points, their median by up to 0.07) and worse on none by more than 0.02: a few tenths on
-four scenes against a 10 % tail in a grazing view, traded for the tail (docs/tracking.md). All 100 held-out rows were
-rerun (`family_stop49`; stop 48's is `family_stop48`): median of the per-scene medians 0.50 %, p90 1.58 %, 76 % within 1
-%, 95 % within 2 %, every scene's median within 0.01 points of stop 39's (stop 48: 77 % within 1 %, 1003 2.34 % and 1011
-1.69 %, now 2.22 % and 1.91 % as in stop 39). At or over 2 %: 1003, 1056, 1065, 1070 and 1081, as before; 1071 and 1041
-keep their OK frames' 90th percentile at 71 % and 57 %. The tracker's time in this table is not comparable (the run
-shared the 2 cores with the camera sweep and the gain calibration).
+all, but seed 14's mean (15.11 % -> 14.07 %); `always` (`family_dev_0_19_dense_grid_brightness_always`, stop 48's run)
+was better on seeds 6, 7, 12 and 19 (their 90th percentile by 0.04-0.27 points, their median by up to 0.07) and worse
+on none by more than 0.02: a few tenths on four scenes against a 10 % tail in a grazing view, traded for the tail
+(docs/tracking.md). All 100 held-out rows were rerun (`family_stop49`; stop 48's is `family_stop48`): median of the
+per-scene medians 0.50 %, p90 1.58 %, 76 % within 1 %, 95 % within 2 %, every scene's median within 0.01 points of
+stop 39's (stop 48: 77 % within 1 %, 1003 2.34 % and 1011 1.69 %, now 2.22 % and 1.91 % as in stop 39). At or over 2
+%: 1003, 1056, 1065, 1070 and 1081, as before; 1071 and 1041 keep their OK frames' 90th percentile at 71 % and 57 %.
+The tracker's time in this table is not comparable (the run shared the 2 cores with the camera sweep and the gain
+calibration).
 
 Stop 39 fused the shading term's g over the frames the tracker judged sound (`tracking.dense_shading_frames`, 50;
 docs/tracking.md), chosen on development plates and beams ("Plates" below; on development beams 0-19 every scene
@@ -1104,7 +1105,7 @@ off on noisy depth at 0.46 m, every frame flagged); 1007 loses its measurements 
 agree"), 1009 (8.0 %), 1011 (8.3 %) and 1013 (8.3 %) read theta off with alpha_z within 2.6-5.1 degrees. 1002, 1005,
 1006 and 1011 were registered 3.9-4.6 mm off (below). The search's price: on every frame until alpha_z is first seen,
 24 relinks and fits; where that never happens the tracker's median time per frame is 220-1412 ms (1002, 1010, 1013,
-1015; about 20-60 ms elsewhere, this run sharing the cores with another benchmark). The thesis reports no figure for
+1015; about 15-70 ms elsewhere, this run sharing the cores with another benchmark). The thesis reports no figure for
 this example; the boot's three fixed views at 30 fps (`thesis_truth_boot`, without the search) read 0.41-0.72 % at the
 median.
 
@@ -1125,12 +1126,12 @@ The numbers of stop 63 above and below are such draws.
 Development seed 2, rerun with every frame printed: the registration took 32 frames (the lever already at 23 degrees),
 the depth image's reference state put alpha_z 63 degrees off, and that first frame counted as informative, so a search
 that stops once the constant is seen ran on one frame only (21 map points: no winner). alpha_z then wandered along a
-flat cost with a standard deviation of 0.5 degree, and was fixed 50 degrees off. With `frozen` the search runs on
+flat cost with a standard deviation of 0.5 degree, and was fixed 51 degrees off. With `frozen` the search runs on
 every frame until alpha_z is fixed, and a winner restarts its informative frames: seed 2's search won at frame 37, 19
-degrees off, and alpha_z settled 13.8 degrees off (a test breaks the same deadlock on synthetic points). Development
+degrees off, and alpha_z settled 13.3 degrees off (a test breaks the same deadlock on synthetic points). Development
 seeds 0-9 (`family_boot_dev_search_until_frozen`, the same code otherwise): 1.19 % -> **1.40 %**, p90 7.49 % ->
 **3.06 %**, the same shares (40 %, 70 %); seed 2 11.4 % -> 2.8 %, 0 0.73 -> 0.44 %, 8 7.1 -> 5.7 %; 1 1.25 -> 1.42 %, 6
-1.13 -> 1.38 %. Its price rules it out as a default: the tracker's median time per frame 31-4416 ms against 11-51 ms
+1.13 -> 1.38 %. Its price rules it out as a default: the tracker's median time per frame 28-4416 ms against 11-51 ms
 (the search runs on every frame until 40 frames inform alpha_z, which on some scenes is never). A knob for offline
 replays; not run on the held-out seeds.
 
@@ -1157,17 +1158,18 @@ RMS of 2.3-3.8 px and leave alpha_z barely observable (its standard deviation up
 ends (1.9 s per frame at the median).
 
 **Held-out seeds 1000-1019 with the polish** (`family_boot_stop63`, run once after the choice; the registration alone:
-`family_boot_registration`): median of the per-scene medians **2.06 %** (2.18 % without), p90 **9.39 %** (9.85 %), **40
-%** within 1 % (25 %), **45 %** within 2 % (45 %). The registration alone on the first 14 frames: median 0.14 mm and
-0.05 degree, worst 0.64 mm and 0.34 degree, 1000, 1013 and 1018 not placed that early (without the polish, from the
-whole runs: 0.36 mm at the median, 1002, 1005, 1006 and 1011 3.9-4.6 mm off); in the whole runs those four were placed
-0.05-0.64 mm off. Better: 1011 8.3 -> 2.3 %, 1006 1.43 -> 0.81 %, 1017 1.38 -> 0.80 % (alpha_z 23 -> 2.7 degrees), 1016
-2.9 -> 2.0 %, 1007 12.9 -> 9.8 %; worse: 1005 3.1 -> 4.4 % (registered 4.6 -> 0.2 mm off, alpha_z 1.2 degrees), 1004 2.2
--> 2.7 %, 1000 0.56 -> 0.96 %. The gain carried over in the share within 1 % and at p90, hardly at the median, and not
-to the share within 2 %: short of every target the beams meet. What fails now: alpha_z on 1015 (22 degrees, theta 10.5 %
-with every frame called OK) and 1018 (registered 12 mm off on noisy depth at 0.46 m, every frame flagged); theta 8.8-9.8
-% off on 1007 (the measurements lost, 53 % of frames OK), 1009 and 1013 with alpha_z within 1.6-4.7 degrees; 1005 4.4 %.
-Against the spread between identical runs (above) single rows moving by a point or less say little.
+`family_boot_registration` as run then, rerun in stop 70): median of the per-scene medians **2.06 %** (2.18 %
+without), p90 **9.39 %** (9.85 %), **40 %** within 1 % (25 %), **45 %** within 2 % (45 %). The registration alone on
+the first 14 frames: median 0.14 mm and 0.05 degree, worst 0.64 mm and 0.34 degree, 1000, 1013 and 1018 not placed
+that early (without the polish, from the whole runs: 0.36 mm at the median, 1002, 1005, 1006 and 1011 3.9-4.6 mm off);
+in the whole runs those four were placed 0.05-0.64 mm off. Better: 1011 8.3 -> 2.3 %, 1006 1.43 -> 0.81 %, 1017 1.38
+-> 0.80 % (alpha_z 23 -> 2.7 degrees), 1016 2.9 -> 2.0 %, 1007 12.9 -> 9.8 %; worse: 1005 3.1 -> 4.4 % (registered 4.6
+-> 0.2 mm off, alpha_z 1.2 degrees), 1004 2.2 -> 2.7 %, 1000 0.56 -> 0.96 %. The gain carried over in the share within
+1 % and at p90, hardly at the median, and not to the share within 2 %: short of every target the beams meet. What
+fails now: alpha_z on 1015 (22 degrees, theta 10.5 % with every frame called OK) and 1018 (registered 12 mm off on
+noisy depth at 0.46 m, every frame flagged); theta 8.8-9.8 % off on 1007 (the measurements lost, 53 % of frames OK),
+1009 and 1013 with alpha_z within 1.6-4.7 degrees; 1005 4.4 %. Against the spread between identical runs (above)
+single rows moving by a point or less say little.
 
 
 **Repeatable runs** (stop 64). Two causes, both removed. (1) Open3D's `registration_icp` returns poses 1e-15 apart from
@@ -1206,16 +1208,17 @@ standard deviation of 0.05-0.2 degree) found the tracker's measurements falling 
 lever bent, and why: a deformable point never joins the pose's matches nor a keyframe's fusion, so it gains neither
 keyframes nor finds, and the SLAM's culling of young points (ORB-SLAM2's rule: seen by too few keyframes two keyframes
 on) erased every object point made after the start (boot 13: 556 in 124 frames). The measurements were always the
-youngest points, each linked through the estimate of the moment it was first seen. A first version kept every deformable
-point: boot 13 read 0.2-0.5 degree off where it had read 2-3, but boot 1 went from 0.26 % to 5.1 %: points linked while
-the boot was 50 degrees off in alpha_z (the camera lost every other frame) kept that error for good (that run was
-stopped at seed 6 and is not kept). What landed: the tracker tells the map which points it linked at rest
+youngest points, each linked through the estimate of the moment it was first seen. A first version kept every
+deformable point: boot 13 read better, but boot 1 far worse: points linked while the boot was far off in alpha_z (the
+camera lost every other frame) kept that error for good (that run was stopped at seed 6 and is not kept, so its
+figures are not quoted). What landed: the tracker tells the map which points it linked at rest
 (`/simreal/localization/deformable_points` now carries `flags`: bit 0 the fit rejected the point, bit 1 linked at rest),
 and the map keeps those (`SlamConfig.hold_rest_points`, thesis §4.4's scanned points); a point linked while the object
 was deformed is culled as before. A keyframe no longer makes a copy of a followed deformable point (its feature looked
 free to the keyframe because the pose's matches leave the point out; `SlamConfig.followed_px`, 3 px). And a tracked
 parameter whose standard deviation exceeds a uniform draw's over its range (range / sqrt 12) keeps its last value,
-flagged (development boot 12 read 0.4 degree for a lever at 47 from 17 points; its p90 36 % -> 8.6 %).
+flagged (development boot 12 had read 0.4 degree for a lever at 47 from 17 points in a trace; with the rule its p90 is
+8.6 %, `family_boot_dev_10_19_stop65`).
 
 Development seeds 0-9 (`family_boot_dev_stop65`; stop 64's code: `family_boot_dev_stop64`): median of the per-scene
 medians **0.66 %** (0.89 %), p90 **2.23 %** (3.41 %), **80 %** within 1 % (60 %), **80 %** within 2 % (80 %); seed 8's
@@ -1277,17 +1280,18 @@ tracker adds the rest (2.11 % against that reading). Development seeds 20-39 are
 against 1.61 %); seeds 0-19, on which earlier stops chose the boot's settings, read 0.66 %.
 
 **Stop 67: where the wrong measurements come from.** `python -m benchmarks.boot_measurements` (new:
-`benchmarks/results/boot_measurements.md`) labels every object measurement of a boot scene against the independent
-truth: a measurement is wrong when it lies more than 3 x Huber (6 px) from where the truth puts the material point its
-link holds, and each is labelled by how the SLAM measured it (Lucas-Kanade flow from the previous frame, ORB
-re-acquisition by descriptor within `SlamConfig.deformable_radius` = 20 px of its prediction, or a match of the pose's
-search). On development seeds 10 and 12, over the frames more than a degree from rest: **87 % of the 3399
-re-acquisitions are wrong** (90 and 84 %). Of the wrong flow measurements, 72-74 % belong to tracks that began at a
-wrong re-acquisition, 16-21 % at a wrong match of the pose's search, and 7-11 % began right and slid: the flow follows
-what it is given. Fitting each frame without the measurements the truth calls wrong (an oracle, never an estimate) reads
-1.21 and 1.39 % of the range against 2.13 and 2.26 % with them. The 6 px label is coarse (the model's polygonal surface
-against the truth's round one puts a point seen obliquely a few pixels off: at rest 23-32 % are labelled wrong), so the
-oracle bounds what cleaner measurements could give; it is not a target.
+`benchmarks/results/boot_measurements.md`, rerun in stop 70: stop 67's run is in git history) labels every object
+measurement of a boot scene against the independent truth: a measurement is wrong when it lies more than 3 x Huber (6
+px) from where the truth puts the material point its link holds, and each is labelled by how the SLAM measured it
+(Lucas-Kanade flow from the previous frame, ORB re-acquisition by descriptor within `SlamConfig.deformable_radius` =
+20 px of its prediction, or a match of the pose's search). On development seeds 10 and 12, over the frames more than a
+degree from rest: **87 % of the 3399 re-acquisitions are wrong** (90 and 84 %). Of the wrong flow measurements, 72-74
+% belong to tracks that began at a wrong re-acquisition, 16-21 % at a wrong match of the pose's search, and 7-11 %
+began right and slid: the flow follows what it is given. Fitting each frame without the measurements the truth calls
+wrong (an oracle, never an estimate) reads 1.21 and 1.39 % of the range against 2.13 and 2.26 % with them. The 6 px
+label is coarse (the model's polygonal surface against the truth's round one puts a point seen obliquely a few pixels
+off: at rest 23-32 % are labelled wrong), so the oracle bounds what cleaner measurements could give; it is not a
+target.
 
 Two ways to keep the wrong re-acquisitions out were measured against the rule of stop 66 (development seeds 0-39, the
 median of the per-scene medians no worse, the share within 2 % no smaller than the default's 0.93 % and 70 %).
@@ -1298,7 +1302,7 @@ followed on it are lost, the estimate lags, and a point whose prediction lags by
 (`family_boot_dev_sel_deformable_radius_0`, six seeds): the two traced seeds read **0.57 and 0.78 %** (from 2.09 and
 2.24 %; `boot_measurements_deformable_radius_0`: 19-40 % of their bent frames' measurements wrong against 50-61 %), and
 the four scenes the 6 px knob lost are lost too (seeds 7, 29, 26, 24: 3.4, 26.3, 11.1, 4.0 % against 0.81, 1.18, 1.47,
-0.45 %). On seed 29 the lever goes back from 39 to 21 degrees and the estimate stays at 36: the points that remain
+0.45 %). On seed 29 the lever goes back from 41 to 21 degrees and the estimate stays at 36: the points that remain
 measured do not pull it along. The wrong re-acquisitions are what drag the estimate along in those moves, and what bias
 it everywhere else. **The default stays 20 px**; both radii are knobs with their tables. What is left: find lost object
 points again without descriptors (the flow from the last image that followed them, started at the prediction) and a
@@ -1360,26 +1364,27 @@ before) and one 11 cm off under the floor are placed within 1 mm and 0.3 degrees
 
 Development seeds 0-39 (`family_boot_dev_0_39`): **0.98 %** of the lever's range at the median of the scene medians
 against 0.93 % on stop 66's code (`family_boot_dev`, `_10_19`, `_20_39`), p90 **3.65 %** against 6.30 %, 52.5 % within 1
-% against 50 %, 65 % within 2 % against 70 %. The four scenes whose registration had been refused: 18.4 -> 3.2 % (seed
-22), 14.6 -> 4.3 % (25), 25.5 -> 0.74 % (36), 24.7 -> 4.3 % (38). Every other scene's registration moved by at most 0.2
-mm and by its turn about the axis, and their errors moved both ways (18 scenes better and 17 worse by more than 0.05
-points; seed 7 0.81 -> 4.33 % with alpha_z 6.9 degrees off, seed 8 1.40 -> 3.43 %). The first version of the change
-(`family_boot_dev_0_39_icp_turn`: the tilt check, the fit left at the turn the ICP drifted to) read 1.02 %, p90 4.0 %,
-50 % and 77.5 %, with its own scene-by-scene spread (seed 7 1.23 %, seed 26 7.16 %). Turning the guess 7.5 degrees about
-the axis (`family_boot_dev_0_39_guess_turn_7_5`, `--guess-turn 7.5`: a turn the depth does not show and the user does
-not know, half a step of the alpha_z search) reads 0.91 %, p90 3.05 %, 52.5 % within 1 % and 75 % within 2 %: the scene
-medians moved by 0.28 points at the median, by more than a point in 7 of the 40 scenes and by up to 4.7 (seed 38 4.29 ->
-8.97 %, seed 7 4.33 -> 2.17 %). Over these three draws of a turn nothing can see, the development summary spans
-0.91-1.02 % at the median and 65-77.5 % within 2 %; stop 66's 0.93 % and 70 % lie inside that spread. That a boot
-scene's error hangs on it by several points is a fault of the tracker (the alpha_z search's grid, the model's 48 facets
-around the axis), left for a later stop. By stop 66's rule for a default (median no worse, share within 2 % no smaller)
-the change would fail; it is kept because it is not a knob: a registration that refuses the right fit is a fault, and
+% against 50 %, 65 % within 2 % against 70 %. The three scenes whose refused registration had placed them late or
+never: 14.6 -> 4.3 % (25), 25.5 -> 0.74 % (36), 24.7 -> 4.3 % (38); seed 22, placed as before, 18.4 -> 3.2 % (alpha_z
+11.9 -> 1.8 degrees off). Every other scene's registration moved by at most 0.2 mm and by its turn about the axis, and
+their errors moved both ways (18 scenes better and 17 worse by more than 0.05 points; seed 7 0.81 -> 4.33 % with
+alpha_z 6.9 degrees off, seed 8 1.40 -> 3.43 %). The first version of the change (`family_boot_dev_0_39_icp_turn`: the
+tilt check, the fit left at the turn the ICP drifted to) read 1.02 %, p90 4.0 %, 50 % and 77.5 %, with its own
+scene-by-scene spread (seed 7 1.23 %, seed 26 7.16 %). Turning the guess 7.5 degrees about the axis
+(`family_boot_dev_0_39_guess_turn_7_5`, `--guess-turn 7.5`: a turn the depth does not show and the user does not know,
+half a step of the alpha_z search) reads 0.91 %, p90 3.05 %, 52.5 % within 1 % and 75 % within 2 %: the scene medians
+moved by 0.28 points at the median, by more than a point in 7 of the 40 scenes and by up to 4.7 (seed 38 4.29 -> 8.97
+%, seed 7 4.33 -> 2.17 %). Over these three draws of a turn nothing can see, the development summary spans 0.91-1.02 %
+at the median and 65-77.5 % within 2 %; stop 66's 0.93 % and 70 % lie inside that spread. That a boot scene's error
+hangs on it by several points is a fault of the tracker (the alpha_z search's grid, the model's 48 facets around the
+axis), left for a later stop. By stop 66's rule for a default (median no worse, share within 2 % no smaller) the
+change would fail; it is kept because it is not a knob: a registration that refuses the right fit is a fault, and
 which way the ICP left an invisible turn is a draw, not a setting.
 
-Held-out seeds 1000-1019 (`family_boot`, run once on this code; stop 66's is `family_boot_stop66`): **1.42 %** against
-1.61 %, p90 **3.92 %** against 6.74 %, 20 % within 1 % against 30 %, **70 %** within 2 % against 60 %, alpha_z 0.83
-degrees off at the median against 1.25. The registration: 0.12 mm and 0.04 degrees at the median, **worst 0.24 mm and
-0.10 degrees** (1017 was 17.1 mm off on noisy depth before, 1013 1.06 mm with its axis tilted 4.4 degrees); the
+Held-out seeds 1000-1019 (`family_boot_stop70`, run once on this code; stop 66's is `family_boot_stop66`): **1.42 %**
+against 1.61 %, p90 **3.92 %** against 6.74 %, 20 % within 1 % against 30 %, **70 %** within 2 % against 60 %, alpha_z
+0.83 degrees off at the median against 1.25. The registration: 0.12 mm and 0.04 degrees at the median, **worst 0.24 mm
+and 0.10 degrees** (1017 was 17.1 mm off on noisy depth before, 1013 1.06 mm with its axis tilted 4.4 degrees); the
 registration alone (`family_boot_registration`) refuses none of the 20 first tries (3 on the run before: 1000, 1013,
 1018). Eleven scenes better and six worse by more than 0.05 points (1015 12.5 -> 5.0 %, 1013 10.7 -> 3.8 %, 1017 6.3 ->
 1.6 %, 1009 5.7 -> 3.0 %; 1007 4.1 -> 8.7 %, 1018 0.60 -> 1.34 %, 1000 0.57 -> 0.95 %). The beams' targets (< 1 %, p90 <
@@ -1471,14 +1476,14 @@ degree (its lever 0.40 %, but 59 % of its frames flagged, as in stop 71); one sc
 (seed 5, 0.0 -> 0.6). The lever there: 0.35 % at the median, p90 0.68 %, 95 % of the scenes within 1 %, all within 2 %;
 the tracker 65 ms a frame (stop 71's table: 123 ms).
 
-Held-out seeds 1000-1019, run once after that (`family_boot`; stop 71's is `family_boot_stop71`): alpha_z **0.31
-degree** off at the median against the images' 1.03 (stop 71: 1.19), p90 0.52 against 5.56, the worst 0.7 degree against
-8.7; one scene worse by more than half a degree (1003, 0.1 -> 0.6). The lever: **0.48 %** at the median of the scene
-medians (stop 71: 0.47 %), p90 **0.65 %** (0.74 %), **100 %** of the scenes within 1 % (95 %) and within 2 % (100 %).
-The tracker's median time per frame **62 ms** (130 ms), the step 98 ms (163); the scenes whose alpha_z search ran long:
-1002 743 -> 179 ms, 1015 502 -> 131 ms. Still six times the issue's 10 ms for map points, which holds on the boot only
-with `depth_fit` off (9 ms). The thesis's held-out view (`docs/tracking.md`): alpha_z **0.11 degree** off (the images'
-own 0.93; stop 71 0.86), the lever 0.22 degree as in stop 71.
+Held-out seeds 1000-1019, run once after that (`family_boot_stop72`; stop 71's is `family_boot_stop71`): alpha_z
+**0.31 degree** off at the median against the images' 1.03 (stop 71: 1.19), p90 0.52 against 5.56, the worst 0.7
+degree against 8.7; one scene worse by more than half a degree (1003, 0.1 -> 0.6). The lever: **0.48 %** at the median
+of the scene medians (stop 71: 0.47 %), p90 **0.65 %** (0.74 %), **100 %** of the scenes within 1 % (95 %) and within
+2 % (100 %). The tracker's median time per frame **62 ms** (130 ms), the step 98 ms (163); the scenes whose alpha_z
+search ran long: 1002 743 -> 179 ms, 1015 502 -> 131 ms. Still six times the issue's 10 ms for map points, which holds
+on the boot only with `depth_fit` off (9 ms). The thesis's held-out view (`docs/tracking.md`): alpha_z **0.11 degree**
+off (the images' own 0.93; stop 71 0.86), the lever 0.22 degree as in stop 71.
 
 **Stop 73: the depth fit's search trees kept, and the held-out boots 1000-1099.** Each step of the depth fit's
 Gauss-Newton moves the model's samples by a fraction of a millimetre, and each still built a new KD-tree over all 7000
@@ -1498,11 +1503,11 @@ the scene medians, p90 **0.81 %**, **93 %** of the scenes within 1 % and **98 %*
 >= 90 % within 2 %). alpha_z **0.29 degree** off at the median (the images' own: 1.13), p90 0.59, the worst 1.1
 degrees (1031, whose images end 124 degrees off, in the other basin). The registration: 0.15 mm and 0.05 degree at
 the median, 0.37 mm and 0.21 degree at worst. Two scenes miss 2 %. 1083 (3.9 %): the SLAM lost the camera on 46 % of
-the frames, and the lever kept its last value (10 degrees) through holds at 19-46 degrees. 1066 (2.7 %): the model's
+the frames, and the lever kept its last value (10 degrees) through holds at 20-46 degrees. 1066 (2.7 %): the model's
 own error, its best fit to the truth's surface reads 2.2 % off at the scene's levers of 46-50 degrees and the tracker
 is 0.6 % from that best fit. The next two (1026 1.8 %, 1027 1.8 %) are of the same kind: the model's best fit 2.0 and
 1.7 % off, the tracker 0.4 % from it. The tracker takes **58 ms** a frame at the median of the scenes (p90 115 ms), the
-step 93 ms: six times the issue's 10 ms for map points, which the boot meets only with `depth_fit` off (9 ms).
+step 92 ms: six times the issue's 10 ms for map points, which the boot meets only with `depth_fit` off (9 ms).
 Stop 84 made the same fits cheaper, with identical estimates (`benchmarks/results/depth_budget.md`,
 `docs/tracking.md`): 0.90 of the tracker's time at the pairs' median on development seeds 0, 8 and 22; this table
 was not rerun.
@@ -1612,10 +1617,10 @@ change that reads it better.
 
 Development plates 0-9 rerun on this code too (`family_plate_dev_stop74`; stop 49's run is `family_plate_dev`): 1.12 %
 at the median of the scene medians (1.10 %), p90 2.82 % (2.84 %), 30 % within 1 % (40 %), 80 % within 2 % (80 %); every
-scene within 0.1 points of stop 49's but seed 7 (1.53 -> 1.43 %). Seed 7's frames are now all flagged (100 -> 0 % OK):
-its registration can slide 15 mm along the plate instead of 14, 5.1 % of its length, just over the 5 % at which a fit is
-doubted (the slide is measured in 1 mm steps). The registration's new pass does not run there; the SLAM's poses changed
-in stops 50-73.
+scene within 0.11 points of stop 49's (seed 7 1.53 -> 1.43 %, 5 0.96 -> 1.06 %, 1 8.65 -> 8.55 %). Seed 7's frames are
+now all flagged (100 -> 0 % OK): its registration can slide 15 mm along the plate instead of 14, 5.1 % of its length,
+just over the 5 % at which a fit is doubted (the slide is measured in 1 mm steps). The registration's new pass does
+not run there; the SLAM's poses changed in stops 50-73.
 
 **Stop 75: the shelves' s_y is barely in the images.** Scratch runs on development plate 1 (s_y 8.65 % off on the
 independent truth) took the suspects away one at a time: rendered with the tracked model's own displacement (no model
@@ -1625,18 +1630,18 @@ camera poses as well 3.02 %. Development plate 15 rendered with the model's disp
 So it is neither the model nor the camera: the images hold little of s_y on a shelf. `python -m
 benchmarks.plate_observability` (`plate_observability.md`, new; no tracking) says how little: how far 1 % of a
 parameter's range moves the most-moving point of the top face in the image, at most, at the scene's load. For s_y it is
-0.0008-0.026 px on the shelves and 0.027-0.47 px on the plates bolted at both ends. On the development plates 0-29 every
-scene with s_y over 2 % off has at most 0.0109 px, every other at least 0.0132 px. On the held-out plates, every s_y
-failure has at most 0.0142 px (1000 0.0039, 1001 0.0124, 1008 0.0127, 1009 0.0078, 1011 0.0063, 1013 0.0142), but the
-development split (0.0120 px) is not sharp there: three failures lie just over it and two shelves under it read within 2
-% (1004 1.33 %, 1016 1.45 %). A 2 % reading of s_y on those shelves asks the images for a few hundredths of a pixel,
-about what digital image correlation resolves on a good speckle, and these are faint ones. What it suggests, not tried:
-flag s_y as barely observable where the estimate's own sensitivity is that small. Such a flag would leave the beams
-alone: the held-out beams' s moves the image by 0.022-0.99 px per 1 % of its range (`beam_observability.md`, `--object
-beam`), none under the plates' split. Also measured and left (scratch): reading s_y from the depth image too, by fusing
-the depth follower's fit with the image fit's by their information, made plate 1's s_y worse (8.55 -> 11.5 %) and plate
-15's better (3.53 -> 2.76 %, its s_x 0.48 -> 1.51 %); per frame the depth holds s_y less tightly than the images
-(1-sigma 4.4-7.8 % of the range against 2.0-3.0 %).
+0.0015-0.13 px on the shelves and 0.027-0.47 px on the plates bolted at both ends. On the development plates 0-29
+every scene with s_y over 2 % off has at most 0.0109 px, every other at least 0.0132 px. On the held-out plates, every
+s_y failure has at most 0.0142 px (1000 0.0039, 1001 0.0124, 1008 0.0127, 1009 0.0078, 1011 0.0063, 1013 0.0142), but
+the development split (0.0120 px) is not sharp there: three failures lie just over it and two shelves under it read
+within 2 % (1004 1.33 %, 1016 1.45 %). A 2 % reading of s_y on those shelves asks the images for a few hundredths of a
+pixel, about what digital image correlation resolves on a good speckle, and these are faint ones. What it suggests,
+not tried: flag s_y as barely observable where the estimate's own sensitivity is that small. Such a flag would leave
+the beams alone: the held-out beams' s moves the image by 0.022-0.99 px per 1 % of its range (`beam_observability.md`,
+`--object beam`), none under the plates' split. Also measured and left (scratch): reading s_y from the depth image
+too, by fusing the depth follower's fit with the image fit's by their information, made plate 1's s_y worse (8.55 ->
+11.5 %) and plate 15's better (3.53 -> 2.76 %, its s_x 0.48 -> 1.51 %); per frame the depth holds s_y less tightly
+than the images (1-sigma 4.4-7.8 % of the range against 2.0-3.0 %).
 
 **Stop 76: a load the images hold too loosely is flagged.** The lead of stop 75, taken from the fit itself rather than
 from the truth's sensitivity: the tracker reports a dense fit low-confidence where a tracked parameter's standard
@@ -1674,7 +1679,7 @@ to so many views; a sample more than three robust standard deviations off is lef
 deformed state is not refined. A unit test: 9 views cut the template's noise to under half (1 / sqrt(9) where nothing
 else differs), 4 views less. With 20 (about the family's 1.5 s at rest), the 24 development plates of stop 76
 (`family_plate_dev_template_20` against `family_plate_dev_std_stop76`): median of the scene medians 1.42 -> 1.30 %,
-p90 7.20 -> 4.69 %, within 1 % 29 -> 33 %, within 2 % 66 -> 70 %; shelves 1 8.55 -> 4.56 %, 12 1.72 -> 1.06 %, 15 3.53
+p90 7.20 -> 4.69 %, within 1 % 29 -> 33 %, within 2 % 67 -> 71 %; shelves 1 8.55 -> 4.56 %, 12 1.72 -> 1.06 %, 15 3.53
 -> 2.39 %, 28 14.0 -> 11.0 %, 29 2.95 -> 1.92 %; worse 13 3.67 -> 4.74 %, 17 1.50 -> 1.90 %, 21 17.2 -> 20.0 %; the
 bolted plates within 0.2 points. Frames more than 2 % off 781 -> 690, and with the 1 % loose-hold flag those called OK
 245 of them (the flag catches 396). But on the development beams (`family_dev_0_19_template_20`, seeds 0-9 only: the
