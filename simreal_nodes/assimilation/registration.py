@@ -340,10 +340,11 @@ class RegistrationConfig:
     # where it covers this share more of the faces (0: off)
     coarse_gain: float = 0.05
     # a body of revolution about its z axis (:func:`revolves_about_z`): its ICP steps hold the turn about that axis,
-    # which its surface does not fix, and the coarse starts turned about it are left out (False: the turn is free and
-    # reset to the guess's at the end, as before stop 89). Stop 89, the boot family's development seeds 0-9
-    # (`family_boot_registration_dev_hold_spin` against `..._plane_samples`): the registration step 2.6 s at the median
-    # against 3.6 s, placed as well (0.14 mm and 0.06 degree both); other objects run as before, to the bit
+    # which its surface does not fix, and the coarse starts turned about it are left out (False: the steps turn it
+    # freely, as before stop 89; either way the fit takes the guess's turn at the end). Stop 89, the boot family's
+    # development seeds 0-9 (`family_boot_registration_dev_hold_spin` against `..._plane_samples`): the registration
+    # step 2.6 s at the median against 3.6 s, placed as well (0.14 mm and 0.06 degree both); other objects run as
+    # before, to the bit
     hold_spin: bool = True
 
     @classmethod
@@ -869,8 +870,9 @@ def icp_point_to_plane(P: np.ndarray, tree: cKDTree, N: np.ndarray, T: np.ndarra
     rotation composed about z, y, x as Open3D does. It stops after ``max_iteration`` steps or when the share
     of paired points and their RMS distance both change by less than ``tol``. ``hold_turn_about`` (a direction e,
     object frame): the steps do not turn the object about e (a body of revolution's axis, a turn its surface does
-    not fix, about any point): omega is taken perpendicular to e, x = B y with B's columns two directions
-    perpendicular to e (omega) and the three translations, y minimising the same sum. Returns the refined T."""
+    not fix, about any point), to first order (the rotations composed about the other axes twist it by their
+    product): omega is taken perpendicular to e, x = B y with B's columns two directions perpendicular to e (omega)
+    and the three translations, y minimising the same sum. Returns the refined T."""
     B = None
     if hold_turn_about is not None:
         e = np.asarray(hold_turn_about, dtype=np.float64)
