@@ -764,10 +764,10 @@ were run in the old room, but for the stereo tables: stop 61 reran their four (d
 Stop 59 looked for development evidence for stop 58's third fit and found none. The development beams 20-49, last run
 on the defaults of 2026-11-23 (`family_dev`), ran with it on (`family_dev_20_49`): median of the per-scene medians
 0.49 % (0.57 % on the old defaults), p90 1.46 % (1.49 %), 80 % within 1 % (77 %), 90 % within 2 % (93 %: seed 30 1.93
-% -> 2.47 %); seed 32's p90 92.9 % -> 1.16 %, seed 36's 9.5 % -> 40.2 % (its frames 44-51, while the load moves along
-the beam, read 0.15 for 0.27-0.69 with the brightness gain collapsed to 0.04-0.40, flagged low-confidence: on those
-frames the SLAM's camera error jumps from 7-10 mm to 18-31 mm and 0.5-1.3 degrees, the camera check reads 3.5-8 sigma;
-a diagnosis run of this stop, the cause in the localization not looked into). The third fit ran on 20 frames of 15 of
+% -> 2.47 %); seed 32's p90 92.9 % -> 1.16 %, seed 36's 9.5 % -> 40.2 % (a diagnosis run of this stop, not kept: while
+the load moves along the beam, its frames read the load far from where it is with the brightness gain collapsed,
+flagged low-confidence, and on those frames the SLAM's camera error jumps to several times its size before and the
+camera check fires; the cause in the localization not looked into). The third fit ran on 20 frames of 15 of
 these seeds and was kept on 7 frames of 7 (20, 32, 34, 36, 40, 41, 47); rerun with it off (`family_dev_warm_off`, the
 same code otherwise), every row is the same to the hundredth but seed 41's (p90 36.5 % -> 38.1 % with it on: its frame
 49, where the camera was about to be lost, read 0.826 against 0.815 for 0.611, and the value was held while the camera
@@ -988,25 +988,25 @@ beams too and is a default for both.
 
 Stop 37's first results (`family_plate_dev_stop37`: development seeds 0-9, median of the per-scene medians 1.27 %,
 p90 5.4 %, 60 % within 2 %; held-out 1000-1012, whose run was not kept) failed on s_y on shelves.
-Development seed 7 read s_y 8-18 mm too close to the plate's middle on every hold although its load moves the image
-by 25 px. Its diagnosis (scratch scripts on seed 7 alone): the model is not the cause (its best fit to the truth's
-surface at the scene's four load positions is within 0.8 % of each axis), the photometric cost itself had its
-minimum where the fit stopped (not a solver fault), and rendering the same scene with ambient light only took s_y
-from 7.6 % to 1.6 %: the plate's twist turns its surface, and under the scene's directional light the faint
-speckle's change of shading outweighed its motion. The dense measurement now models that change (a matte surface:
-three shading parameters g, the brightness change I_ref (n(mu) - n_ref).g with the normals smooth across each face
-of the model, `tracking.dense_shading`, on; docs/tracking.md), and a unit test renders a faint plate bending under
-a side light (fit 5 % of the range off without the term, within 1.5 % with it, g the light's direction). The
+Development seed 7 read s_y too close to the plate's middle on every hold although its load moves the image by 25 px.
+Its diagnosis (scratch scripts on seed 7 alone, not kept): the model is not the cause (its best fit to the truth's
+surface reads the load 0.58 % off at the median, the model bias of `family_plate_dev_stop37`), the photometric cost
+itself had its minimum where the fit stopped (not a solver fault), and rendering the same scene with ambient light
+only took most of s_y's error away: the plate's twist turns its surface, and under the scene's directional light the
+faint speckle's change of shading outweighed its motion. The dense measurement now models that change (a matte
+surface: three shading parameters g, the brightness change I_ref (n(mu) - n_ref).g with the normals smooth across each
+face of the model, `tracking.dense_shading`, on; docs/tracking.md), and a unit test renders a faint plate bending
+under a side light (fit 5 % of the range off without the term, within 1.5 % with it, g the light's direction). The
 knob was chosen on development seeds only: plates 0-9 (`family_plate_dev_stop38` against `family_plate_dev_stop37`):
-median of the per-scene medians 1.27 % -> 1.10 %, p90 5.4 % -> 3.2 %, within 2 % 60 % -> 70 % (seed 7 7.6 % ->
-2.5 %, seed 2 2.0 % -> 0.4 %; seed 1 5.2 % -> 9.6 %: a 3.2 px load on a faint speckle, 6.9 % even with ambient
-light only, where three more free parameters cost more than they explain); beams 0-19 (`family_dev_0_19_stop38` against
+median of the per-scene medians 1.27 % -> 1.10 %, p90 5.4 % -> 3.2 %, within 2 % 60 % -> 70 % (seed 7 7.6 % -> 2.5 %,
+seed 2 2.0 % -> 0.4 %; seed 1 5.2 % -> 9.6 %: a 3.2 px load on a faint speckle, read poorly even with ambient light
+only, where three more free parameters cost more than they explain); beams 0-19 (`family_dev_0_19_stop38` against
 `family_dev_0_19_dense_shading_false`): 0.30 % -> 0.29 % median, p90 1.15 % -> 1.11 %, 85 % within 1 % and 100 %
-within 2 % both, every scene within 0.16 points of its value without the term; the tracker's time per frame about
-1.5 times (92 -> 145 ms at the median of the two beam tables, each run alone with two scenes in parallel; 142 ->
-200 ms per solve on one frame of seed 1, measured alone: three more iterations and the normals). The two
-development tables ran before two changes made for speed (the corners' blended normals no longer renormalised per
-sample, the last two mu's normals kept): one frame of beam seed 1 reads 0.30720482 before, 0.30720522 after.
+within 2 % both, every scene within 0.16 points of its value without the term; the tracker's time per frame about 1.5
+times (92 -> 145 ms at the median of the two beam tables, each run alone with two scenes in parallel; each solve takes
+more iterations and computes the normals). The two development tables ran before two changes made for speed (the
+corners' blended normals no longer renormalised per sample, the last two mu's normals kept): one frame of beam seed 1,
+checked by hand, read the same before and after but for a difference far below any error quoted here.
 
 On held-out seeds 1000-1019 with the shading term (`family_plate_stop38`, all 20; run once): median of the per-scene
 medians 1.20 % (target < 1 %: **not met**), p90 6.0 % (< 3 %: **not met**), 35 % within 1 %, 60 % within 2 % (>= 90 %:
@@ -1031,9 +1031,9 @@ seeds only. Plates 0-9 (`family_plate_dev` against `family_plate_dev_stop38`): m
 (`family_dev_0_19_dense_shading_frames_50` against `family_dev_0_19_stop38`): 0.29 % median both, p90 1.11 % -> 1.08 %,
 85 % / 100 % within 1 % / 2 % both, every scene within 0.2 points (seed 7 0.74 % -> 0.56 %); seed 14's p90 grew
 (41 % -> 82 %: frames where the camera was lost hold the last estimate, a different one; its sound frames' p90 0.39 %
--> 0.41 %). Fusing every frame instead of the sound ones (a first try, not kept) took plate seed 2 from 0.4 % to
-2.9 %: the frames before the load is placed are fitted with a load the model cannot leave out, measured a wrong g
-with great confidence, and held it for dozens of frames.
+-> 0.41 %). Fusing every frame instead of the sound ones (a first try, not kept) made plate seed 2 (0.4 % with the
+sound frames) far worse: the frames before the load is placed are fitted with a load the model cannot leave out,
+measured a wrong g with great confidence, and held it for dozens of frames.
 On held-out seeds 1000-1019 with it (`family_plate_stop39`, all 20, run once after the choice; `family_plate_stop38` is
 the same seeds with each frame's g alone): median of the per-scene medians 1.20 % both (target < 1 %: **not met**),
 p90 6.0 % -> 4.8 % (< 3 %: **not met**), within 1 % 35 % -> 30 %, within 2 % 60 % both (>= 90 %: **not met**); s_x
@@ -1084,11 +1084,11 @@ The first run, with the thesis boot scene file's settings alone (`family_boot_de
 (0.69 degree), p90 12.8 %, 40 % within 1 %, 60 % within 2 %; held-out seeds 1000-1019 2.22 % (1.2 degrees), p90 10.1
 %, 20 % within 1 %, 45 % within 2 %. The failures were alpha_z's: on 1009, 1015, 1016 and development 3 and 8 the
 tracker never found a frame that informs it; on development 2 it was fixed 49 degrees off. Development seed 3, rerun
-with every frame printed: alpha_z started 146 degrees from the boot's turn (the registration cannot tell the turn of a
-body of revolution); at that alpha_z the bent boot fits no better than an unbent one, so the frame reads "no measurable
-deformation", and a frame that looks undeformed holds alpha_z: theta stayed at 0 while the lever went to 44 degrees.
-The new knob `tracking.constant_search` (default 0, off): until a constant has its first informative frame, each
-frame is also fitted with alpha_z held at N values over its range, the map points relinked at each (a point's
+with every frame printed (not kept): alpha_z started far from the boot's turn (the registration cannot tell the turn
+of a body of revolution); at that alpha_z the bent boot fits no better than an unbent one, so the frame reads "no
+measurable deformation", and a frame that looks undeformed holds alpha_z: theta stayed at 0 while the lever went to 44
+degrees. The new knob `tracking.constant_search` (default 0, off): until a constant has its first informative frame,
+each frame is also fitted with alpha_z held at N values over its range, the map points relinked at each (a point's
 material point depends on the turn), and the best kept where its RMS beats the frame's own fit by
 `min_deformation_px` (a unit test breaks the deadlock above on synthetic points; a first version without the
 relinking failed it). Three knobs on the development seeds, the code otherwise the same: alpha_z fixed over 15
@@ -1121,34 +1121,35 @@ registrations agree to the digit, the per-scene medians by 0.14 points at the me
 1008 1.2 % and 2.7 %, 1005 4.3 % and 3.1 %. Development seed 0 run twice in one process (the OpenCV random state
 reset, the frames copied afresh): the registered pose differs in its last bits (1e-15: Open3D's ICP, called on the
 same clouds in one process with one OpenMP thread, returns poses 1e-15 apart from one call to the next; an open
-upstream question, isl-org/Open3D#6225), theta by 4e-8 rad in that frame and by 0.036 rad (2 degrees) at the lever's
-first move 15 frames later, the camera from the next frame on through the feedback of the boot's map points. The
-tracker's discrete choices (which map points link, which frame informs alpha_z, the search's winner) amplify a
+upstream question, isl-org/Open3D#6225), theta by almost nothing in that frame but visibly at the lever's first move
+some frames later (a check not kept), the camera from the next frame on through the feedback of the boot's map points.
+The tracker's discrete choices (which map points link, which frame informs alpha_z, the search's winner) amplify a
 rounding difference into another basin. So a single boot row is one draw of that spread; the summaries over 10-20
 scenes moved too: over 1000-1011, the median of the per-scene medians read 1.80 % in one run and 2.06 % in the other.
 The numbers of stop 63 above and below are such draws.
 
 **alpha_z searched until it is fixed, a knob** (`tracking.constant_search_until: frozen`, default `seen`; stop 63).
-Development seed 2, rerun with every frame printed: the registration took 32 frames (the lever already at 23 degrees),
-the depth image's reference state put alpha_z 63 degrees off, and that first frame counted as informative, so a search
-that stops once the constant is seen ran on one frame only (21 map points: no winner). alpha_z then wandered along a
-flat cost with a standard deviation of 0.5 degree, and was fixed 51 degrees off. With `frozen` the search runs on
-every frame until alpha_z is fixed, and a winner restarts its informative frames: seed 2's search won at frame 37, 19
-degrees off, and alpha_z settled 13.3 degrees off (a test breaks the same deadlock on synthetic points). Development
-seeds 0-9 (`family_boot_dev_search_until_frozen`, the same code otherwise): 1.19 % -> **1.40 %**, p90 7.49 % ->
-**3.06 %**, the same shares (40 %, 70 %); seed 2 11.4 % -> 2.8 %, 0 0.73 -> 0.44 %, 8 7.1 -> 5.7 %; 1 1.25 -> 1.42 %, 6
-1.13 -> 1.38 %. Its price rules it out as a default: the tracker's median time per frame 28-4416 ms against 11-51 ms
-(the search runs on every frame until 40 frames inform alpha_z, which on some scenes is never). A knob for offline
-replays; not run on the held-out seeds.
+Development seed 2, rerun with every frame printed (not kept): the registration took 32 frames (the lever already at
+23 degrees), the depth image's reference state put alpha_z far off, and that first frame counted as informative, so a
+search that stops once the constant is seen ran on one frame only (too few map points: no winner). alpha_z then
+wandered along a flat cost with a small standard deviation claimed, and was fixed 51 degrees off
+(`family_boot_dev_constant_search_24`). With `frozen` the search runs on every frame until alpha_z is fixed, and a
+winner restarts its informative frames: seed 2's search won a few frames later, still well off, and alpha_z settled
+13.3 degrees off (`family_boot_dev_search_until_frozen`; a test breaks the same deadlock on synthetic points).
+Development seeds 0-9 (`family_boot_dev_search_until_frozen`, the same code otherwise): 1.19 % -> **1.40 %**, p90 7.49
+% -> **3.06 %**, the same shares (40 %, 70 %); seed 2 11.4 % -> 2.8 %, 0 0.73 -> 0.44 %, 8 7.1 -> 5.7 %; 1 1.25 ->
+1.42 %, 6 1.13 -> 1.38 %. Its price rules it out as a default: the tracker's median time per frame 28-4416 ms against
+11-51 ms (the search runs on every frame until 40 frames inform alpha_z, which on some scenes is never). A knob for
+offline replays; not run on the held-out seeds.
 
 **Registration of the boot, and the polish** (stop 63; `python -m benchmarks.family_boot --seeds 0-9 --registration`,
 the registration step alone on each scene's first 14 frames). With the RGB-D defaults
 (`family_boot_registration_dev_before_polish`): median 0.38 mm and 0.13 degree, but seeds 1 and 5 3.8 mm off (3.8 mm
 along the camera's line of sight; 3.8 mm with a 1.9 degree tilt). The fine stage of roll and pitch taken from the
 support plane (`anchor.fine: upright`, new; `family_boot_registration_dev_upright`) did worse: 7 of 9 scenes 3.6-3.95
-mm off. Traced on seeds 1 and 4: the coarse stage (5 mm voxels) ends 3-6 mm off, and the fine stage's ICP stops in a
-neighbouring basin of the bellows' pleats, 3.8 mm away, where more of the faces have a measured point within 6 mm than
-at the true pose (seed 1: 63.5 % against 62.1 %), but fewer within 2 mm (31.5 % against 48.7 %). The new
+mm off. Traced on seeds 1 and 4 (not kept): the coarse stage (5 mm voxels) ends a few millimetres off, and the fine
+stage's ICP stops in a neighbouring basin of the bellows' pleats, 3.8 mm away, where slightly more of the faces have a
+measured point within 6 mm than at the true pose, but far fewer within 2 mm. The new
 `anchor.polish_mm` (default 0, off): the fit and six starts that far away along the object's axes are refined by ICP
 at 4 and 2 mm and the one with the most faces met within 2 mm is kept. With 4 mm
 (`family_boot_registration_dev_polish_4`): median **0.09 mm** and **0.05 degree**, worst **0.42 mm** and 0.29 degree
@@ -1183,8 +1184,8 @@ one call to the next on the same clouds (eight calls with one OpenMP thread: eig
 threads; isl-org/Open3D#6225). The registration's fine stage and polish now run `icp_point_to_plane`: the same loop
 (point-to-plane, Tukey weights, the same pairs, steps and stopping rule) written out in numpy. On a rendered beam scene
 it lands 1e-12 mm and 3e-10 rad from Open3D's result and repeats to the bit, and so does the whole registration (tests
-in `test_registration_rgbd.py`; with Open3D's ICP the same test finds poses 1e-16 apart); it takes as long (0.29 s
-against 0.28 s on 150 000 points). (2) The benchmark's workers take whichever seed is next, and OpenCV's own random
+in `test_registration_rgbd.py`; with Open3D's ICP the same test finds poses 1e-16 apart); it takes about as long
+(timed by hand, not kept). (2) The benchmark's workers take whichever seed is next, and OpenCV's own random
 generator (PnP RANSAC draws from it) carried over from the scenes a worker ran before: each scene now starts it at its
 seed (`family.scene_map`; test in `test_family_bench.py`). The most common reason in a row broke its ties by Python's
 per-process string hashing; now by the first seen. Development seeds 0-9 ran twice on this code
@@ -1209,21 +1210,22 @@ within a degree and every frame called OK: 13 (3.45 %) and 16 (2.78 %, where the
 the median); alpha_z 5.3 degrees off on 12 (p90 6.2 %). These are the held-out failures' kind, on scenes that may be
 traced.
 
-**Stop 65: the object points the map keeps.** Tracing development boots 13 and 16 (theta ~2 degrees off with a claimed
-standard deviation of 0.05-0.2 degree) found the tracker's measurements falling from about 170 at rest to 22-90 once the
-lever bent, and why: a deformable point never joins the pose's matches nor a keyframe's fusion, so it gains neither
-keyframes nor finds, and the SLAM's culling of young points (ORB-SLAM2's rule: seen by too few keyframes two keyframes
-on) erased every object point made after the start (boot 13: 556 in 124 frames). The measurements were always the
-youngest points, each linked through the estimate of the moment it was first seen. A first version kept every
-deformable point: boot 13 read better, but boot 1 far worse: points linked while the boot was far off in alpha_z (the
-camera lost every other frame) kept that error for good (that run was stopped at seed 6 and is not kept, so its
-figures are not quoted). What landed: the tracker tells the map which points it linked at rest
-(`/simreal/localization/deformable_points` now carries `flags`: bit 0 the fit rejected the point, bit 1 linked at rest),
-and the map keeps those (`SlamConfig.hold_rest_points`, thesis §4.4's scanned points); a point linked while the object
-was deformed is culled as before. A keyframe no longer makes a copy of a followed deformable point (its feature looked
-free to the keyframe because the pose's matches leave the point out; `SlamConfig.followed_px`, 3 px). And a tracked
-parameter whose standard deviation exceeds a uniform draw's over its range (range / sqrt 12) keeps its last value,
-flagged (development boot 12 had read 0.4 degree for a lever at 47 from 17 points in a trace; with the rule its p90 is
+**Stop 65: the object points the map keeps.** Tracing development boots 13 and 16 (theta 3.45 and 2.78 % off in
+`family_boot_dev_10_19_stop64`, far more than the standard deviation the fit claimed; the traces not kept) found the
+tracker's measurements falling to a fraction of their number at rest once the lever bent, and why: a deformable point
+never joins the pose's matches nor a keyframe's fusion, so it gains neither keyframes nor finds, and the SLAM's
+culling of young points (ORB-SLAM2's rule: seen by too few keyframes two keyframes on) erased every object point made
+after the start. The measurements were always the youngest points, each linked through the estimate of the moment it
+was first seen. A first version kept every deformable point: boot 13 read better, but boot 1 far worse: points linked
+while the boot was far off in alpha_z (the camera lost every other frame) kept that error for good (that run was
+stopped at seed 6 and is not kept, so its figures are not quoted). What landed: the tracker tells the map which points
+it linked at rest (`/simreal/localization/deformable_points` now carries `flags`: bit 0 the fit rejected the point,
+bit 1 linked at rest), and the map keeps those (`SlamConfig.hold_rest_points`, thesis §4.4's scanned points); a point
+linked while the object was deformed is culled as before. A keyframe no longer makes a copy of a followed deformable
+point (its feature looked free to the keyframe because the pose's matches leave the point out;
+`SlamConfig.followed_px`, 3 px). And a tracked parameter whose standard deviation exceeds a uniform draw's over its
+range (range / sqrt 12) keeps its last value, flagged (a trace of development boot 12 had shown the lever read far off
+at its 47 degree hold from a handful of points; with the rule its p90 is
 8.6 %, `family_boot_dev_10_19_stop65`).
 
 Development seeds 0-9 (`family_boot_dev_stop65`; stop 64's code: `family_boot_dev_stop64`): median of the per-scene
@@ -1248,22 +1250,23 @@ Theta's median improved on 11 scenes (1001 1.19 -> 0.56 %, 1006 0.80 -> 0.31 %) 
 1015; 1018 registered on noisy depth (flagged). On the model's own render (the unit test
 `test_joint_boot_lever_angle_and_...`) the kept rest points cost accuracy: 1.55 degrees at the median against 0.61
 before (0.37 with them culled), the lever read 0.6 degree off while it still rests as the camera travels. Three causes
-were tried and ruled out on that scene: the flow's drift (old tracks snapped onto ORB corners: 1.52, 1.26 degrees), the
-prediction as the flow's start (1.43), stale viewpoints (points measured only within 15 degrees of their link: the lever
-was lost). Open. The beams (dense measurement, which reads no map point, but the same map) on development seeds 0-19
-(`family_dev_0_19_stop65`): median of the per-scene medians 0.27 %, p90 1.07 %, 85 % within 1 %, 100 % within 2 %
-(`family_dev_0_19`, its last run, 2026-11-27: 0.29 %, 1.08 %, 85 %, 100 %); the beams' held-out tables were not rerun.
+were tried and ruled out on that scene (scratch variants, not kept): the flow's drift (old tracks snapped onto ORB
+corners), the prediction as the flow's start, stale viewpoints (points measured only within 15 degrees of their link:
+the lever was lost). Open. The beams (dense measurement, which reads no map point, but the same map) on development
+seeds 0-19 (`family_dev_0_19_stop65`): median of the per-scene medians 0.27 %, p90 1.07 %, 85 % within 1 %, 100 %
+within 2 % (`family_dev_0_19`, its last run, 2026-11-27: 0.29 %, 1.08 %, 85 %, 100 %); the beams' held-out tables were
+not rerun.
 
-**Stop 66: the fit refitted on its inliers, measured and left a knob.** A trace of development boot 12 (the lever at
-7-10 degrees, read 1.1-1.3 degrees high; alpha_z 3-6 degrees off in the frames it was estimated from, frozen 4.3 off)
-showed 25-35 % of the followed object points more than 3 x Huber (6 px) off once the lever bent, and 40 % on boot 10 at
-42 degrees, against 3 % at rest. Huber bounds each such point's pull but keeps it, and a third of the points off the
-same way bias a fit (the unit test `test_refits_remove_the_bias_of_outliers_off_in_one_direction`: 8 of 26 points 8-20
-px off put Huber 34 % of the range off, 4.4 standard deviations; refitted, 1 %). The knob `tracking.outlier_refits`
-(`lm.solve_generic(refits=)`) follows each frame's fit with up to that many fits on the measurements then within 3 x
-Huber, re-classified each round, as ORB-SLAM2's pose optimisation does; a round that ends with fewer inliers than it was
-fitted to is undone (the first version kept it and lost a frame of the starved unit-test graph: 4 of 13 points
-agreeing).
+**Stop 66: the fit refitted on its inliers, measured and left a knob.** A trace of development boot 12 (scratch; the
+lever at 7-10 degrees, read 1.1-1.3 degrees high and alpha_z frozen 4.3 degrees off in `family_boot_dev_10_19`) showed
+a large share of the followed object points more than 3 x Huber (6 px) off once the lever bent, and on boot 10 at 42
+degrees too, against few at rest. Huber bounds each such point's pull but keeps it, and a large share of the points
+off the same way biases a fit (the unit test `test_refits_remove_the_bias_of_outliers_off_in_one_direction`: 8 of 26
+points 8-20 px off put Huber 34 % of the range off, 4.4 standard deviations; refitted, 1 %). The knob
+`tracking.outlier_refits` (`lm.solve_generic(refits=)`) follows each frame's fit with up to that many fits on the
+measurements then within 3 x Huber, re-classified each round, as ORB-SLAM2's pose optimisation does; a round that ends
+with fewer inliers than it was fitted to is undone (the first version kept it and lost a frame of the starved
+unit-test graph: 4 of 13 points agreeing).
 
 It was first made the default (3) on development seeds 0-19, compared with stop 65's tables: 0.62 % against 0.63 %, p90
 1.15 % against 2.15 %. Those tables came from an earlier session's host; this one (AMD EPYC with AVX-512, where a
@@ -1315,34 +1318,34 @@ points again without descriptors (the flow from the last image that followed the
 prediction that does not lag a fast lever.
 
 **Stop 68: measurements that move unlike their neighbours, measured and left a knob.** Where do the wrong
-re-acquisitions come from? A scratch trace of development seed 10 found the prediction the SLAM searches around a median
-1.2 px from the truth's pixel, and the wrong re-acquisitions a median 15 px from it: the right feature is not among
-ORB's corners near the prediction, and the closest descriptor within 50 bits is another corner of the speckle. A ratio
-test (the best under 0.8 of the second best at least 2 px away) with each feature given to one point left 86 % of them
-wrong (scratch, seeds 10 and 12): on the speckle a wrong match is as distinctive as a right one. Its motion tells it
+re-acquisitions come from? A scratch trace of development seed 10 found the prediction the SLAM searches around close
+to the truth's pixel, and the wrong re-acquisitions far from it: the right feature is not among ORB's corners near the
+prediction, and the closest descriptor within 50 bits is another corner of the speckle. A ratio test (the best under
+0.8 of the second best at least 2 px away) with each feature given to one point left most of them wrong (scratch,
+seeds 10 and 12): on the speckle a wrong match is as distinctive as a right one. Its motion tells it
 apart: a lagging prediction offsets a region's measurements alike, a wrong match offsets its own. The knob
 `SlamConfig.coherence_px` (new) drops each object measurement, followed or re-acquired, whose offset from its predicted
 pixel differs by more than that from the median offset of its image neighbours (within `coherence_radius_px` = 40 px, at
 least `coherence_min` = 3 of them; a point with fewer is kept).
 
 It was set on development seeds. On six of them (7, 10, 12, 24, 26, 29; scratch runs) 4 px dropped too much (seed 12's
-alpha_z went to the other basin, 162 degrees off) and 8 px lost none of the fast moves that the radii of stop 67 lost.
-Over seeds 0-39 (`family_boot_dev_0_39_coherence_px_8`) 8 px read **0.88 %** against the default's 0.93 %
-(`family_boot_dev`, `_10_19`, `_20_39`), 72.5 % within 2 % against 70 %, 52.5 % within 1 % against 50 %, the 90th
-percentile of the scene medians 4.6 % against 6.3 %. 19 scenes read better and 14 worse by more than 0.05 points (seed
-22 18.4 -> 4.5 %, 10 2.09 -> 0.36 %; 26 1.47 -> 3.87 %, 24 0.45 -> 1.94 %, 12 2.24 -> 3.53 %); seeds 0-19 0.58 %, 20-39
-2.07 %. On seeds 10 and 12 (`boot_measurements_coherence_px_8`) the bent frames' wrong measurements fall from 61 and 50
-% to 40 and 30 % (flow: 53 and 38 % -> 28 and 14 %; the re-acquisitions kept: 90 and 84 % -> 75 and 70 %). The rule of
-stop 66 held, and the held-out seeds ran with it (`family_boot_coherence_px_8`): **1.60 %** against 1.61 %, p90 6.91 %
-against 6.74 %, 30 % within 1 % and 60 % within 2 % as before, alpha_z 1.2 degrees off at the median against 1.3; ten
-scenes better and ten worse (1015 12.5 -> 3.7 %, 1009 5.7 -> 2.3 %; 1007 4.1 -> 9.5 %, 1002 0.98 -> 2.75 %, 1003 0.24 ->
-1.41 %). The development gain did not hold out. The check also reaches every scene tracked by map points: in
+alpha_z went to the other basin) and 8 px lost none of the fast moves that the radii of stop 67 lost. Over seeds 0-39
+(`family_boot_dev_0_39_coherence_px_8`) 8 px read **0.88 %** against the default's 0.93 % (`family_boot_dev`,
+`_10_19`, `_20_39`), 72.5 % within 2 % against 70 %, 52.5 % within 1 % against 50 %, the 90th percentile of the scene
+medians 4.6 % against 6.3 %. 19 scenes read better and 14 worse by more than 0.05 points (seed 22 18.4 -> 4.5 %, 10
+2.09 -> 0.36 %; 26 1.47 -> 3.87 %, 24 0.45 -> 1.94 %, 12 2.24 -> 3.53 %); seeds 0-19 0.58 %, 20-39 2.07 %. On seeds 10
+and 12 (`boot_measurements_coherence_px_8`) the bent frames' wrong measurements fall from 61 and 50 % to 40 and 30 %
+(flow: 53 and 38 % -> 28 and 14 %; the re-acquisitions kept: 90 and 84 % -> 75 and 70 %). The rule of stop 66 held,
+and the held-out seeds ran with it (`family_boot_coherence_px_8`): **1.60 %** against 1.61 %, p90 6.91 % against 6.74
+%, 30 % within 1 % and 60 % within 2 % as before, alpha_z 1.2 degrees off at the median against 1.3; ten scenes better
+and ten worse (1015 12.5 -> 3.7 %, 1009 5.7 -> 2.3 %; 1007 4.1 -> 9.5 %, 1002 0.98 -> 2.75 %, 1003 0.24 -> 1.41 %).
+The development gain did not hold out. The check also reaches every scene tracked by map points: in
 `docs/tracking.md`'s second table (rerun in this stop) the foam beam at 640 x 480 reads far worse with it (7.2 -> 18.6
-mm, p90 26.6 -> 399 mm), the thesis's boot (1.55 -> 1.50 degrees) and the foam beam at 1280 x 720 (3.0 -> 3.1 mm) level.
-A check that helps one family's development seeds, not its held-out ones, and breaks another scene is a knob, so **the
-default stays off**; its rows are in both documents. Also tried on the six seeds and not kept (scratch, no code): a
-guided re-acquisition, within 6 px of the prediction moved by the followed neighbours' median offset, lost the fast
-moves again (seed 29 17.4 %, seed 7 5.9 %).
+mm, p90 26.6 -> 399 mm), the thesis's boot (1.55 -> 1.50 degrees) and the foam beam at 1280 x 720 (3.0 -> 3.1 mm)
+level. A check that helps one family's development seeds, not its held-out ones, and breaks another scene is a knob,
+so **the default stays off**; its rows are in both documents. Also tried on the six seeds and not kept (scratch, no
+code): a guided re-acquisition, within 6 px of the prediction moved by the followed neighbours' median offset, lost
+the fast moves again (seeds 29 and 7).
 
 The rerun of `docs/tracking.md`'s second table made `flow anchor 1 px` (each followed point re-measured against the
 image its track began in, `SlamConfig.flow_anchor_px`) the best row on both of its scenes (the thesis boot 1.43 against
@@ -1352,21 +1355,22 @@ better, 21 worse; seed 25 25.9 against 14.6 %, 26 4.04 against 1.47 %): it stays
 run.
 
 **Stop 70: the boot registered as a body of revolution.** The registration alone (`python -m benchmarks.family_boot
---registration --seeds 0-39`, scratch) refused its first try on 5 of the 40 development boots (19, 25, 34, 36, 38). Four
-times because every coarse fit had turned more than 30 degrees from the guess: the bellows is a body of revolution about
-its axis (its surface turned by 17, 45, 90 or 151 degrees lies on itself within 2 mm; the beams', the bunny's and the
-dragon's do not), so the ICP turns it about that axis freely, and the turn check took the right fits for another basin.
-Once because the guess (seed 36: 113 mm off, its base 42 mm under the table) was beyond every coarse start. A refused
-registration collects its views again, and by then the lever is loaded: the loaded fit matched 16-18 % of the faces and
-seed 36 was never placed (25.5 %), seeds 25 and 38 were placed late (14.6 and 24.7 %). Now
-(`registration.revolves_about_z`, `turned_like`, `lifted_onto`) a body of revolution is judged by its axis's tilt alone
-and keeps the guess's turn about the axis (the fine stage had left seed 0's 52 degrees from the guess: the turn the
-tracker's alpha_z is measured from was a draw of the ICP), and a guess that sinks the model under the support plane is
-lifted onto it. The first registration on development seeds 0-39: 0 refused (5 before), 0.14 mm and 0.05 degrees at the
-median as before, worst 0.49 mm and 0.31 degrees. The beams' registration (`python -m benchmarks.family --seeds 0-9
---registration`) reads as before in every row. Tests (`tests/assimilation/test_registration_revolution.py`, a boot cloud
-made from its model's surface with clutter beside it): guesses turned -120 and 180 degrees about the axis (refused
-before) and one 11 cm off under the floor are placed within 1 mm and 0.3 degrees, with the guess's turn.
+--registration --seeds 0-39`, scratch) refused its first try on several of the 40 development boots. Mostly because
+every coarse fit had turned more than 30 degrees from the guess: the bellows is a body of revolution about its axis
+(its surface turned by 17, 45, 90 or 151 degrees lies on itself within 2 mm; the beams', the bunny's and the dragon's
+do not), so the ICP turns it about that axis freely, and the turn check took the right fits for another basin. Once
+(seed 36) because the guess, its base under the table, was beyond every coarse start. A refused registration collects
+its views again, and by then the lever is loaded: the loaded fit matched too few of the faces (seed 36: 16 %, its
+refusal in `family_boot_dev_20_39`) and seed 36 was never placed (25.5 %), seeds 25 and 38 were placed late (14.6 and
+24.7 %). Now (`registration.revolves_about_z`, `turned_like`, `lifted_onto`) a body of revolution is judged by its
+axis's tilt alone and keeps the guess's turn about the axis (the fine stage had left seed 0's far from the guess: the
+turn the tracker's alpha_z is measured from was a draw of the ICP), and a guess that sinks the model under the support
+plane is lifted onto it. The first registration on development seeds 0-39 (`family_boot_dev_0_39`): none refused, 0.14
+mm and 0.05 degrees at the median as before, worst 0.49 mm and 0.31 degrees. The beams' registration (`python -m
+benchmarks.family --seeds 0-9 --registration`) reads as before in every row. Tests
+(`tests/assimilation/test_registration_revolution.py`, a boot cloud made from its model's surface with clutter beside
+it): guesses turned -120 and 180 degrees about the axis (refused before) and one 11 cm off under the floor are placed
+within 1 mm and 0.3 degrees, with the guess's turn.
 
 Development seeds 0-39 (`family_boot_dev_0_39`): **0.98 %** of the lever's range at the median of the scene medians
 against 0.93 % on stop 66's code (`family_boot_dev`, `_10_19`, `_20_39`), p90 **3.65 %** against 6.30 %, 52.5 % within 1
@@ -1457,11 +1461,11 @@ the same neighbours), and the pixel grid is undone once per camera (`registratio
 model in `test_registration_rgbd.py`). The alpha_z search relinks every map point two dozen times a frame; it now keeps
 each deformation's search trees (`registration.LinkIndex`) and tests a point's candidate triangles in one array
 operation. All of it gives the same numbers to the bit but one change: the samples' displacement comes from the field's
-own evaluation instead of the Jacobian's (they differ by 7e-18 m). That alone moves single scenes (checked by hand: stop
-71's code with only that change reproduces stop 72's lever to the bit on seeds 1000 and 1001, which stop 71's table read
-at 0.34 and 0.26 %, this stop's at 0.29 and 0.20 %). Over the 20 held-out scenes single scene medians moved by up to
-0.24 points (1019 1.05 -> 0.81 %, 1013 0.71 -> 0.54 %) and the summary by 0.01: the scale of this benchmark's noise per
-scene.
+own evaluation instead of the Jacobian's (they differ by rounding). That alone moves single scenes (checked by hand:
+stop 71's code with only that change reproduces stop 72's lever to the bit on seeds 1000 and 1001, which stop 71's
+table read at 0.34 and 0.26 %, this stop's at 0.29 and 0.20 %). Over the 20 held-out scenes single scene medians moved
+by up to 0.24 points (1019 1.05 -> 0.81 %, 1013 0.71 -> 0.54 %) and the summary by 0.01: the scale of this benchmark's
+noise per scene.
 
 alpha_z (`tracking.depth_turn`, set with `depth_fit` in the boot's scene files). The depth fit's upright rigid
 correction turns the model about its centroid, which on the boot lies on its axis. Stop 71's variant (above) reported
@@ -1499,7 +1503,7 @@ no nearer to a point than its distance there less delta. So a point's 8 nearest 
 nearest of them now is nearer than the 8th was less delta (or the radius is), and the few other points search the old
 tree within their distance plus delta. The answer is the one a new tree gives: `test_depth_state.py` checks it along a
 walk of states (it fails with the few points' search taken out), and the held-out seeds 1000-1019 read as stop 72's
-to the bit. Development seed 8's depth fit replayed alone: 39 -> 32 ms a frame; the thesis's boot views
+to the bit. Development seed 8's depth fit, replayed alone (scratch), took less time a frame; the thesis's boot views
 (`docs/tracking.md`) 37-45 -> 31-35 ms; over the 20 held-out boots the tracker's median is within the host's noise of
 stop 72's (62 ms both; the scenes' ratios 0.8-1.2, 0.95 at the median).
 
@@ -1525,7 +1529,7 @@ ms** a frame at the median of the scenes (0.58 of it, scene by scene), the step 
 %** at the median, p90 0.68 % both, 95 % within 1 % both, all within 2 %; worse by more than 0.2 points on seeds 27
 (0.69 -> 1.05 %) and 38 (0.40 -> 0.67 %), better on none; alpha_z 0.26 -> 0.29 degree. Accuracy first: the default
 stays 2, and 3 is a knob for a user who wants the time. With 4, development seed 8's frames (replayed alone,
-scratch) keep 290 points on the boot, under the fit's 300, and the depth fit stops. Far from 10 ms either way.
+scratch) keep fewer points on the boot than the fit's 300, and the depth fit stops. Far from 10 ms either way.
 
 **Stop 87: a constant seen well is not moved by weaker frames.** alpha_z is a constant: fitted on every frame until
 `constant_frames` (40 in the boot's scene files) frames have shown it well (standard deviation under
@@ -1574,8 +1578,8 @@ the sensitivity itself is not mended (noted in docs/status.md).
 **Stop 89: the boot's turn about its axis held in every ICP step of the registration.** The boot is a body of
 revolution (`revolves_about_z`): its surface does not fix its turn about its axis, and the registration keeps the
 guess's turn at the end (`turned_like`). Its ICP steps left that turn free: in a trace of development seed 0 (scratch)
-the coarse stage's turn wandered by degrees to tens of degrees a step and every start ran all 45 of its iterations,
-and the fine stage's calls turned it by up to 8 degrees each. Now, on a body of revolution, every step holds the turn
+the coarse stage's turn wandered widely from step to step and every start ran all 45 of its iterations, and each of
+the fine stage's calls turned it again. Now, on a body of revolution, every step holds the turn
 (`RegistrationConfig.hold_spin`, on; `icp_point_to_plane(..., hold_turn_about=...)`, the coarse stage a translation
 alone) and the two coarse starts turned about the axis are left out; beams and plates are not bodies of revolution and
 run as before, to the bit. The registration step alone, development seeds 0-9, `--jobs 1`
@@ -1599,7 +1603,7 @@ tail of 20 scenes is better on this draw, not a measured gain of the change.
 Plates with the state read from depth (`family_plate_dev_depth_fit`: development plates 0-9 on map points with
 `depth_fit`, against the dense measurement's `family_plate_dev`): 2.06 % at the median of the scene medians against
 1.10 %, p90 6.6 % against 2.8 %, none within 1 % (40 %), the tracker 80-230 ms a frame (dense 380-1000). One depth
-image on development plate 1 reads s_x within about 0.5 % and s_y 2-10 % off frame to frame (a scratch check of
+image on development plate 1 reads s_x well but s_y far off, and differently from frame to frame (a scratch check of
 `fit_state`), and the tracker takes the images' word on whether the plate deforms at all: on the faint plates the map
 points see no deformation and most frames are flagged. A knob measured, not a default; the plates keep the dense
 measurement.
@@ -1634,15 +1638,15 @@ in this table are not comparable with stop 49's: a scratch registration study an
 for most of it.
 
 Where the shelves' s_y goes wrong (development plate 1, 3.2 px of peak image motion, speckle contrast 0.10: s_y 8.65 %
-off; scratch studies, not committed). The fit is not stuck: started at the true load, it ends where it ends from its own
-start, and the true load costs more than the estimate on every loaded frame checked (by 0.4-0.6 % of the cost). The
-cost itself is biased, and it is flat: over the whole range of s_y it changes by 1-5 %. The shading term's light
-(`dense_shading_frames`: what the frames measured of g, fused) was g = (-0.36, -1.07, -1.92) on those frames, where the
-renderer's light gives (-0.46, -0.21, 0.53). With g held at the renderer's value, the cost's minimum over s_y moves from
-0.122, 0.115, 0.156 and 0.070 to 0.111, 0.104, 0.148 and 0.055 on four frames whose true s_y are 0.093, 0.093, 0.145
-and 0.047 (the estimate's s_x and rigid parts held): the light's error is part of the bias, not all of it. Two other
-suspects were measured on development plate 15 (s_y 3.53 %): without the fusion of g (`dense_shading_frames=0`) 3.77 %,
-and with the load's weight left out of the render 3.44 %; neither is the cause. The shelves' position across the plate
+off in `family_plate_dev`; scratch studies, not committed, so their figures are not quoted). The fit is not stuck:
+started at the true load, it ends where it ends from its own start, and the true load costs a little more than the
+estimate on every loaded frame checked. The cost itself is biased, and it is flat: it changes little over the whole
+range of s_y. The shading term's light (`dense_shading_frames`: what the frames measured of g, fused) was far from the
+renderer's light on those frames. With g held at the renderer's value, the cost's minimum over s_y moves toward the
+true s_y on each of four frames checked, but stops short of it (the estimate's s_x and rigid parts held): the light's
+error is part of the bias, not all of it. Two other suspects were measured on development plate 15 (s_y 3.53 % in
+`family_plate_dev_10_29`): without the fusion of g (`dense_shading_frames=0`) and with the load's weight left out of
+the render it read about the same; neither is the cause. The shelves' position across the plate
 is read from the plate's twist, which under a small load moves the image by a fraction of a pixel; this stop found no
 change that reads it better.
 
@@ -1654,14 +1658,14 @@ just over the 5 % at which a fit is doubted (the slide is measured in 1 mm steps
 not run there; the SLAM's poses changed in stops 50-73.
 
 **Stop 75: the shelves' s_y is barely in the images.** Scratch runs on development plate 1 (s_y 8.65 % off on the
-independent truth) took the suspects away one at a time: rendered with the tracked model's own displacement (no model
-error; its best fit to the truth's top face is within 1.3 % at every hold, as over the whole surface) 8.97 %; with no
-image noise or blur as well 4.50 %; with the light's directional part off (no shading) as well 2.84 %; with the true
-camera poses as well 3.02 %. Development plate 15 rendered with the model's displacement: 3.73 % (3.53 % on the truth).
-So it is neither the model nor the camera: the images hold little of s_y on a shelf. `python -m
+independent truth, `family_plate_dev`; the runs were not kept, so their figures are not quoted) took the suspects away
+one at a time: rendered with the tracked model's own displacement (no model error) it read as far off; with no image
+noise or blur as well, much better; with the light's directional part off (no shading) as well, better again but still
+off; with the true camera poses as well, no better. Development plate 15 rendered with the model's displacement read
+about as on the truth. So it is neither the model nor the camera: the images hold little of s_y on a shelf. `python -m
 benchmarks.plate_observability` (`plate_observability.md`, new; no tracking) says how little: how far 1 % of a
-parameter's range moves the most-moving point of the top face in the image, at most, at the scene's load. For s_y it is
-0.0015-0.13 px on the shelves and 0.027-0.47 px on the plates bolted at both ends. On the development plates 0-29
+parameter's range moves the most-moving point of the top face in the image, at most, at the scene's load. For s_y it
+is 0.0015-0.13 px on the shelves and 0.027-0.47 px on the plates bolted at both ends. On the development plates 0-29
 every scene with s_y over 2 % off has at most 0.0109 px, every other at least 0.0132 px. On the held-out plates, every
 s_y failure has at most 0.0142 px (1000 0.0039, 1001 0.0124, 1008 0.0127, 1009 0.0078, 1011 0.0063, 1013 0.0142), but
 the development split (0.0120 px) is not sharp there: three failures lie just over it and two shelves under it read
@@ -1670,9 +1674,9 @@ pixel, about what digital image correlation resolves on a good speckle, and thes
 not tried: flag s_y as barely observable where the estimate's own sensitivity is that small. Such a flag would leave
 the beams alone: the held-out beams' s moves the image by 0.022-0.99 px per 1 % of its range (`beam_observability.md`,
 `--object beam`), none under the plates' split. Also measured and left (scratch): reading s_y from the depth image
-too, by fusing the depth follower's fit with the image fit's by their information, made plate 1's s_y worse (8.55 ->
-11.5 %) and plate 15's better (3.53 -> 2.76 %, its s_x 0.48 -> 1.51 %); per frame the depth holds s_y less tightly
-than the images (1-sigma 4.4-7.8 % of the range against 2.0-3.0 %).
+too, by fusing the depth follower's fit with the image fit's by their information, made plate 1's s_y worse and plate
+15's better at the cost of its s_x; per frame the depth holds s_y less tightly than the images (a larger standard
+deviation on every frame compared).
 
 **Stop 76: a load the images hold too loosely is flagged.** The lead of stop 75, taken from the fit itself rather than
 from the truth's sensitivity: the tracker reports a dense fit low-confidence where a tracked parameter's standard
@@ -1699,63 +1703,63 @@ held-out tables predate the flag; on the development beams it changed no OK fram
 
 **Stop 77: the template's own noise, averaged over the views at rest (a knob).** The dense measurement compares every
 frame with one reference image, so that image's noise is the same error in every comparison, which no number of frames
-averages out. Scratch runs on development plates 1 and 15, rendered without noise and then given noise of the scene's
-level (another draw than the family's): every frame noisy, s_y 11.5 % and 3.94 % off; the first 20 frames (the
-reference view among them) noiseless, 7.6 % and 3.27 %; every frame noiseless, 5.2 % and 3.33 %.
-`tracking.dense_template_frames` (`DenseSettings.template_frames`, new): each frame the tracker judges at rest before
-any deformation (those that already measure the placement error) is aligned to the template at the reference state
-(the zero-displacement fit, rigid correction, camera error and brightness, down to full resolution) and its
-intensities, brought to the template's brightness, join each sample's running mean, the static surroundings' too, up
-to so many views; a sample more than three robust standard deviations off is left out, and a template taken in a
-deformed state is not refined. A unit test: 9 views cut the template's noise to under half (1 / sqrt(9) where nothing
-else differs), 4 views less. With 20 (about the family's 1.5 s at rest), the 24 development plates of stop 76
-(`family_plate_dev_template_20` against `family_plate_dev_std_stop76`): median of the scene medians 1.42 -> 1.30 %,
-p90 7.20 -> 4.69 %, within 1 % 29 -> 33 %, within 2 % 67 -> 71 %; shelves 1 8.55 -> 4.56 %, 12 1.72 -> 1.06 %, 15 3.53
--> 2.39 %, 28 14.0 -> 11.0 %, 29 2.95 -> 1.92 %; worse 13 3.67 -> 4.74 %, 17 1.50 -> 1.90 %, 21 17.2 -> 20.0 %; the
-bolted plates within 0.2 points. Frames more than 2 % off 781 -> 690, and with the 1 % loose-hold flag those called OK
-245 of them (the flag catches 396). But on the development beams (`family_dev_0_19_template_20`, seeds 0-9 only: the
-run was stopped there for time) the cantilevers got worse: 4 0.55 -> 1.06 %, 5 0.65 -> 0.81 %, 8 1.96 -> 3.21 % (p90
-of the ten 0.78 -> 1.28 %, within 2 % 100 -> 90 %), the two-support beams level or better (6 0.27 -> 0.21 %, 7 0.62 ->
-0.54 %, 9 0.27 -> 0.16 %). Not traced: a cantilever's tip may already move under its own weight's change of view, or
-the views at rest may carry the first sub-threshold load. So it stays a knob (default 0, the reference view alone): it
-helps most plates and hurts beams. Not run on held-out seeds. One noise draw moved development plate 1 by three points
-(8.55 % on the family's draw, 11.5 % on another), so single scenes are weak evidence either way.
+averages out. Scratch runs on development plates 1 and 15 (not kept), rendered without noise and then given noise of
+the scene's level (another draw than the family's): with the first 20 frames (the reference view among them)
+noiseless, s_y read better than with every frame noisy, on plate 1 most of the way to what every frame noiseless
+gives, on plate 15 as well as that. `tracking.dense_template_frames` (`DenseSettings.template_frames`, new): each
+frame the tracker judges at rest before any deformation (those that already measure the placement error) is aligned to
+the template at the reference state (the zero-displacement fit, rigid correction, camera error and brightness, down to
+full resolution) and its intensities, brought to the template's brightness, join each sample's running mean, the
+static surroundings' too, up to so many views; a sample more than three robust standard deviations off is left out,
+and a template taken in a deformed state is not refined. A unit test: 9 views cut the template's noise to under half
+(1 / sqrt(9) where nothing else differs), 4 views less. With 20 (about the family's 1.5 s at rest), the 24 development
+plates of stop 76 (`family_plate_dev_template_20` against `family_plate_dev_std_stop76`): median of the scene medians
+1.42 -> 1.30 %, p90 7.20 -> 4.69 %, within 1 % 29 -> 33 %, within 2 % 67 -> 71 %; shelves 1 8.55 -> 4.56 %, 12 1.72 ->
+1.06 %, 15 3.53 -> 2.39 %, 28 14.0 -> 11.0 %, 29 2.95 -> 1.92 %; worse 13 3.67 -> 4.74 %, 17 1.50 -> 1.90 %, 21 17.2
+-> 20.0 %; the bolted plates within 0.2 points. Frames more than 2 % off 781 -> 690, and with the 1 % loose-hold flag
+those called OK 245 of them (the flag catches 396). But on the development beams (`family_dev_0_19_template_20`, seeds
+0-9 only: the run was stopped there for time) the cantilevers got worse: 4 0.55 -> 1.06 %, 5 0.65 -> 0.81 %, 8 1.96 ->
+3.21 % (p90 of the ten 0.78 -> 1.28 %, within 2 % 100 -> 90 %), the two-support beams level or better (6 0.27 -> 0.21
+%, 7 0.62 -> 0.54 %, 9 0.27 -> 0.16 %). Not traced: a cantilever's tip may already move under its own weight's change
+of view, or the views at rest may carry the first sub-threshold load. So it stays a knob (default 0, the reference
+view alone): it helps most plates and hurts beams. Not run on held-out seeds. Another noise draw read development
+plate 1 far worse than the family's draw (8.55 %), so single scenes are weak evidence either way.
 
 **Stop 78: the averaging closed at the first load, and made the default.** Stop 77's cantilevers traced (scratch runs
-logging every frame of development beams 4 and 8): their first load stands near the clamp (s 0.08 m and 0.14 m), too
-close to bend the beam measurably, and the tracker rightly reported "no measurable deformation" for the next 16
-frames. Those frames still counted as at rest before any deformation, so 5 loaded views (frames 23-27 of each, the
-weight on the beam) were averaged into the template: the template carried a bend, and every later comparison with it.
-What gives that load away without the truth: the deformed fit's image motion (90th percentile of the motion its
-deformation makes), which at rest sits at the least the model can make (0.135-0.136 px on beam 4, a fixed weight bends
-the beam wherever it stands) and rose to 0.22-0.36 px under that load; on development plates 13 and 21 it varied by
-0.013 px at most at rest (0.22 and 0.094-0.107 px) and jumped to 1.86 and 1.26 px at the load. The averaging now
-closes for good at the first view whose fit moves the image more than `DenseSettings.template_motion_px` (0.05 px)
-beyond the least motion of the views averaged so far. With the truth cut in by hand instead (scratch, beam 4: no view
-after the load's first frame) beam 4 read 0.455 %, what the rule gives. With the rule, development beams 0-19
-(`family_dev_0_19_template_gate` against `family_dev_0_19_std`, the same defaults otherwise): median of the scene
-medians 0.271 -> 0.272 %, p90 1.07 -> 0.79 %, within 1 % 85 -> 90 %, within 2 % 100 %; cantilevers 4 0.55 -> 0.46 %, 5
-0.65 -> 0.53 %, 8 1.96 -> 1.05 %, 16 1.03 -> 0.62 %, 19 1.41 -> 1.35 %; the largest loss 15 0.245 -> 0.277 %; frames
-more than 2 % off 100 -> 62, OK frames within 2 % 1465 -> 1533, OK frames more than 2 % off 15 -> 12. Plates rerun
-with the rule (time allowed seven): 0, 1, 3 and 4 as in stop 77 (no load hidden at the start), 2 0.51 -> 0.46 %, 17
-1.90 % as in stop 77 (1.50 % with the reference view alone), 21 20.0 -> 22.5 % (17.2 % alone: a failure with either
-template; its shelf's s_y is the one the images barely hold, stop 75). Stop 77's plates without the rule (24: median
-1.42 -> 1.30 %, p90 7.20 -> 4.69 %) and the beams with it both gained, so `tracking.dense_template_frames: 20` is the
-default now, chosen on development seeds only. Held out, run once after the choice: beams 1000-1009 on this code, one
-view against the averaged template (`family_heldout_1000_1009_stop78` against `family_heldout_1000_1009_template`):
-median of the scene medians 0.57 -> 0.42 %, p90 1.12 -> 0.96 %, within 2 % 90 -> 100 %; 1003 (the one scene over 2 %)
-2.25 -> 1.68 %, 1009 1.00 -> 0.38 %, 1006 0.93 -> 0.42 %; worse 1000 0.36 -> 0.42 % and 1004 0.39 -> 0.43 %; frames
-more than 2 % off 91 -> 63, OK frames within 2 % 594 -> 660, OK frames more than 2 % off 10 -> 9. Plates 1000-1018
-held out (`family_plate_stop78` against `family_plate_stop76`, the code of stop 76 with the one-view template; run
-once, 1019 stopped for time): median of the scene medians 1.11 -> 1.09 %, p90 4.32 -> 3.07 %, within 1 % 37 -> 42 %,
-within 2 % 68 -> 79 %; shelves 3.24 -> 1.60 % at the median (1011 3.24 -> 1.18 %, 1013 4.26 -> 2.25 %, 1008 2.80 ->
-1.60 %, 1001 4.57 -> 3.18 %, 1016 1.45 -> 1.10 %, 1009 5.26 -> 4.57 %), bolted plates 0.89 -> 0.79 %; no scene worse
-by more than 0.03 point at the median. Frames more than 2 % off 541 -> 427 (shelves 472 -> 386, bolted 69 -> 41); OK
-frames within 2 % 893 -> 1048; but OK frames more than 2 % off 198 -> 203 (shelves 129 -> 162: with a cleaner template
-the fits hold s_y more tightly, so the 1 % loose-hold flag lets more of the still-wrong frames through, 1009 0 -> 47 %
-OK at 4.6 % off; bolted 69 -> 41). The plates' targets (p90 < 3 %, 90 % within 2 %) are still missed, narrowly on p90.
-Still open: why averaging costs plate 17 (no hidden load there; the views at rest move the camera by several
-centimetres, and a template averaged over them may blur where the alignment is least sure), and the shelves' s_y.
+logging every frame of development beams 4 and 8): their first load stands near the clamp, too close to bend the beam
+measurably, and the tracker rightly reported "no measurable deformation" for the frames that followed. Those frames
+still counted as at rest before any deformation, so the first loaded views (the weight on the beam) were averaged into
+the template: the template carried a bend, and every later comparison with it. What gives that load away without the
+truth: the deformed fit's image motion (90th percentile of the motion its deformation makes), which at rest sits at
+the least the model can make (a fixed weight bends the beam wherever it stands) and rose well above it under that
+load; on development plates 13 and 21 it barely varied at rest and jumped at the load. The averaging now closes for
+good at the first view whose fit moves the image more than `DenseSettings.template_motion_px` (0.05 px) beyond the
+least motion of the views averaged so far. With the truth cut in by hand instead (scratch, beam 4: no view after the
+load's first frame) beam 4 read what the rule gives (0.455 %, `family_dev_0_19_template_gate`). With the rule,
+development beams 0-19 (`family_dev_0_19_template_gate` against `family_dev_0_19_std`, the same defaults otherwise):
+median of the scene medians 0.271 -> 0.272 %, p90 1.07 -> 0.79 %, within 1 % 85 -> 90 %, within 2 % 100 %; cantilevers
+4 0.55 -> 0.46 %, 5 0.65 -> 0.53 %, 8 1.96 -> 1.05 %, 16 1.03 -> 0.62 %, 19 1.41 -> 1.35 %; the largest loss 15 0.245
+-> 0.277 %; frames more than 2 % off 100 -> 62, OK frames within 2 % 1465 -> 1533, OK frames more than 2 % off 15
+-> 12. Plates rerun with the rule (time allowed seven): 0, 1, 3 and 4 as in stop 77 (no load hidden at the start), 2
+0.51 -> 0.46 %, 17 1.90 % as in stop 77 (1.50 % with the reference view alone), 21 20.0 -> 22.5 % (17.2 % alone: a
+failure with either template; its shelf's s_y is the one the images barely hold, stop 75). Stop 77's plates without
+the rule (24: median 1.42 -> 1.30 %, p90 7.20 -> 4.69 %) and the beams with it both gained, so
+`tracking.dense_template_frames: 20` is the default now, chosen on development seeds only. Held out, run once after
+the choice: beams 1000-1009 on this code, one view against the averaged template (`family_heldout_1000_1009_stop78`
+against `family_heldout_1000_1009_template`): median of the scene medians 0.57 -> 0.42 %, p90 1.12 -> 0.96 %, within 2
+% 90 -> 100 %; 1003 (the one scene over 2 %) 2.25 -> 1.68 %, 1009 1.00 -> 0.38 %, 1006 0.93 -> 0.42 %; worse 1000 0.36
+-> 0.42 % and 1004 0.39 -> 0.43 %; frames more than 2 % off 91 -> 63, OK frames within 2 % 594 -> 660, OK frames more
+than 2 % off 10 -> 9. Plates 1000-1018 held out (`family_plate_stop78` against `family_plate_stop76`, the code of stop
+76 with the one-view template; run once, 1019 stopped for time): median of the scene medians 1.11 -> 1.09 %, p90 4.32
+-> 3.07 %, within 1 % 37 -> 42 %, within 2 % 68 -> 79 %; shelves 3.24 -> 1.60 % at the median (1011 3.24 -> 1.18 %,
+1013 4.26 -> 2.25 %, 1008 2.80 -> 1.60 %, 1001 4.57 -> 3.18 %, 1016 1.45 -> 1.10 %, 1009 5.26 -> 4.57 %), bolted
+plates 0.89 -> 0.79 %; no scene worse by more than 0.03 point at the median. Frames more than 2 % off 541 -> 427
+(shelves 472 -> 386, bolted 69 -> 41); OK frames within 2 % 893 -> 1048; but OK frames more than 2 % off 198 -> 203
+(shelves 129 -> 162: with a cleaner template the fits hold s_y more tightly, so the 1 % loose-hold flag lets more of
+the still-wrong frames through, 1009 0 -> 47 % OK at 4.6 % off; bolted 69 -> 41). The plates' targets (p90 < 3 %, 90 %
+within 2 %) are still missed, narrowly on p90. Still open: why averaging costs plate 17 (no hidden load there; the
+views at rest move the camera by several centimetres, and a template averaged over them may blur where the alignment
+is least sure), and the shelves' s_y.
 
 **Stop 79: the development plates on the defaults, and the loose-hold flag recounted.** The 17 development plates that
 stop 78 had no time for, run on its defaults, complete the set (`family_plate_dev_default`, 24 scenes): median of the
