@@ -299,47 +299,47 @@ table below was rerun with it in stop 46: the foam beam's errors moved by 0.1 mm
 to 152 ms a frame at 640 x 480 and from 140 to 189 ms at 1280 x 720, and the aluminium bar stays unreadable by dense;
 the boot's table measures map points, which it does not touch; the scenes rendered by their own model,
 `tracking_scenes.md`, were rerun after it in stop 68). g belongs to the light and the object, the same in every frame:
-what each frame the tracker judged sound measured
-of it (its information with the frame's other unknowns marginalised out, a Schur complement) is fused over about 50 such
-frames into the next frames' prior (`tracking.dense_shading_frames`, 50; 0: each frame alone), so that a barely bent
-frame cannot pass its deformation off as shading (`docs/family.md`, "Plates"). Frames the tracker did not judge sound
-are left out: the frames before a load is placed, fitted with a load the model cannot leave out, measured g with a
-large, wrong confidence and held it there for dozens of frames (development plate seed 2: 0.4 % -> 2.9 % when every
-frame was fused). A rigid motion of the object looks much like a cantilever's bending and took its blame on the
-development scenes, so with a depth image (RGB-D) the correction is measured where nothing can bend: the static
-surroundings, a ring 32 px wide around the object's outline in the reference view (4 px off it), back-projected with
-that view's depth, enter the same robust cost with their own brightness. The camera's error epsilon moves the
-surroundings and the object alike; the object's own placement error is not refitted on top when the registration
-measured it from the same depth (it is measured at rest and held otherwise). On development seeds 0-11, 27, 31, 44 and
-46 this took large-load cantilevers that had failed (seed 10: 18 % -> 0.1 %, seed 46: 24 % -> 0.2 %) to a fraction of a
-percent. A stereo pair's depth is SGBM on the pair (made in the frames that read depth: docs/family.md, "Through a
-stereo pair"). Without depth (mono) the correction is the object's alone: once a frame at rest has measured it, deformed
-fits stay within 0.1 deg / 3 mm of it. A further step came from a development cantilever (seed 12: faint speckle, 6.6 px
-peak) that read 2.6 % with a steady bias towards less bending, which stayed with the true camera poses and without
-shading (a diagnosis with scratch scripts, not in the repository): the photometric cost itself had its minimum at the
-truth, but the solve did not reach it. The pyramid's coarse levels, where the solve starts, sat well below the truth (a
-faint speckle's detail is gone there, and the brightness gain trades against the misalignment), and at full resolution
-Gauss-Newton linearises with image gradients that are mostly noise: its steps came out short and it stopped short of the
-minimum from any start. So the solve now ends with a search of the cost itself (`tracking.dense_refine`, on by default)
-over each free parameter: 7 points over +-10 % of its range about the Gauss-Newton solution, narrowed three times by 3,
-the brightness refitted for each by Tukey-weighted least squares, at most three free parameters. Over development seeds
-12-49, on the same code otherwise: 84 % -> 95 % of scenes within 2 %, p90 2.5 % -> 1.2 %, seed 12 2.6 % -> 0.8 %
-(`docs/family.md`). In the same diagnosis the camera's error epsilon, fitted in one solve with the object, still took
-part of the bending; measured first on the surroundings alone and then held (`tracking.dense_camera_first`) it took seed
-12 to 0.5 %, but over seeds 12-49 it did worse than the joint fit (87 % of scenes within 2 %, p90 2.4 %; rerun with
-registration's slide pin, the same): a knob, off. Whether a deformation is seen: the same fit with zero displacement, at
-the half-resolution level, must be worse by 5 % and the fitted deformation must move the image by more than 0.3 px. A
-misaligned frame leaves its brightness behind: where the samples miss the texture, the best affine brightness explains
-the image by its mean (a gain a near zero, the bias near the mean intensity) and the shading g takes whatever it can.
-Development seed 0 seen at 65 degrees of azimuth (`docs/stability.md`, the camera at the extremes) lost its camera for
-44 frames; after it came back, each frame's coarse search compared its candidates at that brightness (gain 0.1-0.3, |g|
-2-6), where they differed by how the spurious shading changed with mu rather than by how the texture lined up, and the
-load stayed 28-58 % of the span off for 20 frames, 8 of them called OK. The search now fits the brightness (a, b, g) to
-each candidate, as the final search of the cost does, starting from the plain least-squares fit at that mu, when the
-warm start's gain is under `DenseSettings.min_gain` (0.5, the check below): its brightness is stale
-(`tracking.dense_grid_brightness: auto`, the default since stop 49); the same frames are back on the load from the fifth
-frame after the camera's return (0.03-0.21 % over the 19 frames after; a per-frame trace with a scratch script in stop
-48, the sweep's table has the run's medians). Stop 48 fitted every candidate's brightness on every frame (`always`): on
+what each frame the tracker judged sound measured of it (its information with the frame's other unknowns marginalised
+out, a Schur complement) is fused over about 50 such frames into the next frames' prior
+(`tracking.dense_shading_frames`, 50; 0: each frame alone), so that a barely bent frame cannot pass its deformation off
+as shading (`docs/family.md`, "Plates"). Frames the tracker did not judge sound are left out: the frames before a load
+is placed, fitted with a load the model cannot leave out, measured g with a large, wrong confidence and held it there
+for dozens of frames (development plate seed 2: 0.4 % -> 2.9 % when every frame was fused). A rigid motion of the object
+looks much like a cantilever's bending and took its blame on the development scenes, so with a depth image (RGB-D) the
+correction is measured where nothing can bend: the static surroundings, a ring 32 px wide around the object's outline in
+the reference view (4 px off it), back-projected with that view's depth, enter the same robust cost with their own
+brightness. The camera's error epsilon moves the surroundings and the object alike; the object's own placement error is
+not refitted on top when the registration measured it from the same depth (it is measured at rest and held otherwise).
+On development seeds 0-11, 27, 31, 44 and 46 this took large-load cantilevers that had failed (seed 10: 18 % -> 0.1 %,
+seed 46: 24 % -> 0.2 %) to a fraction of a percent. A stereo pair's depth is SGBM on the pair (made in the frames that
+read depth: docs/family.md, "Through a stereo pair"). Without depth (mono) the correction is the object's alone: once a
+frame at rest has measured it, deformed fits stay within 0.1 deg / 3 mm of it. A further step came from a development
+cantilever (seed 12: faint speckle, 6.6 px peak) that read 2.6 % with a steady bias towards less bending, which stayed
+with the true camera poses and without shading (a diagnosis with scratch scripts, not in the repository): the
+photometric cost itself had its minimum at the truth, but the solve did not reach it. The pyramid's coarse levels, where
+the solve starts, sat well below the truth (a faint speckle's detail is gone there, and the brightness gain trades
+against the misalignment), and at full resolution Gauss-Newton linearises with image gradients that are mostly noise:
+its steps came out short and it stopped short of the minimum from any start. So the solve now ends with a search of the
+cost itself (`tracking.dense_refine`, on by default) over each free parameter: 7 points over +-10 % of its range about
+the Gauss-Newton solution, narrowed three times by 3, the brightness refitted for each by Tukey-weighted least squares,
+at most three free parameters. Over development seeds 12-49, on the same code otherwise: 84 % -> 95 % of scenes within 2
+%, p90 2.5 % -> 1.2 %, seed 12 2.6 % -> 0.8 % (`docs/family.md`). In the same diagnosis the camera's error epsilon,
+fitted in one solve with the object, still took part of the bending; measured first on the surroundings alone and then
+held (`tracking.dense_camera_first`) it took seed 12 to 0.5 %, but over seeds 12-49 it did worse than the joint fit (87
+% of scenes within 2 %, p90 2.4 %; rerun with registration's slide pin, the same): a knob, off. Whether a deformation is
+seen: the same fit with zero displacement, at the half-resolution level, must be worse by 5 % and the fitted deformation
+must move the image by more than 0.3 px. A misaligned frame leaves its brightness behind: where the samples miss the
+texture, the best affine brightness explains the image by its mean (a gain a near zero, the bias near the mean
+intensity) and the shading g takes whatever it can. Development seed 0 seen at 65 degrees of azimuth
+(`docs/stability.md`, the camera at the extremes) lost its camera for 44 frames in stops 47-49 (on the SLAM of stops
+50-56 it no longer does: stop 89's rerun of that sweep); after it came back, each frame's coarse search compared its
+candidates at that brightness (a low gain, a spurious shading), where they differed by how the spurious shading changed
+with mu rather than by how the texture lined up, and the load stayed 28-58 % of the span off for 20 frames, 8 of them
+called OK. The search now fits the brightness (a, b, g) to each candidate, as the final search of the cost does,
+starting from the plain least-squares fit at that mu, when the warm start's gain is under `DenseSettings.min_gain` (0.5,
+the check below): its brightness is stale (`tracking.dense_grid_brightness: auto`, the default since stop 49); the same
+frames came back on the load a few frames after the camera's return (a per-frame trace with a scratch script in stop 48;
+the sweep's table had the run's medians). Stop 48 fitted every candidate's brightness on every frame (`always`): on
 development beams 0-19 that was better by up to 0.27 points of a scene's 90th percentile (seed 7 1.62 -> 1.35 %, seed 12
 0.83 -> 0.77 % at the median, seed 19 1.12 -> 1.06 %), but in the camera sweep seed 1 at 80 degrees of azimuth, a
 grazing view whose coarsest level keeps few samples of the face, then picked wrong candidates (five brightness
