@@ -1592,8 +1592,8 @@ Development seeds 0-9 tracked (`family_boot_dev_hold_spin` against `family_boot_
 % at the median of the scene medians, p90 0.37 -> 0.39 %, all within 1 % both; seed 6 0.30 -> 0.39 %, every other
 scene within 0.03 points; alpha_z 0.32 degree both. Level within the tracker's sensitivity to small registration
 differences (stop 88 above): 0.02 points of the range is 0.01 degree of lever. Kept for the time: live, the
-registration runs in a worker on the cores the SLAM uses, and `benchmarks/live_slam.py` now places the boot 4.9-6.1 s
-after the first frame (stop 88: 5.9-7.6 s).
+registration runs in a worker on the cores the SLAM uses, and `benchmarks/live_slam.py` now places the boot 4.8-5.5 s
+after the first frame (stop 88: 5.9-7.6 s; the run before the last, in git history: 4.9-6.1 s).
 
 Held-out seeds 1000-1019, run once after that choice (`family_boot_stop89_1000_1019`): median of the scene medians
 **0.46 %** (stop 88's run: 0.46 %), p90 **0.67 %** (1.09 %), **100 %** within 1 % (85 %) and within 2 %; alpha_z 0.30
