@@ -68,7 +68,7 @@ def main():
                        alpha_median_deg=float(np.median(err["alpha_z"])) if len(err["alpha_z"]) else float("nan"),
                        lost_frames=err["lost"], tracked=bool(theta < 2.0),
                        theta_after_median_deg=float(np.median(after["theta"])) if after and len(after["theta"])
-                       else float("nan"), lost_after=after["lost"] if after else -1,
+                       else float("nan"), lost_after=after["lost"] if after else "n/a",
                        fps_through=d["fps_through"], latency_p50=lat["p50"], latency_p95=lat["p95"])
             rows.append(row)
             print(row, flush=True)

@@ -566,8 +566,8 @@ def register_rgbd(cloud: np.ndarray, model: ReducedModel, guess: np.ndarray, cam
     centre = model.points.mean(axis=0)
     # a body of revolution about its z axis (the joint boot's bellows) fits its cloud equally well at any turn
     # about that axis: only the axis's tilt from the guess tells another basin (the turn about it is the tracker's
-    # to find, a constant such as the boot's alpha_z). Its ICP steps hold that turn (a free one wandered by degrees
-    # a step, so that the ICP ran to its last iteration), and the starts turned about the axis are left out
+    # to find, a constant such as the boot's alpha_z). Its ICP steps hold that turn (a free one wandered from step to
+    # step, so that the ICP ran to its last iteration), and the starts turned about the axis are left out
     spin_free = revolves_about_z(S, N, tree, centre, cfg.inlier_dist / 3)
     spin = np.array([0.0, 0.0, 1.0]) if spin_free and cfg.hold_spin else None
 
