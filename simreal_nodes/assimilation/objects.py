@@ -21,6 +21,7 @@ from simreal_nodes.assimilation.registration import (
     Registration,
     RegistrationConfig,
     RegistrationError,
+    SlideRefused,
     depth_cloud,
     register_loaded,
     register_rgbd,
@@ -54,6 +55,9 @@ class ObjectTrackers:
         self.registrations: dict[str, Registration] = {}
         self._views: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
         self._posed: dict[str, int] = {}  # frames with a camera pose seen while waiting for the registration
+        # registrations refused for their slide along the object's axis alone, by object: after
+        # RegistrationConfig.slide_refusals of them the position along the axis is taken from the guess
+        self._slides: dict[str, int] = {}
         self.depth_baseline: float | None = None  # the depth is SGBM on a stereo pair of this baseline (None: RGB-D)
         self.stereo_min_depth = 0.4  # metres: the nearest depth SGBM searches (the scene's camera.stereo_min_depth_m)
         self.background: BackgroundRegistration | None = None
@@ -130,6 +134,8 @@ class ObjectTrackers:
                 status, value = done
                 if status == "ok":
                     return self._placed(oid, value)
+                if status == "slide":
+                    self._slides[oid] = self._slides.get(oid, 0) + 1
                 return f"waiting for registration: {value}"  # the views are collected afresh from the next frame
             if self.background.pending(oid):
                 return registering
@@ -168,6 +174,8 @@ class ObjectTrackers:
                     return registering
                 reg = register_rgbd(cloud, model, guess, cams, cfg)
         except RegistrationError as e:
+            if isinstance(e, SlideRefused):
+                self._slides[oid] = self._slides.get(oid, 0) + 1
             return f"waiting for registration: {e.args[0]}"
         return self._placed(oid, reg)
 
@@ -175,6 +183,8 @@ class ObjectTrackers:
         """The registration settings for object ``o``: the camera's, with the scene file's ``anchor.fine`` and
         ``anchor.polish_mm`` where it sets them."""
         cfg, a = self.registration, o["anchor"]
+        if self._slides.get(o["id"], 0) >= cfg.slide_refusals:  # refused so often for its slide alone: the guess's
+            cfg = dataclasses.replace(cfg, slide_from_guess=True)
         if a.get("fine", "auto") != "auto":
             cfg = dataclasses.replace(cfg, fine=a["fine"])
         if a.get("polish_mm", 0.0) > 0:

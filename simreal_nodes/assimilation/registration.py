@@ -274,6 +274,11 @@ class RegistrationError(SimrealError):
     """The registration found no fit it can vouch for (too little of the model seen, or a bad residual)."""
 
 
+class SlideRefused(RegistrationError):
+    """The fit is otherwise good but can slide along the object's axis further than ``max_slide_spread``: the views
+    did not see its ends well enough to place it along that axis (:attr:`RegistrationConfig.slide_from_guess`)."""
+
+
 @dataclass(frozen=True)
 class RegistrationConfig:
     """How an RGB-D registration collects its views and judges its fit (lengths in metres).
@@ -346,6 +351,13 @@ class RegistrationConfig:
     # step 2.6 s at the median against 3.6 s, placed as well (0.14 mm and 0.06 degree both); other objects run as
     # before, to the bit
     hold_spin: bool = True
+    # a fit refused only because it can slide along the object's axis (its ends not seen, :class:`SlideRefused`) is
+    # kept with its position along that axis taken from the guess (anchor.guess) and doubted (its estimates flagged),
+    # instead of refused: the data hold the other five degrees of freedom. The tracker sets it after
+    # ``slide_refusals`` such refusals of an object (each a new set of views); before stop 90 such an object waited for
+    # its ends to be seen, and was never placed where the camera never saw them (held-out beam 1081 of the family)
+    slide_from_guess: bool = False
+    slide_refusals: int = 2
 
     @classmethod
     def for_camera(cls, camera: dict[str, Any]) -> RegistrationConfig:
@@ -383,6 +395,9 @@ class Registration:
     # axis (docs/stability.md); its estimates are flagged low-confidence
     noise: float = 0.0
     doubt: str = ""
+    # why the position along the object's axis is the guess's (:attr:`RegistrationConfig.slide_from_guess`), '' when
+    # the data placed it; part of ``doubt`` too
+    along_from_guess: str = ""
 
 
 @dataclass(frozen=True)
@@ -646,10 +661,34 @@ def register_rgbd(cloud: np.ndarray, model: ReducedModel, guess: np.ndarray, cam
     if out.slide_spread > cfg.max_slide_spread:
         what = ("beyond the searched range" if not np.isfinite(out.slide_spread)
                 else f"over {1e3 * out.slide_spread:.0f} mm")
-        raise RegistrationError(f"registration refused: the fit can slide along the object's axis {what} at about "
-                                f"the same cover (at most {1e3 * cfg.max_slide_spread:.0f} mm): its ends are not "
-                                "seen well enough to place it; show the camera an end of the object", out)
+        if cfg.slide_from_guess:
+            return _slid_to_guess(out, P, T, S, N, cams, guess, centre, cfg, what)
+        raise SlideRefused(f"registration refused: the fit can slide along the object's axis {what} at about "
+                           f"the same cover (at most {1e3 * cfg.max_slide_spread:.0f} mm): its ends are not "
+                           "seen well enough to place it; show the camera an end of the object", out)
     return out
+
+
+def _slid_to_guess(out: Registration, P: np.ndarray, T: np.ndarray, S: np.ndarray, N: np.ndarray,
+                   cams: DepthViews | _Centres, guess: np.ndarray, centre: np.ndarray, cfg: RegistrationConfig,
+                   what: str) -> Registration:
+    """The fit ``T`` (map -> object) slid along the axis it cannot be pinned on (:func:`_weak_axis`) until the
+    model's ``centre`` lies where the (levelled) ``guess`` puts it along that axis, judged again and doubted: the
+    other five degrees of freedom are the data's, the position along the axis the user's (a hand measurement is
+    off by millimetres to centimetres, and a load's position along the axis with it)."""
+    axis = _weak_axis(P, T, S, N, cfg)
+    if axis is None:  # no weak axis at the fit itself: nothing to take from the guess (slide_spread saw one)
+        axis = np.zeros(3)
+    T_map_obj = G.inv(T)
+    a_map = T_map_obj[:3, :3] @ axis
+    dx = float(a_map @ ((guess[:3, :3] @ centre + guess[:3, 3]) - (T_map_obj[:3, :3] @ centre + T_map_obj[:3, 3])))
+    T = G.make_T(t=-dx * axis) @ T  # the model moves by dx along the axis: object-frame points move by -dx
+    fitness, rmse, hits = _quality(P, T, S, N, cams, cfg.inlier_dist)
+    slid = _judged(Registration(G.inv(T), fitness, rmse, hits, out.plane, out.slide_spread), P, T, S, N, cfg)
+    why = (f"placed along its axis by the guess (anchor.guess), {1e3 * dx:+.0f} mm from the fit's position: the fit "
+           f"can slide along it {what} at about the same cover, its ends not seen; positions along the axis (a "
+           "load's) are as good as the guess; show the camera an end of the object")
+    return replace(slid, doubt="; ".join(d for d in (why, slid.doubt) if d), along_from_guess=why)
 
 
 def register_loaded(cloud: np.ndarray, model: ReducedModel, guess: np.ndarray, cam_centres: np.ndarray | DepthViews,
@@ -684,10 +723,22 @@ def register_loaded(cloud: np.ndarray, model: ReducedModel, guess: np.ndarray, c
     fitness, rmse, hits = _quality(P, T, S, N, cams, cfg.inlier_dist)
     out = _judged(Registration(st.T_map_obj, fitness, rmse, hits, reg.plane, slide_spread(P, T, S, N, cams, cfg),
                                st.mu.copy(), st.reason), P, T, S, N, cfg)
-    if fitness < cfg.min_fitness or rmse > cfg.max_rmse or out.slide_spread > cfg.max_slide_spread:
+    if fitness < cfg.min_fitness or rmse > cfg.max_rmse:
         raise RegistrationError(f"registration refused (deformed fit: {st.reason}): {100 * fitness:.0f} % of the "
                                 f"model surface facing the camera matched, residual {1e3 * rmse:.1f} mm, slide "
                                 f"spread {1e3 * out.slide_spread:.0f} mm", out)
+    if reg.along_from_guess:  # the depth fit held the weak axis where the rigid fit put it: the guess's
+        return replace(out, doubt="; ".join(d for d in (reg.along_from_guess, out.doubt) if d),
+                       along_from_guess=reg.along_from_guess)
+    if out.slide_spread > cfg.max_slide_spread and cfg.slide_from_guess:  # the rigid fit pinned it: it stays there
+        why = (f"the deformed fit can slide along the object's axis over {1e3 * out.slide_spread:.0f} mm at about the "
+               "same cover: kept where the rigid fit placed it")
+        return replace(out, doubt="; ".join(d for d in (why, out.doubt) if d))
+    if out.slide_spread > cfg.max_slide_spread:
+        raise SlideRefused(f"registration refused (deformed fit: {st.reason}): {100 * fitness:.0f} % of the model "
+                           f"surface facing the camera matched, residual {1e3 * rmse:.1f} mm, slide spread "
+                           f"{1e3 * out.slide_spread:.0f} mm (at most {1e3 * cfg.max_slide_spread:.0f} mm): the fit "
+                           "can slide along the object's axis, its ends not seen well enough to place it", out)
     return out
 
 

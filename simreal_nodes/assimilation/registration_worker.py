@@ -29,14 +29,21 @@ from typing import Any
 
 from simreal_nodes.lifetime import end_with_parent
 
-Result = tuple[str, Any]  # ("ok", Registration) | ("refused", why) | ("failed", why)
+# ("ok", Registration) | ("refused", why) | ("slide", why: refused for its slide along the object's axis alone,
+# :class:`~simreal_nodes.assimilation.registration.SlideRefused`) | ("failed", why)
+Result = tuple[str, Any]
 
 
 def _serve(conn: Connection, parent: int) -> None:
     """The worker's loop: (object id, kind, args, kwargs) in, (object id, status, value) out; None ends it."""
     if not end_with_parent(parent, signal.SIGKILL):  # the node died before the request: no signal will come
         os._exit(0)
-    from simreal_nodes.assimilation.registration import RegistrationError, register_loaded, register_rgbd
+    from simreal_nodes.assimilation.registration import (
+        RegistrationError,
+        SlideRefused,
+        register_loaded,
+        register_rgbd,
+    )
 
     run: dict[str, Callable[..., Any]] = {"rgbd": register_rgbd, "loaded": register_loaded}
     while True:
@@ -49,6 +56,8 @@ def _serve(conn: Connection, parent: int) -> None:
         oid, kind, args, kwargs = job
         try:
             conn.send((oid, "ok", run[kind](*args, **kwargs)))
+        except SlideRefused as e:
+            conn.send((oid, "slide", e.args[0]))
         except RegistrationError as e:
             conn.send((oid, "refused", e.args[0]))
         except Exception as e:  # noqa: BLE001 - any failure is the registration's, reported, not the worker's end

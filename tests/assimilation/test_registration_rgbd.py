@@ -16,6 +16,7 @@ from simreal_nodes.assimilation.registration import (
     Registration,
     RegistrationConfig,
     RegistrationError,
+    SlideRefused,
     _judged,
     _pin_slide,
     _polished,
@@ -213,6 +214,40 @@ def test_object_trackers_wait_for_the_registration_then_track_from_it(scene3):
     assert k == 0 and len(poly) >= 3 and objs.focus(None) == []
 
 
+def test_object_trackers_take_the_guess_along_the_axis_after_repeated_slide_refusals(scene3, monkeypatch):
+    """A registration refused for its slide alone is tried again on new views; after
+    ``RegistrationConfig.slide_refusals`` such refusals the next try takes the position along the axis from the
+    guess (``slide_from_guess``). Another refusal (too little matched) does not count."""
+    import simreal_nodes.assimilation.objects as objects_module
+
+    s, seq = scene3, scene3["seq"]
+    scene = build_spec_models(validate_scene(copy.deepcopy(s["doc"]), "family_3", "."))
+    asked: list[bool] = []
+    outcomes = iter(["other", "slide", "slide"])
+
+    def refusing(real):
+        def register(*args, **kwargs):
+            cfg = next(a for a in [*args, *kwargs.values()] if isinstance(a, RegistrationConfig))
+            asked.append(cfg.slide_from_guess)
+            what = next(outcomes, None)
+            if what == "other":
+                raise RegistrationError("registration refused: 10 % of the model surface facing the camera matched")
+            if what == "slide":
+                raise SlideRefused("registration refused: the fit can slide along the object's axis over 80 mm")
+            return real(*args, **kwargs)
+        return register
+
+    # the beam's dense tracker registers with its deformation (register_loaded); either path counts the same
+    monkeypatch.setattr(objects_module, "register_rgbd", refusing(objects_module.register_rgbd))
+    monkeypatch.setattr(objects_module, "register_loaded", refusing(objects_module.register_loaded))
+    objs = ObjectTrackers(scene["objects"], {"beam": s["model"]}, registration=replace(CFG, frames=1, every=1))
+    objs.set_camera(seq["cam"])
+    reasons = [objs.update(seq["T"][i], depth=seq["depth"][i])["beam"].reason for i in range(4)]
+    assert asked == [False, False, False, True], (asked, reasons)
+    assert "slide" in reasons[2] and "beam" in objs.registrations, reasons
+    assert _error(objs.registrations["beam"].T_map_obj, s["truth"])[0] < 20.0  # placed (from one view)
+
+
 def test_a_background_registration_lets_frames_go_on_and_places_the_beam_as_the_synchronous_one(scene3):
     """Live (``background=True``): the views go to a worker process and the frame that completes them returns at
     once, saying so; frames go on while it works, and its registration is the synchronous one (to rounding: another
@@ -271,6 +306,15 @@ def test_a_registration_worker_that_dies_is_reported_and_started_again(scene3):
         bg.submit("beam", "rgbd", np.zeros((10, 3)))  # a failing call is reported with its error
         status, why = result(bg)
         assert status == "failed" and "TypeError" in why, why
+        # a refusal for the slide alone is told apart (the tracker counts those): the beam without its ends
+        m = s["model"]
+        P_obj = (s["cloud"] - s["truth"][:3, 3]) @ s["truth"][:3, :3]
+        lo, hi = m.points.min(axis=0), m.points.max(axis=0)
+        beam = np.all((P_obj > lo - 0.01) & (P_obj < hi + 0.01), axis=1)
+        ends = (P_obj[:, 0] < lo[0] + 0.05) | (P_obj[:, 0] > hi[0] - 0.05)
+        bg.submit("beam", "rgbd", s["cloud"][~(beam & ends)], m, s["guess"], s["cams"], CFG)
+        status, why = result(bg)
+        assert status == "slide" and "slide along the object's axis" in why, (status, why)
         with pytest.raises(ValueError, match="registration kind"):
             bg.submit("beam", "icp")
     finally:
@@ -333,6 +377,34 @@ def test_a_fit_whose_ends_are_not_seen_is_refused_not_slid(scene3):
     assert whole.slide_spread < 0.03, whole.slide_spread
     with pytest.raises(RegistrationError, match="slide along the object's axis"):
         register_rgbd(s["cloud"][~(beam & ends)], m, s["guess"], s["cams"], CFG)
+
+
+def test_a_fit_whose_ends_are_not_seen_takes_its_position_along_the_axis_from_the_guess(scene3):
+    """With ``slide_from_guess`` (the tracker's, after repeated refusals for the slide alone) the same fit is kept:
+    the five degrees of freedom the data hold are the fit's, the position along the beam's axis is the guess's, and
+    the pose is doubted, saying so. Without the option the same cloud is refused (above)."""
+    s = scene3
+    m = s["model"]
+    P_obj = (s["cloud"] - s["truth"][:3, 3]) @ s["truth"][:3, :3]
+    lo, hi = m.points.min(axis=0), m.points.max(axis=0)
+    beam = np.all((P_obj > lo - 0.01) & (P_obj < hi + 0.01), axis=1)
+    ends = (P_obj[:, 0] < lo[0] + 0.05) | (P_obj[:, 0] > hi[0] - 0.05)
+    cloud = s["cloud"][~(beam & ends)]
+    guess = G.make_T(s["guess"][:3, :3], s["guess"][:3, 3] - 0.04 * s["guess"][:3, 0])  # 40 mm back along the beam
+    with pytest.raises(SlideRefused):
+        register_rgbd(cloud, m, guess, s["cams"], CFG)
+    reg = register_rgbd(cloud, m, guess, s["cams"], replace(CFG, slide_from_guess=True))
+    assert reg.doubt.startswith("placed along its axis by the guess"), reg.doubt
+    c = m.points.mean(axis=0)
+    axis = s["truth"][:3, 0]  # the beam's length, in the map
+    placed, true, guessed = (T[:3, :3] @ c + T[:3, 3] for T in (reg.T_map_obj, s["truth"], guess))
+    along = float(axis @ (placed - true))
+    # along the axis: where the guess puts the centre (the guess is levelled onto the floor first: a few mm)
+    assert abs(along - float(axis @ (guessed - true))) < 3.0e-3, (along, float(axis @ (guessed - true)))
+    across = np.linalg.norm((placed - true) - along * axis)
+    deg = _error(reg.T_map_obj, s["truth"])[1]
+    assert 1e3 * across < 2.0 and deg < 0.5, (1e3 * across, deg)
+    assert abs(along) > 0.015  # the guess is off along the axis: the test tells the guess's position from the truth's
 
 
 def test_a_fit_that_can_slide_over_a_share_of_the_beam_is_doubted(scene3):
