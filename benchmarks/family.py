@@ -897,14 +897,15 @@ host; the issue's target is <= 10 ms), but reads the load 7.0 % off at the media
 every try for its slide alone (no view sees its end faces), so its beam was never placed. Now, after
 `RegistrationConfig.slide_refusals` (2) such refusals of an object, each on new views, the next try keeps the fit
 (`slide_from_guess`): its other five degrees of freedom are the data's, its position along the axis is the guess's
-(`anchor.guess`, the user's measurement), and the pose is doubted, so every estimate is flagged low-confidence with
-the reason (`registration._slid_to_guess`; tests in `tests/assimilation/test_registration_rgbd.py`). No development
-seed ever had a slide refusal, nor any other held-out scene of the current results (`family.json`: 1081 alone), so
-only 1081 moves. Rerun alone (`family_1081_slide_guess`): placed 29.5 mm off along the beam (the guess's own error
-there) and 0.22 degree, the load read 8.95 % of its range off at the median of the loaded frames against 39.0 % never
+(`anchor.guess`, the user's measurement) but no further than the shifts the depth covers about as well as the best
+allow, and the pose is doubted, so every estimate is flagged low-confidence with the reason
+(`registration._slid_to_guess`; tests in `tests/assimilation/test_registration_rgbd.py`). No development seed ever had
+a slide refusal, nor any other held-out scene of the current results (`family.json`: 1081 alone), so only 1081 moves.
+Rerun alone (`family_1081_slide_guess`): placed 11.7 mm and 0.22 degree off (the guess's position held at the end of
+what the depth allows), the load read 7.60 % of its range off at the median of the loaded frames against 39.0 % never
 placed (the initial value), every frame flagged. Not within 1 %: a position along the axis is only as good as the
-guess. The main table's row of 1081 is the run before; its median and its shares within 1 % and 2 % do not move with
-it (1081 is over 2 % either way).
+guess and the depth's bound on it. The main table's row of 1081 is the run before; its median and its shares within
+1 % and 2 % do not move with it (1081 is over 2 % either way).
 
 Loaded from the first frame (`--preloaded`, `benchmarks/results/family_preloaded.md` and
 `family_preloaded_heldout.md`): there is no view of the object at rest. Until stop 30 the dense measurement took

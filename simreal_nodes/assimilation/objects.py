@@ -181,7 +181,8 @@ class ObjectTrackers:
 
     def _registration_config(self, o: dict[str, Any]) -> RegistrationConfig:
         """The registration settings for object ``o``: the camera's, with the scene file's ``anchor.fine`` and
-        ``anchor.polish_mm`` where it sets them."""
+        ``anchor.polish_mm`` where it sets them, and ``slide_from_guess`` once the object's registration has been
+        refused ``slide_refusals`` times for its slide along its axis alone."""
         cfg, a = self.registration, o["anchor"]
         if self._slides.get(o["id"], 0) >= cfg.slide_refusals:  # refused so often for its slide alone: the guess's
             cfg = dataclasses.replace(cfg, slide_from_guess=True)

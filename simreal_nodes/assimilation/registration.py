@@ -659,35 +659,55 @@ def register_rgbd(cloud: np.ndarray, model: ReducedModel, guess: np.ndarray, cam
                                 f"camera is matched (at least {100 * cfg.min_fitness:.0f} % needed), residual "
                                 f"{1e3 * rmse:.1f} mm (at most {1e3 * cfg.max_rmse:.1f} mm)", out)
     if out.slide_spread > cfg.max_slide_spread:
-        what = ("beyond the searched range" if not np.isfinite(out.slide_spread)
-                else f"over {1e3 * out.slide_spread:.0f} mm")
+        what = _slide_words(out.slide_spread)
         if cfg.slide_from_guess:
-            return _slid_to_guess(out, P, T, S, N, cams, guess, centre, cfg, what)
+            return _slid_to_guess(out, P, T, S, N, cams, guess, centre, cfg)
         raise SlideRefused(f"registration refused: the fit can slide along the object's axis {what} at about "
                            f"the same cover (at most {1e3 * cfg.max_slide_spread:.0f} mm): its ends are not "
                            "seen well enough to place it; show the camera an end of the object", out)
     return out
 
 
+def _slide_words(spread: float) -> str:
+    return "beyond the searched range" if not np.isfinite(spread) else f"over {1e3 * spread:.0f} mm"
+
+
 def _slid_to_guess(out: Registration, P: np.ndarray, T: np.ndarray, S: np.ndarray, N: np.ndarray,
-                   cams: DepthViews | _Centres, guess: np.ndarray, centre: np.ndarray, cfg: RegistrationConfig,
-                   what: str) -> Registration:
-    """The fit ``T`` (map -> object) slid along the axis it cannot be pinned on (:func:`_weak_axis`) until the
-    model's ``centre`` lies where the (levelled) ``guess`` puts it along that axis, judged again and doubted: the
-    other five degrees of freedom are the data's, the position along the axis the user's (a hand measurement is
-    off by millimetres to centimetres, and a load's position along the axis with it)."""
-    axis = _weak_axis(P, T, S, N, cfg)
-    if axis is None:  # no weak axis at the fit itself: nothing to take from the guess (slide_spread saw one)
-        axis = np.zeros(3)
+                   cams: DepthViews | _Centres, guess: np.ndarray, centre: np.ndarray,
+                   cfg: RegistrationConfig) -> Registration:
+    """The fit ``T`` (map -> object) slid along the axis it cannot be pinned on until the model's ``centre`` lies
+    where the (levelled) ``guess`` puts it along that axis, but not beyond the shifts the data cover about as well
+    as the best (:func:`_slide_cover`: a guess there contradicts the depth; an end of the searched range left open
+    does not bound it), judged again and doubted: the other five degrees of freedom are the data's, the position
+    along the axis the user's (a hand measurement is off by millimetres to centimetres, and a load's position along
+    the axis with it). Refused (:class:`RegistrationError`) where the slid fit no longer meets ``min_fitness`` /
+    ``max_rmse``."""
+    sl = _slide_cover(P, T, S, N, _views(cams), cfg)
+    if sl is None:  # every direction held at this fit: nothing to take from the guess
+        return out
+    axis, shifts, cover = sl
     T_map_obj = G.inv(T)
     a_map = T_map_obj[:3, :3] @ axis
-    dx = float(a_map @ ((guess[:3, :3] @ centre + guess[:3, 3]) - (T_map_obj[:3, :3] @ centre + T_map_obj[:3, 3])))
+    wanted = float(a_map @ ((guess[:3, :3] @ centre + guess[:3, 3]) - (T_map_obj[:3, :3] @ centre + T_map_obj[:3, 3])))
+    near = cover >= cover.max() - cfg.slide_cover
+    lo = -np.inf if near[0] else float(shifts[near].min())
+    hi = np.inf if near[-1] else float(shifts[near].max())
+    dx = float(np.clip(wanted, lo, hi))
     T = G.make_T(t=-dx * axis) @ T  # the model moves by dx along the axis: object-frame points move by -dx
     fitness, rmse, hits = _quality(P, T, S, N, cams, cfg.inlier_dist)
-    slid = _judged(Registration(G.inv(T), fitness, rmse, hits, out.plane, out.slide_spread), P, T, S, N, cfg)
-    why = (f"placed along its axis by the guess (anchor.guess), {1e3 * dx:+.0f} mm from the fit's position: the fit "
-           f"can slide along it {what} at about the same cover, its ends not seen; positions along the axis (a "
-           "load's) are as good as the guess; show the camera an end of the object")
+    slid = _judged(Registration(G.inv(T), fitness, rmse, hits, out.plane, out.slide_spread, out.state,
+                                out.state_reason), P, T, S, N, cfg)
+    if fitness < cfg.min_fitness or rmse > cfg.max_rmse:
+        raise RegistrationError(f"registration refused: placed along its axis by the guess (anchor.guess), "
+                                f"{100 * fitness:.0f} % of the model surface facing the camera is matched (at least "
+                                f"{100 * cfg.min_fitness:.0f} % needed), residual {1e3 * rmse:.1f} mm (at most "
+                                f"{1e3 * cfg.max_rmse:.1f} mm): is the guess's position along the object right?", slid)
+    where = (f"{1e3 * dx:+.0f} mm from the fit's position" if dx == wanted else
+             f"{1e3 * dx:+.0f} mm from the fit's position, at the end of what the depth allows (the guess: "
+             f"{1e3 * wanted:+.0f} mm)")
+    why = (f"placed along its axis by the guess (anchor.guess), {where}: the fit can slide along it "
+           f"{_slide_words(out.slide_spread)} at about the same cover, its ends not seen; positions along the axis "
+           "(a load's) are as good as the guess; show the camera an end of the object")
     return replace(slid, doubt="; ".join(d for d in (why, slid.doubt) if d), along_from_guess=why)
 
 
@@ -727,18 +747,24 @@ def register_loaded(cloud: np.ndarray, model: ReducedModel, guess: np.ndarray, c
         raise RegistrationError(f"registration refused (deformed fit: {st.reason}): {100 * fitness:.0f} % of the "
                                 f"model surface facing the camera matched, residual {1e3 * rmse:.1f} mm, slide "
                                 f"spread {1e3 * out.slide_spread:.0f} mm", out)
-    if reg.along_from_guess:  # the depth fit held the weak axis where the rigid fit put it: the guess's
-        return replace(out, doubt="; ".join(d for d in (reg.along_from_guess, out.doubt) if d),
-                       along_from_guess=reg.along_from_guess)
-    if out.slide_spread > cfg.max_slide_spread and cfg.slide_from_guess:  # the rigid fit pinned it: it stays there
-        why = (f"the deformed fit can slide along the object's axis over {1e3 * out.slide_spread:.0f} mm at about the "
+    sliding = out.slide_spread > cfg.max_slide_spread
+    if reg.along_from_guess or (sliding and cfg.slide_from_guess and failed is not None):
+        # the rigid fit was placed along the axis by the guess, or was refused (its residual: the object is bent)
+        # and the deformed fit slides: the deformed fit is placed there by the guess too (the levelled guess, as the
+        # rigid fit's)
+        g = np.asarray(guess, dtype=np.float64)
+        g = g if reg.plane is None else _level(g, reg.plane[:3], model.points.mean(axis=0))
+        return _slid_to_guess(out, P, T, S, N, cams, g, model.points.mean(axis=0), cfg)
+    if sliding and cfg.slide_from_guess:  # the rigid fit was accepted, its slide pinned by the data: it stays there
+        why = (f"the deformed fit can slide along the object's axis {_slide_words(out.slide_spread)} at about the "
                "same cover: kept where the rigid fit placed it")
         return replace(out, doubt="; ".join(d for d in (why, out.doubt) if d))
-    if out.slide_spread > cfg.max_slide_spread:
+    if sliding:
         raise SlideRefused(f"registration refused (deformed fit: {st.reason}): {100 * fitness:.0f} % of the model "
-                           f"surface facing the camera matched, residual {1e3 * rmse:.1f} mm, slide spread "
-                           f"{1e3 * out.slide_spread:.0f} mm (at most {1e3 * cfg.max_slide_spread:.0f} mm): the fit "
-                           "can slide along the object's axis, its ends not seen well enough to place it", out)
+                           f"surface facing the camera matched, residual {1e3 * rmse:.1f} mm: the fit can slide along "
+                           f"the object's axis {_slide_words(out.slide_spread)} at about the same cover (at most "
+                           f"{1e3 * cfg.max_slide_spread:.0f} mm): its ends are not seen well enough to place it; "
+                           "show the camera an end of the object", out)
     return out
 
 

@@ -22,6 +22,7 @@ from simreal_nodes.assimilation.registration import (
     _polished,
     depth_cloud,
     icp_point_to_plane,
+    register_loaded,
     register_rgbd,
     sample_surface,
 )
@@ -405,6 +406,20 @@ def test_a_fit_whose_ends_are_not_seen_takes_its_position_along_the_axis_from_th
     deg = _error(reg.T_map_obj, s["truth"])[1]
     assert 1e3 * across < 2.0 and deg < 0.5, (1e3 * across, deg)
     assert abs(along) > 0.015  # the guess is off along the axis: the test tells the guess's position from the truth's
+    assert reg.along_from_guess and reg.along_from_guess in reg.doubt
+    # with its deformation fitted too (the beam is at rest here: the rigid fit stands, and says the same)
+    lo_mu, hi_mu = np.array([a.values[0] for a in m.axes]), np.array([a.values[-1] for a in m.axes])
+    loaded = register_loaded(cloud, m, guess, s["cams"], lo_mu, hi_mu, replace(CFG, slide_from_guess=True))
+    assert loaded.along_from_guess and loaded.state is None, loaded.state_reason
+    np.testing.assert_allclose(loaded.T_map_obj, reg.T_map_obj, atol=1e-9)
+    # a guess the depth contradicts (15 cm along the 0.46 m beam: the model's end far past the measured beam) is
+    # followed only to the end of the shifts the depth covers about as well as the best, and says so
+    far = G.make_T(guess[:3, :3], guess[:3, 3] - 0.11 * guess[:3, 0])
+    reg = register_rgbd(cloud, m, far, s["cams"], replace(CFG, slide_from_guess=True))
+    along_far = float(axis @ (reg.T_map_obj[:3, :3] @ c + reg.T_map_obj[:3, 3] - true))
+    guessed_far = float(axis @ (far[:3, :3] @ c + far[:3, 3] - true))
+    assert "at the end of what the depth allows" in reg.doubt, reg.doubt
+    assert guessed_far < along_far - 0.05 and reg.fitness >= CFG.min_fitness, (guessed_far, along_far, reg.fitness)
 
 
 def test_a_fit_that_can_slide_over_a_share_of_the_beam_is_doubted(scene3):
