@@ -899,13 +899,15 @@ every try for its slide alone (no view sees its end faces), so its beam was neve
 (`slide_from_guess`): its other five degrees of freedom are the data's, its position along the axis is the guess's
 (`anchor.guess`, the user's measurement) but no further than the shifts the depth covers about as well as the best
 allow, and the pose is doubted, so every estimate is flagged low-confidence with the reason
-(`registration._slid_to_guess`; tests in `tests/assimilation/test_registration_rgbd.py`). No development seed ever had
-a slide refusal, nor any other held-out scene of the current results (`family.json`: 1081 alone), so only 1081 moves.
-Rerun alone (`family_1081_slide_guess`): placed 11.7 mm and 0.22 degree off (the guess's position held at the end of
-what the depth allows), the load read 7.60 % of its range off at the median of the loaded frames against 39.0 % never
-placed (the initial value), every frame flagged. Not within 1 %: a position along the axis is only as good as the
-guess and the depth's bound on it. The main table's row of 1081 is the run before; its median and its shares within
-1 % and 2 % do not move with it (1081 is over 2 % either way).
+(`registration._slid_to_guess`; tests in `tests/assimilation/test_registration_rgbd.py`). Where the object is bent and
+its deformation is fitted with the pose (`register_loaded`), the deformed shape may pin the slide itself (a bent beam is
+not a prism): it is then placed along the axis by its own cover, as a rigid fit is, still doubted. No development seed
+ever had a slide refusal, nor any other held-out scene of the current results (`family.json`: 1081 alone), so only
+1081 moves. Rerun alone (`family_1081_slide_guess`): the rigid fit placed by the guess, then the loaded beam's
+deformed fit pinned by its own cover: 4.4 mm and 0.21 degree off, the load read 7.52 % of its range off at the median
+of the loaded frames against 39.0 % never placed (the initial value), every frame flagged. Not within 2 %: its load
+moves the image by 2.1 px at most, the small-load case that also fails elsewhere (1065). The main table's row of 1081
+is the run before; its median and its shares within 1 % and 2 % do not move with it (1081 is over 2 % either way).
 
 Loaded from the first frame (`--preloaded`, `benchmarks/results/family_preloaded.md` and
 `family_preloaded_heldout.md`): there is no view of the object at rest. Until stop 30 the dense measurement took

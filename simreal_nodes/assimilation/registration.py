@@ -549,7 +549,7 @@ def register_rgbd(cloud: np.ndarray, model: ReducedModel, guess: np.ndarray, cam
     if cfg.fine not in ("full", "upright"):
         raise ValueError(f"RegistrationConfig.fine: expected 'full' or 'upright'; found '{cfg.fine}'")
     o3d.utility.random.seed(seed)
-    guess = np.asarray(guess, dtype=np.float64)
+    guess = given = np.asarray(guess, dtype=np.float64)  # ``given``: the user's, before it is levelled
     P = _down(np.asarray(cloud, dtype=np.float64), cfg.voxel)
     if len(P) < 100:
         raise RegistrationError(f"registration: only {len(P)} depth points (is the depth image empty?)")
@@ -661,7 +661,7 @@ def register_rgbd(cloud: np.ndarray, model: ReducedModel, guess: np.ndarray, cam
     if out.slide_spread > cfg.max_slide_spread:
         what = _slide_words(out.slide_spread)
         if cfg.slide_from_guess:
-            return _slid_to_guess(out, P, T, S, N, cams, guess, centre, cfg)
+            return _slid_to_guess(out, P, T, S, N, cams, given, centre, cfg)
         raise SlideRefused(f"registration refused: the fit can slide along the object's axis {what} at about "
                            f"the same cover (at most {1e3 * cfg.max_slide_spread:.0f} mm): its ends are not "
                            "seen well enough to place it; show the camera an end of the object", out)
@@ -682,16 +682,27 @@ def _slid_to_guess(out: Registration, P: np.ndarray, T: np.ndarray, S: np.ndarra
     along the axis the user's (a hand measurement is off by millimetres to centimetres, and a load's position along
     the axis with it). Refused (:class:`RegistrationError`) where the slid fit no longer meets ``min_fitness`` /
     ``max_rmse``."""
-    sl = _slide_cover(P, T, S, N, _views(cams), cfg)
+    views = _views(cams)
+    sl = _slide_cover(P, T, S, N, views, cfg)
     if sl is None:  # every direction held at this fit: nothing to take from the guess
         return out
     axis, shifts, cover = sl
     T_map_obj = G.inv(T)
     a_map = T_map_obj[:3, :3] @ axis
     wanted = float(a_map @ ((guess[:3, :3] @ centre + guess[:3, 3]) - (T_map_obj[:3, :3] @ centre + T_map_obj[:3, 3])))
-    near = cover >= cover.max() - cfg.slide_cover
-    lo = -np.inf if near[0] else float(shifts[near].min())
-    hi = np.inf if near[-1] else float(shifts[near].max())
+    # the shifts covered about as well as the best, by the measurable faces and (depth views) by every face turned to
+    # the cameras, as :func:`slide_spread` judges: the wider of the two bounds (the measurable faces alone can hold a
+    # fit whose hidden end sits at the edge of what the views measure)
+    covers = [cover]
+    if isinstance(views, DepthViews):
+        other = _slide_cover(P, T, S, N, _views(views.centres), cfg)
+        if other is not None and np.allclose(other[0], axis):
+            covers.append(other[2])
+    lo, hi = np.inf, -np.inf
+    for cv in covers:
+        near = cv >= cv.max() - cfg.slide_cover
+        lo = min(lo, -np.inf if near[0] else float(shifts[near].min()))
+        hi = max(hi, np.inf if near[-1] else float(shifts[near].max()))
     dx = float(np.clip(wanted, lo, hi))
     T = G.make_T(t=-dx * axis) @ T  # the model moves by dx along the axis: object-frame points move by -dx
     fitness, rmse, hits = _quality(P, T, S, N, cams, cfg.inlier_dist)
@@ -748,13 +759,26 @@ def register_loaded(cloud: np.ndarray, model: ReducedModel, guess: np.ndarray, c
                                 f"model surface facing the camera matched, residual {1e3 * rmse:.1f} mm, slide "
                                 f"spread {1e3 * out.slide_spread:.0f} mm", out)
     sliding = out.slide_spread > cfg.max_slide_spread
-    if reg.along_from_guess or (sliding and cfg.slide_from_guess and failed is not None):
-        # the rigid fit was placed along the axis by the guess, or was refused (its residual: the object is bent)
-        # and the deformed fit slides: the deformed fit is placed there by the guess too (the levelled guess, as the
-        # rigid fit's)
-        g = np.asarray(guess, dtype=np.float64)
-        g = g if reg.plane is None else _level(g, reg.plane[:3], model.points.mean(axis=0))
-        return _slid_to_guess(out, P, T, S, N, cams, g, model.points.mean(axis=0), cfg)
+    if sliding and cfg.slide_from_guess and (reg.along_from_guess or failed is not None):
+        # the deformed fit slides, and the rigid fit was placed along the axis by the guess or was refused (its
+        # residual: the object is bent): the deformed fit is placed there by the guess too
+        return _slid_to_guess(out, P, T, S, N, cams, np.asarray(guess, dtype=np.float64), model.points.mean(axis=0),
+                              cfg)
+    if reg.along_from_guess:
+        # the rigid fit could slide (its ends not seen) and was placed by the guess, but the deformed shape pins the
+        # slide (a bent beam is not a prism): placed along the axis by its own cover, as a rigid fit is
+        # (:func:`_pin_slide`), still doubted: the ends are not seen
+        T = _pin_slide(P, T, S, N, cams, cfg)
+        fitness, rmse, hits = _quality(P, T, S, N, cams, cfg.inlier_dist)
+        pinned = _judged(Registration(G.inv(T), fitness, rmse, hits, reg.plane, slide_spread(P, T, S, N, cams, cfg),
+                                      st.mu.copy(), st.reason), P, T, S, N, cfg)
+        if fitness < cfg.min_fitness or rmse > cfg.max_rmse:
+            raise RegistrationError(f"registration refused (deformed fit: {st.reason}): {100 * fitness:.0f} % of the "
+                                    f"model surface facing the camera matched, residual {1e3 * rmse:.1f} mm", pinned)
+        why = ("the rigid fit could slide along the object's axis, its ends not seen; the deformed fit is placed "
+               f"along it by its own cover of the depth (it can slide {_slide_words(pinned.slide_spread)} at about "
+               "the same cover): show the camera an end of the object")
+        return replace(pinned, doubt="; ".join(d for d in (why, pinned.doubt) if d))
     if sliding and cfg.slide_from_guess:  # the rigid fit was accepted, its slide pinned by the data: it stays there
         why = (f"the deformed fit can slide along the object's axis {_slide_words(out.slide_spread)} at about the "
                "same cover: kept where the rigid fit placed it")

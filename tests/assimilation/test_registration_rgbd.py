@@ -13,6 +13,7 @@ from scipy.spatial import cKDTree
 from simreal_nodes import geometry as G
 from simreal_nodes.assimilation.objects import ObjectTrackers
 from simreal_nodes.assimilation.registration import (
+    DepthViews,
     Registration,
     RegistrationConfig,
     RegistrationError,
@@ -407,12 +408,21 @@ def test_a_fit_whose_ends_are_not_seen_takes_its_position_along_the_axis_from_th
     assert 1e3 * across < 2.0 and deg < 0.5, (1e3 * across, deg)
     assert abs(along) > 0.015  # the guess is off along the axis: the test tells the guess's position from the truth's
     assert reg.along_from_guess and reg.along_from_guess in reg.doubt
+    # the same from the depth views themselves (what the tracker passes: the faces each view can measure)
+    seq = s["seq"]
+    views = DepthViews(np.array([seq["T"][i] for i in VIEWS]), seq["cam"])
+    with pytest.raises(SlideRefused):
+        register_rgbd(cloud, m, guess, views, CFG)
+    by_views = register_rgbd(cloud, m, guess, views, replace(CFG, slide_from_guess=True))
+    placed_v = by_views.T_map_obj[:3, :3] @ c + by_views.T_map_obj[:3, 3]
+    assert abs(float(axis @ (placed_v - true)) - float(axis @ (guessed - true))) < 3.0e-3, by_views.doubt
+    assert by_views.along_from_guess
     # with its deformation fitted too (the beam is at rest here: the rigid fit stands, and says the same)
     lo_mu, hi_mu = np.array([a.values[0] for a in m.axes]), np.array([a.values[-1] for a in m.axes])
     loaded = register_loaded(cloud, m, guess, s["cams"], lo_mu, hi_mu, replace(CFG, slide_from_guess=True))
     assert loaded.along_from_guess and loaded.state is None, loaded.state_reason
     np.testing.assert_allclose(loaded.T_map_obj, reg.T_map_obj, atol=1e-9)
-    # a guess the depth contradicts (15 cm along the 0.46 m beam: the model's end far past the measured beam) is
+    # a guess the depth contradicts (11 cm further back, 15 cm from the truth along the 0.46 m beam) is
     # followed only to the end of the shifts the depth covers about as well as the best, and says so
     far = G.make_T(guess[:3, :3], guess[:3, 3] - 0.11 * guess[:3, 0])
     reg = register_rgbd(cloud, m, far, s["cams"], replace(CFG, slide_from_guess=True))
