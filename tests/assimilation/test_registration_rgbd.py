@@ -122,6 +122,18 @@ def scene3():
             "guess": G.pose7_to_matrix(doc["objects"][0]["anchor"]["guess"])}
 
 
+def _without_ends(s) -> np.ndarray:
+    """The scene's fused cloud without the beam's last 5 cm at either end (measured in the true pose): nothing in it
+    pins the beam along its axis."""
+    m = s["model"]
+    P_obj = (s["cloud"] - s["truth"][:3, 3]) @ s["truth"][:3, :3]
+    lo, hi = m.points.min(axis=0), m.points.max(axis=0)
+    beam = np.all((P_obj > lo - 0.01) & (P_obj < hi + 0.01), axis=1)
+    ends = (P_obj[:, 0] < lo[0] + 0.05) | (P_obj[:, 0] > hi[0] - 0.05)
+    out: np.ndarray = s["cloud"][~(beam & ends)]
+    return out
+
+
 def _error(T, T_true):
     D = G.inv(T_true) @ T
     return 1e3 * np.linalg.norm(D[:3, 3]), np.rad2deg(np.arccos(np.clip((np.trace(D[:3, :3]) - 1) / 2, -1, 1)))
@@ -309,12 +321,7 @@ def test_a_registration_worker_that_dies_is_reported_and_started_again(scene3):
         status, why = result(bg)
         assert status == "failed" and "TypeError" in why, why
         # a refusal for the slide alone is told apart (the tracker counts those): the beam without its ends
-        m = s["model"]
-        P_obj = (s["cloud"] - s["truth"][:3, 3]) @ s["truth"][:3, :3]
-        lo, hi = m.points.min(axis=0), m.points.max(axis=0)
-        beam = np.all((P_obj > lo - 0.01) & (P_obj < hi + 0.01), axis=1)
-        ends = (P_obj[:, 0] < lo[0] + 0.05) | (P_obj[:, 0] > hi[0] - 0.05)
-        bg.submit("beam", "rgbd", s["cloud"][~(beam & ends)], m, s["guess"], s["cams"], CFG)
+        bg.submit("beam", "rgbd", _without_ends(s), s["model"], s["guess"], s["cams"], CFG)
         status, why = result(bg)
         assert status == "slide" and "slide along the object's axis" in why, (status, why)
         with pytest.raises(ValueError, match="registration kind"):
@@ -371,14 +378,10 @@ def test_a_fit_whose_ends_are_not_seen_is_refused_not_slid(scene3):
     The same scene with its ends seen slides over a few millimetres only."""
     s = scene3
     m = s["model"]
-    P_obj = (s["cloud"] - s["truth"][:3, 3]) @ s["truth"][:3, :3]
-    lo, hi = m.points.min(axis=0), m.points.max(axis=0)
-    beam = np.all((P_obj > lo - 0.01) & (P_obj < hi + 0.01), axis=1)
-    ends = (P_obj[:, 0] < lo[0] + 0.05) | (P_obj[:, 0] > hi[0] - 0.05)
     whole = register_rgbd(s["cloud"], m, s["guess"], s["cams"], CFG)
     assert whole.slide_spread < 0.03, whole.slide_spread
     with pytest.raises(RegistrationError, match="slide along the object's axis"):
-        register_rgbd(s["cloud"][~(beam & ends)], m, s["guess"], s["cams"], CFG)
+        register_rgbd(_without_ends(s), m, s["guess"], s["cams"], CFG)
 
 
 def test_a_fit_whose_ends_are_not_seen_takes_its_position_along_the_axis_from_the_guess(scene3):
@@ -387,11 +390,7 @@ def test_a_fit_whose_ends_are_not_seen_takes_its_position_along_the_axis_from_th
     the pose is doubted, saying so. Without the option the same cloud is refused (above)."""
     s = scene3
     m = s["model"]
-    P_obj = (s["cloud"] - s["truth"][:3, 3]) @ s["truth"][:3, :3]
-    lo, hi = m.points.min(axis=0), m.points.max(axis=0)
-    beam = np.all((P_obj > lo - 0.01) & (P_obj < hi + 0.01), axis=1)
-    ends = (P_obj[:, 0] < lo[0] + 0.05) | (P_obj[:, 0] > hi[0] - 0.05)
-    cloud = s["cloud"][~(beam & ends)]
+    cloud = _without_ends(s)
     guess = G.make_T(s["guess"][:3, :3], s["guess"][:3, 3] - 0.04 * s["guess"][:3, 0])  # 40 mm back along the beam
     with pytest.raises(SlideRefused):
         register_rgbd(cloud, m, guess, s["cams"], CFG)
