@@ -676,12 +676,12 @@ def _slid_to_guess(out: Registration, P: np.ndarray, T: np.ndarray, S: np.ndarra
                    cams: DepthViews | _Centres, guess: np.ndarray, centre: np.ndarray,
                    cfg: RegistrationConfig) -> Registration:
     """The fit ``T`` (map -> object) slid along the axis it cannot be pinned on until the model's ``centre`` lies
-    where the user's ``guess`` (as given, not levelled) puts it along that axis, but not beyond the shifts the data cover about as well
-    as the best (:func:`_slide_cover`: a guess there contradicts the depth; an end of the searched range left open
-    does not bound it), judged again and doubted: the other five degrees of freedom are the data's, the position
-    along the axis the user's (a hand measurement is off by millimetres to centimetres, and a load's position along
-    the axis with it). Refused (:class:`RegistrationError`) where the slid fit no longer meets ``min_fitness`` /
-    ``max_rmse``."""
+    where the user's ``guess`` (as given, not levelled) puts it along that axis, but not beyond the shifts the data
+    cover about as well as the best (:func:`_slide_cover`: a guess there contradicts the depth; an end of the
+    searched range left open does not bound it), judged again and doubted: the other five degrees of freedom are the
+    data's, the position along the axis the user's (a hand measurement is off by millimetres to centimetres, and a
+    load's position along the axis with it). Refused (:class:`RegistrationError`) where the slid fit no longer meets
+    ``min_fitness`` / ``max_rmse``."""
     views = _views(cams)
     sl = _slide_cover(P, T, S, N, views, cfg)
     if sl is None:  # every direction held at this fit: nothing to take from the guess
