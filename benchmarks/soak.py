@@ -12,7 +12,10 @@ published at the bag's rate. The graph sheds load live as it would from a camera
 Measured: every node's resident memory (RSS) every 2 s, and each finished frame's latency from publication to
 the overlay's report. Per node: RSS after the first 1000 frames and at the end, and its growth per 1000 frames
 (least squares over the second half of the run); latency p50 / p95 over the first and the last 1000 frames
-published.
+finished; and, since the frames repeat with the sample's cycle (forward and back: 478 frames), the latency's p50
+over each cycle of frames finished, its range over the cycles after the first two (the map is built on those) and
+its trend there (least squares over the cycles' p50, with its standard error): a creep shows as a trend, a
+latency that wanders with the load as a range.
 """
 
 from __future__ import annotations
@@ -38,6 +41,8 @@ from simreal_nodes.ros.commands import replay
 STARTED = re.compile(r"\[launch\] started (\w+) \(pid (\d+)\)")
 INPUTS = ("/camera/image_raw/compressed", "/camera/camera_info", "/camera/depth/image_raw")
 READ_BAG = bags.read_bag  # the replay's reader is swapped for the ping-pong one below
+CYCLE = [478]  # frames in one forward-and-back cycle of the sample (set by ping_pong; runs saved before it: 478)
+SETTLE_CYCLES = 2  # cycles left out of the latency's range and trend: the map is built on them
 
 
 def restamp(raw: bytes, ns: int) -> bytes:
@@ -53,6 +58,7 @@ def ping_pong(bag: Path, n_frames: int, fps: float):
         frames.setdefault(bags.stamp_ns(ts.deserialize_cdr(m.raw, m.msgtype)), []).append(m)
     order = [frames[k] for k in sorted(frames)]
     cycle = order + order[-2:0:-1]
+    CYCLE[0] = len(cycle)
     t0 = time.time_ns()
     for k in range(n_frames):
         ns = t0 + round(k * 1e9 / fps)
@@ -64,6 +70,7 @@ def run(n_frames: int, fps: float, params: dict | None = None) -> dict:
     bag, scene = sample_bag("joint_boot", echo=print)
     pids: dict[str, int] = {}
     rss: list[tuple[float, str, float]] = []
+    cpu: list[tuple[float, str, float]] = []  # (frames published, node, CPU seconds user + system so far)
     stop = threading.Event()
     published = [0]
 
@@ -82,7 +89,10 @@ def run(n_frames: int, fps: float, params: dict | None = None) -> dict:
         while not stop.wait(2.0) and published[0] < n_frames:
             for name, pid in list(pids.items()):
                 with contextlib.suppress(psutil.Error):
-                    rss.append((published[0], name, psutil.Process(pid).memory_info().rss / 2 ** 20))
+                    proc = psutil.Process(pid)
+                    k, mem, t = published[0], proc.memory_info().rss / 2 ** 20, proc.cpu_times()
+                    rss.append((k, name, mem))
+                    cpu.append((k, name, t.user + t.system))
 
     original = bagplay.Player._publish_image
 
@@ -108,7 +118,8 @@ def run(n_frames: int, fps: float, params: dict | None = None) -> dict:
         bagplay.Player._publish_image = original
         stop.set()
         th.join(5)
-    return {"frames": n_frames, "fps": fps, "params": params or {}, "stats": stats.as_dict(), "rss": rss,
+    return {"frames": n_frames, "fps": fps, "cycle": CYCLE[0], "params": params or {}, "stats": stats.as_dict(),
+            "rss": rss, "cpu": cpu,
             "exits": restarts,
             "latency_ms": {n: list(v) for n, v in stats.latency_ms.items()}}
 
@@ -129,8 +140,52 @@ def summarize(r: dict) -> list[dict]:
                      "lat_last": float(np.percentile(lat[-k:], 50)) if k else float("nan"),
                      "lat_first95": float(np.percentile(lat[:k], 95)) if k else float("nan"),
                      "lat_last95": float(np.percentile(lat[-k:], 95)) if k else float("nan"),
-                     "finished": len(lat)})
+                     "finished": len(lat), **cycle_trend(lat, int(r.get("cycle", 478))),
+                     **cpu_drift(r.get("cpu", []), name, n, int(r.get("cycle", 478)))})
     return rows
+
+
+def cpu_per_frame(cpu: list, name: str, window: float = 1000.0) -> np.ndarray:
+    """(frames published at the window's end, CPU ms per frame published over the window) of node ``name``, from
+    the cumulative CPU samples, windows of about ``window`` frames."""
+    pts = np.array([(k, c) for k, nm, c in cpu if nm == name], float).reshape(-1, 2)
+    out = []
+    j = 0
+    for i in range(1, len(pts)):
+        if pts[i, 0] - pts[j, 0] >= window:
+            out.append((pts[i, 0], 1e3 * (pts[i, 1] - pts[j, 1]) / (pts[i, 0] - pts[j, 0])))
+            j = i
+    return np.array(out, float).reshape(-1, 2)
+
+
+def cpu_drift(cpu: list, name: str, n: int, cycle: int) -> dict:
+    """A node's CPU per frame published over the 1000 frames after :data:`SETTLE_CYCLES` cycles and over the last
+    1000 (NaN where the run sampled no CPU: runs saved before stop 91)."""
+    pts = np.array([(k, c) for k, nm, c in cpu if nm == name], float).reshape(-1, 2)
+    start = SETTLE_CYCLES * cycle
+
+    def rate(a: float, b: float) -> float:
+        sel = pts[(pts[:, 0] >= a) & (pts[:, 0] <= b)]
+        if len(sel) < 2 or sel[-1, 0] - sel[0, 0] < 0.5 * (b - a):
+            return float("nan")
+        return float(1e3 * (sel[-1, 1] - sel[0, 1]) / (sel[-1, 0] - sel[0, 0]))
+
+    return {"cpu_early": rate(start, start + 1000), "cpu_late": rate(n - 1000, n)}
+
+
+def cycle_trend(lat: np.ndarray, cycle: int) -> dict:
+    """The latency's p50 over each ``cycle`` frames finished; over the cycles after :data:`SETTLE_CYCLES`: their
+    lowest and highest p50 and the least-squares trend of the p50 per 1000 frames with its standard error."""
+    p50 = np.array([np.percentile(lat[i:i + cycle], 50) for i in range(0, len(lat) - cycle + 1, cycle)])
+    late = p50[SETTLE_CYCLES:]
+    out = {"cycles": len(p50), "cycle_lo": float("nan"), "cycle_hi": float("nan"), "trend": float("nan"),
+           "trend_se": float("nan")}
+    if len(late) >= 4:
+        x = np.arange(len(late)) * cycle / 1000.0
+        (slope, _icpt), cov = np.polyfit(x, late, 1, cov=True)
+        out.update(cycle_lo=float(late.min()), cycle_hi=float(late.max()), trend=float(slope),
+                   trend_se=float(np.sqrt(cov[0, 0])))
+    return out
 
 
 def main() -> None:
@@ -157,11 +212,16 @@ def main() -> None:
             ("rss_end", "RSS at the end (MB)", "{:.0f}"), ("slope", "growth, 2nd half (MB / 1000 frames)", "{:.2f}"),
             ("finished", "frames finished", "{}"), ("lat_first", "latency p50, first 1000 finished (ms)", "{:.0f}"),
             ("lat_last", "p50, last 1000 (ms)", "{:.0f}"), ("lat_first95", "p95 first (ms)", "{:.0f}"),
-            ("lat_last95", "p95 last (ms)", "{:.0f}")]
+            ("lat_last95", "p95 last (ms)", "{:.0f}"),
+            ("cycle_lo", "p50 per cycle after the 2nd: lowest (ms)", "{:.0f}"), ("cycle_hi", "highest (ms)", "{:.0f}"),
+            ("trend", "trend of the cycles' p50 (ms / 1000 frames)", "{:+.1f}"), ("trend_se", "its std err", "{:.1f}"),
+            ("cpu_early", f"CPU per frame, frames {SETTLE_CYCLES * CYCLE[0]}+ (1000; ms)", "{:.1f}"),
+            ("cpu_late", "CPU per frame, last 1000 (ms)", "{:.1f}")]
     st = r["stats"]
 
     def plot(plt):
-        fig, ax = plt.subplots(1, 2, figsize=(11, 3.8))
+        has_cpu = bool(r.get("cpu"))
+        fig, ax = plt.subplots(1, 3 if has_cpu else 2, figsize=(16 if has_cpu else 11, 3.8))
         for name in sorted({x[1] for x in r["rss"]}):
             pts = np.array([(k, v) for k, nm, v in r["rss"] if nm == name])
             ax[0].plot(pts[:, 0], pts[:, 1], label=name)
@@ -176,6 +236,14 @@ def main() -> None:
         ax[1].set_xlabel("frames finished (in order)")
         ax[1].set_ylabel("latency from publication (ms, mean of 50)")
         ax[1].legend(fontsize=7)
+        if has_cpu:
+            for name in sorted({x[1] for x in r["cpu"]}):
+                c = cpu_per_frame(r["cpu"], name, 500.0)
+                if len(c):
+                    ax[2].plot(c[:, 0], c[:, 1], label=name, marker=".")
+            ax[2].set_xlabel("frames published")
+            ax[2].set_ylabel("CPU per frame published (ms, over ~500 frames)")
+            ax[2].legend(fontsize=7)
         fig.tight_layout()
         return fig
 
@@ -188,7 +256,10 @@ def main() -> None:
          f"forward and backward at {r['fps']:.0f} fps, live. Frames published {st['frames_published']}, finished "
          f"by every node {st['frames_completed']} ({st.get('fps_through', float('nan')):.1f} fps through), the rest "
          f"skipped as live load shedding. Node exits during the run: {len(r.get('exits', [])) or 'none'}. RSS "
-         "sampled every 2 s; latency from the player's publication to each node's report. The launcher's standby "
+         "and CPU (user + system, of each node process) sampled every 2 s; latency from the player's publication "
+         "to each node's report. Cycle: "
+         f"{int(r.get('cycle', 478))} frames finished, one forward-and-back pass of the sample; the cycles' range "
+         f"and trend leave out the first {SETTLE_CYCLES} (the map is built on them). The launcher's standby "
          "processes (the live default) are not in the RSS columns.", plot, extra={"run": r})
 
 

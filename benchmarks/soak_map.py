@@ -1,0 +1,111 @@
+"""The soak's frames through the ROS-free pipeline (issue 20): does the map stay bounded, does the work per frame?
+
+    python -m benchmarks.soak_map                  # 10 cycles of the sample (4 780 frames, about 4 minutes)
+    python -m benchmarks.soak_map --cycles 4
+
+`benchmarks/soak.py` measures the live graph: latency and each node's CPU. This takes the same frames (the joint boot
+sample played forward and back, :func:`benchmarks.soak.ping_pong`) through `assimilation/offline.py`'s
+:class:`Pipeline` (the RGB-D SLAM core and the boot's deformable tracker, the trackers' word on the map points
+reaching the localization a frame late, as live), every frame processed, and reports after each cycle: the map's
+keyframes and points, the points flagged deformable and those the map holds for the tracker (never culled), and the
+localization's and the tracker's time per frame (p50 over the cycle). A map that revisits the same views should stop
+growing, and the work per frame with it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+from benchmarks.common import save
+
+
+def run(cycles: int) -> list[dict]:
+    import cv2
+
+    from benchmarks import soak
+    from simreal_nodes.assimilation.offline import Pipeline
+    from simreal_nodes.camera import CameraModel
+    from simreal_nodes.demo import sample_bag
+    from simreal_nodes.io import bags, images
+    from simreal_nodes.scene.schema import build_spec_models, load_scene
+
+    bag, scene_path = sample_bag("joint_boot", echo=print)
+    scene = load_scene(scene_path)
+    build_spec_models(scene)
+    ts = bags.typestore()
+    n_cycle = 2 * len({m.log_time_ns for m in bags.read_bag(bag, topics=["/camera/depth/image_raw"])}) - 2
+    pipe: Pipeline | None = None
+    frame: dict = {}
+    loc_ms: list[float] = []
+    trk_ms: list[float] = []
+    rows: list[dict] = []
+    for m in soak.ping_pong(bag, cycles * n_cycle, 30.0):
+        msg = ts.deserialize_cdr(m.raw, m.msgtype)
+        if m.topic.endswith("camera_info"):
+            if pipe is None:
+                pipe = Pipeline(scene, CameraModel.from_camera_info(msg), feedback_delay=1)
+            continue
+        if m.topic.endswith("compressed"):
+            frame["bgr"] = cv2.imdecode(np.frombuffer(bytes(msg.data), np.uint8), cv2.IMREAD_COLOR)
+        else:
+            frame["depth"] = images.depth_metres_of(msg)
+        if pipe is None or "bgr" not in frame or "depth" not in frame:
+            continue
+        t0 = time.perf_counter()
+        pipe.step(frame["bgr"], m.log_time_ns, depth=frame["depth"])
+        loc_ms.append(1e3 * (time.perf_counter() - t0) - pipe.tracker_ms)
+        trk_ms.append(pipe.tracker_ms)
+        frame = {}
+        if len(loc_ms) % n_cycle == 0:
+            slam = pipe.loc.slam  # type: ignore[attr-defined]  # an RGB-D scene: a SlamLocalization
+            mp = slam.map
+            rows.append({"cycle": len(rows) + 1, "frames": len(loc_ms), "keyframes": len(mp.keyframes),
+                         "points": len(mp.points),
+                         "deformable": sum(1 for p in mp.points.values() if p.deformable),
+                         "held": len(slam.ctx.held),
+                         "loc_ms": float(np.median(loc_ms[-n_cycle:])), "trk_ms": float(np.median(trk_ms[-n_cycle:]))})
+            print(rows[-1], flush=True)
+    if pipe is not None:
+        pipe.loc.close()
+    return rows
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--cycles", type=int, default=10)
+    a = ap.parse_args()
+    rows = run(a.cycles)
+    cols = [("cycle", "cycle", "{}"), ("frames", "frames", "{}"), ("keyframes", "keyframes", "{}"),
+            ("points", "map points", "{}"), ("deformable", "flagged deformable", "{}"),
+            ("held", "held for the tracker", "{}"), ("loc_ms", "localization p50 (ms/frame)", "{:.1f}"),
+            ("trk_ms", "tracker p50 (ms/frame)", "{:.1f}")]
+
+    def plot(plt):
+        fig, ax = plt.subplots(1, 2, figsize=(10, 3.6))
+        f = [r["frames"] for r in rows]
+        for k in ("keyframes", "points", "held"):
+            v = np.array([r[k] for r in rows], float)
+            ax[0].plot(f, v / v[0], marker=".", label=f"{k} (/{v[0]:.0f})")
+        ax[0].set_xlabel("frames")
+        ax[0].set_ylabel("relative to the first cycle")
+        ax[0].legend(fontsize=7)
+        ax[1].plot(f, [r["loc_ms"] for r in rows], marker=".", label="localization")
+        ax[1].plot(f, [r["trk_ms"] for r in rows], marker=".", label="tracker")
+        ax[1].set_xlabel("frames")
+        ax[1].set_ylabel("ms per frame (p50 over the cycle)")
+        ax[1].legend(fontsize=7)
+        fig.tight_layout()
+        return fig
+
+    save("soak_map", rows, cols, "The soak's frames through the ROS-free pipeline: map size and work per cycle",
+         f"`python -m benchmarks.soak_map --cycles {a.cycles}` (see its docstring): the joint boot sample (640x480 "
+         "RGB-D) forward and back, every frame through the RGB-D SLAM and the boot's tracker in one process (the "
+         "local BA in the same process, not the node's worker), the trackers' feedback a frame late. Times are "
+         "wall-clock per frame with nothing else running by intent; the live graph's are in `soak.md`.", plot)
+
+
+if __name__ == "__main__":
+    main()
