@@ -13,7 +13,7 @@ Measured: every node's resident memory (RSS) every 2 s, and each finished frame'
 the overlay's report. Per node: RSS after the first 1000 frames and at the end, and its growth per 1000 frames
 (least squares over the second half of the run); latency p50 / p95 over the first and the last 1000 frames
 finished; and, since the frames repeat with the sample's cycle (forward and back: 478 frames), the latency's p50
-over each cycle of frames finished, its range over the cycles after the first two (the map is built on those) and
+over each cycle of frames finished, its range over the cycles after the first two (most of the map is made on those) and
 its trend there (least squares over the cycles' p50, with its standard error): a creep shows as a trend, a
 latency that wanders with the load as a range.
 """
@@ -42,7 +42,7 @@ STARTED = re.compile(r"\[launch\] started (\w+) \(pid (\d+)\)")
 INPUTS = ("/camera/image_raw/compressed", "/camera/camera_info", "/camera/depth/image_raw")
 READ_BAG = bags.read_bag  # the replay's reader is swapped for the ping-pong one below
 CYCLE = [478]  # frames in one forward-and-back cycle of the sample (set by ping_pong; runs saved before it: 478)
-SETTLE_CYCLES = 2  # cycles left out of the latency's range and trend: the map is built on them
+SETTLE_CYCLES = 2  # cycles left out of the latency's range and trend: most of the map is made on them
 
 
 def restamp(raw: bytes, ns: int) -> bytes:
@@ -206,7 +206,10 @@ def main() -> None:
         if not (node and name and value):
             ap.error(f"--param {p!r}: expected NODE.NAME=VALUE")
         params.setdefault(node, {})[name] = json.loads(value)
-    r = json.loads((RESULTS / f"{a.out}.json").read_text())["run"] if a.report else run(a.frames, a.fps, params)
+    saved = json.loads((RESULTS / f"{a.out}.json").read_text()) if a.report else None
+    r = saved["run"] if saved else run(a.frames, a.fps, params)
+    # a report rewritten from a saved run keeps the machine (date, CPU probe) of the run, not of the rewrite
+    kept = {"machine": saved["machine"]} if saved and "machine" in saved else {}
     rows = summarize(r)
     cols = [("node", "node", "{}"), ("rss_start", "RSS after 1000 frames (MB)", "{:.0f}"),
             ("rss_end", "RSS at the end (MB)", "{:.0f}"), ("slope", "growth, 2nd half (MB / 1000 frames)", "{:.2f}"),
@@ -215,7 +218,7 @@ def main() -> None:
             ("lat_last95", "p95 last (ms)", "{:.0f}"),
             ("cycle_lo", "p50 per cycle after the 2nd: lowest (ms)", "{:.0f}"), ("cycle_hi", "highest (ms)", "{:.0f}"),
             ("trend", "trend of the cycles' p50 (ms / 1000 frames)", "{:+.1f}"), ("trend_se", "its std err", "{:.1f}"),
-            ("cpu_early", f"CPU per frame, frames {SETTLE_CYCLES * CYCLE[0]}+ (1000; ms)", "{:.1f}"),
+            ("cpu_early", f"CPU per frame, frames {SETTLE_CYCLES * int(r.get('cycle', 478))}+ (1000; ms)", "{:.1f}"),
             ("cpu_late", "CPU per frame, last 1000 (ms)", "{:.1f}")]
     st = r["stats"]
 
@@ -259,8 +262,8 @@ def main() -> None:
          "and CPU (user + system, of each node process) sampled every 2 s; latency from the player's publication "
          "to each node's report. Cycle: "
          f"{int(r.get('cycle', 478))} frames finished, one forward-and-back pass of the sample; the cycles' range "
-         f"and trend leave out the first {SETTLE_CYCLES} (the map is built on them). The launcher's standby "
-         "processes (the live default) are not in the RSS columns.", plot, extra={"run": r})
+         f"and trend leave out the first {SETTLE_CYCLES} (most of the map is made on them). The launcher's standby "
+         "processes (the live default) are not in the RSS columns.", plot, extra={"run": r, **kept})
 
 
 if __name__ == "__main__":
