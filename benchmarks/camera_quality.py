@@ -34,7 +34,7 @@ import time
 
 import numpy as np
 
-from benchmarks.common import RESULTS, save
+from benchmarks.common import RESULTS, save, saved_machine
 from benchmarks.family import FPS, parse_seeds, run_scene, scene_name
 from simreal_nodes.synth.sequence import sequence
 
@@ -186,7 +186,8 @@ def main() -> None:
          "'placed': scenes the registration placed "
          "the object in. The load error is over the loaded frames whatever the tracker's state; 'OK' is the share "
          "of those frames it reported as a measured estimate; 'OK frames' is the load error over those frames alone "
-         "(the worst scene's median): a large value there is a silent failure.", plot, extra={"runs": runs})
+         "(the worst scene's median): a large value there is a silent failure.", plot,
+         extra={"runs": runs, **(saved_machine("camera_quality") if a.report else {})})
 
 
 if __name__ == "__main__":

@@ -11,6 +11,17 @@ from pathlib import Path
 RESULTS = Path(__file__).resolve().parent / "results"
 
 
+def saved_machine(name: str) -> dict:
+    """``{"machine": ...}`` of the saved results ``name`` (empty when there are none): for :func:`save`'s ``extra``
+    when a benchmark rewrites its report from a saved run, so the report keeps the run's date and CPU probe, not the
+    rewrite's."""
+    path = RESULTS / f"{name}.json"
+    if not path.is_file():
+        return {}
+    doc = json.loads(path.read_text())
+    return {"machine": doc["machine"]} if isinstance(doc, dict) and "machine" in doc else {}
+
+
 def machine() -> dict:
     import numpy as np
 

@@ -24,7 +24,7 @@ import time
 
 import numpy as np
 
-from benchmarks.common import RESULTS, save
+from benchmarks.common import RESULTS, save, saved_machine
 from benchmarks.family import FPS, _depth_or_pair, parse_seeds, registration_error, scene_name
 from simreal_nodes.assimilation.offline import Pipeline
 from simreal_nodes.assimilation.registration import RegistrationConfig
@@ -143,7 +143,8 @@ def main() -> None:
          "0.5 degrees (issue 16). 'placed': the registration accepted a pose (a refused one leaves the beam "
          "waiting, flagged, rather than misplaced). 'flagged': placed, but on depth scattering more than "
          f"{max_noise_mm:g} mm about the fit (RegistrationConfig.max_noise, chosen on development seeds 0-9): its "
-         "estimates are reported low-confidence.", plot, extra={"runs": runs})
+         "estimates are reported low-confidence.", plot,
+         extra={"runs": runs, **(saved_machine(name) if a.report else {})})
 
 
 if __name__ == "__main__":

@@ -36,7 +36,7 @@ from pathlib import Path
 import numpy as np
 import psutil
 
-from benchmarks.common import save
+from benchmarks.common import save, saved_machine
 from simreal_nodes.io import bags
 from simreal_nodes.launch import ONE_PROCESS
 from simreal_nodes.rom.build import REPO
@@ -216,7 +216,7 @@ def main():
          "within 1 s. `--victims` reruns some rows and keeps the others' runs from the JSON"
          + (f" (kept here: every victim's but {', '.join(a.victims)})" if set(a.victims) != set(VICTIMS) else "")
          + ".", plot,
-         extra={"runs": rows})
+         extra={"runs": rows, **(saved_machine("respawn") if a.report else {})})
 
 
 if __name__ == "__main__":

@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 import psutil
 
-from benchmarks.common import RESULTS, save
+from benchmarks.common import RESULTS, save, saved_machine
 from simreal_nodes.demo import sample_bag
 from simreal_nodes.io import bags
 from simreal_nodes.ros import bagplay
@@ -206,10 +206,8 @@ def main() -> None:
         if not (node and name and value):
             ap.error(f"--param {p!r}: expected NODE.NAME=VALUE")
         params.setdefault(node, {})[name] = json.loads(value)
-    saved = json.loads((RESULTS / f"{a.out}.json").read_text()) if a.report else None
-    r = saved["run"] if saved else run(a.frames, a.fps, params)
-    # a report rewritten from a saved run keeps the machine (date, CPU probe) of the run, not of the rewrite
-    kept = {"machine": saved["machine"]} if saved and "machine" in saved else {}
+    r = json.loads((RESULTS / f"{a.out}.json").read_text())["run"] if a.report else run(a.frames, a.fps, params)
+    kept = saved_machine(a.out) if a.report else {}  # the run's date and CPU probe, not the rewrite's
     rows = summarize(r)
     cols = [("node", "node", "{}"), ("rss_start", "RSS after 1000 frames (MB)", "{:.0f}"),
             ("rss_end", "RSS at the end (MB)", "{:.0f}"), ("slope", "growth, 2nd half (MB / 1000 frames)", "{:.2f}"),

@@ -38,3 +38,20 @@ def test_checkout_notes_give_each_checkouts_median_and_the_pairs_ratios():
     assert f"{this} 60 ms; {other} 90 ms" in text
     assert "median 0.62 (from 0.50 to 0.75, 2 pairs)" in text
     assert "Pairs'" not in checkout_notes([r for r in rows if r["code"] == this], [("ms", "the time")])
+
+
+def test_a_report_rewritten_from_a_saved_run_keeps_the_runs_machine(tmp_path, monkeypatch):
+    import json
+
+    from benchmarks import common
+
+    monkeypatch.setattr(common, "RESULTS", tmp_path)
+    assert common.saved_machine("nothing") == {}
+    run_machine = {"python": "3.11", "cpus": 2, "date": "2026-01-01 00:00:00", "cpu_probe_ms": 16.0, "cpu": "x"}
+    common.save("b", [{"v": 1}], [("v", "v", "{}")], "t", extra={"machine": run_machine})
+    assert common.saved_machine("b") == {"machine": run_machine}
+    common.save("b", [{"v": 2}], [("v", "v", "{}")], "t", extra=common.saved_machine("b"))  # the rewrite
+    assert json.loads((tmp_path / "b.json").read_text())["machine"] == run_machine
+    assert "2026-01-01 00:00:00; CPU probe 16 ms" in (tmp_path / "b.md").read_text()
+    common.save("b", [{"v": 3}], [("v", "v", "{}")], "t")  # a new run: this machine, now
+    assert json.loads((tmp_path / "b.json").read_text())["machine"]["date"] != run_machine["date"]
