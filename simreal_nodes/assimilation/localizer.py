@@ -248,6 +248,12 @@ class LiveLocalizer:
         """The SLAM map (None: no localizer yet, or one without a map)."""
         return self.core.map if self.core is not None else None
 
+    def map_stats(self) -> dict[str, str]:
+        """The map's size for the node's diagnostics (``map_keyframes``, ``map_points``; empty without a map): what a
+        long run watches to see that the map stays bounded (`benchmarks/soak_map.py`)."""
+        m = self.map
+        return {} if m is None else {"map_keyframes": str(len(m.keyframes)), "map_points": str(len(m.points))}
+
     def map_points(self) -> np.ndarray | None:
         """(N, 3) points of the SLAM map (None: no map, or an empty one)."""
         if self.map is None or not self.map.points:

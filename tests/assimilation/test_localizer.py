@@ -141,3 +141,18 @@ def test_focus_polygons_that_are_not_finite_or_far_off_steer_nothing_and_break_n
     huge = np.array([[-1e30, -1e30], [1e30, -1e30], [1e30, 1e30], [-1e30, 1e30]])
     got = ex.extract(img, focus=[nan, huge], focus_share=0.2)
     assert len(got) == pytest.approx(len(plain), rel=0.05)
+
+
+def test_live_map_stats_give_the_maps_size_for_the_diagnostics():
+    markers = LiveLocalizer(MARKERS)
+    assert markers.map_stats() == {}  # no camera yet, no localizer
+    markers.set_camera(CAM)
+    assert markers.map_stats() == {}  # markers build no map
+    live = LiveLocalizer(SLAM)
+    live.set_camera(CAM)
+    assert live.map_stats() == {"map_keyframes": "0", "map_points": "0"}  # a SLAM before its start: empty
+    m = live.map
+    m.keyframes[7] = object()  # the stats count what the map holds, nothing else
+    assert live.map_stats()["map_keyframes"] == "1"
+    del m.keyframes[7]
+    live.close()

@@ -75,6 +75,11 @@ def test_probe_pushes_crossed_beams_through_the_graph(tmp_path):
     print(f"warm overlay pixels: before the press median {np.median(before)}, pressed {np.median(deep)}")
     assert len(before) > 10 and len(deep) > 10
     assert np.median(before) <= 20 and np.median(deep) >= 200  # measured 6 and 578 (320x240)
+    # the localization's diagnostics carry its map's size (what a long run watches)
+    sizes = [{kv.key: kv.value for kv in st.values} for m in bags.read_bag(out, topics=["/diagnostics"])
+             for st in bags.decode(m).status if st.name == "simreal/localization"]
+    sizes = [d for d in sizes if "map_keyframes" in d]
+    assert sizes and int(sizes[-1]["map_keyframes"]) >= 2 and int(sizes[-1]["map_points"]) > 100, sizes[-1:]
 
 
 def _coloured_pixels(run, bag) -> dict[int, int]:

@@ -131,6 +131,7 @@ class LocalizationNode(SimrealNode):
         self.pub_obs.publish(convert.observations_msg(r, header.stamp, self.camera_frame))
         if r.timings is not None:
             self.metrics.extra = {k: f"{v:.1f}" for k, v in r.timings.items()}
+        self.metrics.extra.update(self.live.map_stats())
         self.pub_status.publish(convert.localization_status_msg(r, header.stamp, self.get_name(), self.mode))
         level, text = status_text(r)
         self.set_status(level, text)
