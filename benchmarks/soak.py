@@ -145,10 +145,15 @@ def summarize(r: dict) -> list[dict]:
     return rows
 
 
+def _samples(series: list, name: str) -> np.ndarray:
+    """(frames published, value) rows of node ``name`` in a sampled series of (frames, node, value)."""
+    return np.array([(k, v) for k, nm, v in series if nm == name], float).reshape(-1, 2)
+
+
 def cpu_per_frame(cpu: list, name: str, window: float = 1000.0) -> np.ndarray:
     """(frames published at the window's end, CPU ms per frame published over the window) of node ``name``, from
     the cumulative CPU samples, windows of about ``window`` frames."""
-    pts = np.array([(k, c) for k, nm, c in cpu if nm == name], float).reshape(-1, 2)
+    pts = _samples(cpu, name)
     out = []
     j = 0
     for i in range(1, len(pts)):
@@ -161,7 +166,7 @@ def cpu_per_frame(cpu: list, name: str, window: float = 1000.0) -> np.ndarray:
 def cpu_drift(cpu: list, name: str, n: int, cycle: int) -> dict:
     """A node's CPU per frame published over the 1000 frames after :data:`SETTLE_CYCLES` cycles and over the last
     1000 (NaN where the run sampled no CPU: runs saved before stop 91)."""
-    pts = np.array([(k, c) for k, nm, c in cpu if nm == name], float).reshape(-1, 2)
+    pts = _samples(cpu, name)
     start = SETTLE_CYCLES * cycle
 
     def rate(a: float, b: float) -> float:
