@@ -145,6 +145,57 @@ def replot(name: str, plot_rows) -> Path:
     return png
 
 
+def process_memory() -> dict[str, float]:
+    """This process's memory (MB): ``rss`` (resident, from the OS), ``malloc_used`` and ``malloc_free`` (glibc's
+    heap over all arenas, ``mallinfo2``: bytes handed out, mmapped chunks included, and bytes held free inside the
+    arenas) and ``py_blocks`` (thousands of blocks Python's own allocator holds). Together they tell where a process
+    grows: Python objects (``py_blocks``), native allocations of the extensions (``malloc_used`` without
+    ``py_blocks``), or the allocator keeping freed memory (``malloc_free``). The malloc fields are NaN off glibc."""
+    import ctypes
+    import sys
+
+    import psutil
+
+    out = {"rss": psutil.Process().memory_info().rss / 2 ** 20, "malloc_used": float("nan"),
+           "malloc_free": float("nan"), "py_blocks": sys.getallocatedblocks() / 1e3}
+    try:
+        fn = ctypes.CDLL("libc.so.6").mallinfo2
+    except (OSError, AttributeError):
+        return out
+
+    class MallInfo2(ctypes.Structure):
+        _fields_ = [(n, ctypes.c_size_t) for n in ("arena", "ordblks", "smblks", "hblks", "hblkhd", "usmblks",
+                                                   "fsmblks", "uordblks", "fordblks", "keepcost")]
+
+    fn.restype = MallInfo2
+    mi = fn()
+    out["malloc_used"] = (mi.uordblks + mi.hblkhd) / 2 ** 20
+    out["malloc_free"] = mi.fordblks / 2 ** 20
+    return out
+
+
+def malloc_trim() -> bool:
+    """Ask glibc to return the free memory its arenas hold to the OS (``malloc_trim(0)``); False off glibc. What
+    the resident size loses by it was the allocator's, not the program's."""
+    import ctypes
+
+    try:
+        return bool(ctypes.CDLL("libc.so.6").malloc_trim(0))
+    except (OSError, AttributeError):
+        return False
+
+
+def growth_per_1000(frames, values) -> float:
+    """Least-squares slope of ``values`` against ``frames``, per 1000 frames (NaN under three points)."""
+    import numpy as np
+
+    x, y = np.asarray(frames, float), np.asarray(values, float)
+    ok = np.isfinite(x) & np.isfinite(y)
+    if ok.sum() < 3:
+        return float("nan")
+    return float(np.polyfit(x[ok], y[ok], 1)[0] * 1000)
+
+
 def most_common(items: list) -> object:
     """The most frequent item; of several as frequent, the first seen (``max(set(...))`` broke ties by the set's
     order, which follows Python's per-process string hashing: the same run printed another reason)."""

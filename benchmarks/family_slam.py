@@ -149,7 +149,10 @@ def summary(rows: list[dict]) -> dict:
     return out
 
 
-def write(rows: list[dict], label: str, name: str) -> None:
+def write(rows: list[dict], label: str, name: str, runs: list[dict] | None = None) -> None:
+    """The table of ``rows``. ``runs``: where the rows are rewritten from saved results (``--report``,
+    ``--compose``), each source's ``{"name", "machine"}``: the report keeps the machine line of the run (of the
+    newest, with every source's date and CPU probe in the notes), not the rewrite's."""
     onsets = _onsets()
     for r in rows:  # the monocular start against the earliest the truth allows (the median rule)
         o = onsets.get(r["seed"])
@@ -208,8 +211,16 @@ def write(rows: list[dict], label: str, name: str) -> None:
         fig.tight_layout()
         return fig
 
+    extra: dict = {"summary": s, "label": label}
+    runs = [r for r in runs or [] if r.get("machine")]
+    if runs:
+        extra["machine"] = max(runs, key=lambda r: r["machine"]["date"])["machine"]
+        if len(runs) > 1:
+            notes += " Composed from the saved runs " + ", ".join(
+                f"`{r['name']}` ({r['machine']['date']}, CPU probe {r['machine']['cpu_probe_ms']:.0f} ms)"
+                for r in runs) + "; the machine line below is the newest's."
     save(name, rows, cols, "The SLAM alone on the scene family: frames tracked, ATE, time", notes, plot,
-         extra={"summary": s, "label": label})
+         extra=extra)
 
 
 ONSET = "family_slam_onset"
@@ -319,13 +330,16 @@ def main() -> None:
 
         name = a.out or "family_slam"
         merged: dict[tuple, dict] = {}
+        runs = []
         for src in (a.compose.split(",") if a.compose else [name]):
-            for r in json.loads((RESULTS / f"{src}.json").read_text())["rows"]:
+            doc = json.loads((RESULTS / f"{src}.json").read_text())
+            runs.append({"name": src, "machine": doc.get("machine")})
+            for r in doc["rows"]:
                 merged[(r["seed"], r["mode"], r.get("config", "default"))] = r
         kept = [merged[k] for k in sorted(merged)]
         done = sorted({r["seed"] for r in kept})
         kind = "held-out" if all(k >= HELD_OUT_SEEDS.start for k in done) else "development"
-        write(kept, f"{kind} seeds {done[0]}-{done[-1]} ({len(done)} scenes)", name)
+        write(kept, f"{kind} seeds {done[0]}-{done[-1]} ({len(done)} scenes)", name, runs)
         return
     seeds = parse_seeds(a.seeds)
     if a.onset:  # other seeds' rows already in the table are kept

@@ -55,3 +55,46 @@ def test_a_report_rewritten_from_a_saved_run_keeps_the_runs_machine(tmp_path, mo
     assert "2026-01-01 00:00:00; CPU probe 16 ms" in (tmp_path / "b.md").read_text()
     common.save("b", [{"v": 3}], [("v", "v", "{}")], "t")  # a new run: this machine, now
     assert json.loads((tmp_path / "b.json").read_text())["machine"]["date"] != run_machine["date"]
+
+
+def test_process_memory_sees_an_allocation_in_the_native_heap():
+    import numpy as np
+
+    from benchmarks.common import process_memory
+
+    before = process_memory()
+    assert before["rss"] > 0 and before["py_blocks"] > 0
+    if not np.isfinite(before["malloc_used"]):
+        pytest.skip("glibc's mallinfo2 is not available here")
+    held = np.ones(8 * 2 ** 20, np.uint8)  # 8 MB from the native heap (numpy allocates with malloc)
+    after = process_memory()
+    assert after["malloc_used"] - before["malloc_used"] == pytest.approx(8, abs=1)
+    del held
+    assert process_memory()["malloc_used"] < after["malloc_used"] - 7
+
+
+def test_growth_per_1000_is_the_fitted_slope():
+    from benchmarks.common import growth_per_1000
+
+    assert growth_per_1000([0, 500, 1000, 1500], [10.0, 10.5, 11.0, 11.5]) == pytest.approx(1.0)
+    assert growth_per_1000([0, 500, float("nan"), 1500], [10.0, 10.0, 99.0, 10.0]) == pytest.approx(0.0)
+    assert growth_per_1000([0, 500], [1.0, 2.0]) != growth_per_1000([0, 500], [1.0, 2.0])  # NaN: too few points
+
+
+def test_malloc_trim_returns_what_the_heap_held_free():
+    import numpy as np
+
+    from benchmarks.common import malloc_trim, process_memory
+
+    if not np.isfinite(process_memory()["malloc_free"]):
+        pytest.skip("glibc's malloc is not this process's allocator")
+    blocks = [bytes(2000) + bytes([i % 256]) for i in range(40_000)]  # 80 MB of malloc'd blocks, brk-heap sized
+    keep = blocks[-1]  # the heap's top stays in use: only a trim (not free) can hand the rest back
+    del blocks
+    before = process_memory()
+    assert before["malloc_free"] > 60
+    assert malloc_trim()
+    after = process_memory()
+    assert before["rss"] - after["rss"] > 40
+    assert after["malloc_used"] == pytest.approx(before["malloc_used"], abs=1)
+    del keep

@@ -35,3 +35,27 @@ def test_config_fields_are_parsed_and_checked():
 def test_seed_ranges():
     assert _ranges([1001, 0, 1, 2, 5, 1000, 1099]) == "0-2, 5, 1000-1001, 1099"
     assert _ranges([]) == ""
+
+
+def test_a_report_rewritten_from_saved_runs_keeps_their_machine(tmp_path, monkeypatch):
+    import json
+
+    import benchmarks.common as common
+    from benchmarks.family_slam import write
+
+    monkeypatch.setattr(common, "RESULTS", tmp_path)
+    rows = [_row(0, "default", 92.0, 0.1, frames=100, first_tracked=8, first_lost=None, rpe_1s_mm=1.0,
+                 scale=1.0, keyframes=5, path_m=1.0)]
+
+    def run(date: str, probe: float) -> dict:
+        return {"cpu": "a CPU", "cpus": 2, "python": "3.11", "date": date, "cpu_probe_ms": probe}
+
+    write(rows, "held-out seeds 0", "slam_one", [{"name": "slam_one", "machine": run("2026-01-02 03:04:05", 21.0)}])
+    md = (tmp_path / "slam_one.md").read_text()
+    assert "2026-01-02 03:04:05; CPU probe 21 ms" in md and "Composed" not in md
+    assert json.loads((tmp_path / "slam_one.json").read_text())["machine"]["date"] == "2026-01-02 03:04:05"
+    write(rows, "held-out seeds 0", "slam_two", [{"name": "a", "machine": run("2026-01-05 00:00:00", 30.0)},
+                                                  {"name": "b", "machine": run("2026-01-02 00:00:00", 20.0)}])
+    md = (tmp_path / "slam_two.md").read_text()
+    assert "2026-01-05 00:00:00; CPU probe 30 ms" in md  # the newest run's line
+    assert "`a` (2026-01-05 00:00:00, CPU probe 30 ms), `b` (2026-01-02 00:00:00, CPU probe 20 ms)" in md

@@ -708,6 +708,37 @@ def test_deformable_tracks_reacquire_by_descriptor_and_widely_after_a_gap():
     assert tracks.sources == {}
 
 
+def test_deformable_descriptors_of_erased_points_are_forgotten():
+    """The object's points are culled and made anew all the time (new ids, never reused): the last descriptor of each
+    one measured is kept for its re-acquisition, and those of erased points must go while the map's size holds, or
+    the store grows frame after frame (until stop 92 it was pruned only past twice the map's points)."""
+    X, desc = scene()
+    ctx = context()
+    depth_map(ctx, X, desc)
+    m = ctx.map
+    tracks = DeformableTracks(ctx)
+    gray = np.zeros((480, 640), np.uint8)
+    rows = np.arange(0, 30)
+    pid_of_row = np.arange(len(X))
+    sizes, found = [], []
+    for r in range(40):
+        ctx.frame_id = 10 * (r + 1)  # frames apart: no flow, every point re-acquired by its descriptor
+        for row in rows:  # the object's points culled and mapped again: the map keeps its size
+            m.erase_point(int(pid_of_row[row]))
+            pid_of_row[row] = m.new_point(X[row], desc[row]).id
+        tracks.set_deformable(pid_of_row[rows], X[rows])
+        tracks.new_frame(gray)
+        f, _, _ = view(X, desc, np.eye(4), sel=rows)
+        res = TrackResult(OK)
+        tracks.observe(f, np.eye(4), res, exclude=np.zeros(0, np.int64))
+        found.append(len(res.obs_ids))
+        sizes.append(len(tracks._last_desc))
+    assert len(m.points) == len(X) and found == [len(rows)] * 40
+    # 30 new entries a frame: 1 200 in all, over twice the map's 400 points; kept to the live ones and a margin
+    assert max(sizes) <= 2 * len(rows) + 256 + len(rows)
+    assert {int(i) for i in pid_of_row[rows]} <= set(tracks._last_desc)  # the live points' descriptors stay
+
+
 def test_deformable_tracks_follow_the_image_by_flow_from_the_previous_frame():
     """A point measured in the previous frame is followed by Lucas-Kanade on the images (not by its descriptor):
     the texture moved 3 px right and 2 px down, the features (and the prediction) stayed: the flow finds it moved."""
