@@ -114,3 +114,12 @@ class StampSync:
     def pop_dropped(self) -> list[tuple[int, str]]:
         d, self._dropped = self._dropped, []
         return d
+
+
+def live_skip_reason(why: str) -> str:
+    """A dropped frame's reason as a live node reports it. Live, an input that never completes its frame was most
+    often replaced in the subscription's keep-last queue while the node was busy (load shedding, as meant), not
+    lost; the reason says both, so that a skipped frame does not read like a fault."""
+    if why.startswith("incomplete frame (missing "):
+        return why[:-1] + ": replaced in the live queue while the node was busy, or never received)"
+    return why

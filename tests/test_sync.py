@@ -3,7 +3,7 @@ a producer's 'not coming' releases a frame; frames that cannot complete are repo
 
 import pytest
 
-from simreal_nodes.sync import TIME_JUMP_NS, StampSync
+from simreal_nodes.sync import TIME_JUMP_NS, StampSync, live_skip_reason
 
 
 def stamps(ready):
@@ -89,3 +89,14 @@ def test_a_complete_frame_dropped_while_it_waits_says_what_it_waited_for():
     for s in (1, 2, 3):
         assert sync.add("image", s, object()) == []
     assert sync.pop_dropped() == [(1, "frame held for depth and over 2 frames pending")]
+
+
+def test_a_live_skip_says_a_missing_input_may_have_been_shed():
+    s = StampSync(("image",), ("depth",), wait=0, max_pending=1)
+    s.add("depth", 1, "d1")
+    s.add("depth", 2, "d2")  # frame 1 never got its image (replaced while the node was busy): over max_pending
+    (stamp, why), = s.pop_dropped()
+    assert stamp == 1 and why == "incomplete frame (missing image)"
+    live = live_skip_reason(why)
+    assert live.startswith("incomplete frame (missing image: replaced in the live queue") and live.endswith(")")
+    assert live_skip_reason("the stamps jumped back (source restarted)") == "the stamps jumped back (source restarted)"

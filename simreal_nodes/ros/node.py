@@ -29,6 +29,7 @@ from simreal_nodes.metrics import StageMetrics
 from simreal_nodes.ros.convert import image_view, ns_to_stamp, stamp_ns
 from simreal_nodes.ros.qos import reliable_qos
 from simreal_nodes.scene import graph
+from simreal_nodes.sync import live_skip_reason
 
 if TYPE_CHECKING:
     from simreal_nodes.sync import StampSync
@@ -152,7 +153,10 @@ class SimrealNode(Node):
         catches up instead of working through a backlog). Lossless replay processes every frame."""
         ready = sync.give_up(key, stamp) if msg is None else sync.add(key, stamp, msg)
         for s, why in sync.pop_dropped():
-            (self.drop if self.lossless else self.skip)(ns_to_stamp(s), why)
+            if self.lossless:
+                self.drop(ns_to_stamp(s), why)
+            else:
+                self.skip(ns_to_stamp(s), live_skip_reason(why))
         if not self.lossless and len(ready) > 1:
             for s, _ in ready[:-1]:
                 self.skip(ns_to_stamp(s), "a newer frame was ready")
