@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import gc
+import os
 import time
 
 import numpy as np
@@ -86,6 +87,7 @@ def run(cycles: int) -> list[dict]:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--cycles", type=int, default=10)
+    ap.add_argument("--out", default="soak_map", help="results name (e.g. a run under other malloc settings)")
     a = ap.parse_args()
     rows = run(a.cycles)
     cols = [("cycle", "cycle", "{}"), ("frames", "frames", "{}"), ("keyframes", "keyframes", "{}"),
@@ -121,8 +123,11 @@ def main() -> None:
         fig.tight_layout()
         return fig
 
-    save("soak_map", rows, cols, "The soak's frames through the ROS-free pipeline: map size and work per cycle",
-         f"`python -m benchmarks.soak_map --cycles {a.cycles}` (see its docstring): the joint boot sample (640x480 "
+    env = " ".join(f"{k}={v}" for k, v in sorted(os.environ.items())
+                   if k.startswith(("MALLOC_", "GLIBC_TUNABLES")))
+    save(a.out, rows, cols, "The soak's frames through the ROS-free pipeline: map size and work per cycle",
+         f"`{env + ' ' if env else ''}python -m benchmarks.soak_map --cycles {a.cycles}"
+         f"{'' if a.out == 'soak_map' else ' --out ' + a.out}` (see its docstring): the joint boot sample (640x480 "
          "RGB-D) forward and back, every frame through the RGB-D SLAM and the boot's tracker in one process (the "
          "local BA in the same process, not the node's worker), the trackers' feedback a frame late. Times are "
          "wall-clock per frame with nothing else running by intent; the live graph's are in `soak.md`. Memory after "
