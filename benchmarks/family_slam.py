@@ -212,13 +212,16 @@ def write(rows: list[dict], label: str, name: str, runs: list[dict] | None = Non
         return fig
 
     extra: dict = {"summary": s, "label": label}
-    runs = [r for r in runs or [] if r.get("machine")]
-    if runs:
-        extra["machine"] = max(runs, key=lambda r: r["machine"]["date"])["machine"]
-        if len(runs) > 1:
-            notes += " Composed from the saved runs " + ", ".join(
-                f"`{r['name']}` ({r['machine']['date']}, CPU probe {r['machine']['cpu_probe_ms']:.0f} ms)"
-                for r in runs) + "; the machine line below is the newest's."
+    runs = runs or []
+    known = [r for r in runs if r.get("machine")]
+    if known:
+        extra["machine"] = max(known, key=lambda r: r["machine"]["date"])["machine"]
+    if len(runs) > 1 or (runs and not known):
+        notes += " Composed from the saved runs " + ", ".join(
+            f"`{r['name']}` ({r['machine'].get('cpu', '?')}, {r['machine']['date']}, CPU probe "
+            f"{r['machine']['cpu_probe_ms']:.0f} ms)" if r.get("machine") else f"`{r['name']}` (no machine recorded)"
+            for r in runs) + ("; the machine line below is the newest's." if known else
+                              "; the machine line below is the rewrite's.")
     save(name, rows, cols, "The SLAM alone on the scene family: frames tracked, ATE, time", notes, plot,
          extra=extra)
 

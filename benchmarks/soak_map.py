@@ -77,7 +77,8 @@ def run(cycles: int) -> list[dict]:
                          "loc_ms": float(np.median(loc_ms)), "trk_ms": float(np.median(trk_ms)),
                          **process_memory()})
             if len(rows) == cycles:  # what of the resident size the allocator held free: returned by a trim
-                rows[-1]["rss_trimmed"] = process_memory()["rss"] if malloc_trim() else float("nan")
+                malloc_trim()  # (False also where glibc had nothing to return: the RSS after it says so)
+                rows[-1]["rss_trimmed"] = process_memory()["rss"]
             print(rows[-1], flush=True)
     if pipe is not None:
         pipe.loc.close()
@@ -89,6 +90,8 @@ def main() -> None:
     ap.add_argument("--cycles", type=int, default=10)
     ap.add_argument("--out", default="soak_map", help="results name (e.g. a run under other malloc settings)")
     a = ap.parse_args()
+    if a.cycles < 1:
+        ap.error("--cycles: at least 1 (the memory's growth over the second half needs 6 or more)")
     rows = run(a.cycles)
     cols = [("cycle", "cycle", "{}"), ("frames", "frames", "{}"), ("keyframes", "keyframes", "{}"),
             ("points", "map points", "{}"), ("deformable", "flagged deformable", "{}"),

@@ -58,4 +58,7 @@ def test_a_report_rewritten_from_saved_runs_keeps_their_machine(tmp_path, monkey
                                                   {"name": "b", "machine": run("2026-01-02 00:00:00", 20.0)}])
     md = (tmp_path / "slam_two.md").read_text()
     assert "2026-01-05 00:00:00; CPU probe 30 ms" in md  # the newest run's line
-    assert "`a` (2026-01-05 00:00:00, CPU probe 30 ms), `b` (2026-01-02 00:00:00, CPU probe 20 ms)" in md
+    assert "`a` (a CPU, 2026-01-05 00:00:00, CPU probe 30 ms), `b` (a CPU, 2026-01-02 00:00:00, CPU probe 20 ms)" in md
+    write(rows, "held-out seeds 0", "slam_three", [{"name": "a", "machine": run("2026-01-05 00:00:00", 30.0)},
+                                                    {"name": "old", "machine": None}])
+    assert "`old` (no machine recorded)" in (tmp_path / "slam_three.md").read_text()

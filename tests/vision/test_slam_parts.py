@@ -733,10 +733,10 @@ def test_deformable_descriptors_of_erased_points_are_forgotten():
         tracks.observe(f, np.eye(4), res, exclude=np.zeros(0, np.int64))
         found.append(len(res.obs_ids))
         sizes.append(len(tracks._last_desc))
+        assert {int(i) for i in pid_of_row[rows]} <= set(tracks._last_desc)  # a prune keeps the live points' ones
     assert len(m.points) == len(X) and found == [len(rows)] * 40
     # 30 new entries a frame: 1 200 in all, over twice the map's 400 points; kept to the live ones and a margin
     assert max(sizes) <= 2 * len(rows) + 256 + len(rows)
-    assert {int(i) for i in pid_of_row[rows]} <= set(tracks._last_desc)  # the live points' descriptors stay
 
 
 def test_deformable_tracks_follow_the_image_by_flow_from_the_previous_frame():
