@@ -269,17 +269,18 @@ def checkout_pairs(script: Path, root: Path, against: Path | None, seeds: list[i
     return rows
 
 
-def checkout_notes(rows: list[dict], keys: list[tuple[str, str]]) -> str:
-    """Sentences on :func:`checkout_pairs`'s rows: each checkout's median over its runs of ``keys[0]``, and with two
-    checkouts, for each (key, what) of ``keys``, the pairs' ratio this checkout / the other (median and range)."""
+def checkout_notes(rows: list[dict], keys: list[tuple[str, str]], fmt: str = "{:.0f}") -> str:
+    """Sentences on :func:`checkout_pairs`'s rows: each checkout's median over its runs of ``keys[0]`` (ms, written
+    with ``fmt``), and with two checkouts, for each (key, what) of ``keys``, the pairs' ratio this checkout / the
+    other (median and range)."""
     import numpy as np
 
     first, what0 = keys[0]
     by_code: dict[str, list[float]] = {}
     for r in rows:
         by_code.setdefault(r["code"], []).append(float(r[first]))
-    out = (f"Median over the runs of {what0}: " + "; ".join(f"{c} {np.median(v):.0f} ms" for c, v in by_code.items())
-           + ".")
+    out = (f"Median over the runs of {what0}: "
+           + "; ".join(f"{c} {fmt.format(np.median(v))} ms" for c, v in by_code.items()) + ".")
     arms = sorted(by_code, key=lambda c: not c.startswith("this"))
     if len(arms) == 2:
         pairs: dict[tuple, dict[str, dict]] = {}

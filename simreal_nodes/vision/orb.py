@@ -11,6 +11,7 @@ Image regions where tracked objects are predicted (``focus``) get a guaranteed s
 
 from __future__ import annotations
 
+import operator
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -19,6 +20,7 @@ import numpy as np
 
 from simreal_nodes.camera import CameraModel
 
+_RESPONSE = operator.attrgetter("response")
 POPCOUNT = np.array([bin(i).count("1") for i in range(256)], np.uint8)  # set bits of every byte value
 
 
@@ -118,13 +120,14 @@ class OrbExtractor:
                 fresh = ~np.isin(key, taken)
                 bp, br, key = bp[fresh], br[fresh], key[fresh]
                 keep = _grid_select(bp, br, _cell_for(area, want), want)
-                chosen.append(np.c_[bp[keep], br[keep]])
-                taken = np.r_[taken, key[keep]]
+                chosen.append(np.column_stack((bp[keep], br[keep])))
+                taken = np.concatenate((taken, key[keep]))
             rest = self.per_level[lvl] - sum(len(c) for c in chosen)
-            fresh = ~np.isin(_keys(pts, img.shape[1]), taken)
-            pts, resp = pts[fresh], resp[fresh]
+            if len(taken):
+                fresh = ~np.isin(_keys(pts, img.shape[1]), taken)
+                pts, resp = pts[fresh], resp[fresh]
             keep = _grid_select(pts, resp, _cell_for(float(img.shape[0] * img.shape[1]), max(rest, 1)), max(rest, 0))
-            chosen.append(np.c_[pts[keep], resp[keep]])
+            chosen.append(np.column_stack((pts[keep], resp[keep])))
             sel = np.concatenate(chosen)
             if not len(sel):
                 continue
@@ -175,7 +178,7 @@ class OrbExtractor:
                      for k in empty]
             wp = np.concatenate([p for p, _ in parts])
             wr = np.concatenate([r for _, r in parts])
-        return np.r_[pts, wp], np.r_[resp, wr]
+        return np.concatenate((pts, wp)), np.concatenate((resp, wr))
 
     def _focus_candidates(self, img: np.ndarray, mask: np.ndarray | None,
                           poly: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
@@ -226,7 +229,7 @@ def _fast(det: cv2.FastFeatureDetector, img: np.ndarray, box: tuple[int, int, in
     if not kps:
         return np.zeros((0, 2), np.int64), np.zeros(0, np.float32)
     p = np.rint(cv2.KeyPoint_convert(kps)).astype(np.int64) + (a0, b0)  # type: ignore[attr-defined]
-    r = np.fromiter((k.response for k in kps), np.float32, len(kps))
+    r = np.fromiter(map(_RESPONSE, kps), np.float32, len(kps))
     ok = (p[:, 0] >= x0) & (p[:, 0] < x1) & (p[:, 1] >= y0) & (p[:, 1] < y1)
     return p[ok], r[ok]
 
@@ -249,20 +252,33 @@ def _cell_for(area: float, n: int) -> float:
 
 def _grid_select(pts: np.ndarray, resp: np.ndarray, cell: float, n: int) -> np.ndarray:
     """Indices of ``n`` keypoints spread evenly: every occupied cell gives its strongest, then every cell its
-    second strongest, ...; within one round the stronger first (deterministic: a stable sort on exact keys).
-    A vectorised stand-in for ORB-SLAM2's quadtree: the same even coverage with no loop over nodes."""
+    second strongest, ...; within one round the stronger first (deterministic: stable sorts on exact keys, ties in
+    the candidates' order). A vectorised stand-in for ORB-SLAM2's quadtree: the same even coverage with no loop over
+    nodes. Only the rounds that can fill ``n`` are ordered in the second sort."""
     if n <= 0 or len(pts) == 0:
         return np.zeros(0, np.int64)
     if len(pts) <= n:
         return np.arange(len(pts))
     cx = (pts[:, 0] // cell).astype(np.int64)
     cy = (pts[:, 1] // cell).astype(np.int64)
-    weak = 255 - np.clip(resp, 0, 255).astype(np.int64)  # FAST scores are whole grey levels: one sort key each
-    order = np.argsort((cy * (int(cx.max()) + 1) + cx) * 256 + weak, kind="stable")  # by cell, strongest first
-    cid_sorted = (cy * (int(cx.max()) + 1) + cx)[order]
-    first = np.r_[0, np.flatnonzero(np.diff(cid_sorted)) + 1]
-    rank = np.arange(len(order)) - np.repeat(first, np.diff(np.r_[first, len(order)]))
-    return order[np.argsort(rank * 256 + weak[order], kind="stable")[:n]]
+    cid = cy * (int(cx.max()) + 1) + cx
+    weak = 255 - np.clip(resp, 0, 255).astype(np.int64)  # FAST scores are whole grey levels
+    order = _stable_order(cid, weak)  # by cell, strongest first
+    cid_sorted = cid[order]
+    first = np.r_[0, np.flatnonzero(cid_sorted[1:] != cid_sorted[:-1]) + 1]
+    rank = np.arange(len(order)) - np.repeat(first, np.diff(np.r_[first, len(order)]))  # round of each, in order
+    rounds = int(np.searchsorted(np.cumsum(np.bincount(rank)), n)) + 1  # the first rounds that hold n
+    live = rank < rounds
+    cand = order[live]
+    return cand[_stable_order(rank[live], weak[cand])[:n]]
+
+
+def _stable_order(major: np.ndarray, minor: np.ndarray) -> np.ndarray:
+    """The stable argsort of the key ``major * 256 + minor`` (``minor`` in 0..255, ``major`` >= 0) as two stable
+    passes, least significant first; each pass on 16-bit keys where they fit, which numpy sorts by radix."""
+    by_minor = np.argsort(minor.astype(np.uint8), kind="stable")
+    m = major[by_minor]
+    return by_minor[np.argsort(m.astype(np.uint16) if int(m.max()) < 1 << 16 else m, kind="stable")]
 
 
 def hamming(a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -72,3 +72,40 @@ def test_ic_angle_points_to_the_bright_side():
     img[:, 33:] = 200
     assert abs(ic_angle(img, np.array([[32, 32]]))[0] - 0.0) < 1.0
     assert abs(ic_angle(img.T.copy(), np.array([[32, 32]]))[0] - 90.0) < 1.0
+
+
+def _grid_select_by_one_key(pts: np.ndarray, resp: np.ndarray, cell: float, n: int) -> np.ndarray:
+    """The even selection as one stable sort on a single key per round (cell, then strength), every round ordered:
+    the plain statement of what :func:`orb._grid_select` computes in fewer passes."""
+    if len(pts) <= n:
+        return np.arange(len(pts))
+    cx, cy = (pts[:, 0] // cell).astype(np.int64), (pts[:, 1] // cell).astype(np.int64)
+    cid = cy * (int(cx.max()) + 1) + cx
+    weak = 255 - np.clip(resp, 0, 255).astype(np.int64)
+    order = np.argsort(cid * 256 + weak, kind="stable")
+    rank = np.empty(len(order), np.int64)
+    seen: dict[int, int] = {}
+    for j, i in enumerate(order):
+        rank[j] = seen.get(int(cid[i]), 0)
+        seen[int(cid[i])] = rank[j] + 1
+    return order[np.argsort(rank * 256 + weak[order], kind="stable")[:n]]
+
+
+def test_even_selection_matches_its_plain_statement():
+    """The selection's two-pass radix ordering and its cut to the rounds that can fill the budget pick the same
+    keypoints in the same order as the plain single-key sort: with ties in strength, one crowded cell, more than
+    65 536 cell keys (the 64-bit pass) and a budget that needs every round."""
+    from simreal_nodes.vision import orb
+
+    rng = np.random.default_rng(3)
+    cases = [(rng.integers(0, 640, (4000, 2)), rng.integers(7, 60, 4000), 38.0, 200),  # many ties
+             (rng.integers(0, 60, (500, 2)), rng.integers(7, 255, 500), 30.0, 100),  # four crowded cells
+             (rng.integers(0, 90_000, (3000, 2)), rng.integers(7, 80, 3000), 1.0, 2500),  # keys past 16 bits
+             (rng.integers(0, 640, (300, 2)), rng.integers(7, 40, 300), 64.0, 299),  # nearly every round
+             (rng.integers(0, 640, (50, 2)), rng.integers(7, 40, 50), 64.0, 80)]  # fewer than the budget
+    for pts, resp, cell, n in cases:
+        resp = resp.astype(np.float32)
+        got = orb._grid_select(pts.astype(np.int64), resp, cell, n)
+        want = _grid_select_by_one_key(pts.astype(np.int64), resp, cell, n)
+        assert np.array_equal(got, want), (cell, n)
+        assert len(got) == min(n, len(pts)) and len(np.unique(got)) == len(got)

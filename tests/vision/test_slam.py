@@ -129,3 +129,31 @@ def test_map_save_load_and_relocalize(room, tmp_path):
     from simreal_nodes.errors import SimrealError
     with pytest.raises(SimrealError, match="not a readable HDF5 map"):
         Map.load(tmp_path / "bad.h5")
+
+
+def test_a_map_loaded_into_a_running_slam_leaves_nothing_of_the_session_before(room, tmp_path):
+    """A saved map numbers its points and keyframes from 0, as the running session did: whatever the session kept
+    about its own map (the deformable tracks' predictions, the tracker's local map, the mapper's new points) would be
+    read as the loaded map's. load_map starts those parts afresh and keeps the localization-only switch."""
+    saved, _ = run(room, "rgbd", frames=range(0, 60))
+    f = tmp_path / "map.h5"
+    saved.map.save(f, room["cam"], "rgbd")
+    slam, _ = run(room, "rgbd", frames=range(100, 150))  # a session of its own on another stretch of the room
+    ids = sorted(slam.map.points)[:40]
+    slam.set_deformable(ids, np.zeros((len(ids), 3)))
+    slam.track(room["gray"][150], 150, depth=room["depth"][150])
+    assert slam.tracks._predicted and slam.tracker._local_key is not None and slam.mapper._recent_points
+    slam.set_localization_only(True)
+    m = Map.load(f)
+    slam.load_map(m)
+    assert slam.map is m and slam.state == LOST and slam.localization_only
+    assert not slam.tracks._predicted and not slam.tracks._last_seen and not slam.tracks._flow
+    assert slam.tracker._local_key is None and not slam.mapper._recent_points
+    assert slam.ctx.deformable == {p.id for p in m.points.values() if p.deformable}
+    r = slam.track(room["gray"][35], 151, depth=room["depth"][35])
+    assert r.state == RELOCALIZED
+    assert np.linalg.norm(r.T_wc[:3, 3] - room["T"][35][:3, 3]) < 0.01
+    n_kf = len(m.keyframes)
+    for i in range(36, 50):
+        assert slam.track(room["gray"][i], 151 + i, depth=room["depth"][i]).T_wc is not None
+    assert len(slam.map.keyframes) == n_kf

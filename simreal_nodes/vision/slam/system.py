@@ -112,7 +112,14 @@ class Slam:
         self.tracks.drop_tracks(ids)
 
     def load_map(self, m: Map) -> None:
-        """Localize in a saved map: the next frame relocalizes into it."""
+        """Localize in a saved map: the next frame relocalizes into it. Every part that followed the map before
+        (the tracker's local map, the deformable tracks and their predictions, the mapper's queue and any BA in
+        flight, the loops) starts afresh, as :meth:`reset` makes them: a saved map numbers its keyframes and points
+        from 0 as the session's own did, so nothing kept could be told from the new map's. The localization-only
+        switch is kept."""
+        only = self.localization_only
+        self.reset()
+        self.localization_only = only
         self.ctx.map = m
         self.ctx.state = LOST
         self.set_deformable({p.id for p in m.points.values() if p.deformable})
