@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 import psutil
 
-from benchmarks.common import RESULTS, save, saved_machine
+from benchmarks.common import RESULTS, growth_per_1000, save, saved_machine
 from simreal_nodes.demo import sample_bag
 from simreal_nodes.io import bags
 from simreal_nodes.ros import bagplay
@@ -130,7 +130,7 @@ def summarize(r: dict) -> list[dict]:
     for name in sorted({x[1] for x in r["rss"]}):
         pts = np.array([(k, v) for k, nm, v in r["rss"] if nm == name])
         late = pts[pts[:, 0] >= n / 2]
-        slope = float(np.polyfit(late[:, 0], late[:, 1], 1)[0] * 1000) if len(late) > 3 else float("nan")
+        slope = growth_per_1000(late[:, 0], late[:, 1]) if len(late) > 3 else float("nan")  # four samples at least
         early = pts[pts[:, 0] >= min(1000, n / 4)]
         lat = np.asarray(r["latency_ms"].get(name, []))
         k = min(len(lat) // 4, 1000) if len(lat) else 0
