@@ -157,3 +157,11 @@ def test_a_map_loaded_into_a_running_slam_leaves_nothing_of_the_session_before(r
     for i in range(36, 50):
         assert slam.track(room["gray"][i], 151 + i, depth=room["depth"][i]).T_wc is not None
     assert len(slam.map.keyframes) == n_kf
+    fresh = Slam(room["cam"], "rgbd")  # nothing seen: nothing to forget, its parts kept
+    mapper = fresh.mapper
+    fresh.load_map(Map.load(f))
+    assert fresh.mapper is mapper
+    told = Slam(room["cam"], "rgbd")  # no frame yet, but told of object points: those go
+    told.set_deformable([1, 2], np.zeros((2, 3)))
+    told.load_map(Map.load(f))
+    assert not told.tracks._predicted and told.ctx.deformable == set()

@@ -116,10 +116,13 @@ class Slam:
         (the tracker's local map, the deformable tracks and their predictions, the mapper's queue and any BA in
         flight, the loops) starts afresh, as :meth:`reset` makes them: a saved map numbers its keyframes and points
         from 0 as the session's own did, so nothing kept could be told from the new map's. The localization-only
-        switch is kept."""
-        only = self.localization_only
-        self.reset()
-        self.localization_only = only
+        switch is kept. A session that has seen no frame and been told of no object point has nothing to forget (and
+        keeps its mapping process: starting another costs about 0.3 s)."""
+        ctx = self.ctx
+        if ctx.frame_id or ctx.map.keyframes or ctx.map.points or ctx.deformable or self.tracks._predicted:
+            only = self.localization_only
+            self.reset()
+            self.localization_only = only
         self.ctx.map = m
         self.ctx.state = LOST
         self.set_deformable({p.id for p in m.points.values() if p.deformable})
