@@ -109,3 +109,19 @@ def test_even_selection_matches_its_plain_statement():
         want = _grid_select_by_one_key(pts.astype(np.int64), resp, cell, n)
         assert np.array_equal(got, want), (cell, n)
         assert len(got) == min(n, len(pts)) and len(np.unique(got)) == len(got)
+
+
+def test_hamming_counts_the_differing_bits_of_any_layout():
+    """Descriptors as the matchers hand them over: gathered rows, a strided view, Fortran order, one row against
+    many; each distance is the count of differing bits (against unpacking them one by one)."""
+    from simreal_nodes.vision.orb import hamming
+
+    rng = np.random.default_rng(5)
+    a, b = rng.integers(0, 256, (300, 32), np.uint8), rng.integers(0, 256, (300, 32), np.uint8)
+    wide = rng.integers(0, 256, (300, 64), np.uint8)
+    for x, y in ((a, b), (a[::-1], b[rng.permutation(300)]), (wide[:, ::2], b), (np.asfortranarray(a), b),
+                 (a[:1], b), (a[:0], b[:0])):
+        want = np.unpackbits(np.bitwise_xor(x, y), axis=1).sum(axis=1)
+        got = hamming(x, y)
+        assert got.dtype == np.int32 and np.array_equal(got, want)
+    assert hamming(a[:1], a[:1])[0] == 0 and hamming(a[:1], ~a[:1])[0] == 256

@@ -103,3 +103,32 @@ def test_a_map_file_is_read_into_as_many_rows_as_it_has_points(tmp_path):
         h["points/id"][...] = ids
     with pytest.raises(SimrealError, match="repeated point ids"):
         Map.load(f)
+
+
+def test_a_points_descriptor_is_the_observation_closest_to_the_others():
+    """ORB-SLAM2's representative descriptor: of the observations, the one with the least median Hamming distance
+    to the others. One descriptor and four copies of it with 6-30 bits flipped (each copy its own bits), one of them
+    observed twice: the unflipped one is nearest to all (each copy is further from the others than from it)."""
+    from simreal_nodes.vision.orb import Features
+
+    rng = np.random.default_rng(2)
+    base = rng.integers(0, 256, 32, np.uint8)
+    bits = rng.permutation(256)
+    descs = [base]
+    for k, n in enumerate((6, 12, 20, 30)):
+        flip = np.zeros(256, np.uint8)
+        flip[bits[40 * k:40 * k + n]] = 1
+        descs.append(base ^ np.packbits(flip))
+    descs.append(descs[1])
+    order = [3, 0, 5, 1, 4, 2]  # the observations' keyframe order, the base among them
+    m = Map()
+    p = m.new_point(np.zeros(3), descs[3])
+    for i in order:
+        f = Features(np.zeros((1, 2), np.float32), np.zeros((1, 2)), np.zeros(1, np.int32), descs[i][None],
+                     np.zeros(1, np.float32))
+        m.link(p, m.new_keyframe(0, np.eye(4), f), 0)
+    m.update_descriptor(p)
+    assert np.array_equal(p.desc, base)
+    D = np.array([descs[i] for i in order])
+    dist = np.unpackbits(D[:, None, :] ^ D[None, :, :], axis=2).sum(axis=2)
+    assert np.array_equal(p.desc, D[np.argmin(np.median(dist, axis=1))])

@@ -362,8 +362,8 @@ class Map:
                 p.desc = descs[-1]
             return
         D = np.array(descs, dtype=np.uint8)
-        bits = np.unpackbits(D, axis=1).astype(np.int32)
-        dist = np.abs(bits[:, None, :] - bits[None, :, :]).sum(axis=2)
+        W = D.view(np.uint64)  # (n, 4): each descriptor as four 64-bit words
+        dist = np.bitwise_count(W[:, None, :] ^ W[None, :, :]).sum(axis=2, dtype=np.int32)  # pairwise Hamming
         p.desc = D[int(np.argmin(np.median(dist, axis=1)))]
 
     # -- persistence ----------------------------------------------------------------------------------------
