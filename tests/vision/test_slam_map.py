@@ -132,3 +132,40 @@ def test_a_points_descriptor_is_the_observation_closest_to_the_others():
     D = np.array([descs[i] for i in order])
     dist = np.unpackbits(D[:, None, :] ^ D[None, :, :], axis=2).sum(axis=2)
     assert np.array_equal(p.desc, D[np.argmin(np.median(dist, axis=1))])
+
+
+def test_the_observations_rows_follow_links_erasures_and_compactions():
+    """The cached rows of every observation's point read as the rows looked up afresh after each kind of change:
+    a new keyframe, a new link, an erased point, a compaction (which moves every live point's row)."""
+    from simreal_nodes.vision.orb import Features
+
+    rng = np.random.default_rng(4)
+    m = Map()
+
+    def keyframe(n):
+        f = Features(np.zeros((n, 2), np.float32), np.zeros((n, 2)), np.zeros(n, np.int32),
+                     rng.integers(0, 256, (n, 32), np.uint8), np.zeros(n, np.float32))
+        return m.new_keyframe(0, np.eye(4), f)
+
+    def check():
+        pid, _, _ = m.observations()
+        assert np.array_equal(m.observation_rows(), m.rows(pid))
+        assert np.array_equal(m._ids[m.observation_rows()], pid)
+
+    kfs = [keyframe(300) for _ in range(3)]
+    pts = [m.new_point(rng.normal(size=3), rng.integers(0, 256, 32, np.uint8)) for _ in range(600)]
+    for k, kf in enumerate(kfs):
+        for i in range(300):
+            m.link(pts[(i + 150 * k) % 600], kf, i)
+    check()
+    first = m.observation_rows()
+    assert m.observation_rows() is first  # kept while nothing changed
+    m.link(pts[5], keyframe(10), 0)
+    check()
+    for p in pts[:450]:
+        m.erase_point(p.id)
+    check()
+    rows_before = m.observation_rows().copy()
+    assert m.compact(min_rows=16)
+    check()
+    assert not np.array_equal(m.observation_rows(), rows_before)  # the compaction moved the rows

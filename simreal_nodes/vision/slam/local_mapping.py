@@ -325,16 +325,16 @@ class LocalMapper:
         pts = seen[np.sort(first)]
         pts = pts[m.alive(pts)]
         pts = pts[~np.fromiter((m.points[int(i)].deformable for i in pts), bool, len(pts))]
-        pid, kid, _ = m.observations()
+        _, kid, _ = m.observations()
         max_points = cfg.max_ba_points if max_points is None else max_points
         if 0 < max_points < len(pts):  # the most observed (stable: first seen first among equals)
-            n_obs = np.bincount(m.rows(pid), minlength=m.n_rows)
+            n_obs = np.bincount(m.observation_rows(), minlength=m.n_rows)
             pts = pts[np.argsort(-n_obs[m.rows(pts)], kind="stable")[:max_points]]
         if kfs_fixed is None:
             # keyframes outside the window that see the points, most shared first (ties: the newest), at most 10
             inside = np.zeros(m.n_rows, bool)
             inside[m.rows(pts)] = True
-            outer = kid[inside[m.rows(pid)] & ~np.isin(kid, list(opt_ids))]
+            outer = kid[inside[m.observation_rows()] & ~np.isin(kid, list(opt_ids))]
             fixed = m.ranked(outer)
             kfs_fixed = [m.keyframes[k] for k in fixed if k in m.keyframes][:10]
             # gauge: 6 dof need one fixed keyframe; a monocular map's scale needs a second one

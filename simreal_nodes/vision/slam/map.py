@@ -123,6 +123,10 @@ class Map:
         # every observation as arrays (point id, keyframe id, feature index), from the keyframes' point links; rebuilt
         # on the first query after a link changes (the covisibility queries read it instead of looping over points)
         self._obs: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        # the rows of those observations' points: (the observation arrays they belong to, the compactions done
+        # then, the rows), redone for new arrays or after a compaction (observation_rows)
+        self._obs_rows: tuple[tuple[np.ndarray, np.ndarray, np.ndarray], int, np.ndarray] | None = None
+        self._compactions = 0
 
     def _reserve(self, n: int) -> None:
         """Room for ``n`` rows."""
@@ -186,6 +190,7 @@ class Map:
         self._n = len(keep)
         for r, pid in enumerate(self._ids[: self._n].tolist()):
             self.points[pid].row = r
+        self._compactions += 1
         return True
 
     # -- editing --------------------------------------------------------------------------------------------
@@ -305,6 +310,16 @@ class Map:
                 self._obs = (mp[keep], kid[keep], idx[keep])
         return self._obs
 
+    def observation_rows(self) -> np.ndarray:
+        """The rows of :meth:`observations`' point ids (``rows(observations()[0])``), kept with those arrays until a
+        link changes or the rows are compacted (the covisibility and BA queries of one frame read it several
+        times)."""
+        obs = self.observations()
+        c = self._obs_rows
+        if c is None or c[0] is not obs or c[1] != self._compactions:
+            c = self._obs_rows = (obs, self._compactions, self.rows(obs[0]))
+        return c[2]
+
     def observers(self, ids) -> dict[int, int]:
         """Keyframe id -> how many of the points ``ids`` it observes (a point listed twice counts twice; points no
         longer in the map are skipped), ordered by count, most first, then by keyframe id, newest first."""
@@ -313,7 +328,7 @@ class Map:
         pid, kid, _ = self.observations()
         if len(ids) == 0 or len(pid) == 0:
             return {}
-        weight = np.bincount(self.rows(ids), minlength=self._n)[self.rows(pid)]
+        weight = np.bincount(self.rows(ids), minlength=self._n)[self.observation_rows()]
         sel = weight > 0
         if not np.any(sel):
             return {}

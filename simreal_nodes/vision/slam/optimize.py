@@ -63,12 +63,12 @@ def ba_request(m, kfs_opt, kfs_fixed, pt_ids: np.ndarray) -> dict:
     observation arrays (no loop over points)."""
     kfs = list(kfs_opt) + list(kfs_fixed)
     pt_ids = np.asarray(pt_ids, np.int64)
-    pid, kid, idx = m.observations()
+    _, kid, idx = m.observations()
     jmap = np.full(m.n_rows, -1, np.int64)  # row -> the point's index in pt_ids
     jmap[m.rows(pt_ids)] = np.arange(len(pt_ids))
     kmap = np.full(max([k.id for k in kfs] + [int(kid.max()) if len(kid) else 0]) + 1, -1, np.int64)
     kmap[[k.id for k in kfs]] = np.arange(len(kfs))
-    prow = m.rows(pid)
+    prow = m.observation_rows()
     sel = (jmap[prow] >= 0) & (kmap[kid] >= 0)
     obs_p, obs_k, fi = jmap[prow[sel]], kmap[kid[sel]], idx[sel]
     order = np.lexsort((obs_k, obs_p))
