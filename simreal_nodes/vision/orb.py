@@ -273,19 +273,28 @@ def _grid_select(pts: np.ndarray, resp: np.ndarray, cell: float, n: int) -> np.n
 
 
 def _stable_order(major: np.ndarray, minor: np.ndarray) -> np.ndarray:
-    """The stable argsort of the key ``major * 256 + minor`` (``minor`` in 0..255, ``major`` >= 0) as two stable
-    passes, least significant first; each pass on 16-bit keys where they fit, which numpy sorts by radix."""
+    """The stable argsort of the key ``major * 256 + minor`` (``minor`` in 0..255) as two stable passes, least
+    significant first; the major pass on 16-bit keys where they fit (0..65535), which numpy sorts by radix."""
     by_minor = np.argsort(minor.astype(np.uint8), kind="stable")
     m = major[by_minor]
-    return by_minor[np.argsort(m.astype(np.uint16) if int(m.max()) < 1 << 16 else m, kind="stable")]
+    small = int(m.min()) >= 0 and int(m.max()) < 1 << 16
+    return by_minor[np.argsort(m.astype(np.uint16) if small else m, kind="stable")]
 
 
 def hamming(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Row-wise Hamming distance between two (n, 32) uint8 descriptor arrays (vectorized over candidate pairs,
-    where a brute-force matcher would compare every row with every row): the XOR's set bits, counted four 64-bit
-    words a row."""
+    where a brute-force matcher would compare every row with every row; they broadcast, so (n, 1, 32) against
+    (1, m, 32) gives every pair): the XOR's set bits, counted four 64-bit words a row where numpy can
+    (``np.bitwise_count``, numpy 2), else byte by byte from a table."""
     x = np.bitwise_xor(a, b, order="C")
-    return np.bitwise_count(x.view(np.uint64)).sum(axis=-1, dtype=np.int32)
+    if _BITWISE_COUNT and x.dtype == np.uint8 and x.shape[-1] % 8 == 0:
+        return np.bitwise_count(x.view(np.uint64)).sum(axis=-1, dtype=np.int32)
+    return _BYTE_BITS[x].sum(axis=-1, dtype=np.int32)
+
+
+# numpy 2 counts bits itself; a ROS install's python3-numpy (Ubuntu 24.04: numpy 1.26) does not
+_BITWISE_COUNT = hasattr(np, "bitwise_count")
+_BYTE_BITS = np.array([bin(i).count("1") for i in range(256)], np.uint8)  # set bits of every byte value
 
 
 def match_descriptors(d1: np.ndarray, d2: np.ndarray, mask: np.ndarray | None = None, max_dist: int = 64,

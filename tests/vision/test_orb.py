@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
+import pytest
 
 from simreal_nodes.vision.orb import OrbExtractor, ic_angle
 
@@ -102,7 +103,8 @@ def test_even_selection_matches_its_plain_statement():
              (rng.integers(0, 60, (500, 2)), rng.integers(7, 255, 500), 30.0, 100),  # four crowded cells
              (rng.integers(0, 90_000, (3000, 2)), rng.integers(7, 80, 3000), 1.0, 2500),  # keys past 16 bits
              (rng.integers(0, 640, (300, 2)), rng.integers(7, 40, 300), 64.0, 299),  # nearly every round
-             (rng.integers(0, 640, (50, 2)), rng.integers(7, 40, 50), 64.0, 80)]  # fewer than the budget
+             (rng.integers(0, 640, (50, 2)), rng.integers(7, 40, 50), 64.0, 80),  # fewer than the budget
+             (rng.integers(-300, 300, (800, 2)), rng.integers(7, 40, 800), 20.0, 150)]  # cells of both signs
     for pts, resp, cell, n in cases:
         resp = resp.astype(np.float32)
         got = orb._grid_select(pts.astype(np.int64), resp, cell, n)
@@ -111,17 +113,22 @@ def test_even_selection_matches_its_plain_statement():
         assert len(got) == min(n, len(pts)) and len(np.unique(got)) == len(got)
 
 
-def test_hamming_counts_the_differing_bits_of_any_layout():
+@pytest.mark.parametrize("word_count", [True, False], ids=["numpy-2-bitwise-count", "byte-table"])
+def test_hamming_counts_the_differing_bits_of_any_layout(monkeypatch, word_count):
     """Descriptors as the matchers hand them over: gathered rows, a strided view, Fortran order, one row against
-    many; each distance is the count of differing bits (against unpacking them one by one)."""
-    from simreal_nodes.vision.orb import hamming
+    many, every pair by broadcasting; each distance is the count of differing bits (against unpacking them one by
+    one), with numpy 2's bit count and with the byte table a numpy 1 install falls back on."""
+    from simreal_nodes.vision import orb
 
+    monkeypatch.setattr(orb, "_BITWISE_COUNT", word_count and orb._BITWISE_COUNT)
     rng = np.random.default_rng(5)
     a, b = rng.integers(0, 256, (300, 32), np.uint8), rng.integers(0, 256, (300, 32), np.uint8)
     wide = rng.integers(0, 256, (300, 64), np.uint8)
     for x, y in ((a, b), (a[::-1], b[rng.permutation(300)]), (wide[:, ::2], b), (np.asfortranarray(a), b),
-                 (a[:1], b), (a[:0], b[:0])):
+                 (a[:1], b), (a[:0], b[:0]), (a[:, :31], b[:, :31])):
         want = np.unpackbits(np.bitwise_xor(x, y), axis=1).sum(axis=1)
-        got = hamming(x, y)
+        got = orb.hamming(x, y)
         assert got.dtype == np.int32 and np.array_equal(got, want)
-    assert hamming(a[:1], a[:1])[0] == 0 and hamming(a[:1], ~a[:1])[0] == 256
+    assert orb.hamming(a[:1], a[:1])[0] == 0 and orb.hamming(a[:1], ~a[:1])[0] == 256
+    pairs = orb.hamming(a[:7, None, :], b[None, :5, :])
+    assert pairs.shape == (7, 5) and pairs[3, 2] == orb.hamming(a[3:4], b[2:3])[0]

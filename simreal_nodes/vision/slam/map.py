@@ -10,7 +10,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from simreal_nodes.errors import SimrealError
-from simreal_nodes.vision.orb import Features
+from simreal_nodes.vision.orb import Features, hamming
 
 MAP_FORMAT = "simreal-slam-map"
 MAP_VERSION = 1
@@ -317,7 +317,9 @@ class Map:
         obs = self.observations()
         c = self._obs_rows
         if c is None or c[0] is not obs or c[1] != self._compactions:
-            c = self._obs_rows = (obs, self._compactions, self.rows(obs[0]))
+            rows = self.rows(obs[0])
+            rows.setflags(write=False)  # shared by every reader until the next change
+            c = self._obs_rows = (obs, self._compactions, rows)
         return c[2]
 
     def observers(self, ids) -> dict[int, int]:
@@ -377,8 +379,7 @@ class Map:
                 p.desc = descs[-1]
             return
         D = np.array(descs, dtype=np.uint8)
-        W = D.view(np.uint64)  # (n, 4): each descriptor as four 64-bit words
-        dist = np.bitwise_count(W[:, None, :] ^ W[None, :, :]).sum(axis=2, dtype=np.int32)  # pairwise Hamming
+        dist = hamming(D[:, None, :], D[None, :, :])  # every pair
         p.desc = D[int(np.argmin(np.median(dist, axis=1)))]
 
     # -- persistence ----------------------------------------------------------------------------------------
