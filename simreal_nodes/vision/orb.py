@@ -21,6 +21,9 @@ import numpy as np
 from simreal_nodes.camera import CameraModel
 
 _RESPONSE = operator.attrgetter("response")
+# hamming: numpy 2 counts bits itself; a ROS install's python3-numpy (Ubuntu 24.04: numpy 1.26) does not
+_BITWISE_COUNT = hasattr(np, "bitwise_count")
+_BYTE_BITS = np.array([bin(i).count("1") for i in range(256)], np.uint8)  # set bits of every byte value
 
 
 @dataclass
@@ -290,11 +293,6 @@ def hamming(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     if _BITWISE_COUNT and x.dtype == np.uint8 and x.shape[-1] % 8 == 0:
         return np.bitwise_count(x.view(np.uint64)).sum(axis=-1, dtype=np.int32)
     return _BYTE_BITS[x].sum(axis=-1, dtype=np.int32)
-
-
-# numpy 2 counts bits itself; a ROS install's python3-numpy (Ubuntu 24.04: numpy 1.26) does not
-_BITWISE_COUNT = hasattr(np, "bitwise_count")
-_BYTE_BITS = np.array([bin(i).count("1") for i in range(256)], np.uint8)  # set bits of every byte value
 
 
 def match_descriptors(d1: np.ndarray, d2: np.ndarray, mask: np.ndarray | None = None, max_dist: int = 64,
