@@ -23,6 +23,13 @@ Per view, refinement and check level (0: no check): frames, poses given, poses r
 error (rms, median, worst) and how many of them are more than 5 mm off, the refused ones' median error (had they been
 given), and the localizer's time per frame. ``--windows`` adds the detector with two adaptive-threshold windows (3 and
 23 px) instead of OpenCV's three (3, 13, 23): issue 18's cheaper detection, measured and not adopted (see the notes).
+
+Detection scale (``--scales``; ``localization.markers.detect_scale``): the first at every check level, the others at
+the default check (``subpix`` always detects in the full image: its row says 1). Stop 94 made 0.5 the default on the
+development views (the detector on the half-size image, the corners refined in the full one, a layout marker the first
+pose puts in view but the half-size image missed looked for in a window of the full image, the whole full image
+searched where the half-size one gives no pose); the held-out views were run once after that choice. The rows count
+the frames that needed a window search or the full image.
 """
 
 from __future__ import annotations
@@ -35,7 +42,7 @@ import numpy as np
 from benchmarks.camera_quality import made_worse
 from benchmarks.common import save
 from simreal_nodes import geometry as G
-from simreal_nodes.vision.markers import MAX_STD_PCT, MarkerLocalizer
+from simreal_nodes.vision.markers import DETECT_SCALE, MAX_STD_PCT, MarkerLocalizer
 
 DURATION = 5.0
 FPS = 30.0
@@ -51,27 +58,33 @@ FAR_MM = 5.0  # a pose this far off is counted as wrong
 
 
 def localizer(seq: dict, max_std_pct: float, windows: tuple[int, int, int] | None = None,
-              refinement: str = "edges") -> MarkerLocalizer:
+              refinement: str = "edges", scale: float = DETECT_SCALE) -> MarkerLocalizer:
     doc = seq["scene"].scene_yaml(seq["scene"])["localization"]["markers"]
     loc = MarkerLocalizer(seq["cam"], doc["dictionary"], doc["size_m"],
                           {k: G.pose7_to_matrix(v) for k, v in doc["poses"].items()}, max_std_pct=max_std_pct,
-                          corner_refinement=refinement)
+                          corner_refinement=refinement, detect_scale=scale)
     if windows is not None:
-        p = loc.detector.getDetectorParameters()
-        p.adaptiveThreshWinSizeMin, p.adaptiveThreshWinSizeMax, p.adaptiveThreshWinSizeStep = windows
-        loc.detector.setDetectorParameters(p)
+        for det in (loc.detector, loc._reduced):
+            p = det.getDetectorParameters()
+            p.adaptiveThreshWinSizeMin, p.adaptiveThreshWinSizeMax, p.adaptiveThreshWinSizeStep = windows
+            det.setDetectorParameters(p)
     return loc
 
 
-def run_view(seq: dict, check: float, windows: tuple[int, int, int] | None = None, refinement: str = "edges") -> dict:
+def run_view(seq: dict, check: float, windows: tuple[int, int, int] | None = None, refinement: str = "edges",
+             scale: float = DETECT_SCALE) -> dict:
     """One view through the localizer at one check level; a refused pose's error is measured from the pose the check
     turned down (the same solve without the check)."""
-    loc, unchecked = localizer(seq, check, windows, refinement), localizer(seq, 0.0, windows, refinement)
+    loc = localizer(seq, check, windows, refinement, scale)
+    unchecked = localizer(seq, 0.0, windows, refinement, scale)
     given, refused, ms, markers = [], [], [], []
+    searched, full = 0, 0
     for g, T in zip(seq["gray"], seq["T"]):
         t0 = time.perf_counter()
         r = loc.locate(g)
         ms.append(1e3 * (time.perf_counter() - t0))
+        searched += "windows" in loc.last_passes
+        full += loc.reduced and "full" in loc.last_passes
         if r.T_wc is not None:
             given.append(1e3 * np.linalg.norm(r.T_wc[:3, 3] - T[:3, 3]))
             markers.append(len(r.ids))
@@ -85,7 +98,8 @@ def run_view(seq: dict, check: float, windows: tuple[int, int, int] | None = Non
             "median_mm": float(np.median(e)) if len(e) else nan, "worst_mm": float(e.max()) if len(e) else nan,
             "far_given": int((e > FAR_MM).sum()), "far_refused": int((f > FAR_MM).sum()),
             "refused_median_mm": float(np.median(f)) if len(f) else nan,
-            "markers_mean": float(np.mean(markers)) if markers else nan, "ms_p50": float(np.median(ms))}
+            "markers_mean": float(np.mean(markers)) if markers else nan, "ms_p50": float(np.median(ms)),
+            "window_frames": searched, "full_frames": int(full), "scale": loc.detect_scale if loc.reduced else 1.0}
 
 
 def main() -> None:
@@ -97,10 +111,13 @@ def main() -> None:
     ap.add_argument("--refinements", default="edges,subpix",
                     help="corner refinements: the first at every check level, the others at 0 and the default")
     ap.add_argument("--windows", action="store_true", help="also the detector with threshold windows 3 and 23 px")
+    ap.add_argument("--scales", default=f"{DETECT_SCALE:g},1",
+                    help="detection scales: the first at every check level, the others at the default")
     ap.add_argument("--out", default="marker_quality")
     a = ap.parse_args()
     checks = [float(c) for c in a.checks.split(",")]
     refinements = a.refinements.split(",")
+    scales = [float(v) for v in a.scales.split(",")]
     rows: list[dict] = []
     bases: dict[str, dict] = {}
     for group in a.views.split(","):
@@ -110,23 +127,29 @@ def main() -> None:
                 bases[res] = sequence("aluminium_beam", w, h, duration=DURATION, fps=FPS)
             seq = made_worse(bases[res], kind, level, seed)
             view = "as drawn" if kind == "none" else f"{kind} {level:g}"
-            variants = [(refinements[0], c, None, "3, 13, 23") for c in checks]
-            variants += [(r, c, None, "3, 13, 23") for r in refinements[1:] for c in (0.0, MAX_STD_PCT) if c in checks]
+            sc = scales[0]
+            variants = [(refinements[0], c, None, "3, 13, 23", sc) for c in checks]
+            variants += [(refinements[0], MAX_STD_PCT, None, "3, 13, 23", s) for s in scales[1:]]
+            variants += [(r, c, None, "3, 13, 23", sc) for r in refinements[1:] for c in (0.0, MAX_STD_PCT)
+                         if c in checks]
             if a.windows:
-                variants += [(refinements[0], MAX_STD_PCT, (3, 23, 20), "3, 23")]
-            for refinement, check, windows, label in variants:
+                variants += [(refinements[0], MAX_STD_PCT, (3, 23, 20), "3, 23", sc)]
+            for refinement, check, windows, label, scale in variants:
                 row = {"set": group, "resolution": res, "seed": seed, "view": view, "kind": kind, "level": level,
                        "refinement": refinement, "check_pct": check, "windows": label,
-                       **run_view(seq, check, windows, refinement)}
+                       **run_view(seq, check, windows, refinement, scale)}
                 rows.append(row)
                 print(row, flush=True)
     cols = [("set", "set", "{}"), ("resolution", "resolution", "{}"), ("seed", "noise seed", "{}"),
-            ("view", "view", "{}"), ("refinement", "corners", "{}"), ("windows", "threshold windows (px)", "{}"),
+            ("view", "view", "{}"), ("refinement", "corners", "{}"), ("scale", "detection scale", "{:g}"),
+            ("windows", "threshold windows (px)", "{}"),
             ("check_pct", "max_std_pct (0: off)", "{:g}"), ("frames", "frames", "{}"), ("given", "poses given", "{}"),
             ("refused", "refused", "{}"), ("markers_mean", "markers per pose", "{:.2f}"),
             ("rms_mm", "error rms (mm)", "{:.2f}"), ("median_mm", "median", "{:.2f}"), ("worst_mm", "worst", "{:.1f}"),
             ("far_given", f"given > {FAR_MM:g} mm off", "{}"), ("far_refused", f"refused > {FAR_MM:g} mm off", "{}"),
             ("refused_median_mm", "refused: median error had they been given (mm)", "{:.1f}"),
+            ("window_frames", "frames with a window search", "{}"),
+            ("full_frames", "frames searched in full after the reduced image", "{}"),
             ("ms_p50", "ms per frame p50", "{:.1f}")]
 
     def plot(plt):
@@ -135,19 +158,25 @@ def main() -> None:
             for ref, ls in zip(refinements, ("-", "--", ":")):
                 for c in checks:
                     sel = [r for r in rows if r["set"] == group and r["check_pct"] == c and r["windows"] == "3, 13, 23"
-                           and r["refinement"] == ref]
+                           and r["refinement"] == ref and (ref != refinements[0] or r["scale"] == scales[0])]
                     if not sel:
                         continue
                     lab = [f"{r['resolution']} {r['view']}" for r in sel]
                     ax[0].plot(lab, [r["far_given"] for r in sel], mk + ls, label=f"{group}, {ref}, check {c:g} %")
                     ax[1].plot(lab, [r["given"] for r in sel], mk + ls, label=f"{group}, {ref}, check {c:g} %")
+            for sc in scales[1:]:
+                sel = [r for r in rows if r["set"] == group and r["scale"] == sc and r["windows"] == "3, 13, 23"
+                       and r["refinement"] == refinements[0]]
+                lab = [f"{r['resolution']} {r['view']}" for r in sel]
+                for x, key in zip(ax, ("far_given", "given")):
+                    x.plot(lab, [r[key] for r in sel], mk + "-.", label=f"{group}, detection scale {sc:g}")
         ax[0].set_ylabel(f"poses given more than {FAR_MM:g} mm off")
         ax[1].set_ylabel("poses given")
         for x in ax:
             x.tick_params(axis="x", rotation=75)
             x.legend(fontsize=7)
         fig.suptitle("Marker localization: blur and noise against wrong poses given and poses refused "
-                     "(solid: edges, dashed: subpix)")
+                     "(solid: edges, dashed: subpix, dash-dot: another detection scale)")
         return fig
 
     save(a.out, rows, cols, "Marker localization at the extremes: blur, noise, the loose-pose check, the detector",

@@ -148,13 +148,14 @@ def make_localizer(loc: dict[str, Any], cam: CameraModel, baseline: float | None
     overrides its field)."""
     mode = loc["mode"]
     if mode == "markers":
-        from simreal_nodes.vision.markers import MAX_STD_PCT, MarkerLocalizer
+        from simreal_nodes.vision.markers import DETECT_SCALE, MAX_STD_PCT, MarkerLocalizer
 
         mk = loc["markers"]
         return MarkerLocalization(MarkerLocalizer(cam, mk["dictionary"], mk["size_m"],
                                                   {int(k): G.pose7_to_matrix(v) for k, v in mk["poses"].items()},
                                                   max_std_pct=mk.get("max_std_pct", MAX_STD_PCT),
-                                                  corner_refinement=mk.get("corner_refinement", "edges")))
+                                                  corner_refinement=mk.get("corner_refinement", "edges"),
+                                                  detect_scale=mk.get("detect_scale", DETECT_SCALE)))
     if mode == "static":
         return StaticLocalization(G.pose7_to_matrix(loc["static_pose"]))
     from simreal_nodes.vision.slam.map import Map

@@ -72,6 +72,11 @@ MARKERS = Record({
     "corner_refinement": Enum(("edges", "subpix"), "edges: each corner where lines fitted to the marker's sides' "
                               "edges meet (holds under blur); subpix: OpenCV's corner search, which blur pulls "
                               "inward (benchmarks/marker_quality.py)", default="edges"),
+    "detect_scale": Number("share of the image's size the marker detector runs on with the edges' refinement (area "
+                           "averaged; the corners are refined in the full image, and a marker of the layout the pose "
+                           "puts in view but the reduced image missed is looked for in the full image round where it "
+                           "should be); 1: the full image; subpix always detects in the full image "
+                           "(benchmarks/marker_quality.py)", lo=0, lo_open=True, hi=1, default=0.5),
 })
 
 LOCALIZATION = Record({

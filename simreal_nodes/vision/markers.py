@@ -60,6 +60,14 @@ EDGE_MAX_SHIFT = 1.5
 SUBPIX_WIN = 4
 SUBPIX_MAX_ITER = 50
 SUBPIX_MIN_ACCURACY = 0.01
+# the detection's scale (issue 18): OpenCV's detector runs on the image reduced to this share of its size (area
+# averaging) and the corners it finds are refined in the full image; 1: the full image
+DETECT_SCALE = 0.5
+# a layout marker the pose predicts in view but the reduced image missed (too small there) is looked for in the full
+# image, in a window round its predicted square padded by this many of its sides, if its predicted side is at least
+# WINDOW_MIN_SIDE_PX (smaller than any marker the full image's detector reads)
+WINDOW_PAD = 1.0
+WINDOW_MIN_SIDE_PX = 10.0
 
 
 def refine_by_edges(gray: np.ndarray, corners: np.ndarray, cells: int, iterations: int = 3) -> np.ndarray | None:
@@ -108,13 +116,15 @@ def refine_markers_by_edges(gray: np.ndarray, corners: list[np.ndarray], cells: 
     if img.size == 0:
         return [None] * M
     off = np.zeros((M, 4, k))
+    bx, by = base[..., 0, None], base[..., 1, None]
+    nx, ny = n[:, :, None, 0, None], n[:, :, None, 1, None]
     for _ in range(iterations):
-        P = base[..., None, :] + (off[..., None, None] + prof_s[:, :, None, :, None]) * n[:, :, None, None, :]
-        prof = cv2.remap(img, (P[..., 0] - x0).reshape(-1, m).astype(np.float32),
-                         (P[..., 1] - y0).reshape(-1, m).astype(np.float32), cv2.INTER_LINEAR,
+        across = off[..., None] + prof_s[:, :, None, :]  # (M, 4, k, m): each sample's distance from the side
+        prof = cv2.remap(img, (bx + across * nx - x0).reshape(-1, m).astype(np.float32),
+                         (by + across * ny - y0).reshape(-1, m).astype(np.float32), cv2.INTER_LINEAR,
                          borderMode=cv2.BORDER_REPLICATE).reshape(M, 4, k, m)
-        fall = np.clip(prof[..., :-1] - prof[..., 1:], 0.0, None)  # light outside -> dark border along n
-        w = np.clip(fall - 0.2 * fall.max(axis=3, keepdims=True), 0.0, None)
+        fall = np.maximum(prof[..., :-1] - prof[..., 1:], 0.0)  # light outside -> dark border along n
+        w = np.maximum(fall - 0.2 * fall.max(axis=3, keepdims=True), 0.0)
         sw = w.sum(axis=3)
         off = off + np.where(sw > 1e-6, (w * mid[:, :, None, :]).sum(axis=3) / np.maximum(sw, 1e-9), 0.0)
     good = (sw > 1e-6) & (np.abs(off) < border[..., None])
@@ -156,16 +166,22 @@ def marker_corners(size: float) -> np.ndarray:
 
 class MarkerLocalizer:
     def __init__(self, cam: CameraModel, dictionary: str, size: float, poses: dict[int, np.ndarray],
-                 max_std_pct: float = MAX_STD_PCT, corner_refinement: str = "edges"):
+                 max_std_pct: float = MAX_STD_PCT, corner_refinement: str = "edges",
+                 detect_scale: float = DETECT_SCALE):
         """``max_std_pct``: refuse a pose whose camera position is held more loosely than this share of the
         distance to the markers (standard deviation, %; 0 or less: never). ``corner_refinement``: "edges" (lines
-        fitted to the sides, :func:`refine_by_edges`) or "subpix" (OpenCV's corners)."""
+        fitted to the sides, :func:`refine_by_edges`) or "subpix" (OpenCV's corners). ``detect_scale``: the share of
+        the image's size OpenCV's detector runs on with the edges' refinement (1: the full image; see
+        :meth:`locate` and :attr:`reduced`)."""
         if not hasattr(cv2.aruco, dictionary):
             raise SimrealError(f"unknown marker dictionary '{dictionary}' (e.g. DICT_4X4_50, DICT_APRILTAG_36h11)")
         if corner_refinement not in CORNER_REFINEMENTS:
             raise SimrealError(f"unknown corner refinement '{corner_refinement}' "
                                f"(one of {', '.join(CORNER_REFINEMENTS)})")
+        if not 0.0 < float(detect_scale) <= 1.0:
+            raise SimrealError(f"marker detection scale {detect_scale}: expected a share of the image's size in (0, 1]")
         self.corner_refinement = corner_refinement
+        self.detect_scale = float(detect_scale)
         self.cam = cam
         self.size = float(size)
         self.max_std_pct = float(max_std_pct)
@@ -177,32 +193,123 @@ class MarkerLocalizer:
         params.cornerRefinementWinSize = SUBPIX_WIN
         params.cornerRefinementMaxIterations = SUBPIX_MAX_ITER
         params.cornerRefinementMinAccuracy = SUBPIX_MIN_ACCURACY
+        self._relative_win = float(params.relativeCornerRefinmentWinSize)
         dictionary_ = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, dictionary))
         self.detector = cv2.aruco.ArucoDetector(dictionary_, params)
+        # the reduced image's detector leaves the corners as found: they are refined in the full image
+        self._reduced = cv2.aruco.ArucoDetector(dictionary_, cv2.aruco.DetectorParameters())
         self._cells = int(dictionary_.markerSize) + 2 * int(params.markerBorderBits)
         self._local = marker_corners(self.size)
         self._world = {k: G.transform(T, self._local) for k, T in self.poses.items()}
+        # the searches of the last locate(): "reduced", "windows" (how many), "full"
+        self.last_passes: dict[str, int] = {}
+
+    @property
+    def reduced(self) -> bool:
+        """Whether the detector runs on a reduced image: ``detect_scale`` under 1 with the edges' refinement. OpenCV's
+        corners (``subpix``) need the full image's contours to start from: from the reduced image's, their search
+        (a window of 0.3 of a cell) lands off (stop 94, tried: the demo's sharp frames' median error doubled), so
+        ``subpix`` detects in the full image at any scale."""
+        return self.detect_scale < 1.0 and self.corner_refinement == "edges"
 
     def detect(self, gray: np.ndarray) -> dict[int, np.ndarray]:
-        corners, ids, _ = self.detector.detectMarkers(gray)
+        """Every marker OpenCV's detector finds in ``gray`` (at ``detect_scale`` of its size where :attr:`reduced`),
+        id -> (4, 2) corners
+        (distorted pixels of ``gray``, OpenCV's order), refined in the full image as ``corner_refinement`` says."""
+        if not self.reduced:
+            return self._refined(gray, self._found(self.detector, gray))
+        h, w = gray.shape[:2]
+        size = (max(1, round(w * self.detect_scale)), max(1, round(h * self.detect_scale)))
+        small = cv2.resize(gray, size, interpolation=cv2.INTER_AREA)
+        found = self._found(self._reduced, small)
+        if not found:
+            return {}
+        # a reduced pixel's centre i is the full image's (i + 1/2) / scale - 1/2
+        scale = np.array([size[0] / w, size[1] / h])
+        crit = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, SUBPIX_MAX_ITER, SUBPIX_MIN_ACCURACY)
+        for k, c in found.items():
+            c = ((c + 0.5) / scale - 0.5).astype(np.float32)
+            # OpenCV's sub-pixel search in the full image with the detector's own window: SUBPIX_WIN at most, and
+            # no more than 0.3 of a cell (a wider one reaches the bits' edges and pulls the corner off)
+            cell = float(np.linalg.norm(c - np.roll(c, 1, axis=0), axis=1).sum()) / (4 * self._cells)
+            win = min(SUBPIX_WIN, max(1, round(self._relative_win * cell)))
+            found[k] = cv2.cornerSubPix(gray, c.reshape(-1, 1, 2), (win, win), (-1, -1), crit).reshape(4, 2)
+        return self._refined(gray, {k: c.astype(np.float64) for k, c in found.items()})
+
+    @staticmethod
+    def _found(detector, gray: np.ndarray) -> dict[int, np.ndarray]:
+        corners, ids, _ = detector.detectMarkers(gray)
         if ids is None:
             return {}
-        out = {int(i): c.reshape(4, 2).astype(np.float64) for i, c in zip(ids.ravel(), corners)}
-        if self.corner_refinement == "edges":
-            refined_all = refine_markers_by_edges(gray, list(out.values()), self._cells)
-            for k, refined in zip(list(out), refined_all):
+        return {int(i): c.reshape(4, 2).astype(np.float64) for i, c in zip(ids.ravel(), corners)}
+
+    def _refined(self, gray: np.ndarray, found: dict[int, np.ndarray]) -> dict[int, np.ndarray]:
+        if self.corner_refinement == "edges" and found:
+            for k, refined in zip(list(found), refine_markers_by_edges(gray, list(found.values()), self._cells)):
                 if refined is not None:
-                    out[k] = refined
-        return out
+                    found[k] = refined
+        return found
+
+    def _in_windows(self, gray: np.ndarray, T_cw: np.ndarray, det: dict[int, np.ndarray]) -> dict[int, np.ndarray]:
+        """The layout's markers that the pose ``T_cw`` (map -> camera) puts in view, facing the camera and at least
+        ``WINDOW_MIN_SIDE_PX`` a side, but ``det`` lacks, each looked for by the full image's detector in a window
+        round its predicted square (padded by ``WINDOW_PAD`` sides; clipped to the image)."""
+        h, w = gray.shape[:2]
+        found: dict[int, np.ndarray] = {}
+        centre = G.inv(T_cw)[:3, 3]
+        for k, X in self._world.items():
+            if k in det or k in found:
+                continue
+            normal = self.poses[k][:3, 2]
+            if float(normal @ (centre - self.poses[k][:3, 3])) <= 0.0:
+                continue  # seen from behind
+            uv = self.cam.project(G.transform(T_cw, X))
+            if not np.all(np.isfinite(uv)):
+                continue
+            side = float(np.linalg.norm(uv - np.roll(uv, 1, axis=0), axis=1).min())
+            if side < WINDOW_MIN_SIDE_PX:
+                continue
+            lo, hi = uv.min(axis=0) - WINDOW_PAD * side, uv.max(axis=0) + WINDOW_PAD * side
+            x0, y0 = (int(np.floor(v)) for v in np.maximum(lo, 0.0))
+            x1, y1 = int(np.ceil(min(hi[0], w))), int(np.ceil(min(hi[1], h)))
+            if x1 - x0 < side or y1 - y0 < side:
+                continue
+            self.last_passes["windows"] = self.last_passes.get("windows", 0) + 1
+            for i, c in self._found(self.detector, np.ascontiguousarray(gray[y0:y1, x0:x1])).items():
+                if i in self._world and i not in det and i not in found:
+                    found[i] = c + (x0, y0)
+        return self._refined(gray, found)
 
     def locate(self, gray: np.ndarray) -> MarkerResult:
+        """The camera pose from the layout's markers in ``gray``. Where :attr:`reduced`: the markers the
+        reduced image shows give a first pose; a layout marker that pose puts in view but the reduced image missed
+        is looked for in a window of the full image round where it should be, and the pose solved again with it;
+        where the reduced image gives no pose (no marker of the layout, or none consistent) the whole full image is
+        searched, as without the reduction."""
+        self.last_passes = {"reduced" if self.reduced else "full": 1}
         det = self.detect(gray)
+        res, T_cw = self._solve(det)
+        if not self.reduced:
+            return res
+        if T_cw is None:
+            self.last_passes["full"] = 1
+            det = self._refined(gray, self._found(self.detector, gray))
+            return self._solve(det)[0]
+        more = self._in_windows(gray, T_cw, det)
+        if more:
+            det.update(more)
+            res = self._solve(det)[0]
+        return res
+
+    def _solve(self, det: dict[int, np.ndarray]) -> tuple[MarkerResult, np.ndarray | None]:
+        """The pose from detected markers ``det``, and the map -> camera pose it solved before the loose-pose check
+        (None where there was none, or it did not fit the layout)."""
         known = {k: v for k, v in det.items() if k in self._world}
         res = MarkerResult(None, sorted(known), sorted(set(det) - set(known)), corners=det)
         if not known:
             res.reason = ("no marker of the layout in view"
                           + (f" (saw unknown ids {res.unknown_ids})" if res.unknown_ids else ""))
-            return res
+            return res, None
         obj = np.concatenate([self._world[k] for k in known])
         img = np.concatenate([known[k] for k in known])
         und = self.cam.undistort_points(img)
@@ -213,7 +320,7 @@ class MarkerLocalizer:
                                       flags=cv2.SOLVEPNP_IPPE_SQUARE)
         if not ok:
             res.reason = "marker pose estimation failed"
-            return res
+            return res, None
         T_cm = G.make_T(cv2.Rodrigues(rvec)[0], tvec.ravel())
         T_cw = T_cm @ G.inv(self.poses[best])
         rvec, _ = cv2.Rodrigues(T_cw[:3, :3])
@@ -236,22 +343,22 @@ class MarkerLocalizer:
         if res.rms_px > 3.0:
             res.reason = (f"markers inconsistent with the layout (reprojection {res.rms_px:.1f} px): "
                           "moved marker or wrong size?")
-            return res
+            return res, None
         std_m, distance = position_std(obj, K, rvec, tvec, max(res.rms_px, CORNER_FLOOR_PX))
         res.std_pct = 100.0 * std_m / distance
         if not np.isfinite(res.std_pct) and self.max_std_pct > 0:
             res.reason = ("pose refused: the markers' corners do not determine the camera position (degenerate "
                           "view; localization.markers.max_std_pct)")
-            return res
+            return res, T_cw
         if not res.std_pct <= self.max_std_pct and self.max_std_pct > 0:
             n = len(res.ids)
             res.reason = (f"pose refused: {n} marker{'s hold' if n > 1 else ' holds'} the camera position only to "
                           f"+-{1e3 * std_m:.0f} mm ({res.std_pct:.1f} % of the {distance:.2f} m to them, over "
                           f"{self.max_std_pct:g} %): too few, too small or too blurred "
                           "(localization.markers.max_std_pct)")
-            return res
+            return res, T_cw
         res.T_wc = G.inv(T_cw)
-        return res
+        return res, T_cw
 
 
 def position_std(obj: np.ndarray, K: np.ndarray, rvec: np.ndarray, tvec: np.ndarray,

@@ -3,6 +3,7 @@ import numpy as np
 import pytest
 
 from simreal_nodes import geometry as G
+from simreal_nodes.errors import SimrealError
 from simreal_nodes.scene.schema import MARKERS
 from simreal_nodes.vision.markers import MAX_STD_PCT, MarkerLocalizer
 from simreal_nodes.vision.trajectory import ate, read_tum, rpe, umeyama, write_tum
@@ -70,3 +71,50 @@ def test_umeyama_recovers_a_similarity_and_ate_rpe(tmp_path):
     write_tum(tmp_path / "t.txt", np.arange(10) * 0.1, Ts)
     _t, back = read_tum(tmp_path / "t.txt")
     np.testing.assert_allclose(back[3], Ts[3], atol=1e-8)
+
+
+def test_reduced_detection_finds_in_windows_what_it_misses_and_loses_no_marker():
+    """The detector on the half-size image misses the demo's smallest markers (about 26 px a side at 640 x 480) in
+    some frames; the first pose puts them in view, a window of the full image round each finds them, and every frame
+    reads at least the markers the full image's detector reads, its pose within 2 mm."""
+    seq = sequence("aluminium_beam", 640, 480, duration=2.0, fps=15.0)
+    doc = seq["scene"].scene_yaml(seq["scene"])["localization"]["markers"]
+    poses = {k: G.pose7_to_matrix(v) for k, v in doc["poses"].items()}
+    reduced = MarkerLocalizer(seq["cam"], doc["dictionary"], doc["size_m"], poses)
+    full = MarkerLocalizer(seq["cam"], doc["dictionary"], doc["size_m"], poses, detect_scale=1.0)
+    assert MARKERS.fields["detect_scale"].default == reduced.detect_scale == 0.5
+    recovered = 0
+    for g, T in zip(seq["gray"], seq["T"]):
+        first = set(reduced.detect(g))
+        r, f = reduced.locate(g), full.locate(g)
+        assert r.T_wc is not None and np.linalg.norm(r.T_wc[:3, 3] - T[:3, 3]) < 0.002, r.reason
+        assert set(r.corners) >= set(f.corners) and reduced.last_passes["reduced"] == 1
+        assert "full" not in reduced.last_passes
+        if set(r.corners) - first:
+            recovered += 1
+            assert reduced.last_passes["windows"] >= len(set(r.corners) - first)
+    assert recovered >= 3
+    # nothing of the layout in the reduced image: the whole full image is searched
+    r = reduced.locate(np.zeros_like(seq["gray"][0]))
+    assert r.T_wc is None and "no marker" in r.reason and reduced.last_passes == {"reduced": 1, "full": 1}
+    assert full.last_passes == {"full": 1}
+    # OpenCV's corners start from the full image's contours at any scale
+    subpix = MarkerLocalizer(seq["cam"], doc["dictionary"], doc["size_m"], poses, corner_refinement="subpix")
+    assert not subpix.reduced and subpix.locate(seq["gray"][0]).T_wc is not None
+    assert subpix.last_passes == {"full": 1}
+    with pytest.raises(SimrealError, match="detection scale"):
+        MarkerLocalizer(seq["cam"], doc["dictionary"], doc["size_m"], poses, detect_scale=0.0)
+
+
+def test_a_marker_too_small_for_the_reduced_image_is_read_in_the_full_one():
+    """A marker about 14 px a side on a 320 x 240 image: the half-size image holds no readable marker, so no first
+    pose; the full image's search reads it."""
+    from tests.vision.test_marker_corners import drawn_marker, localizer
+
+    corners = np.array([[150.0, 110.0], [164.0, 111.0], [163.0, 125.0], [149.0, 124.0]])
+    img = drawn_marker(corners, 0.0)
+    loc = localizer()
+    assert loc.detect(img) == {}
+    r = loc.locate(img)
+    assert loc.last_passes == {"reduced": 1, "full": 1} and 3 in r.corners
+    assert np.linalg.norm(r.corners[3] - corners, axis=1).max() < 0.5
