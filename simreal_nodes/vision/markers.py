@@ -158,6 +158,11 @@ def refine_markers_by_edges(gray: np.ndarray, corners: list[np.ndarray], cells: 
     return [out[i] if valid[i] else None for i in range(M)]
 
 
+def _inside(uv: np.ndarray, w: int, h: int) -> bool:
+    """Whether every point of ``uv`` lies in a ``w`` x ``h`` image (pixel centres 0 .. w - 1, 0 .. h - 1)."""
+    return bool(np.all(uv >= 0.0) and np.all(uv[:, 0] <= w - 1) and np.all(uv[:, 1] <= h - 1))
+
+
 def marker_corners(size: float) -> np.ndarray:
     """Corners in the marker frame (x right, y up, z out of the marker), OpenCV's order: TL, TR, BR, BL."""
     h = size / 2
@@ -251,9 +256,10 @@ class MarkerLocalizer:
         return found
 
     def _in_windows(self, gray: np.ndarray, T_cw: np.ndarray, det: dict[int, np.ndarray]) -> dict[int, np.ndarray]:
-        """The layout's markers that the pose ``T_cw`` (map -> camera) puts in view, facing the camera and at least
-        ``WINDOW_MIN_SIDE_PX`` a side, but ``det`` lacks, each looked for by the full image's detector in a window
-        round its predicted square (padded by ``WINDOW_PAD`` sides; clipped to the image)."""
+        """The layout's markers that the pose ``T_cw`` (map -> camera) puts wholly in the image, facing the camera
+        and at least ``WINDOW_MIN_SIDE_PX`` a side, but ``det`` lacks,
+        each looked for by the full image's detector in a window round its predicted square (padded by
+        ``WINDOW_PAD`` sides; clipped to the image)."""
         h, w = gray.shape[:2]
         found: dict[int, np.ndarray] = {}
         centre = G.inv(T_cw)[:3, 3]
@@ -264,8 +270,8 @@ class MarkerLocalizer:
             if float(normal @ (centre - self.poses[k][:3, 3])) <= 0.0:
                 continue  # seen from behind
             uv = self.cam.project(G.transform(T_cw, X))
-            if not np.all(np.isfinite(uv)):
-                continue
+            if not np.all(np.isfinite(uv)) or not _inside(uv, w, h):
+                continue  # behind the camera, or cut by the image's edge (the detector reads no such marker)
             side = float(np.linalg.norm(uv - np.roll(uv, 1, axis=0), axis=1).min())
             if side < WINDOW_MIN_SIDE_PX:
                 continue

@@ -118,3 +118,17 @@ def test_a_marker_too_small_for_the_reduced_image_is_read_in_the_full_one():
     r = loc.locate(img)
     assert loc.last_passes == {"reduced": 1, "full": 1} and 3 in r.corners
     assert np.linalg.norm(r.corners[3] - corners, axis=1).max() < 0.5
+
+
+def test_a_marker_the_image_edge_cuts_is_not_looked_for():
+    """At 1280 x 720 the demo's first view cuts one marker by the image's lower edge: the detector cannot read it, so
+    no window is searched for it (it had been, every frame); the pose comes from the other three."""
+    seq = sequence("aluminium_beam", 1280, 720, duration=0.4, fps=5.0)
+    doc = seq["scene"].scene_yaml(seq["scene"])["localization"]["markers"]
+    loc = MarkerLocalizer(seq["cam"], doc["dictionary"], doc["size_m"],
+                          {k: G.pose7_to_matrix(v) for k, v in doc["poses"].items()})
+    r = loc.locate(seq["gray"][0])
+    assert r.T_wc is not None and np.linalg.norm(r.T_wc[:3, 3] - seq["T"][0][:3, 3]) < 0.002
+    cut = loc.cam.project(G.transform(G.inv(r.T_wc), loc._world[0]))
+    assert cut[:, 1].max() > 720 and cut[:, 1].min() < 700 and sorted(r.corners) == [1, 2, 3]
+    assert loc.last_passes == {"reduced": 1}
