@@ -15,6 +15,12 @@ sharp, 0.6 px under a 2-px blur on ``tests/vision/test_marker_corners.py``'s mar
 across the side away from its ends (the steepest dark-inside descent in a profile no wider than the black border),
 a line is fitted through those points, and the corners are the lines' intersections: blur spreads a straight edge
 symmetrically, so the line stays where it is. ``subpix`` keeps OpenCV's corners.
+
+With the edges, OpenCV's detector runs on the image reduced to ``detect_scale`` of its size (0.5 by default: its
+contours and its reading of the bits are most of the time), the corners it finds searched again in the full image;
+a marker of the layout the first pose puts in view that the reduced image missed is read in a window of the full
+image, and the full image is searched whole where the reduced one gives no pose or a refused one
+(:meth:`MarkerLocalizer.locate`; ``benchmarks/marker_quality.py`` measures the trade).
 """
 
 from __future__ import annotations
@@ -64,10 +70,17 @@ SUBPIX_MIN_ACCURACY = 0.01
 # averaging) and the corners it finds are refined in the full image; 1: the full image
 DETECT_SCALE = 0.5
 # a layout marker the pose predicts in view but the reduced image missed (too small there) is looked for in the full
-# image, in a window round its predicted square padded by this many of its sides, if its predicted side is at least
-# WINDOW_MIN_SIDE_PX (smaller than any marker the full image's detector reads)
-WINDOW_PAD = 1.0
+# image, in a window round its predicted square padded by this many of its sides (and no less than the detector's
+# largest adaptive-threshold window plus its distance to the border: nearer the crop's edge the threshold sees
+# another image and a blurred marker is missed), if its predicted side is at least WINDOW_MIN_SIDE_PX (smaller than
+# any marker the full image's detector reads)
+WINDOW_PAD = 1.5
 WINDOW_MIN_SIDE_PX = 10.0
+# the reduced image's detector takes no contour with less than this many pixels a cell (its perimeter under 4 x cells
+# x this): OpenCV's least perimeter is a share of the image's size, and in a small reduced image it would let every
+# speck through as a candidate to read (the 320 x 240 demo's half-size image: 12.7 ms against 3 ms for the full one);
+# a marker under about 1.5 px a cell is not read there anyway (its windows or the full image read it)
+REDUCED_MIN_CELL_PX = 1.0
 
 
 def refine_by_edges(gray: np.ndarray, corners: np.ndarray, cells: int, iterations: int = 3) -> np.ndarray | None:
@@ -199,10 +212,17 @@ class MarkerLocalizer:
         params.cornerRefinementMaxIterations = SUBPIX_MAX_ITER
         params.cornerRefinementMinAccuracy = SUBPIX_MIN_ACCURACY
         self._relative_win = float(params.relativeCornerRefinmentWinSize)
+        self._min_pad_px = float(params.adaptiveThreshWinSizeMax + params.minDistanceToBorder)
         dictionary_ = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, dictionary))
         self.detector = cv2.aruco.ArucoDetector(dictionary_, params)
+        # the windows' detector: as the full image's, its least perimeter set per window (see _in_windows)
+        self._window_params = params
+        self._window_detector = cv2.aruco.ArucoDetector(dictionary_, params)
+        self._min_perimeter_rate = float(params.minMarkerPerimeterRate)
         # the reduced image's detector leaves the corners as found: they are refined in the full image
-        self._reduced = cv2.aruco.ArucoDetector(dictionary_, cv2.aruco.DetectorParameters())
+        self._reduced_params = cv2.aruco.DetectorParameters()
+        self._reduced = cv2.aruco.ArucoDetector(dictionary_, self._reduced_params)
+        self._reduced_size: tuple[int, int] | None = None
         self._cells = int(dictionary_.markerSize) + 2 * int(params.markerBorderBits)
         self._local = marker_corners(self.size)
         self._world = {k: G.transform(T, self._local) for k, T in self.poses.items()}
@@ -218,17 +238,27 @@ class MarkerLocalizer:
         return self.detect_scale < 1.0 and self.corner_refinement == "edges"
 
     def detect(self, gray: np.ndarray) -> dict[int, np.ndarray]:
-        """Every marker OpenCV's detector finds in ``gray`` (at ``detect_scale`` of its size where :attr:`reduced`),
-        id -> (4, 2) corners
-        (distorted pixels of ``gray``, OpenCV's order), refined in the full image as ``corner_refinement`` says."""
+        """Every marker OpenCV's detector finds in ``gray`` (at ``detect_scale`` of its size where :attr:`reduced`):
+        id -> (4, 2) corners (distorted pixels of ``gray``, OpenCV's order), refined in the full image as
+        ``corner_refinement`` says."""
+        if gray.ndim != 2:
+            raise SimrealError(f"marker detection takes a grey image (H, W), not an array of shape {gray.shape}")
         if not self.reduced:
             return self._refined(gray, self._found(self.detector, gray))
+        return self._refined(gray, self._from_reduced(gray))
+
+    def _from_reduced(self, gray: np.ndarray) -> dict[int, np.ndarray]:
+        """The markers the detector finds in ``gray`` reduced to ``detect_scale`` of its size, their corners mapped to
+        ``gray`` and searched there by OpenCV's sub-pixel rule (before the edges' refinement)."""
         h, w = gray.shape[:2]
         size = (max(1, round(w * self.detect_scale)), max(1, round(h * self.detect_scale)))
         small = cv2.resize(gray, size, interpolation=cv2.INTER_AREA)
+        if size != self._reduced_size:  # the least perimeter in the reduced image's pixels (see REDUCED_MIN_CELL_PX)
+            self._reduced_params.minMarkerPerimeterRate = max(self._min_perimeter_rate,
+                                                              4 * self._cells * REDUCED_MIN_CELL_PX / max(size))
+            self._reduced.setDetectorParameters(self._reduced_params)
+            self._reduced_size = size
         found = self._found(self._reduced, small)
-        if not found:
-            return {}
         # a reduced pixel's centre i is the full image's (i + 1/2) / scale - 1/2
         scale = np.array([size[0] / w, size[1] / h])
         crit = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, SUBPIX_MAX_ITER, SUBPIX_MIN_ACCURACY)
@@ -239,10 +269,10 @@ class MarkerLocalizer:
             cell = float(np.linalg.norm(c - np.roll(c, 1, axis=0), axis=1).sum()) / (4 * self._cells)
             win = min(SUBPIX_WIN, max(1, round(self._relative_win * cell)))
             found[k] = cv2.cornerSubPix(gray, c.reshape(-1, 1, 2), (win, win), (-1, -1), crit).reshape(4, 2)
-        return self._refined(gray, {k: c.astype(np.float64) for k, c in found.items()})
+        return {k: c.astype(np.float64) for k, c in found.items()}
 
     @staticmethod
-    def _found(detector, gray: np.ndarray) -> dict[int, np.ndarray]:
+    def _found(detector: cv2.aruco.ArucoDetector, gray: np.ndarray) -> dict[int, np.ndarray]:
         corners, ids, _ = detector.detectMarkers(gray)
         if ids is None:
             return {}
@@ -255,57 +285,74 @@ class MarkerLocalizer:
                     found[k] = refined
         return found
 
-    def _in_windows(self, gray: np.ndarray, T_cw: np.ndarray, det: dict[int, np.ndarray]) -> dict[int, np.ndarray]:
-        """The layout's markers that the pose ``T_cw`` (map -> camera) puts wholly in the image, facing the camera
-        and at least ``WINDOW_MIN_SIDE_PX`` a side, but ``det`` lacks,
-        each looked for by the full image's detector in a window round its predicted square (padded by
-        ``WINDOW_PAD`` sides; clipped to the image)."""
-        h, w = gray.shape[:2]
-        found: dict[int, np.ndarray] = {}
+    def _windows(self, shape: tuple[int, ...], T_cw: np.ndarray,
+                 det: dict[int, np.ndarray]) -> list[tuple[int, int, int, int, float]]:
+        """Where to look for the layout's markers that the pose ``T_cw`` (map -> camera) puts wholly in the image,
+        facing the camera and at least ``WINDOW_MIN_SIDE_PX`` a side, but ``det`` lacks: for each, (x0, y0, x1, y1)
+        round its predicted square, padded by ``WINDOW_PAD`` sides (no less than the detector's threshold window and
+        border distance) and clipped to the image, and the square's predicted perimeter (px)."""
+        h, w = shape[:2]
+        out = []
         centre = G.inv(T_cw)[:3, 3]
         for k, X in self._world.items():
-            if k in det or k in found:
+            if k in det:
                 continue
-            normal = self.poses[k][:3, 2]
-            if float(normal @ (centre - self.poses[k][:3, 3])) <= 0.0:
-                continue  # seen from behind
+            if float(self.poses[k][:3, 2] @ (centre - self.poses[k][:3, 3])) <= 0.0:
+                continue  # seen from behind (the marker's face is its frame's +z)
             uv = self.cam.project(G.transform(T_cw, X))
             if not np.all(np.isfinite(uv)) or not _inside(uv, w, h):
                 continue  # behind the camera, or cut by the image's edge (the detector reads no such marker)
             side = float(np.linalg.norm(uv - np.roll(uv, 1, axis=0), axis=1).min())
             if side < WINDOW_MIN_SIDE_PX:
                 continue
-            lo, hi = uv.min(axis=0) - WINDOW_PAD * side, uv.max(axis=0) + WINDOW_PAD * side
-            x0, y0 = (int(np.floor(v)) for v in np.maximum(lo, 0.0))
-            x1, y1 = int(np.ceil(min(hi[0], w))), int(np.ceil(min(hi[1], h)))
-            if x1 - x0 < side or y1 - y0 < side:
-                continue
-            self.last_passes["windows"] = self.last_passes.get("windows", 0) + 1
-            for i, c in self._found(self.detector, np.ascontiguousarray(gray[y0:y1, x0:x1])).items():
+            pad = max(WINDOW_PAD * side, self._min_pad_px)
+            x0, y0 = (int(np.floor(v)) for v in np.maximum(uv.min(axis=0) - pad, 0.0))
+            x1, y1 = int(np.ceil(min(uv[:, 0].max() + pad, w))), int(np.ceil(min(uv[:, 1].max() + pad, h)))
+            out.append((x0, y0, x1, y1, float(np.linalg.norm(uv - np.roll(uv, 1, axis=0), axis=1).sum())))
+        return out
+
+    def _in_windows(self, gray: np.ndarray, windows: list[tuple[int, int, int, int, float]],
+                    det: dict[int, np.ndarray]) -> dict[int, np.ndarray]:
+        """The layout's markers the full image's detector finds in ``windows`` that ``det`` lacks, refined. In a
+        window the detector takes no contour shorter than half the predicted perimeter (nor than the full image's
+        least): its least perimeter is a share of the image it is given, and in a small crop every speck of
+        texture would be a candidate to read (a 160-px window cost three times the whole 320 x 240 image)."""
+        found: dict[int, np.ndarray] = {}
+        least = self._min_perimeter_rate * max(gray.shape[:2])
+        for x0, y0, x1, y1, perimeter in windows:
+            self._window_params.minMarkerPerimeterRate = max(0.5 * perimeter, least) / max(x1 - x0, y1 - y0)
+            self._window_detector.setDetectorParameters(self._window_params)
+            for i, c in self._found(self._window_detector, np.ascontiguousarray(gray[y0:y1, x0:x1])).items():
                 if i in self._world and i not in det and i not in found:
                     found[i] = c + (x0, y0)
         return self._refined(gray, found)
 
     def locate(self, gray: np.ndarray) -> MarkerResult:
-        """The camera pose from the layout's markers in ``gray``. Where :attr:`reduced`: the markers the
-        reduced image shows give a first pose; a layout marker that pose puts in view but the reduced image missed
-        is looked for in a window of the full image round where it should be, and the pose solved again with it;
-        where the reduced image gives no pose (no marker of the layout, or none consistent) the whole full image is
-        searched, as without the reduction."""
+        """The camera pose from the layout's markers in ``gray``. Where :attr:`reduced`: the markers the reduced
+        image shows give a first pose (refused or not); a layout marker that pose puts in view but the reduced image
+        missed is looked for in a window of the full image round where it should be, and the pose solved again with
+        it (the first pose kept if that one fails). The whole full image is searched, as without the reduction, where
+        the reduced image gives no pose (no marker of the layout, or none consistent), where the windows would cover
+        more than the image, and where the pose is refused in the end."""
         self.last_passes = {"reduced" if self.reduced else "full": 1}
         det = self.detect(gray)
         res, T_cw = self._solve(det)
         if not self.reduced:
             return res
-        if T_cw is None:
-            self.last_passes["full"] = 1
-            det = self._refined(gray, self._found(self.detector, gray))
-            return self._solve(det)[0]
-        more = self._in_windows(gray, T_cw, det)
-        if more:
-            det.update(more)
-            res = self._solve(det)[0]
-        return res
+        if T_cw is not None:
+            windows = self._windows(gray.shape, T_cw, det)
+            if sum((x1 - x0) * (y1 - y0) for x0, y0, x1, y1, _ in windows) <= gray.shape[0] * gray.shape[1]:
+                if windows:
+                    self.last_passes["windows"] = len(windows)
+                    more = self._in_windows(gray, windows, det)
+                    if more:
+                        again = self._solve({**det, **more})[0]
+                        if again.T_wc is not None or res.T_wc is None:
+                            res = again
+                if res.T_wc is not None:
+                    return res
+        self.last_passes["full"] = 1
+        return self._solve(self._refined(gray, self._found(self.detector, gray)))[0]
 
     def _solve(self, det: dict[int, np.ndarray]) -> tuple[MarkerResult, np.ndarray | None]:
         """The pose from detected markers ``det``, and the map -> camera pose it solved before the loose-pose check
