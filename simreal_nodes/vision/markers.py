@@ -216,8 +216,8 @@ class MarkerLocalizer:
         dictionary_ = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, dictionary))
         self.detector = cv2.aruco.ArucoDetector(dictionary_, params)
         # the windows' detector: as the full image's, its least perimeter set per window (see _in_windows)
-        self._window_params = params
-        self._window_detector = cv2.aruco.ArucoDetector(dictionary_, params)
+        self._window_params = self.detector.getDetectorParameters()  # a copy: the full image's stays as it is
+        self._window_detector = cv2.aruco.ArucoDetector(dictionary_, self._window_params)
         self._min_perimeter_rate = float(params.minMarkerPerimeterRate)
         # the reduced image's detector leaves the corners as found: they are refined in the full image
         self._reduced_params = cv2.aruco.DetectorParameters()
@@ -302,13 +302,13 @@ class MarkerLocalizer:
             uv = self.cam.project(G.transform(T_cw, X))
             if not np.all(np.isfinite(uv)) or not _inside(uv, w, h):
                 continue  # behind the camera, or cut by the image's edge (the detector reads no such marker)
-            side = float(np.linalg.norm(uv - np.roll(uv, 1, axis=0), axis=1).min())
-            if side < WINDOW_MIN_SIDE_PX:
+            sides = np.linalg.norm(uv - np.roll(uv, 1, axis=0), axis=1)
+            if sides.min() < WINDOW_MIN_SIDE_PX:
                 continue
-            pad = max(WINDOW_PAD * side, self._min_pad_px)
+            pad = max(WINDOW_PAD * float(sides.min()), self._min_pad_px)
             x0, y0 = (int(np.floor(v)) for v in np.maximum(uv.min(axis=0) - pad, 0.0))
             x1, y1 = int(np.ceil(min(uv[:, 0].max() + pad, w))), int(np.ceil(min(uv[:, 1].max() + pad, h)))
-            out.append((x0, y0, x1, y1, float(np.linalg.norm(uv - np.roll(uv, 1, axis=0), axis=1).sum())))
+            out.append((x0, y0, x1, y1, float(sides.sum())))
         return out
 
     def _in_windows(self, gray: np.ndarray, windows: list[tuple[int, int, int, int, float]],
