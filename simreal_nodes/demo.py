@@ -127,7 +127,7 @@ def evaluate_run(run_bag: Path, truth_bag: Path, scene: dict, out: Path) -> dict
 
 def run_demo(scene: str = DEFAULT_SCENE, out: str | Path = "out/demo", regenerate: bool = False,
              resolution: str = "640x480", duration: float | None = None, echo=print,
-             one_process: bool = True, executor: str | None = None) -> dict:
+             one_process: bool = True, executor: str | None = None, threads: int | None = None) -> dict:
     from simreal_nodes.ros.commands import replay
     from simreal_nodes.scene.schema import build_spec_models, load_scene
 
@@ -148,7 +148,7 @@ def run_demo(scene: str = DEFAULT_SCENE, out: str | Path = "out/demo", regenerat
                                                    fromlist=["required_nodes"]).required_nodes(sc)))
     stats, _report, counts = replay(str(bag), str(scene_yaml), lossless=True, record=str(run_bag),
                                    extra_params={"overlay": {"video": str(video.resolve())}}, echo=echo,
-                                   one_process=one_process, executor=executor)
+                                   one_process=one_process, executor=executor, threads=threads)
     if stats is None:
         raise SimrealError("the replay did not run")
     params = evaluate_run(run_bag, bag, sc, out)

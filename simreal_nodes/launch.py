@@ -77,19 +77,78 @@ def executor_kind(env: dict | None = None) -> str:
     return kind
 
 
+THREADS_ENV = "SIMREAL_THREADS"  # worker threads per pool in each node process (0: the libraries' own; unset: default)
+# the thread pools the environment sizes: OpenMP (Open3D), OpenBLAS (numpy, scipy; the copy OpenCV bundles too), MKL.
+# OpenCV's own pool is sized by the node process itself (cv2.setNumThreads: :func:`simreal_nodes.ros.node.set_threads`)
+THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+
+
+def node_threads(env: dict | None = None) -> int | None:
+    """The worker threads per pool named by :data:`THREADS_ENV` in ``env`` (default: this process's environment); None
+    where it is unset or empty (the default sizing, :func:`ros_environment`); :class:`SimrealError` for anything but a
+    whole number >= 0."""
+    raw = (os.environ if env is None else env).get(THREADS_ENV)
+    if raw is None or raw == "":
+        return None
+    try:
+        n = int(raw)
+    except ValueError:
+        n = -1
+    if n < 0:
+        raise SimrealError(f"{THREADS_ENV}={raw!r}: the threads per pool must be a whole number >= 0 "
+                           "(0: the libraries' own defaults)")
+    return n
+
+
+def thread_variables(base: dict, threads: int | None = None) -> dict[str, str]:
+    """The variables that size a node process's thread pools, to add to ``base`` (the user's environment), as
+    :func:`ros_environment` describes; also for ``ros2 launch`` (``ros2_ws``), whose node processes start from the
+    user's environment."""
+    out: dict[str, str] = {} if threads is None else {THREADS_ENV: str(threads)}
+    n = node_threads(base | out)
+    if n is None:
+        out.update((var, "1") for var in THREAD_VARS if not base.get(var))
+    elif n > 0:
+        out.update((var, str(n)) for var in THREAD_VARS)
+    return out
+
+
+def set_threads(n: int | None) -> None:
+    """OpenCV's worker threads in this process (a node's: :func:`simreal_nodes.ros.node.run_nodes`): ``n`` > 0 of
+    them; 0 or None: OpenCV's own sizing (a thread per core). The pools sized by environment variables (OpenBLAS,
+    OpenMP) were set before the process started (:func:`thread_variables`)."""
+    if n:
+        import cv2
+
+        cv2.setNumThreads(n)
+
+
 def ros_environment(base: dict | None = None, discovery_range: str | None = None,
-                    executor: str | None = None) -> dict:
-    """Environment for node processes: SHM transport profile, ament prefix of the venv, DDS discovery range.
+                    executor: str | None = None, threads: int | None = None) -> dict:
+    """Environment for node processes: SHM transport profile, ament prefix of the venv, DDS discovery range, the
+    libraries' thread pools.
 
     Discovery stays on this host unless widened: ROS 2's own default (SUBNET) would announce every node, its camera
     images included, to the whole network, and take commands from it. ``discovery_range`` (one of
     :data:`DISCOVERY_RANGES`) sets it explicitly; otherwise a range already set in ``base`` (the user's environment)
     is kept; otherwise LOCALHOST. ``executor`` (one of :data:`EXECUTORS`) sets the nodes' executor; otherwise
-    ``base``'s :data:`EXECUTOR_ENV`, else :data:`DEFAULT_EXECUTOR`."""
+    ``base``'s :data:`EXECUTOR_ENV`, else :data:`DEFAULT_EXECUTOR`.
+
+    ``threads`` (else ``base``'s :data:`THREADS_ENV`): N > 0 sizes every pool of a node process to N threads
+    (OpenBLAS, OpenMP, MKL through :data:`THREAD_VARS`, overriding the user's; OpenCV's by the process itself); 0
+    leaves every pool at the library's own default (a thread per core; a variable of :data:`THREAD_VARS` the user set
+    is kept). Neither given: the default, one thread for
+    the linear algebra's pools (OpenBLAS, OpenMP, MKL; a variable of :data:`THREAD_VARS` the user set is kept) and
+    OpenCV's own pool as OpenCV sizes it. The linear algebra of the nodes is small (tall, thin least squares of a
+    few thousand rows) and its pool's threads only contend with the other nodes; OpenCV's pool, on whole images,
+    gains on a frame that one node works on alone (``./run bench threads``: the family scene's nodes used 37 % less
+    CPU a frame than with every pool at its library's default; with OpenCV held to one thread as well the markers
+    demo's lossless rate fell by 7 %)."""
     env = dict(os.environ if base is None else base)
     if executor is not None:
         env[EXECUTOR_ENV] = executor
     env[EXECUTOR_ENV] = executor_kind(env)
+    env.update(thread_variables(env, threads))
     if discovery_range is not None:
         if discovery_range not in DISCOVERY_RANGES:
             raise SimrealError(f"DDS discovery range: expected one of {', '.join(DISCOVERY_RANGES)}; "
@@ -139,8 +198,8 @@ class _Proc:
 class Launcher:
     """Start, watch and stop a set of node processes.
 
-    ``env``, ``discovery_range`` and ``executor``: as :func:`ros_environment` takes them (DDS discovery on this
-    host unless widened). ``namespace`` (e.g. ``/cell2``): every node is started in it, so node names and the
+    ``env``, ``discovery_range``, ``executor`` and ``threads``: as :func:`ros_environment` takes them (DDS discovery
+    on this host unless widened). ``namespace`` (e.g. ``/cell2``): every node is started in it, so node names and the
     services they address by relative names (the tracker's call to ``localization/set_localization_only``) do not
     collide with a second graph; the data topics are absolute (:mod:`simreal_nodes.scene.graph`) and move only by
     ``remaps``."""
@@ -148,12 +207,12 @@ class Launcher:
     def __init__(self, nodes: list[NodeSpec], remaps: dict[str, str] | None = None, respawn: int = 2,
                  env: dict | None = None, echo=print, log_dir: str | Path | None = None, namespace: str = "",
                  discovery_range: str | None = None, standby: bool = False, one_process: bool = False,
-                 executor: str | None = None):
+                 executor: str | None = None, threads: int | None = None):
         self.nodes = nodes
         self.remaps = remaps or {}
         self.respawn = respawn
         self.standby = standby and respawn > 0
-        self.env = ros_environment(env, discovery_range, executor)
+        self.env = ros_environment(env, discovery_range, executor, threads)
         self.echo = echo
         self._tmp = tempfile.TemporaryDirectory(prefix="simreal-launch-")
         if log_dir is None:

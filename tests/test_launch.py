@@ -1,27 +1,34 @@
-"""The launcher's environment for its node processes: DDS discovery stays on this host unless widened."""
+"""The launcher's environment for its node processes: DDS discovery stays on this host unless widened; the
+libraries' thread pools sized to one thread unless asked."""
 
+import os
+import subprocess
 import sys
 import time
 
 import pytest
 
 from simreal_nodes.errors import SimrealError
-from simreal_nodes.launch import DISCOVERY_RANGE, Launcher
+from simreal_nodes.launch import DISCOVERY_RANGE, THREAD_VARS, THREADS_ENV, Launcher, node_threads, ros_environment
 from simreal_nodes.scene.graph import NodeSpec
 
 PRINT_ENV = f"import os; print('{DISCOVERY_RANGE}=' + repr(os.environ.get('{DISCOVERY_RANGE}')))"
 
 
-def child_discovery_range(tmp_path, base: dict, **kw) -> str:
-    """What a node process started by the launcher sees (the node's command swapped for one that prints it)."""
+def child_says(tmp_path, base: dict, code: str, key: str, **kw) -> str:
+    """What a node process started by the launcher prints after ``key=`` (the node's command swapped for ``code``)."""
     lines: list[str] = []
     launcher = Launcher([NodeSpec("ingest")], respawn=0, env=base, echo=lines.append, log_dir=tmp_path / "log", **kw)
-    launcher.procs[0].cmd = [sys.executable, "-c", PRINT_ENV]
+    launcher.procs[0].cmd = [sys.executable, "-c", code]
     with launcher:
-        t_end = time.monotonic() + 20
-        while not any(DISCOVERY_RANGE in x for x in lines) and time.monotonic() < t_end:
+        t_end = time.monotonic() + 30
+        while not any(f"{key}=" in x for x in lines) and time.monotonic() < t_end:
             time.sleep(0.05)
-    return next(x for x in lines if DISCOVERY_RANGE in x).split("=", 1)[1]
+    return next(x for x in lines if f"{key}=" in x).split(f"{key}=", 1)[1]
+
+
+def child_discovery_range(tmp_path, base: dict, **kw) -> str:
+    return child_says(tmp_path, base, PRINT_ENV, DISCOVERY_RANGE, **kw)
 
 
 @pytest.mark.parametrize("user,option,seen", [
@@ -39,6 +46,98 @@ def test_node_processes_discover_on_localhost_unless_widened(tmp_path, user, opt
 def test_unknown_discovery_range_is_refused(tmp_path):
     with pytest.raises(SimrealError, match="DDS discovery range: expected one of LOCALHOST, SUBNET"):
         Launcher([NodeSpec("ingest")], env={}, discovery_range="WORLD", log_dir=tmp_path)
+
+
+# what a node process's pools hold once it has started as run_nodes starts it: the OpenBLAS pools (numpy's and the
+# one OpenCV bundles) as the environment sized them when they loaded, OpenCV's own as set_threads set it
+PRINT_POOLS = ("import cv2, numpy, threadpoolctl\n"
+               "from simreal_nodes.launch import node_threads, set_threads\n"
+               "set_threads(node_threads())\n"
+               "blas = [p['num_threads'] for p in threadpoolctl.threadpool_info() if p['internal_api'] == 'openblas']\n"
+               "print(f'pools=blas {max(blas)} cv2 {cv2.getNumThreads()}', flush=True)")
+
+
+def own_pools() -> dict[str, int]:
+    """The pools of a process that no one sized (the libraries' own defaults)."""
+    env = {"PATH": "/usr/bin:/bin"}
+    out = subprocess.run([sys.executable, "-c", PRINT_POOLS.replace("set_threads(node_threads())", "")], env=env,
+                         capture_output=True, text=True, timeout=60, check=True).stdout
+    _, blas, _, cv = out.split("pools=", 1)[1].split()
+    return {"blas": int(blas), "cv": int(cv)}
+
+
+CORES = os.cpu_count() or 1  # OpenBLAS takes no more threads than the cores
+
+
+@pytest.mark.parametrize("user,option,seen", [
+    ({}, None, "blas 1 cv2 {cv}"),  # the default: the linear algebra's pools one thread, OpenCV's its own
+    ({"OPENBLAS_NUM_THREADS": "2"}, None, f"blas {min(2, CORES)} cv2 {{cv}}"),  # a pool the user sized is kept ...
+    ({"OPENBLAS_NUM_THREADS": "2"}, 1, "blas 1 cv2 1"),  # ... unless the option says otherwise
+    ({THREADS_ENV: "1", "OPENBLAS_NUM_THREADS": "2"}, None, "blas 1 cv2 1"),  # or the user's SIMREAL_THREADS
+    ({THREADS_ENV: "3"}, None, f"blas {min(3, CORES)} cv2 3"),
+    ({}, 0, "blas {blas} cv2 {cv}"),  # the libraries' own
+])
+def test_node_processes_size_the_libraries_pools(tmp_path, user, option, seen):
+    got = child_says(tmp_path, {"PATH": "/usr/bin:/bin"} | user, PRINT_POOLS, "pools", threads=option).strip()
+    assert got == seen.format(**own_pools())
+
+
+@pytest.mark.parametrize("user,option,seen", [
+    ({}, None, "1"),
+    ({"OMP_NUM_THREADS": "4"}, None, {"OMP_NUM_THREADS": "4", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}),
+    ({"OMP_NUM_THREADS": "4"}, 2, "2"),
+    ({THREADS_ENV: "3"}, None, "3"),
+    ({"MKL_NUM_THREADS": "4"}, 0, {"OMP_NUM_THREADS": None, "OPENBLAS_NUM_THREADS": None, "MKL_NUM_THREADS": "4"}),
+])
+def test_every_pool_variable_is_set(user, option, seen):
+    env = ros_environment(user, threads=option)
+    want = seen if isinstance(seen, dict) else dict.fromkeys(THREAD_VARS, seen)
+    assert {k: env.get(k) for k in THREAD_VARS} == want
+
+
+def test_the_threads_option_reaches_the_replay(monkeypatch):
+    """`--threads` on launch, replay and demo: parsed, refused when bad, and passed on (the demo's to its replay)."""
+    from simreal_nodes.cli import build_parser
+    from simreal_nodes.ros import commands
+
+    p = build_parser()
+    for cmd in (["launch", "s.yaml"], ["replay", "b", "--scene", "s.yaml"], ["demo"]):
+        assert p.parse_args([*cmd, "--threads", "2"]).threads == 2
+        assert p.parse_args(cmd).threads is None
+        with pytest.raises(SystemExit):
+            p.parse_args([*cmd, "--threads", "-1"])
+    seen = {}
+
+    class Reached(Exception):
+        pass
+
+    def fake_replay(*a, **kw):
+        seen.update(kw)
+        raise Reached
+
+    import simreal_nodes.demo
+
+    real_replay = commands.replay
+    monkeypatch.setattr(commands, "replay", fake_replay)
+    monkeypatch.setattr(simreal_nodes.demo, "run_demo", fake_replay)
+    for cmd in (["replay", "b", "--scene", "s.yaml"], ["demo"]):
+        seen.clear()
+        a = p.parse_args([*cmd, "--threads", "3"])
+        with pytest.raises(Reached):
+            a.fn(a)
+        assert seen["threads"] == 3
+    # a bad SIMREAL_THREADS is refused before the replay reads anything
+    monkeypatch.setenv(THREADS_ENV, "many")
+    with pytest.raises(SimrealError, match="whole number >= 0"):
+        real_replay("no-such-bag", "no-such-scene.yaml")
+
+
+@pytest.mark.parametrize("raw", ["-1", "two", "1.5"])
+def test_a_bad_thread_count_is_refused(raw):
+    with pytest.raises(SimrealError, match="whole number >= 0"):
+        node_threads({THREADS_ENV: raw})
+    with pytest.raises(SimrealError, match="whole number >= 0"):
+        ros_environment({THREADS_ENV: raw})
 
 
 # A stand-in for a node's process: a standby says it is ready and waits for the promotion line; a node (or a

@@ -264,17 +264,22 @@ def _at_level(uv: Array, level: int) -> Array:
     return out
 
 
-_REMAP_ROWS = 32000
+_REMAP_COLS = 32000
 _CANDIDATES = 64  # candidates costed in one pass at most
 
 
 def bilinear(img: NDArray[np.float32], uv: Array) -> NDArray[np.float32]:
-    """Bilinear samples of ``img`` at (N, 2) pixel coordinates; outside the image: NaN."""
+    """Bilinear samples of ``img`` at (N, 2) pixel coordinates; outside the image: NaN.
+
+    The samples are one row of OpenCV's map, not one column: ``remap`` shares its rows among OpenCV's threads, and
+    a few thousand samples split into stripes cost more in the threads' wake-ups than they save (one row: the
+    tracker's time per frame 0.93 of it on development scenes 0, 3 and 12, every estimate the same to the bit;
+    ``benchmarks/results/dense_budget.md``, stop 95)."""
     if uv.size == 0:
         return np.zeros(0, np.float32)
-    if len(uv) > _REMAP_ROWS:  # OpenCV's maps hold fewer than 2^15 rows: in pieces (each sample is its own lookup)
-        return np.concatenate([bilinear(img, uv[k:k + _REMAP_ROWS]) for k in range(0, len(uv), _REMAP_ROWS)])
-    m = np.ascontiguousarray(uv.reshape(-1, 1, 2), np.float32)
+    if len(uv) > _REMAP_COLS:  # OpenCV's maps hold fewer than 2^15 columns: in pieces (each sample its own lookup)
+        return np.concatenate([bilinear(img, uv[k:k + _REMAP_COLS]) for k in range(0, len(uv), _REMAP_COLS)])
+    m = np.ascontiguousarray(uv.reshape(1, -1, 2), np.float32)
     v = cv2.remap(img, m, None, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,  # type: ignore[call-overload]
                   borderValue=np.nan)
     return np.asarray(v, np.float32).reshape(-1)

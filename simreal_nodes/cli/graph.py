@@ -34,6 +34,20 @@ def add_executor(s: argparse.ArgumentParser) -> None:
                    help="the rclpy executor the nodes spin on: events (C++, the default) or single (rclpy's Python "
                         "SingleThreadedExecutor); default: $SIMREAL_EXECUTOR, else events "
                         "(benchmarks/results/executor.md)")
+    s.add_argument("--threads", type=_threads, default=None, metavar="N",
+                   help="worker threads of each pool of a node process's numerical libraries (OpenBLAS, OpenMP, "
+                        "OpenCV); 0: the libraries' own defaults; default: $SIMREAL_THREADS, else one thread for the "
+                        "linear algebra's pools and OpenCV's own (benchmarks/results/threads.md)")
+
+
+def _threads(text: str) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        n = -1
+    if n < 0:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 0, got {text!r}")
+    return n
 
 
 def cmd_launch(a: argparse.Namespace) -> int:
@@ -47,7 +61,8 @@ def cmd_launch(a: argparse.Namespace) -> int:
           f"({ingest_note(scene, nodes)})")
     return run_until_signal(Launcher(nodes, remaps=_remaps(a.remap), respawn=a.respawn, namespace=a.namespace,
                                      discovery_range=a.discovery_range, standby=not a.no_standby,
-                                     one_process=a.one_process, executor=a.executor))
+                                     one_process=a.one_process, executor=a.executor,
+                                     threads=a.threads))
 
 
 def cmd_replay(a: argparse.Namespace) -> int:
@@ -57,7 +72,7 @@ def cmd_replay(a: argparse.Namespace) -> int:
                               storage=a.storage, launch=not a.no_launch, frame_timeout_s=a.frame_timeout,
                               metrics_json=a.metrics, namespace=a.namespace,
                               standby=False if a.no_standby else None, one_process=a.one_process,
-                              executor=a.executor)
+                              executor=a.executor, threads=a.threads)
     return 0 if stats is not None and not stats.record_error else 1
 
 

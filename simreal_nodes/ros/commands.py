@@ -15,7 +15,16 @@ from rclpy.signals import SignalHandlerOptions
 
 from simreal_nodes.errors import BagError, SimrealError
 from simreal_nodes.io import bags
-from simreal_nodes.launch import DISCOVERY_RANGE, EXECUTOR_ENV, QOS_FROM_XML, Launcher, executor_kind, ros_environment
+from simreal_nodes.launch import (
+    DISCOVERY_RANGE,
+    EXECUTOR_ENV,
+    QOS_FROM_XML,
+    THREADS_ENV,
+    Launcher,
+    executor_kind,
+    ros_environment,
+    thread_variables,
+)
 from simreal_nodes.ros.bagplay import Player, Recorder
 from simreal_nodes.ros.node import make_executor
 from simreal_nodes.scene.graph import image_topic, ingest_note, output_topics, required_nodes
@@ -40,7 +49,7 @@ class _StopFlag:
 def _share_node_environment() -> None:
     """This process's own node (player, recorder) uses the nodes' transport profile and discovery range: with
     another range it would not meet them, or would announce itself beyond this host."""
-    env = ros_environment()
+    env = ros_environment({k: v for k, v in os.environ.items() if k != THREADS_ENV})  # the pools: the nodes' alone
     os.environ.update({k: env[k] for k in ("FASTRTPS_DEFAULT_PROFILES_FILE", DISCOVERY_RANGE, QOS_FROM_XML)
                        if k in env})
 
@@ -48,14 +57,18 @@ def _share_node_environment() -> None:
 def replay(bag: str, scene_file: str, rate: float = 1.0, lossless: bool = False, record: str | None = None,
            storage: str = "mcap", launch: bool = True, frame_timeout_s: float = 30.0, ready_timeout_s: float = 90.0,
            metrics_json: str | None = None, echo=print, extra_params: dict | None = None, namespace: str = "",
-           standby: bool | None = None, one_process: bool = False, executor: str | None = None):
+           standby: bool | None = None, one_process: bool = False, executor: str | None = None,
+           threads: int | None = None):
     """Replay ``bag`` into the graph of ``scene_file``; returns (PlayStats, BagReport, recorder counts).
     ``namespace``: the nodes' namespace; ``standby``: a standby process per node (:class:`~simreal_nodes.launch.
     Launcher`), by default in a live replay and not in a lossless one (a node that exits there is a fault to see,
     and time does not press); ``one_process``: every node in one process on one executor (the CLI's default; here
     a process per node unless asked, so that a caller says which it runs); ``executor``: the nodes' and the
-    player's (one of :data:`~simreal_nodes.launch.EXECUTORS`; None: :func:`~simreal_nodes.launch.executor_kind`)."""
+    player's (one of :data:`~simreal_nodes.launch.EXECUTORS`; None: :func:`~simreal_nodes.launch.executor_kind`);
+    ``threads``: the worker threads of each node process's libraries (:func:`~simreal_nodes.launch.ros_environment`;
+    None: ``SIMREAL_THREADS``, else 1)."""
     executor = executor_kind(None if executor is None else {EXECUTOR_ENV: executor})
+    thread_variables(dict(os.environ), threads)  # a bad SIMREAL_THREADS (or threads) refused before any work
     scene = load_scene(scene_file)
     if launch:
         build_spec_models(scene)  # before the nodes start: they find the built spec:NAME models in the cache
@@ -87,7 +100,7 @@ def replay(bag: str, scene_file: str, rate: float = 1.0, lossless: bool = False,
     if standby is None:
         standby = not lossless
     launcher = Launcher(nodes, echo=echo, namespace=namespace, standby=standby,
-                        one_process=one_process, executor=executor) if launch else None
+                        one_process=one_process, executor=executor, threads=threads) if launch else None
     _share_node_environment()
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     node = Node("simreal_player")

@@ -23,7 +23,17 @@ from rclpy.node import Node
 from sensor_msgs.msg import Image
 from std_msgs.msg import Header
 
-from simreal_nodes.launch import EXECUTOR_ENV, LAUNCHER_PID_ENV, PROMOTE, STANDBY_ENV, STANDBY_READY, executor_kind
+from simreal_nodes.errors import SimrealError
+from simreal_nodes.launch import (
+    EXECUTOR_ENV,
+    LAUNCHER_PID_ENV,
+    PROMOTE,
+    STANDBY_ENV,
+    STANDBY_READY,
+    executor_kind,
+    node_threads,
+    set_threads,
+)
 from simreal_nodes.lifetime import end_with_parent
 from simreal_nodes.metrics import StageMetrics
 from simreal_nodes.ros.convert import image_view, ns_to_stamp, stamp_ns
@@ -320,6 +330,11 @@ def run_nodes(builders: list[Callable[[], Node]], args=None) -> int:
     restarts it)."""
     if not _end_with_launcher():
         return 0
+    try:
+        set_threads(node_threads())
+    except SimrealError as e:
+        print(f"error: {e}", file=sys.stderr, flush=True)
+        return 2
     rclpy.init(args=args)
     nodes: list[Node] = []
     profile_dir = os.environ.get("SIMREAL_PROFILE_DIR")  # development: a cProfile of the process's spin
