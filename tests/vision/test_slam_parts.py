@@ -807,3 +807,47 @@ def test_config_defaults_are_documented_and_checked():
         SlamConfig(homography_ambiguity="most")
     with pytest.raises(ValueError, match="fuse_neighbours"):
         SlamConfig(fuse_neighbours="yes")
+
+
+def ba_problem(n_pts: int, n_kf: int = 10, seed: int = 0) -> tuple[np.ndarray, dict]:
+    """A monocular BA request (:func:`~simreal_nodes.vision.slam.optimize.ba_request`'s layout): ``n_kf`` cameras
+    10 cm apart along x, every point seen by each, positions 2 cm and pixels 0.5 px off."""
+    rng = np.random.default_rng(seed)
+    K = CAM.K
+    poses = np.repeat(np.eye(4)[None], n_kf, axis=0)
+    poses[:, 0, 3] = 0.1 * np.arange(n_kf)
+    P = np.c_[rng.uniform(-2, 3, n_pts), rng.uniform(-1, 1, n_pts), rng.uniform(3, 5, n_pts)]
+    obs_p, obs_k = np.repeat(np.arange(n_pts), n_kf), np.tile(np.arange(n_kf), n_pts)
+    x = P[obs_p] - poses[obs_k, :3, 3]
+    uv = np.c_[K[0, 0] * x[:, 0] / x[:, 2] + K[0, 2], K[1, 1] * x[:, 1] / x[:, 2] + K[1, 2]]
+    n = len(obs_p)
+    return K, {"kf_ids": np.arange(n_kf), "poses": poses, "fixed": np.arange(n_kf) < 2, "pt_ids": np.arange(n_pts),
+               "pos": P + rng.normal(0, 0.02, P.shape), "obs_p": obs_p, "obs_k": obs_k,
+               "uv": uv + rng.normal(0, 0.5, (n, 2)), "z": np.full(n, np.nan), "sigma": np.ones(n)}
+
+
+def test_closing_the_mapping_process_does_not_wait_for_its_bundle_adjustment():
+    """Slam.reset / close (a map loaded, a node's shutdown) end the mapping process while a BA may be in flight: the
+    close kills it at once rather than wait for a result it would drop (stop 93's note: up to 2 s). The BA's own
+    time, measured in this process on the same request, is the yardstick (no fixed time bound)."""
+    import time
+
+    from simreal_nodes.vision.slam.optimize import AsyncBundleAdjuster, bundle_adjust
+
+    K, req = ba_problem(6000)
+    t0 = time.perf_counter()
+    bundle_adjust(req, K, None, 10)
+    ba_s = time.perf_counter() - t0
+    ba = AsyncBundleAdjuster(K, None, 10)
+    t_ready = time.monotonic() + 60
+    while not ba.proc.is_alive() and time.monotonic() < t_ready:
+        time.sleep(0.01)
+    assert ba.submit(req)
+    t0 = time.perf_counter()
+    ba.close()
+    close_s = time.perf_counter() - t0
+    assert not ba.proc.is_alive() and not ba.busy
+    assert close_s < 0.25 * ba_s, (close_s, ba_s)
+    idle = AsyncBundleAdjuster(K, None, 10)  # an idle one is told to end, and does so by itself
+    idle.close(timeout=60)  # its imports may still run on a busy host: the end waits for them
+    assert idle.proc.exitcode == 0
