@@ -79,7 +79,7 @@ def executor_kind(env: dict | None = None) -> str:
 
 THREADS_ENV = "SIMREAL_THREADS"  # worker threads per pool in each node process (0: the libraries' own; unset: default)
 # the thread pools the environment sizes: OpenMP (Open3D), OpenBLAS (numpy, scipy; the copy OpenCV bundles too), MKL.
-# OpenCV's own pool is sized by the node process itself (cv2.setNumThreads: :func:`simreal_nodes.ros.node.set_threads`)
+# OpenCV's own pool is sized by the node process itself (cv2.setNumThreads: :func:`set_threads`)
 THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 
 
@@ -137,13 +137,12 @@ def ros_environment(base: dict | None = None, discovery_range: str | None = None
     ``threads`` (else ``base``'s :data:`THREADS_ENV`): N > 0 sizes every pool of a node process to N threads
     (OpenBLAS, OpenMP, MKL through :data:`THREAD_VARS`, overriding the user's; OpenCV's by the process itself); 0
     leaves every pool at the library's own default (a thread per core; a variable of :data:`THREAD_VARS` the user set
-    is kept). Neither given: the default, one thread for
-    the linear algebra's pools (OpenBLAS, OpenMP, MKL; a variable of :data:`THREAD_VARS` the user set is kept) and
-    OpenCV's own pool as OpenCV sizes it. The linear algebra of the nodes is small (tall, thin least squares of a
-    few thousand rows) and its pool's threads only contend with the other nodes; OpenCV's pool, on whole images,
-    gains on a frame that one node works on alone (``./run bench threads``: the family scene's nodes used 37 % less
-    CPU a frame than with every pool at its library's default; with OpenCV held to one thread as well the markers
-    demo's lossless rate fell by 7 %)."""
+    is kept). Neither given: the default, one thread for the linear algebra's pools (OpenBLAS, OpenMP, MKL; a
+    variable of :data:`THREAD_VARS` the user set is kept) and OpenCV's own pool as OpenCV sizes it. The linear algebra
+    of the nodes is small (tall, thin least squares of a few thousand rows) and its pool's threads only spin beside
+    the other nodes; OpenCV's pool, on whole images, gains on a frame that one node works on alone (``./run bench
+    threads``: the family scene's nodes used 37 % less CPU a frame than with every pool at its library's default, at
+    the same frame rate; with OpenCV held to one thread as well the markers demo's lossless rate fell by 4-10 %)."""
     env = dict(os.environ if base is None else base)
     if executor is not None:
         env[EXECUTOR_ENV] = executor

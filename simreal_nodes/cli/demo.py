@@ -9,8 +9,7 @@ def cmd_demo(a: argparse.Namespace) -> int:
     from simreal_nodes.demo import run_demo
 
     m = run_demo(a.scene, a.output, regenerate=a.regenerate, resolution=a.resolution, duration=a.duration,
-                 one_process=a.one_process, executor=a.executor,
-                 threads=a.threads)
+                 one_process=a.one_process, executor=a.executor, threads=a.threads)
     bad = [k for k, p in m["parameters"].items() if "error" in p]
     return 1 if bad or m["frames"]["frames_completed"] == 0 else 0
 

@@ -61,8 +61,7 @@ def cmd_launch(a: argparse.Namespace) -> int:
           f"({ingest_note(scene, nodes)})")
     return run_until_signal(Launcher(nodes, remaps=_remaps(a.remap), respawn=a.respawn, namespace=a.namespace,
                                      discovery_range=a.discovery_range, standby=not a.no_standby,
-                                     one_process=a.one_process, executor=a.executor,
-                                     threads=a.threads))
+                                     one_process=a.one_process, executor=a.executor, threads=a.threads))
 
 
 def cmd_replay(a: argparse.Namespace) -> int:

@@ -66,7 +66,7 @@ def replay(bag: str, scene_file: str, rate: float = 1.0, lossless: bool = False,
     a process per node unless asked, so that a caller says which it runs); ``executor``: the nodes' and the
     player's (one of :data:`~simreal_nodes.launch.EXECUTORS`; None: :func:`~simreal_nodes.launch.executor_kind`);
     ``threads``: the worker threads of each node process's libraries (:func:`~simreal_nodes.launch.ros_environment`;
-    None: ``SIMREAL_THREADS``, else 1)."""
+    None: ``SIMREAL_THREADS``, else the default: the linear algebra's pools one thread, OpenCV's its own)."""
     executor = executor_kind(None if executor is None else {EXECUTOR_ENV: executor})
     thread_variables(dict(os.environ), threads)  # a bad SIMREAL_THREADS (or threads) refused before any work
     scene = load_scene(scene_file)
