@@ -49,16 +49,29 @@ def frames(seed: int) -> Path:
     return path
 
 
-def worker(seed: int, out: Path) -> None:
-    """One run (in this process, with whatever ``simreal_nodes`` the path gives): per frame the stage times, the
-    tracker's time and the estimate."""
+def scene_pipeline(seed: int):
+    """Development scene ``seed``'s cached frames (RGB, depth), the offline pipeline with its scene's defaults (RGB-D
+    SLAM, registration, the dense tracker) and its frame stream (the scene, its truth)."""
     import copy
 
     from benchmarks.family import scene_name
-    from simreal_nodes.assimilation import dense
     from simreal_nodes.assimilation.offline import Pipeline
     from simreal_nodes.scene.schema import build_spec_models, validate_scene
     from simreal_nodes.synth.sequence import FrameStream
+
+    with np.load(frames(seed)) as z:  # each read of a compressed member inflates it whole: once
+        rgb, depth = z["rgb"], z["depth"]
+    fs = FrameStream(scene_name(seed), 640, 480, None, FPS, False, 0, 2, None)
+    doc = copy.deepcopy(fs.scene.scene_yaml(fs.scene))
+    pipe = Pipeline(build_spec_models(validate_scene(doc, fs.scene.name, ".")), fs.cam,
+                    baseline=fs.scene.stereo_baseline)
+    return rgb, depth, pipe, fs
+
+
+def worker(seed: int, out: Path) -> None:
+    """One run (in this process, with whatever ``simreal_nodes`` the path gives): per frame the stage times, the
+    tracker's time and the estimate."""
+    from simreal_nodes.assimilation import dense
 
     spent = dict.fromkeys(STAGES, 0.0)
 
@@ -73,12 +86,7 @@ def worker(seed: int, out: Path) -> None:
 
     for name in STAGES:
         setattr(dense.DenseAligner, name, timed(name, getattr(dense.DenseAligner, name)))
-    with np.load(frames(seed)) as z:  # each read of a compressed member inflates it whole: once
-        rgb, depth = z["rgb"], z["depth"]
-    fs = FrameStream(scene_name(seed), 640, 480, None, FPS, False, 0, 2, None)
-    doc = copy.deepcopy(fs.scene.scene_yaml(fs.scene))
-    pipe = Pipeline(build_spec_models(validate_scene(doc, fs.scene.name, ".")), fs.cam,
-                    baseline=fs.scene.stereo_baseline)
+    rgb, depth, pipe, fs = scene_pipeline(seed)
     rows = []
     for i in range(len(rgb)):
         for k in spent:

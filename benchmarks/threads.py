@@ -42,22 +42,11 @@ GRAPH_CASES = (("aluminium_beam", "640x480"), ("family-3", "640x480"))
 def worker(out: Path) -> None:
     """One offline run in this process (its environment already the node's): per frame wall, CPU, tracker time and
     the estimate."""
-    import copy
-
-    from benchmarks.dense_budget import FPS, frames
-    from benchmarks.family import scene_name
-    from simreal_nodes.assimilation.offline import Pipeline
+    from benchmarks.dense_budget import FPS, scene_pipeline
     from simreal_nodes.launch import node_threads, set_threads
-    from simreal_nodes.scene.schema import build_spec_models, validate_scene
-    from simreal_nodes.synth.sequence import FrameStream
 
     set_threads(node_threads())
-    with np.load(frames(SEED)) as z:
-        rgb, depth = z["rgb"], z["depth"]
-    fs = FrameStream(scene_name(SEED), 640, 480, None, FPS, False, 0, 2, None)
-    doc = copy.deepcopy(fs.scene.scene_yaml(fs.scene))
-    pipe = Pipeline(build_spec_models(validate_scene(doc, fs.scene.name, ".")), fs.cam,
-                    baseline=fs.scene.stereo_baseline)
+    rgb, depth, pipe, fs = scene_pipeline(SEED)
     rows = []
     for i in range(len(rgb)):
         w0, c0 = time.perf_counter(), time.process_time()

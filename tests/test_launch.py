@@ -5,6 +5,7 @@ import os
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pytest
 
@@ -229,3 +230,70 @@ def test_without_standby_a_restart_is_a_new_process(tmp_path):
         wait_for(lambda: p.popen is None)
     assert lines[-1].startswith("[launch] ingest exited with code -9; not restarting") or \
         any("not restarting" in x for x in lines)
+
+
+SAMPLES = Path(__file__).resolve().parents[1] / "bags" / "samples"
+
+
+class Reached(Exception):
+    """Raised by :func:`catch_launcher`'s stand-in: the launch got as far as starting the nodes."""
+
+
+def catch_launcher(monkeypatch, module) -> dict:
+    """Swap ``module``'s Launcher for one that records its keyword arguments (returned) and raises :class:`Reached`;
+    the scene's models are not built (the launch's pick needs none)."""
+    import simreal_nodes.scene.schema
+
+    seen: dict = {}
+
+    def fake_launcher(nodes, **kw):
+        seen.update(kw)
+        raise Reached
+
+    monkeypatch.setattr(module, "Launcher", fake_launcher)
+    monkeypatch.setattr(module if hasattr(module, "build_spec_models") else simreal_nodes.scene.schema,
+                        "build_spec_models", lambda s: s)
+    return seen
+
+
+@pytest.mark.parametrize("sample,lossless,one", [
+    ("aluminium_beam_320x240", False, True),  # markers: one process, live too
+    ("crossed_beams_probe_320x240", False, False),  # RGB-D SLAM live: a process per node
+    ("crossed_beams_probe_320x240", True, True),  # lossless: one process
+])
+def test_a_replay_picks_the_launch_the_cli_left_open(monkeypatch, sample, lossless, one):
+    """`simreal replay` without --one-process / --process-per-node: the scene's pick
+    (scene.graph.one_process_default) reaches the launcher."""
+    from simreal_nodes.ros import commands
+
+    seen = catch_launcher(monkeypatch, commands)
+    with pytest.raises(Reached):
+        commands.replay(str(SAMPLES / sample), str(SAMPLES / f"{sample}.yaml"), lossless=lossless, one_process=None,
+                        echo=lambda *a: None)
+    assert seen["one_process"] is one
+
+
+@pytest.mark.parametrize("sample,lossless,one", [
+    ("aluminium_beam_320x240", False, True),
+    ("crossed_beams_probe_320x240", False, False),
+    ("crossed_beams_probe_320x240", True, True),
+])
+def test_simreal_launch_picks_the_launch_it_was_not_told(monkeypatch, capsys, sample, lossless, one):
+    """`simreal launch SCENE` without --one-process / --process-per-node: the scene's pick reaches the launcher and
+    its first line says so; told, the flag wins."""
+    import simreal_nodes.launch
+    from simreal_nodes.cli import build_parser
+
+    seen = catch_launcher(monkeypatch, simreal_nodes.launch)
+    p = build_parser()
+    a = p.parse_args(["launch", str(SAMPLES / f"{sample}.yaml"), *(["--lossless"] if lossless else [])])
+    assert a.one_process is None
+    with pytest.raises(Reached):
+        a.fn(a)
+    assert seen["one_process"] is one
+    assert ("in one process" if one else "a process per node") in capsys.readouterr().out
+    for flag, told in (("--one-process", True), ("--process-per-node", False)):
+        a = p.parse_args(["launch", str(SAMPLES / f"{sample}.yaml"), flag])
+        with pytest.raises(Reached):
+            a.fn(a)
+        assert seen["one_process"] is told

@@ -25,6 +25,7 @@ def add_demo(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--duration", type=float, help="seconds, when the sample bag has to be rendered")
     s.add_argument("--regenerate", action="store_true", help="render the sample bag again")
     s.add_argument("--process-per-node", dest="one_process", action="store_false",
-                   help="each node in its own process (default: every node in one process, as `simreal launch`)")
+                   help="each node in its own process (default: every node in one process, as `simreal launch` runs "
+                        "a lossless graph)")
     add_executor(s)
     s.set_defaults(fn=cmd_demo)

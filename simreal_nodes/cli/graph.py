@@ -20,12 +20,13 @@ def _remaps(items: list[str] | None) -> dict[str, str]:
 
 def _launch_mode(s: argparse.ArgumentParser) -> None:
     g = s.add_mutually_exclusive_group()
-    g.add_argument("--one-process", dest="one_process", action="store_true", default=True,
-                   help="every node in one process on one executor (the default: faster end to end or level on every "
-                        "scene measured, benchmarks/results/graph.md)")
+    g.add_argument("--one-process", dest="one_process", action="store_true", default=None,
+                   help="every node in one process on one executor (the default, but for a live graph with a SLAM "
+                        "localization or a dense tracker: benchmarks/results/graph.md, launch_mode.md)")
     g.add_argument("--process-per-node", dest="one_process", action="store_false",
                    help="each node in its own process: a fault in one node leaves the others (and the SLAM map) "
-                        "running")
+                        "running (the default for a live graph with a SLAM localization or a dense tracker, whose "
+                        "work a frame outlasts a camera frame period)")
     add_executor(s)
 
 
@@ -52,16 +53,17 @@ def _threads(text: str) -> int:
 
 def cmd_launch(a: argparse.Namespace) -> int:
     from simreal_nodes.launch import Launcher, run_until_signal
-    from simreal_nodes.scene.graph import ingest_note, required_nodes
+    from simreal_nodes.scene.graph import ingest_note, launch_note, one_process_default, required_nodes
     from simreal_nodes.scene.schema import build_spec_models, load_scene
 
     scene = build_spec_models(load_scene(a.scene))  # before the nodes start: they load the built models
     nodes = required_nodes(scene, lossless=a.lossless)
+    one = one_process_default(scene, a.lossless) if a.one_process is None else a.one_process
     print(f"[launch] scene '{scene['name']}': starting {', '.join(n.name for n in nodes)} "
-          f"({ingest_note(scene, nodes)})")
+          f"({ingest_note(scene, nodes)}; {launch_note(one, a.one_process is None)})")
     return run_until_signal(Launcher(nodes, remaps=_remaps(a.remap), respawn=a.respawn, namespace=a.namespace,
                                      discovery_range=a.discovery_range, standby=not a.no_standby,
-                                     one_process=a.one_process, executor=a.executor, threads=a.threads))
+                                     one_process=one, executor=a.executor, threads=a.threads))
 
 
 def cmd_replay(a: argparse.Namespace) -> int:

@@ -27,7 +27,14 @@ from simreal_nodes.launch import (
 )
 from simreal_nodes.ros.bagplay import Player, Recorder
 from simreal_nodes.ros.node import make_executor
-from simreal_nodes.scene.graph import image_topic, ingest_note, output_topics, required_nodes
+from simreal_nodes.scene.graph import (
+    image_topic,
+    ingest_note,
+    launch_note,
+    one_process_default,
+    output_topics,
+    required_nodes,
+)
 from simreal_nodes.scene.schema import build_spec_models, load_scene
 
 
@@ -57,13 +64,14 @@ def _share_node_environment() -> None:
 def replay(bag: str, scene_file: str, rate: float = 1.0, lossless: bool = False, record: str | None = None,
            storage: str = "mcap", launch: bool = True, frame_timeout_s: float = 30.0, ready_timeout_s: float = 90.0,
            metrics_json: str | None = None, echo=print, extra_params: dict | None = None, namespace: str = "",
-           standby: bool | None = None, one_process: bool = False, executor: str | None = None,
+           standby: bool | None = None, one_process: bool | None = False, executor: str | None = None,
            threads: int | None = None):
     """Replay ``bag`` into the graph of ``scene_file``; returns (PlayStats, BagReport, recorder counts).
     ``namespace``: the nodes' namespace; ``standby``: a standby process per node (:class:`~simreal_nodes.launch.
     Launcher`), by default in a live replay and not in a lossless one (a node that exits there is a fault to see,
-    and time does not press); ``one_process``: every node in one process on one executor (the CLI's default; here
-    a process per node unless asked, so that a caller says which it runs); ``executor``: the nodes' and the
+    and time does not press); ``one_process``: every node in one process on one executor (here a process per node
+    unless asked, so that a caller says which it runs; None: the scene's pick, as the CLI's default,
+    :func:`~simreal_nodes.scene.graph.one_process_default`); ``executor``: the nodes' and the
     player's (one of :data:`~simreal_nodes.launch.EXECUTORS`; None: :func:`~simreal_nodes.launch.executor_kind`);
     ``threads``: the worker threads of each node process's libraries (:func:`~simreal_nodes.launch.ros_environment`;
     None: ``SIMREAL_THREADS``, else the default: the linear algebra's pools one thread, OpenCV's its own)."""
@@ -74,7 +82,10 @@ def replay(bag: str, scene_file: str, rate: float = 1.0, lossless: bool = False,
         build_spec_models(scene)  # before the nodes start: they find the built spec:NAME models in the cache
     cam = scene["camera"]
     nodes = required_nodes(scene, lossless=lossless, source="topic")  # the player is the source
-    echo(f"[replay] nodes: {', '.join(n.name for n in nodes)} ({ingest_note(scene, nodes, 'topic')})")
+    picked = one_process is None
+    one_process = one_process_default(scene, lossless) if one_process is None else one_process
+    how = f"; {launch_note(one_process, picked)}" if launch else ""
+    echo(f"[replay] nodes: {', '.join(n.name for n in nodes)} ({ingest_note(scene, nodes, 'topic')}{how})")
     for n in nodes:
         n.parameters.update((extra_params or {}).get(n.name, {}))
     report = bags.BagReport()

@@ -12,7 +12,9 @@ separate processes; the nodes share one DDS participant and one executor
 The trade, measured by ``./run bench graph`` (``benchmarks/results/graph.md``): one process saves the per-process
 overhead (an interpreter, a participant, a publication that wakes another process) but runs every callback on one
 thread, so the nodes no longer overlap and a fault in one ends them all. On two cores it was faster end to end or level
-on every scene measured, so it is the CLI's default (``--process-per-node`` for one each).
+on every scene measured lossless and live for the markers demo, so it is the CLI's default (``--process-per-node`` for
+one each), but for a live graph with a SLAM localization or a dense tracker, whose work a frame outlasts a camera
+frame period: there a process per node put more frames through (``scene.graph.one_process_default``).
 """
 
 from __future__ import annotations

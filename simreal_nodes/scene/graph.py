@@ -145,6 +145,34 @@ def tracker_stereo_depth(scene: dict) -> bool:
     return tracker_reads_depth(scene) and cam["depth"] is None and cam["right_image"] is not None
 
 
+SLAM_MODES = ("mono", "rgbd", "stereo")  # localization modes that run the SLAM
+
+
+def one_process_default(scene: dict, lossless: bool) -> bool:
+    """The launch the CLI picks when told neither ``--one-process`` nor ``--process-per-node``: every node in one
+    process, but a process per node for a live graph with a node whose work takes longer than a camera frame period
+    (a SLAM localization, 34-39 ms a frame at 640 x 480; the dense tracker, about 120 ms): on one executor every other
+    node waits for it, while in its own process it runs beside them on another core. Set on
+    ``benchmarks/results/graph.md`` (stop 95): one process faster or level in every lossless case and live for the
+    markers demo (96 % of the frames through against 93 %), a process per node live for the RGB-D SLAM scenes (the
+    foam beam 60 % against 37 %, family-3 49 % against 34 %); checked on held-out scenes by ``./run bench
+    launch_mode``."""
+    if lossless:
+        return True
+    heavy = scene["localization"]["mode"] in SLAM_MODES or any(
+        o["tracking"]["enabled"] and o["tracking"]["measurements"] == "dense" for o in scene["objects"])
+    return not heavy
+
+
+def launch_note(one_process: bool, picked: bool) -> str:
+    """How the nodes run, for the launch's first line; ``picked``: by :func:`one_process_default` (not told)."""
+    how = "in one process" if one_process else "a process per node"
+    if not picked:
+        return how
+    why = "the default" if one_process else "live, with a node slower than a frame: the default for such a graph"
+    return f"{how} ({why}; --one-process / --process-per-node choose)"
+
+
 def required_nodes(scene: dict, lossless: bool = False, source: str | None = None) -> list[NodeSpec]:
     """The nodes the scene requires, in pipeline order. Only those are started. ``source``: where the frames come
     from when not the scene's ``camera.source`` (see :func:`ingest_work`). The ingest node is among them when it has

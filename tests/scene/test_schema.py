@@ -218,3 +218,26 @@ def test_aero_mistakes_are_named(tmp_path, change, match):
     (tmp_path / "db.h5").write_bytes(b"")
     with pytest.raises(SceneError, match=match):
         load_scene(write(tmp_path, AERO.replace(*change)))
+
+
+@pytest.mark.parametrize("mode,measurements,lossless,one", [
+    ("markers", "dots", False, True),  # the demo: one executor keeps up live
+    ("static", "dots", False, True),
+    ("rgbd", "map_points", False, False),  # a SLAM takes longer than a frame period: its own process, live
+    ("mono", "map_points", False, False),
+    ("stereo", "map_points", False, False),
+    ("markers", "dense", False, False),  # so does the dense tracker
+    ("rgbd", "map_points", True, True),  # lossless: one process, whatever runs
+    ("markers", "dense", True, True),
+])
+def test_the_cli_launches_live_graphs_with_a_heavy_node_a_process_per_node(mode, measurements, lossless, one):
+    """Issue 18: the launch the CLI picks when told neither --one-process nor --process-per-node
+    (benchmarks/results/graph.md, launch_mode.md)."""
+    from simreal_nodes.scene.graph import one_process_default
+
+    scene = {"localization": {"mode": mode},
+             "objects": [{"tracking": {"enabled": True, "measurements": measurements}},
+                         {"tracking": {"enabled": False, "measurements": "dense"}}]}  # a disabled one weighs nothing
+    assert one_process_default(scene, lossless) is one
+    scene["objects"][0]["tracking"]["enabled"] = False
+    assert one_process_default(scene, lossless) is (lossless or mode not in ("rgbd", "mono", "stereo"))

@@ -284,4 +284,5 @@ class AsyncBundleAdjuster:
         if self.proc.is_alive():
             self.proc.terminate()
             self.proc.join(timeout=1.0)
+        self.conn.close()
         self.busy = False

@@ -1,0 +1,97 @@
+"""The CLI's launch mode (issue 18), checked on scenes it was not chosen on: all nodes in one process against a
+process per node, live (the bag's rate, live QoS) and lossless, on RGB-D SLAM scenes that ``benchmarks/graph.py``
+does not run.
+
+    ./run bench launch_mode
+
+The rule (``simreal_nodes.scene.graph.one_process_default``) was set on ``benchmarks/results/graph.md``'s cases, one
+run each (stop 95): one process is faster or level in every lossless case and live for the markers demo, while live
+the RGB-D SLAM scenes put more frames through with a process per node (the foam beam 60 % against 37 %, family-3 49
+% against 34 %): their SLAM (34-39 ms a frame) or dense tracker (120 ms) holds one executor for longer than a camera
+frame period, and in their own processes they run beside the others on the second core. Held out here: the sample
+``joint_boot`` (RGB-D SLAM, map points, the boot's neo-Hookean model; rendered by that model) and
+``joint_boot_truth_live`` (the same graph, the boot placed by registration from a guess by eye, its images from an
+independent full-order solve), each case twice with the order alternating (one process, per node, per node, one
+process). Reported: frames through (% and per second), latency p50 / p95 to the overlay, the nodes' CPU per frame,
+and what the rule picks against the launch that put more frames through (live) or went faster (lossless).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from benchmarks.common import save
+from benchmarks.graph import run_case
+from simreal_nodes.demo import sample_bag
+
+SCENES = ("joint_boot", "joint_boot_truth_live")
+ORDER = (True, False, False, True)  # one_process in the runs of each case
+
+
+def rule_pick(scene_yaml, lossless: bool) -> str:
+    from simreal_nodes.scene.graph import one_process_default
+    from simreal_nodes.scene.schema import load_scene
+
+    return "one process" if one_process_default(load_scene(scene_yaml), lossless) else "process per node"
+
+
+def main() -> None:
+    runs = []
+    for scene in SCENES:
+        bag, scene_yaml = sample_bag(scene, echo=lambda *a: None)
+        for lossless in (False, True):
+            for rep, one in enumerate(ORDER):
+                r = run_case(scene, "640x480", bag, scene_yaml, lossless, one)
+                r["run"] = rep
+                r.pop("budget", None)
+                runs.append(r)
+                print({k: r[k] for k in ("scene", "mode", "launch", "fps", "delivered_pct", "latency_p95",
+                                         "nodes_cpu_ms")}, flush=True)
+    rows = []
+    for scene in SCENES:
+        _, scene_yaml = sample_bag(scene, echo=lambda *a: None)
+        for mode in ("real time (30 fps)", "lossless"):
+            by = {}
+            for launch in ("one process", "process per node"):
+                rs = [r for r in runs if r["scene"] == scene and r["mode"] == mode and r["launch"] == launch]
+                by[launch] = {k: float(np.median([r[k] for r in rs])) for k in
+                              ("fps", "delivered_pct", "latency_p50", "latency_p95", "nodes_cpu_ms")}
+                by[launch]["runs_fps"] = ", ".join(f"{r['fps']:.1f}" for r in rs)
+            key = "delivered_pct" if mode != "lossless" else "fps"
+            better = max(by, key=lambda k: by[k][key])
+            pick = rule_pick(scene_yaml, mode == "lossless")
+            for launch, v in by.items():
+                rows.append(dict(scene=scene, mode=mode, launch=launch, **v, rule=pick == launch,
+                                 better=better == launch))
+    cols = [("scene", "scene", "{}"), ("mode", "replay", "{}"), ("launch", "launch", "{}"),
+            ("fps", "fps through (median)", "{:.1f}"), ("runs_fps", "runs", "{}"),
+            ("delivered_pct", "frames through (%)", "{:.0f}"), ("latency_p50", "latency p50 (ms)", "{:.0f}"),
+            ("latency_p95", "p95 (ms)", "{:.0f}"), ("nodes_cpu_ms", "nodes' CPU/frame (ms)", "{:.1f}"),
+            ("rule", "the CLI's pick", "{}"), ("better", "more frames through (live) / faster (lossless)", "{}")]
+
+    def plot(plt):
+        fig, ax = plt.subplots(figsize=(8, 3.8))
+        cases = list(dict.fromkeys((r["scene"], r["mode"]) for r in rows))
+        for k, (launch, color) in enumerate((("one process", "tab:orange"), ("process per node", "tab:blue"))):
+            by = {(r["scene"], r["mode"]): r for r in rows if r["launch"] == launch}
+            ax.bar([i + 0.4 * k - 0.2 for i in range(len(cases))],
+                   [by[c]["delivered_pct"] if c[1] != "lossless" else by[c]["fps"] for c in cases], width=0.4,
+                   color=color, label=launch)
+        ax.set_xticks(range(len(cases)))
+        ax.set_xticklabels([f"{s}\n{m}" for s, m in cases], fontsize=7)
+        ax.set_ylabel("live: frames through (%); lossless: fps")
+        ax.legend(fontsize=7)
+        fig.tight_layout()
+        return fig
+
+    notes = ("Each case twice, order one process, per node, per node, one process; medians (each run's rate in "
+             "'runs'; every run in `runs` of the JSON). Live: the bag at its 30 fps, live QoS; the launch that put "
+             "more frames through is the better. Lossless: lock-step; the faster is the better. The CLI's pick: "
+             "`simreal_nodes.scene.graph.one_process_default`, set on `benchmarks/results/graph.md`'s scenes, none "
+             "of them these.")
+    save("launch_mode", rows, cols, "The CLI's launch mode on held-out RGB-D SLAM scenes: one process against a "
+         "process per node, live and lossless", notes, plot, extra={"runs": runs})
+
+
+if __name__ == "__main__":
+    main()
