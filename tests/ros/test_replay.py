@@ -86,8 +86,8 @@ def test_without_an_ingest_the_nodes_drop_malformed_frames_with_reasons(tmp_path
     lines: list[str] = []
     stats, _, counts = replay(str(tmp_path / "bad"), str(f), lossless=True, record=str(out), echo=lines.append,
                               frame_timeout_s=10)
-    assert "[replay] nodes: overlay (no ingest: the nodes read /camera/image_raw and its CameraInfo themselves)" \
-        in lines
+    assert ("[replay] nodes: overlay (no ingest: the nodes read /camera/image_raw and its CameraInfo themselves; "
+            "a process per node)") in lines
     assert stats.frames_published == 20
     assert stats.frames_dropped == 3 and stats.frames_completed == 17 and stats.frames_timed_out == 0
     assert any("step" in why for why in stats.drop_reasons)
