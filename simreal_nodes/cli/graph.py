@@ -42,25 +42,27 @@ def add_executor(s: argparse.ArgumentParser) -> None:
 
 
 def _threads(text: str) -> int:
+    from simreal_nodes.launch import THREADS_ENV, node_threads
+
     try:
-        n = int(text)
-    except ValueError:
-        n = -1
-    if n < 0:
+        n = node_threads({THREADS_ENV: text})  # the launcher's own check
+    except SimrealError:
+        n = None
+    if n is None:
         raise argparse.ArgumentTypeError(f"expected a whole number >= 0, got {text!r}")
     return n
 
 
 def cmd_launch(a: argparse.Namespace) -> int:
     from simreal_nodes.launch import Launcher, run_until_signal
-    from simreal_nodes.scene.graph import ingest_note, launch_note, one_process_default, required_nodes
+    from simreal_nodes.scene.graph import ingest_note, launch_choice, required_nodes
     from simreal_nodes.scene.schema import build_spec_models, load_scene
 
     scene = build_spec_models(load_scene(a.scene))  # before the nodes start: they load the built models
     nodes = required_nodes(scene, lossless=a.lossless)
-    one = one_process_default(scene, a.lossless) if a.one_process is None else a.one_process
+    one, how = launch_choice(scene, a.lossless, a.one_process)
     print(f"[launch] scene '{scene['name']}': starting {', '.join(n.name for n in nodes)} "
-          f"({ingest_note(scene, nodes)}; {launch_note(one, a.one_process is None)})")
+          f"({ingest_note(scene, nodes)}; {how})")
     return run_until_signal(Launcher(nodes, remaps=_remaps(a.remap), respawn=a.respawn, namespace=a.namespace,
                                      discovery_range=a.discovery_range, standby=not a.no_standby,
                                      one_process=one, executor=a.executor, threads=a.threads))

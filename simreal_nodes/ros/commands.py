@@ -30,8 +30,7 @@ from simreal_nodes.ros.node import make_executor
 from simreal_nodes.scene.graph import (
     image_topic,
     ingest_note,
-    launch_note,
-    one_process_default,
+    launch_choice,
     output_topics,
     required_nodes,
 )
@@ -82,9 +81,8 @@ def replay(bag: str, scene_file: str, rate: float = 1.0, lossless: bool = False,
         build_spec_models(scene)  # before the nodes start: they find the built spec:NAME models in the cache
     cam = scene["camera"]
     nodes = required_nodes(scene, lossless=lossless, source="topic")  # the player is the source
-    picked = one_process is None
-    one_process = one_process_default(scene, lossless) if one_process is None else one_process
-    how = f"; {launch_note(one_process, picked)}" if launch else ""
+    one_process, how = launch_choice(scene, lossless, one_process)
+    how = f"; {how}" if launch else ""
     echo(f"[replay] nodes: {', '.join(n.name for n in nodes)} ({ingest_note(scene, nodes, 'topic')}{how})")
     for n in nodes:
         n.parameters.update((extra_params or {}).get(n.name, {}))

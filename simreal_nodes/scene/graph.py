@@ -164,13 +164,15 @@ def one_process_default(scene: dict, lossless: bool) -> bool:
     return not heavy
 
 
-def launch_note(one_process: bool, picked: bool) -> str:
-    """How the nodes run, for the launch's first line; ``picked``: by :func:`one_process_default` (not told)."""
-    how = "in one process" if one_process else "a process per node"
-    if not picked:
-        return how
-    why = "the default" if one_process else "live, with a node slower than a frame: the default for such a graph"
-    return f"{how} ({why}; --one-process / --process-per-node choose)"
+def launch_choice(scene: dict, lossless: bool, told: bool | None) -> tuple[bool, str]:
+    """(one process?, how the nodes run, for the launch's first line): ``told`` where the user said
+    (``--one-process`` / ``--process-per-node``), else :func:`one_process_default`'s pick."""
+    one = one_process_default(scene, lossless) if told is None else told
+    how = "in one process" if one else "a process per node"
+    if told is not None:
+        return one, how
+    why = "the default" if one else "live, with a node slower than a frame: the default for such a graph"
+    return one, f"{how} ({why}; --one-process / --process-per-node choose)"
 
 
 def required_nodes(scene: dict, lossless: bool = False, source: str | None = None) -> list[NodeSpec]:
