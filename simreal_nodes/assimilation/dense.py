@@ -285,6 +285,19 @@ def bilinear(img: NDArray[np.float32], uv: Array) -> NDArray[np.float32]:
     return np.asarray(v, np.float32).reshape(-1)
 
 
+def _median(a: Array) -> float:
+    """``np.median`` of a 1-D array, the same value (NaN if any is NaN) without its generality's overhead (the
+    robust scale takes two a Gauss-Newton iteration, most of them on a few hundred samples)."""
+    n = a.shape[0]
+    if n == 0:
+        return float("nan")
+    h = n // 2
+    p = np.partition(a, (h, n - 1) if n % 2 else (h - 1, h, n - 1))
+    if np.isnan(p[-1]):
+        return float("nan")
+    return float(p[h] if n % 2 else (p[h - 1] + p[h]) / 2)
+
+
 def _cross(a: Array, b: Array) -> Array:
     """Row-wise cross product of (N, 3) arrays (np.cross's arithmetic, without its generality's overhead)."""
     out = np.empty(a.shape)
@@ -551,6 +564,9 @@ class DenseAligner:
         self.g_info = np.zeros((3, 3))
         self.g_eta = np.zeros(3)
         self.g_frame: tuple[Array, Array] | None = None  # the last solve's (information, its sum), not yet fused
+        self._g_prior_memo: tuple[tuple[float, bytes, bytes], tuple[Array, Array]] | None = None
+        self._wide_memo: tuple[tuple[float, float], Array] | None = None
+        self._taken: list[tuple[Array, NDArray[np.int64], Array]] = []  # (array, rows, array[rows]): _take
         self.grid_margin = float("nan")  # the last coarse search's runner-up margin (see :meth:`_grid_start`)
         self.grid_runner_up: Array | None = None  # and that runner-up's parameters
         self.c = G.transform(self.T_mo, np.asarray(model.points, np.float64).mean(axis=0, keepdims=True))[0]
@@ -618,6 +634,7 @@ class DenseAligner:
         vis = self.visible(T_cw, G.transform(self.T_mo, x_ref), smp.normal @ self.T_mo[:3, :3].T)
         idx = np.flatnonzero(vis)
         self.levels, self.static = [], []
+        self._taken.clear()
         if len(idx) < self.s.min_samples:
             return False
         uv = self.cam.project(G.transform(T_cw @ self.T_mo, x_ref[idx]), distort=False)
@@ -741,10 +758,10 @@ class DenseAligner:
             if use_s and n:
                 S = self.static[lvl]
                 srows = self._static_rows(lvl, f, T_cw, rows)
-                uvs, _ = self._rigid_project(S.X[srows], f.cam, T_cw, jac=False)
+                uvs, _ = self._rigid_project(self._take(S.X, srows), f.cam, T_cw, jac=False)
                 vs = bilinear(pyr[lvl], _at_level(uvs, lvl)).astype(np.float64)
                 self._average_in(S.values, self._static_counts[lvl], srows, vs,
-                                 f.photo_s[0] * S.values[srows] + f.photo_s[1], f.photo_s)
+                                 f.photo_s[0] * self._take(S.values, srows) + f.photo_s[1], f.photo_s)
         self.template_views += 1
         self._rest_motion = min(self._rest_motion, float(motion_px))
         return done
@@ -764,6 +781,7 @@ class DenseAligner:
         n = counts[sel]
         values[sel] += ((seen[ok] - photo[1]) / photo[0] - values[sel]) / (n + 1.0)
         counts[sel] = n + 1.0
+        self._taken.clear()  # the gathers of the old values go
         return len(sel)
 
     def hold_rest(self) -> None:
@@ -784,6 +802,20 @@ class DenseAligner:
             R = self._rot_cache[key] = G.exp_so3(omega)
             R.flags.writeable = False  # shared by every caller of this omega
         return R
+
+    def _take(self, a: Array, rows: NDArray[np.int64]) -> Array:
+        """``a[rows]`` (read-only), kept for the few (array, rows) pairs in use: a level's fit gathers the same
+        samples' positions and intensities at every iteration and every trial step. Keyed on the objects
+        themselves (held here, so that neither is freed and its identity reused); neither is changed in place."""
+        for src, idx, out in self._taken:
+            if src is a and idx is rows:
+                return out
+        out = a[rows]
+        out.flags.writeable = False
+        self._taken.append((a, rows, out))
+        if len(self._taken) > 6:
+            self._taken.pop(0)
+        return out
 
     def _to_camera(self, rigid: Array, T_cw: Array) -> tuple[Array, Array]:
         """(A, a): the camera-frame point A X + a of a map-frame point X moved by the rigid correction about the
@@ -817,7 +849,7 @@ class DenseAligner:
                   jac: bool) -> tuple[Array, _Chain | None]:
         """Ideal pixels (N, 2) of the level's samples ``rows`` and, with ``jac``, what chains image gradients at
         them to d(intensity)/d(mu, omega, t) (:class:`_Chain`; ``mu`` None: zero displacement, no mu columns)."""
-        x = L.x[rows]
+        x = self._take(L.x, rows)
         du: Array | None = None
         if mu is not None and jac:
             u_all, du_all = L.view.with_jacobian(mu)
@@ -860,7 +892,7 @@ class DenseAligner:
     def _brightness_basis(self, L: Level, rows: NDArray[np.int64], mu: Array | None) -> Array:
         """The columns the object's brightness parameters multiply (N, n_photo): I_ref, 1 and, with the
         shading, I_ref (n(mu) - n_ref); the predicted intensity is this times ``photo``."""
-        ref = L.values[rows]
+        ref = self._take(L.values, rows)
         cols = [ref, np.ones(len(rows))]
         if self.n_photo > 2:
             cols.append(ref[:, None] * L.normals.change(mu, rows))
@@ -868,7 +900,7 @@ class DenseAligner:
 
     def _predicted(self, L: Level, rows: NDArray[np.int64], mu: Array | None, photo: Array) -> Array:
         """a I_ref + b (+ I_ref (n(mu) - n_ref) . g): the shading as one number per triangle corner, blended."""
-        ref = L.values[rows]
+        ref = self._take(L.values, rows)
         out: Array = photo[0] * ref + photo[1]
         if self.n_photo > 2:
             dn = L.normals.corners(mu) - L.normals.corner_ref
@@ -881,9 +913,14 @@ class DenseAligner:
         shading)."""
         if self.n_photo <= 2:
             return np.zeros((3, 3)), np.zeros(3)
-        P = np.eye(3) / self.s.prior_shading**2 + self.g_info
-        m = np.asarray(np.linalg.solve(P, self.g_eta), np.float64)
-        return P, m
+        # asked several times an iteration, changed only when a frame's shading is accepted: kept (read-only)
+        key = (self.s.prior_shading, self.g_info.tobytes(), self.g_eta.tobytes())
+        if self._g_prior_memo is None or self._g_prior_memo[0] != key:
+            P = np.eye(3) / self.s.prior_shading**2 + self.g_info
+            m = np.asarray(np.linalg.solve(P, self.g_eta), np.float64)
+            P.flags.writeable = m.flags.writeable = False
+            self._g_prior_memo = (key, (P, m))
+        return self._g_prior_memo[1]
 
     def _g_prior_cost(self, g: Array) -> float:
         """0.5 (g - m)^T P (g - m): g's prior in the units of the normalised residuals' cost (0 without the
@@ -948,7 +985,7 @@ class DenseAligner:
                         T_cw: Array) -> Array:
         """:meth:`_residuals` with f's mu replaced by each row of ``mus`` (K, n_mu): (K, N), in one pass."""
         L = self.levels[lvl]
-        ref = L.values[rows]
+        ref = self._take(L.values, rows)
         pred = np.broadcast_to(f.photo[0] * ref + f.photo[1], (len(mus), len(rows)))
         dn = self._normals_change_many(L, mus)
         if dn is not None:
@@ -959,9 +996,9 @@ class DenseAligner:
     def _static_residuals(self, lvl: int, img: NDArray[np.float32], rows: NDArray[np.int64], f: _Fit,
                           T_cw: Array) -> Array:
         S = self.static[lvl]
-        uv, _ = self._rigid_project(S.X[rows], f.cam, T_cw, jac=False)
+        uv, _ = self._rigid_project(self._take(S.X, rows), f.cam, T_cw, jac=False)
         r: Array = (bilinear(img, _at_level(uv, lvl)).astype(np.float64)
-                    - (f.photo_s[0] * S.values[rows] + f.photo_s[1]))
+                    - (f.photo_s[0] * self._take(S.values, rows) + f.photo_s[1]))
         return r
 
     def _priors(self, f: _Fit) -> tuple[Array, Array]:
@@ -981,9 +1018,14 @@ class DenseAligner:
         return np.concatenate(wts), np.concatenate(off)
 
     def _wide(self) -> Array:
-        """1-sigma of the rigid corrections' wide prior (omega, t)."""
-        out: Array = np.repeat([self.s.prior_rot_rad, self.s.prior_trans_m], 3)
-        return out
+        """1-sigma of the rigid corrections' wide prior (omega, t) (read-only: asked several times an
+        iteration)."""
+        key = (self.s.prior_rot_rad, self.s.prior_trans_m)
+        if self._wide_memo is None or self._wide_memo[0] != key:
+            out: Array = np.repeat([self.s.prior_rot_rad, self.s.prior_trans_m], 3)
+            out.flags.writeable = False
+            self._wide_memo = (key, out)
+        return self._wide_memo[1]
 
     @staticmethod
     def _rho(r: Array, c: float) -> float:
@@ -1002,7 +1044,7 @@ class DenseAligner:
     @staticmethod
     def _scale(r: Array) -> float:
         """Robust standard deviation (1.4826 MAD), at least half an intensity level."""
-        return max(1.4826 * float(np.median(np.abs(r - np.median(r)))), 0.5)
+        return max(1.4826 * _median(np.abs(r - _median(r))), 0.5)
 
     def _cost(self, lvl: int, img: NDArray[np.float32], rows: NDArray[np.int64], srows: NDArray[np.int64],
               f: _Fit, T_cw: Array, sig: tuple[float, float], counts: tuple[int, int]) -> float:
@@ -1069,10 +1111,10 @@ class DenseAligner:
             sigma_s, n_s = 1.0, 0
             if use_s:
                 S = self.static[lvl]
-                uvs, chain_s = self._rigid_project(S.X[srows], f.cam, T_cw, jac=True)
+                uvs, chain_s = self._rigid_project(self._take(S.X, srows), f.cam, T_cw, jac=True)
                 assert chain_s is not None
                 qs = _at_level(uvs, lvl)
-                rs = bilinear(img, qs).astype(np.float64) - (f.photo_s[0] * S.values[srows] + f.photo_s[1])
+                rs = bilinear(img, qs).astype(np.float64) - (f.photo_s[0] * self._take(S.values, srows) + f.photo_s[1])
                 oks = np.isfinite(rs)
                 n_s = int(oks.sum())
                 if n_s >= 10:
@@ -1082,7 +1124,7 @@ class DenseAligner:
                     n_rho = 6 if f.rho_free else 0
                     Jstat = np.zeros((n_s, J.shape[1] + 2))
                     Jstat[:, n_f + n_rho:n_f + n_rho + 6] = Jsg
-                    Jstat[:, -2] = -S.values[srows][oks]
+                    Jstat[:, -2] = -self._take(S.values, srows)[oks]
                     Jstat[:, -1] = -1.0
                     J = np.vstack([np.hstack([J, np.zeros((len(J), 2))]), Jstat / sigma_s])
                     res = np.concatenate([res, rs[oks] / sigma_s])
@@ -1146,17 +1188,17 @@ class DenseAligner:
             img, (gx, gy) = pyr[lvl], grads[lvl]
             lam = 1e-3
             for _ in range(self.s.iterations):
-                uv, chain = self._rigid_project(S.X[srows], cam, T_cw, jac=True)
+                uv, chain = self._rigid_project(self._take(S.X, srows), cam, T_cw, jac=True)
                 assert chain is not None
                 q = _at_level(uv, lvl)
-                r = bilinear(img, q).astype(np.float64) - (photo_s[0] * S.values[srows] + photo_s[1])
+                r = bilinear(img, q).astype(np.float64) - (photo_s[0] * self._take(S.values, srows) + photo_s[1])
                 ok = np.isfinite(r)
                 if ok.sum() < 10:
                     break
                 sig = self._scale(r[ok])
                 g = np.stack([bilinear(gx, q[ok]), bilinear(gy, q[ok])], axis=1).astype(np.float64) * 0.5**lvl
-                J = np.concatenate([chain(g, ok),
-                                    np.stack([-S.values[srows][ok], -np.ones(ok.sum())], axis=1)], axis=1) / sig
+                J = np.concatenate([chain(g, ok), np.stack([-self._take(S.values, srows)[ok], -np.ones(ok.sum())],
+                                                           axis=1)], axis=1) / sig
                 res = r[ok] / sig
                 w = self._weights(res, TUKEY)
                 pw = np.r_[1.0 / wide**2, 0.0, 0.0]
@@ -1191,8 +1233,9 @@ class DenseAligner:
     def _camera_cost(self, lvl: int, img: NDArray[np.float32], S: StaticLevel, srows: NDArray[np.int64], cam: Array,
                      photo_s: Array, T_cw: Array, sig: float, count: int) -> float:
         """The surroundings' robust cost (mean loss scaled to ``count``, as :meth:`_cost`) plus epsilon's prior."""
-        uv, _ = self._rigid_project(S.X[srows], cam, T_cw, jac=False)
-        r = bilinear(img, _at_level(uv, lvl)).astype(np.float64) - (photo_s[0] * S.values[srows] + photo_s[1])
+        uv, _ = self._rigid_project(self._take(S.X, srows), cam, T_cw, jac=False)
+        r = (bilinear(img, _at_level(uv, lvl)).astype(np.float64)
+             - (photo_s[0] * self._take(S.values, srows) + photo_s[1]))
         ok = np.isfinite(r)
         wide = self._wide()
         return (self._rho(r[ok] / sig, TUKEY) * count / max(int(ok.sum()), 1)
@@ -1267,7 +1310,7 @@ class DenseAligner:
         """The image at the level's samples ``rows`` deformed by each row of ``mus`` (K, N; NaN outside): as
         :meth:`_geometry` without the Jacobian, every candidate in one product and one lookup."""
         L = self.levels[lvl]
-        x = L.x[rows][None] + L.view.field.evaluate_many(mus)[:, rows]  # (K, N, 3)
+        x = self._take(L.x, rows)[None] + L.view.field.evaluate_many(mus)[:, rows]  # (K, N, 3)
         A, a = self._to_camera(f.total, T_cw)
         R_mo = self.T_mo[:3, :3]
         uv = self._pinhole(x.reshape(-1, 3) @ (A @ R_mo).T + (A @ self.T_mo[:3, 3] + a))

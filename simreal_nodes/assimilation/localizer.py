@@ -84,6 +84,7 @@ class MarkerLocalization(Localizer):
 
     def __init__(self, markers: MarkerLocalizer):
         self.markers = markers
+        self.localization_only = False  # no map to freeze; reported as told (:class:`MapFreeze` reads it)
 
     def step(self, gray: np.ndarray, stamp_ns: int, depth: np.ndarray | None = None,
              right: np.ndarray | None = None, focus: Sequence[np.ndarray] = ()) -> Localization:
@@ -91,7 +92,11 @@ class MarkerLocalization(Localizer):
         state = TrackingState.OK if res.T_wc is not None else TrackingState.LOST
         reason = (res.reason if res.T_wc is None
                   else f"{len(res.ids)} markers, {res.rms_px:.2f} px, position +-{res.std_pct:.2f} % of the distance")
-        return Localization(res.T_wc, state, reason, features=4 * len(res.ids))
+        return Localization(res.T_wc, state, reason, features=4 * len(res.ids),
+                            localization_only=self.localization_only)
+
+    def set_localization_only(self, on: bool) -> None:
+        self.localization_only = bool(on)
 
 
 class SlamLocalization(Localizer):
@@ -131,10 +136,14 @@ class StaticLocalization(Localizer):
 
     def __init__(self, T_wc: np.ndarray):
         self.T_wc = T_wc
+        self.localization_only = False  # no map to freeze; reported as told (:class:`MapFreeze` reads it)
 
     def step(self, gray: np.ndarray, stamp_ns: int, depth: np.ndarray | None = None,
              right: np.ndarray | None = None, focus: Sequence[np.ndarray] = ()) -> Localization:
-        return Localization(self.T_wc, 2)
+        return Localization(self.T_wc, 2, localization_only=self.localization_only)
+
+    def set_localization_only(self, on: bool) -> None:
+        self.localization_only = bool(on)
 
 
 def make_localizer(loc: dict[str, Any], cam: CameraModel, baseline: float | None = None, async_mapping: bool = False,
@@ -283,3 +292,54 @@ def status_text(r: Localization) -> tuple[str, str]:
     level = ("ok" if r.state in (TrackingState.OK, TrackingState.RELOCALIZED)
              else "warn" if r.state in (TrackingState.NOT_STARTED, TrackingState.INITIALIZING) else "error")
     return level, f"{STATE_NAMES.get(r.state, r.state)}" + (f": {r.reason}" if r.reason else "")
+
+
+class MapFreeze:
+    """The tracker's side of ``localization.freeze_map_on_deformation`` (thesis §4.4.1): once a deformation appears,
+    ask the localization to stop mapping; and ask again when the localization reports mapping after it was told (a
+    localization node restarted by the launcher's respawn starts a new map, mapping: what the first one was told died
+    with it). ROS-free: the tracker node feeds it and sends what it says.
+
+    Per frame :meth:`due` (is there a deformation, is the localization's service there): True means send the request
+    now, then :meth:`sent`; :meth:`answered` when the response comes; :meth:`status` with each of the localization's
+    status reports (its ``localization_only``). After an answer, :data:`STRIKES` reports in a row that say mapping
+    re-arm the request (one such report may have left the localization before the request was served). A request
+    whose service went away unanswered (the node died with it in flight) is forgotten, so that the next one goes out
+    once a service is there again."""
+
+    STRIKES = 2
+
+    def __init__(self, enabled: bool) -> None:
+        self.enabled = bool(enabled)
+        self.pending = False  # a request is out, not answered
+        self.told = False  # the localization answered that it stopped mapping
+        self.requests = 0  # requests sent so far
+        self._strikes = 0
+
+    def due(self, deforming: bool, service_ready: bool) -> bool:
+        """Whether to send the request now."""
+        if self.pending and not service_ready:
+            self.pending = False
+        return self.enabled and deforming and service_ready and not self.pending and not self.told
+
+    def sent(self) -> None:
+        self.pending, self._strikes = True, 0
+        self.requests += 1
+
+    def answered(self, success: bool) -> None:
+        self.pending = False
+        self.told = bool(success)
+
+    def status(self, localization_only: bool) -> bool:
+        """One status report of the localization; True when it re-armed the request (the localization is mapping
+        again, after it was told not to)."""
+        if not self.told:
+            return False
+        if localization_only:
+            self._strikes = 0
+            return False
+        self._strikes += 1
+        if self._strikes < self.STRIKES:
+            return False
+        self.told, self._strikes = False, 0
+        return True

@@ -122,6 +122,13 @@ def tracker_inputs(scene: dict) -> tuple[str, ...]:
     return ("obs",)
 
 
+def tracker_reads_status(scene: dict) -> bool:
+    """Whether the tracker node reads the localization's status: with ``localization.freeze_map_on_deformation``,
+    to ask a restarted localization again (a static camera has no localization node to ask)."""
+    loc = scene["localization"]
+    return bool(loc.get("freeze_map_on_deformation", False)) and loc["mode"] != "static"
+
+
 def tracker_reads_depth(scene: dict) -> bool:
     """Whether the tracker node takes depth (optional in its frame; the depth image of an RGB-D camera, or the
     stereo pair it matches itself, see :func:`tracker_stereo_depth`): an object placed by registration (its depth
@@ -229,7 +236,8 @@ def required_nodes(scene: dict, lossless: bool = False, source: str | None = Non
             list(dict.fromkeys([LOC_OBS if k == "obs" else image for k in tracker_inputs(scene)] + [info]
                                + ([t["depth"]] if depth and tracker_reads_depth(scene) else [])
                                + ([image, t["right"], t["right_info"]] if tracker_stereo_depth(scene)
-                                  else []))),
+                                  else [])
+                               + ([LOC_STATUS] if tracker_reads_status(scene) else []))),
             {**{params_topic(o["id"]): "simreal_msgs/msg/ModelParameters" for o in tracked},
              TRACKER_STATUS: "simreal_msgs/msg/TrackingStatus",
              **({LOC_DEFORMABLE: "sensor_msgs/msg/PointCloud2", LOC_FOCUS: "geometry_msgs/msg/PolygonInstanceStamped"}

@@ -928,3 +928,43 @@ def test_a_refinement_without_width_keeps_the_gauss_newton_solution(model):
     T = pose(0.03)
     r = al.solve(render(tex, T, 0.6, 1.0, seed=2), G.inv(T), np.array([0.5]), np.zeros(1), np.ones(1))
     assert abs(r.mu[0] - 0.6) < 0.05
+
+
+def test_the_robust_scales_median_is_numpys():
+    """``dense._median`` (the robust scale's, without ``np.median``'s overhead): the same value to the bit on odd,
+    even and tiny lengths, NaN where a sample is NaN (as numpy), NaN for no samples."""
+    from simreal_nodes.assimilation.dense import _median
+
+    rng = np.random.default_rng(0)
+    for n in (1, 2, 3, 4, 471, 1800, 7001):
+        a = rng.normal(size=n) * 10 ** rng.uniform(-3, 3)
+        assert _median(a) == float(np.median(a)), n
+        a[n // 2] = np.nan
+        assert np.isnan(_median(a)), n
+    assert np.isnan(_median(np.zeros(0)))
+
+
+def test_kept_gathers_and_priors_follow_the_template_and_the_shading(model):
+    """What a solve keeps between its iterations (``_take``'s gathers of the samples, ``_g_prior``, ``_wide``)
+    is the template's and the shading's as they are now: a view averaged into the template (``_average_in``, in
+    place), a frame's shading accepted or a setting changed is seen at once, and what is kept cannot be written to."""
+    al = _aligner(bend_model(), shading_frames=20)
+    T0 = pose()
+    tex = texture(0.5, seed=3)
+    assert al.set_reference(render(tex, T0, 0.0), G.inv(T0))
+    L = al.levels[0]
+    rows = np.arange(0, len(L.values), 2)
+    before = al._take(L.values, rows)
+    assert al._take(L.values, rows) is before and not before.flags.writeable
+    seen = al._take(L.values, rows) + 4.0
+    predicted = seen + np.random.default_rng(0).normal(0, 1, len(rows))
+    assert al._average_in(L.values, np.ones(len(L.values)), rows, seen, predicted, np.array([1.0, 0.0])) > 100
+    assert np.array_equal(al._take(L.values, rows), L.values[rows]) and not np.array_equal(before, L.values[rows])
+    P0, m0 = al._g_prior()
+    assert not P0.flags.writeable and not m0.flags.writeable and not m0.any()
+    al.g_frame = (np.eye(3), np.ones(3))
+    al.accept_shading()
+    P1, m1 = al._g_prior()
+    assert np.array_equal(P1, P0 + np.eye(3)) and np.allclose(m1, np.linalg.solve(P1, np.ones(3)))
+    al.s.prior_rot_rad = 0.02
+    assert al._wide()[0] == 0.02 and not al._wide().flags.writeable

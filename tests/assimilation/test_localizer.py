@@ -8,6 +8,7 @@ import pytest
 from simreal_nodes import geometry as G
 from simreal_nodes.assimilation.localizer import (
     LiveLocalizer,
+    MapFreeze,
     MarkerLocalization,
     SlamLocalization,
     StaticLocalization,
@@ -156,3 +157,44 @@ def test_live_map_stats_give_the_maps_size_for_the_diagnostics():
     assert live.map_stats()["map_keyframes"] == "1"
     del m.keyframes[7]
     live.close()
+
+
+def test_map_freeze_asks_once_and_again_when_the_localization_maps_again():
+    """``MapFreeze`` (the tracker's side of ``freeze_map_on_deformation``): one request once a deformation appears
+    and the service is there; none while it is out or answered; asked again only after two status reports in a row
+    say the localization maps (a respawned localization; one report may predate the request's service), or when the
+    service went away with the request unanswered; never when the scene does not ask for it."""
+    f = MapFreeze(True)
+    assert not f.due(deforming=False, service_ready=True) and not f.due(deforming=True, service_ready=False)
+    assert f.due(True, True)
+    f.sent()
+    assert not f.due(True, True)  # out: not again
+    assert not f.status(False) and not f.status(False)  # reports before the answer re-arm nothing
+    f.answered(True)
+    assert f.told and not f.due(True, True)
+    assert not f.status(False)  # one report may have left before the request was served
+    assert not f.status(True) and not f.status(False)  # frozen in between: the count starts again
+    assert f.status(False)  # two in a row: the localization maps again
+    assert not f.told and not f.due(False, True) and f.due(True, True)
+    f.sent()
+    assert not f.due(True, True)
+    assert not f.due(True, False)  # the service went away with the request in flight: forgotten
+    assert f.due(True, True) and f.requests == 2
+    f.sent()
+    f.answered(False)  # refused: not told, asked again at the next deforming frame
+    assert not f.told and f.due(True, True)
+    off = MapFreeze(False)
+    assert not off.due(True, True) and not off.status(False)
+
+
+def test_markers_and_a_static_camera_report_the_localization_only_they_were_asked():
+    """No map to freeze, but their status says what they were told (the tracker's MapFreeze reads it to tell a
+    restarted localization node, which was told nothing, from one that was)."""
+    for loc in (make_localizer(MARKERS, CAM), make_localizer({"mode": "static", "static_pose": [0, 0, 0, 0, 0, 0, 1]},
+                                                             CAM)):
+        img = np.full((480, 640), 255, np.uint8)
+        assert not loc.step(img, 0).localization_only
+        loc.set_localization_only(True)
+        assert loc.step(img, 1).localization_only
+        loc.set_localization_only(False)
+        assert not loc.step(img, 2).localization_only

@@ -126,6 +126,10 @@ def test_tracker_inputs_are_what_it_subscribes(name, needs_image):
     assert graph.LOC_DEFORMABLE in nodes["localization"].inputs
     assert graph.LOC_DEFORMABLE in nodes["tracker"].outputs
     assert graph.LOC_FOCUS in nodes["localization"].inputs and graph.LOC_FOCUS in nodes["tracker"].outputs
+    # the localization's status: read only to ask a restarted localization again to freeze its map
+    assert graph.LOC_STATUS not in nodes["tracker"].inputs
+    s["localization"]["freeze_map_on_deformation"] = True
+    assert graph.LOC_STATUS in {n.name: n for n in required_nodes(s)}["tracker"].inputs
 
 
 SPEC_SCENE = BASE + "objects:\n  - {id: beam, model: 'spec:aluminium_beam', parameters: {PARAM: {mode: tracked}}}\n"

@@ -141,7 +141,8 @@ def test_a_map_loaded_into_a_running_slam_leaves_nothing_of_the_session_before(r
     slam, _ = run(room, "rgbd", frames=range(100, 150))  # a session of its own on another stretch of the room
     ids = sorted(slam.map.points)[:40]
     slam.set_deformable(ids, np.zeros((len(ids), 3)))
-    slam.track(room["gray"][150], 150, depth=room["depth"][150])
+    r = slam.track(room["gray"][150], 150, depth=room["depth"][150])
+    assert 0 < r.timings["deformable_ms"] < r.timings["total_ms"]  # the object's points' measurement, timed
     assert slam.tracks._predicted and slam.tracker._local_key is not None and slam.mapper._recent_points
     slam.set_localization_only(True)
     m = Map.load(f)

@@ -788,6 +788,84 @@ def test_deformable_measurements_moving_unlike_their_neighbours_are_dropped():
     assert sorted(found) == sorted(set(pred) - set(wrong)) and not set(wrong) & set(tracks.sources)
 
 
+def _reacquire_one_by_one(tracks, f, kp_idx, ids_a, D, uv, has_pred, todo, radius):
+    """The re-acquisition as it was written until stop 96: a search and a descriptor comparison per point."""
+    from scipy.spatial import cKDTree
+
+    from simreal_nodes.vision.orb import hamming
+
+    tree, out = cKDTree(f.und[kp_idx]), {}
+    for k in todo:
+        pid = int(ids_a[k])
+        centres = [uv[k]] if (has_pred[k] or pid not in tracks._last_seen) else []
+        if pid in tracks._last_seen:
+            centres.append(tracks._last_seen[pid])
+        near: set[int] = set()
+        for q in centres:
+            if np.all(np.isfinite(q)):
+                near.update(tree.query_ball_point(q, radius))
+        if not near:
+            continue
+        c = kp_idx[np.fromiter(near, np.int64)]
+        d = hamming(np.repeat(D[k][None], len(c), axis=0), f.desc[c])
+        last = tracks._last_desc.get(pid)
+        if last is not None:
+            d = np.minimum(d, hamming(np.repeat(last[None], len(c), axis=0), f.desc[c]))
+        j = int(np.argmin(d))
+        if d[j] <= 50:
+            out[pid] = int(c[j])
+    return out
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_deformable_reacquisition_in_one_batch_makes_the_matches_of_a_search_per_point(seed):
+    """``DeformableTracks._reacquire`` (one tree query, one batch of distances) against the search per point it
+    replaced: the same point -> feature matches, ties included (descriptors a few bits apart, so that many
+    candidates tie at the least distance), with predictions, last observations, a last descriptor, points with no
+    finite centre and points with no candidate."""
+    rng = np.random.default_rng(seed)
+    n_kp, n_pts, n_base = 1500, 150, 3
+    base = rng.integers(0, 256, (n_base, 32), dtype=np.uint8)  # few distinct descriptors: many ties
+
+    def near_copy(rows):
+        out = base[rows].copy()
+        flip = rng.integers(0, 32, (len(rows), 3))
+        for r, cols in enumerate(flip):
+            out[r, cols] ^= np.uint8(1 << int(rng.integers(8)))
+        return out
+
+    uv_kp = rng.uniform(0, 640, (n_kp, 2))
+    f = Features(uv_kp.astype(np.float32), uv_kp, np.zeros(n_kp, np.int32), near_copy(rng.integers(0, n_base, n_kp)),
+                 np.ones(n_kp, np.float32), 1.2)
+    tracks = DeformableTracks(context())
+    ids_a = np.arange(1000, 1000 + n_pts)
+    D = near_copy(rng.integers(0, n_base, n_pts))
+    uv = rng.uniform(-20, 660, (n_pts, 2))
+    uv[rng.random(n_pts) < 0.1] = np.nan  # no finite prediction
+    has_pred = rng.random(n_pts) < 0.6
+    for k in np.flatnonzero(rng.random(n_pts) < 0.5):
+        tracks._last_seen[int(ids_a[k])] = uv[k] + rng.normal(0, 8, 2) if rng.random() < 0.9 else np.full(2, np.nan)
+    for k in np.flatnonzero(rng.random(n_pts) < 0.3):
+        tracks._last_desc[int(ids_a[k])] = near_copy([int(rng.integers(n_base))])[0]
+    kp_idx = np.flatnonzero(rng.random(n_kp) < 0.8)
+    todo = [int(k) for k in np.flatnonzero(rng.random(n_pts) < 0.9)]
+    for radius in (6.0, 20.0, 80.0):
+        got = tracks._reacquire(f, kp_idx, ids_a, D, uv, has_pred, todo, radius)
+        want = _reacquire_one_by_one(tracks, f, kp_idx, ids_a, D, uv, has_pred, todo, radius)
+        assert got == want and len(want) > (5 if radius < 10 else 50)
+    assert tracks._reacquire(f, kp_idx, ids_a, D, uv, has_pred, [], 20.0) == {}
+    # the 50-bit bound, both sides of it
+    one = DeformableTracks(context())
+    desc = np.zeros((2, 32), np.uint8)
+    desc[0, :6], desc[0, 6] = 255, 3  # 50 bits set
+    desc[1, :6], desc[1, 6] = 255, 7  # 51
+    for j, want in ((0, {7: 0}), (1, {})):
+        g = Features(np.full((1, 2), 100, np.float32), np.full((1, 2), 100.0), np.zeros(1, np.int32), desc[j:j + 1],
+                     np.ones(1, np.float32), 1.2)
+        assert one._reacquire(g, np.arange(1), np.array([7]), np.zeros((1, 32), np.uint8), np.full((1, 2), 101.0),
+                              np.ones(1, bool), [0], 20.0) == want
+
+
 def test_config_defaults_are_documented_and_checked():
     src = inspect.getsource(SlamConfig)
     for f in dataclasses.fields(SlamConfig):

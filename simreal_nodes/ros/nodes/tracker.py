@@ -6,7 +6,8 @@ and, for glued-dot measurements, the image of the same stamp, runs the ROS-free
 (ModelParameters: values, covariance, residual, inliers, state and reason). Once deformation appears
 (if the scene's ``localization.freeze_map_on_deformation``) it asks the localization node to stop mapping
 (parameter ``localization_service``: a name relative to the tracker's namespace, so a graph launched in a
-namespace reaches its own localization node; remappable like any service name). An object with
+namespace reaches its own localization node; remappable like any service name), and asks again when the
+localization's status reports it mapping after it was told (a restarted localization node). An object with
 ``anchor: registration`` is placed from the depth images (taken while it waits for them); dense measurements read
 the depth of their reference view. On a stereo camera the node makes that depth itself, by SGBM on the rectified
 pair (``camera.stereo_min_depth_m``), and only in the frames where depth is still read. After every frame it tells
@@ -25,6 +26,7 @@ from simreal_msgs.msg import FeatureObservations, ModelParameters, TrackingStatu
 from std_srvs.srv import SetBool
 
 from simreal_nodes import geometry as G
+from simreal_nodes.assimilation.localizer import MapFreeze
 from simreal_nodes.assimilation.objects import ObjectTrackers
 from simreal_nodes.assimilation.registration import RegistrationConfig
 from simreal_nodes.assimilation.tracker import Estimate
@@ -91,7 +93,9 @@ class TrackerNode(SimrealNode):
                              "the localization node's SetBool freezing its map; relative: in this node's namespace",
                              read_only=True)
         self.loc_client = self.create_client(SetBool, service)
-        self._loc_only_requested = False
+        self.freeze = MapFreeze(self.freeze_map)
+        if graph.tracker_reads_status(self.scene):  # what the localization was told: a restarted one is asked again
+            self.create_subscription(TrackingStatus, graph.LOC_STATUS, self.on_localization_status, reliable_qos(10))
         self.set_status("ok", f"tracking {', '.join(o['id'] for o in self.objects)}")
 
     @guarded
@@ -176,10 +180,21 @@ class TrackerNode(SimrealNode):
                 self.pub_deformable.publish(cloud_msg(P, head, self.map_frame, {"id": ids, "flags": flags}))
         for k, poly in focus:
             self.pub_focus.publish(focus_msg(poly, k, head, self.camera_frame))
-        if deforming and self.freeze_map and not self._loc_only_requested and self.loc_client.service_is_ready():
-            self.loc_client.call_async(SetBool.Request(data=True))
-            self._loc_only_requested = True
-            self.get_logger().info("deformation appeared: localization-only mode requested")
+        if self.freeze.due(deforming, self.loc_client.service_is_ready()):
+            self.loc_client.call_async(SetBool.Request(data=True)).add_done_callback(self._freeze_answered)
+            self.freeze.sent()
+            self.get_logger().info("deformation appeared: localization-only mode requested"
+                                   + (" again" if self.freeze.requests > 1 else ""))
+
+    @guarded
+    def _freeze_answered(self, future) -> None:
+        self.freeze.answered(future.exception() is None and bool(future.result().success))
+
+    @guarded
+    def on_localization_status(self, msg: TrackingStatus) -> None:
+        if self.freeze.status(bool(msg.localization_only)):
+            self.get_logger().warning("the localization is mapping again (restarted?): localization-only mode will "
+                                      "be requested again")
 
     def close(self) -> None:
         self.core.close()

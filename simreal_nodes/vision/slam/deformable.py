@@ -156,30 +156,11 @@ class DeformableTracks:
         avail[np.asarray(exclude, np.int64)] = False
         kp_idx = np.flatnonzero(avail)
         if len(kp_idx):
-            tree = cKDTree(f.und[kp_idx])
-            for k, pid in enumerate(ids_a):
-                pid = int(pid)
-                if pid in found or zc[k] <= 0:
-                    continue
-                centres = [uv[k]] if (has_pred[k] or pid not in self._last_seen) else []
-                if pid in self._last_seen:
-                    centres.append(self._last_seen[pid])
-                near: set[int] = set()
-                for q in centres:
-                    if np.all(np.isfinite(q)):
-                        near.update(tree.query_ball_point(q, radius))
-                if not near:
-                    continue
-                c = kp_idx[np.fromiter(near, np.int64)]
-                d = hamming(np.repeat(D[k][None], len(c), axis=0), f.desc[c])
-                last = self._last_desc.get(pid)
-                if last is not None:
-                    d = np.minimum(d, hamming(np.repeat(last[None], len(c), axis=0), f.desc[c]))
-                j = int(np.argmin(d))
-                if d[j] <= 50:
-                    found[pid] = f.uv[c[j]].astype(np.float64)
-                    new_desc[pid] = f.desc[c[j]].copy()
-                    self.sources[pid] = "descriptor"
+            todo = [k for k, pid in enumerate(ids_a) if int(pid) not in found and zc[k] > 0]
+            for pid, j in self._reacquire(f, kp_idx, ids_a, D, uv, has_pred, todo, radius).items():
+                found[pid] = f.uv[j].astype(np.float64)
+                new_desc[pid] = f.desc[j].copy()
+                self.sources[pid] = "descriptor"
         if cfg.coherence_px > 0 and len(found) > cfg.coherence_min:
             self._coherent(found, {int(pid): raw_pred[k] for k, pid in enumerate(ids_a)})
         # 3. every measurement of a point whose track started in an earlier image is taken against that image;
@@ -216,6 +197,56 @@ class DeformableTracks:
         res.obs_uv = np.concatenate([res.obs_uv, raw])
         res.obs_inlier = np.concatenate([res.obs_inlier, np.zeros(len(new_ids), bool)])
         res.obs_pos = np.concatenate([res.obs_pos, m._pos[m.rows(new_ids)]])
+
+    def _reacquire(self, f: Features, kp_idx: np.ndarray, ids_a: np.ndarray, D: np.ndarray, uv: np.ndarray,
+                   has_pred: np.ndarray, todo: list[int], radius: float) -> dict[int, int]:
+        """Step 2 of :meth:`_measure` for the points ``todo`` (rows of ``ids_a``, ``D``, ``uv``): point id -> the
+        feature (index into ``f``) it is re-acquired at. A point's candidates are the features of ``kp_idx`` within
+        ``radius`` of its search centres (its predicted pixel, where it has a prediction or no last observation, and
+        its last observation); its match is the candidate at the least Hamming distance to the map's descriptor or
+        to that of its last ORB match, if within 50 bits (a tie: the first in the order the set of candidates
+        iterates). The centres are searched in one query and the distances counted in one batch (stop 96: the
+        same matches as a search per point and a few times faster; ``benchmarks/points_budget.py``)."""
+        owner, centres = [], []  # each search centre and the row of ``todo`` it belongs to
+        for t, k in enumerate(todo):
+            pid = int(ids_a[k])
+            if has_pred[k] or pid not in self._last_seen:
+                owner.append(t)
+                centres.append(uv[k])
+            if pid in self._last_seen:
+                owner.append(t)
+                centres.append(self._last_seen[pid])
+        if not centres:
+            return {}
+        Q = np.asarray(centres, np.float64).reshape(-1, 2)
+        finite = np.all(np.isfinite(Q), axis=1)
+        hits = np.empty(len(Q), object)
+        hits[finite] = cKDTree(f.und[kp_idx]).query_ball_point(Q[finite], radius, return_sorted=False)
+        near: list[set[int]] = [set() for _ in todo]
+        for t, ok, h in zip(owner, finite, hits):
+            if ok:
+                near[t].update(h)
+        rows = [t for t in range(len(todo)) if near[t]]
+        if not rows:
+            return {}
+        sizes = np.array([len(near[t]) for t in rows])
+        starts = np.r_[0, np.cumsum(sizes)[:-1]]
+        cand = kp_idx[np.fromiter((i for t in rows for i in near[t]), np.int64, int(sizes.sum()))]
+        k_of = np.repeat(np.asarray(todo, np.int64)[rows], sizes)
+        d = hamming(D[k_of], f.desc[cand])
+        last = [self._last_desc.get(int(ids_a[todo[t]])) for t in rows]
+        with_last = np.array([x is not None for x in last])
+        if with_last.any():
+            L = np.stack([x for x in last if x is not None])
+            sel = np.repeat(with_last, sizes)
+            slot = np.repeat(np.cumsum(with_last) - 1, sizes)[sel]
+            d[sel] = np.minimum(d[sel], hamming(L[slot], f.desc[cand[sel]]))
+        best = np.minimum.reduceat(d, starts)
+        seg = np.repeat(np.arange(len(rows)), sizes)
+        at_best = np.flatnonzero(d == best[seg])
+        _, first = np.unique(seg[at_best], return_index=True)  # each point's first candidate at its least distance
+        j = cand[at_best[first]]
+        return {int(ids_a[todo[t]]): int(j[n]) for n, t in enumerate(rows) if best[n] <= 50}
 
     def _coherent(self, found: dict[int, np.ndarray], pred: dict[int, np.ndarray]) -> None:
         """Drop from ``found`` the measurements that move unlike their image neighbours: each measurement's offset

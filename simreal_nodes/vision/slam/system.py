@@ -37,7 +37,7 @@ from simreal_nodes.vision.slam.loop_closing import LoopCloser
 from simreal_nodes.vision.slam.map import Map
 from simreal_nodes.vision.slam.relocalization import Relocalizer
 from simreal_nodes.vision.slam.result import TrackResult
-from simreal_nodes.vision.slam.tracking import Tracker
+from simreal_nodes.vision.slam.tracking import PoseFix, Tracker
 from simreal_nodes.vision.slam.two_view import Initializer
 from simreal_nodes.vision.stereo import sparse_stereo_depth
 
@@ -154,11 +154,11 @@ class Slam:
         elif ctx.state == LOST:
             res, fix = self.relocalizer.relocalize(feats, tim)
             if fix is not None:
-                self.tracks.observe(feats, fix.T_cw, res, exclude=fix.match[:, 0])
+                self._observe(feats, fix, res, tim)
         else:
             res, fix = self.tracker.track(feats, tim)
             if fix is not None:
-                self.tracks.observe(feats, fix.T_cw, res, exclude=fix.match[:, 0])
+                self._observe(feats, fix, res, tim)
                 if not self.localization_only and self.mapper.need_keyframe(res.n_inliers):
                     t3 = time.perf_counter()
                     kf = self.mapper.insert_keyframe(stamp, fix.T_cw, feats, z, fix.match, fix.inl,
@@ -177,6 +177,13 @@ class Slam:
         res.timings.update(tim)
         res.timings["total_ms"] = (time.perf_counter() - t0) * 1e3
         return res
+
+    def _observe(self, feats: Features, fix: PoseFix, res: TrackResult, tim: dict[str, float]) -> None:
+        """The deforming objects' map points measured in this frame (:meth:`DeformableTracks.observe`), timed as
+        ``deformable_ms``."""
+        t0 = time.perf_counter()
+        self.tracks.observe(feats, fix.T_cw, res, exclude=fix.match[:, 0])
+        tim["deformable_ms"] = (time.perf_counter() - t0) * 1e3
 
     def _fail(self, reason: str, tim: dict[str, float], nf: int) -> TrackResult:
         """A frame not processed (``reason``): a tracked camera is lost."""
