@@ -107,7 +107,8 @@ def summary(doc: dict, first: dict | None) -> dict:
            "deformable_ms_p50": med("deformable_ms"), "tracking_ms_p50": float(np.median(tracking)),
            "tracker_ms_p50": med("tracker_ms")}
     if first is not None:
-        out["frames_differ"] = int(sum(a["digest"] != b["digest"] for a, b in zip(first["frames"], doc["frames"])))
+        out["frames_differ"] = int(sum(a["digest"] != b["digest"] for a, b in zip(first["frames"], doc["frames"]))
+                                   + abs(len(first["frames"]) - len(doc["frames"])))  # a frame missing differs
     return out
 
 

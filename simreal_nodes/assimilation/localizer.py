@@ -301,18 +301,21 @@ class MapFreeze:
     with it). ROS-free: the tracker node feeds it and sends what it says.
 
     Per frame :meth:`due` (is there a deformation, is the localization's service there): True means send the request
-    now, then :meth:`sent`; :meth:`answered` when the response comes; :meth:`status` with each of the localization's
-    status reports (its ``localization_only``). After an answer, :data:`STRIKES` reports in a row that say mapping
-    re-arm the request (one such report may have left the localization before the request was served). A request
-    whose service went away unanswered (the node died with it in flight) is forgotten, so that the next one goes out
-    once a service is there again."""
+    now (call :meth:`sent` first); :meth:`answered` when the response comes; :meth:`status` with each of the
+    localization's status reports (its ``localization_only``). After an answer, :data:`STRIKES` reports in a row that
+    say mapping re-arm the request (one such report may have left the localization before the request was served). A
+    request still out is settled by the reports as well: one that says frozen is taken as its answer, and
+    :data:`LOST_AFTER` in a row that say mapping as its loss (a node that died with the request, or a server that
+    dropped it: the response never comes, and while the localization is down the tracker gets no frame to see its
+    service gone); so is one whose service went away."""
 
     STRIKES = 2
+    LOST_AFTER = 30  # status reports (frames) in a row that say mapping while a request is out: it was lost
 
     def __init__(self, enabled: bool) -> None:
         self.enabled = bool(enabled)
         self.pending = False  # a request is out, not answered
-        self.told = False  # the localization answered that it stopped mapping
+        self.told = False  # the localization answered (or reported) that it stopped mapping
         self.requests = 0  # requests sent so far
         self._strikes = 0
 
@@ -327,19 +330,22 @@ class MapFreeze:
         self.requests += 1
 
     def answered(self, success: bool) -> None:
-        self.pending = False
+        self.pending, self._strikes = False, 0
         self.told = bool(success)
 
     def status(self, localization_only: bool) -> bool:
         """One status report of the localization; True when it re-armed the request (the localization is mapping
-        again, after it was told not to)."""
-        if not self.told:
-            return False
+        again after it was told not to, or a request out was lost)."""
         if localization_only:
+            if self.pending:  # served: its response may still come (and says the same)
+                self.pending, self.told = False, True
             self._strikes = 0
             return False
-        self._strikes += 1
-        if self._strikes < self.STRIKES:
+        if not (self.told or self.pending):
             return False
-        self.told, self._strikes = False, 0
+        self._strikes += 1
+        if self._strikes < (self.LOST_AFTER if self.pending else self.STRIKES):
+            return False
+        self.told = self.pending = False
+        self._strikes = 0
         return True

@@ -163,7 +163,8 @@ def test_map_freeze_asks_once_and_again_when_the_localization_maps_again():
     """``MapFreeze`` (the tracker's side of ``freeze_map_on_deformation``): one request once a deformation appears
     and the service is there; none while it is out or answered; asked again only after two status reports in a row
     say the localization maps (a respawned localization; one report may predate the request's service), or when the
-    service went away with the request unanswered; never when the scene does not ask for it."""
+    request was lost (its service went away, or many reports in a row say mapping while it is out); a report that
+    says frozen answers a request out; never when the scene does not ask for it."""
     f = MapFreeze(True)
     assert not f.due(deforming=False, service_ready=True) and not f.due(deforming=True, service_ready=False)
     assert f.due(True, True)
@@ -183,6 +184,16 @@ def test_map_freeze_asks_once_and_again_when_the_localization_maps_again():
     f.sent()
     f.answered(False)  # refused: not told, asked again at the next deforming frame
     assert not f.told and f.due(True, True)
+    # a request out is settled by the reports too: one that says frozen answers it, ...
+    f.sent()
+    assert not f.status(True) and f.told and not f.pending and not f.due(True, True)
+    f.answered(True)  # its response, late: the same
+    assert f.told and not f.due(True, True)
+    # ... and LOST_AFTER in a row that say mapping lose it (the localization died with it; its service still listed)
+    assert not f.status(False) and f.status(False) and f.due(True, True)
+    f.sent()
+    assert not any(f.status(False) for _ in range(MapFreeze.LOST_AFTER - 1)) and not f.due(True, True)
+    assert f.status(False) and not f.pending and f.due(True, True) and f.requests == 5
     off = MapFreeze(False)
     assert not off.due(True, True) and not off.status(False)
 

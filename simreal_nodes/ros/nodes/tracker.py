@@ -181,8 +181,8 @@ class TrackerNode(SimrealNode):
         for k, poly in focus:
             self.pub_focus.publish(focus_msg(poly, k, head, self.camera_frame))
         if self.freeze.due(deforming, self.loc_client.service_is_ready()):
-            self.loc_client.call_async(SetBool.Request(data=True)).add_done_callback(self._freeze_answered)
             self.freeze.sent()
+            self.loc_client.call_async(SetBool.Request(data=True)).add_done_callback(self._freeze_answered)
             self.get_logger().info("deformation appeared: localization-only mode requested"
                                    + (" again" if self.freeze.requests > 1 else ""))
 
@@ -193,8 +193,8 @@ class TrackerNode(SimrealNode):
     @guarded
     def on_localization_status(self, msg: TrackingStatus) -> None:
         if self.freeze.status(bool(msg.localization_only)):
-            self.get_logger().warning("the localization is mapping again (restarted?): localization-only mode will "
-                                      "be requested again")
+            self.get_logger().warning("the localization is mapping (restarted, or the request was lost): "
+                                      "localization-only mode will be requested again")
 
     def close(self) -> None:
         self.core.close()

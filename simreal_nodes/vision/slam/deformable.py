@@ -206,7 +206,7 @@ class DeformableTracks:
         its last observation); its match is the candidate at the least Hamming distance to the map's descriptor or
         to that of its last ORB match, if within 50 bits (a tie: the first in the order the set of candidates
         iterates). The centres are searched in one query and the distances counted in one batch (stop 96: the
-        same matches as a search per point and a few times faster; ``benchmarks/points_budget.py``)."""
+        same matches, in the same order, as a search per point)."""
         owner, centres = [], []  # each search centre and the row of ``todo`` it belongs to
         for t, k in enumerate(todo):
             pid = int(ids_a[k])
