@@ -180,7 +180,8 @@ class TrackerNode(SimrealNode):
                 self.pub_deformable.publish(cloud_msg(P, head, self.map_frame, {"id": ids, "flags": flags}))
         for k, poly in focus:
             self.pub_focus.publish(focus_msg(poly, k, head, self.camera_frame))
-        if self.freeze.due(deforming, self.loc_client.service_is_ready()):
+        # the service's presence is asked of rcl only where the scene freezes the map (not every frame of every scene)
+        if self.freeze.enabled and self.freeze.due(deforming, self.loc_client.service_is_ready()):
             self.freeze.sent()
             self.loc_client.call_async(SetBool.Request(data=True)).add_done_callback(self._freeze_answered)
             self.get_logger().info("deformation appeared: localization-only mode requested"
