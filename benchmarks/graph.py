@@ -10,11 +10,15 @@ all nodes in one process (``--one-process``), on two scenes:
 
     ./run bench graph
 
-Two replays of each scene's sample bag per resolution and launch: *lossless* (the player waits for every frame to
-leave the graph before the next: lock-step throughput) and *real time* at the bag's 30 fps (live QoS: a busy node
-takes the newest frame and skips the others). Reported: frames that went through every node per second of play
-and as a fraction, latency from publication to the overlay's report (its own clock), each node's processing time,
-the CPU each process used per published frame (from /proc), and the nodes' CPU per frame in all.
+Three replays of each scene's sample bag per resolution and launch: *lossless* (the player waits for every frame to
+leave the graph before the next: lock-step throughput), *lossless with IN_FLIGHT frames in flight* (every frame still
+processed by every node, in order; the nodes of a process per node overlap) and *real time* at the bag's 30 fps
+(live QoS: a busy node takes the newest frame and skips the others); on the demo at 640 x 480 also 2 and 8 frames in
+flight (``graph_in_flight``: the trade of frames a second against latency). Reported: frames that went through
+every node per second of play and as a fraction, latency from publication to the overlay's report (its own clock),
+each node's processing time, the CPU each process used per published frame (from /proc), and the nodes' CPU per
+frame in all. The recorder counts the graph's image outputs without writing them (``run_case``'s
+``record_images``).
 """
 
 from __future__ import annotations
@@ -35,23 +39,39 @@ CASES = (("aluminium_beam", "640x480", None), ("aluminium_beam", "1280x720", 4.0
          ("family-3", "640x480", None))
 PLAYER = "player + recorder"
 POSE_TOPIC = "/simreal/localization/pose"
+# the lossless rows with frames in flight: as many as the graphs' per-frame nodes (ingest, localization, tracker,
+# overlay), so that with a process per node each can work on a frame of its own
+IN_FLIGHT = 4
+SWEEP_CASE = ("aluminium_beam", "640x480")  # the in-flight trade, measured besides 1 and IN_FLIGHT at these
+SWEEP = (2, 8)
 
 
 def main():
-    rows = []
+    rows, sweep = [], []
     for scene, res, duration in CASES:
         bag, scene_yaml = sample_bag(scene, duration=duration, resolution=res, echo=lambda *a: None)
-        for lossless in (True, False):
+        for lossless, in_flight in ((True, 1), (True, IN_FLIGHT), (False, 1)):
             for one_process in (False, True):
-                rows.append(run_case(scene, res, bag, scene_yaml, lossless, one_process))
+                rows.append(run_case(scene, res, bag, scene_yaml, lossless, one_process, in_flight=in_flight,
+                                     record_images=False))
                 print(rows[-1], flush=True)
+        if (scene, res) == SWEEP_CASE:
+            for in_flight in SWEEP:
+                for one_process in (False, True):
+                    sweep.append(run_case(scene, res, bag, scene_yaml, True, one_process, in_flight=in_flight,
+                                          record_images=False))
+                    print(sweep[-1], flush=True)
     report(rows)
+    report_in_flight(rows, sweep)
 
 
 def run_case(scene, res, bag, scene_yaml, lossless, one_process, executor=None, evaluate=None,
-             isolated=True) -> dict:
+             isolated=True, in_flight=1, record_images=True) -> dict:
     """One replay; ``executor``: the nodes' and the player's (None: the default); ``evaluate(record) -> dict``:
-    more of the row, read from the replay's record (picklable: a top-level function or a partial of one).
+    more of the row, read from the replay's record (picklable: a top-level function or a partial of one);
+    ``in_flight``: lossless, the frames the player lets into the graph at once (1: lock-step); ``record_images``:
+    False, the graph's image outputs are received and counted, not written (the harness then costs what a display
+    would, not a disk: at 1280 x 720 the two raw images a frame cost the player about 7 ms of CPU a frame to write).
 
     ``isolated``: the replay runs in a fresh process, as ``simreal replay`` does, so that no case inherits another's
     process state. (Until stop 82 the replay never shut its EventsExecutor down, which kept the native memory of
@@ -63,11 +83,12 @@ def run_case(scene, res, bag, scene_yaml, lossless, one_process, executor=None, 
 
         with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as pool:
             return pool.submit(run_case, scene, res, bag, scene_yaml, lossless, one_process, executor, evaluate,
-                               False).result()
+                               False, in_flight, record_images).result()
     with tempfile.TemporaryDirectory() as tmp:
         t0 = time.monotonic()
         stats, _, counts = replay(str(bag), str(scene_yaml), lossless=lossless, record=str(Path(tmp) / "run"),
-                                  echo=lambda *a: None, one_process=one_process, executor=executor)
+                                  echo=lambda *a: None, one_process=one_process, executor=executor,
+                                  in_flight=in_flight, record_images=record_images)
         wall = time.monotonic() - t0
         nodes = node_metrics(Path(tmp) / "run")
         extra = evaluate(Path(tmp) / "run") if evaluate else {}
@@ -75,7 +96,8 @@ def run_case(scene, res, bag, scene_yaml, lossless, one_process, executor=None, 
     lat = d["latency_ms"]
     last = lat.get("overlay") or next(iter(lat.values()), {"p50": float("nan"), "p95": float("nan")})
     cpu = d["cpu_ms_per_frame"]
-    return dict(scene=scene, resolution=res, mode="lossless" if lossless else "real time (30 fps)",
+    mode = ("lossless" if in_flight == 1 else f"lossless, {in_flight} in flight") if lossless else "real time (30 fps)"
+    return dict(scene=scene, resolution=res, mode=mode, in_flight=in_flight if lossless else None,
                 launch="one process" if one_process else "process per node", executor=executor or executor_kind(),
                 fps=d["fps_through"], delivered_pct=100 * d["frames_completed"] / max(d["frames_published"], 1),
                 # the localization's own output (pose, TF): what a robot stack reads, whatever the later nodes do
@@ -106,7 +128,7 @@ def budget_rows(rows: list[dict]) -> list[dict]:
     localization also its mapping process)."""
     out = []
     for r in rows:
-        if r["mode"] != "lossless":
+        if r["mode"] != "lossless":  # the lock-step runs: each node's time alone
             continue
         for n in NODES:
             b = r["budget"].get(n)
@@ -160,14 +182,54 @@ def report(rows):
          "frames): the difference is the executor, the middleware and the timers. 'nodes' is the one process of "
          "`--one-process`; the player + recorder is the test harness (the bag reader, the camera's stand-in). "
          "Camera poses out: the frames the localization published a pose (and TF) for, whatever the later nodes did. "
-         "Cores busy: all CPU over the play time. Real time: live QoS, a busy node takes the newest frame "
-         "(skipped frames are the 'not through' ones). 2-core CPU, Mesa llvmpipe for the overlay.\n\n"
-         "## Per-stage budget (lossless runs; ms per frame, p50 of each node's /diagnostics)\n\n"
+         "Cores busy: all CPU over the play time. Lossless: reliable QoS with deep queues, every frame processed by "
+         "every node in order; plain 'lossless' is lock-step (the player publishes a frame when every node reported "
+         f"the last: one frame in the graph, its fps the inverse of a frame's trip), 'lossless, {IN_FLIGHT} in "
+         f"flight' lets up to {IN_FLIGHT} frames in at once (nodes in their own processes work on different frames; "
+         "latency then includes the queue; `simreal replay --lossless --in-flight N`). Real time: live QoS, a busy "
+         "node takes the newest frame (skipped frames are the 'not through' ones). The recorder counts the image "
+         "outputs (camera, overlay) without writing them (the harness costs a display's reception, not a disk's). "
+         "2-core CPU, Mesa llvmpipe for the overlay.\n\n"
+         "## Per-stage budget (lock-step lossless runs; ms per frame, p50 of each node's /diagnostics)\n\n"
          + markdown_table(budget_rows(rows), BUDGET_COLS) + "\n\n"
          "decode: messages to arrays (for ingest: the JPEG decompression); work: the ROS-free core; encode: arrays "
          "to messages and their publication; processing: the whole callback. CPU/frame and the rest (CPU/frame "
          "less processing: the executor, the middleware's receiving side, timers, and for the localization its "
          "mapping process) only where each node has its own process.", plot)
+
+
+def report_in_flight(rows: list[dict], sweep: list[dict]) -> None:
+    """The in-flight trade on the demo at 640 x 480: frames a second against latency, for 1, 2, IN_FLIGHT and 8
+    frames in flight, each launch."""
+    pts = sorted([r for r in rows if (r["scene"], r["resolution"]) == SWEEP_CASE and r["in_flight"]] + sweep,
+                 key=lambda r: (r["launch"], r["in_flight"]))
+
+    def plot(plt):
+        fig, ax = plt.subplots(figsize=(6, 4))
+        for launch, color in (("process per node", "tab:blue"), ("one process", "tab:orange")):
+            mine = [r for r in pts if r["launch"] == launch]
+            ax.plot([r["latency_p50"] for r in mine], [r["fps"] for r in mine], "o-", color=color, label=launch)
+            for r in mine:
+                ax.annotate(str(r["in_flight"]), (r["latency_p50"], r["fps"]), fontsize=7, xytext=(3, 3),
+                            textcoords="offset points")
+        ax.axhline(60, color="k", ls=":", lw=0.8)
+        ax.set_xlabel("latency to the overlay's output, p50 (ms)")
+        ax.set_ylabel("frames per second through the graph")
+        ax.set_title("demo, 640 x 480, lossless: frames in flight (labels)", fontsize=9)
+        ax.legend(fontsize=7)
+        fig.tight_layout()
+        return fig
+
+    cols = [("launch", "launch", "{}"), ("in_flight", "frames in flight", "{}"), ("fps", "fps through", "{:.1f}"),
+            ("delivered_pct", "frames through (%)", "{:.0f}"), ("latency_p50", "latency p50 (ms)", "{:.0f}"),
+            ("latency_p95", "p95 (ms)", "{:.0f}"), ("nodes_cpu_ms", "nodes' CPU/frame (ms)", "{:.1f}"),
+            ("cores_busy", "cores busy", "{:.2f}")]
+    save("graph_in_flight", pts, cols, "Lossless replay of the demo (640 x 480): frames in flight against frames a "
+         "second and latency, one process per node and one process",
+         "`./run bench graph` (the 1 and 4 rows are graph.md's). Every frame goes through every node, in order, at "
+         "any setting (frames through 100 %). More frames in flight let the nodes of a process per node work at "
+         "once, on two cores; one process runs one callback at a time and gains only the player's overlap. The "
+         "price is latency: a frame waits behind the ones before it.", plot)
 
 
 BUDGET_COLS = [("scene", "scene", "{}"), ("resolution", "resolution", "{}"), ("launch", "launch", "{}"),

@@ -256,12 +256,14 @@ def catch_launcher(monkeypatch, module) -> dict:
     return seen
 
 
-@pytest.mark.parametrize("sample,lossless,one", [
-    ("aluminium_beam_320x240", False, True),  # markers: one process, live too
-    ("crossed_beams_probe_320x240", False, False),  # RGB-D SLAM live: a process per node
-    ("crossed_beams_probe_320x240", True, True),  # lossless: one process
+@pytest.mark.parametrize("sample,lossless,in_flight,one", [
+    ("aluminium_beam_320x240", False, 1, True),  # markers: one process, live too
+    ("crossed_beams_probe_320x240", False, 1, False),  # RGB-D SLAM live: a process per node
+    ("crossed_beams_probe_320x240", True, 1, True),  # lossless, lock-step: one process
+    ("aluminium_beam_320x240", True, 3, False),  # lossless with frames in flight: a process per node
+    ("aluminium_beam_320x240", False, 3, True),  # live: the player's in-flight bound does not apply
 ])
-def test_a_replay_picks_the_launch_the_cli_left_open(monkeypatch, sample, lossless, one):
+def test_a_replay_picks_the_launch_the_cli_left_open(monkeypatch, sample, lossless, in_flight, one):
     """`simreal replay` without --one-process / --process-per-node: the scene's pick
     (scene.graph.one_process_default) reaches the launcher."""
     from simreal_nodes.ros import commands
@@ -269,8 +271,38 @@ def test_a_replay_picks_the_launch_the_cli_left_open(monkeypatch, sample, lossle
     seen = catch_launcher(monkeypatch, commands)
     with pytest.raises(Reached):
         commands.replay(str(SAMPLES / sample), str(SAMPLES / f"{sample}.yaml"), lossless=lossless, one_process=None,
-                        echo=lambda *a: None)
+                        echo=lambda *a: None, in_flight=in_flight)
     assert seen["one_process"] is one
+
+
+def test_the_in_flight_option_is_parsed_refused_when_bad_and_reaches_the_replay(monkeypatch):
+    """`simreal replay --in-flight N`: a whole number >= 1 (default 1, lock-step), passed on to the player."""
+    from simreal_nodes.cli import build_parser
+    from simreal_nodes.ros import commands
+
+    p = build_parser()
+    cmd = ["replay", "b", "--scene", "s.yaml", "--lossless"]
+    assert p.parse_args(cmd).in_flight == 1
+    assert p.parse_args([*cmd, "--in-flight", "4"]).in_flight == 4
+    for bad in ("0", "-2", "1.5", "two"):
+        with pytest.raises(SystemExit):
+            p.parse_args([*cmd, "--in-flight", bad])
+    seen = {}
+
+    def fake_replay(*a, **kw):
+        seen.update(kw)
+        raise Reached
+
+    real_replay = commands.replay
+    monkeypatch.setattr(commands, "replay", fake_replay)
+    a = p.parse_args([*cmd, "--in-flight", "3"])
+    with pytest.raises(Reached):
+        a.fn(a)
+    assert seen["in_flight"] == 3
+    # the function refuses what the parser would, before it reads anything
+    for bad in (0, -1, 2.0, True):
+        with pytest.raises(SimrealError, match="frames in flight"):
+            real_replay("no-such-bag", "no-such-scene.yaml", in_flight=bad)
 
 
 @pytest.mark.parametrize("sample,lossless,one", [

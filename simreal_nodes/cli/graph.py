@@ -41,6 +41,16 @@ def add_executor(s: argparse.ArgumentParser) -> None:
                         "linear algebra's pools and OpenCV's own (benchmarks/results/threads.md)")
 
 
+def _at_least_one(text: str) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        n = 0
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {text!r}")
+    return n
+
+
 def _threads(text: str) -> int:
     from simreal_nodes.launch import THREADS_ENV, node_threads
 
@@ -75,7 +85,7 @@ def cmd_replay(a: argparse.Namespace) -> int:
                               storage=a.storage, launch=not a.no_launch, frame_timeout_s=a.frame_timeout,
                               metrics_json=a.metrics, namespace=a.namespace,
                               standby=False if a.no_standby else None, one_process=a.one_process,
-                              executor=a.executor, threads=a.threads)
+                              executor=a.executor, threads=a.threads, in_flight=a.in_flight)
     return 0 if stats is not None and not stats.record_error else 1
 
 
@@ -123,6 +133,10 @@ def add_replay(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--storage", choices=("mcap", "sqlite3"), default="mcap")
     s.add_argument("--no-launch", action="store_true", help="the graph is already running")
     s.add_argument("--frame-timeout", type=float, default=30.0, help="lossless: seconds to wait per frame")
+    s.add_argument("--in-flight", type=_at_least_one, default=1, metavar="N",
+                   help="lossless: frames let into the graph at once (default 1: each frame waits for the last to "
+                        "leave, the least latency; more: a process per node overlaps them, more frames a second, "
+                        "none lost; benchmarks/results/graph.md measures the trade)")
     s.add_argument("--metrics", metavar="JSON", help="write replay statistics here")
     s.add_argument("--namespace", default="", help="the graph's ROS namespace")
     s.add_argument("--no-standby", action="store_true",

@@ -45,8 +45,12 @@ class Recorder:
     """Raw subscriptions on a node, written to a :class:`bags.BagWriter`."""
 
     def __init__(self, node: Node, path, storage: str = "mcap", topics: dict[str, str] | None = None,
-                 discover: bool = False, exclude: tuple[str, ...] = ("/rosout", "/parameter_events")):
+                 discover: bool = False, exclude: tuple[str, ...] = ("/rosout", "/parameter_events"),
+                 count_only: tuple[str, ...] = ()):
+        """``count_only``: topics subscribed to and counted but not written (their messages cost a reader's
+        reception, not a disk's)."""
         self.node = node
+        self.count_only = frozenset(count_only)
         self.writer = bags.BagWriter(path, storage).open()
         self.exclude = exclude
         self._subs: dict[str, Subscription | None] = {}  # None: waiting for a publisher
@@ -83,7 +87,8 @@ class Recorder:
         self._pending.pop(topic, None)
         try:
             cls = message_class(msgtype)
-            self.writer.add_topic(topic, msgtype)
+            if topic not in self.count_only:
+                self.writer.add_topic(topic, msgtype)
         except Exception as e:  # noqa: BLE001 - a type we cannot record is reported, not fatal
             self.node.get_logger().warning(f"not recording {topic} ({msgtype}): {e}")
             self._subs[topic] = None
@@ -91,6 +96,9 @@ class Recorder:
 
         def cb(raw: bytes, topic=topic):
             if self.failed:
+                return
+            if topic in self.count_only:
+                self.counts[topic] += 1
                 return
             try:
                 self.writer.write_raw(topic, self.node.get_clock().now().nanoseconds, raw)
@@ -178,8 +186,12 @@ class Player:
 
     def __init__(self, node: Node, executor, input_topics: dict[str, str], image_topic: str,
                  nodes: list[str], lossless: bool, rate: float = 1.0, frame_timeout_s: float = 30.0,
-                 echo=print):
+                 echo=print, in_flight: int = 1):
+        if int(in_flight) < 1:
+            raise ValueError(f"in_flight {in_flight}: a lossless replay lets at least one frame into the graph")
         self.node, self.executor = node, executor
+        self.in_flight = int(in_flight)
+        self._open: dict[int, tuple[float, float | None]] = {}  # frames in the graph: stamp -> (deadline, grace end)
         self.image_topic = image_topic
         self.nodes = list(nodes)
         self.lossless, self.rate, self.frame_timeout_s = lossless, rate, frame_timeout_s
@@ -258,30 +270,42 @@ class Player:
         self.stats.frames_published += 1
         self.stats.published_stamps.append(s)
 
-    def _wait_frame(self, s: int) -> None:
-        t_end = time.monotonic() + self.frame_timeout_s
-        grace_end = None
-        while True:
+    def _settle(self, most: int) -> None:
+        """Spin until at most ``most`` published frames are still in the graph: each leaves it when every node
+        reported it finished, when a node dropped it (after a short grace for the others' reports) or at its
+        timeout. ``most`` 0: the graph drained; the lock-step player settles to 0 after every frame."""
+        while len(self._open) > most:
             # returns as soon as a report (or anything) arrives: a long timeout only saves idle wake-ups,
             # which cost the graph CPU (each builds the executor's wait set)
             self.executor.spin_once(timeout_sec=0.05)
-            st = self._frame_done(s)
-            if st == "done":
-                self.stats.frames_completed += 1
-                return
-            if st and st.startswith("dropped"):
-                # a node dropped it: its downstream nodes will not report; give others a moment
-                grace_end = grace_end or time.monotonic() + 0.3
-                if time.monotonic() > grace_end or all(n in self._reports[s] for n in self.nodes):
-                    self.stats.frames_dropped += 1
-                    self.stats.drop_reasons[st[8:]] += 1
-                    return
-            if time.monotonic() > t_end:
-                self.stats.frames_timed_out += 1
-                missing = [n for n in self.nodes if n not in self._reports.get(s, {})]
-                self.echo(f"[replay] frame {s * 1e-9:.3f} s not finished after {self.frame_timeout_s:.0f} s "
-                          f"(no report from {', '.join(missing)})")
-                return
+            for s in list(self._open):
+                if self._closed(s):
+                    del self._open[s]
+
+    def _closed(self, s: int) -> bool:
+        """Whether frame ``s`` has left the graph (counted in the stats once, here)."""
+        t_end, grace_end = self._open[s]
+        st = self._frame_done(s)
+        if st == "done":
+            self.stats.frames_completed += 1
+            return True
+        now = time.monotonic()
+        if st and st.startswith("dropped"):
+            # a node dropped it: its downstream nodes will not report; give others a moment
+            if grace_end is None:
+                grace_end = now + 0.3
+                self._open[s] = (t_end, grace_end)
+            if now > grace_end or all(n in self._reports[s] for n in self.nodes):
+                self.stats.frames_dropped += 1
+                self.stats.drop_reasons[st[8:]] += 1
+                return True
+        if now > t_end:
+            self.stats.frames_timed_out += 1
+            missing = [n for n in self.nodes if n not in self._reports.get(s, {})]
+            self.echo(f"[replay] frame {s * 1e-9:.3f} s not finished after {self.frame_timeout_s:.0f} s "
+                      f"(no report from {', '.join(missing)})")
+            return True
+        return False
 
     def play(self, messages, hold_for: tuple[str, ...] = ()) -> PlayStats:
         """Play an iterable of :class:`bags.BagMessage` (already filtered to the input topics)."""
@@ -296,7 +320,8 @@ class Player:
             raw, s, _ = held.pop(i)
             self._publish_image(raw, s)
             if self.lossless:
-                self._wait_frame(s)
+                self._open[s] = (time.monotonic() + self.frame_timeout_s, None)
+                self._settle(self.in_flight - 1)
 
         for m in messages:
             if self.should_stop():
@@ -341,6 +366,7 @@ class Player:
         while held:
             seen_since.pop(0)
             release(0)
+        self._settle(0)
         if self._t_pub:
             assert self._t_first is not None  # set with the first publication
             self.stats.play_s = time.monotonic() - self._t_first

@@ -36,6 +36,9 @@ from simreal_nodes.scene.graph import (
 )
 from simreal_nodes.scene.schema import build_spec_models, load_scene
 
+# the outputs a replay with ``record_images`` off counts without writing them
+IMAGE_TYPES = frozenset({"sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage"})
+
 
 class _StopFlag:
     def __init__(self):
@@ -64,7 +67,7 @@ def replay(bag: str, scene_file: str, rate: float = 1.0, lossless: bool = False,
            storage: str = "mcap", launch: bool = True, frame_timeout_s: float = 30.0, ready_timeout_s: float = 90.0,
            metrics_json: str | None = None, echo=print, extra_params: dict | None = None, namespace: str = "",
            standby: bool | None = None, one_process: bool | None = False, executor: str | None = None,
-           threads: int | None = None):
+           threads: int | None = None, in_flight: int = 1, record_images: bool = True):
     """Replay ``bag`` into the graph of ``scene_file``; returns (PlayStats, BagReport, recorder counts).
     ``namespace``: the nodes' namespace; ``standby``: a standby process per node (:class:`~simreal_nodes.launch.
     Launcher`), by default in a live replay and not in a lossless one (a node that exits there is a fault to see,
@@ -73,15 +76,22 @@ def replay(bag: str, scene_file: str, rate: float = 1.0, lossless: bool = False,
     :func:`~simreal_nodes.scene.graph.one_process_default`); ``executor``: the nodes' and the
     player's (one of :data:`~simreal_nodes.launch.EXECUTORS`; None: :func:`~simreal_nodes.launch.executor_kind`);
     ``threads``: the worker threads of each node process's libraries (:func:`~simreal_nodes.launch.ros_environment`;
-    None: ``SIMREAL_THREADS``, else the default: the linear algebra's pools one thread, OpenCV's its own)."""
+    None: ``SIMREAL_THREADS``, else the default: the linear algebra's pools one thread, OpenCV's its own);
+    ``in_flight``: lossless, how many frames the player lets into the graph at once (1: lock-step, the next frame
+    published when every node reported the last; more: the nodes of a process per node overlap, every frame still
+    processed, in order, by every node); ``record_images``: False, the graph's image outputs are received and
+    counted but not written to the record (what a display costs, not a disk)."""
     executor = executor_kind(None if executor is None else {EXECUTOR_ENV: executor})
     thread_variables(dict(os.environ), threads)  # a bad SIMREAL_THREADS (or threads) refused before any work
+    if isinstance(in_flight, bool) or not isinstance(in_flight, int) or in_flight < 1:
+        raise SimrealError(f"frames in flight {in_flight!r}: a lossless replay lets a whole number of at least 1 "
+                           "into the graph at once")
     scene = load_scene(scene_file)
     if launch:
         build_spec_models(scene)  # before the nodes start: they find the built spec:NAME models in the cache
     cam = scene["camera"]
     nodes = required_nodes(scene, lossless=lossless, source="topic")  # the player is the source
-    one_process, how = launch_choice(scene, lossless, one_process)
+    one_process, how = launch_choice(scene, lossless, one_process, in_flight if lossless else 1)
     how = f"; {how}" if launch else ""
     echo(f"[replay] nodes: {', '.join(n.name for n in nodes)} ({ingest_note(scene, nodes, 'topic')}{how})")
     for n in nodes:
@@ -120,9 +130,11 @@ def replay(bag: str, scene_file: str, rate: float = 1.0, lossless: bool = False,
     try:
         with _StopFlag() as stop:
             if record:
-                recorder = Recorder(node, record, storage, topics=output_topics(nodes))
+                outputs = output_topics(nodes)
+                recorder = Recorder(node, record, storage, topics=outputs, count_only=() if record_images else tuple(
+                    t for t, ty in outputs.items() if ty in IMAGE_TYPES))
             player = Player(node, ex, inputs, img, [n.name for n in nodes if n.per_frame], lossless, rate,
-                            frame_timeout_s, echo=echo)
+                            frame_timeout_s, echo=echo, in_flight=in_flight)
             player.should_stop = stop.event.is_set
             # what the nodes must have subscribed to before the first frame: the graph's topics and the player's
             player.node_inputs = {n.name: [t for t in n.inputs if t.startswith("/simreal/") or t in inputs]

@@ -337,7 +337,8 @@ def run_nodes(builders: list[Callable[[], Node]], args=None) -> int:
         return 2
     rclpy.init(args=args)
     nodes: list[Node] = []
-    profile_dir = os.environ.get("SIMREAL_PROFILE_DIR")  # development: a cProfile of the process's spin
+    # development: a cProfile of the process's spin (SIMREAL_PROFILE_CPU=1: its main thread's CPU time, not wall time)
+    profile_dir = os.environ.get("SIMREAL_PROFILE_DIR")
     prof = None
     try:
         placeholder = None
@@ -355,7 +356,8 @@ def run_nodes(builders: list[Callable[[], Node]], args=None) -> int:
         if profile_dir:
             import cProfile
 
-            prof = cProfile.Profile()
+            prof = cProfile.Profile(time.thread_time) if os.environ.get("SIMREAL_PROFILE_CPU") == "1" \
+                else cProfile.Profile()
             prof.enable()
         spin(ex)
     except (KeyboardInterrupt, ExternalShutdownException):

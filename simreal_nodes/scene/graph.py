@@ -155,7 +155,7 @@ def tracker_stereo_depth(scene: dict) -> bool:
 SLAM_MODES = ("mono", "rgbd", "stereo")  # localization modes that run the SLAM
 
 
-def one_process_default(scene: dict, lossless: bool) -> bool:
+def one_process_default(scene: dict, lossless: bool, in_flight: int = 1) -> bool:
     """The launch the CLI picks when told neither ``--one-process`` nor ``--process-per-node``: every node in one
     process, but a process per node for a live graph with a node whose work takes longer than a camera frame period
     (a SLAM localization, 34-39 ms a frame at 640 x 480; the dense tracker, about 120 ms): on one executor every other
@@ -163,22 +163,25 @@ def one_process_default(scene: dict, lossless: bool) -> bool:
     ``benchmarks/results/graph.md`` (stop 95): one process faster or level in every lossless case and live for the
     markers demo (96 % of the frames through against 93 %), a process per node live for the RGB-D SLAM scenes (the
     foam beam 60 % against 37 %, family-3 49 % against 34 %); checked on held-out scenes by ``./run bench
-    launch_mode``."""
+    launch_mode``. A lossless replay with more than one frame in flight (``in_flight``, the player's) runs a process
+    per node: there the nodes work on different frames at once, which one executor cannot (stop 97's graph run: a
+    process per node ahead in every case, the rows with frames in flight)."""
     if lossless:
-        return True
+        return in_flight <= 1
     heavy = scene["localization"]["mode"] in SLAM_MODES or any(
         o["tracking"]["enabled"] and o["tracking"]["measurements"] == "dense" for o in scene["objects"])
     return not heavy
 
 
-def launch_choice(scene: dict, lossless: bool, told: bool | None) -> tuple[bool, str]:
+def launch_choice(scene: dict, lossless: bool, told: bool | None, in_flight: int = 1) -> tuple[bool, str]:
     """(one process?, how the nodes run, for the launch's first line): ``told`` where the user said
     (``--one-process`` / ``--process-per-node``), else :func:`one_process_default`'s pick."""
-    one = one_process_default(scene, lossless) if told is None else told
+    one = one_process_default(scene, lossless, in_flight) if told is None else told
     how = "in one process" if one else "a process per node"
     if told is not None:
         return one, how
-    why = "the default" if one else "live, with a node slower than a frame: the default for such a graph"
+    why = ("the default" if one else "lossless with frames in flight: the default there" if lossless
+           else "live, with a node slower than a frame: the default for such a graph")
     return one, f"{how} ({why}; --one-process / --process-per-node choose)"
 
 

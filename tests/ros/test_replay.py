@@ -54,6 +54,30 @@ def test_lossless_replay_loses_no_frame_and_keeps_order(tmp_path, scene):
     assert any(s.name == "simreal/ingest" for d in diags for s in d.status)
 
 
+def test_with_frames_in_flight_a_lossless_replay_still_loses_none_and_keeps_order(tmp_path, scene):
+    """`--in-flight 3`: up to three frames in the graph at once, every one still through every node in order; dropped
+    frames counted as such (not as finished, not twice); images counted, not written, when told so."""
+    stamps = write_camera_bag(tmp_path / "in", n=60, w=320, h=240, depth=True)
+    out = tmp_path / "out"
+    stats, report, counts = replay(str(tmp_path / "in"), scene, lossless=True, record=str(out),
+                                   echo=lambda *_: None, in_flight=3, record_images=False)
+    assert report.problems == 0
+    assert stats.frames_published == 60 and stats.frames_completed == 60
+    assert stats.frames_dropped == stats.frames_timed_out == stats.conflicting_reports == 0
+    # the images were received (counted) but not written; the rest was written
+    assert counts["/simreal/camera/image"] == 60 and counts["/simreal/camera/depth"] == 60
+    assert recorded(out, "/simreal/camera/image") == [] and recorded(out, "/simreal/camera/depth") == []
+    infos = recorded(out, "/simreal/camera/camera_info")
+    assert [bags.stamp_ns(m) for m in infos] == stamps  # 0 of N lost, in order
+
+    write_camera_bag(tmp_path / "bad", n=20, w=160, h=120, bad_step=(3, 7, 8))
+    stats, _, _ = replay(str(tmp_path / "bad"), scene, lossless=True, record=str(tmp_path / "out_bad"),
+                         echo=lambda *_: None, frame_timeout_s=10, in_flight=3)
+    assert stats.frames_published == 20
+    assert stats.frames_dropped == 3 and stats.frames_completed == 17 and stats.frames_timed_out == 0
+    assert len(recorded(tmp_path / "out_bad", "/simreal/camera/image")) == 17
+
+
 def test_malformed_images_and_zero_camera_info_are_dropped_with_reasons(tmp_path, scene):
     write_camera_bag(tmp_path / "bad", n=20, w=160, h=120, bad_step=(3, 7, 8))
     out = tmp_path / "out_bad"

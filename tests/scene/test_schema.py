@@ -243,5 +243,8 @@ def test_the_cli_launches_live_graphs_with_a_heavy_node_a_process_per_node(mode,
              "objects": [{"tracking": {"enabled": True, "measurements": measurements}},
                          {"tracking": {"enabled": False, "measurements": "dense"}}]}  # a disabled one weighs nothing
     assert one_process_default(scene, lossless) is one
+    # lossless with frames in flight: a process per node, whatever runs (graph.md's rows with frames in flight)
+    assert one_process_default(scene, lossless, in_flight=4) is (one and not lossless)
+    assert one_process_default(scene, lossless, in_flight=1) is one
     scene["objects"][0]["tracking"]["enabled"] = False
     assert one_process_default(scene, lossless) is (lossless or mode not in ("rgbd", "mono", "stereo"))

@@ -1,0 +1,110 @@
+"""The lossless player's frames in flight (`simreal replay --lossless --in-flight N`), against a stand-in graph that
+reports the frames it is given: never more than N frames in the graph, each counted once as finished, dropped or
+timed out, and a frame that never finishes holds up no other."""
+
+import time
+
+import pytest
+
+pytest.importorskip("rclpy")
+
+from std_msgs.msg import Header
+
+from simreal_nodes.io import bags
+from simreal_nodes.ros.bagplay import Player
+from simreal_nodes.ros.node import progress_id
+from tests.helpers import write_camera_bag
+
+pytestmark = pytest.mark.ros
+
+NODES = ("ingest", "overlay")
+IMAGE = "/camera/image_raw"
+
+
+class _Pub:
+    def publish(self, raw) -> None:
+        pass
+
+
+class _Node:
+    """What the player asks of its node: publishers for the inputs, the progress subscription."""
+
+    def create_publisher(self, cls, topic, qos):
+        return _Pub()
+
+    def create_subscription(self, cls, topic, cb, qos):
+        return None
+
+
+class _Graph:
+    """The executor's stand-in: each spin, the graph finishes the oldest frame it holds (both nodes report it), or
+    drops it (the first node says why, the second says nothing: the real graph's downstream nodes never see it), or
+    never answers for it (``hung``). It notes how many published frames were not finished at each spin."""
+
+    def __init__(self, player: Player, dropped=(), hung=()):
+        self.player, self.dropped, self.hung = player, set(dropped), set(hung)
+        self.answered: set[int] = set()
+        self.most_open = 0
+
+    def spin_once(self, timeout_sec=None) -> None:
+        published = self.player.stats.published_stamps
+        waiting = [s for s in published if s not in self.answered]
+        self.most_open = max(self.most_open, len(waiting))
+        todo = [s for s in waiting if published.index(s) not in self.hung]
+        if not todo:
+            time.sleep(0.001)
+            return
+        s = todo[0]
+        self.answered.add(s)
+        i = published.index(s)
+        for k, name in enumerate(NODES):
+            if i in self.dropped and k > 0:
+                break
+            h = Header()
+            h.stamp.sec, h.stamp.nanosec = divmod(s, 10**9)
+            h.frame_id = progress_id(name, time.monotonic(), "bad frame" if i in self.dropped else "")
+            self.player._on_progress(h)
+
+
+def _play(tmp_path, in_flight, n=12, frame_timeout_s=30.0, **graph):
+    write_camera_bag(tmp_path / "in", n=n, w=64, h=48)
+    said: list[tuple[str, int]] = []  # the player's messages, with how many frames the graph had answered then
+    player = Player(_Node(), None, {IMAGE: "sensor_msgs/msg/Image"}, IMAGE, list(NODES), lossless=True,
+                    frame_timeout_s=frame_timeout_s, echo=lambda m: said.append((m, len(g.answered))),
+                    in_flight=in_flight)
+    g = _Graph(player, **graph)
+    player.executor = g
+    stats = player.play(bags.read_bag(tmp_path / "in", topics=[IMAGE]))
+    g.said = said
+    return stats, g
+
+
+@pytest.mark.parametrize("in_flight", [1, 3])
+def test_no_more_frames_in_the_graph_than_allowed_and_each_counted_once(tmp_path, in_flight):
+    stats, g = _play(tmp_path, in_flight)
+    assert stats.frames_published == 12 and stats.frames_completed == 12
+    assert stats.frames_dropped == stats.frames_timed_out == stats.conflicting_reports == 0
+    assert g.most_open == in_flight  # the window filled, never overflowed
+
+
+def test_a_dropped_frame_is_counted_dropped_once(tmp_path):
+    stats, g = _play(tmp_path, 3, dropped={4, 9})
+    assert stats.frames_completed == 10 and stats.frames_dropped == 2 and stats.frames_timed_out == 0
+    assert dict(stats.drop_reasons) == {"ingest: bad frame": 2}
+    assert g.most_open <= 3
+
+
+@pytest.mark.parametrize("in_flight,answered", [(1, 2), (3, 11)])
+def test_a_frame_that_never_finishes_times_out_and_holds_up_no_other_with_frames_in_flight(tmp_path, in_flight,
+                                                                                          answered):
+    stats, g = _play(tmp_path, in_flight, frame_timeout_s=0.5, hung={2})
+    assert stats.frames_completed == 11 and stats.frames_timed_out == 1 and stats.frames_dropped == 0
+    (msg, seen), = g.said
+    assert "not finished after" in msg
+    # lock-step: nothing after the hung frame went in before its timeout; with room in flight, every other frame did
+    assert seen == answered
+
+
+def test_the_player_refuses_no_frame_in_flight():
+    with pytest.raises(ValueError, match="at least one frame"):
+        Player(_Node(), None, {IMAGE: "sensor_msgs/msg/Image"}, IMAGE, list(NODES), lossless=True, in_flight=0)
