@@ -14,12 +14,12 @@ imports would slow the node it stands behind while that one recovers). Without a
 a new process, its imports, and a new participant that the others must discover
 (``./run bench respawn`` measures both).
 
-With ``one_process`` on (the CLI's default but for live SLAM or dense-tracker graphs,
-:func:`~simreal_nodes.scene.graph.one_process_default`; ``--process-per-node`` turns it off), the nodes run in a
-single process on one executor (:mod:`simreal_nodes.ros.compose`), each with the arguments it would have had in its
-own; the launcher then watches, restarts and stops that one process (named :data:`ONE_PROCESS`) as it would a node,
-with one standby. ``./run bench graph`` measures it against one process per node. The class itself starts a process
-per node unless asked (its callers, tests and benchmarks, say which they run).
+With ``one_process`` on (the CLI's default but for live SLAM or dense-tracker graphs and lossless replays with
+frames in flight, :func:`~simreal_nodes.scene.graph.one_process_default`; ``--process-per-node`` turns it off), the
+nodes run in a single process on one executor (:mod:`simreal_nodes.ros.compose`), each with the arguments it would
+have had in its own; the launcher then watches, restarts and stops that one process (named :data:`ONE_PROCESS`) as
+it would a node, with one standby. ``./run bench graph`` measures it against one process per node. The class itself
+starts a process per node unless asked (its callers, tests and benchmarks, say which they run).
 """
 
 from __future__ import annotations
