@@ -141,6 +141,12 @@ class Recorder:
 # ---------------------------------------------------------------------------------------------
 
 
+# the start-up a replay's steady-state share leaves out (``PlayStats.through_after``): live, a graph's first frame
+# waits for what every node builds once the first CameraInfo comes with it (the overlay's GL context and undistortion
+# maps, the localizer), and the frames that arrive meanwhile are replaced in the nodes' one-deep queues
+STARTUP_S = 1.0
+
+
 @dataclass
 class PlayStats:
     frames_published: int = 0
@@ -153,6 +159,7 @@ class PlayStats:
     wall_s: float = 0.0
     play_s: float = 0.0  # first publication to the last one (real time) or the last frame's end (lossless)
     published_stamps: list[int] = field(default_factory=list)
+    completed_stamps: list[int] = field(default_factory=list)  # the frames every node finished, in their order
     cpu_s: dict[str, float] = field(default_factory=dict)  # CPU seconds per process while playing
     record_error: str = ""  # why the recording stopped early ('' when it did not)
 
@@ -169,11 +176,24 @@ class PlayStats:
                              f"p95 {np.percentile(a, 95):.1f} ms")
         return "\n".join(lines)
 
+    def through_after(self, seconds: float) -> float:
+        """The share (%) of the frames published ``seconds`` (of the bag's stamps) or more after the first that went
+        through every node: the steady state, without the nodes' start-up (NaN when no frame is that late)."""
+        if not self.published_stamps:
+            return float("nan")
+        t0 = min(self.published_stamps)
+        late = [s for s in self.published_stamps if s - t0 >= seconds * 1e9]
+        if not late:
+            return float("nan")
+        done = set(self.completed_stamps)
+        return 100.0 * sum(s in done for s in late) / len(late)
+
     def as_dict(self) -> dict:
         out = {k: getattr(self, k) for k in ("frames_published", "frames_completed", "frames_dropped",
                                              "frames_timed_out", "conflicting_reports", "wall_s", "play_s")}
         out["fps"] = self.frames_published / self.play_s if self.play_s > 0 else 0.0
         out["fps_through"] = self.frames_completed / self.play_s if self.play_s > 0 else 0.0
+        out["through_after_startup_pct"] = self.through_after(STARTUP_S)
         out["cpu_ms_per_frame"] = {n: 1e3 * v / max(self.frames_published, 1) for n, v in self.cpu_s.items()}
         out["drop_reasons"] = dict(self.drop_reasons)
         out["latency_ms"] = {n: {"p50": float(np.percentile(v, 50)), "p95": float(np.percentile(v, 95)),
@@ -288,6 +308,7 @@ class Player:
         st = self._frame_done(s)
         if st == "done":
             self.stats.frames_completed += 1
+            self.stats.completed_stamps.append(s)
             return True
         now = time.monotonic()
         if st and st.startswith("dropped"):
@@ -379,6 +400,7 @@ class Player:
                 st = self._frame_done(s)
                 if st == "done":
                     self.stats.frames_completed += 1
+                    self.stats.completed_stamps.append(s)
                 elif st:
                     self.stats.frames_dropped += 1
                     self.stats.drop_reasons[st[8:]] += 1

@@ -11,7 +11,7 @@ pytest.importorskip("rclpy")
 from std_msgs.msg import Header
 
 from simreal_nodes.io import bags
-from simreal_nodes.ros.bagplay import Player
+from simreal_nodes.ros.bagplay import Player, PlayStats
 from simreal_nodes.ros.node import progress_id
 from tests.helpers import write_camera_bag
 
@@ -90,6 +90,8 @@ def test_no_more_frames_in_the_graph_than_allowed_and_each_counted_once(tmp_path
 def test_a_dropped_frame_is_counted_dropped_once(tmp_path):
     stats, g = _play(tmp_path, 3, dropped={4, 9})
     assert stats.frames_completed == 10 and stats.frames_dropped == 2 and stats.frames_timed_out == 0
+    pub = stats.published_stamps
+    assert stats.completed_stamps == [s for i, s in enumerate(pub) if i not in (4, 9)]
     assert dict(stats.drop_reasons) == {"ingest: bad frame": 2}
     assert g.most_open <= 3
 
@@ -108,3 +110,16 @@ def test_a_frame_that_never_finishes_times_out_and_holds_up_no_other_with_frames
 def test_the_player_refuses_no_frame_in_flight():
     with pytest.raises(ValueError, match="at least one frame"):
         Player(_Node(), None, {IMAGE: "sensor_msgs/msg/Image"}, IMAGE, list(NODES), lossless=True, in_flight=0)
+
+
+def test_the_steady_share_leaves_the_start_up_out():
+    """Live, the frames lost while the nodes build on the first CameraInfo are the start-up's; the share after the
+    first second counts the rest (and says NaN where no frame is that late)."""
+    st = PlayStats()
+    st.published_stamps = [round(i * 1e9 / 30) for i in range(90)]  # 3 s at 30 fps
+    st.completed_stamps = [s for i, s in enumerate(st.published_stamps) if i == 1 or i > 8 and i != 60]
+    assert st.through_after(1.0) == pytest.approx(100 * 59 / 60)  # frame 60 lost in the steady state
+    assert st.through_after(0.0) == pytest.approx(100 * 81 / 90)
+    assert st.as_dict()["through_after_startup_pct"] == pytest.approx(100 * 59 / 60)
+    assert st.through_after(5.0) != st.through_after(5.0)  # NaN: no frame 5 s in
+    assert PlayStats().through_after(1.0) != PlayStats().through_after(1.0)
