@@ -303,6 +303,11 @@ def test_the_in_flight_option_is_parsed_refused_when_bad_and_reaches_the_replay(
     for bad in (0, -1, 2.0, True):
         with pytest.raises(SimrealError, match="frames in flight"):
             real_replay("no-such-bag", "no-such-scene.yaml", in_flight=bad)
+    # live, the bound means nothing: said, not silently ignored
+    said = []
+    with pytest.raises(SimrealError):  # (then the scene is missing)
+        real_replay("no-such-bag", "no-such-scene.yaml", in_flight=3, echo=said.append)
+    assert any("live replay" in m and "--lossless" in m for m in said)
 
 
 @pytest.mark.parametrize("sample,lossless,one", [

@@ -86,6 +86,9 @@ def replay(bag: str, scene_file: str, rate: float = 1.0, lossless: bool = False,
     if isinstance(in_flight, bool) or not isinstance(in_flight, int) or in_flight < 1:
         raise SimrealError(f"frames in flight {in_flight!r}: a lossless replay lets a whole number of at least 1 "
                            "into the graph at once")
+    if in_flight > 1 and not lossless:
+        echo(f"[replay] warning: {in_flight} frames in flight asked of a live replay, which publishes at the bag's "
+             "rate and bounds nothing: the bound is the lossless replay's (--lossless)")
     scene = load_scene(scene_file)
     if launch:
         build_spec_models(scene)  # before the nodes start: they find the built spec:NAME models in the cache

@@ -117,7 +117,7 @@ def test_the_steady_share_leaves_the_start_up_out():
     first second counts the rest (and says NaN where no frame is that late)."""
     st = PlayStats()
     st.published_stamps = [round(i * 1e9 / 30) for i in range(90)]  # 3 s at 30 fps
-    st.completed_stamps = [s for i, s in enumerate(st.published_stamps) if i == 1 or i > 8 and i != 60]
+    st.completed_stamps = [s for i, s in enumerate(st.published_stamps) if i == 1 or (i > 8 and i != 60)]
     assert st.through_after(1.0) == pytest.approx(100 * 59 / 60)  # frame 60 lost in the steady state
     assert st.through_after(0.0) == pytest.approx(100 * 81 / 90)
     assert st.as_dict()["through_after_startup_pct"] == pytest.approx(100 * 59 / 60)
