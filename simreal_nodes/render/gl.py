@@ -160,27 +160,44 @@ class Mesh:
     _tex: moderngl.Texture | None = None
 
 
+# a context made ahead of the first Renderer (prepare_context): loading the OpenGL driver is tens of milliseconds
+_SPARE: list[moderngl.Context] = []
+
+
+def _new_context() -> moderngl.Context:
+    import moderngl
+
+    backend = os.environ.get("SIMREAL_GL_BACKEND", "egl")
+    try:
+        # moderngl's stubs type each **settings value as a dict; backend is a string at run time
+        return (moderngl.create_standalone_context(backend=backend)  # type: ignore[arg-type]
+                if backend else moderngl.create_standalone_context())
+    except Exception as e:  # noqa: BLE001
+        raise RenderError(f"cannot create an OpenGL context over {backend or 'the default backend'} ({e}); "
+                          "install libegl1 and libgl1-mesa-dri (./run setup does)") from None
+
+
+def prepare_context() -> str:
+    """Create the OpenGL context the next :class:`Renderer` of this thread takes, and return its GL_RENDERER: a node
+    that renders calls it at start-up, so that the driver loads then and not while its first frame waits (the
+    camera's intrinsics, which the renderer needs, come with that frame). :class:`RenderError` as Renderer gives it."""
+    if not _SPARE:
+        _SPARE.append(_new_context())
+    return _SPARE[0].info.get("GL_RENDERER", "?")
+
+
 class Renderer:
     """Offscreen renderer for one camera model (resolution, K, distortion)."""
 
     def __init__(self, cam: CameraModel, near: float = 0.05, far: float = 20.0, ssaa: int = 1,
                  light=(0.3, 0.8, 0.5), ambient: float = 0.55, background=(0, 0, 0)):
-        import moderngl
-
         self.cam = cam
         self.near, self.far = near, far
         self.ssaa = int(ssaa)
         self.ambient = ambient
         self.light = np.asarray(light, dtype=np.float64)
         self.background = tuple(c / 255.0 for c in background)
-        backend = os.environ.get("SIMREAL_GL_BACKEND", "egl")
-        try:
-            # moderngl's stubs type each **settings value as a dict; backend is a string at run time
-            self.ctx = (moderngl.create_standalone_context(backend=backend)  # type: ignore[arg-type]
-                        if backend else moderngl.create_standalone_context())
-        except Exception as e:  # noqa: BLE001
-            raise RenderError(f"cannot create an OpenGL context over {backend or 'the default backend'} ({e}); "
-                              "install libegl1 and libgl1-mesa-dri (./run setup does)") from None
+        self.ctx = _SPARE.pop() if _SPARE else _new_context()  # the one prepare_context made, if any
         self.progs = {occ: self.ctx.program(vertex_shader=VERT, fragment_shader=FRAG.replace(
             "//DEFINES", "#define OCCLUSION" if occ else "")) for occ in (False, True)}
         self.prog = self.progs[False]

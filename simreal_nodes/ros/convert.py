@@ -70,6 +70,12 @@ def _jazzy_types():
     return get_typestore(Stores.ROS2_JAZZY)
 
 
+def prepare() -> None:
+    """Load rosbags' type store now (its import, every ROS 2 distribution's store module, about 0.1 s of CPU): a
+    node calls it at start-up, so that its first image does not wait for it."""
+    _jazzy_types()
+
+
 def read_image_cdr(raw: bytes | bytearray | memoryview):
     """An Image subscription's serialized message (``raw=True``) read by rosbags' CDR deserializer (its message
     class; ``data`` a read-only numpy view on ``raw``, not a copy), instead of rclpy's conversion into a message

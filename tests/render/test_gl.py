@@ -94,3 +94,34 @@ def test_occlusion_by_real_depth_is_exact():
     shown = rgb[..., 0] > 0
     assert not shown[:, :320].any()
     assert shown[:, 320:].all()
+
+
+def test_a_context_made_ahead_is_the_one_the_next_renderer_takes(monkeypatch):
+    """Issue 18: the overlay node makes its GL context at start-up (the driver's loading off its first frame); the
+    next renderer takes that one, the one after makes its own; a backend that cannot give a context is refused with
+    the reason, as the renderer refuses it."""
+    from simreal_nodes.render import gl
+
+    monkeypatch.setattr(gl, "_SPARE", [])
+    assert gl.prepare_context() not in ("", "?")
+    spare = gl._SPARE[0]
+    assert gl.prepare_context()
+    assert len(gl._SPARE) == 1 and gl._SPARE[0] is spare  # asked again: still the one
+    r = Renderer(CAMS["pinhole"])
+    assert r.ctx is spare and not gl._SPARE
+    r2 = Renderer(CAMS["pinhole"])
+    assert r2.ctx is not spare
+    # the taken context renders as a fresh one does
+    V, F = disks([np.array([0.0, 0.0, 2.0])], 0.1)
+    for rr in (r, r2):
+        rr.add(Mesh("d", V, F, tint=(1.0, 0.0, 0.0)))
+    (c1, d1), (c2, d2) = r.render(np.eye(4)), r2.render(np.eye(4))
+    np.testing.assert_array_equal(c1, c2)
+    np.testing.assert_array_equal(d1, d2)
+    assert (d1 > 0).sum() > 100  # the disk was drawn
+    r.release()
+    r2.release()
+    monkeypatch.setenv("SIMREAL_GL_BACKEND", "no-such-backend")
+    with pytest.raises(gl.RenderError, match="cannot create an OpenGL context over no-such-backend"):
+        gl.prepare_context()
+    assert not gl._SPARE

@@ -123,3 +123,25 @@ def test_the_steady_share_leaves_the_start_up_out():
     assert st.as_dict()["through_after_startup_pct"] == pytest.approx(100 * 59 / 60)
     assert st.through_after(5.0) != st.through_after(5.0)  # NaN: no frame 5 s in
     assert PlayStats().through_after(1.0) != PlayStats().through_after(1.0)
+
+
+def test_a_node_process_loads_before_its_spin_what_its_first_frame_would_wait_for():
+    """Issue 18 (live, the frames that arrive while the first one waits are lost): rosbags' type store is loaded and
+    each node has logged once before the spin."""
+    from simreal_nodes.ros import convert
+    from simreal_nodes.ros.node import warm_start
+
+    said = []
+
+    class _Logger:
+        def info(self, msg):
+            said.append(msg)
+
+    class _N:
+        def get_logger(self):
+            return _Logger()
+
+    convert._jazzy_types.cache_clear()
+    warm_start([_N(), _N()])
+    assert convert._jazzy_types.cache_info().currsize == 1
+    assert said == ["up: spinning"] * 2

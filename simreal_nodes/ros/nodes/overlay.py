@@ -23,6 +23,7 @@ from simreal_nodes.io import images
 from simreal_nodes.io.cdr import marker_array_cdr
 from simreal_nodes.io.video import VideoSink
 from simreal_nodes.render.aero import FLOW_TUBE_RADIUS_M, FlowOverlay, flow_geometry
+from simreal_nodes.render.gl import RenderError, prepare_context
 from simreal_nodes.render.scene import SceneOverlay, overlay_models
 from simreal_nodes.ros.convert import observation_pose, stamp_ns
 from simreal_nodes.ros.node import SimrealNode, guarded, parse_progress, run_node
@@ -78,6 +79,10 @@ class OverlayNode(SimrealNode):
             self.create_subscription(Header, graph.PROGRESS, self.on_progress, reliable_qos(1000))
         self.frames = 0
         self.set_status("ok", "waiting for images")
+        try:  # the GL driver loaded now, not while the first frame waits (its intrinsics come with it)
+            self.say(f"overlay renderer: {prepare_context()} (its context made at start-up)")
+        except RenderError as e:  # said here; the first frame reports it again, as a drop with the reason
+            self.set_status("error", str(e))
 
     @guarded
     def on_info(self, msg: CameraInfo) -> None:
