@@ -103,7 +103,7 @@ def run_case(scene, res, bag, scene_yaml, lossless, one_process, executor=None, 
                 # the localization's own output (pose, TF): what a robot stack reads, whatever the later nodes do
                 pose_pct=100 * counts.get(POSE_TOPIC, 0) / max(d["frames_published"], 1),
                 # after the first second: the steady state, without the nodes' start-up (bagplay.STARTUP_S)
-                steady_pct=d["through_after_startup_pct"],
+                steady_pct=_num(d["through_after_startup_pct"]),
                 latency_p50=last["p50"], latency_p95=last["p95"], wall_s=wall,
                 cores_busy=sum(stats.cpu_s.values()) / d["play_s"] if d["play_s"] > 0 else float("nan"),
                 nodes_cpu_ms=sum(v for n, v in cpu.items() if n != PLAYER),

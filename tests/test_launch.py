@@ -284,7 +284,8 @@ def test_the_in_flight_option_is_parsed_refused_when_bad_and_reaches_the_replay(
     cmd = ["replay", "b", "--scene", "s.yaml", "--lossless"]
     assert p.parse_args(cmd).in_flight == 1
     assert p.parse_args([*cmd, "--in-flight", "4"]).in_flight == 4
-    for bad in ("0", "-2", "1.5", "two"):
+    assert p.parse_args([*cmd, "--in-flight", "15"]).in_flight == 15
+    for bad in ("0", "-2", "1.5", "two", "16"):
         with pytest.raises(SystemExit):
             p.parse_args([*cmd, "--in-flight", bad])
     seen = {}
@@ -300,7 +301,7 @@ def test_the_in_flight_option_is_parsed_refused_when_bad_and_reaches_the_replay(
         a.fn(a)
     assert seen["in_flight"] == 3
     # the function refuses what the parser would, before it reads anything
-    for bad in (0, -1, 2.0, True):
+    for bad in (0, -1, 2.0, True, 16):
         with pytest.raises(SimrealError, match="frames in flight"):
             real_replay("no-such-bag", "no-such-scene.yaml", in_flight=bad)
     # live, the bound means nothing: said, not silently ignored

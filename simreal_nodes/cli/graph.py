@@ -41,13 +41,15 @@ def add_executor(s: argparse.ArgumentParser) -> None:
                         "linear algebra's pools and OpenCV's own (benchmarks/results/threads.md)")
 
 
-def _at_least_one(text: str) -> int:
+def _in_flight(text: str) -> int:
+    from simreal_nodes.ros.bagplay import MAX_IN_FLIGHT
+
     try:
         n = int(text)
     except ValueError:
         n = 0
-    if n < 1:
-        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {text!r}")
+    if not 1 <= n <= MAX_IN_FLIGHT:
+        raise argparse.ArgumentTypeError(f"expected a whole number from 1 to {MAX_IN_FLIGHT}, got {text!r}")
     return n
 
 
@@ -133,10 +135,12 @@ def add_replay(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--storage", choices=("mcap", "sqlite3"), default="mcap")
     s.add_argument("--no-launch", action="store_true", help="the graph is already running")
     s.add_argument("--frame-timeout", type=float, default=30.0, help="lossless: seconds to wait per frame")
-    s.add_argument("--in-flight", type=_at_least_one, default=1, metavar="N",
-                   help="lossless: frames let into the graph at once (default 1: each frame waits for the last to "
-                        "leave, the least latency; more: a process per node overlaps them, more frames a second, "
-                        "none lost; benchmarks/results/graph.md measures the trade)")
+    s.add_argument("--in-flight", type=_in_flight, default=1, metavar="N",
+                   help="lossless: frames let into the graph at once, 1 to 15 (default 1: each frame waits for the "
+                        "last to leave, the least latency, the same estimates run to run; more: a process per node "
+                        "overlaps them, more frames a second, none lost, but the tracker's feedback to a SLAM "
+                        "localization comes frames late, by the run's timing; latency and --frame-timeout count from "
+                        "publication, queueing included; benchmarks/results/graph.md measures the trade)")
     s.add_argument("--metrics", metavar="JSON", help="write replay statistics here")
     s.add_argument("--namespace", default="", help="the graph's ROS namespace")
     s.add_argument("--no-standby", action="store_true",

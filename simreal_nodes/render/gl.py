@@ -165,10 +165,10 @@ _SPARE: list[moderngl.Context] = []
 
 
 def _new_context() -> moderngl.Context:
-    import moderngl
-
     backend = os.environ.get("SIMREAL_GL_BACKEND", "egl")
     try:
+        import moderngl
+
         # moderngl's stubs type each **settings value as a dict; backend is a string at run time
         return (moderngl.create_standalone_context(backend=backend)  # type: ignore[arg-type]
                 if backend else moderngl.create_standalone_context())
@@ -178,7 +178,7 @@ def _new_context() -> moderngl.Context:
 
 
 def prepare_context() -> str:
-    """Create the OpenGL context the next :class:`Renderer` of this thread takes, and return its GL_RENDERER: a node
+    """Create the OpenGL context the next :class:`Renderer` of this process takes, and return its GL_RENDERER: a node
     that renders calls it at start-up, so that the driver loads then and not while its first frame waits (the
     camera's intrinsics, which the renderer needs, come with that frame). :class:`RenderError` as Renderer gives it."""
     if not _SPARE:
@@ -207,6 +207,12 @@ class Renderer:
     @property
     def gl_renderer(self) -> str:
         return self.ctx.info.get("GL_RENDERER", "?")
+
+    def _current(self) -> None:
+        """Make this renderer's context the thread's current one before its GL calls: moderngl issues them to
+        whichever context is current, and with several renderers in one thread (the overlay's and an aero flow's;
+        a context made ahead by :func:`prepare_context`) the last one made would take every renderer's drawing."""
+        self.ctx.__enter__()
 
     def _setup_camera(self, cam: CameraModel) -> None:
         """The ideal (undistorted) render camera: same focal lengths, a margin that covers the distorted
@@ -249,11 +255,13 @@ class Renderer:
 
     # -- scene ---------------------------------------------------------------------------------------------
     def add(self, mesh: Mesh) -> Mesh:
+        self._current()
         self.meshes[mesh.name] = mesh
         self._upload(mesh, first=True)
         return mesh
 
     def remove(self, name: str) -> None:
+        self._current()
         m = self.meshes.pop(name, None)
         if m and m._vao:
             for v in m._vao.values():
@@ -263,6 +271,7 @@ class Renderer:
 
     def update(self, name: str, vertices: np.ndarray | None = None, colors: np.ndarray | None = None,
                pose: np.ndarray | None = None) -> None:
+        self._current()
         m = self.meshes[name]
         if vertices is not None:
             m.vertices = np.asarray(vertices, dtype=np.float64)
@@ -336,6 +345,7 @@ class Renderer:
         ``real_depth`` (metres, real camera pixels, 0/NaN invalid): fragments farther than it are discarded
         (occlusion by real geometry). ``background`` (HxWx3 uint8): composited under the drawn pixels.
         """
+        self._current()
         rc = self.render_cam
         self.fbo.use()
         self.ctx.viewport = (0, 0, rc.width, rc.height)
@@ -356,6 +366,7 @@ class Renderer:
         vertices in the ideal render camera (the whole view if one lies behind the near plane). With lens
         distortion the box's camera pixels look their colour and coverage up in the drawn patch through the
         distortion map (bilinear, so edges are antialiased by coverage). With supersampling: :meth:`render`."""
+        self._current()
         cam = self.cam
         bg = np.asarray(background)
         if bg.dtype != np.uint8 or bg.shape != (cam.height, cam.width, 3):
@@ -545,6 +556,7 @@ class Renderer:
         return np.ascontiguousarray(rgb_o), np.ascontiguousarray(d_o)
 
     def release(self) -> None:
+        self._current()
         for n in list(self.meshes):
             self.remove(n)
         self.patch_fbo.release()

@@ -141,6 +141,10 @@ class Recorder:
 # ---------------------------------------------------------------------------------------------
 
 
+# the most frames a lossless replay lets into the graph at once: a node holds up to StampSync's max_pending (30)
+# frames waiting for their inputs and drops the oldest beyond; half of that leaves room for the inputs that come early
+MAX_IN_FLIGHT = 15
+
 # the start-up a replay's steady-state share leaves out (``PlayStats.through_after``): live, a graph's first frame
 # waits for what every node builds once the first CameraInfo comes with it (the overlay's GL context and undistortion
 # maps, the localizer), and the frames that arrive meanwhile are replaced in the nodes' one-deep queues
@@ -193,7 +197,8 @@ class PlayStats:
                                              "frames_timed_out", "conflicting_reports", "wall_s", "play_s")}
         out["fps"] = self.frames_published / self.play_s if self.play_s > 0 else 0.0
         out["fps_through"] = self.frames_completed / self.play_s if self.play_s > 0 else 0.0
-        out["through_after_startup_pct"] = self.through_after(STARTUP_S)
+        steady = self.through_after(STARTUP_S)
+        out["through_after_startup_pct"] = None if steady != steady else steady  # JSON has no NaN
         out["cpu_ms_per_frame"] = {n: 1e3 * v / max(self.frames_published, 1) for n, v in self.cpu_s.items()}
         out["drop_reasons"] = dict(self.drop_reasons)
         out["latency_ms"] = {n: {"p50": float(np.percentile(v, 50)), "p95": float(np.percentile(v, 95)),
@@ -207,8 +212,9 @@ class Player:
     def __init__(self, node: Node, executor, input_topics: dict[str, str], image_topic: str,
                  nodes: list[str], lossless: bool, rate: float = 1.0, frame_timeout_s: float = 30.0,
                  echo=print, in_flight: int = 1):
-        if int(in_flight) < 1:
-            raise ValueError(f"in_flight {in_flight}: a lossless replay lets at least one frame into the graph")
+        if not 1 <= int(in_flight) <= MAX_IN_FLIGHT:
+            raise ValueError(f"in_flight {in_flight}: a lossless replay lets 1 to {MAX_IN_FLIGHT} frames into the "
+                             "graph")
         self.node, self.executor = node, executor
         self.in_flight = int(in_flight)
         self._open: dict[int, tuple[float, float | None]] = {}  # frames in the graph: stamp -> (deadline, grace end)
@@ -294,7 +300,7 @@ class Player:
         """Spin until at most ``most`` published frames are still in the graph: each leaves it when every node
         reported it finished, when a node dropped it (after a short grace for the others' reports) or at its
         timeout. ``most`` 0: the graph drained; the lock-step player settles to 0 after every frame."""
-        while len(self._open) > most:
+        while len(self._open) > most and not self.should_stop():
             # returns as soon as a report (or anything) arrives: a long timeout only saves idle wake-ups,
             # which cost the graph CPU (each builds the executor's wait set)
             self.executor.spin_once(timeout_sec=0.05)
@@ -339,6 +345,9 @@ class Player:
 
         def release(i):
             raw, s, _ = held.pop(i)
+            if self.lossless:  # a frame with the stamp of one still in the graph waits for it (frames are keyed by it)
+                while s in self._open and not self.should_stop():
+                    self._settle(len(self._open) - 1)
             self._publish_image(raw, s)
             if self.lossless:
                 self._open[s] = (time.monotonic() + self.frame_timeout_s, None)

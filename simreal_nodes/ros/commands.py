@@ -25,7 +25,7 @@ from simreal_nodes.launch import (
     ros_environment,
     thread_variables,
 )
-from simreal_nodes.ros.bagplay import Player, Recorder
+from simreal_nodes.ros.bagplay import MAX_IN_FLIGHT, Player, Recorder
 from simreal_nodes.ros.node import make_executor
 from simreal_nodes.scene.graph import (
     image_topic,
@@ -77,15 +77,18 @@ def replay(bag: str, scene_file: str, rate: float = 1.0, lossless: bool = False,
     player's (one of :data:`~simreal_nodes.launch.EXECUTORS`; None: :func:`~simreal_nodes.launch.executor_kind`);
     ``threads``: the worker threads of each node process's libraries (:func:`~simreal_nodes.launch.ros_environment`;
     None: ``SIMREAL_THREADS``, else the default: the linear algebra's pools one thread, OpenCV's its own);
-    ``in_flight``: lossless, how many frames the player lets into the graph at once (1: lock-step, the next frame
-    published when every node reported the last; more: the nodes of a process per node overlap, every frame still
-    processed, in order, by every node); ``record_images``: False, the graph's image outputs are received and
-    counted but not written to the record (what a display costs, not a disk)."""
+    ``in_flight``: lossless, how many frames the player lets into the graph at once (1 to
+    :data:`~simreal_nodes.ros.bagplay.MAX_IN_FLIGHT`; 1: lock-step, the next frame published when every node
+    reported the last; more: the nodes of a process per node overlap, every frame still processed, in order, by
+    every node, but what the tracker tells the localization about a frame (its map points' flags, its focus region,
+    the map's freeze) reaches it up to ``in_flight - 1`` frames later than lock-step, by the timing of the run: a
+    SLAM scene's estimates then need not repeat; lock-step for evaluation); ``record_images``: False, the graph's
+    image outputs are received and counted but not written to the record (what a display costs, not a disk)."""
     executor = executor_kind(None if executor is None else {EXECUTOR_ENV: executor})
     thread_variables(dict(os.environ), threads)  # a bad SIMREAL_THREADS (or threads) refused before any work
-    if isinstance(in_flight, bool) or not isinstance(in_flight, int) or in_flight < 1:
-        raise SimrealError(f"frames in flight {in_flight!r}: a lossless replay lets a whole number of at least 1 "
-                           "into the graph at once")
+    if isinstance(in_flight, bool) or not isinstance(in_flight, int) or not 1 <= in_flight <= MAX_IN_FLIGHT:
+        raise SimrealError(f"frames in flight {in_flight!r}: a lossless replay lets a whole number from 1 to "
+                           f"{MAX_IN_FLIGHT} into the graph at once (a node holds 30 frames waiting for inputs)")
     if in_flight > 1 and not lossless:
         echo(f"[replay] warning: {in_flight} frames in flight asked of a live replay, which publishes at the bag's "
              "rate and bounds nothing: the bound is the lossless replay's (--lossless)")

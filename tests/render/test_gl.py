@@ -109,16 +109,17 @@ def test_a_context_made_ahead_is_the_one_the_next_renderer_takes(monkeypatch):
     assert len(gl._SPARE) == 1 and gl._SPARE[0] is spare  # asked again: still the one
     r = Renderer(CAMS["pinhole"])
     assert r.ctx is spare and not gl._SPARE
-    r2 = Renderer(CAMS["pinhole"])
+    V, F = disks([np.array([-0.3, 0.0, 2.0])], 0.1)  # a disk on the left for this one
+    r.add(Mesh("d", V, F, tint=(1.0, 0.0, 0.0)))
+    r2 = Renderer(CAMS["pinhole"])  # made after: its context is the thread's current one now
     assert r2.ctx is not spare
-    # the taken context renders as a fresh one does
-    V, F = disks([np.array([0.0, 0.0, 2.0])], 0.1)
-    for rr in (r, r2):
-        rr.add(Mesh("d", V, F, tint=(1.0, 0.0, 0.0)))
-    (c1, d1), (c2, d2) = r.render(np.eye(4)), r2.render(np.eye(4))
-    np.testing.assert_array_equal(c1, c2)
-    np.testing.assert_array_equal(d1, d2)
-    assert (d1 > 0).sum() > 100  # the disk was drawn
+    V, F = disks([np.array([0.3, 0.0, 2.0])], 0.1)  # on the right for the other
+    r2.add(Mesh("d", V, F, tint=(1.0, 0.0, 0.0)))
+    # each draws into its own context (before stop 97's review, the first drew the last one's scene)
+    (_, d1), (_, d2) = r.render(np.eye(4)), r2.render(np.eye(4))
+    w = d1.shape[1]
+    assert (d1[:, : w // 2] > 0).sum() > 100 and (d1[:, w // 2:] > 0).sum() == 0
+    assert (d2[:, w // 2:] > 0).sum() > 100 and (d2[:, : w // 2] > 0).sum() == 0
     r.release()
     r2.release()
     monkeypatch.setenv("SIMREAL_GL_BACKEND", "no-such-backend")

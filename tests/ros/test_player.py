@@ -11,7 +11,7 @@ pytest.importorskip("rclpy")
 from std_msgs.msg import Header
 
 from simreal_nodes.io import bags
-from simreal_nodes.ros.bagplay import Player, PlayStats
+from simreal_nodes.ros.bagplay import MAX_IN_FLIGHT, Player, PlayStats
 from simreal_nodes.ros.node import progress_id
 from tests.helpers import write_camera_bag
 
@@ -107,9 +107,44 @@ def test_a_frame_that_never_finishes_times_out_and_holds_up_no_other_with_frames
     assert seen == answered
 
 
-def test_the_player_refuses_no_frame_in_flight():
-    with pytest.raises(ValueError, match="at least one frame"):
-        Player(_Node(), None, {IMAGE: "sensor_msgs/msg/Image"}, IMAGE, list(NODES), lossless=True, in_flight=0)
+@pytest.mark.parametrize("in_flight", [0, MAX_IN_FLIGHT + 1])
+def test_the_player_refuses_no_frame_or_more_than_the_nodes_hold_in_flight(in_flight):
+    with pytest.raises(ValueError, match=f"lets 1 to {MAX_IN_FLIGHT} frames"):
+        Player(_Node(), None, {IMAGE: "sensor_msgs/msg/Image"}, IMAGE, list(NODES), lossless=True,
+               in_flight=in_flight)
+
+
+def test_the_bound_stays_below_what_a_node_holds_waiting_for_inputs():
+    from simreal_nodes.sync import StampSync
+
+    assert StampSync(("a",)).max_pending >= 2 * MAX_IN_FLIGHT
+
+
+def test_a_frame_with_the_stamp_of_one_still_in_the_graph_waits_for_it(tmp_path):
+    """Frames are keyed by stamp: a second image with a stamp still in flight is published once the first left (as
+    lock-step did), so every frame is counted once."""
+    write_camera_bag(tmp_path / "in", n=6, w=64, h=48)
+    msgs = list(bags.read_bag(tmp_path / "in", topics=[IMAGE]))
+    msgs = msgs[:3] + [msgs[2]] + msgs[3:]  # frame 2 twice
+    player = Player(_Node(), None, {IMAGE: "sensor_msgs/msg/Image"}, IMAGE, list(NODES), lossless=True,
+                    echo=lambda *a: None, in_flight=3)
+    player.executor = _Graph(player)
+    stats = player.play(msgs)
+    assert stats.frames_published == 7
+    assert stats.frames_completed == 7 and stats.frames_dropped == stats.frames_timed_out == 0
+
+
+def test_live_the_frames_every_node_finished_are_listed(tmp_path):
+    """Live, the frames through are listed too (the steady share reads them), and one the graph never finished is
+    not."""
+    write_camera_bag(tmp_path / "in", n=8, w=64, h=48, fps=60.0)
+    player = Player(_Node(), None, {IMAGE: "sensor_msgs/msg/Image"}, IMAGE, list(NODES), lossless=False,
+                    echo=lambda *a: None)
+    player.executor = _Graph(player, hung={5})
+    stats = player.play(bags.read_bag(tmp_path / "in", topics=[IMAGE]))
+    pub = stats.published_stamps
+    assert len(pub) == 8 and sorted(stats.completed_stamps) == [s for i, s in enumerate(pub) if i != 5]
+    assert stats.frames_completed == 7 and stats.frames_dropped == 1
 
 
 def test_the_steady_share_leaves_the_start_up_out():
@@ -145,3 +180,17 @@ def test_a_node_process_loads_before_its_spin_what_its_first_frame_would_wait_fo
     warm_start([_N(), _N()])
     assert convert._jazzy_types.cache_info().currsize == 1
     assert said == ["up: spinning"] * 2
+
+
+def test_a_node_process_warms_its_nodes_before_it_spins(monkeypatch):
+    """`run_nodes` (every node process, and the one-process launch) calls the warm start with its nodes, before the
+    executor spins."""
+    from rclpy.node import Node
+
+    from simreal_nodes.ros import node as node_mod
+
+    order = []
+    monkeypatch.setattr(node_mod, "warm_start", lambda nodes: order.append(("warm", [n.get_name() for n in nodes])))
+    monkeypatch.setattr(node_mod, "spin", lambda ex: order.append(("spin", None)))
+    assert node_mod.run_nodes([lambda: Node("warm_a"), lambda: Node("warm_b")]) == 0
+    assert order == [("warm", ["warm_a", "warm_b"]), ("spin", None)]
