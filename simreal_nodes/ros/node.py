@@ -317,17 +317,18 @@ def spin(ex) -> None:
                 raise
 
 
-def warm_start(nodes: list[Node]) -> None:
-    """Before the spin, what would otherwise fall on a node's first frame: live, the frames that arrive while it
-    waits are replaced in the one-deep queues (a replay's first second lost 8 of the demo's 30 frames so). Loaded:
-    rosbags' type store, which reads and writes the images serialized (about 0.1 s of CPU); and rclpy's logger,
-    whose first call has :mod:`inspect` index every module loaded to find its caller (about 0.1 s): each node logs
-    that it is up."""
+def warm_start() -> None:
+    """Before the nodes are built (so before they subscribe), what would otherwise fall on a node's first frame: live,
+    the frames that arrive while it waits are replaced in the one-deep queues (a replay's first second lost 5-8 of
+    the demo's 30 frames so). Loaded: rosbags' type store, which reads and writes the images serialized (about 0.1 s
+    of CPU); and :mod:`inspect`'s index of the loaded modules, which rclpy's logger builds on its first call to find
+    its caller (about 0.1 s; a node that logs while it is built adds its own imports to it then)."""
+    import inspect
+
     from simreal_nodes.ros.convert import prepare
 
     prepare()
-    for node in nodes:
-        node.get_logger().info("up: spinning")
+    inspect.getframeinfo(sys._getframe())
 
 
 def run_node(node_cls, args=None) -> int:
@@ -359,11 +360,11 @@ def run_nodes(builders: list[Callable[[], Node]], args=None) -> int:
             placeholder = _standby_until_promoted()
             if placeholder is None:
                 return 0
+        warm_start()
         for build in builders:
             nodes.append(build())
         if placeholder is not None:
             placeholder.destroy_node()
-        warm_start(nodes)
         ex = make_executor()
         for node in nodes:
             ex.add_node(node)
