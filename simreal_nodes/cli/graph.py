@@ -42,13 +42,13 @@ def add_executor(s: argparse.ArgumentParser) -> None:
 
 
 def _in_flight(text: str) -> int:
-    from simreal_nodes.ros.bagplay import MAX_IN_FLIGHT
+    from simreal_nodes.ros.bagplay import MAX_IN_FLIGHT, in_flight_ok
 
     try:
         n = int(text)
     except ValueError:
         n = 0
-    if not 1 <= n <= MAX_IN_FLIGHT:
+    if not in_flight_ok(n):
         raise argparse.ArgumentTypeError(f"expected a whole number from 1 to {MAX_IN_FLIGHT}, got {text!r}")
     return n
 

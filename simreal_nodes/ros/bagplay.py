@@ -145,6 +145,12 @@ class Recorder:
 # frames waiting for their inputs and drops the oldest beyond; half of that leaves room for the inputs that come early
 MAX_IN_FLIGHT = 15
 
+
+def in_flight_ok(n) -> bool:
+    """Whether ``n`` is a bound a lossless replay takes for its frames in flight: a whole number (not a bool) from 1
+    to :data:`MAX_IN_FLIGHT` (the player's, ``replay``'s and the CLI's one check)."""
+    return isinstance(n, int) and not isinstance(n, bool) and 1 <= n <= MAX_IN_FLIGHT
+
 # the start-up a replay's steady-state share leaves out (``PlayStats.through_after``): live, a graph's first frame
 # waits for what every node builds once the first CameraInfo comes with it (the overlay's GL context and undistortion
 # maps, the localizer), and the frames that arrive meanwhile are replaced in the nodes' one-deep queues
@@ -212,7 +218,7 @@ class Player:
     def __init__(self, node: Node, executor, input_topics: dict[str, str], image_topic: str,
                  nodes: list[str], lossless: bool, rate: float = 1.0, frame_timeout_s: float = 30.0,
                  echo=print, in_flight: int = 1):
-        if not 1 <= int(in_flight) <= MAX_IN_FLIGHT:
+        if not in_flight_ok(int(in_flight)):
             raise ValueError(f"in_flight {in_flight}: a lossless replay lets 1 to {MAX_IN_FLIGHT} frames into the "
                              "graph")
         self.node, self.executor = node, executor

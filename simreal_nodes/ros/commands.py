@@ -25,7 +25,7 @@ from simreal_nodes.launch import (
     ros_environment,
     thread_variables,
 )
-from simreal_nodes.ros.bagplay import MAX_IN_FLIGHT, Player, Recorder
+from simreal_nodes.ros.bagplay import MAX_IN_FLIGHT, Player, Recorder, in_flight_ok
 from simreal_nodes.ros.node import make_executor
 from simreal_nodes.scene.graph import (
     image_topic,
@@ -86,7 +86,7 @@ def replay(bag: str, scene_file: str, rate: float = 1.0, lossless: bool = False,
     image outputs are received and counted but not written to the record (what a display costs, not a disk)."""
     executor = executor_kind(None if executor is None else {EXECUTOR_ENV: executor})
     thread_variables(dict(os.environ), threads)  # a bad SIMREAL_THREADS (or threads) refused before any work
-    if isinstance(in_flight, bool) or not isinstance(in_flight, int) or not 1 <= in_flight <= MAX_IN_FLIGHT:
+    if not in_flight_ok(in_flight):
         raise SimrealError(f"frames in flight {in_flight!r}: a lossless replay lets a whole number from 1 to "
                            f"{MAX_IN_FLIGHT} into the graph at once (a node holds 30 frames waiting for inputs)")
     if in_flight > 1 and not lossless:
