@@ -1,5 +1,6 @@
 """Whole graph (issues 7, 18): frames per second, latency and CPU of the node graph, one process per node against
-all nodes in one process (``--one-process``), on two scenes:
+all nodes in one process (``--one-process``) and, for the scenes with a node slower than a frame, the split launch
+(``--split``: that node alone, the others in one process), on these scenes:
 
 - the demo (``aluminium_beam``: ingest -> markers localization -> deformable tracker (glued dots) -> overlay) at
   640 x 480 and 1280 x 720;
@@ -18,7 +19,8 @@ flight (``graph_in_flight``: the trade of frames a second against latency). Repo
 every node per second of play and as a fraction, latency from publication to the overlay's report (its own clock),
 each node's processing time, the CPU each process used per published frame (from /proc), and the nodes' CPU per
 frame in all. The recorder counts the graph's image outputs without writing them (``run_case``'s
-``record_images``).
+``record_images``). Last, the library pools' threads with frames in flight, one (the replay's default there)
+against two (``graph_threads``).
 """
 
 from __future__ import annotations
@@ -34,24 +36,31 @@ from simreal_nodes.demo import node_metrics, sample_bag
 from simreal_nodes.launch import executor_kind
 from simreal_nodes.metrics import STAGES
 from simreal_nodes.ros.commands import replay
+from simreal_nodes.scene.graph import SPLIT, slow_nodes
+from simreal_nodes.scene.schema import load_scene
 
 CASES = (("aluminium_beam", "640x480", None), ("aluminium_beam", "1280x720", 4.0), ("foam_beam", "640x480", None),
          ("family-3", "640x480", None))
 PLAYER = "player + recorder"
+LAUNCH_NAMES = {False: "process per node", True: "one process", SPLIT: "split"}
 POSE_TOPIC = "/simreal/localization/pose"
 # the lossless rows with frames in flight: as many as the graphs' per-frame nodes (ingest, localization, tracker,
 # overlay), so that with a process per node each can work on a frame of its own
 IN_FLIGHT = 4
 SWEEP_CASE = ("aluminium_beam", "640x480")  # the in-flight trade, measured besides 1 and IN_FLIGHT at these
 SWEEP = (2, 8)
+# the pools' threads with frames in flight (replay's IN_FLIGHT_THREADS, one, against two: OpenCV's own count here)
+THREADS_CASES = ((("aluminium_beam", "640x480"), False), (("foam_beam", "640x480"), SPLIT))
 
 
 def main():
     rows, sweep = [], []
     for scene, res, duration in CASES:
         bag, scene_yaml = sample_bag(scene, duration=duration, resolution=res, echo=lambda *a: None)
+        slow = bool(slow_nodes(load_scene(scene_yaml)))
         for lossless, in_flight in ((True, 1), (True, IN_FLIGHT), (False, 1)):
-            for one_process in (False, True):
+            # the split launch where the scene has a slow node (else it is the one process) and nodes overlap
+            for one_process in (False, True) + ((SPLIT,) if slow and (in_flight > 1 or not lossless) else ()):
                 rows.append(run_case(scene, res, bag, scene_yaml, lossless, one_process, in_flight=in_flight,
                                      record_images=False))
                 print(rows[-1], flush=True)
@@ -63,10 +72,18 @@ def main():
                     print(sweep[-1], flush=True)
     report(rows)
     report_in_flight(rows, sweep)
+    threads = []
+    for (scene, res), launch in THREADS_CASES:
+        bag, scene_yaml = sample_bag(scene, resolution=res, echo=lambda *a: None)
+        for n in (1, 2, 2, 1):  # pairs, the order alternating
+            threads.append(run_case(scene, res, bag, scene_yaml, True, launch, in_flight=IN_FLIGHT, threads=n,
+                                    record_images=False))
+            print(threads[-1], flush=True)
+    report_threads(threads)
 
 
 def run_case(scene, res, bag, scene_yaml, lossless, one_process, executor=None, evaluate=None,
-             isolated=True, in_flight=1, record_images=True) -> dict:
+             isolated=True, in_flight=1, record_images=True, threads=None) -> dict:
     """One replay; ``executor``: the nodes' and the player's (None: the default); ``evaluate(record) -> dict``:
     more of the row, read from the replay's record (picklable: a top-level function or a partial of one);
     ``in_flight``: lossless, the frames the player lets into the graph at once (1: lock-step); ``record_images``:
@@ -83,12 +100,12 @@ def run_case(scene, res, bag, scene_yaml, lossless, one_process, executor=None, 
 
         with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as pool:
             return pool.submit(run_case, scene, res, bag, scene_yaml, lossless, one_process, executor, evaluate,
-                               False, in_flight, record_images).result()
+                               False, in_flight, record_images, threads).result()
     with tempfile.TemporaryDirectory() as tmp:
         t0 = time.monotonic()
         stats, _, counts = replay(str(bag), str(scene_yaml), lossless=lossless, record=str(Path(tmp) / "run"),
                                   echo=lambda *a: None, one_process=one_process, executor=executor,
-                                  in_flight=in_flight, record_images=record_images)
+                                  in_flight=in_flight, record_images=record_images, threads=threads)
         wall = time.monotonic() - t0
         nodes = node_metrics(Path(tmp) / "run")
         extra = evaluate(Path(tmp) / "run") if evaluate else {}
@@ -97,8 +114,8 @@ def run_case(scene, res, bag, scene_yaml, lossless, one_process, executor=None, 
     last = lat.get("overlay") or next(iter(lat.values()), {"p50": float("nan"), "p95": float("nan")})
     cpu = d["cpu_ms_per_frame"]
     mode = ("lossless" if in_flight == 1 else f"lossless, {in_flight} in flight") if lossless else "real time (30 fps)"
-    return dict(scene=scene, resolution=res, mode=mode, in_flight=in_flight if lossless else None,
-                launch="one process" if one_process else "process per node", executor=executor or executor_kind(),
+    return dict(scene=scene, resolution=res, mode=mode, in_flight=in_flight if lossless else None, threads=threads,
+                launch=LAUNCH_NAMES[one_process], executor=executor or executor_kind(),
                 fps=d["fps_through"], delivered_pct=100 * d["frames_completed"] / max(d["frames_published"], 1),
                 # the localization's own output (pose, TF): what a robot stack reads, whatever the later nodes do
                 pose_pct=100 * counts.get(POSE_TOPIC, 0) / max(d["frames_published"], 1),
@@ -148,10 +165,11 @@ def report(rows):
         fig, ax = plt.subplots(1, 3, figsize=(14, 3.8))
         cases = list(dict.fromkeys((r["scene"], r["resolution"], r["mode"]) for r in rows))
         x = range(len(cases))
-        for k, (launch, color) in enumerate((("process per node", "tab:blue"), ("one process", "tab:orange"))):
+        for k, (launch, color) in enumerate((("process per node", "tab:blue"), ("one process", "tab:orange"),
+                                             ("split", "tab:green"))):
             by = {(r["scene"], r["resolution"], r["mode"]): r for r in rows if r["launch"] == launch}
             for a, key in zip(ax, ("fps", "latency_p95", "nodes_cpu_ms"), strict=True):
-                a.bar([i + 0.4 * k - 0.2 for i in x], [by[c][key] if c in by else 0 for c in cases], width=0.4,
+                a.bar([i + 0.28 * k - 0.28 for i in x], [by[c][key] if c in by else 0 for c in cases], width=0.28,
                       color=color, label=launch)
         ax[0].axhline(60, color="k", ls=":", lw=0.8)
         ax[0].axhline(30, color="k", ls="--", lw=0.8)
@@ -176,14 +194,16 @@ def report(rows):
     cpu_cols = sorted({k for r in rows for k in r if k.startswith("cpu_")})
     cols += [(k, k[4:-3] + " CPU/frame (ms)", "{:.1f}") for k in cpu_cols] + [("cores_busy", "cores busy", "{:.2f}")]
     save("graph", rows, cols, "Whole graph: the demo scene (markers + dots), RGB-D SLAM scenes (foam beam, map "
-         "points; family seed 3, dense, registered), one process per node against one process",
+         "points; family seed 3, dense, registered), one process per node against one process and split",
          "Goals (issues 7, 18): >= 60 fps at 640x480 and >= 30 fps at 1280x720 lossless, 100 % through live at 30 fps "
          "with p95 <= 2 frame periods, nodes' CPU <= 30 ms per frame at 640x480; RGB-D SLAM graph >= 30 fps "
          "lossless. Node p50 columns: processing time per frame inside each node's callback (its /diagnostics: "
          "message to array, the core's work, array to message); their sum beside the nodes' CPU per frame (CPU "
          "time, user + system, from /proc, of every node process while the bag played, over the published "
-         "frames): the difference is the executor, the middleware and the timers. 'nodes' is the one process of "
-         "`--one-process`; the player + recorder is the test harness (the bag reader, the camera's stand-in). "
+         "frames): the difference is the executor, the middleware and the timers. 'nodes' is the process of several "
+         "nodes: all of them with `--one-process`, all but the slow one(s) with `--split` (split: the nodes slower "
+         "than a frame, a SLAM localization or a dense tracker, each in a process of its own); the player + "
+         "recorder is the test harness (the bag reader, the camera's stand-in). "
          "After the first second: the frames through among those published a second or more after the first (the "
          "steady state: live, a graph's first frame waits for what each node builds on the first CameraInfo, which "
          "comes with it, and the frames meanwhile are replaced in the one-deep queues). "
@@ -192,7 +212,8 @@ def report(rows):
          "every node in order; plain 'lossless' is lock-step (the player publishes a frame when every node reported "
          f"the last: one frame in the graph, its fps the inverse of a frame's trip), 'lossless, {IN_FLIGHT} in "
          f"flight' lets up to {IN_FLIGHT} frames in at once (nodes in their own processes work on different frames; "
-         "latency then includes the queue; `simreal replay --lossless --in-flight N`). Real time: live QoS, a busy "
+         "latency then includes the queue; `simreal replay --lossless --in-flight N`, which then gives each "
+         "library pool one thread: graph_threads.md). Real time: live QoS, a busy "
          "node takes the newest frame (skipped frames are the 'not through' ones). The recorder counts the image "
          "outputs (camera, overlay) without writing them (the harness costs a display's reception, not a disk's). "
          "2-core CPU, Mesa llvmpipe for the overlay.\n\n"
@@ -236,6 +257,40 @@ def report_in_flight(rows: list[dict], sweep: list[dict]) -> None:
          "any setting (frames through 100 %). More frames in flight let the nodes of a process per node work at "
          "once, on two cores; one process runs one callback at a time and gains only the player's overlap. The "
          "price is latency: a frame waits behind the ones before it.", plot)
+
+
+def report_threads(runs: list[dict]) -> None:
+    """The library pools' threads per node process with frames in flight: one (the replay's default there,
+    ``commands.IN_FLIGHT_THREADS``) against two (OpenCV's own count on 2 cores), medians of two runs each."""
+    rows = []
+    for key in dict.fromkeys((r["scene"], r["launch"], r["threads"]) for r in runs):
+        mine = [r for r in runs if (r["scene"], r["launch"], r["threads"]) == key]
+        rows.append(dict(scene=key[0], launch=key[1], threads=key[2], runs=len(mine),
+                         **{k: float(np.median([r[k] for r in mine]))
+                            for k in ("fps", "nodes_cpu_ms", "cpu_player_ms", "latency_p50", "cores_busy")}))
+    cols = [("scene", "scene", "{}"), ("launch", "launch", "{}"), ("threads", "threads a pool", "{}"),
+            ("fps", "fps through", "{:.1f}"), ("nodes_cpu_ms", "nodes' CPU/frame (ms)", "{:.1f}"),
+            ("cpu_player_ms", "player CPU/frame (ms)", "{:.1f}"), ("latency_p50", "latency p50 (ms)", "{:.0f}"),
+            ("cores_busy", "cores busy", "{:.2f}")]
+
+    def plot(plt):
+        fig, ax = plt.subplots(figsize=(6, 3.5))
+        labels = [f"{r['scene']}\n{r['launch']}\n{r['threads']} a pool" for r in rows]
+        ax.bar(range(len(rows)), [r["fps"] for r in rows], color=["tab:blue" if r["threads"] == 1 else "tab:gray"
+                                                                 for r in rows])
+        ax.set_xticks(range(len(rows)))
+        ax.set_xticklabels(labels, fontsize=7)
+        ax.axhline(30, color="k", ls="--", lw=0.8)
+        ax.set_ylabel(f"fps through, lossless, {IN_FLIGHT} in flight")
+        fig.tight_layout()
+        return fig
+
+    save("graph_threads", rows, cols, f"Library pools' threads per node process, lossless with {IN_FLIGHT} frames "
+         "in flight", "`./run bench graph`: each case twice per setting, order 1, 2, 2, 1; medians. With frames in "
+         "flight every core is busy with a node, so a pool's helper threads (OpenCV's own count is one per core) "
+         "only add switching and synchronisation: `simreal replay --lossless --in-flight N` gives every pool one "
+         "thread unless told (`--threads`, `SIMREAL_THREADS`). 2 a pool also gives the linear algebra's pools two "
+         "(the lock-step default keeps them at one).", plot)
 
 
 BUDGET_COLS = [("scene", "scene", "{}"), ("resolution", "resolution", "{}"), ("launch", "launch", "{}"),

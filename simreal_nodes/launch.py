@@ -18,7 +18,9 @@ With ``one_process`` on (the CLI's default but for live SLAM or dense-tracker gr
 frames in flight, :func:`~simreal_nodes.scene.graph.one_process_default`; ``--process-per-node`` turns it off), the
 nodes run in a single process on one executor (:mod:`simreal_nodes.ros.compose`), each with the arguments it would
 have had in its own; the launcher then watches, restarts and stops that one process (named :data:`ONE_PROCESS`) as
-it would a node, with one standby. ``./run bench graph`` measures it against one process per node. The class itself
+it would a node, with one standby. ``--split`` puts the nodes slower than a camera frame (a SLAM localization, a
+dense tracker) in processes of their own and the others in one (``groups``,
+:func:`~simreal_nodes.scene.graph.process_groups`). ``./run bench graph`` measures the three. The class itself
 starts a process per node unless asked (its callers, tests and benchmarks, say which they run).
 """
 
@@ -179,7 +181,7 @@ WATCH_PERIOD_S = 0.05  # how often the launcher looks for exited nodes
 EXECUTOR_ENV = "SIMREAL_EXECUTOR"  # the executor node processes (and the replay's player) spin on: EXECUTORS
 EXECUTORS = ("events", "single")  # rclpy's EventsExecutor (C++), its SingleThreadedExecutor (Python)
 DEFAULT_EXECUTOR = "events"
-ONE_PROCESS = "nodes"  # the name (log, CPU figures) of the process that runs every node in the one-process launch
+ONE_PROCESS = "nodes"  # the name (log, CPU figures) of a process of several nodes (all: the one-process launch)
 
 
 @dataclass
@@ -202,12 +204,15 @@ class Launcher:
     on this host unless widened). ``namespace`` (e.g. ``/cell2``): every node is started in it, so node names and the
     services they address by relative names (the tracker's call to ``localization/set_localization_only``) do not
     collide with a second graph; the data topics are absolute (:mod:`simreal_nodes.scene.graph`) and move only by
-    ``remaps``."""
+    ``remaps``. ``groups``: the node names that share a process (each node named once; a group of one is that
+    node's own process, one of several runs them on one executor, :mod:`simreal_nodes.ros.compose`, and is named
+    :data:`ONE_PROCESS`: :func:`~simreal_nodes.scene.graph.process_groups` makes at most one such group); None:
+    ``one_process`` says (every node in one, or one each)."""
 
     def __init__(self, nodes: list[NodeSpec], remaps: dict[str, str] | None = None, respawn: int = 2,
                  env: dict | None = None, echo=print, log_dir: str | Path | None = None, namespace: str = "",
                  discovery_range: str | None = None, standby: bool = False, one_process: bool = False,
-                 executor: str | None = None, threads: int | None = None):
+                 executor: str | None = None, threads: int | None = None, groups: list[list[str]] | None = None):
         self.nodes = nodes
         self.remaps = remaps or {}
         self.respawn = respawn
@@ -239,12 +244,23 @@ class Launcher:
             for a, b in self.remaps.items():
                 cmd += ["-r", f"{a}:={b}"]
             self.procs.append(_Proc(spec, cmd))
-        if one_process and self.procs:
-            nodes_json = Path(self._tmp.name) / "nodes.json"
-            nodes_json.write_text(json.dumps([{"module": modules[p.spec.name], "args": p.cmd[3:]}
-                                              for p in self.procs], indent=1))
-            self.procs = [_Proc(NodeSpec(ONE_PROCESS, per_frame=False),
-                                [sys.executable, "-m", "simreal_nodes.ros.compose", str(nodes_json)])]
+        if groups is None:
+            groups = [[p.spec.name for p in self.procs]] if one_process else [[p.spec.name] for p in self.procs]
+        by_name = {p.spec.name: p for p in self.procs}
+        if sorted(n for g in groups for n in g) != sorted(by_name) or sum(len(g) > 1 for g in groups) > 1:
+            raise SimrealError(f"process groups {groups} must name each node ({', '.join(by_name)}) once, with at "
+                               "most one group of several")
+        procs = []
+        for g in groups:
+            if len(g) == 1:
+                procs.append(by_name[g[0]])
+                continue
+            nodes_json = Path(self._tmp.name) / f"nodes{len(procs)}.json"
+            nodes_json.write_text(json.dumps([{"module": modules[n], "args": by_name[n].cmd[3:]} for n in g],
+                                             indent=1))
+            procs.append(_Proc(NodeSpec(ONE_PROCESS, per_frame=False),
+                               [sys.executable, "-m", "simreal_nodes.ros.compose", str(nodes_json)]))
+        self.procs = procs
 
     # -----------------------------------------------------------------------------------------
     def start(self) -> Launcher:

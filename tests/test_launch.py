@@ -272,7 +272,7 @@ def test_a_replay_picks_the_launch_the_cli_left_open(monkeypatch, sample, lossle
     with pytest.raises(Reached):
         commands.replay(str(SAMPLES / sample), str(SAMPLES / f"{sample}.yaml"), lossless=lossless, one_process=None,
                         echo=lambda *a: None, in_flight=in_flight)
-    assert seen["one_process"] is one
+    assert (len(seen["groups"]) == 1) is one and sum(map(len, seen["groups"])) > 1
 
 
 def test_the_in_flight_option_is_parsed_refused_when_bad_and_reaches_the_replay(monkeypatch):
@@ -328,10 +328,37 @@ def test_simreal_launch_picks_the_launch_it_was_not_told(monkeypatch, capsys, sa
     assert a.one_process is None
     with pytest.raises(Reached):
         a.fn(a)
-    assert seen["one_process"] is one
+    assert (len(seen["groups"]) == 1) is one
     assert ("in one process" if one else "a process per node") in capsys.readouterr().out
     for flag, told in (("--one-process", True), ("--process-per-node", False)):
         a = p.parse_args(["launch", str(SAMPLES / f"{sample}.yaml"), flag])
         with pytest.raises(Reached):
             a.fn(a)
-        assert seen["one_process"] is told
+        assert (len(seen["groups"]) == 1) is told
+
+
+@pytest.mark.parametrize("sample,apart", [
+    ("crossed_beams_probe_320x240", ["localization"]),  # RGB-D SLAM: the localization alone
+    ("aluminium_beam_320x240", []),  # markers: no slow node, all in one process
+])
+def test_split_puts_the_slow_nodes_in_processes_of_their_own(monkeypatch, capsys, sample, apart):
+    """`simreal launch SCENE --split` and `simreal replay --split`: each slow node alone, the others in one."""
+    import simreal_nodes.launch
+    from simreal_nodes.cli import build_parser
+    from simreal_nodes.ros import commands
+
+    seen = catch_launcher(monkeypatch, simreal_nodes.launch)
+    a = build_parser().parse_args(["launch", str(SAMPLES / f"{sample}.yaml"), "--split"])
+    assert a.one_process == "split"
+    with pytest.raises(Reached):
+        a.fn(a)
+    groups = seen["groups"]
+    assert [g for g in groups if len(g) == 1 and g[0] in apart] == [[n] for n in apart]
+    shared = [g for g in groups if g[0] not in apart]
+    assert len(shared) == 1 and len(shared[0]) >= 2 and not set(shared[0]) & set(apart)
+    assert "split" in capsys.readouterr().out
+    seen = catch_launcher(monkeypatch, commands)
+    with pytest.raises(Reached):
+        commands.replay(str(SAMPLES / sample), str(SAMPLES / f"{sample}.yaml"), lossless=True, one_process="split",
+                        echo=lambda *a: None, in_flight=4)
+    assert seen["groups"] == groups

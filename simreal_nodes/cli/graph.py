@@ -27,6 +27,10 @@ def _launch_mode(s: argparse.ArgumentParser) -> None:
                    help="each node in its own process: a fault in one node leaves the others (and the SLAM map) "
                         "running (the default for a live graph with a SLAM localization or a dense tracker, whose "
                         "work a frame outlasts a camera frame period)")
+    g.add_argument("--split", dest="one_process", action="store_const", const="split",
+                   help="the nodes slower than a camera frame (a SLAM localization, a dense tracker) each in a "
+                        "process of its own, the others together in one: on 2 cores the fastest with frames in "
+                        "flight for an RGB-D SLAM graph (benchmarks/results/graph.md)")
     add_executor(s)
 
 
@@ -67,17 +71,18 @@ def _threads(text: str) -> int:
 
 def cmd_launch(a: argparse.Namespace) -> int:
     from simreal_nodes.launch import Launcher, run_until_signal
-    from simreal_nodes.scene.graph import ingest_note, launch_choice, required_nodes
+    from simreal_nodes.scene.graph import ingest_note, launch_choice, process_groups, required_nodes
     from simreal_nodes.scene.schema import build_spec_models, load_scene
 
     scene = build_spec_models(load_scene(a.scene))  # before the nodes start: they load the built models
     nodes = required_nodes(scene, lossless=a.lossless)
-    one, how = launch_choice(scene, a.lossless, a.one_process)
+    how_run, how = launch_choice(scene, a.lossless, a.one_process)
     print(f"[launch] scene '{scene['name']}': starting {', '.join(n.name for n in nodes)} "
           f"({ingest_note(scene, nodes)}; {how})")
     return run_until_signal(Launcher(nodes, remaps=_remaps(a.remap), respawn=a.respawn, namespace=a.namespace,
                                      discovery_range=a.discovery_range, standby=not a.no_standby,
-                                     one_process=one, executor=a.executor, threads=a.threads))
+                                     groups=process_groups(scene, nodes, how_run), executor=a.executor,
+                                     threads=a.threads))
 
 
 def cmd_replay(a: argparse.Namespace) -> int:

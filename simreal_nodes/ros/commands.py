@@ -22,6 +22,7 @@ from simreal_nodes.launch import (
     THREADS_ENV,
     Launcher,
     executor_kind,
+    node_threads,
     ros_environment,
     thread_variables,
 )
@@ -32,6 +33,7 @@ from simreal_nodes.scene.graph import (
     ingest_note,
     launch_choice,
     output_topics,
+    process_groups,
     required_nodes,
 )
 from simreal_nodes.scene.schema import build_spec_models, load_scene
@@ -63,20 +65,25 @@ def _share_node_environment() -> None:
                        if k in env})
 
 
+IN_FLIGHT_THREADS = 1  # each library pool's threads per node process in a lossless replay with frames in flight
+
+
 def replay(bag: str, scene_file: str, rate: float = 1.0, lossless: bool = False, record: str | None = None,
            storage: str = "mcap", launch: bool = True, frame_timeout_s: float = 30.0, ready_timeout_s: float = 90.0,
            metrics_json: str | None = None, echo=print, extra_params: dict | None = None, namespace: str = "",
-           standby: bool | None = None, one_process: bool | None = False, executor: str | None = None,
+           standby: bool | None = None, one_process: bool | str | None = False, executor: str | None = None,
            threads: int | None = None, in_flight: int = 1, record_images: bool = True):
     """Replay ``bag`` into the graph of ``scene_file``; returns (PlayStats, BagReport, recorder counts).
     ``namespace``: the nodes' namespace; ``standby``: a standby process per node (:class:`~simreal_nodes.launch.
     Launcher`), by default in a live replay and not in a lossless one (a node that exits there is a fault to see,
     and time does not press); ``one_process``: every node in one process on one executor (here a process per node
-    unless asked, so that a caller says which it runs; None: the scene's pick, as the CLI's default,
+    unless asked, so that a caller says which it runs; ``"split"``: the slow nodes apart, the others in one,
+    :func:`~simreal_nodes.scene.graph.process_groups`; None: the scene's pick, as the CLI's default,
     :func:`~simreal_nodes.scene.graph.one_process_default`); ``executor``: the nodes' and the
     player's (one of :data:`~simreal_nodes.launch.EXECUTORS`; None: :func:`~simreal_nodes.launch.executor_kind`);
     ``threads``: the worker threads of each node process's libraries (:func:`~simreal_nodes.launch.ros_environment`;
-    None: ``SIMREAL_THREADS``, else the default: the linear algebra's pools one thread, OpenCV's its own);
+    None: ``SIMREAL_THREADS``, else the default: the linear algebra's pools one thread, OpenCV's its own, and with
+    frames in flight :data:`IN_FLIGHT_THREADS` for every pool);
     ``in_flight``: lossless, how many frames the player lets into the graph at once (1 to
     :data:`~simreal_nodes.ros.bagplay.MAX_IN_FLIGHT`; 1: lock-step, the next frame published when every node
     reported the last; more: the nodes of a process per node overlap, every frame still processed, in order, by
@@ -92,13 +99,19 @@ def replay(bag: str, scene_file: str, rate: float = 1.0, lossless: bool = False,
     if in_flight > 1 and not lossless:
         echo(f"[replay] warning: {in_flight} frames in flight asked of a live replay, which publishes at the bag's "
              "rate and bounds nothing: the bound is the lossless replay's (--lossless)")
+    if threads is None and lossless and in_flight > 1 and node_threads(dict(os.environ)) is None:
+        # frames in flight keep every core busy with a node: a pool's helper threads then only add switching
+        # (benchmarks/results/graph_threads.md)
+        threads, pools = IN_FLIGHT_THREADS, f"; {IN_FLIGHT_THREADS} thread per library pool (frames in flight)"
+    else:
+        pools = ""
     scene = load_scene(scene_file)
     if launch:
         build_spec_models(scene)  # before the nodes start: they find the built spec:NAME models in the cache
     cam = scene["camera"]
     nodes = required_nodes(scene, lossless=lossless, source="topic")  # the player is the source
-    one_process, how = launch_choice(scene, lossless, one_process, in_flight if lossless else 1)
-    how = f"; {how}" if launch else ""
+    how_run, how = launch_choice(scene, lossless, one_process, in_flight if lossless else 1)
+    how = f"; {how}{pools}" if launch else ""
     echo(f"[replay] nodes: {', '.join(n.name for n in nodes)} ({ingest_note(scene, nodes, 'topic')}{how})")
     for n in nodes:
         n.parameters.update((extra_params or {}).get(n.name, {}))
@@ -125,7 +138,8 @@ def replay(bag: str, scene_file: str, rate: float = 1.0, lossless: bool = False,
     if standby is None:
         standby = not lossless
     launcher = Launcher(nodes, echo=echo, namespace=namespace, standby=standby,
-                        one_process=one_process, executor=executor, threads=threads) if launch else None
+                        groups=process_groups(scene, nodes, how_run), executor=executor,
+                        threads=threads) if launch else None
     _share_node_environment()
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     node = Node("simreal_player")

@@ -109,6 +109,22 @@ def image_cdr(m, frame_id: str, pixels: np.ndarray | None = None) -> bytes:
     return bytes(_jazzy_types().serialize_cdr(out, IMAGE_TYPE))
 
 
+def array_image_cdr(pixels: np.ndarray, encoding: str, stamp, frame_id: str) -> bytes:
+    """Serialized bytes (to publish as they are) of an Image of ``pixels`` in ``encoding``, stamped ``stamp`` (an
+    rclpy Time message) in ``frame_id``, by rosbags' serializer: the pixels are copied once, into the bytes, where
+    an rclpy message would copy them into its Python array and again into the C message."""
+    from simreal_nodes.io.images import array_to_image_fields
+
+    ts = _jazzy_types()
+    f = array_to_image_fields(pixels, encoding)
+    head = ts.types["std_msgs/msg/Header"](
+        stamp=ts.types["builtin_interfaces/msg/Time"](sec=int(stamp.sec), nanosec=int(stamp.nanosec)),
+        frame_id=frame_id)
+    img = ts.types[IMAGE_TYPE](header=head, height=f.height, width=f.width, encoding=f.encoding,
+                               is_bigendian=f.is_bigendian, step=f.step, data=np.frombuffer(f.data, np.uint8))
+    return bytes(ts.serialize_cdr(img, IMAGE_TYPE))
+
+
 def camera_info_msg(cam: CameraModel, stamp, frame_id: str) -> CameraInfo:
     """sensor_msgs/CameraInfo of a camera model."""
     m = CameraInfo()

@@ -168,21 +168,60 @@ def one_process_default(scene: dict, lossless: bool, in_flight: int = 1) -> bool
     process per node ahead in every case, the rows with frames in flight)."""
     if lossless:
         return in_flight <= 1
-    heavy = scene["localization"]["mode"] in SLAM_MODES or any(
-        o["tracking"]["enabled"] and o["tracking"]["measurements"] == "dense" for o in scene["objects"])
-    return not heavy
+    return not slow_nodes(scene)
 
 
-def launch_choice(scene: dict, lossless: bool, told: bool | None, in_flight: int = 1) -> tuple[bool, str]:
-    """(one process?, how the nodes run, for the launch's first line): ``told`` where the user said
-    (``--one-process`` / ``--process-per-node``), else :func:`one_process_default`'s pick."""
+def slow_nodes(scene: dict) -> set[str]:
+    """The nodes whose work a frame outlasts a camera frame period at 640 x 480 on 2 cores: a SLAM localization
+    (34-39 ms a frame) and a dense tracker (about 120 ms); those a split launch (:func:`process_groups`) runs in
+    processes of their own."""
+    slow = set()
+    if scene["localization"]["mode"] in SLAM_MODES:
+        slow.add("localization")
+    if any(o["tracking"]["enabled"] and o["tracking"]["measurements"] == "dense" for o in scene["objects"]):
+        slow.add("tracker")
+    return slow
+
+
+SPLIT = "split"  # the launch with the slow nodes apart (``--split``): see :func:`process_groups`
+
+
+def process_groups(scene: dict, nodes: list[NodeSpec], launch: bool | str) -> list[list[str]]:
+    """Which of ``nodes`` share a process: ``launch`` True, all of them (one process, one executor); False, none (a
+    process per node); :data:`SPLIT`, each slow node (:func:`slow_nodes`) in a process of its own and the others
+    together in one. The split is for 2 cores with frames in flight: the slow node has a core to itself while the
+    light ones share the other without the per-process overhead of each (an interpreter, a DDS participant, a
+    publication that wakes another process); ``./run bench graph`` measures it beside the other two."""
+    names = [n.name for n in nodes]
+    if launch is True:
+        return [names] if names else []
+    if launch is False:
+        return [[n] for n in names]
+    if launch != SPLIT:
+        raise ValueError(f"launch {launch!r}: expected True (one process), False (a process per node) or {SPLIT!r}")
+    slow = slow_nodes(scene)
+    rest = [n for n in names if n not in slow]
+    return [[n] for n in names if n in slow] + ([rest] if rest else [])
+
+
+def launch_choice(scene: dict, lossless: bool, told: bool | str | None,
+                  in_flight: int = 1) -> tuple[bool | str, str]:
+    """(the launch, for :func:`process_groups`; how the nodes run, for the launch's first line): ``told`` where the
+    user said (``--one-process`` True, ``--process-per-node`` False, ``--split`` :data:`SPLIT`), else
+    :func:`one_process_default`'s pick."""
     one = one_process_default(scene, lossless, in_flight) if told is None else told
-    how = "in one process" if one else "a process per node"
+    if one == SPLIT:
+        apart = sorted(slow_nodes(scene))
+        how = (f"split: {', '.join(apart)} in {'a process' if len(apart) == 1 else 'processes'} of "
+               f"{'its' if len(apart) == 1 else 'their'} own, the others in one" if apart
+               else "split: no node slower than a frame, all in one process")
+    else:
+        how = "in one process" if one else "a process per node"
     if told is not None:
         return one, how
     why = ("the default" if one else "lossless with frames in flight: the default there" if lossless
            else "live, with a node slower than a frame: the default for such a graph")
-    return one, f"{how} ({why}; --one-process / --process-per-node choose)"
+    return one, f"{how} ({why}; --one-process / --process-per-node / --split choose)"
 
 
 def required_nodes(scene: dict, lossless: bool = False, source: str | None = None) -> list[NodeSpec]:

@@ -107,26 +107,29 @@ class OrbExtractor:
         polys = [np.clip(q, -big, big) for q in (np.asarray(p, np.float64).reshape(-1, 2) for p in focus if len(p) >= 3)
                  if np.all(np.isfinite(q))]
         kps: list[cv2.KeyPoint] = []
+        scores, levels = [], []  # per level, the kept keypoints' FAST scores and their level
         for lvl, img in enumerate(self.pyramid(gray)):
             s = self.sf ** lvl
             lmask = None if mask is None else cv2.resize(mask, img.shape[::-1], interpolation=cv2.INTER_NEAREST)
             pts, resp = self._candidates(img, lmask)
             chosen: list[np.ndarray] = []
-            taken = np.zeros(0, np.int64)  # pixel keys of the focus picks, so the even selection skips them
+            taken = None  # the focus picks' pixels (flat), so that the even selection skips them
             for poly in polys:
                 want = int(focus_share * self.per_level[lvl])
                 if want <= 0:
                     continue
                 bp, br, area = self._focus_candidates(img, lmask, poly / s)
                 key = _keys(bp, img.shape[1])
-                fresh = ~np.isin(key, taken)
+                if taken is None:
+                    taken = np.zeros(img.size, bool)
+                fresh = ~taken[key]
                 bp, br, key = bp[fresh], br[fresh], key[fresh]
                 keep = _grid_select(bp, br, _cell_for(area, want), want)
                 chosen.append(np.column_stack((bp[keep], br[keep])))
-                taken = np.concatenate((taken, key[keep]))
+                taken[key[keep]] = True
             rest = self.per_level[lvl] - sum(len(c) for c in chosen)
-            if len(taken):
-                fresh = ~np.isin(_keys(pts, img.shape[1]), taken)
+            if taken is not None:
+                fresh = ~taken[_keys(pts, img.shape[1])]
                 pts, resp = pts[fresh], resp[fresh]
             keep = _grid_select(pts, resp, _cell_for(float(img.shape[0] * img.shape[1]), max(rest, 1)), max(rest, 0))
             chosen.append(np.column_stack((pts[keep], resp[keep])))
@@ -134,20 +137,28 @@ class OrbExtractor:
             if not len(sel):
                 continue
             p = sel[:, :2].astype(np.int64)
-            # keypoints built in OpenCV per level (one call), then their orientation and score set
+            # keypoints built in OpenCV per level (one call), then their orientation set
             level_kps = cv2.KeyPoint_convert((p * s).astype(np.float32), (2 * RADIUS + 1) * s, 0.0,  # type: ignore
                                              lvl)
-            for k, ang, r in zip(level_kps, ic_angle(img, p).tolist(), sel[:, 2].tolist()):
-                k.angle, k.response = ang, r
+            for k, ang in zip(level_kps, ic_angle(img, p).tolist()):
+                k.angle = ang
             kps.extend(level_kps)
+            scores.append(sel[:, 2])
+            levels.append(np.full(len(sel), lvl, np.int32))
         if not kps:
             return Features.empty(self.sf)
+        uv_in = cv2.KeyPoint_convert(kps)  # type: ignore[attr-defined]
         kps, desc = self.describer.compute(gray, kps)
         if desc is None or not kps:
             return Features.empty(self.sf)
         uv = cv2.KeyPoint_convert(kps).astype(np.float32)  # type: ignore[attr-defined]
-        octave = np.fromiter((k.octave for k in kps), np.int32, len(kps))
-        response = np.fromiter((k.response for k in kps), np.float32, len(kps))
+        octave, response = np.concatenate(levels), np.concatenate(scores).astype(np.float32)
+        if len(uv) != len(uv_in) or not np.array_equal(uv, uv_in):
+            # OpenCV left some out (or reordered them): each output keypoint's own level and score, by position
+            at = {(x, y, o): r for (x, y), o, r in zip(uv_in.tolist(), octave.tolist(), response.tolist())}
+            octave = np.fromiter((k.octave for k in kps), np.int32, len(kps))
+            response = np.fromiter((at.get((x, y, o), 0.0) for (x, y), o in zip(uv.tolist(), octave.tolist())),
+                                   np.float32, len(kps))
         und = cam.undistort_points(uv) if cam is not None and cam.has_distortion else uv.astype(np.float64)
         return Features(uv, und, octave, desc, response, self.sf)
 
@@ -267,8 +278,11 @@ def _grid_select(pts: np.ndarray, resp: np.ndarray, cell: float, n: int) -> np.n
     weak = 255 - np.clip(resp, 0, 255).astype(np.int64)  # FAST scores are whole grey levels
     order = _stable_order(cid, weak)  # by cell, strongest first
     cid_sorted = cid[order]
-    first = np.r_[0, np.flatnonzero(cid_sorted[1:] != cid_sorted[:-1]) + 1]
-    rank = np.arange(len(order)) - np.repeat(first, np.diff(np.r_[first, len(order)]))  # round of each, in order
+    at = np.arange(len(order))
+    starts = np.empty(len(order), bool)  # where a cell's run begins in the sorted order
+    starts[0] = True
+    np.not_equal(cid_sorted[1:], cid_sorted[:-1], out=starts[1:])
+    rank = at - np.maximum.accumulate(np.where(starts, at, 0))  # round of each: its place in its cell's run
     rounds = int(np.searchsorted(np.cumsum(np.bincount(rank)), n)) + 1  # the first rounds that hold n
     live = rank < rounds
     cand = order[live]

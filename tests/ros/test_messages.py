@@ -227,3 +227,23 @@ def test_an_image_passed_on_serialized_keeps_its_pixels_or_takes_new_ones_and_th
     other = deserialize_message(image_cdr(m, "camera_optical_frame", new), Image)
     assert (other.height, other.width, other.encoding, other.step, other.header.stamp.sec) == (3, 5, "rgb8", 15, 42)
     assert np.array_equal(image_to_array(other), new)
+
+
+def test_a_decoded_image_published_serialized_reads_back_with_its_stamp_frame_and_pixels():
+    """The ingest node publishes a decompressed image as serialized bytes (``array_image_cdr``): rclpy reads the
+    stamp, the frame, the encoding and the pixels back (colour and 16-bit depth)."""
+    from builtin_interfaces.msg import Time
+    from rclpy.serialization import deserialize_message
+    from sensor_msgs.msg import Image
+
+    from simreal_nodes.io.images import image_to_array
+    from simreal_nodes.ros.convert import array_image_cdr
+
+    rng = np.random.default_rng(0)
+    for px, enc in ((rng.integers(0, 256, (5, 7, 3), dtype=np.uint8), "bgr8"),
+                    (rng.integers(0, 65535, (4, 6), dtype=np.uint16), "16UC1")):
+        back = deserialize_message(array_image_cdr(px, enc, Time(sec=12, nanosec=345), "camera_optical_frame"), Image)
+        assert (back.header.stamp.sec, back.header.stamp.nanosec, back.header.frame_id) == (12, 345,
+                                                                                          "camera_optical_frame")
+        assert (back.height, back.width, back.encoding) == (px.shape[0], px.shape[1], enc)
+        assert np.array_equal(image_to_array(back), px)

@@ -29,6 +29,23 @@ def test_the_launcher_runs_one_process_with_each_nodes_own_arguments(tmp_path):
     launcher._tmp.cleanup()
 
 
+def test_the_launcher_runs_process_groups_and_refuses_bad_ones(tmp_path):
+    """A group of one is that node's own process, a group of several one composed process (named ONE_PROCESS);
+    groups that miss a node, name one twice or hold two groups of several are refused."""
+    nodes = [NodeSpec("ingest"), NodeSpec("localization"), NodeSpec("tracker"), NodeSpec("overlay")]
+    launcher = Launcher(nodes, env={}, log_dir=tmp_path, groups=[["localization"], ["ingest", "tracker", "overlay"]])
+    alone, shared = launcher.procs
+    assert alone.spec.name == "localization" and alone.cmd[2] == "simreal_nodes.ros.nodes.localization"
+    assert shared.spec.name == ONE_PROCESS and not shared.spec.per_frame
+    assert [m for m, _ in read_nodes(shared.cmd[3])] == [f"simreal_nodes.ros.nodes.{n}"
+                                                         for n in ("ingest", "tracker", "overlay")]
+    launcher._tmp.cleanup()
+    for bad in ([["localization"], ["ingest", "tracker"]], [["localization", "ingest"], ["tracker", "overlay"]],
+                [["localization"], ["ingest", "tracker", "overlay", "ingest"]]):
+        with pytest.raises(SimrealError, match="process groups"):
+            Launcher(nodes, env={}, log_dir=tmp_path, groups=bad)
+
+
 @pytest.mark.parametrize("content, why", [
     ("not json", "cannot read"),
     ("[]", "non-empty list"),

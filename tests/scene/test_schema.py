@@ -248,3 +248,27 @@ def test_the_cli_launches_live_graphs_with_a_heavy_node_a_process_per_node(mode,
     assert one_process_default(scene, lossless, in_flight=1) is one
     scene["objects"][0]["tracking"]["enabled"] = False
     assert one_process_default(scene, lossless) is (lossless or mode not in ("rgbd", "mono", "stereo"))
+
+
+@pytest.mark.parametrize("mode,measurements,slow", [
+    ("markers", "dots", set()),
+    ("rgbd", "map_points", {"localization"}),
+    ("markers", "dense", {"tracker"}),
+    ("stereo", "dense", {"localization", "tracker"}),
+])
+def test_process_groups_of_each_launch(mode, measurements, slow):
+    """One process: one group of all; a process per node: one each; split: each slow node alone, the others (if
+    any) in one group."""
+    from simreal_nodes.scene.graph import SPLIT, NodeSpec, process_groups, slow_nodes
+
+    scene = {"localization": {"mode": mode}, "objects": [{"tracking": {"enabled": True, "measurements": measurements}}]}
+    assert slow_nodes(scene) == slow
+    nodes = [NodeSpec(n) for n in ("ingest", "localization", "tracker", "overlay")]
+    names = [n.name for n in nodes]
+    assert process_groups(scene, nodes, True) == [names]
+    assert process_groups(scene, nodes, False) == [[n] for n in names]
+    split = process_groups(scene, nodes, SPLIT)
+    assert [g for g in split if len(g) == 1] == [[n] for n in names if n in slow]
+    assert [g for g in split if len(g) > 1] == [[n for n in names if n not in slow]]
+    with pytest.raises(ValueError, match="launch"):
+        process_groups(scene, nodes, "two")

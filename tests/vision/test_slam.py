@@ -143,13 +143,13 @@ def test_a_map_loaded_into_a_running_slam_leaves_nothing_of_the_session_before(r
     slam.set_deformable(ids, np.zeros((len(ids), 3)))
     r = slam.track(room["gray"][150], 150, depth=room["depth"][150])
     assert 0 < r.timings["deformable_ms"] < r.timings["total_ms"]  # the object's points' measurement, timed
-    assert slam.tracks._predicted and slam.tracker._local_key is not None and slam.mapper._recent_points
+    assert slam.tracks._predicted and slam.tracker._local_cache and slam.mapper._recent_points
     slam.set_localization_only(True)
     m = Map.load(f)
     slam.load_map(m)
     assert slam.map is m and slam.state == LOST and slam.localization_only
     assert not slam.tracks._predicted and not slam.tracks._last_seen and not slam.tracks._flow
-    assert slam.tracker._local_key is None and not slam.mapper._recent_points
+    assert not slam.tracker._local_cache and not slam.mapper._recent_points
     assert slam.ctx.deformable == {p.id for p in m.points.values() if p.deformable}
     r = slam.track(room["gray"][35], 151, depth=room["depth"][35])
     assert r.state == RELOCALIZED

@@ -122,7 +122,6 @@ class IngestNode(SimrealNode):
             except ImageFormatError as e:
                 what = "right compressed image" if kind == "right" else "compressed image"
                 return self._left_out(kind, msg.header.stamp, f"malformed {what}: {e}")
-            msg = images.fill_image_msg(Image(header=msg.header), arr, enc)
         if t0 is not None:
             self.metrics.lap("decode")
         checked = self.core.check(kind, msg, arr)
@@ -130,11 +129,15 @@ class IngestNode(SimrealNode):
             return self._left_out(kind, msg.header.stamp, checked.why)
         if t0 is not None:
             self.metrics.lap("work")
+        frame_id = msg.header.frame_id if kind == "right" else self.camera_frame
+        if arr is not None:  # decoded here: published serialized, its pixels copied once (into the bytes)
+            out = convert.array_image_cdr(arr if checked.pixels is None else checked.pixels, enc, msg.header.stamp,
+                                          frame_id)
+            return self._publish(kind, out, msg.header.stamp, frame_id, t0)
         if checked.pixels is not None:
             msg = images.fill_image_msg(Image(header=msg.header), checked.pixels, msg.encoding)
-        if kind != "right":
-            msg.header.frame_id = self.camera_frame
-        self._publish(kind, msg, msg.header.stamp, msg.header.frame_id, t0)
+        msg.header.frame_id = frame_id
+        self._publish(kind, msg, msg.header.stamp, frame_id, t0)
 
     def _publish(self, kind: str, msg: Image | bytes, stamp, frame_id: str, t0: float | None) -> None:
         """The image (a message or its serialized bytes) with its CameraInfo (the depth without)."""

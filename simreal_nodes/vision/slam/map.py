@@ -120,6 +120,7 @@ class Map:
         # ORB-SLAM2's max distance): the level it is predicted at from elsewhere; NaN unknown (points of a loaded map)
         self._dist0 = np.full(1024, np.nan)
         self.version = 0  # bumped by every keyframe change (caches key on it)
+        self.links = 0  # bumped by every change of a keyframe's point links (caches of them key on it)
         # every observation as arrays (point id, keyframe id, feature index), from the keyframes' point links; rebuilt
         # on the first query after a link changes (the covisibility queries read it instead of looping over points)
         self._obs: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
@@ -201,6 +202,7 @@ class Map:
         self.version += 1
         self._next_kf += 1
         self._obs = None
+        self.links += 1
         return kf
 
     def new_point(self, pos, desc, kf: KeyFrame | None = None, idx: int | None = None) -> MapPoint:
@@ -234,6 +236,7 @@ class Map:
         kf.mp[idx] = p.id
         p.obs[kf.id] = idx
         self._obs = None
+        self.links += 1
 
     def unlink(self, p: MapPoint, kf: KeyFrame) -> None:
         """``kf`` no longer observes ``p`` (an outlier observation)."""
@@ -241,6 +244,7 @@ class Map:
         if idx is not None and kf.mp[idx] == p.id:
             kf.mp[idx] = -1
         self._obs = None
+        self.links += 1
 
     def erase_point(self, pid: int) -> None:
         p = self.points.pop(pid, None)
@@ -248,6 +252,7 @@ class Map:
             return
         self._alive[p.row] = False
         self._obs = None
+        self.links += 1
         for kid, idx in p.obs.items():
             kf = self.keyframes.get(kid)
             if kf is not None and kf.mp[idx] == pid:
@@ -259,6 +264,7 @@ class Map:
             return
         self.version += 1
         self._obs = None
+        self.links += 1
         for pid in kf.mp:
             if pid >= 0 and pid in self.points:
                 p = self.points[pid]
@@ -291,6 +297,7 @@ class Map:
         self.points.pop(drop.id, None)
         self._alive[drop.row] = False
         self._obs = None
+        self.links += 1
 
     # -- queries --------------------------------------------------------------------------------------------
     def observations(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

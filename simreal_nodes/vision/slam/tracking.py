@@ -45,8 +45,8 @@ def pnp_ransac(P: np.ndarray, und: np.ndarray, K: np.ndarray) -> np.ndarray | No
 class Tracker:
     def __init__(self, ctx: SlamContext) -> None:
         self.ctx = ctx
-        self._local_key: tuple[int, int, int, bool] | None = None  # what the cached local map was computed for
-        self._local_cache = np.zeros(0, np.int64)
+        # (map version, its links' count, keyframe ids) -> the sorted ids of the points those keyframes hold
+        self._local_cache: dict[tuple[int, int, tuple[int, ...]], np.ndarray] = {}
 
     def track(self, f: Features, tim: dict[str, float]) -> tuple[TrackResult, PoseFix | None]:
         """Track a frame from the last one; the result and, when tracked, its pose and matches (``tim``: the
@@ -119,19 +119,9 @@ class Tracker:
 
     def local_points(self, seed_ids: np.ndarray | None = None) -> np.ndarray:
         """Point ids of the local map: keyframes that see the tracked points (``seed_ids``) most, plus the
-        reference keyframe and its covisible neighbours (at most ~2 x local_kfs keyframes). The keyframe set
-        is cached until the map's keyframes change (or a few frames pass)."""
-        ctx = self.ctx
-        key = (ctx.map.version, ctx.ref_kf.id if ctx.ref_kf is not None else -1, ctx.frame_id // 5, seed_ids is None)
-        if self._local_key == key:
-            ids = self._local_cache
-            ids = ids[ctx.map.alive(ids)]
-            return ids
-        ids = self._compute_local_points(seed_ids)
-        self._local_key, self._local_cache = key, ids
-        return ids
-
-    def _compute_local_points(self, seed_ids: np.ndarray | None) -> np.ndarray:
+        reference keyframe and its covisible neighbours (at most ~2 x local_kfs keyframes), less the points no
+        longer in the map and those on a deforming object. The points of a set of keyframes are kept until the map's
+        keyframes or their links change (the same result as computed afresh: the set is chosen every call)."""
         ctx, m, n_local = self.ctx, self.ctx.map, self.ctx.config.local_kfs
         kfs = {}
         if seed_ids is not None and len(seed_ids):
@@ -147,7 +137,13 @@ class Tracker:
             kfs[last] = m.keyframes[last]
         if not kfs:
             return np.zeros(0, np.int64)
-        ids = np.unique(np.concatenate([kf.mp[kf.mp >= 0] for kf in kfs.values()]))
+        key = (m.version, m.links, tuple(kfs))
+        ids = self._local_cache.get(key)
+        if ids is None:
+            ids = np.unique(np.concatenate([kf.mp[kf.mp >= 0] for kf in kfs.values()]))
+            # the two sets of a frame (before and after the pose) for this map's keyframes
+            self._local_cache = {k: v for k, v in self._local_cache.items() if k[:2] == key[:2]}
+            self._local_cache[key] = ids
         ids = ids[m.alive(ids)]
         if ctx.deformable:
             ids = ids[ctx.rigid(ids)]
