@@ -84,6 +84,9 @@ THREADS_ENV = "SIMREAL_THREADS"  # worker threads per pool in each node process 
 # the thread pools the environment sizes: OpenMP (Open3D), OpenBLAS (numpy, scipy; the copy OpenCV bundles too), MKL.
 # OpenCV's own pool is sized by the node process itself (cv2.setNumThreads: :func:`set_threads`)
 THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+# Mesa's llvmpipe (the overlay's OpenGL without a GPU) rasterizes on this many threads besides the caller's (0: in the
+# caller's alone); sized only when the threads per pool are given (N > 0: N - 1 besides the caller)
+LLVMPIPE_THREADS = "LP_NUM_THREADS"
 
 
 def node_threads(env: dict | None = None) -> int | None:
@@ -113,6 +116,7 @@ def thread_variables(base: dict, threads: int | None = None) -> dict[str, str]:
         out.update((var, "1") for var in THREAD_VARS if not base.get(var))
     elif n > 0:
         out.update((var, str(n)) for var in THREAD_VARS)
+        out[LLVMPIPE_THREADS] = str(n - 1)
     return out
 
 
@@ -138,7 +142,8 @@ def ros_environment(base: dict | None = None, discovery_range: str | None = None
     ``base``'s :data:`EXECUTOR_ENV`, else :data:`DEFAULT_EXECUTOR`.
 
     ``threads`` (else ``base``'s :data:`THREADS_ENV`): N > 0 sizes every pool of a node process to N threads
-    (OpenBLAS, OpenMP, MKL through :data:`THREAD_VARS`, overriding the user's; OpenCV's by the process itself); 0
+    (OpenBLAS, OpenMP, MKL through :data:`THREAD_VARS`, overriding the user's; OpenCV's by the process itself; Mesa
+    llvmpipe's rasterizer to N - 1 besides the rendering thread, :data:`LLVMPIPE_THREADS`); 0
     leaves every pool at the library's own default (a thread per core; a variable of :data:`THREAD_VARS` the user set
     is kept). Neither given: the default, one thread for the linear algebra's pools (OpenBLAS, OpenMP, MKL; a
     variable of :data:`THREAD_VARS` the user set is kept) and OpenCV's own pool as OpenCV sizes it. The linear algebra

@@ -10,7 +10,15 @@ from pathlib import Path
 import pytest
 
 from simreal_nodes.errors import SimrealError
-from simreal_nodes.launch import DISCOVERY_RANGE, THREAD_VARS, THREADS_ENV, Launcher, node_threads, ros_environment
+from simreal_nodes.launch import (
+    DISCOVERY_RANGE,
+    LLVMPIPE_THREADS,
+    THREAD_VARS,
+    THREADS_ENV,
+    Launcher,
+    node_threads,
+    ros_environment,
+)
 from simreal_nodes.scene.graph import NodeSpec
 
 PRINT_ENV = f"import os; print('{DISCOVERY_RANGE}=' + repr(os.environ.get('{DISCOVERY_RANGE}')))"
@@ -94,6 +102,9 @@ def test_every_pool_variable_is_set(user, option, seen):
     env = ros_environment(user, threads=option)
     want = seen if isinstance(seen, dict) else dict.fromkeys(THREAD_VARS, seen)
     assert {k: env.get(k) for k in THREAD_VARS} == want
+    # llvmpipe's rasterizer threads besides the rendering one: sized only when the threads per pool are given
+    n = option if option is not None else int(user[THREADS_ENV]) if THREADS_ENV in user else None
+    assert env.get(LLVMPIPE_THREADS) == (str(n - 1) if n else None)
 
 
 def test_the_threads_option_reaches_the_replay(monkeypatch):

@@ -90,7 +90,9 @@ def replay(bag: str, scene_file: str, rate: float = 1.0, lossless: bool = False,
     every node, but what the tracker tells the localization about a frame (its map points' flags, its focus region,
     the map's freeze) reaches it up to ``in_flight - 1`` frames later than lock-step, by the timing of the run: a
     SLAM scene's estimates then need not repeat; lock-step for evaluation); ``record_images``: False, the graph's
-    image outputs are received and counted but not written to the record (what a display costs, not a disk)."""
+    image outputs are received and counted but not written to the record (what a display costs, not a disk), and
+    the camera's images that the ingest passes on to the other nodes are not subscribed (a display shows the
+    graph's products)."""
     executor = executor_kind(None if executor is None else {EXECUTOR_ENV: executor})
     thread_variables(dict(os.environ), threads)  # a bad SIMREAL_THREADS (or threads) refused before any work
     if not in_flight_ok(in_flight):
@@ -151,8 +153,14 @@ def replay(bag: str, scene_file: str, rate: float = 1.0, lossless: bool = False,
         with _StopFlag() as stop:
             if record:
                 outputs = output_topics(nodes)
-                recorder = Recorder(node, record, storage, topics=outputs, count_only=() if record_images else tuple(
-                    t for t, ty in outputs.items() if ty in IMAGE_TYPES))
+                count_only: tuple[str, ...] = ()
+                if not record_images:  # what a display receives: the graph's images, counted, not written
+                    # the camera's frames that the ingest passes on to other nodes: no display shows them again
+                    passed_on = {t for n in nodes if n.name == "ingest" and len(nodes) > 1
+                                 for t, ty in n.outputs.items() if ty in IMAGE_TYPES}
+                    outputs = {t: ty for t, ty in outputs.items() if t not in passed_on}
+                    count_only = tuple(t for t, ty in outputs.items() if ty in IMAGE_TYPES)
+                recorder = Recorder(node, record, storage, topics=outputs, count_only=count_only)
             player = Player(node, ex, inputs, img, [n.name for n in nodes if n.per_frame], lossless, rate,
                             frame_timeout_s, echo=echo, in_flight=in_flight)
             player.should_stop = stop.event.is_set
