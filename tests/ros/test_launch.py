@@ -23,6 +23,15 @@ localization: {mode: static, static_pose: [0, 0, 0, 0, 0, 0, 1]}
 overlay: {enabled: false}
 """
 
+# two nodes (the ingest kept by ``camera.ingest: always``), so the default launch has a process to share
+TWO_NODES = """
+simreal_scene: 1
+name: cam_and_markers
+camera: {ingest: always}
+localization: {mode: markers, markers: {poses: {0: [0, 0, 0, 0, 0, 0, 1]}}}
+overlay: {enabled: false}
+"""
+
 
 def node_children(proc):
     """The node processes of a launcher: one per node, or the one process that runs them all."""
@@ -34,7 +43,7 @@ def node_children(proc):
                                        (signal.SIGINT, "--process-per-node")])
 def test_launch_starts_required_nodes_and_stops_cleanly(tmp_path, sig, mode):
     f = tmp_path / "scene.yaml"
-    f.write_text(textwrap.dedent(SCENE))
+    f.write_text(textwrap.dedent(TWO_NODES))
     env = ros_environment()
     env["ROS_LOG_DIR"] = str(tmp_path / "logs")
     p = subprocess.Popen([sys.executable, "-m", "simreal_nodes.cli", "launch", str(f)] + ([mode] if mode else []),
@@ -57,8 +66,9 @@ def test_launch_starts_required_nodes_and_stops_cleanly(tmp_path, sig, mode):
     try:
         assert up.wait(60), "the node did not come up:\n" + "".join(lines)
         kids = node_children(p)
-        assert [k.cmdline()[2] for k in kids] == (["simreal_nodes.ros.nodes.ingest"] if mode else
-                                                  ["simreal_nodes.ros.compose"])
+        want = (["simreal_nodes.ros.nodes.ingest", "simreal_nodes.ros.nodes.localization"] if mode else
+                ["simreal_nodes.ros.compose"])
+        assert sorted(k.cmdline()[2] for k in kids) == want
         p.send_signal(sig)
         p.wait(30)
         reader.join(10)
