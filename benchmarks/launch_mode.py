@@ -1,19 +1,21 @@
-"""The CLI's launch mode (issue 18), checked on scenes it was not chosen on: all nodes in one process against a
-process per node, live (the bag's rate, live QoS) and lossless (lock-step and with frames in flight), on RGB-D SLAM
-scenes that ``benchmarks/graph.py`` does not run.
+"""The CLI's launch mode (issue 18), checked on scenes it was not chosen on: all nodes in one process, a process per
+node and split (the SLAM in a process of its own, the other nodes in one), live (the bag's rate, live QoS) and
+lossless (lock-step and with frames in flight), on RGB-D SLAM scenes that ``benchmarks/graph.py`` does not run.
 
     ./run bench launch_mode
 
-The rule (``simreal_nodes.scene.graph.one_process_default``) was set on ``benchmarks/results/graph.md``'s cases, one
+The rule (``simreal_nodes.scene.graph.default_launch``) was set on ``benchmarks/results/graph.md``'s cases, one
 run each (stop 95): one process is faster or level in every lossless case and live for the markers demo, while live
 the RGB-D SLAM scenes put more frames through with a process per node (the foam beam 60 % against 37 %, family-3 49
 % against 34 %): their SLAM (34-39 ms a frame) or dense tracker (120 ms) holds one executor for longer than a camera
-frame period, and in their own processes they run beside the others on the second core. Held out here: the sample
+frame period, and in their own processes they run beside the others on the second core; with frames in flight
+lossless, a process per node (stop 97), split where a node is slow (stop 98: the foam beam 30.1 fps against 26.5,
+family-3 8.9 against 8.5). Held out here: the sample
 ``joint_boot`` (RGB-D SLAM, map points, the boot's neo-Hookean model; rendered by that model) and
 ``joint_boot_truth_live`` (the same graph, the boot placed by registration from a guess by eye, its images from an
-independent full-order solve), each case twice with the order alternating (one process, per node, per node, one
-process). Reported: frames through (% and per second), latency p50 / p95 to the overlay, the nodes' CPU per frame,
-and what the rule picks against the launch that put more frames through (live) or went faster (lossless).
+independent full-order solve), each case twice with the order alternating (one process, per node, split, split, per
+node, one process). Reported: frames through (% and per second), latency p50 / p95 to the overlay, the nodes' CPU
+per frame, and what the rule picks against the launch that put more frames through (live) or went faster (lossless).
 """
 
 from __future__ import annotations
@@ -23,18 +25,20 @@ import numpy as np
 from benchmarks.common import save
 from benchmarks.graph import IN_FLIGHT, run_case
 from simreal_nodes.demo import sample_bag
+from simreal_nodes.scene.graph import SPLIT
 
 SCENES = ("joint_boot", "joint_boot_truth_live")
-ORDER = (True, False, False, True)  # one_process in the runs of each case
+ORDER = (True, False, SPLIT, SPLIT, False, True)  # the launch of the runs of each case (replay's one_process)
+LAUNCHES = {True: "one process", False: "process per node", SPLIT: "split"}
 # (replay label, lossless, frames in flight): live, lossless lock-step, lossless with graph.py's frames in flight
 MODES = (("real time (30 fps)", False, 1), ("lossless", True, 1), (f"lossless, {IN_FLIGHT} in flight", True, IN_FLIGHT))
 
 
 def rule_pick(scene_yaml, lossless: bool, in_flight: int = 1) -> str:
-    from simreal_nodes.scene.graph import one_process_default
+    from simreal_nodes.scene.graph import default_launch
     from simreal_nodes.scene.schema import load_scene
 
-    return "one process" if one_process_default(load_scene(scene_yaml), lossless, in_flight) else "process per node"
+    return LAUNCHES[default_launch(load_scene(scene_yaml), lossless, in_flight)]
 
 
 def main() -> None:
@@ -55,7 +59,7 @@ def main() -> None:
         _, scene_yaml = sample_bag(scene, echo=lambda *a: None)
         for mode, lossless, in_flight in MODES:
             by = {}
-            for launch in ("one process", "process per node"):
+            for launch in LAUNCHES.values():
                 rs = [r for r in runs if r["scene"] == scene and r["mode"] == mode and r["launch"] == launch]
                 by[launch] = {k: float(np.median([r[k] for r in rs])) for k in
                               ("fps", "delivered_pct", "latency_p50", "latency_p95", "nodes_cpu_ms")}
@@ -75,11 +79,11 @@ def main() -> None:
     def plot(plt):
         fig, ax = plt.subplots(figsize=(8, 3.8))
         cases = list(dict.fromkeys((r["scene"], r["mode"]) for r in rows))
-        for k, (launch, color) in enumerate((("one process", "tab:orange"), ("process per node", "tab:blue"))):
+        for k, (launch, color) in enumerate(zip(LAUNCHES.values(), ("tab:orange", "tab:blue", "tab:green"))):
             by = {(r["scene"], r["mode"]): r for r in rows if r["launch"] == launch}
-            ax.bar([i + 0.4 * k - 0.2 for i in range(len(cases))],
-                   [by[c]["fps"] if c[1].startswith("lossless") else by[c]["delivered_pct"] for c in cases], width=0.4,
-                   color=color, label=launch)
+            ax.bar([i + 0.27 * k - 0.27 for i in range(len(cases))],
+                   [by[c]["fps"] if c[1].startswith("lossless") else by[c]["delivered_pct"] for c in cases],
+                   width=0.27, color=color, label=launch)
         ax.set_xticks(range(len(cases)))
         ax.set_xticklabels([f"{s}\n{m}" for s, m in cases], fontsize=7)
         ax.set_ylabel("live: frames through (%); lossless: fps")
@@ -87,15 +91,17 @@ def main() -> None:
         fig.tight_layout()
         return fig
 
-    notes = ("Each case twice, order one process, per node, per node, one process; medians (each run's rate in "
-             "'runs'; every run in `runs` of the JSON). Live: the bag at its 30 fps, live QoS; the launch that put "
-             "more frames through is the better. Lossless: lock-step, or with up to "
+    notes = ("Each case twice, order one process, per node, split, split, per node, one process; medians (each "
+             "run's rate in 'runs'; every run in `runs` of the JSON). Live: the bag at its 30 fps, live QoS; the "
+             "launch that put more frames through is the better. Lossless: lock-step, or with up to "
              f"{IN_FLIGHT} frames in the graph at once (`simreal replay --lossless --in-flight {IN_FLIGHT}`); the "
-             "faster is the better. The CLI's pick: `simreal_nodes.scene.graph.one_process_default`, set on "
-             "`benchmarks/results/graph.md`'s scenes, none of them these (with frames in flight: stop 97). Since stop "
+             "faster is the better. The CLI's pick: `simreal_nodes.scene.graph.default_launch`, set on "
+             "`benchmarks/results/graph.md`'s scenes, none of them these (with frames in flight: stop 97; split there "
+             "where a node is slow: stop 98). Split: the SLAM localization in a process of its own, the other nodes "
+             "in one (`--split`). Since stop "
              "97 the recorder counts the graph's images without writing them, as `./run bench graph` does.")
-    save("launch_mode", rows, cols, "The CLI's launch mode on held-out RGB-D SLAM scenes: one process against a "
-         "process per node, live and lossless", notes, plot, extra={"runs": runs})
+    save("launch_mode", rows, cols, "The CLI's launch mode on held-out RGB-D SLAM scenes: one process, a process "
+         "per node and split, live and lossless", notes, plot, extra={"runs": runs})
 
 
 if __name__ == "__main__":

@@ -15,7 +15,7 @@ a new process, its imports, and a new participant that the others must discover
 (``./run bench respawn`` measures both).
 
 With ``one_process`` on (the CLI's default but for live SLAM or dense-tracker graphs and lossless replays with
-frames in flight, :func:`~simreal_nodes.scene.graph.one_process_default`; ``--process-per-node`` turns it off), the
+frames in flight, :func:`~simreal_nodes.scene.graph.default_launch`; ``--process-per-node`` turns it off), the
 nodes run in a single process on one executor (:mod:`simreal_nodes.ros.compose`), each with the arguments it would
 have had in its own; the launcher then watches, restarts and stops that one process (named :data:`ONE_PROCESS`) as
 it would a node, with one standby. ``--split`` puts the nodes slower than a camera frame (a SLAM localization, a

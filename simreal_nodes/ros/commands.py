@@ -79,7 +79,7 @@ def replay(bag: str, scene_file: str, rate: float = 1.0, lossless: bool = False,
     and time does not press); ``one_process``: every node in one process on one executor (here a process per node
     unless asked, so that a caller says which it runs; ``"split"``: the slow nodes apart, the others in one,
     :func:`~simreal_nodes.scene.graph.process_groups`; None: the scene's pick, as the CLI's default,
-    :func:`~simreal_nodes.scene.graph.one_process_default`); ``executor``: the nodes' and the
+    :func:`~simreal_nodes.scene.graph.default_launch`); ``executor``: the nodes' and the
     player's (one of :data:`~simreal_nodes.launch.EXECUTORS`; None: :func:`~simreal_nodes.launch.executor_kind`);
     ``threads``: the worker threads of each node process's libraries (:func:`~simreal_nodes.launch.ros_environment`;
     None: ``SIMREAL_THREADS``, else the default: the linear algebra's pools one thread, OpenCV's its own, and with

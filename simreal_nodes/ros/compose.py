@@ -14,9 +14,10 @@ overhead (an interpreter, a participant, a publication that wakes another proces
 thread, so the nodes no longer overlap and a fault in one ends them all. On two cores it was faster end to end or level
 on every scene measured lossless and live for the markers demo, so it is the CLI's default (``--process-per-node`` for
 one each), but for a live graph with a SLAM localization or a dense tracker, whose work a frame outlasts a camera
-frame period: there a process per node put more frames through (``scene.graph.one_process_default``); and for a
+frame period: there a process per node put more frames through (``scene.graph.default_launch``); and for a
 lossless replay with frames in flight (``simreal replay --in-flight N``), where the nodes of a process per node work
-on different frames at once and one executor cannot.
+on different frames at once and one executor cannot (there a scene with such a slow node is split: it runs in its
+own process, the others in one).
 """
 
 from __future__ import annotations

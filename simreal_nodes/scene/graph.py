@@ -155,20 +155,28 @@ def tracker_stereo_depth(scene: dict) -> bool:
 SLAM_MODES = ("mono", "rgbd", "stereo")  # localization modes that run the SLAM
 
 
-def one_process_default(scene: dict, lossless: bool, in_flight: int = 1) -> bool:
-    """The launch the CLI picks when told neither ``--one-process`` nor ``--process-per-node``: every node in one
+SPLIT = "split"  # the launch with the slow nodes apart (``--split``): see :func:`process_groups`
+
+
+def default_launch(scene: dict, lossless: bool, in_flight: int = 1) -> bool | str:
+    """The launch the CLI picks when told none of ``--one-process``, ``--process-per-node`` and ``--split`` (as
+    :func:`process_groups` takes it: True one process, False a process per node, :data:`SPLIT`): every node in one
     process, but a process per node for a live graph with a node whose work takes longer than a camera frame period
-    (a SLAM localization, 34-39 ms a frame at 640 x 480; the dense tracker, about 120 ms): on one executor every other
-    node waits for it, while in its own process it runs beside them on another core. Set on
+    (:func:`slow_nodes`: a SLAM localization, 33-38 ms a frame at 640 x 480; the dense tracker, about 120 ms): on one
+    executor every other node waits for it, while in its own process it runs beside them on another core. Set on
     ``benchmarks/results/graph.md`` (stop 95): one process faster or level in every lossless case and live for the
     markers demo (96 % of the frames through against 93 %), a process per node live for the RGB-D SLAM scenes (the
     foam beam 60 % against 37 %, family-3 49 % against 34 %); checked on held-out scenes by ``./run bench
-    launch_mode``. A lossless replay with more than one frame in flight (``in_flight``, the player's) runs a process
-    per node: there the nodes work on different frames at once, which one executor cannot (stop 97's graph run: a
-    process per node ahead in every case, the rows with frames in flight)."""
+    launch_mode``. A lossless replay with more than one frame in flight (``in_flight``, the player's) has the nodes
+    work on different frames at once, which one executor cannot: a process per node (stop 97's graph run: ahead in
+    every case with frames in flight), and split where a node is slow (stop 98's: the foam beam 30.1 fps split
+    against 26.5, family-3 8.9 against 8.5; the slow node keeps a core to itself, the light ones share the other
+    without a process each). Live, split stays a choice: it put more of the foam beam's frames through (90 % against
+    85 %) and fewer of family-3's (56 % against 62 %)."""
+    slow = slow_nodes(scene)
     if lossless:
-        return in_flight <= 1
-    return not slow_nodes(scene)
+        return True if in_flight <= 1 else SPLIT if slow else False
+    return not slow
 
 
 def slow_nodes(scene: dict) -> set[str]:
@@ -181,9 +189,6 @@ def slow_nodes(scene: dict) -> set[str]:
     if any(o["tracking"]["enabled"] and o["tracking"]["measurements"] == "dense" for o in scene["objects"]):
         slow.add("tracker")
     return slow
-
-
-SPLIT = "split"  # the launch with the slow nodes apart (``--split``): see :func:`process_groups`
 
 
 def process_groups(scene: dict, nodes: list[NodeSpec], launch: bool | str) -> list[list[str]]:
@@ -208,8 +213,8 @@ def launch_choice(scene: dict, lossless: bool, told: bool | str | None,
                   in_flight: int = 1) -> tuple[bool | str, str]:
     """(the launch, for :func:`process_groups`; how the nodes run, for the launch's first line): ``told`` where the
     user said (``--one-process`` True, ``--process-per-node`` False, ``--split`` :data:`SPLIT`), else
-    :func:`one_process_default`'s pick."""
-    one = one_process_default(scene, lossless, in_flight) if told is None else told
+    :func:`default_launch`'s pick."""
+    one = default_launch(scene, lossless, in_flight) if told is None else told
     if one == SPLIT:
         apart = sorted(slow_nodes(scene))
         how = (f"split: {', '.join(apart)} in {'a process' if len(apart) == 1 else 'processes'} of "
@@ -219,7 +224,7 @@ def launch_choice(scene: dict, lossless: bool, told: bool | str | None,
         how = "in one process" if one else "a process per node"
     if told is not None:
         return one, how
-    why = ("the default" if one else "lossless with frames in flight: the default there" if lossless
+    why = ("the default" if one is True else "lossless with frames in flight: the default there" if lossless
            else "live, with a node slower than a frame: the default for such a graph")
     return one, f"{how} ({why}; --one-process / --process-per-node / --split choose)"
 
