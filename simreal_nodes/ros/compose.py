@@ -16,8 +16,7 @@ on every scene measured lossless and live for the markers demo, so it is the CLI
 one each), but for a live graph with a SLAM localization or a dense tracker, whose work a frame outlasts a camera
 frame period: there a process per node put more frames through (``scene.graph.default_launch``); and for a
 lossless replay with frames in flight (``simreal replay --in-flight N``), where the nodes of a process per node work
-on different frames at once and one executor cannot (there a scene with such a slow node is split: it runs in its
-own process, the others in one).
+on different frames at once and one executor cannot.
 """
 
 from __future__ import annotations

@@ -158,9 +158,9 @@ SLAM_MODES = ("mono", "rgbd", "stereo")  # localization modes that run the SLAM
 SPLIT = "split"  # the launch with the slow nodes apart (``--split``): see :func:`process_groups`
 
 
-def default_launch(scene: dict, lossless: bool, in_flight: int = 1) -> bool | str:
+def default_launch(scene: dict, lossless: bool, in_flight: int = 1) -> bool:
     """The launch the CLI picks when told none of ``--one-process``, ``--process-per-node`` and ``--split`` (as
-    :func:`process_groups` takes it: True one process, False a process per node, :data:`SPLIT`): every node in one
+    :func:`process_groups` takes it: True one process, False a process per node): every node in one
     process, but a process per node for a live graph with a node whose work takes longer than a camera frame period
     (:func:`slow_nodes`: a SLAM localization, 33-38 ms a frame at 640 x 480; the dense tracker, about 120 ms): on one
     executor every other node waits for it, while in its own process it runs beside them on another core. Set on
@@ -169,14 +169,15 @@ def default_launch(scene: dict, lossless: bool, in_flight: int = 1) -> bool | st
     foam beam 60 % against 37 %, family-3 49 % against 34 %); checked on held-out scenes by ``./run bench
     launch_mode``. A lossless replay with more than one frame in flight (``in_flight``, the player's) has the nodes
     work on different frames at once, which one executor cannot: a process per node (stop 97's graph run: ahead in
-    every case with frames in flight), and split where a node is slow (stop 98's: the foam beam 30.1 fps split
-    against 26.5, family-3 8.9 against 8.5; the slow node keeps a core to itself, the light ones share the other
-    without a process each). Live, split stays a choice: it put more of the foam beam's frames through (90 % against
-    85 %) and fewer of family-3's (56 % against 62 %)."""
-    slow = slow_nodes(scene)
+    every case with frames in flight). Split (:data:`SPLIT`) stays a choice: stop 98 made it the pick with frames in
+    flight where a node is slow, on ``graph.md``'s scenes (the foam beam 30.1 fps split against 26.5, family-3 8.9
+    against 8.5), and the held-out scenes did not bear it out (``launch_mode.md``: the joint boot 23.9 against 23.7, the
+    registered one 15.8 against 18.6); live it put more frames through on two scenes of four (the foam beam 90 %
+    against 85 %, the registered boot 67 % against 62 %), fewer on one (family-3 56 % against 62 %), as many on the
+    fourth (85 %)."""
     if lossless:
-        return True if in_flight <= 1 else SPLIT if slow else False
-    return not slow
+        return in_flight <= 1
+    return not slow_nodes(scene)
 
 
 def slow_nodes(scene: dict) -> set[str]:
@@ -224,7 +225,7 @@ def launch_choice(scene: dict, lossless: bool, told: bool | str | None,
         how = "in one process" if one else "a process per node"
     if told is not None:
         return one, how
-    why = ("the default" if one is True else "lossless with frames in flight: the default there" if lossless
+    why = ("the default" if one else "lossless with frames in flight: the default there" if lossless
            else "live, with a node slower than a frame: the default for such a graph")
     return one, f"{how} ({why}; --one-process / --process-per-node / --split choose)"
 
