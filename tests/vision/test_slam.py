@@ -166,3 +166,41 @@ def test_a_map_loaded_into_a_running_slam_leaves_nothing_of_the_session_before(r
     told.set_deformable([1, 2], np.zeros((2, 3)))
     told.load_map(Map.load(f))
     assert not told.tracks._predicted and told.ctx.deformable == set()
+
+
+
+def test_every_change_of_a_keyframes_links_renews_the_local_map_cache(room):
+    """Issue 18: the tracker keeps the local map's point ids between frames while the map's version, its links'
+    count and the keyframes are the same (``Tracker._local_cache``). Each way a keyframe's links change (a link, a new
+    point on a keyframe, an unlink, a fusion, a point erased, a keyframe erased) must give the set computed afresh;
+    a change that left ``Map.links`` as it was would leave the old set (checked: without its bump, a link, an unlink
+    or a fusion fails here; an erased point is left out by the alive filter, an erased keyframe changes the version).
+    On the room's frames the poses would not show it: every mapping step there also adds a keyframe."""
+    slam, _ = run(room, "rgbd", range(45))
+    tr, m = slam.tracker, slam.map
+    kf = slam.ctx.ref_kf
+    assert kf is not None and len(m.keyframes) >= 3
+
+    def check(change) -> np.ndarray:
+        before = tr.local_points()  # the set cached before the change
+        change()
+        cached = tr.local_points()
+        tr._local_cache.clear()
+        np.testing.assert_array_equal(cached, tr.local_points())
+        return before
+
+    some = m.points[int(kf.mp[kf.mp >= 0][0])]
+    p, q = (m.new_point(some.pos + d, some.desc) for d in (0.01, 0.02))  # points no keyframe observes yet
+    free = np.flatnonzero(kf.mp < 0)
+    assert len(free) >= 2
+    before = check(lambda: m.link(p, kf, int(free[0])))
+    assert p.id not in before and p.id in tr.local_points()  # the change is one the set shows
+    new = []
+    check(lambda: new.append(m.new_point(p.pos + 0.01, p.desc, kf, int(free[1]))))
+    assert new[0].id in tr.local_points()
+    check(lambda: m.unlink(p, kf))
+    inside = int(kf.mp[kf.mp >= 0][0])
+    check(lambda: m.fuse(q, m.points[inside]))
+    assert q.id in tr.local_points()
+    check(lambda: m.erase_point(new[0].id))
+    check(lambda: m.erase_keyframe(max(k for k in m.keyframes if k != kf.id)))
