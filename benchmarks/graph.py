@@ -214,8 +214,9 @@ def report(rows):
          f"flight' lets up to {IN_FLIGHT} frames in at once (nodes in their own processes work on different frames; "
          "latency then includes the queue; `simreal replay --lossless --in-flight N`, which then gives each "
          "library pool one thread: graph_threads.md). Real time: live QoS, a busy "
-         "node takes the newest frame (skipped frames are the 'not through' ones). The recorder counts the image "
-         "outputs (camera, overlay) without writing them (the harness costs a display's reception, not a disk's). "
+         "node takes the newest frame (skipped frames are the 'not through' ones). The recorder counts the graph's "
+         "image outputs without writing them (the harness costs a display's reception, not a disk's) and, since "
+         "stop 98, leaves the camera images the ingest passes on to the other nodes unsubscribed. "
          "2-core CPU, Mesa llvmpipe for the overlay.\n\n"
          "## Per-stage budget (lock-step lossless runs; ms per frame, p50 of each node's /diagnostics)\n\n"
          + markdown_table(budget_rows(rows), BUDGET_COLS) + "\n\n"
@@ -289,8 +290,9 @@ def report_threads(runs: list[dict]) -> None:
          "in flight", "`./run bench graph`: each case twice per setting, order 1, 2, 2, 1; medians. With frames in "
          "flight every core is busy with a node, so a pool's helper threads (OpenCV's own count is one per core) "
          "only add switching and synchronisation: `simreal replay --lossless --in-flight N` gives every pool one "
-         "thread unless told (`--threads`, `SIMREAL_THREADS`). 2 a pool also gives the linear algebra's pools two "
-         "(the lock-step default keeps them at one).", plot)
+         "thread unless told (`--threads`, `SIMREAL_THREADS`). 2 a pool is near the default before stop 98 on this "
+         "2-core host, which was not run here: OpenCV a thread a core as there, the linear algebra's pools two "
+         "against one, llvmpipe one thread besides the caller against its own count, a thread a core.", plot)
 
 
 BUDGET_COLS = [("scene", "scene", "{}"), ("resolution", "resolution", "{}"), ("launch", "launch", "{}"),

@@ -1,6 +1,8 @@
 """What the graph benchmark's harness costs (issue 18): the replay's recorder writing the graph's image outputs (the
 camera image the ingest publishes, the overlay's output) to the record, against receiving and counting them only
-(``benchmarks.graph.run_case``'s ``record_images``, which ``./run bench graph`` turns off since stop 97).
+(``benchmarks.graph.run_case``'s ``record_images``, which ``./run bench graph`` turns off since stop 97). Since stop
+98 the counting arm also leaves the camera images the ingest passes on unsubscribed
+(``simreal_nodes.ros.commands.recorded_topics``): the table's last run (stop 97) measured counting them.
 
     ./run bench graph_harness
 

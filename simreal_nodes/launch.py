@@ -252,9 +252,10 @@ class Launcher:
         if groups is None:
             groups = [[p.spec.name for p in self.procs]] if one_process else [[p.spec.name] for p in self.procs]
         by_name = {p.spec.name: p for p in self.procs}
-        if sorted(n for g in groups for n in g) != sorted(by_name) or sum(len(g) > 1 for g in groups) > 1:
+        if (sorted(n for g in groups for n in g) != sorted(by_name) or sum(len(g) > 1 for g in groups) > 1
+                or not all(groups)):
             raise SimrealError(f"process groups {groups} must name each node ({', '.join(by_name)}) once, with at "
-                               "most one group of several")
+                               "most one group of several and none empty")
         procs = []
         for g in groups:
             if len(g) == 1:

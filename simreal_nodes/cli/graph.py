@@ -22,7 +22,8 @@ def _launch_mode(s: argparse.ArgumentParser) -> None:
     g = s.add_mutually_exclusive_group()
     g.add_argument("--one-process", dest="one_process", action="store_true", default=None,
                    help="every node in one process on one executor (the default, but for a live graph with a SLAM "
-                        "localization or a dense tracker: benchmarks/results/graph.md, launch_mode.md)")
+                        "localization or a dense tracker and a lossless replay with frames in flight: "
+                        "benchmarks/results/graph.md, launch_mode.md)")
     g.add_argument("--process-per-node", dest="one_process", action="store_false",
                    help="each node in its own process: a fault in one node leaves the others (and the SLAM map) "
                         "running (the default for a live graph with a SLAM localization or a dense tracker, whose "
@@ -30,7 +31,7 @@ def _launch_mode(s: argparse.ArgumentParser) -> None:
     g.add_argument("--split", dest="one_process", action="store_const", const="split",
                    help="the nodes slower than a camera frame (a SLAM localization, a dense tracker) each in a "
                         "process of its own, the others together in one: on 2 cores the fastest with frames in "
-                        "flight for an RGB-D SLAM graph (benchmarks/results/graph.md)")
+                        "flight for graph.md's RGB-D SLAM graphs, not for launch_mode.md's (benchmarks/results)")
     add_executor(s)
 
 
@@ -41,8 +42,9 @@ def add_executor(s: argparse.ArgumentParser) -> None:
                         "(benchmarks/results/executor.md)")
     s.add_argument("--threads", type=_threads, default=None, metavar="N",
                    help="worker threads of each pool of a node process's numerical libraries (OpenBLAS, OpenMP, "
-                        "OpenCV); 0: the libraries' own defaults; default: $SIMREAL_THREADS, else one thread for the "
-                        "linear algebra's pools and OpenCV's own (benchmarks/results/threads.md)")
+                        "OpenCV; llvmpipe N - 1 besides the caller); 0: the libraries' own defaults; default: "
+                        "$SIMREAL_THREADS, else one thread for the linear algebra's pools and OpenCV's own, and "
+                        "with frames in flight one for every pool (benchmarks/results/threads.md, graph_threads.md)")
 
 
 def _in_flight(text: str) -> int:

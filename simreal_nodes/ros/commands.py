@@ -29,6 +29,7 @@ from simreal_nodes.launch import (
 from simreal_nodes.ros.bagplay import MAX_IN_FLIGHT, Player, Recorder, in_flight_ok
 from simreal_nodes.ros.node import make_executor
 from simreal_nodes.scene.graph import (
+    NodeSpec,
     image_topic,
     ingest_note,
     launch_choice,
@@ -66,6 +67,20 @@ def _share_node_environment() -> None:
 
 
 IN_FLIGHT_THREADS = 1  # each library pool's threads per node process in a lossless replay with frames in flight
+
+
+def recorded_topics(nodes: list[NodeSpec], record_images: bool = True) -> tuple[dict[str, str], tuple[str, ...]]:
+    """(topic -> type, the topics only counted) of a replay's record of ``nodes``' outputs: every output, written;
+    with ``record_images`` False what a display receives: the graph's images counted, not written, and the camera's
+    images that an ingest passes on to the other nodes not subscribed at all (no display shows them again; an ingest
+    alone keeps them, they are its product)."""
+    outputs = output_topics(nodes)
+    if record_images:
+        return outputs, ()
+    passed_on = {t for n in nodes if n.name == "ingest" and len(nodes) > 1
+                 for t, ty in n.outputs.items() if ty in IMAGE_TYPES}
+    outputs = {t: ty for t, ty in outputs.items() if t not in passed_on}
+    return outputs, tuple(t for t, ty in outputs.items() if ty in IMAGE_TYPES)
 
 
 def replay(bag: str, scene_file: str, rate: float = 1.0, lossless: bool = False, record: str | None = None,
@@ -152,14 +167,7 @@ def replay(bag: str, scene_file: str, rate: float = 1.0, lossless: bool = False,
     try:
         with _StopFlag() as stop:
             if record:
-                outputs = output_topics(nodes)
-                count_only: tuple[str, ...] = ()
-                if not record_images:  # what a display receives: the graph's images, counted, not written
-                    # the camera's frames that the ingest passes on to other nodes: no display shows them again
-                    passed_on = {t for n in nodes if n.name == "ingest" and len(nodes) > 1
-                                 for t, ty in n.outputs.items() if ty in IMAGE_TYPES}
-                    outputs = {t: ty for t, ty in outputs.items() if t not in passed_on}
-                    count_only = tuple(t for t, ty in outputs.items() if ty in IMAGE_TYPES)
+                outputs, count_only = recorded_topics(nodes, record_images)
                 recorder = Recorder(node, record, storage, topics=outputs, count_only=count_only)
             player = Player(node, ex, inputs, img, [n.name for n in nodes if n.per_frame], lossless, rate,
                             frame_timeout_s, echo=echo, in_flight=in_flight)

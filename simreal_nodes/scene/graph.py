@@ -182,7 +182,7 @@ def default_launch(scene: dict, lossless: bool, in_flight: int = 1) -> bool:
 
 def slow_nodes(scene: dict) -> set[str]:
     """The nodes whose work a frame outlasts a camera frame period at 640 x 480 on 2 cores: a SLAM localization
-    (34-39 ms a frame) and a dense tracker (about 120 ms); those a split launch (:func:`process_groups`) runs in
+    (33-38 ms a frame) and a dense tracker (about 120 ms); those a split launch (:func:`process_groups`) runs in
     processes of their own."""
     slow = set()
     if scene["localization"]["mode"] in SLAM_MODES:
@@ -219,7 +219,7 @@ def launch_choice(scene: dict, lossless: bool, told: bool | str | None,
     if one == SPLIT:
         apart = sorted(slow_nodes(scene))
         how = (f"split: {', '.join(apart)} in {'a process' if len(apart) == 1 else 'processes'} of "
-               f"{'its' if len(apart) == 1 else 'their'} own, the others in one" if apart
+               f"{'its' if len(apart) == 1 else 'their'} own, any others in one" if apart
                else "split: no node slower than a frame, all in one process")
     else:
         how = "in one process" if one else "a process per node"

@@ -121,16 +121,18 @@ class IngestCamera:
             return img
         return self._und.depth(img) if kind == "depth" else self._und.image(img)
 
-    def check(self, kind: str, msg, arr: np.ndarray | None = None) -> Checked:
-        """One incoming Image (anything with its fields) of stream ``kind``, its pixels ``arr`` if already decoded:
+    def check(self, kind: str, msg, arr: np.ndarray | None = None, encoding: str | None = None) -> Checked:
+        """One incoming Image (anything with its fields) of stream ``kind``, its pixels ``arr`` and their
+        ``encoding`` if already decoded (a decompressed image: its message has no encoding field):
         an ``image`` needs the camera and must be of its size, a ``depth`` must be 16UC1 or 32FC1, a ``right``
         image needs the right camera and passes as it is; every one must be well formed. The image and the depth
         are undistorted when asked."""
         if kind == "image" and self.cam is None:
             return Checked(f"unusable CameraInfo: {self.info_error}" if self.info_error
                            else "waiting for a valid CameraInfo")
-        if kind == "depth" and msg.encoding not in images.DEPTH_ENCODINGS:
-            return Checked(f"depth encoding '{msg.encoding}' (expected 16UC1 or 32FC1)")
+        enc = encoding if arr is not None and encoding is not None else getattr(msg, "encoding", None)
+        if kind == "depth" and enc not in images.DEPTH_ENCODINGS:
+            return Checked(f"depth encoding '{enc}' (expected 16UC1 or 32FC1)")
         if kind == "right" and self.right is None:
             return Checked("right image without a valid right CameraInfo")
         if arr is None:

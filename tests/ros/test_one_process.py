@@ -31,7 +31,7 @@ def test_the_launcher_runs_one_process_with_each_nodes_own_arguments(tmp_path):
 
 def test_the_launcher_runs_process_groups_and_refuses_bad_ones(tmp_path):
     """A group of one is that node's own process, a group of several one composed process (named ONE_PROCESS);
-    groups that miss a node, name one twice or hold two groups of several are refused."""
+    groups that miss a node, name one twice, hold two groups of several or an empty one are refused."""
     nodes = [NodeSpec("ingest"), NodeSpec("localization"), NodeSpec("tracker"), NodeSpec("overlay")]
     launcher = Launcher(nodes, env={}, log_dir=tmp_path, groups=[["localization"], ["ingest", "tracker", "overlay"]])
     alone, shared = launcher.procs
@@ -41,7 +41,8 @@ def test_the_launcher_runs_process_groups_and_refuses_bad_ones(tmp_path):
                                                          for n in ("ingest", "tracker", "overlay")]
     launcher._tmp.cleanup()
     for bad in ([["localization"], ["ingest", "tracker"]], [["localization", "ingest"], ["tracker", "overlay"]],
-                [["localization"], ["ingest", "tracker", "overlay", "ingest"]]):
+                [["localization"], ["ingest", "tracker", "overlay", "ingest"]],
+                [["localization"], ["ingest", "tracker", "overlay"], []]):
         with pytest.raises(SimrealError, match="process groups"):
             Launcher(nodes, env={}, log_dir=tmp_path, groups=bad)
 

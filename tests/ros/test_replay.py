@@ -212,3 +212,26 @@ def test_a_record_that_runs_out_of_space_stops_with_a_clear_error_and_stays_read
     images = [m for m in bags.read_bag(out, report) if m.topic == "/simreal/camera/image"]
     assert images and report.salvaged, report.summary()
     assert sum(f.stat().st_size for f in out.glob("*")) <= limit
+
+
+def test_a_record_of_images_counted_only_leaves_out_the_camera_images_the_ingest_passes_on():
+    """`replay(record_images=False)` (the graph benchmark's harness): the graph's images are counted, not written,
+    and the camera images an ingest passes on to the other nodes are not subscribed; an ingest alone keeps its
+    images (they are its product), and `record_images=True` writes every output."""
+    from pathlib import Path
+
+    from simreal_nodes.ros.commands import recorded_topics
+    from simreal_nodes.scene.graph import CAM_DEPTH, CAM_IMAGE, OVERLAY_IMAGE, required_nodes
+    from simreal_nodes.scene.schema import load_scene
+
+    sample = Path(__file__).resolve().parents[2] / "bags" / "samples" / "aluminium_beam_320x240.yaml"
+    nodes = required_nodes(load_scene(sample), lossless=True, source="topic")
+    assert nodes[0].name == "ingest" and len(nodes) > 1  # its JPEG images keep the ingest
+    every, none = recorded_topics(nodes, record_images=True)
+    assert CAM_IMAGE in every and none == ()
+    topics, counted = recorded_topics(nodes, record_images=False)
+    assert CAM_IMAGE not in topics and OVERLAY_IMAGE in counted
+    assert set(counted) <= set(topics) and set(topics) == set(every) - {CAM_IMAGE, CAM_DEPTH}
+    alone = [n for n in nodes if n.name == "ingest"]
+    topics, counted = recorded_topics(alone, record_images=False)
+    assert CAM_IMAGE in topics and CAM_IMAGE in counted

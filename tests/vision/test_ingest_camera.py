@@ -76,6 +76,11 @@ def test_every_stream_states_why_it_is_left_out():
     assert ic.check("right", _msg(img, "bgr8")).why == "right image without a valid right CameraInfo"
     assert ic.right_info(_info(PINHOLE)) == "" and ic.check("right", _msg(img, "bgr8")).why == ""
     assert ic.check("right", broken).why.startswith("malformed right image: ")
+    # a decompressed one (its message has no encoding field): the decoder's encoding decides
+    packed = SimpleNamespace(format="png")
+    depth = np.full((48, 64), 1000, np.uint16)
+    assert ic.check("depth", packed, depth, "16UC1").why == ""
+    assert ic.check("depth", packed, img, "bgr8").why == "depth encoding 'bgr8' (expected 16UC1 or 32FC1)"
     # a calibration file wins: CameraInfo is ignored
     cal = IngestCamera(undistort=True, calibration=PINHOLE)
     assert cal.camera_info(bad) == "" and cal.cam is PINHOLE

@@ -204,3 +204,21 @@ def test_every_change_of_a_keyframes_links_renews_the_local_map_cache(room):
     assert q.id in tr.local_points()
     check(lambda: m.erase_point(new[0].id))
     check(lambda: m.erase_keyframe(max(k for k in m.keyframes if k != kf.id)))
+
+
+def test_the_local_map_cache_stays_bounded_on_a_map_that_does_not_change(room):
+    """A frozen map (localization only) keeps its version and links while the camera moves over new sets of
+    keyframes: the tracker keeps a few sets, not one per set ever seen."""
+    from simreal_nodes.vision.slam.tracking import LOCAL_CACHE_SETS
+
+    slam, _ = run(room, "rgbd", range(60), config=SlamConfig(local_kfs=2))  # a local map of a few keyframes
+    tr, m = slam.tracker, slam.map
+    kids = sorted(m.keyframes)
+    seen = set()
+    for i in range(len(kids)):
+        slam.ctx.ref_kf = m.keyframes[kids[i]]
+        seen.add(tuple(tr.local_points()))
+        seed = m.keyframes[kids[-1 - i]].mp
+        seen.add(tuple(tr.local_points(seed_ids=seed[seed >= 0][:40])))
+        assert len(tr._local_cache) <= LOCAL_CACHE_SETS
+    assert len(seen) > LOCAL_CACHE_SETS  # more sets were asked for than are kept

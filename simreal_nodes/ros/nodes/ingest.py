@@ -115,7 +115,7 @@ class IngestNode(SimrealNode):
         """One image of stream ``kind`` (image, depth, right): checked, undistorted if asked, republished with its
         CameraInfo (the depth without). A colour image left out is a dropped frame, a depth or right one counted."""
         t0 = self.metrics.arrived() if kind == "image" else None
-        arr = None
+        arr, enc = None, ""  # enc: a decompressed image's encoding (the message has none)
         if isinstance(msg, CompressedImage):
             try:
                 arr, enc = images.decode_compressed(msg)
@@ -124,13 +124,13 @@ class IngestNode(SimrealNode):
                 return self._left_out(kind, msg.header.stamp, f"malformed {what}: {e}")
         if t0 is not None:
             self.metrics.lap("decode")
-        checked = self.core.check(kind, msg, arr)
+        checked = self.core.check(kind, msg, arr, enc or None)
         if checked.why:
             return self._left_out(kind, msg.header.stamp, checked.why)
         if t0 is not None:
             self.metrics.lap("work")
         frame_id = msg.header.frame_id if kind == "right" else self.camera_frame
-        if arr is not None:  # decoded here: published serialized, its pixels copied once (into the bytes)
+        if arr is not None:  # decoded here: published serialized (convert.array_image_cdr), no rclpy message
             out = convert.array_image_cdr(arr if checked.pixels is None else checked.pixels, enc, msg.header.stamp,
                                           frame_id)
             return self._publish(kind, out, msg.header.stamp, frame_id, t0)

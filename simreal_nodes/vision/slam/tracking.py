@@ -19,6 +19,8 @@ from simreal_nodes.vision.slam.context import SlamContext
 from simreal_nodes.vision.slam.optimize import project, refine_pose
 from simreal_nodes.vision.slam.result import TrackResult, frame_result
 
+LOCAL_CACHE_SETS = 4  # local-map point sets the tracker keeps for one state of the map (Tracker.local_points)
+
 
 @dataclass
 class PoseFix:
@@ -45,7 +47,7 @@ def pnp_ransac(P: np.ndarray, und: np.ndarray, K: np.ndarray) -> np.ndarray | No
 class Tracker:
     def __init__(self, ctx: SlamContext) -> None:
         self.ctx = ctx
-        # (map version, its links' count, keyframe ids) -> the sorted ids of the points those keyframes hold
+        # (map version, its links' count, sorted keyframe ids) -> the sorted ids of the points those keyframes hold
         self._local_cache: dict[tuple[int, int, tuple[int, ...]], np.ndarray] = {}
 
     def track(self, f: Features, tim: dict[str, float]) -> tuple[TrackResult, PoseFix | None]:
@@ -137,12 +139,14 @@ class Tracker:
             kfs[last] = m.keyframes[last]
         if not kfs:
             return np.zeros(0, np.int64)
-        key = (m.version, m.links, tuple(kfs))
+        key = (m.version, m.links, tuple(sorted(kfs)))
         ids = self._local_cache.get(key)
         if ids is None:
             ids = np.unique(np.concatenate([kf.mp[kf.mp >= 0] for kf in kfs.values()]))
-            # the two sets of a frame (before and after the pose) for this map's keyframes
-            self._local_cache = {k: v for k, v in self._local_cache.items() if k[:2] == key[:2]}
+            # a frame asks for two sets (before and after its pose): the newest few of this map's state are kept (a
+            # frozen map's state never changes while the camera moves over new sets of keyframes)
+            kept = [(k, v) for k, v in self._local_cache.items() if k[:2] == key[:2]][-(LOCAL_CACHE_SETS - 1):]
+            self._local_cache = dict(kept)
             self._local_cache[key] = ids
         ids = ids[m.alive(ids)]
         if ctx.deformable:
