@@ -130,7 +130,7 @@ class IngestCamera:
         if kind == "image" and self.cam is None:
             return Checked(f"unusable CameraInfo: {self.info_error}" if self.info_error
                            else "waiting for a valid CameraInfo")
-        enc = encoding if arr is not None and encoding is not None else getattr(msg, "encoding", None)
+        enc = encoding or getattr(msg, "encoding", None)
         if kind == "depth" and enc not in images.DEPTH_ENCODINGS:
             return Checked(f"depth encoding '{enc}' (expected 16UC1 or 32FC1)")
         if kind == "right" and self.right is None:
