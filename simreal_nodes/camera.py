@@ -15,6 +15,8 @@ import yaml
 from simreal_nodes.errors import CameraInfoError, ImageFormatError
 
 DISTORTION_MODELS = ("plumb_bob", "rational_polynomial", "equidistant", "none", "")
+# the overlay's distortion map: exact every 4th pixel, bilinear between (CameraModel.ideal_pixel_map)
+IDEAL_MAP_STEP = 4
 MAX_IMAGE_SIDE = 16384  # pixels: above any camera the graph serves (and OpenGL's usual texture limit)
 
 
@@ -152,6 +154,31 @@ class CameraModel:
             uv.reshape(-1, 1, 2), self.K, self.D, None, self.K,
             criteria=(cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-10))
         return und.reshape(-1, 2)
+
+    def ideal_pixel_map(self, step: int = IDEAL_MAP_STEP) -> np.ndarray:
+        """(height, width, 2) float64: the ideal (undistorted) pixel of every pixel of the image, as
+        :meth:`undistort_points` gives it, computed exactly at every ``step``-th pixel (the grid reaching one step
+        past the last row and column) and bilinear between. The distortion varies slowly over a few pixels: at the
+        default step the map is within 0.02 px of the exact one on a strong barrel distortion (tests/test_camera.py)
+        at about a tenth of the time (640 x 480: about 4 ms against 40; the overlay builds it when the camera comes,
+        and its first frame waits for that). ``step`` 1: every pixel exactly; else a power of two up to 32 (OpenCV's
+        bilinear weights are multiples of 1/32: exact at the fractions k / step then)."""
+        W, H = self.width, self.height
+        if step not in (1, 2, 4, 8, 16, 32):
+            raise ValueError(f"step {step}: 1 or a power of two up to 32")
+        if step == 1:
+            xs, ys = np.meshgrid(np.arange(W, dtype=np.float64), np.arange(H, dtype=np.float64))
+            return self.undistort_points(np.c_[xs.ravel(), ys.ravel()]).reshape(H, W, 2)
+        import cv2
+
+        gx = np.arange(0, W - 1 + step, step, dtype=np.float64)
+        gy = np.arange(0, H - 1 + step, step, dtype=np.float64)
+        GX, GY = np.meshgrid(gx, gy)
+        coarse = self.undistort_points(np.c_[GX.ravel(), GY.ravel()]).reshape(len(gy), len(gx), 2)
+        mx, my = np.meshgrid(np.arange(W, dtype=np.float32) / step, np.arange(H, dtype=np.float32) / step)
+        # float32 lookups of float32 values: about 1e-4 px at 1 000 px, far under the interpolation's own error
+        return np.dstack([cv2.remap(np.ascontiguousarray(coarse[..., k], dtype=np.float32), mx, my, cv2.INTER_LINEAR)
+                          for k in range(2)]).astype(np.float64)
 
     def backproject(self, uv: np.ndarray, depth: np.ndarray) -> np.ndarray:
         """Ideal (undistorted) pixels + z-depth -> (N, 3) points in the optical frame."""

@@ -25,7 +25,7 @@ import cv2
 import numpy as np
 
 from simreal_nodes import geometry as G
-from simreal_nodes.camera import CameraModel
+from simreal_nodes.camera import IDEAL_MAP_STEP, CameraModel
 from simreal_nodes.rom.model import ReducedModel
 from simreal_nodes.rom.state import ModelState
 
@@ -239,7 +239,7 @@ class OverlayCompositor:
         self.occlusion = occlusion
         self.colorbar = colorbar
         self.margin = occlusion_margin
-        self.renderer = Renderer(cam, near=0.02, far=50.0, ssaa=ssaa, ambient=0.6)
+        self.renderer = Renderer(cam, near=0.02, far=50.0, ssaa=ssaa, ambient=0.6, map_step=IDEAL_MAP_STEP)
         for oid, ob in objects.items():
             # a closed surface (the boundary of a solid model) is drawn without its back faces: half the
             # fragments, the same picture from outside (from inside it, nothing is drawn)
@@ -272,5 +272,6 @@ class OverlayCompositor:
                     break  # one bar: the first coloured object (scenes colour one object)
         return out, states
 
-    def release(self) -> None:
-        self.renderer.release()
+    def release(self, keep: bool = False) -> None:
+        """Free the GL objects; ``keep``: the context goes to the next renderer (``Renderer.release``)."""
+        self.renderer.release(keep)

@@ -14,6 +14,19 @@ from simreal_nodes.rom.model import ReducedModel
 from simreal_nodes.rom.model_file import load_model
 
 Parameters = tuple[list[str], list[float]]  # (names, values) of one object's model parameters
+WARM_UP_SIZE = (160, 120)  # the warm-up's camera (SceneOverlay.warm_up): the draw states, not the size, matter
+
+
+def _view_of(T_world_object: np.ndarray, X: np.ndarray) -> tuple[np.ndarray, float]:
+    """(T_world_camera, distance): a camera three bounding radii from the centre of the points ``X`` (object frame)
+    on the object's +z side, looking at it along -z (its y axis along the object's)."""
+    c = T_world_object[:3, :3] @ X.mean(axis=0) + T_world_object[:3, 3]
+    r = max(float(np.linalg.norm(X - X.mean(axis=0), axis=1).max()), 1e-3)
+    x, y = T_world_object[:3, 0], -T_world_object[:3, 1]
+    T = np.eye(4)
+    T[:3, :3] = np.c_[x, y, np.cross(x, y)]  # optical z = x cross y = the object's -z
+    T[:3, 3] = c + 3.0 * r * T_world_object[:3, 2]
+    return T, 3.0 * r
 
 
 def overlay_models(objects: list[dict]) -> dict[str, ReducedModel]:
@@ -53,14 +66,37 @@ class SceneOverlay:
     def build(self) -> OverlayCompositor:
         """(Re)build the compositor for the current camera."""
         assert self.cam is not None  # built once a camera is set (set_camera; the node checks it first)
+        self.comp = self._compositor(self.cam)
+        return self.comp
+
+    def warm_up(self) -> None:
+        """Draw every object once on a small camera of its own (with lens distortion), without and with a depth image,
+        and hand the renderer's context and programs on to the compositor of the real camera
+        (``Renderer.release(keep=True)``): the GL driver compiles its shaders for these draws and OpenCV loads the
+        colour bar's font now, not while the first camera frame waits. The overlay node calls it at start-up; live,
+        the frames that come while the first waits are replaced in the one-deep queues (on llvmpipe the first draw
+        took about 40 ms more than the next, 25 of them the font's loading; scratch measure, stop 99)."""
+        W, H, f = WARM_UP_SIZE[0], WARM_UP_SIZE[1], float(WARM_UP_SIZE[0])
+        cam = CameraModel(W, H, np.array([[f, 0.0, W / 2], [0.0, f, H / 2], [0.0, 0.0, 1.0]]),
+                          np.array([-0.1, 0.01, 0.0, 0.0, 0.0]), "plumb_bob")
+        comp = self._compositor(cam)
+        try:
+            for ob in comp.objects.values():
+                T_wc, dist = _view_of(ob.T, ob.X)
+                img = np.zeros((H, W, 3), dtype=np.uint8)
+                comp.compose(img, T_wc, {})
+                comp.compose(img, T_wc, {}, np.full((H, W), dist, dtype=np.float32))
+        finally:
+            comp.release(keep=True)
+
+    def _compositor(self, cam: CameraModel) -> OverlayCompositor:
         obs = {}
         for o in self.objects:
             ov = o["overlay"]
             modes = ov["modes"] if self.modes < 0 else self.modes
             obs[o["id"]] = ObjectOverlay(self.models[o["id"]], G.pose7_to_matrix(o["anchor"]["pose"]), ov["field"],
                                          ov["colormap"], modes, ov["max_error_px"], ov["magnify"], ov["range"])
-        self.comp = OverlayCompositor(self.cam, obs, occlusion=self.occlusion, colorbar=self.colorbar, ssaa=self.ssaa)
-        return self.comp
+        return OverlayCompositor(cam, obs, occlusion=self.occlusion, colorbar=self.colorbar, ssaa=self.ssaa)
 
     def draw(self, bgr: np.ndarray, T_wc: np.ndarray | None, params: dict[str, Parameters | None],
              depth: np.ndarray | None = None) -> tuple[np.ndarray, dict[str, DrawState], str]:

@@ -343,7 +343,7 @@ class Player:
     def play(self, messages, hold_for: tuple[str, ...] = ()) -> PlayStats:
         """Play an iterable of :class:`bags.BagMessage` (already filtered to the input topics)."""
         t0_wall = time.monotonic()
-        t0_bag = None
+        t0_bag, t0_clock = None, t0_wall
         held: list[tuple[bytes, int, set]] = []  # images waiting for same-stamp companions
         seen_since: list[int] = []
         recent: dict[str, deque] = {t: deque(maxlen=64) for t in hold_for}  # stamps already published
@@ -363,10 +363,12 @@ class Player:
             if self.should_stop():
                 self.echo("[replay] stopped by signal")
                 break
-            if t0_bag is None:
-                t0_bag = m.log_time_ns
+            if t0_bag is None:  # the bag's clock starts with its first message in hand (opening the bag and
+                # reading it take tens of milliseconds: counted from before, frame 0 went out late and frame 1, on
+                # time, right after it, replacing it in a busy node's one-deep queue)
+                t0_bag, t0_clock = m.log_time_ns, time.monotonic()
             if not self.lossless:
-                due = t0_wall + (m.log_time_ns - t0_bag) * 1e-9 / self.rate
+                due = t0_clock + (m.log_time_ns - t0_bag) * 1e-9 / self.rate
                 while True:
                     now = time.monotonic()
                     if now >= due:

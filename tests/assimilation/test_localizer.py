@@ -209,3 +209,29 @@ def test_markers_and_a_static_camera_report_the_localization_only_they_were_aske
         assert loc.step(img, 1).localization_only
         loc.set_localization_only(False)
         assert not loc.step(img, 2).localization_only
+
+
+@pytest.mark.parametrize("mode", ["markers", "rgbd", "stereo", "mono", "static"])
+def test_the_warm_up_leaves_no_localizer_and_no_camera_behind(mode, monkeypatch):
+    """Issue 18: the node's warm-up builds a localizer of its mode on a camera of its own, steps it once and closes
+    it (no mapping worker even when the node maps in one); the live localizer still waits for a CameraInfo."""
+    from simreal_nodes.assimilation import localizer as loc_mod
+
+    made = []
+    real = loc_mod.make_localizer
+
+    def spy(*a, **kw):
+        made.append(kw)
+        core = real(*a, **kw)
+        closed = core.close
+        core.close = lambda: (made.append("closed"), closed())
+        return core
+
+    monkeypatch.setattr(loc_mod, "make_localizer", spy)
+    live = LiveLocalizer(MARKERS if mode == "markers" else dict(SLAM, mode=mode), async_mapping=True)
+    live.warm_up()
+    assert live.cam is None and live.core is None and live.not_ready() == "waiting for a valid CameraInfo"
+    if mode == "static":
+        assert made == []
+    else:
+        assert made[-1] == "closed" and "async_mapping" not in made[0]  # (built without a worker)

@@ -104,11 +104,11 @@ def test_a_context_made_ahead_is_the_one_the_next_renderer_takes(monkeypatch):
 
     monkeypatch.setattr(gl, "_SPARE", [])
     assert gl.prepare_context() not in ("", "?")
-    spare = gl._SPARE[0]
+    spare, programs = gl._SPARE[0]
     assert gl.prepare_context()
-    assert len(gl._SPARE) == 1 and gl._SPARE[0] is spare  # asked again: still the one
+    assert len(gl._SPARE) == 1 and gl._SPARE[0][0] is spare  # asked again: still the one
     r = Renderer(CAMS["pinhole"])
-    assert r.ctx is spare and not gl._SPARE
+    assert r.ctx is spare and r.progs is programs and not gl._SPARE
     V, F = disks([np.array([-0.3, 0.0, 2.0])], 0.1)  # a disk on the left for this one
     r.add(Mesh("d", V, F, tint=(1.0, 0.0, 0.0)))
     r2 = Renderer(CAMS["pinhole"])  # made after: its context is the thread's current one now
@@ -126,3 +126,59 @@ def test_a_context_made_ahead_is_the_one_the_next_renderer_takes(monkeypatch):
     with pytest.raises(gl.RenderError, match="cannot create an OpenGL context over no-such-backend"):
         gl.prepare_context()
     assert not gl._SPARE
+
+
+@pytest.mark.parametrize("ssaa", [1, 2])
+def test_the_occlusion_lookup_puts_each_render_pixel_where_the_camera_sees_its_ray(ssaa):
+    """Issue 18: the render pixel -> camera pixel lookup of the occlusion shader is OpenCV's rectification map (made
+    in milliseconds; projecting each ray took 0.1-1 s on the first depth frame): the same pixels as projecting each
+    render pixel's ray with the camera's distortion, to float32 precision; rays that land outside the image are -1 (and
+    those on an edge pixel's outer half read that pixel: before, x in (-0.5, 0) read as outside, never occluded)."""
+    cam = CAMS["distorted"]
+    r = Renderer(cam, ssaa=ssaa)
+    r._set_real_depth(np.ones((cam.height, cam.width), np.float32))
+    rc = r.render_cam
+    lookup = np.frombuffer(r._depth_map_tex.read(), np.float32).reshape(rc.height, rc.width, 2)[::-1]
+    r.release()
+    xs, ys = np.meshgrid(np.arange(rc.width, dtype=np.float64), np.arange(rc.height, dtype=np.float64))
+    rays = np.stack([(xs - rc.cx) / rc.fx, (ys - rc.cy) / rc.fy, np.ones_like(xs)], -1).reshape(-1, 3)
+    uv = cam.project(rays).reshape(rc.height, rc.width, 2)
+    inside = (uv[..., 0] > -0.5) & (uv[..., 0] < cam.width - 0.5) \
+        & (uv[..., 1] > -0.5) & (uv[..., 1] < cam.height - 0.5)
+    assert inside.mean() > 0.5 and (~inside).any()  # the render's margin reaches past the distorted image
+    ok = inside & (lookup[..., 0] >= 0)
+    assert ok.sum() >= inside.sum() - 4  # (rays on the very edge may fall either side in float32)
+    # (a ray in the outer half of an edge pixel reads that pixel: clipped to it, as the shader reads x < 0 as outside)
+    np.testing.assert_allclose(lookup[ok], np.clip(uv, 0, [cam.width - 1, cam.height - 1])[ok], atol=2e-3)
+    assert (lookup[~inside & (np.abs(uv[..., 0] - cam.width / 2) > cam.width / 2 + 1)] == -1).all()
+
+
+def test_a_renderer_released_to_keep_hands_its_context_and_programs_to_the_next(monkeypatch):
+    """Issue 18 (the overlay's warm-up): a renderer released with ``keep`` leaves its context and compiled programs to
+    the next renderer of the process, its own GL objects freed; the next draws as a renderer of a fresh context
+    does."""
+    from simreal_nodes.render import gl
+
+    monkeypatch.setattr(gl, "_SPARE", [])
+    V, F = disks([np.array([0.1, -0.05, 2.0])], 0.2)
+    small = Renderer(CameraModel.from_intrinsics(160, 120, 150.0, 150.0, 79.5, 59.5, D=[-0.1, 0.01, 0, 0, 0]))
+    small.add(Mesh("d", V, F, tint=(0.0, 1.0, 0.0)))
+    small.render(np.eye(4), real_depth=np.ones((120, 160), np.float32))
+    ctx, progs = small.ctx, small.progs
+    small.release(keep=True)
+    assert len(gl._SPARE) == 1 and gl._SPARE[0] == (ctx, progs) and small.meshes == {}
+    r = Renderer(CAMS["distorted"])
+    assert r.ctx is ctx and r.progs is progs and not gl._SPARE
+    fresh = Renderer(CAMS["distorted"])
+    assert fresh.ctx is not ctx
+    real = np.full((480, 640), 1.9, np.float32)
+    real[:, :345] = 2.5  # the disk (centre near column 345) drawn on its left half
+    images = []
+    for rend in (r, fresh):
+        rend.add(Mesh("d", V, F, tint=(0.0, 1.0, 0.0)))
+        images.append(rend.render(np.eye(4), real_depth=real))
+        rend.release()
+    (rgb1, d1), (rgb2, d2) = images
+    assert (rgb1[:, :345, 1] > 0).sum() > 1000 and not (rgb1[:, 347:, 1] > 0).any()  # hidden where it is nearer
+    np.testing.assert_array_equal(rgb1, rgb2)
+    np.testing.assert_array_equal(d1, d2)

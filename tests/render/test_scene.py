@@ -53,3 +53,45 @@ def test_draw(overlay):
     assert m.ns == "simreal/beam" and m.id == 0 and len(m.points) == 3 * len(overlay.comp.objects["beam"].triangles)
     with pytest.raises(ValueError, match="320x240"):
         overlay.draw(img[:100], VIEW, {"beam": None})
+
+
+def test_the_warm_up_draws_on_a_camera_of_its_own_and_hands_its_context_to_the_real_one(monkeypatch):
+    """Issue 18 (live, the frames that come while the first one waits are skipped): the warm-up draws the objects
+    once on a small camera of its own, with and without depth, then leaves its GL context to the compositor the real
+    camera builds; what that one draws is what a compositor without warm-up draws."""
+    from simreal_nodes.render import gl
+
+    monkeypatch.setattr(gl, "_SPARE", [])
+    cam = CameraModel.from_intrinsics(320, 240, 262.0, 260.0, 159.3, 120.6, D=[-0.2, 0.05, 0.0, 0.0, 0.0])
+    img = np.full((cam.height, cam.width, 3), 90, np.uint8)
+    depth = np.full((cam.height, cam.width), 0.7, np.float32)
+    depth[:, 160:] = 0.9
+    out = []
+    for warm in (True, False):
+        so = SceneOverlay([OBJ], {"beam": beam_model()})
+        if warm:
+            so.warm_up()
+            assert so.comp is None and len(gl._SPARE) == 1  # nothing kept but the context (and its programs)
+            ctx = gl._SPARE[0][0]
+        so.set_camera(cam)
+        assert (so.comp.renderer.ctx is ctx) == warm and not gl._SPARE
+        out.append(so.draw(img, VIEW, {"beam": (["s"], [0.4])}, depth)[0])
+        so.release()
+    assert (out[0] != img).sum() > 1000
+    np.testing.assert_array_equal(out[0], out[1])
+
+
+def test_the_warm_up_view_sees_the_whole_object():
+    """The warm-up's camera (three bounding radii away, on the object's +z side) has every point of the object in
+    front of it and inside its image: the draw it makes runs the shaders over the object."""
+    from simreal_nodes.render.scene import WARM_UP_SIZE, _view_of
+
+    X = beam_model().points
+    T_wc, dist = _view_of(np.eye(4), X)
+    assert dist > 0
+    W, H = WARM_UP_SIZE
+    cam = CameraModel.from_intrinsics(W, H, float(W), float(W), W / 2, H / 2)
+    P = (np.linalg.inv(T_wc) @ np.c_[X, np.ones(len(X))].T).T[:, :3]
+    assert (P[:, 2] > 0).all() and np.isclose(np.linalg.det(T_wc[:3, :3]), 1.0)
+    uv = cam.project(P)
+    assert (uv >= 0).all() and (uv[:, 0] < W).all() and (uv[:, 1] < H).all()

@@ -4,6 +4,7 @@ timed out, and a frame that never finishes holds up no other."""
 
 import time
 
+import numpy as np
 import pytest
 
 pytest.importorskip("rclpy")
@@ -193,3 +194,22 @@ def test_a_node_process_warms_up_before_it_builds_its_nodes(monkeypatch):
     monkeypatch.setattr(node_mod, "spin", lambda ex: order.append(("spin", None)))
     assert node_mod.run_nodes([lambda: build("warm_a"), lambda: build("warm_b")]) == 0
     assert order == [("warm", None), ("build", "warm_a"), ("build", "warm_b"), ("spin", None)]
+
+
+def test_live_the_bags_clock_starts_with_its_first_message_in_hand(tmp_path):
+    """Issue 18: live, the frames go out at the bag's rate from the first one on, however long the bag took to open
+    and yield its first message (counted from before, frame 0 went out late and frame 1 right after it: a busy
+    node's one-deep queue kept only frame 1, and a replay of the demo lost its first frame that way)."""
+    write_camera_bag(tmp_path / "in", n=4, w=64, h=48, fps=30.0)
+
+    def slow_to_open():
+        time.sleep(0.2)
+        yield from bags.read_bag(tmp_path / "in", topics=[IMAGE])
+
+    player = Player(_Node(), None, {IMAGE: "sensor_msgs/msg/Image"}, IMAGE, list(NODES), lossless=False,
+                    echo=lambda *a: None)
+    player.executor = _Graph(player)
+    stats = player.play(slow_to_open())
+    t = [player._t_pub[s] for s in stats.published_stamps]
+    assert len(t) == 4
+    assert min(np.diff(t)) > 0.8 / 30  # a frame period apart, the first two too

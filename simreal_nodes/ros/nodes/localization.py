@@ -21,7 +21,7 @@ from tf2_msgs.msg import TFMessage
 
 from simreal_nodes.aero.slam_cloud import capture_cloud
 from simreal_nodes.assimilation.localizer import LiveLocalizer, Localization, status_text
-from simreal_nodes.errors import ImageFormatError
+from simreal_nodes.errors import ImageFormatError, SimrealError
 from simreal_nodes.io import images
 from simreal_nodes.ros import convert
 from simreal_nodes.ros.node import SimrealNode, guarded, run_node
@@ -55,6 +55,10 @@ class LocalizationNode(SimrealNode):
         section = dict(loc, mode=self.mode, features=n_features, scale_factor=scale, pyramid_levels=levels,
                        known_scale_m=known_scale or None, loop_closing=loop)
         self.live = LiveLocalizer(section, async_mapping, self.map_file, frozen)
+        try:  # what the first frame would set up, now (live, frames that come while it waits are skipped)
+            self.live.warm_up()
+        except (ValueError, SimrealError) as e:  # the first CameraInfo builds the localizer again, with the reason
+            self.get_logger().warning(f"localizer warm-up failed: {e}")
         q = data_qos(self.lossless)
         ordered = q if self.lossless else reliable_qos(10)  # poses and observations: each one, in order
         self.pub_pose = self.create_publisher(PoseStamped, graph.POSE, ordered)

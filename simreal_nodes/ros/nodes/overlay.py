@@ -23,7 +23,7 @@ from simreal_nodes.io import images
 from simreal_nodes.io.cdr import marker_array_cdr
 from simreal_nodes.io.video import VideoSink
 from simreal_nodes.render.aero import FLOW_TUBE_RADIUS_M, FlowOverlay, flow_geometry
-from simreal_nodes.render.gl import RenderError, prepare_context
+from simreal_nodes.render.gl import prepare_context
 from simreal_nodes.render.scene import SceneOverlay, overlay_models
 from simreal_nodes.ros.convert import observation_pose, stamp_ns
 from simreal_nodes.ros.node import SimrealNode, guarded, parse_progress, run_node
@@ -79,9 +79,11 @@ class OverlayNode(SimrealNode):
             self.create_subscription(Header, graph.PROGRESS, self.on_progress, reliable_qos(1000))
         self.frames = 0
         self.set_status("ok", "waiting for images")
-        try:  # the GL driver loaded now, not while the first frame waits (its intrinsics come with it)
-            self.say(f"overlay renderer: {prepare_context()} (its context made at start-up)")
-        except RenderError as e:  # said here; the first frame reports it again, as a drop with the reason
+        try:  # the GL driver loaded, the shaders compiled and the font read now, not while the first frame waits
+            # (the camera's intrinsics come with it; live, the frames that come meanwhile are skipped)
+            self.say(f"overlay renderer: {prepare_context()} (its context made and warmed up at start-up)")
+            self.core.warm_up()
+        except (ValueError, SimrealError) as e:  # said here; the first frame reports it again, as a drop
             self.set_status("error", str(e))
 
     @guarded
