@@ -35,6 +35,7 @@ from benchmarks.common import markdown_table, save
 from simreal_nodes.demo import node_metrics, sample_bag
 from simreal_nodes.launch import executor_kind
 from simreal_nodes.metrics import STAGES
+from simreal_nodes.ros.bagplay import STARTUP_S
 from simreal_nodes.ros.commands import replay
 from simreal_nodes.scene.graph import SPLIT, slow_nodes
 from simreal_nodes.scene.schema import load_scene
@@ -121,6 +122,8 @@ def run_case(scene, res, bag, scene_yaml, lossless, one_process, executor=None, 
                 pose_pct=100 * counts.get(POSE_TOPIC, 0) / max(d["frames_published"], 1),
                 # after the first second: the steady state, without the nodes' start-up (bagplay.STARTUP_S)
                 steady_pct=_num(d["through_after_startup_pct"]),
+                frames=d["frames_published"], lost=d["frames_published"] - d["frames_completed"],
+                lost_startup=stats.lost_before(STARTUP_S),
                 latency_p50=last["p50"], latency_p95=last["p95"], wall_s=wall,
                 cores_busy=sum(stats.cpu_s.values()) / d["play_s"] if d["play_s"] > 0 else float("nan"),
                 nodes_cpu_ms=sum(v for n, v in cpu.items() if n != PLAYER),

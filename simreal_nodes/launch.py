@@ -181,6 +181,7 @@ STANDBY_ENV = "SIMREAL_STANDBY"  # "1" in a standby process's environment
 LAUNCHER_PID_ENV = "SIMREAL_LAUNCHER_PID"  # a node ends when the process of this pid (its launcher) does
 PROMOTE = "go"  # the line written to a standby's stdin to make it the node
 STANDBY_READY = b"standby ready"  # how a standby's ready line starts (:func:`simreal_nodes.ros.node.run_node`)
+QUIET_CORES = 0.15  # Launcher.wait_quiet: below this CPU use (cores) the graph is idle (its timers, diagnostics)
 STANDBY_DELAY_S = 5.0  # a standby starts this long after the node it stands behind (start or restart)
 WATCH_PERIOD_S = 0.05  # how often the launcher looks for exited nodes
 EXECUTOR_ENV = "SIMREAL_EXECUTOR"  # the executor node processes (and the replay's player) spin on: EXECUTORS
@@ -390,6 +391,27 @@ class Launcher:
             time.sleep(0.05)
         return False
 
+    def wait_quiet(self, timeout_s: float, window_s: float = 0.25, busy_cores: float = QUIET_CORES) -> bool:
+        """Wait until the graph is quiet: every process this one started (nodes, their workers, standbys) and this
+        one together used less than ``busy_cores`` of CPU over ``window_s`` (False: not within ``timeout_s``). For a
+        replay, before its first frame: a standby says it is ready when its participant is up, and the discovery that
+        follows takes every participant's CPU for 0.4-0.9 s on 2 cores (stop 99: a live replay of the demo that
+        started then lost 8-10 of its first frames with a process per node in 3 of 5 runs, none with the standbys
+        off). Linux /proc; True at once where it cannot be read."""
+        deadline = time.monotonic() + timeout_s
+        busy = _descendants_cpu_s(os.getpid())
+        if busy is None:
+            return True
+        t = time.monotonic()
+        while True:
+            time.sleep(window_s)
+            now, t_now = _descendants_cpu_s(os.getpid()), time.monotonic()
+            if now is None or (now - busy) / max(t_now - t, 1e-3) < busy_cores:
+                return True
+            if t_now > deadline:
+                return False
+            busy, t = now, t_now
+
     @staticmethod
     def _end_standby(p: _Proc) -> subprocess.Popen[bytes] | None:
         """Tell ``p``'s standby to end (EOF on its stdin); returns it to be waited for."""
@@ -402,32 +424,11 @@ class Launcher:
     def cpu_seconds(self) -> dict[str, float]:
         """CPU time (user + system) used so far by each running node and the processes it started (Linux
         /proc; empty where that is unavailable)."""
-        try:
-            tick = os.sysconf("SC_CLK_TCK")
-            stats = {}
-            for d in os.listdir("/proc"):
-                if d.isdigit():
-                    try:
-                        f = Path(f"/proc/{d}/stat").read_text().rsplit(")", 1)[1].split()
-                    except OSError:
-                        continue
-                    stats[int(d)] = (int(f[1]), (int(f[11]) + int(f[12])) / tick)  # ppid, utime + stime
-        except (OSError, ValueError, AttributeError):
+        table = _proc_table()
+        if table is None:
             return {}
-        kids: dict[int, list[int]] = {}
-        for pid, (ppid, _) in stats.items():
-            kids.setdefault(ppid, []).append(pid)
-        out = {}
-        for p in self.procs:
-            if p.popen is None or p.popen.poll() is not None:
-                continue
-            total, todo = 0.0, [p.popen.pid]
-            while todo:
-                pid = todo.pop()
-                total += stats.get(pid, (0, 0.0))[1]
-                todo += kids.get(pid, [])
-            out[p.spec.name] = total
-        return out
+        return {p.spec.name: _tree_cpu_s(table, p.popen.pid) for p in self.procs
+                if p.popen is not None and p.popen.poll() is None}
 
     def alive(self) -> dict[str, bool]:
         return {p.spec.name: p.popen is not None and p.popen.poll() is None for p in self.procs}
@@ -494,3 +495,40 @@ def run_until_signal(launcher: Launcher) -> int:
     for n, c in codes.items():
         launcher.echo(f"[launch] {n}: exit code {c}")
     return 1 if bad else 0
+
+
+def _proc_table() -> tuple[dict[int, float], dict[int, list[int]]] | None:
+    """Every process's CPU seconds (user + system) so far and each process's children (Linux /proc; None where it
+    cannot be read)."""
+    try:
+        tick = os.sysconf("SC_CLK_TCK")
+        cpu: dict[int, float] = {}
+        kids: dict[int, list[int]] = {}
+        for d in os.listdir("/proc"):
+            if d.isdigit():
+                try:
+                    f = Path(f"/proc/{d}/stat").read_text().rsplit(")", 1)[1].split()
+                except OSError:
+                    continue
+                cpu[int(d)] = (int(f[11]) + int(f[12])) / tick
+                kids.setdefault(int(f[1]), []).append(int(d))
+    except (OSError, ValueError, AttributeError):
+        return None
+    return cpu, kids
+
+
+def _tree_cpu_s(table: tuple[dict[int, float], dict[int, list[int]]], root: int) -> float:
+    """CPU seconds of process ``root`` (all its threads) and every process below it, from a :func:`_proc_table`."""
+    cpu, kids = table
+    total, todo = 0.0, [root]
+    while todo:
+        pid = todo.pop()
+        total += cpu.get(pid, 0.0)
+        todo += kids.get(pid, [])
+    return total
+
+
+def _descendants_cpu_s(root: int) -> float | None:
+    """CPU seconds used so far by process ``root`` and every process below it (None where /proc cannot be read)."""
+    table = _proc_table()
+    return None if table is None else _tree_cpu_s(table, root)

@@ -226,6 +226,35 @@ def test_a_replay_starts_the_standbys_before_its_first_frame(tmp_path):
         assert plain.start_standbys(timeout_s=0.0)
 
 
+BUSY_NODE = """
+import sys, time
+t_end = time.monotonic() + float(sys.argv[1])
+while time.monotonic() < t_end:
+    pass
+print("idle", flush=True)
+while True:
+    time.sleep(0.05)
+"""
+
+
+@pytest.mark.parametrize("busy_s", [0.8, 60.0])
+def test_a_replay_waits_for_the_graph_to_go_quiet_before_its_first_frame(tmp_path, busy_s):
+    """Issue 18: ``wait_quiet`` returns once the processes the launcher started use (almost) no CPU: not while a
+    node works (here a node that spins for ``busy_s``), and False at its timeout when the graph never goes quiet
+    (a live replay that started while the standbys' participants were being discovered lost 8-10 of the demo's
+    first frames in 3 of 5 runs)."""
+    launcher, lines = fake_launcher(tmp_path, respawn=0, standby=False)
+    launcher.procs[0].cmd = [sys.executable, "-c", BUSY_NODE, str(busy_s)]
+    with launcher:
+        t0 = time.monotonic()
+        quiet = launcher.wait_quiet(timeout_s=3.0)
+        waited = time.monotonic() - t0
+        if busy_s < 3.0:
+            assert quiet and waited >= busy_s - 0.3 and "[ingest] idle" in lines
+        else:
+            assert not quiet and 3.0 <= waited < 4.0
+
+
 def test_without_standby_a_restart_is_a_new_process(tmp_path):
     launcher, lines = fake_launcher(tmp_path, respawn=1, standby=False)
     p = launcher.procs[0]

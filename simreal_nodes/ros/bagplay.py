@@ -186,6 +186,14 @@ class PlayStats:
                              f"p95 {np.percentile(a, 95):.1f} ms")
         return "\n".join(lines)
 
+    def lost_before(self, seconds: float) -> int:
+        """How many of the frames published less than ``seconds`` (of the bag's stamps) after the first did not go
+        through every node: the start-up's losses (:meth:`through_after` the share of the rest)."""
+        if not self.published_stamps:
+            return 0
+        t0, done = min(self.published_stamps), set(self.completed_stamps)
+        return sum(s - t0 < seconds * 1e9 and s not in done for s in self.published_stamps)
+
     def through_after(self, seconds: float) -> float:
         """The share (%) of the frames published ``seconds`` (of the bag's stamps) or more after the first that went
         through every node: the steady state, without the nodes' start-up (NaN when no frame is that late)."""

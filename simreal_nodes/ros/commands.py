@@ -66,6 +66,7 @@ def _share_node_environment() -> None:
                        if k in env})
 
 
+QUIET_TIMEOUT_S = 5.0  # a replay waits at most this long for the graph to go quiet before its first frame
 IN_FLIGHT_THREADS = 1  # each library pool's threads per node process in a lossless replay with frames in flight
 
 
@@ -186,6 +187,8 @@ def replay(bag: str, scene_file: str, rate: float = 1.0, lossless: bool = False,
                 raise SimrealError("the graph did not come up; see the node output above")
             if launcher and not launcher.start_standbys(ready_timeout_s):
                 echo(f"[replay] warning: not every standby was ready within {ready_timeout_s:.0f} s; playing anyway")
+            if launcher and not launcher.wait_quiet(QUIET_TIMEOUT_S):
+                echo(f"[replay] warning: the graph was still busy {QUIET_TIMEOUT_S:.0f} s after it came up; playing")
             cpu0, own0 = (launcher.cpu_seconds() if launcher else {}), time.process_time()
             stats = player.play(bags.read_bag(bag, report, topics=inputs.keys()), hold_for=hold_for)
             cpu1 = launcher.cpu_seconds() if launcher else {}

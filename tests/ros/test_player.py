@@ -157,6 +157,7 @@ def test_the_steady_share_leaves_the_start_up_out():
     assert st.through_after(1.0) == pytest.approx(100 * 59 / 60)  # frame 60 lost in the steady state
     assert st.through_after(0.0) == pytest.approx(100 * 81 / 90)
     assert st.as_dict()["through_after_startup_pct"] == pytest.approx(100 * 59 / 60)
+    assert st.lost_before(1.0) == 8 and st.lost_before(10.0) == 9  # frames 0 and 2-8 in the first second, 60 after
     assert st.through_after(5.0) != st.through_after(5.0)  # NaN: no frame 5 s in
     assert PlayStats().through_after(1.0) != PlayStats().through_after(1.0)
 
