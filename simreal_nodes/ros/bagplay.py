@@ -151,9 +151,10 @@ def in_flight_ok(n) -> bool:
     to :data:`MAX_IN_FLIGHT` (the player's, ``replay``'s and the CLI's one check)."""
     return isinstance(n, int) and not isinstance(n, bool) and 1 <= n <= MAX_IN_FLIGHT
 
-# the start-up a replay's steady-state share leaves out (``PlayStats.through_after``): live, a graph's first frame
-# waits for what every node builds once the first CameraInfo comes with it (the overlay's GL context and undistortion
-# maps, the localizer), and the frames that arrive meanwhile are replaced in the nodes' one-deep queues
+# the start-up a replay's steady-state share leaves out (``PlayStats.through_after``, ``lost_before``): live, a graph's
+# first frame waits for what every node builds once the first CameraInfo comes with it (the overlay's compositor and
+# distortion maps, the localizer, the trackers; since stop 99 the overlay and the localizer warm up before, and those
+# builds take tens of milliseconds), and the frames that arrive meanwhile are replaced in the nodes' one-deep queues
 STARTUP_S = 1.0
 
 
