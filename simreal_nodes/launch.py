@@ -391,26 +391,33 @@ class Launcher:
             time.sleep(0.05)
         return False
 
-    def wait_quiet(self, timeout_s: float, window_s: float = 0.25, busy_cores: float = QUIET_CORES) -> bool:
+    def wait_quiet(self, timeout_s: float, window_s: float = 0.25, busy_cores: float = QUIET_CORES,
+                   should_stop=lambda: False) -> bool:
         """Wait until the graph is quiet: every process this one started (nodes, their workers, standbys) and this
-        one together used less than ``busy_cores`` of CPU over ``window_s`` (False: not within ``timeout_s``). For a
-        replay, before its first frame: a standby says it is ready when its participant is up, and the discovery that
-        follows takes every participant's CPU for 0.4-0.9 s on 2 cores (stop 99: a live replay of the demo that
-        started then lost 8-10 of its first frames with a process per node in 3 of 5 runs, none with the standbys
-        off). Linux /proc; True at once where it cannot be read."""
+        one together used less than ``busy_cores`` of CPU in each of two windows of ``window_s`` in a row (False:
+        not within ``timeout_s``, or ``should_stop()``). For a live replay, before its first frame: a standby says
+        it is ready when its participant is up, and the discovery that follows takes every participant's CPU for
+        0.4-0.9 s on 2 cores (stop 99: a live replay of the demo that started then lost 8-10 of its first frames
+        with a process per node in 3 of 5 runs, none with the standbys off). Each process's CPU counts by its own
+        growth (one that ends meanwhile takes nothing back). Linux /proc; True at once where it cannot be read."""
         deadline = time.monotonic() + timeout_s
-        busy = _descendants_cpu_s(os.getpid())
-        if busy is None:
+        before, t = _tree_cpu_by_pid(os.getpid()), time.monotonic()
+        if before is None:
             return True
-        t = time.monotonic()
-        while True:
+        quiet = 0
+        while not should_stop():
             time.sleep(window_s)
-            now, t_now = _descendants_cpu_s(os.getpid()), time.monotonic()
-            if now is None or (now - busy) / max(t_now - t, 1e-3) < busy_cores:
+            now, t_now = _tree_cpu_by_pid(os.getpid()), time.monotonic()
+            if now is None:
+                return True
+            used = sum(max(0.0, c - before.get(pid, 0.0)) for pid, c in now.items())
+            quiet = quiet + 1 if used / max(t_now - t, 1e-3) < busy_cores else 0
+            if quiet >= 2:
                 return True
             if t_now > deadline:
                 return False
-            busy, t = now, t_now
+            before, t = now, t_now
+        return False
 
     @staticmethod
     def _end_standby(p: _Proc) -> subprocess.Popen[bytes] | None:
@@ -517,6 +524,21 @@ def _proc_table() -> tuple[dict[int, float], dict[int, list[int]]] | None:
     return cpu, kids
 
 
+def _tree_cpu_by_pid(root: int) -> dict[int, float] | None:
+    """CPU seconds so far of process ``root`` (all its threads) and of every process below it, by process id (None
+    where /proc cannot be read)."""
+    table = _proc_table()
+    if table is None:
+        return None
+    cpu, kids = table
+    out, todo = {}, [root]
+    while todo:
+        pid = todo.pop()
+        out[pid] = cpu.get(pid, 0.0)
+        todo += kids.get(pid, [])
+    return out
+
+
 def _tree_cpu_s(table: tuple[dict[int, float], dict[int, list[int]]], root: int) -> float:
     """CPU seconds of process ``root`` (all its threads) and every process below it, from a :func:`_proc_table`."""
     cpu, kids = table
@@ -526,9 +548,3 @@ def _tree_cpu_s(table: tuple[dict[int, float], dict[int, list[int]]], root: int)
         total += cpu.get(pid, 0.0)
         todo += kids.get(pid, [])
     return total
-
-
-def _descendants_cpu_s(root: int) -> float | None:
-    """CPU seconds used so far by process ``root`` and every process below it (None where /proc cannot be read)."""
-    table = _proc_table()
-    return None if table is None else _tree_cpu_s(table, root)

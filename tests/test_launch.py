@@ -253,6 +253,9 @@ def test_a_replay_waits_for_the_graph_to_go_quiet_before_its_first_frame(tmp_pat
             assert quiet and waited >= busy_s - 0.3 and "[ingest] idle" in lines
         else:
             assert not quiet and 3.0 <= waited < 4.0
+            t0 = time.monotonic()  # a stop (Ctrl-C) ends the wait at the next window
+            assert not launcher.wait_quiet(timeout_s=30.0, should_stop=lambda: time.monotonic() - t0 > 0.5)
+            assert time.monotonic() - t0 < 1.5
 
 
 def test_without_standby_a_restart_is_a_new_process(tmp_path):

@@ -183,7 +183,7 @@ def make_localizer(loc: dict[str, Any], cam: CameraModel, baseline: float | None
     return SlamLocalization(slam)
 
 
-WARM_UP_SIZE = (160, 120)  # LiveLocalizer.warm_up's camera
+WARM_UP_SIZE = (320, 240)  # LiveLocalizer.warm_up's camera
 FOCUS_MAX_AGE_NS = 500_000_000  # an object's image region older than this (ns) no longer steers the features
 
 
@@ -203,19 +203,21 @@ class LiveLocalizer:
         self._focus: dict[int, tuple[int, np.ndarray]] = {}  # object index -> (stamp ns, (K, 2) image polygon)
 
     def warm_up(self) -> None:
-        """Build a localizer of this mode on a small camera of its own, give it one blank frame and drop it: the
-        modules it imports and what its first frame sets up (the marker detector's, ORB's) are loaded before the first
-        CameraInfo, whose frame would wait for them (live, the frames that come meanwhile are replaced in the
-        queues). Its mapping runs in this process (no worker is started); no saved map is read."""
+        """Build a localizer of this mode on a camera of its own, give it one textured frame (a seeded random
+        pattern, 1 m away for RGB-D; for stereo the same image on both sides) and drop it: the modules it imports and
+        what its first frame sets up (the marker detector's, ORB's extraction and matching, a SLAM's map
+        initialisation) are loaded before the first CameraInfo, whose frame would wait for them (live, the frames
+        that come meanwhile are replaced in the queues). Its mapping runs in this process (no worker is started); no
+        saved map is read."""
         if self.loc["mode"] == "static":
             return
         W, H = WARM_UP_SIZE
         cam = CameraModel.from_intrinsics(W, H, float(W), float(W), W / 2, H / 2)
         core = make_localizer(self.loc, cam, baseline=0.1)
         try:
-            blank = np.zeros((H, W), np.uint8)
-            core.step(blank, 0, depth=np.zeros((H, W), np.float32) if self.loc["mode"] == "rgbd" else None,
-                      right=blank if self.loc["mode"] == "stereo" else None)
+            img = np.random.default_rng(0).integers(0, 256, (H, W), dtype=np.uint8)
+            core.step(img, 0, depth=np.ones((H, W), np.float32) if self.loc["mode"] == "rgbd" else None,
+                      right=img if self.loc["mode"] == "stereo" else None)
         finally:
             core.close()
 

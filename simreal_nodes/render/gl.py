@@ -192,7 +192,12 @@ def prepare_context() -> str:
     Renderer gives it."""
     if not _SPARE:
         ctx = _new_context()
-        _SPARE.append((ctx, _programs(ctx)))
+        try:
+            programs = _programs(ctx)
+        except Exception as e:  # noqa: BLE001 - the driver's own error type, said as a RenderError
+            ctx.release()
+            raise RenderError(f"cannot compile the renderer's shaders ({type(e).__name__}: {e})") from None
+        _SPARE.append((ctx, programs))
     return _SPARE[0][0].info.get("GL_RENDERER", "?")
 
 
@@ -204,6 +209,8 @@ class Renderer:
         """``map_step``: the lens-distortion map's step (``CameraModel.ideal_pixel_map``): 1, every pixel exact (the
         renders that make synthetic camera data); the overlay, a display, takes ``IDEAL_MAP_STEP`` (within 0.02 px,
         a tenth of the time, which its first frame waits for)."""
+        if map_step not in (1, 2, 4, 8, 16, 32):
+            raise ValueError(f"map_step {map_step}: 1 or a power of two up to 32")
         self.cam = cam
         self.map_step = int(map_step)
         self.near, self.far = near, far
@@ -219,7 +226,11 @@ class Renderer:
             self.progs = _programs(self.ctx)
         self.prog = self.progs[False]
         self.meshes: dict[str, Mesh] = {}
-        self._setup_camera(cam)
+        try:
+            self._setup_camera(cam)
+        except Exception:
+            _SPARE.append((self.ctx, self.progs))  # the context goes to the next renderer, not lost with this one
+            raise
 
     @property
     def gl_renderer(self) -> str:

@@ -240,13 +240,17 @@ class OverlayCompositor:
         self.colorbar = colorbar
         self.margin = occlusion_margin
         self.renderer = Renderer(cam, near=0.02, far=50.0, ssaa=ssaa, ambient=0.6, map_step=IDEAL_MAP_STEP)
-        for oid, ob in objects.items():
-            # a closed surface (the boundary of a solid model) is drawn without its back faces: half the
-            # fragments, the same picture from outside (from inside it, nothing is drawn)
-            outward = G.outward_triangles(ob.X, ob.triangles)
-            self.renderer.add(Mesh(oid, ob.X.copy(), ob.triangles if outward is None else outward, mode="vertex",
-                                   colors=np.tile([0.7, 0.7, 0.7], (len(ob.X), 1)), pose=ob.T,
-                                   cull_back=outward is not None))
+        try:
+            for oid, ob in objects.items():
+                # a closed surface (the boundary of a solid model) is drawn without its back faces: half the
+                # fragments, the same picture from outside (from inside it, nothing is drawn)
+                outward = G.outward_triangles(ob.X, ob.triangles)
+                self.renderer.add(Mesh(oid, ob.X.copy(), ob.triangles if outward is None else outward,
+                                       mode="vertex", colors=np.tile([0.7, 0.7, 0.7], (len(ob.X), 1)), pose=ob.T,
+                                       cull_back=outward is not None))
+        except Exception:
+            self.renderer.release(keep=True)  # its context to the next compositor, not lost with this one
+            raise
         self.last: dict[str, tuple] = {}
 
     def compose(self, image_bgr: np.ndarray, T_world_cam: np.ndarray, estimates: dict[str, tuple],

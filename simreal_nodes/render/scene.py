@@ -18,15 +18,17 @@ WARM_UP_SIZE = (160, 120)  # the warm-up's camera (SceneOverlay.warm_up): the dr
 
 
 def _view_of(T_world_object: np.ndarray, X: np.ndarray) -> tuple[np.ndarray, float]:
-    """(T_world_camera, distance): a camera three bounding radii from the centre of the points ``X`` (object frame)
-    on the object's +z side, looking at it along -z (its y axis along the object's)."""
+    """(T_world_camera, distance): a camera three bounding radii from the centre of the points ``X`` (object frame),
+    kept between 0.1 and 40 m (inside the overlay's near and far planes), on the object's +z side, looking at it along
+    -z (its x axis along the object's, its y axis opposite)."""
     c = T_world_object[:3, :3] @ X.mean(axis=0) + T_world_object[:3, 3]
-    r = max(float(np.linalg.norm(X - X.mean(axis=0), axis=1).max()), 1e-3)
+    r = float(np.linalg.norm(X - X.mean(axis=0), axis=1).max())
+    dist = float(np.clip(3.0 * r, 0.1, 40.0))
     x, y = T_world_object[:3, 0], -T_world_object[:3, 1]
     T = np.eye(4)
     T[:3, :3] = np.c_[x, y, np.cross(x, y)]  # optical z = x cross y = the object's -z
-    T[:3, 3] = c + 3.0 * r * T_world_object[:3, 2]
-    return T, 3.0 * r
+    T[:3, 3] = c + dist * T_world_object[:3, 2]
+    return T, dist
 
 
 def overlay_models(objects: list[dict]) -> dict[str, ReducedModel]:
@@ -70,7 +72,7 @@ class SceneOverlay:
         return self.comp
 
     def warm_up(self) -> None:
-        """Draw every object once on a small camera of its own (with lens distortion), without and with a depth image,
+        """Draw every object on a small camera of its own (with lens distortion), without and then with a depth image,
         and hand the renderer's context and programs on to the compositor of the real camera
         (``Renderer.release(keep=True)``): the GL driver compiles its shaders for these draws and OpenCV loads the
         colour bar's font now, not while the first camera frame waits. The overlay node calls it at start-up; live,
@@ -79,7 +81,7 @@ class SceneOverlay:
         W, H, f = WARM_UP_SIZE[0], WARM_UP_SIZE[1], float(WARM_UP_SIZE[0])
         cam = CameraModel(W, H, np.array([[f, 0.0, W / 2], [0.0, f, H / 2], [0.0, 0.0, 1.0]]),
                           np.array([-0.1, 0.01, 0.0, 0.0, 0.0]), "plumb_bob")
-        comp = self._compositor(cam)
+        comp = self._compositor(cam)  # (a failing build hands its context on itself)
         try:
             for ob in comp.objects.values():
                 T_wc, dist = _view_of(ob.T, ob.X)

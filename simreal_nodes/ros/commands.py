@@ -187,7 +187,9 @@ def replay(bag: str, scene_file: str, rate: float = 1.0, lossless: bool = False,
                 raise SimrealError("the graph did not come up; see the node output above")
             if launcher and not launcher.start_standbys(ready_timeout_s):
                 echo(f"[replay] warning: not every standby was ready within {ready_timeout_s:.0f} s; playing anyway")
-            if launcher and not launcher.wait_quiet(QUIET_TIMEOUT_S):
+            # live, the first frame meets a quiet graph (lossless loses no frame to a busy start)
+            if launcher and not lossless and not launcher.wait_quiet(QUIET_TIMEOUT_S, should_stop=stop.event.is_set) \
+                    and not stop.event.is_set():
                 echo(f"[replay] warning: the graph was still busy {QUIET_TIMEOUT_S:.0f} s after it came up; playing")
             cpu0, own0 = (launcher.cpu_seconds() if launcher else {}), time.process_time()
             stats = player.play(bags.read_bag(bag, report, topics=inputs.keys()), hold_for=hold_for)

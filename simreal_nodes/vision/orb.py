@@ -109,6 +109,8 @@ class OrbExtractor:
         kps: list[cv2.KeyPoint] = []
         scores, levels = [], []  # per level, the kept keypoints' FAST scores and their level
         for lvl, img in enumerate(self.pyramid(gray)):
+            if min(img.shape) <= 2 * self.edge:  # no pixel a patch fits around (a small image, many levels)
+                continue
             s = self.sf ** lvl
             lmask = None if mask is None else cv2.resize(mask, img.shape[::-1], interpolation=cv2.INTER_NEAREST)
             pts, resp = self._candidates(img, lmask)

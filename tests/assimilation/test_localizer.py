@@ -212,12 +212,15 @@ def test_markers_and_a_static_camera_report_the_localization_only_they_were_aske
 
 
 @pytest.mark.parametrize("mode", ["markers", "rgbd", "stereo", "mono", "static"])
-def test_the_warm_up_leaves_no_localizer_and_no_camera_behind(mode, monkeypatch):
-    """Issue 18: the node's warm-up builds a localizer of its mode on a camera of its own, steps it once and closes
-    it (no mapping worker even when the node maps in one); the live localizer still waits for a CameraInfo."""
+def test_the_warm_up_reaches_the_first_frames_work_and_leaves_nothing_behind(mode, monkeypatch):
+    """Issue 18: the node's warm-up builds a localizer of its mode on a camera of its own, steps it once on a textured
+    frame (so far that the markers are searched for, ORB features extracted) and closes it, with no mapping worker
+    even when the node maps in one; the live localizer still waits for a CameraInfo."""
     from simreal_nodes.assimilation import localizer as loc_mod
+    from simreal_nodes.vision.markers import MarkerLocalizer
+    from simreal_nodes.vision.orb import OrbExtractor
 
-    made = []
+    made, work = [], []
     real = loc_mod.make_localizer
 
     def spy(*a, **kw):
@@ -227,11 +230,16 @@ def test_the_warm_up_leaves_no_localizer_and_no_camera_behind(mode, monkeypatch)
         core.close = lambda: (made.append("closed"), closed())
         return core
 
+    for cls, name in ((OrbExtractor, "extract"), (MarkerLocalizer, "locate")):
+        fn = getattr(cls, name)
+        monkeypatch.setattr(cls, name,
+                            lambda self, *a, _fn=fn, _n=name, **kw: (work.append(_n), _fn(self, *a, **kw))[1])
     monkeypatch.setattr(loc_mod, "make_localizer", spy)
     live = LiveLocalizer(MARKERS if mode == "markers" else dict(SLAM, mode=mode), async_mapping=True)
     live.warm_up()
     assert live.cam is None and live.core is None and live.not_ready() == "waiting for a valid CameraInfo"
     if mode == "static":
-        assert made == []
+        assert made == [] and work == []
     else:
         assert made[-1] == "closed" and "async_mapping" not in made[0]  # (built without a worker)
+        assert work and set(work) == {"locate" if mode == "markers" else "extract"}

@@ -182,3 +182,28 @@ def test_a_renderer_released_to_keep_hands_its_context_and_programs_to_the_next(
     assert (rgb1[:, :345, 1] > 0).sum() > 1000 and not (rgb1[:, 347:, 1] > 0).any()  # hidden where it is nearer
     np.testing.assert_array_equal(rgb1, rgb2)
     np.testing.assert_array_equal(d1, d2)
+
+
+def test_a_renderer_that_fails_to_build_hands_its_context_on(monkeypatch):
+    """A renderer whose camera set-up fails leaves the context (and programs) it took to the next renderer, which
+    then needs no new one; a distortion map step that is not a power of two up to 32 is refused before any."""
+    from simreal_nodes.render import gl
+
+    monkeypatch.setattr(gl, "_SPARE", [])
+    gl.prepare_context()
+    (spare, programs), = gl._SPARE
+    with pytest.raises(ValueError, match="map_step 3"):
+        Renderer(CAMS["pinhole"], map_step=3)
+    assert len(gl._SPARE) == 1 and gl._SPARE[0] == (spare, programs)
+
+    def broken(self, cam):
+        raise RuntimeError("set-up failed")
+
+    with monkeypatch.context() as m:
+        m.setattr(Renderer, "_setup_camera", broken)
+        with pytest.raises(RuntimeError, match="set-up failed"):
+            Renderer(CAMS["pinhole"])
+    assert len(gl._SPARE) == 1 and gl._SPARE[0][0] is spare
+    r = Renderer(CAMS["pinhole"])
+    assert r.ctx is spare and not gl._SPARE
+    r.release()

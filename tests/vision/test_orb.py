@@ -132,3 +132,13 @@ def test_hamming_counts_the_differing_bits_of_any_layout(monkeypatch, word_count
     assert orb.hamming(a[:1], a[:1])[0] == 0 and orb.hamming(a[:1], ~a[:1])[0] == 256
     pairs = orb.hamming(a[:7, None, :], b[None, :5, :])
     assert pairs.shape == (7, 5) and pairs[3, 2] == orb.hamming(a[3:4], b[2:3])[0]
+
+
+def test_levels_too_small_for_a_patch_are_skipped_not_a_crash():
+    """A pyramid deeper than the image allows (the scene schema takes up to 16 levels): the levels no 31-pixel patch
+    fits in give no keypoints, the others theirs (before stop 99 such a level made OpenCV raise on a negative size)."""
+    img = np.random.default_rng(3).integers(0, 256, (240, 320), dtype=np.uint8)
+    ex = OrbExtractor(500, n_levels=16)
+    f = ex.extract(img)
+    top = max(k for k, lv in enumerate(ex.pyramid(img)) if min(lv.shape) > 2 * ex.edge)
+    assert len(f) > 100 and f.octave.max() <= top < 15

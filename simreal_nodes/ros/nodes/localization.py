@@ -21,7 +21,7 @@ from tf2_msgs.msg import TFMessage
 
 from simreal_nodes.aero.slam_cloud import capture_cloud
 from simreal_nodes.assimilation.localizer import LiveLocalizer, Localization, status_text
-from simreal_nodes.errors import ImageFormatError, SimrealError
+from simreal_nodes.errors import ImageFormatError
 from simreal_nodes.io import images
 from simreal_nodes.ros import convert
 from simreal_nodes.ros.node import SimrealNode, guarded, run_node
@@ -57,8 +57,8 @@ class LocalizationNode(SimrealNode):
         self.live = LiveLocalizer(section, async_mapping, self.map_file, frozen)
         try:  # what the first frame would set up, now (live, frames that come while it waits are skipped)
             self.live.warm_up()
-        except (ValueError, SimrealError) as e:  # the first CameraInfo builds the localizer again, with the reason
-            self.get_logger().warning(f"localizer warm-up failed: {e}")
+        except Exception as e:  # noqa: BLE001 - an optimisation only: the first CameraInfo builds the localizer
+            self.get_logger().warning(f"localizer warm-up failed ({type(e).__name__}: {e})")
         q = data_qos(self.lossless)
         ordered = q if self.lossless else reliable_qos(10)  # poses and observations: each one, in order
         self.pub_pose = self.create_publisher(PoseStamped, graph.POSE, ordered)

@@ -79,12 +79,17 @@ class OverlayNode(SimrealNode):
             self.create_subscription(Header, graph.PROGRESS, self.on_progress, reliable_qos(1000))
         self.frames = 0
         self.set_status("ok", "waiting for images")
-        try:  # the GL driver loaded, the shaders compiled and the font read now, not while the first frame waits
-            # (the camera's intrinsics come with it; live, the frames that come meanwhile are skipped)
-            self.say(f"overlay renderer: {prepare_context()} (its context made and warmed up at start-up)")
-            self.core.warm_up()
-        except (ValueError, SimrealError) as e:  # said here; the first frame reports it again, as a drop
+        try:  # the GL driver loaded now, not while the first frame waits (its intrinsics come with it)
+            renderer = prepare_context()
+        except SimrealError as e:  # said here; the first frame reports it again, as a drop with the reason
             self.set_status("error", str(e))
+        else:
+            try:  # the shaders compiled and the font read now too (live, the frames that come meanwhile are skipped)
+                self.core.warm_up()
+                self.say(f"overlay renderer: {renderer} (its context made and warmed up at start-up)")
+            except Exception as e:  # noqa: BLE001 - an optimisation only: the first frame builds what it needs
+                self.get_logger().warning(f"overlay warm-up failed ({type(e).__name__}: {e}); the first frame "
+                                          "builds the renderer")
 
     @guarded
     def on_info(self, msg: CameraInfo) -> None:
