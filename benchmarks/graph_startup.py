@@ -81,8 +81,9 @@ def report(rows: list[dict]) -> None:
          "live. Lost: frames that did not go through every node; in the first second (of the bag's stamps): the "
          "start-up's (the overlay's renderer, the localizer, the tracker built on the first CameraInfo while its "
          "frame waits; since stop 99 the overlay and the localizer warm up before the nodes spin, the overlay's "
-         "distortion and occlusion maps take milliseconds, and the player's clock starts with the bag's first "
-         "message). Per launch:\n\n" + table, plot=plot)
+         "distortion and occlusion maps take milliseconds, the player's clock starts with the bag's first "
+         "message, and the first frame waits for the graph to go quiet: the standbys' discovery). Per launch:\n\n"
+         + table, plot=plot)
 
 
 if __name__ == "__main__":
