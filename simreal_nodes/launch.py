@@ -434,7 +434,7 @@ class Launcher:
         table = _proc_table()
         if table is None:
             return {}
-        return {p.spec.name: _tree_cpu_s(table, p.popen.pid) for p in self.procs
+        return {p.spec.name: sum(_tree_cpu(table, p.popen.pid).values()) for p in self.procs
                 if p.popen is not None and p.popen.poll() is None}
 
     def alive(self) -> dict[str, bool]:
@@ -524,12 +524,9 @@ def _proc_table() -> tuple[dict[int, float], dict[int, list[int]]] | None:
     return cpu, kids
 
 
-def _tree_cpu_by_pid(root: int) -> dict[int, float] | None:
-    """CPU seconds so far of process ``root`` (all its threads) and of every process below it, by process id (None
-    where /proc cannot be read)."""
-    table = _proc_table()
-    if table is None:
-        return None
+def _tree_cpu(table: tuple[dict[int, float], dict[int, list[int]]], root: int) -> dict[int, float]:
+    """CPU seconds so far of process ``root`` (all its threads) and of every process below it, by process id, from a
+    :func:`_proc_table`."""
     cpu, kids = table
     out, todo = {}, [root]
     while todo:
@@ -539,12 +536,7 @@ def _tree_cpu_by_pid(root: int) -> dict[int, float] | None:
     return out
 
 
-def _tree_cpu_s(table: tuple[dict[int, float], dict[int, list[int]]], root: int) -> float:
-    """CPU seconds of process ``root`` (all its threads) and every process below it, from a :func:`_proc_table`."""
-    cpu, kids = table
-    total, todo = 0.0, [root]
-    while todo:
-        pid = todo.pop()
-        total += cpu.get(pid, 0.0)
-        todo += kids.get(pid, [])
-    return total
+def _tree_cpu_by_pid(root: int) -> dict[int, float] | None:
+    """:func:`_tree_cpu` of ``root`` read now (None where /proc cannot be read)."""
+    table = _proc_table()
+    return None if table is None else _tree_cpu(table, root)
