@@ -84,6 +84,8 @@ def vocabulary(k: int = 10, levels: int = VOCAB_LEVELS, seeds: range = VOCAB_SEE
 def settings_yaml(cam, mode: str, fps: float, path: Path, baseline: float = 0.08) -> Path:
     """ORB-SLAM3's settings file (its older format, as ORB-SLAM2's TUM examples): OpenCV YAML, reals written with a
     decimal point (ORB-SLAM3 checks the node types)."""
+    if cam.fisheye:  # ORB-SLAM3 has it (KannalaBrandt8), the settings written here do not
+        raise ValueError("ORB-SLAM3's pinhole settings take k1 k2 p1 p2 k3, not an equidistant (fisheye) lens")
     D = np.r_[np.asarray(cam.cv_dist(), float).ravel(), np.zeros(5)]
     if np.any(D[5:] != 0):
         raise ValueError(f"ORB-SLAM3's pinhole model takes k1 k2 p1 p2 k3, not a {cam.distortion_model} distortion")

@@ -1,5 +1,12 @@
 """Pinhole camera with OpenCV distortion: the one camera model every part of simreal uses.
 
+Two lens models, as sensor_msgs/CameraInfo names them: ``plumb_bob`` / ``rational_polynomial`` (OpenCV's radial
+and tangential model, 4-14 coefficients) and ``equidistant`` (the fisheye model of OpenCV's ``cv::fisheye`` and ROS's
+image_geometry, 4 coefficients k1..k4: a ray at angle theta off the optical axis lands at the radius
+f * theta * (1 + k1 theta^2 + k2 theta^4 + k3 theta^6 + k4 theta^8)). Everything past the lens works in the ideal
+pinhole image of the same K, so a fisheye serves rays up to under 90 degrees off the axis; a pixel beyond (a
+circular fisheye's dark corners) has no ideal pixel: NaN.
+
 Conventions (REP-103 optical frame): x right, y down, z forward. Pixel (u, v) with the centre of
 the top-left pixel at (0, 0), as in OpenCV and sensor_msgs/CameraInfo.
 """
@@ -15,6 +22,7 @@ import yaml
 from simreal_nodes.errors import CameraInfoError, ImageFormatError
 
 DISTORTION_MODELS = ("plumb_bob", "rational_polynomial", "equidistant", "none", "")
+CALIBRATION_MODELS = ("plumb_bob", "rational_polynomial", "equidistant")  # `simreal calibrate --model`
 # the overlay's distortion map: exact every 4th pixel, bilinear between (CameraModel.ideal_pixel_map)
 IDEAL_MAP_STEP = 4
 MAX_IMAGE_SIDE = 16384  # pixels: above any camera the graph serves (and OpenGL's usual texture limit)
@@ -78,6 +86,9 @@ class CameraModel:
                 f"(expected one of {', '.join(m for m in DISTORTION_MODELS if m)})")
         if not np.all(np.isfinite(self.D)):
             raise CameraInfoError("distortion coefficients have NaN or inf entries")
+        if self.fisheye and len(self.D) != 4:
+            raise CameraInfoError(f"the equidistant (fisheye) model takes 4 distortion coefficients k1..k4, "
+                                  f"found {len(self.D)}")
         if len(self.D) not in (0, 4, 5, 8, 12, 14):
             raise CameraInfoError(f"{len(self.D)} distortion coefficients (OpenCV takes 4, 5, 8, 12 or 14)")
 
@@ -106,12 +117,29 @@ class CameraModel:
         return float(self.K[1, 2])
 
     @property
+    def fisheye(self) -> bool:
+        """The equidistant (fisheye) lens model: OpenCV's ``cv2.fisheye`` functions, not its pinhole ones."""
+        return self.distortion_model == "equidistant"
+
+    @property
     def has_distortion(self) -> bool:
-        return self.distortion_model not in ("none", "") and bool(np.any(self.D != 0))
+        """Whether pixels differ from the ideal pinhole image's. Always so for a fisheye: with k1..k4 all zero it
+        still maps a ray at theta to the radius f * theta, not the pinhole's f * tan(theta)."""
+        return self.fisheye or (self.distortion_model not in ("none", "") and bool(np.any(self.D != 0)))
 
     def cv_dist(self) -> np.ndarray:
-        """Distortion vector as OpenCV wants it (zeros when none)."""
+        """Distortion vector as OpenCV's pinhole functions want it (zeros when none). A fisheye's coefficients
+        mean something else to those: use :meth:`project`, :meth:`undistort_points` and :meth:`undistort_maps`."""
+        if self.fisheye:
+            raise CameraInfoError("an equidistant (fisheye) camera's coefficients are not OpenCV pinhole distortion")
         return self.D.copy() if self.has_distortion else np.zeros(5)
+
+    def same_as(self, other: CameraModel | None) -> bool:
+        """The same image size, K, lens model and coefficients (a camera's derived maps can be kept)."""
+        return other is not None and (self.width, self.height) == (other.width, other.height) \
+            and np.allclose(self.K, other.K) and self.has_distortion == other.has_distortion \
+            and (not self.has_distortion or (self.fisheye == other.fisheye and self.D.shape == other.D.shape
+                                             and np.allclose(self.D, other.D)))
 
     def scaled(self, factor: float) -> CameraModel:
         """The same camera at a resolution scaled by ``factor`` (pixel-centre convention kept)."""
@@ -134,7 +162,10 @@ class CameraModel:
         if distort and self.has_distortion:
             import cv2
 
-            uv, _ = cv2.projectPoints(P[ok], np.zeros(3), np.zeros(3), self.K, self.D)
+            if self.fisheye:
+                uv, _ = cv2.fisheye.projectPoints(P[ok].reshape(-1, 1, 3), np.zeros(3), np.zeros(3), self.K, self.D)
+            else:
+                uv, _ = cv2.projectPoints(P[ok], np.zeros(3), np.zeros(3), self.K, self.D)
             out[ok] = uv.reshape(-1, 2)
         else:
             x = P[ok, 0] / P[ok, 2]
@@ -144,16 +175,51 @@ class CameraModel:
         return out
 
     def undistort_points(self, uv: np.ndarray) -> np.ndarray:
-        """Distorted pixels -> ideal (undistorted) pixels of the same K."""
+        """Distorted pixels -> ideal (undistorted) pixels of the same K. A fisheye pixel whose ray is not in front of
+        the camera (90 degrees or more off the axis, or past the lens polynomial's turning point) gives NaN: OpenCV's
+        iteration returns a point on the wrong side there, so every result is projected back and kept only where it
+        lands within a hundredth of a pixel of where it came from."""
         uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
         if not self.has_distortion or uv.size == 0:
             return uv.copy()
         import cv2
 
-        und = cv2.undistortPoints(
-            uv.reshape(-1, 1, 2), self.K, self.D, None, self.K,
-            criteria=(cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-10))
-        return und.reshape(-1, 2)
+        crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-10)
+        if not self.fisheye:
+            return cv2.undistortPoints(uv.reshape(-1, 1, 2), self.K, self.D, None, self.K, criteria=crit).reshape(-1, 2)
+        und = cv2.fisheye.undistortPoints(uv.reshape(-1, 1, 2), self.K, self.D, None, self.K,
+                                          criteria=crit).reshape(-1, 2)
+        y = (und[:, 1] - self.cy) / self.fy
+        x = (und[:, 0] - self.cx - self.K[0, 1] * y) / self.fx
+        with np.errstate(invalid="ignore"):
+            back = self.project(np.c_[x, y, np.ones(len(x))])
+            und[~(np.linalg.norm(back - uv, axis=1) < 0.01)] = np.nan
+        return und
+
+    def stretch(self, uv: np.ndarray) -> np.ndarray:
+        """(N,) ideal pixels per image pixel at the distorted pixels ``uv``: the larger singular value of the
+        undistortion's Jacobian (central differences of half a pixel). A fisheye's periphery is stretched in the
+        ideal image (about 1 / cos^2 theta radially: 4 at 60 degrees), so a pixel's measurement error is that many
+        ideal pixels there; 1 without distortion, NaN where a pixel has no ideal one."""
+        uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
+        if not self.has_distortion or not len(uv):
+            return np.ones(len(uv))
+        h = 0.5
+        d = [self.undistort_points(uv + s) for s in ((h, 0), (-h, 0), (0, h), (0, -h))]
+        a, c = ((d[0] - d[1]) / (2 * h)).T  # d ideal / d u
+        b, e = ((d[2] - d[3]) / (2 * h)).T  # d ideal / d v
+        # the larger singular value of [[a, b], [c, e]]
+        p, q = (a * a + b * b + c * c + e * e) / 2, a * e - b * c
+        return np.sqrt(p + np.sqrt(np.maximum(p * p - q * q, 0.0)))
+
+    def undistort_maps(self, new_K: np.ndarray, size: tuple[int, int], m1type: int) -> tuple[np.ndarray, np.ndarray]:
+        """OpenCV's remap maps from the ideal pinhole image of ``new_K`` and ``size`` (width, height) to this camera's
+        pixels (``cv2.initUndistortRectifyMap``, or its fisheye counterpart for an equidistant lens)."""
+        import cv2
+
+        if self.fisheye:
+            return cv2.fisheye.initUndistortRectifyMap(self.K, self.D, np.eye(3), new_K, size, m1type)
+        return cv2.initUndistortRectifyMap(self.K, self.cv_dist(), None, new_K, size, m1type)
 
     def ideal_pixel_map(self, step: int = IDEAL_MAP_STEP) -> np.ndarray:
         """(height, width, 2) float64: the ideal (undistorted) pixel of every pixel of the image, as

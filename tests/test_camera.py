@@ -83,3 +83,69 @@ def test_the_ideal_pixel_map_is_within_a_fiftieth_of_a_pixel_of_the_exact_one():
     np.testing.assert_allclose(plain[..., 0], np.broadcast_to(np.arange(64.0), (48, 64)), atol=1e-4)
     with pytest.raises(ValueError, match="power of two"):
         cam.ideal_pixel_map(step=3)
+
+
+FISHEYE_D = [-0.021, 0.0043, -0.0012, 0.0001]
+
+
+def _equidistant(P, fx, fy, cx, cy, D):
+    """The equidistant lens written out (ROS image_geometry's and OpenCV's cv::fisheye's): theta the ray's angle off
+    the axis, its radius in the image f * theta_d with theta_d = theta (1 + k1 theta^2 + ... + k4 theta^8)."""
+    a, b = P[:, 0] / P[:, 2], P[:, 1] / P[:, 2]
+    r = np.hypot(a, b)
+    th = np.arctan(r)
+    thd = th * (1 + D[0] * th ** 2 + D[1] * th ** 4 + D[2] * th ** 6 + D[3] * th ** 8)
+    s = np.where(r > 0, thd / np.where(r > 0, r, 1), 1.0)
+    return np.c_[fx * a * s + cx, fy * b * s + cy]
+
+
+def test_an_equidistant_camera_is_a_fisheye_not_a_pinhole_with_four_coefficients():
+    """A CameraInfo with distortion_model 'equidistant' (a fisheye, k1..k4) was taken as plumb_bob's k1 k2 p1 p2:
+    every pixel off. Now it projects as the model's formula does, its pixels undistort back to the ray's ideal
+    pixel, a pixel whose ray would be 90 degrees or more off the axis has none (NaN), zero coefficients still
+    are a fisheye (the radius f * theta, not f * tan theta), and it takes exactly four coefficients."""
+    cam = CameraModel.from_camera_info(Info(640, 480, [300.0, 0, 321.3, 0, 298.0, 238.6, 0, 0, 1], d=FISHEYE_D,
+                                            model="equidistant"))
+    assert cam.fisheye and cam.has_distortion
+    rng = np.random.default_rng(0)
+    ang = rng.uniform(0, np.radians(80), 200)  # rays up to 80 degrees off the axis
+    phi = rng.uniform(0, 2 * np.pi, 200)
+    P = np.c_[np.sin(ang) * np.cos(phi), np.sin(ang) * np.sin(phi), np.cos(ang)] * rng.uniform(0.3, 5, (200, 1))
+    uv = cam.project(P)
+    np.testing.assert_allclose(uv, _equidistant(P, cam.fx, cam.fy, cam.cx, cam.cy, FISHEYE_D), atol=1e-6)
+    pinhole = cam.project(P, distort=False)
+    assert np.median(np.linalg.norm(uv - pinhole, axis=1)) > 20  # what the plumb_bob reading was off by, and more
+    np.testing.assert_allclose(cam.undistort_points(uv), pinhole, atol=1e-4 * np.abs(pinhole).max())
+    # pixels past the ray at 90 degrees (theta_d at pi/2 is about 1.51 here: a circular fisheye's dark corners)
+    far = cam.undistort_points(np.array([[cam.cx + 300 * 1.6, cam.cy], [cam.cx, cam.cy - 298 * 1.7],
+                                         [cam.cx + 300 * 1.45, cam.cy]]))
+    assert np.isnan(far[:2]).all() and np.isfinite(far[2]).all() and far[2, 0] > cam.cx + 300 * 8
+    zero = CameraModel(640, 480, cam.K, np.zeros(4), "equidistant")
+    assert zero.has_distortion
+    np.testing.assert_allclose(zero.project(np.array([[1.0, 0, 1]]))[0, 0], cam.cx + cam.fx * np.pi / 4)
+    with pytest.raises(CameraInfoError, match="takes 4 distortion coefficients"):
+        CameraModel(640, 480, cam.K, np.zeros(5), "equidistant")
+    with pytest.raises(CameraInfoError, match="not OpenCV pinhole distortion"):
+        cam.cv_dist()
+    # the maps a node keeps are rebuilt when the lens changes, not only K
+    assert cam.same_as(CameraModel(640, 480, cam.K.copy(), list(FISHEYE_D), "equidistant"))
+    assert not cam.same_as(CameraModel(640, 480, cam.K, [-0.02, 0.0043, -0.0012, 0.0001], "equidistant"))
+    assert not cam.same_as(CameraModel(640, 480, cam.K, FISHEYE_D, "plumb_bob"))
+    assert not cam.same_as(None)
+
+
+def test_a_fisheye_undistortion_map_takes_each_ideal_pixel_to_its_fisheye_pixel():
+    """The maps the ingest's undistortion and the dense tracker remap with (``undistort_maps``): each pixel of the
+    ideal pinhole image reads the fisheye pixel its ray lands on; and the ideal pixel map inverts them."""
+    import cv2
+
+    cam = CameraModel(640, 480, [[300.0, 0, 321.3], [0, 298.0, 238.6], [0, 0, 1]], FISHEYE_D, "equidistant")
+    mx, my = cam.undistort_maps(cam.K, (640, 480), cv2.CV_32FC1)
+    ys, xs = np.mgrid[0:480:37, 0:640:41]
+    rays = np.c_[(xs.ravel() - cam.cx) / cam.fx, (ys.ravel() - cam.cy) / cam.fy, np.ones(xs.size)]
+    expect = _equidistant(rays, cam.fx, cam.fy, cam.cx, cam.cy, FISHEYE_D)
+    np.testing.assert_allclose(np.c_[mx[ys, xs].ravel(), my[ys, xs].ravel()], expect, atol=2e-3)
+    ideal = cam.ideal_pixel_map(step=1)
+    back = ideal[np.rint(expect[:, 1]).astype(int).clip(0, 479), np.rint(expect[:, 0]).astype(int).clip(0, 639)]
+    inside = (expect[:, 0] > 0) & (expect[:, 0] < 639) & (expect[:, 1] > 0) & (expect[:, 1] < 479)
+    assert np.isfinite(back[inside]).all()

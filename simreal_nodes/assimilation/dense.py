@@ -574,8 +574,7 @@ class DenseAligner:
         # images are undistorted once per frame (one remap) so that the hot loop projects with the pinhole alone
         self._maps = None
         if cam.has_distortion:
-            self._maps = cv2.initUndistortRectifyMap(cam.K, cam.cv_dist(), None, cam.K, (cam.width, cam.height),
-                                                     cv2.CV_32FC1)
+            self._maps = cam.undistort_maps(cam.K, (cam.width, cam.height), cv2.CV_32FC1)
 
     def _photo0(self) -> Array:
         out: Array = np.r_[1.0, np.zeros(self.n_photo - 1)]

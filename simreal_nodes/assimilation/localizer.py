@@ -238,7 +238,7 @@ class LiveLocalizer:
     def set_camera(self, cam: CameraModel) -> bool:
         """Intrinsics from a CameraInfo; True when they are new and the localizer was (re)built. Built now, not on
         the first frame: live, the frames that arrive while it builds (a mapping worker starts) would be skipped."""
-        if self.cam is not None and cam.width == self.cam.width and np.allclose(cam.K, self.cam.K):
+        if cam.same_as(self.cam):
             return False
         if self.core is not None:
             self.core.close()

@@ -460,7 +460,7 @@ def _pixel_grid(cam: CameraModel, shape: tuple[int, ...], stride: int) -> np.nda
     """The ideal (undistorted) pixels of every ``stride``-th pixel of an image of ``shape``, row-major (N, 2): the
     same for every frame of a camera, so undone once (the lens model's iterative inverse took 8 ms a frame at
     640 x 480, stride 2). Kept for the last few cameras asked for."""
-    key = np.r_[cam.K.ravel(), cam.D, shape, stride].astype(np.float64).tobytes()
+    key = np.r_[cam.K.ravel(), cam.fisheye, cam.D, shape, stride].astype(np.float64).tobytes()
     grid = _GRIDS.get(key)
     if grid is None:
         v, u = np.mgrid[0:shape[0]:stride, 0:shape[1]:stride]
@@ -496,6 +496,7 @@ def depth_cloud(cam: CameraModel, depth: np.ndarray, T_wc: np.ndarray, stride: i
             uv = C[:, :2] / C[:, 2:] @ cam.K[:2, :2].T + cam.K[:2, 2]  # ideal pixels (the pinhole; skew kept)
             lo, hi = uv.min(axis=0) - px, uv.max(axis=0) + px
             ok &= (grid[:, 0] > lo[0]) & (grid[:, 0] < hi[0]) & (grid[:, 1] > lo[1]) & (grid[:, 1] < hi[1])
+    ok &= np.isfinite(grid[:, 0])  # a fisheye pixel with no ray in front of the camera
     P = cam.backproject(grid[ok], z[ok])
     out: np.ndarray = P @ T_wc[:3, :3].T + T_wc[:3, 3]
     return out

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 
+from simreal_nodes.camera import CALIBRATION_MODELS
 from simreal_nodes.errors import SimrealError
 
 
@@ -30,7 +31,8 @@ def add_calibrate(sub: argparse._SubParsersAction) -> None:
     s.add_argument("images", nargs="+", help="image files or folders")
     s.add_argument("--board", required=True, help="inner corners COLSxROWS, e.g. 9x6")
     s.add_argument("--square", type=float, required=True, help="square size, metres")
-    s.add_argument("--model", choices=("plumb_bob", "rational_polynomial"), default="plumb_bob")
+    s.add_argument("--model", choices=CALIBRATION_MODELS, default="plumb_bob",
+                   help="lens model (CameraInfo's distortion_model); equidistant: a fisheye lens")
     s.add_argument("--camera-name", default="camera")
     s.add_argument("-o", "--output", required=True)
     s.set_defaults(fn=cmd_calibrate)

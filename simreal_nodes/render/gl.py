@@ -110,6 +110,8 @@ void main() {
 """
 
 
+MAX_HALF_ANGLE_DEG = 75.0  # the widest ray off the optical axis a distorted (fisheye) camera's render draws
+_UNDRAWN = -1e5  # a distortion map's entry for a camera pixel the render does not cover (read as outside it)
 _MAP_STEP = 8  # pixel step of the coarse distortion-map search for a patch's camera pixels
 
 
@@ -251,10 +253,18 @@ class Renderer:
         Wr, Hr = W, H
         if cam.has_distortion:
             ideal = cam.ideal_pixel_map(self.map_step)
-            margin_l = int(np.ceil(max(0.0, -ideal[..., 0].min()))) + 2
-            margin_t = int(np.ceil(max(0.0, -ideal[..., 1].min()))) + 2
-            Wr = int(np.ceil(max(W, ideal[..., 0].max() + 1))) + margin_l + 2
-            Hr = int(np.ceil(max(H, ideal[..., 1].max() + 1))) + margin_t + 2
+            # the ideal render covers rays up to MAX_HALF_ANGLE_DEG off the axis: a fisheye's wider rays (and its
+            # pixels with no ray in front, NaN) are left undrawn, far outside the render
+            reach = np.tan(np.radians(MAX_HALF_ANGLE_DEG)) * np.array([cam.fx, cam.fy])
+            with np.errstate(invalid="ignore"):
+                drawn = np.all(np.abs(ideal - [cam.cx, cam.cy]) <= reach, axis=-1)
+            if not drawn.any():
+                raise RenderError("no pixel of the camera sees a ray the renderer can draw (a damaged CameraInfo?)")
+            ideal[~drawn] = _UNDRAWN
+            margin_l = int(np.ceil(max(0.0, -ideal[drawn, 0].min()))) + 2
+            margin_t = int(np.ceil(max(0.0, -ideal[drawn, 1].min()))) + 2
+            Wr = int(np.ceil(max(W, ideal[drawn, 0].max() + 1))) + margin_l + 2
+            Hr = int(np.ceil(max(H, ideal[drawn, 1].max() + 1))) + margin_t + 2
             self._ideal = ideal
         K = cam.K.copy()
         K[0, 2] += margin_l
@@ -547,8 +557,7 @@ class Renderer:
             # the same pixels to 3e-5 px as projecting each ray, in milliseconds where projectPoints took 0.1-1 s
             import cv2
 
-            mx, my = cv2.initUndistortRectifyMap(cam.K, cam.cv_dist(), None, rc.K, (rc.width, rc.height),
-                                                 cv2.CV_32FC1)
+            mx, my = cam.undistort_maps(rc.K, (rc.width, rc.height), cv2.CV_32FC1)
             uv = np.dstack([mx, my])
             inside = np.all(np.isfinite(uv), axis=-1) & (uv[..., 0] > -0.5) & (uv[..., 0] < cam.width - 0.5) \
                 & (uv[..., 1] > -0.5) & (uv[..., 1] < cam.height - 0.5)

@@ -56,8 +56,7 @@ class SceneOverlay:
     def set_camera(self, cam: CameraModel) -> bool:
         """Intrinsics from a CameraInfo; True when they are new and the compositor was rebuilt (now, not on the first
         frame: that frame would wait for it)."""
-        if self.cam is not None and (cam.width, cam.height) == (self.cam.width, self.cam.height) \
-                and np.allclose(cam.K, self.cam.K):
+        if cam.same_as(self.cam):
             return False
         if self.comp is not None:
             self.comp.release()

@@ -20,10 +20,10 @@ from simreal_nodes.camera import CameraModel
 
 
 @functools.lru_cache(maxsize=16)
-def _rays(width: int, height: int, K: tuple, D: tuple, step: int) -> np.ndarray:
+def _rays(width: int, height: int, K: tuple, D: tuple, model: str, step: int) -> np.ndarray:
     """(h', w', 3) rays with z = 1 through the decimated pixel grid, lens distortion removed (the depth image is
-    registered to the distorted colour image)."""
-    cam = CameraModel(width, height, np.asarray(K).reshape(3, 3), np.asarray(D), "plumb_bob")
+    registered to the distorted colour image); NaN where a fisheye pixel has no ray in front of the camera."""
+    cam = CameraModel(width, height, np.asarray(K).reshape(3, 3), np.asarray(D), model)
     vs, us = np.mgrid[0:height:step, 0:width:step]
     uv = np.c_[us.ravel(), vs.ravel()].astype(np.float64)
     if cam.has_distortion:
@@ -52,10 +52,12 @@ def depth_points(depth_m: np.ndarray, cam: CameraModel, step: int = 1, T_world_c
     total = sub.size
     with np.errstate(invalid="ignore"):
         ok = np.isfinite(sub) & (sub >= min_depth) & (sub <= max_depth)
+    rays = _rays(cam.width, cam.height, tuple(cam.K.ravel()), tuple(np.ravel(cam.D)), cam.distortion_model,
+                 step)  # distortion removed
+    ok &= np.isfinite(rays[..., 0])
     vv, uu = np.nonzero(ok)
     z = sub[vv, uu]
     uv = np.stack([uu * step, vv * step], axis=1).astype(np.float64)
-    rays = _rays(cam.width, cam.height, tuple(cam.K.ravel()), tuple(np.ravel(cam.D)), step)  # distortion removed
     P = rays[vv, uu] * z[:, None]
     if T_world_cam is not None:
         P = G.transform(np.asarray(T_world_cam, dtype=np.float64), P)

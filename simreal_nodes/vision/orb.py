@@ -34,17 +34,32 @@ class Features:
     desc: np.ndarray  # (N, 32) uint8
     response: np.ndarray  # (N,)
     scale_factor: float = 1.2
+    # (N,) ideal pixels per image pixel where the lens stretches the ideal image (a fisheye's periphery:
+    # CameraModel.stretch); None: 1 everywhere (a pinhole, or a lens whose figures were measured without it)
+    stretch: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.uv)
 
+    def sigma(self) -> np.ndarray:
+        """Measurement standard deviation per feature in ideal pixels: the pyramid level's scale, times the lens's
+        stretch of the ideal image where there is one."""
+        s = (self.scale_factor ** self.octave).astype(np.float64)
+        return s if self.stretch is None else s * self.stretch
+
     def sigma2(self) -> np.ndarray:
-        """Measurement variance per feature (pixels^2), growing with the pyramid level."""
-        return (self.scale_factor ** (2 * self.octave)).astype(np.float64)
+        """Measurement variance per feature (ideal pixels^2), growing with the pyramid level (and the stretch)."""
+        if self.stretch is None:
+            return (self.scale_factor ** (2 * self.octave)).astype(np.float64)
+        return self.sigma() ** 2
+
+    def max_sigma(self) -> float:
+        """The largest :meth:`sigma` (a search's radius bound before the per-feature test); 1 when empty."""
+        return float(self.sigma().max()) if len(self.octave) else 1.0
 
     def subset(self, idx) -> Features:
         return Features(self.uv[idx], self.und[idx], self.octave[idx], self.desc[idx], self.response[idx],
-                        self.scale_factor)
+                        self.scale_factor, None if self.stretch is None else self.stretch[idx])
 
     @classmethod
     def empty(cls, scale_factor: float = 1.2) -> Features:
@@ -162,7 +177,12 @@ class OrbExtractor:
             response = np.fromiter((at.get((x, y, o), 0.0) for (x, y), o in zip(uv.tolist(), octave.tolist())),
                                    np.float32, len(kps))
         und = cam.undistort_points(uv) if cam is not None and cam.has_distortion else uv.astype(np.float64)
-        return Features(uv, und, octave, desc, response, self.sf)
+        ray = np.isfinite(und[:, 0])  # a fisheye's pixels past 90 degrees off the axis have no ideal pixel
+        if not ray.all():
+            uv, und, octave, desc, response = uv[ray], und[ray], octave[ray], desc[ray], response[ray]
+        # a fisheye's stretch weighs its features' errors (ideal pixels) as the image's pixels they were measured in
+        stretch = cam.stretch(uv) if cam is not None and cam.fisheye else None
+        return Features(uv, und, octave, desc, response, self.sf, stretch)
 
     def _candidates(self, img: np.ndarray, mask: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
         """FAST corners of one level (all of it but the border), (N, 2) int pixel positions and their FAST scores:

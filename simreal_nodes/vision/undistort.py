@@ -20,12 +20,10 @@ class Undistorter:
     def __init__(self, cam: CameraModel):
         self.cam = cam
         self.ideal = CameraModel(cam.width, cam.height, cam.K.copy(), np.zeros(5), "plumb_bob", cam.frame_id)
-        self._maps = cv2.initUndistortRectifyMap(cam.K, cam.cv_dist(), None, cam.K,
-                                                 (cam.width, cam.height), cv2.CV_16SC2)
+        self._maps = cam.undistort_maps(cam.K, (cam.width, cam.height), cv2.CV_16SC2)
 
     def matches(self, cam: CameraModel) -> bool:
-        return (cam.width, cam.height) == (self.cam.width, self.cam.height) and np.allclose(cam.K, self.cam.K) \
-            and np.allclose(cam.cv_dist(), self.cam.cv_dist())
+        return cam.same_as(self.cam)
 
     def image(self, img: np.ndarray) -> np.ndarray:
         return cv2.remap(img, self._maps[0], self._maps[1], cv2.INTER_LINEAR)
@@ -77,7 +75,7 @@ class IngestCamera:
             self.info_error, self.cam = str(e), None
             return self.info_error
         self.info_error = ""
-        if self.cam is None or not np.allclose(cam.K, self.cam.K) or cam.width != self.cam.width:
+        if not cam.same_as(self.cam):
             self.set_camera(cam)
         return ""
 

@@ -7,13 +7,25 @@ import pytest
 
 from simreal_nodes import geometry as G
 from simreal_nodes.camera import CameraModel
-from simreal_nodes.render.gl import Mesh, Renderer
+from simreal_nodes.render.gl import MAX_HALF_ANGLE_DEG, Mesh, Renderer
 
 CAMS = {
     "pinhole": CameraModel.from_intrinsics(640, 480, 525.0, 520.0, 318.7, 241.2),
     "distorted": CameraModel.from_intrinsics(640, 480, 525.0, 520.0, 318.7, 241.2,
                                              D=[-0.28, 0.09, 0.0012, -0.0007, -0.01]),
+    # a fisheye (equidistant, k1..k4) whose image reaches 70 degrees off the axis
+    "fisheye": CameraModel(640, 480, [[330.0, 0, 321.3], [0, 328.0, 238.6], [0, 0, 1]],
+                           [-0.021, 0.0043, -0.0012, 0.0001], "equidistant"),
 }
+
+
+def opencv_project(cam: CameraModel, P: np.ndarray) -> np.ndarray:
+    """OpenCV's own projection of camera-frame points (its fisheye functions for the equidistant lens)."""
+    if cam.fisheye:
+        uv, _ = cv2.fisheye.projectPoints(P.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), cam.K, cam.D)
+    else:
+        uv, _ = cv2.projectPoints(P, np.zeros(3), np.zeros(3), cam.K, cam.cv_dist())
+    return uv.reshape(-1, 2)
 
 
 def disks(points, radius, n=24):
@@ -28,6 +40,13 @@ def disks(points, radius, n=24):
     return np.asarray(V), np.asarray(F)
 
 
+def _polygon_centroid(q: np.ndarray) -> np.ndarray:
+    x, y = q[:, 0], q[:, 1]
+    xn, yn = np.roll(x, -1), np.roll(y, -1)
+    c = x * yn - xn * y
+    return np.array([np.sum((x + xn) * c), np.sum((y + yn) * c)]) / (3.0 * np.sum(c))
+
+
 @pytest.mark.parametrize("name", list(CAMS))
 @pytest.mark.parametrize("ssaa", [1, 2])
 def test_dots_land_where_project_points_puts_them(name, ssaa):
@@ -38,14 +57,15 @@ def test_dots_land_where_project_points_puts_them(name, ssaa):
     uv_target = np.c_[gx.ravel(), gy.ravel()] + rng.uniform(-15, 15, (40, 2))
     ideal = cam.undistort_points(uv_target)
     P = np.c_[(ideal[:, 0] - cam.cx) / cam.fx * z, (ideal[:, 1] - cam.cy) / cam.fy * z, z]
-    V, F = disks(P, 0.008)
+    V, F = disks(P, 0.025 if cam.fisheye else 0.008)  # a fisheye's edge shrinks a dot to a pixel or two
     r = Renderer(cam, ssaa=ssaa, background=(0, 0, 0))
     r.add(Mesh("dots", V, F, mode="flat", tint=(1, 1, 1), unlit=True))
     rgb, depth = r.render(np.eye(4))
     r.release()
     gray = rgb[..., 0].astype(np.float64)
-    uv_cv, _ = cv2.projectPoints(P, np.zeros(3), np.zeros(3), cam.K, cam.cv_dist())
-    uv_cv = uv_cv.reshape(-1, 2)
+    # where OpenCV puts each dot: the centroid of its rim's image (a fisheye squeezes a dot off the axis unevenly,
+    # so that the image of its centre is up to a pixel off the image's centroid there)
+    uv_cv = np.array([_polygon_centroid(opencv_project(cam, V[k * 25 + 1:(k + 1) * 25])) for k in range(len(P))])
     n, lab = cv2.connectedComponents((gray > 0).astype(np.uint8))
     errs = []
     for k in range(1, n):
@@ -73,9 +93,16 @@ def test_plane_depth_is_exact(name):
     ys, xs = np.mgrid[0:cam.height, 0:cam.width]
     ideal = cam.undistort_points(np.c_[xs.ravel(), ys.ravel()]).reshape(cam.height, cam.width, 2)
     ray = np.dstack([(ideal[..., 0] - cam.cx) / cam.fx, (ideal[..., 1] - cam.cy) / cam.fy, np.ones(xs.shape)])
-    Z = (n @ p0) / (ray @ n)
-    assert np.all(d > 0)
-    np.testing.assert_allclose(d, Z, rtol=2e-6)  # float32 precision
+    with np.errstate(invalid="ignore", divide="ignore"):
+        Z = (n @ p0) / (ray @ n)
+    # a fisheye's rays reach past the plane's horizon and the far plane (20 m), and past the rays it draws
+    reach = np.tan(np.radians(MAX_HALF_ANGLE_DEG)) * np.array([cam.fx, cam.fy])
+    on_plane = np.all(np.abs(((ray * Z[..., None] - p0) @ G.rot_axis("x", 0.5))[..., :2]) < 8.5, axis=-1)
+    drawn = np.all(np.abs(ideal - [cam.cx, cam.cy]) <= 0.97 * reach, axis=-1)
+    hit = (Z > 0) & np.less(Z, 0.9 * r.far) & on_plane & drawn
+    assert hit.mean() > 0.7
+    assert np.all(d[hit] > 0) and np.all(d[~(Z > 0)] == 0)  # (those past the horizon: NaN or negative Z)
+    np.testing.assert_allclose(d[hit], Z[hit], rtol=2e-6)  # float32 precision
 
 
 def test_occlusion_by_real_depth_is_exact():

@@ -27,6 +27,19 @@ def test_plane_points_with_decimation_and_pose():
     np.testing.assert_allclose(dw.points, G.transform(T, depth_points(d, CAM, 4).points))
 
 
+def test_a_fisheye_depth_image_gives_the_points_its_rays_reach():
+    """An equidistant (fisheye) camera: every pixel's point lies on its own ray through the lens (projected back to
+    that pixel), at the depth given; the corners of a circular fisheye, past 90 degrees off the axis, give none."""
+    fish = CameraModel(64, 48, [[24.0, 0, 31.5], [0, 24.0, 23.5], [0, 0, 1]], [-0.02, 0.004, -0.001, 0.0],
+                       "equidistant")
+    dp = depth_points(np.full((48, 64), 2.0, np.float32), fish, 1)
+    assert 0.8 * 48 * 64 < len(dp.points) < 48 * 64  # the corners (radius over 1.53 f) have no ray in front
+    np.testing.assert_allclose(dp.points[:, 2], 2.0)
+    np.testing.assert_allclose(fish.project(dp.points), dp.pixels, atol=1e-6)
+    r = np.hypot(dp.pixels[:, 0] - 31.5, dp.pixels[:, 1] - 23.5) / 24.0
+    assert r.max() > 1.45 and np.degrees(np.arctan(np.hypot(*dp.points[:, :2].T) / 2.0)).max() > 80
+
+
 def test_invalid_depth_is_skipped():
     d = np.full((48, 64), 1.0, np.float32)
     d[0, :] = np.nan

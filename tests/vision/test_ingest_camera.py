@@ -108,3 +108,34 @@ def test_the_right_camera_keeps_its_baseline_in_p():
     assert ic.right_info(info) == ""
     assert ic.right_P is not None and baseline_from_projection(ic.right_P) == pytest.approx(0.12)
     assert ic.right_info(SimpleNamespace(**{**vars(info), "k": [0.0] * 9})) != "" and ic.right_P is None
+
+
+def test_a_fisheye_image_is_undistorted_to_the_pinhole_image_of_its_k():
+    """An equidistant (fisheye) CameraInfo: the published image is the pinhole image of the same K (dots rendered
+    through the fisheye land where K puts them, within 0.3 px), the published camera has no distortion."""
+    import cv2
+
+    from simreal_nodes.render.gl import Mesh, Renderer
+    from tests.render.test_gl import disks
+
+    fish = CameraModel(320, 240, [[170.0, 0, 160.3], [0, 169.0, 119.6], [0, 0, 1]], [-0.021, 0.0043, -0.0012, 0.0001],
+                       "equidistant")
+    gx, gy = np.meshgrid(np.linspace(-0.6, 0.6, 5), np.linspace(-0.4, 0.4, 3))
+    P = np.c_[gx.ravel(), gy.ravel(), np.full(gx.size, 1.5)]  # up to 25 degrees off the axis
+    V, F = disks(P, 0.03)
+    r = Renderer(fish, ssaa=2, background=(0, 0, 0))
+    r.add(Mesh("dots", V, F, mode="flat", tint=(1, 1, 1), unlit=True))
+    rgb, _ = r.render(np.eye(4))
+    r.release()
+    ic = IngestCamera(undistort=True)
+    assert ic.camera_info(_info(fish)) == ""
+    out = ic.check("image", _msg(np.ascontiguousarray(rgb[..., ::-1]), "bgr8")).pixels
+    assert out is not None and not ic.out_camera.has_distortion and np.allclose(ic.out_camera.K, fish.K)
+    gray = out[..., 0].astype(np.float64)
+    n, lab = cv2.connectedComponents((gray > 0).astype(np.uint8))
+    assert n - 1 == len(P)
+    truth = fish.project(P, distort=False)
+    for k in range(1, n):
+        ys, xs = np.nonzero(lab == k)
+        c = np.array([np.sum(xs * gray[ys, xs]), np.sum(ys * gray[ys, xs])]) / gray[ys, xs].sum()
+        assert np.min(np.linalg.norm(truth - c, axis=1)) < 0.3

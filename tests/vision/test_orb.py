@@ -142,3 +142,22 @@ def test_levels_too_small_for_a_patch_are_skipped_not_a_crash():
     f = ex.extract(img)
     top = max(k for k, lv in enumerate(ex.pyramid(img)) if min(lv.shape) > 2 * ex.edge)
     assert len(f) > 100 and f.octave.max() <= top < 15
+
+
+def test_a_fisheye_camera_keeps_only_keypoints_with_a_ray():
+    """On an equidistant (fisheye) camera whose image corners lie past 90 degrees off the axis, the corners'
+    keypoints (no ideal pixel: NaN) are left out; every kept one undistorts to where the lens puts its ray."""
+    from simreal_nodes.camera import CameraModel
+
+    img = np.clip(_speckle(np.random.default_rng(1), 480, 640, 200.0), 0, 255).astype(np.uint8)
+    fish = CameraModel(640, 480, [[200.0, 0, 319.5], [0, 200.0, 239.5], [0, 0, 1]], [-0.02, 0.004, -0.001, 0.0],
+                       "equidistant")
+    ext = OrbExtractor(1000)
+    plain, f = ext.extract(img), ext.extract(img, fish)
+    r_plain = np.hypot(plain.uv[:, 0] - 319.5, plain.uv[:, 1] - 239.5) / 200.0
+    assert (r_plain > 1.52).sum() > 20  # the speckle has keypoints past the lens's 90 degrees
+    r = np.hypot(f.uv[:, 0] - 319.5, f.uv[:, 1] - 239.5) / 200.0
+    assert len(f) == len(f.und) == len(f.desc) == len(f.octave) == len(f.response) and r.max() < 1.52
+    assert np.isfinite(f.und).all() and len(f) >= len(plain) - (r_plain > 1.50).sum()
+    rays = np.c_[(f.und - [319.5, 239.5]) / 200.0, np.ones(len(f))]
+    np.testing.assert_allclose(fish.project(rays), f.uv, atol=0.01)

@@ -103,7 +103,7 @@ class TrackerNode(SimrealNode):
         cam = self.camera_model(msg)
         if cam is None:
             return
-        if self.core.cam is None or not np.allclose(cam.K, self.core.cam.K):
+        if not cam.same_as(self.core.cam):
             self.core.set_camera(cam)
 
     @guarded

@@ -39,6 +39,22 @@ class SlamContext:
     deformable: set[int] = field(default_factory=set)  # points on a deforming object (deformable tracks)
     held: set[int] = field(default_factory=set)  # those of them linked at rest: never culled (deformable tracks)
 
+    def in_image(self, uv: np.ndarray, z: np.ndarray, margin: float = 0.0) -> np.ndarray:
+        """Mask of the projections (ideal pixels ``uv`` at depths ``z``) that fall in the image, grown by ``margin``
+        pixels. The ideal image's rectangle for a pinhole or an OpenCV-distorted lens (as before); a fisheye's image
+        in the ideal one is no rectangle (its periphery lies far outside it), so there each ray is taken through
+        the lens and tested in the image itself."""
+        W, H = self.cam.width, self.cam.height
+        if self.cam.fisheye:
+            front = z > 0
+            px = np.full((len(uv), 2), np.nan)
+            if np.any(front):
+                px[front] = self.cam.project(self.cam.backproject(uv[front], np.ones(int(front.sum()))))
+            uv = px
+        with np.errstate(invalid="ignore"):
+            return (z > 0) & (uv[:, 0] >= -margin) & (uv[:, 0] < W + margin) & (uv[:, 1] >= -margin) \
+                & (uv[:, 1] < H + margin)
+
     def rigid(self, ids: np.ndarray) -> np.ndarray:
         """Mask of the point ids that may vote for the camera pose (not flagged deformable)."""
         return ~np.isin(ids, np.fromiter(self.deformable, np.int64) if self.deformable else np.zeros(0, np.int64))

@@ -229,14 +229,12 @@ class LocalMapper:
             return set()
         P = m._pos[m.rows(ids)]
         uv, z = project(kf.T_cw, P, K)
-        W, H = self.ctx.cam.width, self.ctx.cam.height
-        vis = (z > 0) & (uv[:, 0] >= 0) & (uv[:, 0] < W) & (uv[:, 1] >= 0) & (uv[:, 1] < H)
+        vis = self.ctx.in_image(uv, z)
         ids, uv, z = ids[vis], uv[vis], z[vis]
         if len(ids) == 0:
             return set()
         pred = m.predicted_level(ids, kf.center, f.scale_factor)
-        sf = f.scale_factor
-        rmax = radius * sf ** int(np.max(f.octave))
+        rmax = radius * f.max_sigma()
         k_nn = min(8, len(f))
         dpix, nn = kf.tree.query(uv, k=k_nn, distance_upper_bound=rmax)
         dpix, nn = np.reshape(dpix, (len(uv), k_nn)), nn.reshape(len(uv), k_nn)
@@ -256,7 +254,7 @@ class LocalMapper:
                                              self._disparity_sigma()), 0.0)
             chi2[has] = CHI2_3D
         lvl = np.floor(pred[rows])
-        ok = (dpix[valid] <= radius * sf ** oct_) & (e2 < chi2) & (np.isnan(lvl) | (np.abs(oct_ - lvl) <= 1))
+        ok = (dpix[valid] <= radius * f.sigma()[cols]) & (e2 < chi2) & (np.isnan(lvl) | (np.abs(oct_ - lvl) <= 1))
         rows, cols = rows[ok], cols[ok]
         if len(rows) == 0:
             return set()

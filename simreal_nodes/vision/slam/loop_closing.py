@@ -210,18 +210,17 @@ class LoopCloser:
         ctx, m, f = self.ctx, self.ctx.map, kf.feats
         T, _ = self._corrected_cam(kf, S)
         uv, z = project(T, m._pos[m.rows(B)], ctx.K)
-        W, H = ctx.cam.width, ctx.cam.height
-        vis = (z > 0) & (uv[:, 0] >= 0) & (uv[:, 0] < W) & (uv[:, 1] >= 0) & (uv[:, 1] < H)
+        vis = ctx.in_image(uv, z)
         if not np.any(vis):
             return 0
         ids, uv = B[vis], uv[vis]
         k = min(8, len(f))
-        dpix, nn = kf.tree.query(uv, k=k, distance_upper_bound=radius * f.scale_factor ** int(np.max(f.octave)))
+        dpix, nn = kf.tree.query(uv, k=k, distance_upper_bound=radius * f.max_sigma())
         dpix, nn = np.reshape(dpix, (len(uv), k)), nn.reshape(len(uv), k)
         valid = np.isfinite(dpix)
         rows = np.broadcast_to(np.arange(len(uv))[:, None], nn.shape)[valid]
         cols = nn[valid]
-        ok = dpix[valid] <= radius * f.scale_factor ** f.octave[cols].astype(np.float64)
+        ok = dpix[valid] <= radius * f.sigma()[cols]
         rows, cols = rows[ok], cols[ok]
         good = hamming(m._desc[m.rows(ids[rows])], f.desc[cols]) <= 50
         return len(np.unique(cols[good]))

@@ -413,6 +413,8 @@ class Map:
                 h["octave"], h["desc"], h["response"] = kf.feats.octave, kf.feats.desc, kf.feats.response
                 h["mp"] = kf.mp
                 h.attrs["scale_factor"] = kf.feats.scale_factor
+                if kf.feats.stretch is not None:  # a fisheye's (absent from maps of other cameras)
+                    h["stretch"] = kf.feats.stretch
                 if kf.depth is not None:
                     h["depth"] = kf.depth
 
@@ -436,8 +438,12 @@ class Map:
             m.scale_known = bool(f.attrs.get("scale_known", False))
             try:
                 for key, h in f["keyframes"].items():
+                    stretch = h["stretch"][()] if "stretch" in h else None
                     feats = Features(h["uv"][()], h["und"][()], h["octave"][()], h["desc"][()], h["response"][()],
-                                     float(h.attrs["scale_factor"]))
+                                     float(h.attrs["scale_factor"]), stretch)
+                    if stretch is not None and stretch.shape != (len(feats),):
+                        raise SimrealError(f"{path}: keyframe {key}'s stretch has {stretch.shape}, not one value a "
+                                           "feature")
                     kf = KeyFrame(int(key), int(h.attrs["stamp"]), h["T_wc"][()], feats, h["mp"][()],
                                   h["depth"][()] if "depth" in h else None)
                     m.keyframes[kf.id] = kf

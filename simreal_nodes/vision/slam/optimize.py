@@ -81,7 +81,7 @@ def ba_request(m, kfs_opt, kfs_fixed, pt_ids: np.ndarray) -> dict:
         if not np.any(at):
             continue
         uv[at] = kf.feats.und[fi[at]]
-        sig[at] = kf.feats.scale_factor ** kf.feats.octave[fi[at]].astype(np.float64)
+        sig[at] = kf.feats.sigma()[fi[at]]
         if kf.depth is not None:
             z[at] = kf.depth[fi[at]]
     return {"kf_ids": np.array([kf.id for kf in kfs], np.int64), "poses": np.array([kf.T_wc for kf in kfs]),

@@ -167,8 +167,7 @@ class Tracker:
         rows = m.rows(ids)
         P, D = m._pos[rows], m._desc[rows]
         uv, zc = project(T_cw, P, self.ctx.K)
-        W, H = self.ctx.cam.width, self.ctx.cam.height
-        vis = (zc > 0) & (uv[:, 0] >= -10) & (uv[:, 0] < W + 10) & (uv[:, 1] >= -10) & (uv[:, 1] < H + 10)
+        vis = self.ctx.in_image(uv, zc, 10.0)
         m._nvis[rows[vis]] += 1
         if not np.any(vis):
             return np.zeros((0, 2), np.int64)
@@ -180,7 +179,7 @@ class Tracker:
         if len(kp_idx) == 0:
             return np.zeros((0, 2), np.int64)
         tree = cKDTree(f.und[kp_idx])
-        rmax = radius * f.scale_factor ** 2
+        rmax = radius * f.scale_factor ** 2 * (1.0 if f.stretch is None else float(f.stretch.max()))
         k = min(8, len(kp_idx))
         dpix, nn = tree.query(uv, k=k, distance_upper_bound=rmax)  # fixed shape: vectorized candidates
         dpix, nn = np.reshape(dpix, (len(uv), k)), nn.reshape(len(uv), k)  # np.reshape: stubs say float | ndarray
@@ -190,7 +189,7 @@ class Tracker:
         dpix = dpix[valid]
         if len(rows) == 0:
             return np.zeros((0, 2), np.int64)
-        ok = dpix <= radius * f.scale_factor ** f.octave[cols]
+        ok = dpix <= radius * f.sigma()[cols]
         rows, cols = rows[ok], cols[ok]
         dist = hamming(D[rows], f.desc[cols])
         good = dist <= max_dist
