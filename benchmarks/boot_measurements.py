@@ -111,7 +111,7 @@ def run_scene(seed: int, slam: dict | None = None, tracking: dict | None = None)
         meas = tr.map_point_measurements(ids, P, uv)
         if meas is None:
             continue
-        X, uvm, _, _, mids = meas
+        X, uvm, _, _, mids = meas[:5]
         theta = float(seq["truth"][i].params["boot"][2][0])
         wrong = np.linalg.norm(uvm - truth_pixels(truth, T_map_truth, seq["T"][i], K, X, theta), axis=1) > WRONG_PX
         bent = theta > AT_REST_RAD

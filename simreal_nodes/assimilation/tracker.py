@@ -33,6 +33,11 @@ from simreal_nodes.states import EstimateState, PointFlag
 Measurements = tuple[np.ndarray, ...]
 
 
+def _sigma(meas: Measurements) -> np.ndarray | None:
+    """The measurements' pixel noise scales where they carry them (a fisheye's stretch), else None (1 each)."""
+    return meas[5] if len(meas) > 5 and len(meas[5]) else None
+
+
 class Link(NamedTuple):
     """A map point linked to the model (Eq. 4.10)."""
 
@@ -429,7 +434,8 @@ class DeformableTracker:
     # -- measurements ------------------------------------------------------------------------------------------
     def map_point_measurements(self, ids: np.ndarray, P_map: np.ndarray, uv: np.ndarray) -> Measurements | None:
         """The measurements a frame's observed map points give once linked (what :meth:`update` fits): (X rest
-        positions, ideal pixels, nodes, weights, point ids), or None where none of them is linked."""
+        positions, ideal pixels, nodes, weights, point ids, pixel noise scales: a fisheye's stretch, else empty), or
+        None where none of them is linked."""
         return self._map_point_measurements(*_finite_observations(ids, P_map, uv))
 
     def _map_point_measurements(self, ids: np.ndarray, P_map: np.ndarray, uv: np.ndarray) -> Measurements | None:
@@ -442,7 +448,10 @@ class DeformableTracker:
         nodes = np.array([lk.nodes for lk in lks])
         w = np.array([lk.weights for lk in lks])
         X = np.array([lk.X_rest for lk in lks])
-        return X, self.cam.undistort_points(uv[sel]), nodes, w, np.asarray(ids)[sel]
+        # a fisheye's periphery is stretched in the ideal image: each residual weighed as the image pixel it is
+        # (CameraModel.stretch), so that the Huber threshold means the same on every part of the image
+        sigma = self.cam.stretch(uv[sel]) if self.cam.fisheye else np.zeros(0)  # (none: 1 each)
+        return X, self.cam.undistort_points(uv[sel]), nodes, w, np.asarray(ids)[sel], sigma
 
     def _dot_measurements(self, image_bgr: np.ndarray, T_cw: np.ndarray) -> tuple[Measurements | None, int]:
         from simreal_nodes.vision.blobs import detect_color_blobs
@@ -468,7 +477,9 @@ class DeformableTracker:
         ok &= np.bincount(j[ok], minlength=len(und))[j] == 1
         if not ok.any():
             return None, len(found)
-        return (X[ok], und[j[ok]], nodes[ok], w[ok]), len(found)
+        # (no map point ids: dots; a fisheye's stretch weighs each residual as in _map_point_measurements)
+        sigma = self.cam.stretch(found[j[ok]]) if self.cam.fisheye else np.zeros(0)
+        return (X[ok], und[j[ok]], nodes[ok], w[ok], np.zeros(0, np.int64), sigma), len(found)
 
     # -- per frame ----------------------------------------------------------------------------------------------
     def update(self, T_wc: np.ndarray | None, ids: np.ndarray | None = None, P_map: np.ndarray | None = None,
@@ -536,7 +547,8 @@ class DeformableTracker:
             res, rest_rms = self._solve_planar(X, uvm, disp, T_cw, lo, hi)
         else:
             sh = self.cfg.object_shift_m
-            p = lm.Problem(X, uvm, disp, T_cw, self.R_wo, self.K, self.layout.with_shift() if sh > 0 else self.layout)
+            p = lm.Problem(X, uvm, disp, T_cw, self.R_wo, self.K, self.layout.with_shift() if sh > 0 else self.layout,
+                           _sigma(meas))
             x0, lo_p, hi_p = self.values, lo, hi
             if sh > 0:
                 x0, lo_p, hi_p = np.r_[self.values, self.shift], np.r_[lo, -sh, -sh, -sh], np.r_[hi, sh, sh, sh]
@@ -569,7 +581,7 @@ class DeformableTracker:
         est.debug["rest_rms_px"] = rest_rms
         self.outlier_ids = np.zeros(0, np.int64)
         # a fit the majority agrees with judges the rest, and so does the depth's state (measured without them)
-        if len(meas) > 4 and (res.inliers >= 0.6 * len(X) or "image_mu" in est.debug):
+        if len(meas) > 4 and len(meas[4]) == len(X) and (res.inliers >= 0.6 * len(X) or "image_mu" in est.debug):
             self.outlier_ids = meas[4][np.linalg.norm(res.residuals, axis=1) > 2 * self.cfg.huber_px]
         if (res.inliers < self.cfg.min_measurements or not np.isfinite(res.rms_px)) and "image_mu" not in est.debug:
             est.state = EstimateState.LOST
@@ -638,7 +650,7 @@ class DeformableTracker:
             res.x = res.x.copy()
             res.x[:n_mu] = fit.mu
             X, uvm, nodes, w = meas[:4]
-            p = lm.Problem(X, uvm, self._disp_fn(nodes, w), T_cw, self.R_wo, self.K, self.layout)
+            p = lm.Problem(X, uvm, self._disp_fn(nodes, w), T_cw, self.R_wo, self.K, self.layout, _sigma(meas))
             res.residuals = uvm - lm.predict(p, res.x, with_jacobian=False)[0]
 
     def _depth_alone(self, est: Estimate, T_wc: np.ndarray, depth: np.ndarray | None, why: str) -> Estimate | None:
@@ -888,7 +900,7 @@ class DeformableTracker:
             m = self._map_point_measurements(ids, P_map, uv)
             if m is None or len(m[0]) < max(self.cfg.min_measurements, 0.8 * n0):
                 return None
-            p = lm.Problem(m[0], m[1], self._disp_fn(m[2], m[3]), T_cw, self.R_wo, self.K, self.layout)
+            p = lm.Problem(m[0], m[1], self._disp_fn(m[2], m[3]), T_cw, self.R_wo, self.K, self.layout, _sigma(m))
             x = res.x.copy()
             x[c] = g
             lo_g, hi_g = lo_s.copy(), hi_s.copy()

@@ -37,7 +37,7 @@ def cmd_make_bag(a: argparse.Namespace) -> int:
             raise SimrealError(f"--sensor {a.sensor} --object {a.object}: only the 'family' scenes are drawn for "
                                f"another camera or object; '{a.scene}' has its own")
         info = make_bag(name, a.output, w, h, a.duration, a.fps, a.storage, a.seed, a.scene_out, a.ssaa, progress,
-                        image_format=a.image_format, jpeg_quality=a.jpeg_quality)
+                        image_format=a.image_format, jpeg_quality=a.jpeg_quality, lens=a.lens)
     finally:
         if progress:
             progress.close()
@@ -72,6 +72,9 @@ def add_make_bag(sub: argparse._SubParsersAction) -> None:
                    help="'family' only: a beam loaded along its top (s), a plate loaded anywhere on it (s_x, s_y), or "
                         "the joint boot bent by its lever (theta; its turn alpha_z unknown)")
     s.add_argument("--ssaa", type=int, default=2, help="supersampling factor (anti-aliasing)")
+    s.add_argument("--lens", choices=("scene", "fisheye"), default="scene",
+                   help="the scene's own camera, or an equidistant (fisheye) lens whose image corners look 70 degrees "
+                        "off the axis")
     s.add_argument("--scene-out", help="also write the scene YAML that runs the graph on this bag")
     s.add_argument("--image-format", choices=("raw", "jpeg", "png"), default="raw",
                    help="raw sensor_msgs/Image, or CompressedImage on <topic>/compressed (image_transport convention)")

@@ -289,6 +289,11 @@ def _iter_rosbags(path: Path, wanted, only_headers):
 
     try:
         reader = AnyReader([path], default_typestore=typestore())
+        if path.is_dir() and not reader.is2:
+            # rosbags takes any path ending in '.bag' for a ROS 1 bag file; a rosbag2 folder named so ('run.bag', as a
+            # user names a recording) is a rosbag2 bag all the same
+            from rosbags.rosbag2 import Reader as Reader2
+            reader.is2, reader.readers = True, [Reader2(path)]
         reader.open()
     except Exception as e:  # noqa: BLE001
         raise _Unreadable(f"{type(e).__name__}: {e}") from None

@@ -11,12 +11,15 @@ from __future__ import annotations
 
 import re
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 import yaml
 
 from simreal_nodes import geometry as G
+from simreal_nodes.camera import CameraModel
+from simreal_nodes.errors import SimrealError
 from simreal_nodes.io import bags
 from simreal_nodes.render.gl import Renderer
 from simreal_nodes.rom.build import cached_model
@@ -123,7 +126,6 @@ def make_scene(name: str, width: int = 640, height: int = 480, duration: float |
         from simreal_nodes.synth.car_video import car_aero_scene
         return car_aero_scene("mono" if car[1] else "rgbd", width, height, fps=fps, duration=duration)
     if name not in SCENES:
-        from simreal_nodes.errors import SimrealError
         raise SimrealError(f"unknown scene '{name}' (known: {', '.join(SCENES)})")
     kw = {"width": width, "height": height, "fps": fps}
     if duration:
@@ -152,12 +154,37 @@ def load_models(scene: SynthScene, progress=None) -> dict:
     return {oid: load_model(cached_model(spec, progress)) for oid, spec in scene.models.items()}
 
 
+FISHEYE_D = (-0.021, 0.0043, -0.0012, 0.0001)  # k1..k4 of fisheye_camera's equidistant lens
+FISHEYE_CORNER_DEG = 70.0  # how far off the axis its image corners look
+
+
+def fisheye_camera(cam: CameraModel) -> CameraModel:
+    """An equidistant (fisheye) camera of ``cam``'s size and principal point, its focal length such that the image's
+    corners look ``FISHEYE_CORNER_DEG`` off the axis (about 330 px at 640 x 480; the scene's 525 px pinhole sees 37
+    degrees there), its lens ``FISHEYE_D``."""
+    th = np.radians(FISHEYE_CORNER_DEG)
+    k = np.asarray(FISHEYE_D)
+    theta_d = th * (1 + k[0] * th ** 2 + k[1] * th ** 4 + k[2] * th ** 6 + k[3] * th ** 8)
+    r = np.hypot(max(cam.cx, cam.width - 1 - cam.cx), max(cam.cy, cam.height - 1 - cam.cy))
+    f = float(r / theta_d)
+    K = np.array([[f, 0.0, cam.cx], [0.0, f, cam.cy], [0.0, 0.0, 1.0]])
+    return CameraModel(cam.width, cam.height, K, np.array(FISHEYE_D), "equidistant", cam.frame_id)
+
+
 def make_bag(name: str, out: str | Path, width: int = 640, height: int = 480, duration: float | None = None,
              fps: float = 30.0, storage: str = "mcap", seed: int = 0, scene_out: str | Path | None = None,
              ssaa: int = 2, progress=None, compress: bool = True, image_format: str = "raw",
-             jpeg_quality: int = 90) -> dict:
-    """Render the scene into a bag; returns a summary (frames, seconds, bytes)."""
+             jpeg_quality: int = 90, lens: str | Callable[[CameraModel], CameraModel] = "scene") -> dict:
+    """Render the scene into a bag; returns a summary (frames, seconds, bytes). ``lens``: ``scene`` (the scene's
+    own camera), ``fisheye`` (:func:`fisheye_camera`: the frames rendered through an equidistant lens), or a function
+    of the scene's camera giving the one to render through (a benchmark's control camera)."""
     scene = make_scene(name, width, height, duration, fps)
+    if lens != "scene":
+        if not callable(lens) and lens != "fisheye":
+            raise SimrealError(f"lens '{lens}': 'scene' or 'fisheye'")
+        if scene.stereo_baseline:
+            raise SimrealError(f"--lens {lens}: '{name}' is a rectified stereo pair (no lens distortion left)")
+        scene.camera = (fisheye_camera if lens == "fisheye" else lens)(scene.camera)  # type: ignore[operator]
     models = load_models(scene, progress)
     scene.state["models"] = models
     if "prepare" in scene.state:
@@ -168,7 +195,6 @@ def make_bag(name: str, out: str | Path, width: int = 640, height: int = 480, du
     scene.build(scene, r, models)
     if scene.stereo_baseline:
         # rectified stereo: the right camera shares K, no distortion on either after rectification
-        from simreal_nodes.camera import CameraModel
         rect = CameraModel(cam.width, cam.height, cam.K.copy(), np.zeros(5), "plumb_bob")
         scene.camera = cam = rect
         r.release()

@@ -50,6 +50,19 @@ def test_read_reports_gaps_and_out_of_order(tmp_path):
     assert "gap" in rep.summary() and "out-of-order" in rep.summary()
 
 
+@pytest.mark.parametrize("storage", ["mcap", "sqlite3"])
+def test_a_bag_folder_named_dot_bag_reads_whole(tmp_path, storage):
+    """A rosbag2 folder named 'run.bag' (rosbags takes such a path for a ROS 1 bag file) reads as the bag it is: every
+    message, no damage reported (it used to say 'damaged' and read the mcap's records one by one)."""
+    path = tmp_path / "run.bag"
+    stamps = write_camera_bag(path, n=12, storage=storage)
+    rep = bags.BagReport()
+    got = [m for m in bags.read_bag(path, rep) if m.topic == "/camera/image_raw"]
+    assert not rep.damage and not rep.salvaged and rep.problems == 0, rep.summary()
+    assert [bags.stamp_ns(bags.decode(m)) for m in got] == stamps
+    assert "/camera/image_raw" in bags.bag_topics(path)
+
+
 def test_truncated_mcap_is_salvaged(tmp_path):
     path = tmp_path / "b"
     stamps = write_camera_bag(path, n=40)

@@ -46,6 +46,29 @@ def test_same_command_same_pixels(tmp_path):
         np.testing.assert_array_equal(x, y)
 
 
+def test_a_fisheye_bag_carries_its_lens_in_camera_info(tmp_path):
+    """``--lens fisheye``: an equidistant CameraInfo whose image corners look 70 degrees off the axis, the frames
+    rendered through it (the scene's pinhole frames differ); a stereo pair (rectified) or an unknown lens refused."""
+    from simreal_nodes.camera import CameraModel
+    from simreal_nodes.errors import SimrealError
+
+    make_bag("aluminium_beam", tmp_path / "f.bag", 160, 120, duration=0.1, fps=15, ssaa=1, lens="fisheye")
+    make_bag("aluminium_beam", tmp_path / "p.bag", 160, 120, duration=0.1, fps=15, ssaa=1)
+    msgs = {m.topic: bags.decode(m) for m in bags.read_bag(tmp_path / "f.bag")}
+    cam = CameraModel.from_camera_info(msgs["/camera/camera_info"])
+    assert cam.fisheye and len(cam.D) == 4
+    corner = cam.undistort_points(np.array([[0.0, 0.0]]))[0]
+    off_axis = np.degrees(np.arctan(np.hypot((corner[0] - cam.cx) / cam.fx, (corner[1] - cam.cy) / cam.fy)))
+    assert abs(off_axis - 70.0) < 0.5
+    first = next(bags.read_bag(tmp_path / "p.bag", topics=["/camera/image_raw"]))
+    plain = image_to_array(bags.decode(first))
+    assert np.abs(image_to_array(msgs["/camera/image_raw"]).astype(int) - plain).mean() > 5
+    with pytest.raises(SimrealError, match="rectified stereo pair"):
+        make_bag("family-3-stereo", tmp_path / "s", 160, 120, duration=0.1, fps=15, ssaa=1, lens="fisheye")
+    with pytest.raises(SimrealError, match="lens 'wide'"):
+        make_bag("aluminium_beam", tmp_path / "w", 160, 120, duration=0.1, fps=15, ssaa=1, lens="wide")
+
+
 def test_compressed_images_and_sqlite3(tmp_path):
     """A JPEG bag in sqlite3 holds every frame, and each decodes to the picture the same command renders
     uncompressed (the rendering is deterministic): JPEG's rounding only (measured: mean 2.1 grey levels, 0.1 % of
