@@ -43,25 +43,26 @@ def _trajectory(run_bag: Path, truth_bag: Path) -> dict:
     return {"poses": len(ie), "ate_mm": 1e3 * res["rmse"]}
 
 
-def run_case(label: str, lens, work: Path) -> dict:
+def run_case(k: int, label: str, lens, work: Path) -> dict:
     from simreal_nodes.demo import evaluate_run
     from simreal_nodes.ros.commands import replay
     from simreal_nodes.scene.schema import build_spec_models, load_scene
 
-    bag, scene_yaml, run = work / f"{len(label)}_bag", work / f"{len(label)}.yaml", work / f"{len(label)}_run"
+    bag, scene_yaml, run, ev = work / f"{k}_bag", work / f"{k}.yaml", work / f"{k}_run", work / f"{k}_eval"
     info = make_bag(SCENE, bag, scene_out=scene_yaml, lens=lens)
     sc = build_spec_models(load_scene(scene_yaml))
     t0 = time.monotonic()
     stats, _report, _counts = replay(str(bag), str(scene_yaml), lossless=True, record=str(run), echo=lambda *_: None)
     wall = time.monotonic() - t0
-    params = evaluate_run(run, bag, sc, work / f"{len(label)}_eval")["beam/s"]
+    ev.mkdir()
+    params = evaluate_run(run, bag, sc, ev)["beam/s"]
     scene_cam = _scene_camera()
     cam = lens(scene_cam) if callable(lens) else fisheye_camera(scene_cam) if lens == "fisheye" else scene_cam
     return dict(camera=label, model=cam.distortion_model, f_px=cam.fx, frames=info["frames"],
                 median_mm=1e3 * params["median_abs"], mean_mm=1e3 * params["mean_abs"],
                 max_mm=1e3 * params["max_abs"], median_pct=params["median_pct_of_range"],
                 ok_frames=int(params["states"].get(0, 0)), **_trajectory(run, bag),
-                replay_s=wall, through=stats.as_dict().get("completed") if stats is not None else None)
+                replay_s=wall, through=None if stats is None else stats.frames_completed)
 
 
 def _scene_camera() -> CameraModel:
@@ -74,8 +75,8 @@ def main():
     rows = []
     work = Path(tempfile.mkdtemp(prefix="simreal_fisheye_"))
     try:
-        for label, lens in CASES:
-            rows.append(run_case(label, lens, work))
+        for k, (label, lens) in enumerate(CASES):
+            rows.append(run_case(k, label, lens, work))
             print(rows[-1], flush=True)
     finally:
         shutil.rmtree(work, ignore_errors=True)
@@ -94,7 +95,8 @@ def main():
     cols = [("camera", "camera", "{}"), ("model", "CameraInfo model", "{}"), ("f_px", "f (px)", "{:.0f}"),
             ("frames", "frames", "{}"), ("median_mm", "load error median (mm)", "{:.2f}"),
             ("median_pct", "median (% of range)", "{:.2f}"), ("mean_mm", "mean (mm)", "{:.2f}"),
-            ("max_mm", "max (mm)", "{:.1f}"), ("ok_frames", "frames OK", "{}"), ("ate_mm", "camera ATE (mm)", "{:.2f}")]
+            ("max_mm", "max (mm)", "{:.1f}"), ("ok_frames", "frames OK", "{}"), ("through", "frames through", "{}"),
+            ("ate_mm", "camera ATE (mm)", "{:.2f}")]
     save("fisheye", rows, cols, "The aluminium beam through a fisheye lens, replayed through the graph",
          f"`{SCENE}` rendered at 640 x 480 through each camera (`make-bag --lens fisheye`: equidistant, k1..k4 "
          "(-0.021, 0.0043, -0.0012, 0.0001), the image corners 70 degrees off the axis), replayed losslessly through "

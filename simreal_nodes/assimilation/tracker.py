@@ -469,6 +469,10 @@ class DeformableTracker:
         Xw = X + dX @ (self.R_wo @ state.rotation()).T
         pred, z = _project(T_cw, Xw, self.K)
         und = self.cam.undistort_points(found)
+        if not np.isfinite(und).all():  # a fisheye's blob past 90 degrees off the axis: no ray to fit
+            found, und = found[np.isfinite(und).all(axis=1)], und[np.isfinite(und).all(axis=1)]
+            if len(found) == 0:
+                return None, 0
         tree = cKDTree(und)
         # many query points with k=1: arrays of distances and indices (the stubs also allow scalars)
         d, j = cast(tuple[np.ndarray, np.ndarray], tree.query(np.nan_to_num(pred, nan=-1e6), k=1))
@@ -650,8 +654,11 @@ class DeformableTracker:
             res.x = res.x.copy()
             res.x[:n_mu] = fit.mu
             X, uvm, nodes, w = meas[:4]
-            p = lm.Problem(X, uvm, self._disp_fn(nodes, w), T_cw, self.R_wo, self.K, self.layout, _sigma(meas))
+            sig = _sigma(meas)
+            p = lm.Problem(X, uvm, self._disp_fn(nodes, w), T_cw, self.R_wo, self.K, self.layout, sig)
             res.residuals = uvm - lm.predict(p, res.x, with_jacobian=False)[0]
+            if sig is not None:  # in units of each measurement's noise, as lm.solve gives them
+                res.residuals = res.residuals / sig[:, None]
 
     def _depth_alone(self, est: Estimate, T_wc: np.ndarray, depth: np.ndarray | None, why: str) -> Estimate | None:
         """``cfg.depth_alone`` (with ``depth_fit``): a frame whose images give too few measurements on the object

@@ -358,7 +358,10 @@ class MarkerLocalizer:
         """The pose from detected markers ``det``, and the map -> camera pose it solved before the loose-pose check
         (None where there was none, or it did not fit the layout)."""
         known = {k: v for k, v in det.items() if k in self._world}
-        res = MarkerResult(None, sorted(known), sorted(set(det) - set(known)), corners=det)
+        unknown = sorted(set(det) - set(known))
+        if self.cam.fisheye:  # a marker with a corner past 90 degrees off a fisheye's axis has no ray to solve with
+            known = {k: v for k, v in known.items() if np.isfinite(self.cam.undistort_points(v)).all()}
+        res = MarkerResult(None, sorted(known), unknown, corners=det)
         if not known:
             res.reason = ("no marker of the layout in view"
                           + (f" (saw unknown ids {res.unknown_ids})" if res.unknown_ids else ""))

@@ -177,11 +177,16 @@ class OrbExtractor:
             response = np.fromiter((at.get((x, y, o), 0.0) for (x, y), o in zip(uv.tolist(), octave.tolist())),
                                    np.float32, len(kps))
         und = cam.undistort_points(uv) if cam is not None and cam.has_distortion else uv.astype(np.float64)
-        ray = np.isfinite(und[:, 0])  # a fisheye's pixels past 90 degrees off the axis have no ideal pixel
-        if not ray.all():
-            uv, und, octave, desc, response = uv[ray], und[ray], octave[ray], desc[ray], response[ray]
-        # a fisheye's stretch weighs its features' errors (ideal pixels) as the image's pixels they were measured in
-        stretch = cam.stretch(uv) if cam is not None and cam.fisheye else None
+        stretch = None
+        if cam is not None and cam.fisheye:
+            # its stretch weighs each feature's error (ideal pixels) as the image pixels it was measured in; past
+            # MAX_STRETCH (about 72 degrees off the axis) or with no ray at all (90), an ideal position says too little
+            stretch = cam.stretch(uv)
+            with np.errstate(invalid="ignore"):
+                keep = np.isfinite(und[:, 0]) & (stretch <= MAX_STRETCH)
+            if not keep.all():
+                uv, und, octave, desc, response = uv[keep], und[keep], octave[keep], desc[keep], response[keep]
+                stretch = stretch[keep]
         return Features(uv, und, octave, desc, response, self.sf, stretch)
 
     def _candidates(self, img: np.ndarray, mask: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
@@ -234,6 +239,7 @@ class OrbExtractor:
         return pts, resp, float(np.count_nonzero(inside[y0:y1, x0:x1]))
 
 
+MAX_STRETCH = 10.0  # a fisheye's features kept where the ideal image is stretched at most this much (1 / cos^2 72 deg)
 EDGE = 19  # pixels kept clear of a level's border: OpenCV ORB's edgeThreshold (the rotated 31 x 31 patch fits)
 FOCUS_THRESHOLD = 3  # FAST threshold inside a focus polygon: a faint object's texture, a few grey levels
 RADIUS = 15  # the orientation patch's radius (ORB: half the 31-pixel patch)

@@ -146,8 +146,11 @@ def test_levels_too_small_for_a_patch_are_skipped_not_a_crash():
 
 def test_a_fisheye_camera_keeps_only_keypoints_with_a_ray():
     """On an equidistant (fisheye) camera whose image corners lie past 90 degrees off the axis, the corners'
-    keypoints (no ideal pixel: NaN) are left out; every kept one undistorts to where the lens puts its ray."""
+    keypoints (no ideal pixel: NaN) are left out, and so are those where the lens stretches the ideal image over
+    ``MAX_STRETCH`` times (about 72 degrees: an ideal position says too little there); every kept one undistorts
+    to where the lens puts its ray, with a finite stretch, and every one well inside is kept."""
     from simreal_nodes.camera import CameraModel
+    from simreal_nodes.vision.orb import MAX_STRETCH
 
     img = np.clip(_speckle(np.random.default_rng(1), 480, 640, 200.0), 0, 255).astype(np.uint8)
     fish = CameraModel(640, 480, [[200.0, 0, 319.5], [0, 200.0, 239.5], [0, 0, 1]], [-0.02, 0.004, -0.001, 0.0],
@@ -158,6 +161,9 @@ def test_a_fisheye_camera_keeps_only_keypoints_with_a_ray():
     assert (r_plain > 1.52).sum() > 20  # the speckle has keypoints past the lens's 90 degrees
     r = np.hypot(f.uv[:, 0] - 319.5, f.uv[:, 1] - 239.5) / 200.0
     assert len(f) == len(f.und) == len(f.desc) == len(f.octave) == len(f.response) and r.max() < 1.52
-    assert np.isfinite(f.und).all() and len(f) >= len(plain) - (r_plain > 1.50).sum()
+    assert np.isfinite(f.und).all() and f.stretch is not None and np.isfinite(f.stretch).all()
+    assert f.stretch.min() >= 1.0 and f.stretch.max() <= MAX_STRETCH and r.max() < 1.3
+    inside = {tuple(q) for q in plain.uv[r_plain < 1.0].tolist()}
+    assert inside <= {tuple(q) for q in f.uv.tolist()}
     rays = np.c_[(f.und - [319.5, 239.5]) / 200.0, np.ones(len(f))]
     np.testing.assert_allclose(fish.project(rays), f.uv, atol=0.01)
