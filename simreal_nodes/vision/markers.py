@@ -369,6 +369,10 @@ class MarkerLocalizer:
         obj = np.concatenate([self._world[k] for k in known])
         img = np.concatenate([known[k] for k in known])
         und = self.cam.undistort_points(img)
+        # a fisheye's corners are measured in its own pixels, the pose fitted in ideal ones: each corner's error
+        # is read back in image pixels (divided by the lens's stretch there), so that the checks below mean the same
+        # at the periphery (4 ideal pixels a pixel at 60 degrees) as at the centre; 1 for other lenses
+        stretch = self.cam.stretch(img) if self.cam.fisheye else None
         K = self.cam.K
         # initial guess: IPPE on the marker that looks largest
         best = max(known, key=lambda k: cv2.contourArea(known[k].astype(np.float32)))
@@ -385,6 +389,8 @@ class MarkerLocalizer:
         rvec, tvec = cv2.solvePnPRefineLM(obj, und, K, None, rvec, tvec, crit)
         proj, _ = cv2.projectPoints(obj, rvec, tvec, K, None)
         err = np.linalg.norm(proj.reshape(-1, 2) - und, axis=1)
+        if stretch is not None:
+            err = err / stretch
         per_marker = err.reshape(-1, 4).max(axis=1)
         if len(known) > 2 and per_marker.max() > 1.0 and per_marker.max() > 4 * np.median(per_marker):
             # one marker disagrees (partly occluded, bent, glare): solve without it
@@ -394,13 +400,17 @@ class MarkerLocalizer:
             rvec, tvec = cv2.solvePnPRefineLM(obj, und, K, None, rvec, tvec, crit)
             proj, _ = cv2.projectPoints(obj, rvec, tvec, K, None)
             err = np.linalg.norm(proj.reshape(-1, 2) - und, axis=1)
+            if stretch is not None:
+                stretch = stretch[keep]
+                err = err / stretch
         T_cw = G.make_T(cv2.Rodrigues(rvec)[0], tvec.ravel())
         res.rms_px = float(np.sqrt(np.mean(err ** 2)))
         if res.rms_px > 3.0:
             res.reason = (f"markers inconsistent with the layout (reprojection {res.rms_px:.1f} px): "
                           "moved marker or wrong size?")
             return res, None
-        std_m, distance = position_std(obj, K, rvec, tvec, max(res.rms_px, CORNER_FLOOR_PX))
+        sigma = max(res.rms_px, CORNER_FLOOR_PX)
+        std_m, distance = position_std(obj, K, rvec, tvec, sigma if stretch is None else sigma * stretch)
         res.std_pct = 100.0 * std_m / distance
         if not np.isfinite(res.std_pct) and self.max_std_pct > 0:
             res.reason = ("pose refused: the markers' corners do not determine the camera position (degenerate "
@@ -418,16 +428,19 @@ class MarkerLocalizer:
 
 
 def position_std(obj: np.ndarray, K: np.ndarray, rvec: np.ndarray, tvec: np.ndarray,
-                 sigma_px: float) -> tuple[float, float]:
+                 sigma_px: float | np.ndarray) -> tuple[float, float]:
     """The camera centre's standard deviation (metres, the root of the covariance's trace) from the Gauss-Newton
     normal equations of the reprojection of ``obj`` (map points, (N, 3)) at pose (``rvec``, ``tvec``: map -> camera)
-    with ``sigma_px`` of pixel noise per coordinate, and the points' mean distance along the optical axis (m)."""
+    with ``sigma_px`` of pixel noise per coordinate (one for all, or (N,) one a point: a fisheye's, in ideal pixels),
+    and the points' mean distance along the optical axis (m)."""
     _, J = cv2.projectPoints(obj, rvec, tvec, K, None)
     J = J[:, :6]  # d(u, v) / d(rvec, tvec)
+    if np.ndim(sigma_px):  # rows u, v of each point: each weighted by its point's 1 / sigma
+        J = J / np.repeat(np.asarray(sigma_px, dtype=np.float64), 2)[:, None]
     JtJ = J.T @ J
     if not np.all(np.isfinite(JtJ)) or np.linalg.cond(JtJ) > 1e14:
         return float("inf"), float("nan")
-    cov = sigma_px ** 2 * np.linalg.inv(JtJ)
+    cov = (sigma_px ** 2 if not np.ndim(sigma_px) else 1.0) * np.linalg.inv(JtJ)
     # the centre c = -R(r)^T t: its Jacobian by central differences in the six pose parameters
     p0 = np.r_[np.ravel(rvec), np.ravel(tvec)]
 
