@@ -469,8 +469,9 @@ class DeformableTracker:
         Xw = X + dX @ (self.R_wo @ state.rotation()).T
         pred, z = _project(T_cw, Xw, self.K)
         und = self.cam.undistort_points(found)
-        if not np.isfinite(und).all():  # a fisheye's blob past 90 degrees off the axis: no ray to fit
-            found, und = found[np.isfinite(und).all(axis=1)], und[np.isfinite(und).all(axis=1)]
+        ray = np.isfinite(und).all(axis=1)
+        if not ray.all():  # a fisheye's blob past 90 degrees off the axis: no ray to fit
+            found, und = found[ray], und[ray]
             if len(found) == 0:
                 return None, 0
         tree = cKDTree(und)

@@ -359,8 +359,9 @@ class MarkerLocalizer:
         (None where there was none, or it did not fit the layout)."""
         known = {k: v for k, v in det.items() if k in self._world}
         unknown = sorted(set(det) - set(known))
-        if self.cam.fisheye:  # a marker with a corner past 90 degrees off a fisheye's axis has no ray to solve with
-            known = {k: v for k, v in known.items() if np.isfinite(self.cam.undistort_points(v)).all()}
+        ideal = {k: self.cam.undistort_points(v) for k, v in known.items()}  # each marker's corners, undistorted once
+        # a marker with a corner past 90 degrees off a fisheye's axis has no ray to solve with (NaN)
+        known = {k: v for k, v in known.items() if np.isfinite(ideal[k]).all()}
         res = MarkerResult(None, sorted(known), unknown, corners=det)
         if not known:
             res.reason = ("no marker of the layout in view"
@@ -368,7 +369,7 @@ class MarkerLocalizer:
             return res, None
         obj = np.concatenate([self._world[k] for k in known])
         img = np.concatenate([known[k] for k in known])
-        und = self.cam.undistort_points(img)
+        und = np.concatenate([ideal[k] for k in known])
         # a fisheye's corners are measured in its own pixels, the pose fitted in ideal ones: each corner's error
         # is read back in image pixels (divided by the lens's stretch there), so that the checks below mean the same
         # at the periphery (4 ideal pixels a pixel at 60 degrees) as at the centre; 1 for other lenses
@@ -376,7 +377,7 @@ class MarkerLocalizer:
         K = self.cam.K
         # initial guess: IPPE on the marker that looks largest
         best = max(known, key=lambda k: cv2.contourArea(known[k].astype(np.float32)))
-        ok, rvec, tvec = cv2.solvePnP(self._local, self.cam.undistort_points(known[best]), K, None,
+        ok, rvec, tvec = cv2.solvePnP(self._local, ideal[best], K, None,
                                       flags=cv2.SOLVEPNP_IPPE_SQUARE)
         if not ok:
             res.reason = "marker pose estimation failed"
