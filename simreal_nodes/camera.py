@@ -26,6 +26,7 @@ CALIBRATION_MODELS = ("plumb_bob", "rational_polynomial", "equidistant")  # `sim
 # the overlay's distortion map: exact every 4th pixel, bilinear between (CameraModel.ideal_pixel_map)
 IDEAL_MAP_STEP = 4
 MAX_IMAGE_SIDE = 16384  # pixels: above any camera the graph serves (and OpenGL's usual texture limit)
+LENS_TABLE_SIZE = 20001  # samples of a fisheye's lens curve over 0-90 degrees (CameraModel.stretch): 8e-5 rad apart
 
 
 @dataclass
@@ -198,28 +199,78 @@ class CameraModel:
 
     def stretch(self, uv: np.ndarray) -> np.ndarray:
         """(N,) ideal pixels per image pixel at the distorted pixels ``uv``: the larger singular value of the
-        undistortion's Jacobian (central differences of half a pixel). A fisheye's periphery is stretched in the
-        ideal image (about 1 / cos^2 theta radially: 4 at 60 degrees), so a pixel's measurement error is that many
-        ideal pixels there; 1 without distortion, NaN where a pixel has no ideal one."""
+        undistortion's Jacobian. A fisheye's periphery is stretched in the ideal image (about 1 / cos^2 theta
+        radially: 4 at 60 degrees), so a pixel's measurement error is that many ideal pixels there; 1 without
+        distortion, NaN where a pixel has no ideal one. A fisheye's is exact (its lens is radial: the Jacobian in
+        closed form from the ray's angle, read off a table of the lens curve built once per camera); other lenses'
+        by central differences of half a pixel."""
         uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
         if not self.has_distortion or not len(uv):
             return np.ones(len(uv))
+        if self.fisheye:
+            return self._fisheye_stretch(uv)
         h = 0.5
         d = [self.undistort_points(uv + s) for s in ((h, 0), (-h, 0), (0, h), (0, -h))]
         a, c = ((d[0] - d[1]) / (2 * h)).T  # d ideal / d u
         b, e = ((d[2] - d[3]) / (2 * h)).T  # d ideal / d v
-        # the larger singular value of [[a, b], [c, e]]
-        p, q = (a * a + b * b + c * c + e * e) / 2, a * e - b * c
-        return np.sqrt(p + np.sqrt(np.maximum(p * p - q * q, 0.0)))
+        return _larger_singular_value(a, b, c, e)
 
-    def undistort_maps(self, new_K: np.ndarray, size: tuple[int, int], m1type: int) -> tuple[np.ndarray, np.ndarray]:
+    def _fisheye_stretch(self, uv: np.ndarray) -> np.ndarray:
+        """The equidistant lens's stretch. In normalized coordinates a pixel at the lens radius r_d = theta_d (its
+        ray theta off the axis, theta_d = theta (1 + k1 theta^2 + ... + k4 theta^8)) goes to the ideal radius
+        g = tan(theta): the undistortion's Jacobian is (g / r_d) I + (g' - g / r_d) n n^T (n the radial direction,
+        g' = (1 / cos^2 theta) / (d theta_d / d theta)), and in pixels K2 J F^-1 (K2: K's upper-left 2 x 2, F its
+        diagonal: OpenCV's fisheye functions read the lens side without K's skew, the ideal side with it)."""
+        theta_d, theta = self._lens_table()
+        K2 = self.K[:2, :2]
+        f = np.array([self.fx, self.fy])
+        xn = (uv - self.K[:2, 2]) / f  # distorted normalized coordinates
+        rd = np.hypot(xn[:, 0], xn[:, 1])
+        inside = rd < theta_d[-1]  # past the table: at or past 90 degrees, or past the lens curve's turning point
+        t = np.interp(rd, theta_d, theta)
+        k1, k2, k3, k4 = self.D
+        t2 = t * t
+        slope = 1 + t2 * (3 * k1 + t2 * (5 * k2 + t2 * (7 * k3 + t2 * 9 * k4)))  # d theta_d / d theta
+        small = rd <= 1e-12
+        with np.errstate(divide="ignore", invalid="ignore"):
+            radial = 1.0 / (np.cos(t) ** 2 * slope)
+            tangential = np.where(small, radial, np.tan(t) / np.where(small, 1.0, rd))  # g / r_d -> g'(0) at 0
+            n = xn / np.where(small, 1.0, rd)[:, None]
+        # J = K2 (tangential I + (radial - tangential) n n^T) F^-1
+        J = (tangential[:, None, None] * (K2 / f)[None]
+             + (radial - tangential)[:, None, None] * ((n @ K2.T)[:, :, None] * (n / f)[:, None, :]))
+        out = _larger_singular_value(J[:, 0, 0], J[:, 0, 1], J[:, 1, 0], J[:, 1, 1])
+        out[~inside] = np.nan
+        return out
+
+    def _lens_table(self) -> tuple[np.ndarray, np.ndarray]:
+        """The equidistant lens curve theta -> theta_d sampled finely over the rays it serves (from the axis to 90
+        degrees or to where the curve turns back, whichever comes first), kept per K and coefficients."""
+        key = (self.K.tobytes(), self.D.tobytes())
+        cached = getattr(self, "_lens_memo", None)
+        if cached is not None and cached[0] == key:
+            return cached[1]
+        k1, k2, k3, k4 = self.D
+        theta = np.linspace(0.0, np.pi / 2, LENS_TABLE_SIZE)
+        t2 = theta * theta
+        theta_d = theta * (1 + t2 * (k1 + t2 * (k2 + t2 * (k3 + t2 * k4))))
+        rising = np.flatnonzero(np.diff(theta_d) <= 0)
+        end = int(rising[0]) + 1 if len(rising) else len(theta)
+        table = (theta_d[:end].copy(), theta[:end].copy())
+        object.__setattr__(self, "_lens_memo", (key, table))
+        return table
+
+    def undistort_maps(self, new_K: np.ndarray, size: tuple[int, int], m1type: int,
+                       R: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """OpenCV's remap maps from the ideal pinhole image of ``new_K`` and ``size`` (width, height) to this camera's
-        pixels (``cv2.initUndistortRectifyMap``, or its fisheye counterpart for an equidistant lens)."""
+        pixels (``cv2.initUndistortRectifyMap``, or its fisheye counterpart for an equidistant lens); ``R``: the
+        ideal camera turned by it (a stereo pair's rectification, CameraInfo's R), else the identity."""
         import cv2
 
+        R = np.eye(3) if R is None else np.asarray(R, np.float64)
         if self.fisheye:
-            return cv2.fisheye.initUndistortRectifyMap(self.K, self.D, np.eye(3), new_K, size, m1type)
-        return cv2.initUndistortRectifyMap(self.K, self.cv_dist(), None, new_K, size, m1type)
+            return cv2.fisheye.initUndistortRectifyMap(self.K, self.D, R, new_K, size, m1type)
+        return cv2.initUndistortRectifyMap(self.K, self.cv_dist(), R, new_K, size, m1type)
 
     def ideal_pixel_map(self, step: int = IDEAL_MAP_STEP) -> np.ndarray:
         """(height, width, 2) float64: the ideal (undistorted) pixel of every pixel of the image, as
@@ -308,3 +359,10 @@ class CameraModel:
         return cls(int(get("image_width")), int(get("image_height")), K, D,
                    str(doc.get("distortion_model", "plumb_bob")),
                    frame_id=str(doc.get("frame_id", "camera_optical_frame")))
+
+
+def _larger_singular_value(a, b, c, e):
+    """The larger singular value of each 2 x 2 matrix [[a, b], [c, e]] (arrays of the entries)."""
+    p, q = (a * a + b * b + c * c + e * e) / 2, a * e - b * c
+    return np.sqrt(p + np.sqrt(np.maximum(p * p - q * q, 0.0)))
+

@@ -149,3 +149,29 @@ def test_a_fisheye_undistortion_map_takes_each_ideal_pixel_to_its_fisheye_pixel(
     assert inside.sum() > 100
     back = cam.undistort_points(expect[inside])  # and undistorting those fisheye pixels gives the ideal ones back
     np.testing.assert_allclose(back, np.c_[xs.ravel(), ys.ravel()][inside], atol=1e-6)
+
+
+def test_a_fisheyes_stretch_is_the_undistortions_jacobian_in_closed_form():
+    """``stretch`` (ideal pixels per image pixel, what weighs a fisheye's measurements) comes from the lens curve in
+    closed form: the larger singular value of the undistortion's Jacobian, against central differences of
+    ``undistort_points`` over 0.01 px (a skewed K, another lens); 1 at the centre, NaN where a pixel has no ray."""
+    rng = np.random.default_rng(3)
+    uv = rng.uniform([0, 0], [640, 480], (500, 2))
+    for K, D in (([[300.0, 0, 321.3], [0, 298.0, 238.6], [0, 0, 1]], FISHEYE_D),
+                 ([[280.0, 2.5, 318.0], [0, 310.0, 242.0], [0, 0, 1]], [0.05, -0.02, 0.01, -0.003])):
+        cam = CameraModel(640, 480, K, D, "equidistant")
+        h = 0.01
+        d = [cam.undistort_points(uv + s) for s in ((h, 0), (-h, 0), (0, h), (0, -h))]
+        J = np.stack([np.stack([(d[0] - d[1])[:, 0], (d[2] - d[3])[:, 0]], -1),
+                      np.stack([(d[0] - d[1])[:, 1], (d[2] - d[3])[:, 1]], -1)], 1) / (2 * h)
+        finite = np.isfinite(J).all(axis=(1, 2))
+        expect = np.full(len(uv), np.nan)
+        expect[finite] = np.linalg.svd(J[finite], compute_uv=False)[:, 0]
+        got = cam.stretch(uv)
+        np.testing.assert_array_equal(np.isfinite(got), finite)
+        np.testing.assert_allclose(got[finite], expect[finite], rtol=1e-5)
+        assert got[finite].max() > 3.0  # the periphery is stretched (corners about 70 degrees off the axis)
+        if K[0][1] == 0:  # (with a skew the ideal image is sheared against the lens's: over 1 at the centre)
+            np.testing.assert_allclose(cam.stretch(np.array([[cam.cx, cam.cy]])), 1.0, rtol=1e-9)
+    far = np.array([[cam.cx + 280 * 1.7, cam.cy]])  # past 90 degrees
+    assert np.isnan(cam.stretch(far)).all() and np.isnan(cam.undistort_points(far)).all()

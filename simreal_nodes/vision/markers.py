@@ -370,11 +370,18 @@ class MarkerLocalizer:
         obj = np.concatenate([self._world[k] for k in known])
         img = np.concatenate([known[k] for k in known])
         und = np.concatenate([ideal[k] for k in known])
-        # a fisheye's corners are measured in its own pixels, the pose fitted in ideal ones: each corner's error
-        # is read back in image pixels (divided by the lens's stretch there), so that the checks below mean the same
-        # at the periphery (4 ideal pixels a pixel at 60 degrees) as at the centre; 1 for other lenses
+        # a fisheye's corners are measured in its own pixels, where the pose is polished and each corner's error
+        # read, so that the checks below mean the same at the periphery (4 ideal pixels a pixel at 60 degrees) as
+        # at the centre; the stretch weighs the position's spread (ideal pixels); other lenses: ideal pixels
         stretch = self.cam.stretch(img) if self.cam.fisheye else None
         K = self.cam.K
+
+        def errors(rvec, tvec):
+            if stretch is not None:
+                return np.linalg.norm(self.cam.project(obj @ cv2.Rodrigues(rvec)[0].T + tvec.ravel()) - img, axis=1)
+            proj, _ = cv2.projectPoints(obj, rvec, tvec, K, None)
+            return np.linalg.norm(proj.reshape(-1, 2) - und, axis=1)
+
         # initial guess: IPPE on the marker that looks largest
         best = max(known, key=lambda k: cv2.contourArea(known[k].astype(np.float32)))
         ok, rvec, tvec = cv2.solvePnP(self._local, ideal[best], K, None,
@@ -387,23 +394,18 @@ class MarkerLocalizer:
         rvec, _ = cv2.Rodrigues(T_cw[:3, :3])
         tvec = T_cw[:3, 3].reshape(3, 1).copy()
         crit = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 30, 1e-10)
-        rvec, tvec = cv2.solvePnPRefineLM(obj, und, K, None, rvec, tvec, crit)
-        proj, _ = cv2.projectPoints(obj, rvec, tvec, K, None)
-        err = np.linalg.norm(proj.reshape(-1, 2) - und, axis=1)
-        if stretch is not None:
-            err = err / stretch
+        rvec, tvec = _polish(obj, und, self.cam, rvec, tvec, crit, None if stretch is None else img)
+        err = errors(rvec, tvec)
         per_marker = err.reshape(-1, 4).max(axis=1)
         if len(known) > 2 and per_marker.max() > 1.0 and per_marker.max() > 4 * np.median(per_marker):
             # one marker disagrees (partly occluded, bent, glare): solve without it
             keep = np.repeat(per_marker < per_marker.max(), 4)
             res.ids = [k for k, bad in zip(known, per_marker >= per_marker.max()) if not bad]
-            obj, und = obj[keep], und[keep]
-            rvec, tvec = cv2.solvePnPRefineLM(obj, und, K, None, rvec, tvec, crit)
-            proj, _ = cv2.projectPoints(obj, rvec, tvec, K, None)
-            err = np.linalg.norm(proj.reshape(-1, 2) - und, axis=1)
+            obj, und, img = obj[keep], und[keep], img[keep]
             if stretch is not None:
                 stretch = stretch[keep]
-                err = err / stretch
+            rvec, tvec = _polish(obj, und, self.cam, rvec, tvec, crit, None if stretch is None else img)
+            err = errors(rvec, tvec)
         T_cw = G.make_T(cv2.Rodrigues(rvec)[0], tvec.ravel())
         res.rms_px = float(np.sqrt(np.mean(err ** 2)))
         if res.rms_px > 3.0:
@@ -456,3 +458,17 @@ def position_std(obj: np.ndarray, K: np.ndarray, rvec: np.ndarray, tvec: np.ndar
     R = cv2.Rodrigues(np.reshape(rvec, (3, 1)))[0]
     depth = float(np.mean(obj @ R[2] + float(np.ravel(tvec)[2])))
     return float(np.sqrt(max(np.trace(Jc @ cov @ Jc.T), 0.0))), depth
+
+
+def _polish(obj: np.ndarray, und: np.ndarray, cam: CameraModel, rvec: np.ndarray, tvec: np.ndarray, crit,
+            img: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """The pose's least-squares polish: OpenCV's LM on the corners' ideal pixels; through a fisheye (``img``, the
+    corners as measured) in the camera's own pixels, so that the periphery's corners, stretched up to 10 times in
+    the ideal image, do not pull the pose with their amplified noise (``slam.optimize.image_pose_lm``)."""
+    if img is None:
+        return cv2.solvePnPRefineLM(obj, und, cam.K, None, rvec, tvec, crit)
+    from simreal_nodes.vision.slam.optimize import image_pose_lm
+
+    T = image_pose_lm(G.make_T(cv2.Rodrigues(rvec)[0], np.ravel(tvec)), obj.astype(np.float64), img,
+                      np.ones(len(img)), cam, iterations=crit[1], eps=crit[2])
+    return cv2.Rodrigues(T[:3, :3])[0], T[:3, 3].reshape(3, 1).copy()

@@ -231,3 +231,36 @@ def test_markers_at_a_fisheye_s_periphery_are_judged_in_its_own_pixels():
     assert res.T_wc is not None, res.reason
     assert len(res.ids) == 4 and res.rms_px < 0.5, res.rms_px
     assert np.linalg.norm(res.T_wc[:3, 3] - T_wc[:3, 3]) < 0.003
+
+
+def test_a_fisheyes_marker_pose_is_polished_in_its_own_pixels(monkeypatch):
+    """A marker at the centre of a fisheye and one 50-60 degrees off its axis, corners with 0.3 px of image noise
+    (200 draws): polished in ideal pixels, the peripheral marker's corners, stretched 3-4 times there, pull the pose
+    with their amplified noise; polished in the camera's own pixels (``image_pose_lm``) the camera lands closer
+    (median 4.2 mm against 5.5 mm) and no pose is refused (6 were, the pose too loose)."""
+    from simreal_nodes.camera import CameraModel
+    from simreal_nodes.vision import markers
+
+    fish = CameraModel(640, 480, [[200.0, 0, 319.5], [0, 200.0, 239.5], [0, 0, 1]],
+                       [-0.021, 0.0043, -0.0012, 0.0001], "equidistant")
+    poses = {0: G.make_T(t=[0.0, 0.0, 0.45]), 1: G.make_T(t=[0.62, 0.3, 0.45])}
+    loc = MarkerLocalizer(fish, "DICT_4X4_50", 0.12, poses)
+    T_wc = G.make_T(G.rot_axis("z", 0.1), [0.01, -0.02, 0.0])
+
+    def errors():
+        out = []
+        for seed in range(200):
+            rng = np.random.default_rng(seed)
+            det = {k: fish.project(G.transform(G.inv(T_wc), loc._world[k])) + rng.normal(0, 0.3, (4, 2))
+                   for k in poses}
+            res, _ = loc._solve(det)
+            out.append(np.inf if res.T_wc is None else np.linalg.norm(res.T_wc[:3, 3] - T_wc[:3, 3]))
+        return np.array(out)
+
+    own = errors()
+    polish = markers._polish
+    monkeypatch.setattr(markers, "_polish", lambda obj, und, cam, r, t, crit, img: polish(obj, und, cam, r, t, crit,
+                                                                                          None))
+    ideal = errors()
+    assert np.isfinite(own).all()
+    assert np.median(own) < 0.85 * np.median(ideal[np.isfinite(ideal)]), (np.median(own), np.median(ideal))

@@ -546,6 +546,52 @@ def test_fusion_runs_for_the_configured_modes(monkeypatch, fuse, mode, runs):
     assert len(calls) == runs
 
 
+def test_a_pose_refined_in_the_camera_s_own_pixels():
+    """``image_pose_lm`` (a fisheye's pose refinement in the SLAM and the markers): through a plumb_bob lens with
+    equal weights it lands where OpenCV's ``solvePnPRefineLM`` does on the same distorted pixels; through a fisheye
+    with a weight per point, on the weighted least-squares optimum of the fisheye's pixels (scipy's solver on the
+    same cost); ``refine_pose`` with ``lens`` fits there (its result a fixed point of it), away from where the fit in
+    ideal pixels goes."""
+    import cv2
+    from scipy.optimize import least_squares
+
+    from simreal_nodes.vision.slam.optimize import image_pose_lm, refine_pose
+
+    X, _ = scene(200, seed=5)
+    rng = np.random.default_rng(5)
+    T_true = G.make_T(G.exp_so3([0.02, -0.03, 0.01]), [0.05, -0.02, 0.1])
+    T0 = G.make_T(G.exp_so3([0.03, -0.02, 0.0]), [0.08, 0.0, 0.05])
+    r0, t0 = cv2.Rodrigues(T0[:3, :3])[0], T0[:3, 3].reshape(3, 1).copy()
+
+    barrel = CameraModel(640, 480, CAM.K, [-0.2, 0.05, 0.001, -0.001, 0.0])
+    uv = barrel.project(G.transform(T_true, X)) + rng.normal(0, 1.0, (len(X), 2))
+    rvec, tvec = cv2.solvePnPRefineLM(X, uv, barrel.K, barrel.D, r0, t0,
+                                      (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 50, 1e-12))
+    T_cv = G.make_T(cv2.Rodrigues(rvec)[0], tvec.ravel())
+    np.testing.assert_allclose(image_pose_lm(T0, X, uv, np.ones(len(X)), barrel, 50, 1e-12), T_cv, atol=1e-7)
+
+    fish = CameraModel(640, 480, [[300.0, 0, 320.0], [0, 300.0, 240.0], [0, 0, 1]], [-0.021, 0.0043, -0.0012, 0.0001],
+                       "equidistant")
+    px = fish.project(G.transform(T_true, X)) + rng.normal(0, 1.0, (len(X), 2))
+    w = 1.0 / rng.uniform(1.0, 2.0, len(X)) ** 2  # pyramid levels' sigma^2
+
+    def res(p):
+        return ((fish.project(X @ cv2.Rodrigues(p[:3])[0].T + p[3:]) - px) * np.sqrt(w)[:, None]).ravel()
+
+    best = least_squares(res, np.r_[r0.ravel(), t0.ravel()], xtol=1e-14, ftol=1e-14, gtol=1e-14).x
+    T_ls = G.make_T(cv2.Rodrigues(best[:3])[0], best[3:])
+    T_img = image_pose_lm(T0, X, px, w, fish, 50, 1e-12)
+    np.testing.assert_allclose(T_img, T_ls, atol=1e-8)
+
+    und = fish.undistort_points(px)
+    sigma2 = (np.sqrt(1.0 / w) * fish.stretch(px)) ** 2 * 9  # * 9: every match an inlier
+    T_r, inl = refine_pose(T0, X, und, sigma2, fish.K, lens=(fish, px, 1.0 / w))
+    assert inl.all()
+    np.testing.assert_allclose(T_r, image_pose_lm(T_r, X, px, w, fish, 50, 1e-12), atol=1e-7)
+    T_u, _ = refine_pose(T0, X, und, sigma2, fish.K)  # in ideal pixels, all alike
+    assert np.abs(T_u[:3, 3] - T_r[:3, 3]).max() > 1e-4
+
+
 def test_keyframe_decision():
     """ORB-SLAM2's rule: not within 5 frames of the last keyframe; then when tracking clearly fewer points than the
     reference keyframe (RGB-D: also under 100), or after 30 frames; never on 15 inliers or fewer."""
@@ -706,6 +752,30 @@ def test_deformable_tracks_reacquire_by_descriptor_and_widely_after_a_gap():
     res, seen = frame(30, 50.0)
     assert len(seen) > 20 and len(res.obs_ids) == 0  # the same gap without the wide radius loses them
     assert tracks.sources == {}
+
+
+def test_deformable_reacquisition_radius_is_in_a_fisheye_s_own_pixels():
+    """The re-acquisition radius (``deformable_radius``, 20 px) means image pixels: where a fisheye stretches the
+    ideal image the features carry the stretch, and a feature 30 ideal pixels from its prediction is 15 image pixels
+    away at a stretch of 2 (found), 25 at 1.2 (not found, as without a stretch)."""
+    X, desc = scene()
+    ids = np.arange(0, 30)
+    seen_at = {}
+    for stretch in (None, 1.2, 2.0):
+        ctx = context(reacquire_below=8, reacquire_wide_px=20.0, deformable_radius=20.0)
+        depth_map(ctx, X, desc)
+        tracks = DeformableTracks(ctx)
+        tracks.set_deformable(ids, X[ids])
+        ctx.frame_id = 10
+        tracks.new_frame(np.zeros((480, 640), np.uint8))
+        f, idx, _ = view(X, desc, np.eye(4), sel=ids, shift_px=30.0)
+        if stretch is not None:
+            f = dataclasses.replace(f, stretch=np.full(len(f), stretch))
+        res = TrackResult(OK)
+        tracks.observe(f, np.eye(4), res, exclude=np.zeros(0, np.int64))
+        seen_at[stretch] = (len(idx), len(res.obs_ids))
+    n = seen_at[None][0]  # (one of the points moves out of the image)
+    assert n > 25 and seen_at[None] == (n, 0) and seen_at[1.2] == (n, 0) and seen_at[2.0] == (n, n), seen_at
 
 
 def test_deformable_descriptors_of_erased_points_are_forgotten():

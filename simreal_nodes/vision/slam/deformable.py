@@ -202,11 +202,11 @@ class DeformableTracks:
                    has_pred: np.ndarray, todo: list[int], radius: float) -> dict[int, int]:
         """Step 2 of :meth:`_measure` for the points ``todo`` (rows of ``ids_a``, ``D``, ``uv``): point id -> the
         feature (index into ``f``) it is re-acquired at. A point's candidates are the features of ``kp_idx`` within
-        ``radius`` of its search centres (its predicted pixel, where it has a prediction or no last observation, and
-        its last observation); its match is the candidate at the least Hamming distance to the map's descriptor or
-        to that of its last ORB match, if within 50 bits (a tie: the first in the order the set of candidates
-        iterates). The centres are searched in one query and the distances counted in one batch (stop 96: the
-        same matches, in the same order, as a search per point)."""
+        ``radius`` (image pixels: a fisheye's times its stretch in ideal ones) of its search centres (its predicted
+        pixel, where it has a prediction or no last observation, and its last observation); its match is the candidate
+        at the least Hamming distance to the map's descriptor or to that of its last ORB match, if within 50 bits (a
+        tie: the first in the order the set of candidates iterates). The centres are searched in one query and the
+        distances counted in one batch (stop 96: the same matches, in the same order, as a search per point)."""
         owner, centres = [], []  # each search centre and the row of ``todo`` it belongs to
         for t, k in enumerate(todo):
             pid = int(ids_a[k])
@@ -221,7 +221,16 @@ class DeformableTracks:
         Q = np.asarray(centres, np.float64).reshape(-1, 2)
         finite = np.all(np.isfinite(Q), axis=1)
         hits = np.empty(len(Q), object)
-        hits[finite] = cKDTree(f.und[kp_idx]).query_ball_point(Q[finite], radius, return_sorted=False)
+        # a fisheye's radius is in its own pixels: each feature within radius times the lens's stretch there (the
+        # ideal image's pixels per image pixel); found within the largest such radius, then each held to its own
+        stretch = None if f.stretch is None else f.stretch[kp_idx]
+        reach = radius if stretch is None else radius * float(stretch.max(initial=1.0))
+        hits[finite] = cKDTree(f.und[kp_idx]).query_ball_point(Q[finite], reach, return_sorted=False)
+        if stretch is not None:
+            for q in np.flatnonzero(finite):
+                h = np.asarray(hits[q], np.int64)
+                d = np.linalg.norm(f.und[kp_idx[h]] - Q[q], axis=1)
+                hits[q] = h[d <= radius * stretch[h]].tolist()
         near: list[set[int]] = [set() for _ in todo]
         for t, ok, h in zip(owner, finite, hits):
             if ok:

@@ -10,6 +10,7 @@ import cv2
 import numpy as np
 
 from simreal_nodes import geometry as G
+from simreal_nodes.camera import CameraModel
 
 CHI2_2D = 5.991  # 95 % for 2 dof
 CHI2_3D = 7.815
@@ -25,10 +26,66 @@ def project(T_cw: np.ndarray, P: np.ndarray, K: np.ndarray) -> tuple[np.ndarray,
     return uv, z
 
 
+def image_pose_lm(T_cw: np.ndarray, P: np.ndarray, uv: np.ndarray, w: np.ndarray, cam: CameraModel,
+                  iterations: int = 10, eps: float = 1e-9) -> np.ndarray:
+    """The pose that minimizes sum_i w_i |cam(T_cw P_i) - uv_i|^2 in the camera's own (distorted) pixels ``uv``:
+    Levenberg-Marquardt on the rotation and translation vectors, the projection and its Jacobian from OpenCV
+    (``cv2.fisheye.projectPoints`` for a fisheye, ``cv2.projectPoints`` else). A fisheye's pose refined in ideal
+    pixels weighs every point alike although the lens stretches the ideal image up to 10 times towards its edge
+    (more radially than across): here each point's error is read where it was measured. ``w``: 1 / sigma^2 per
+    point (the pyramid level's). Stops when a step changes the vectors by less than ``eps`` or after
+    ``iterations``."""
+    import cv2
+
+    if cam.fisheye:
+        def project(x):
+            out, J = cv2.fisheye.projectPoints(P.reshape(-1, 1, 3), x[:3], x[3:], cam.K, cam.D)
+            return out.reshape(-1, 2), J[:, 8:14]  # (2N, 15): f, c, k1..k4, then rvec, tvec, alpha
+    else:
+        def project(x):
+            out, J = cv2.projectPoints(P, x[:3], x[3:], cam.K, cam.cv_dist())
+            return out.reshape(-1, 2), J[:, :6]  # rvec, tvec, then f, c, the coefficients
+
+    def cost(x):
+        proj, J = project(x)
+        r = proj - uv
+        return r, J, float(np.sum(w * np.sum(r * r, axis=1)))
+
+    x = np.r_[cv2.Rodrigues(T_cw[:3, :3])[0].ravel(), T_cw[:3, 3]]
+    r, J, c = cost(x)
+    if not np.isfinite(c):
+        return T_cw.copy()
+    w2 = np.repeat(w, 2)
+    lam = 1e-3
+    for _ in range(iterations):
+        Jw = J * w2[:, None]
+        H, g = Jw.T @ J, Jw.T @ r.ravel()
+        while True:
+            try:
+                step = -np.linalg.solve(H + lam * np.diag(np.diag(H) + 1e-12), g)
+            except np.linalg.LinAlgError:
+                return G.make_T(cv2.Rodrigues(x[:3])[0], x[3:])
+            r_new, J_new, c_new = cost(x + step)
+            if np.isfinite(c_new) and c_new <= c:
+                x, r, J, c = x + step, r_new, J_new, c_new
+                lam = max(lam / 10, 1e-9)
+                break
+            lam *= 10
+            if lam > 1e6:
+                return G.make_T(cv2.Rodrigues(x[:3])[0], x[3:])
+        if np.linalg.norm(step) < eps:
+            break
+    return G.make_T(cv2.Rodrigues(x[:3])[0], x[3:])
+
+
 def refine_pose(T_cw: np.ndarray, P: np.ndarray, uv: np.ndarray, sigma2: np.ndarray, K: np.ndarray,
-                rounds: int = 4) -> tuple[np.ndarray, np.ndarray]:
+                rounds: int = 4, lens: tuple[CameraModel, np.ndarray, np.ndarray] | None = None,
+                ) -> tuple[np.ndarray, np.ndarray]:
     """Motion-only optimization with outlier rejection (ORB-SLAM2's PoseOptimization, on OpenCV's LM):
-    refine on the current inliers, re-classify every match by its chi-square error, repeat."""
+    refine on the current inliers, re-classify every match by its chi-square error, repeat. ``lens``: (camera,
+    the matches' own pixels, their levels' sigma^2): the fit runs in the camera's pixels, each match weighed by its
+    level (:func:`image_pose_lm`; for a fisheye, whose ideal image is stretched towards its edge); else OpenCV's LM
+    in ideal pixels weighs them alike. The chi-square tests read ``uv`` and ``sigma2`` either way."""
     T = T_cw.copy()
     if len(P) < 4:
         return T, np.zeros(len(P), bool)
@@ -42,14 +99,19 @@ def refine_pose(T_cw: np.ndarray, P: np.ndarray, uv: np.ndarray, sigma2: np.ndar
     for _ in range(rounds):
         if inl.sum() < 4:
             break
-        rvec, _ = cv2.Rodrigues(T[:3, :3])
-        tvec = T[:3, 3].reshape(3, 1).copy()  # (3, 1): OpenCV silently ignores a flat tvec here
-        try:
-            rvec, tvec = cv2.solvePnPRefineLM(P[inl].astype(np.float64), uv[inl].astype(np.float64), K, None, rvec,
-                                              tvec, (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 10, 1e-9))
-        except cv2.error:
-            break
-        T = G.make_T(cv2.Rodrigues(rvec)[0], tvec.ravel())
+        if lens is not None:
+            cam, px, s2 = lens
+            T = image_pose_lm(T, P[inl].astype(np.float64), px[inl].astype(np.float64), 1.0 / s2[inl], cam)
+        else:
+            rvec, _ = cv2.Rodrigues(T[:3, :3])
+            tvec = T[:3, 3].reshape(3, 1).copy()  # (3, 1): OpenCV silently ignores a flat tvec here
+            try:
+                rvec, tvec = cv2.solvePnPRefineLM(P[inl].astype(np.float64), uv[inl].astype(np.float64), K, None,
+                                                  rvec, tvec, (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 10,
+                                                               1e-9))
+            except cv2.error:
+                break
+            T = G.make_T(cv2.Rodrigues(rvec)[0], tvec.ravel())
         proj, z = project(T, P, K)
         e2 = np.sum((proj - uv) ** 2, axis=1) / sigma2
         inl = (e2 < CHI2_2D) & (z > 0) & np.isfinite(e2)

@@ -101,7 +101,10 @@ class Tracker:
         if len(match) == 0:
             return T_init, np.zeros(0, bool)
         P = self.ctx.map._pos[self.ctx.map.rows(match[:, 1])]
-        return refine_pose(T_init, P, f.und[match[:, 0]], f.sigma2()[match[:, 0]], self.ctx.K)
+        i = match[:, 0]
+        # a fisheye's pose fitted in its own pixels (its features' stretch known), each weighed by its level
+        lens = None if f.stretch is None else (self.ctx.cam, f.uv[i], (f.sigma()[i] / f.stretch[i]) ** 2)
+        return refine_pose(T_init, P, f.und[i], f.sigma2()[i], self.ctx.K, lens=lens)
 
     def _pnp_local_map(self, f: Features, ids: np.ndarray) -> tuple[np.ndarray | None, np.ndarray, np.ndarray]:
         """Pose without a prediction: the frame's descriptors matched to the local map's points, PnP RANSAC."""
