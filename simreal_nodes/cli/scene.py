@@ -72,9 +72,10 @@ def add_make_bag(sub: argparse._SubParsersAction) -> None:
                    help="'family' only: a beam loaded along its top (s), a plate loaded anywhere on it (s_x, s_y), or "
                         "the joint boot bent by its lever (theta; its turn alpha_z unknown)")
     s.add_argument("--ssaa", type=int, default=2, help="supersampling factor (anti-aliasing)")
-    s.add_argument("--lens", choices=("scene", "fisheye"), default="scene",
-                   help="the scene's own camera, or an equidistant (fisheye) lens whose image corners look 70 degrees "
-                        "off the axis")
+    s.add_argument("--lens", choices=("scene", "fisheye", "raw"), default="scene",
+                   help="the scene's own camera, an equidistant (fisheye) lens whose image corners look 70 degrees "
+                        "off the axis, or (stereo scenes) the pair as a driver's raw images: each camera its own "
+                        "lens and turn, rectified by the ingest from the CameraInfos' R and P")
     s.add_argument("--scene-out", help="also write the scene YAML that runs the graph on this bag")
     s.add_argument("--image-format", choices=("raw", "jpeg", "png"), default="raw",
                    help="raw sensor_msgs/Image, or CompressedImage on <topic>/compressed (image_transport convention)")

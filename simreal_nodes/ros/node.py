@@ -231,9 +231,16 @@ class SimrealNode(Node):
 
     def stereo_baseline(self, msg, current: float | None) -> float | None:
         """Stereo baseline (metres) of the right camera's CameraInfo, or ``current`` (status set to error with the
-        reason) when its projection matrix holds none."""
+        reason) when its projection matrix holds none; None (status error) when the CameraInfo describes raw images
+        (a pair matched along its rows must be rectified: the ingest rectifies a raw one with
+        ``camera.stereo_input: raw``)."""
+        from simreal_nodes.vision.rectify import rectified_problem
         from simreal_nodes.vision.stereo import baseline_from_projection
 
+        if why := rectified_problem(msg):
+            self.set_status("error", f"right CameraInfo describes raw images ({why}): stereo needs a rectified pair; "
+                                     "set camera.stereo_input: raw to rectify it in the ingest")
+            return None
         try:
             return baseline_from_projection(msg.p)
         except ValueError as e:

@@ -46,7 +46,8 @@ def ingest_work(scene: dict, source: str | None = None) -> list[str]:
     themselves). ``source``: where the frames come from when not the scene's ``camera.source`` (a replay's player
     publishes them on the camera topics: ``"topic"``). Every node that reads the camera checks its CameraInfo and
     its images' format and size itself; what only the ingest does is reading files, decompressing, undistorting,
-    taking the intrinsics from a calibration file, and, with ``camera.ingest: always``, everything."""
+    rectifying a raw stereo pair, taking the intrinsics from a calibration file, and, with ``camera.ingest:
+    always``, everything."""
     cam = scene["camera"]
     src = source or cam["source"]
     why = []
@@ -58,6 +59,8 @@ def ingest_work(scene: dict, source: str | None = None) -> list[str]:
         why.append("decompresses the images")
     if cam["undistort"]:
         why.append("undistorts the images")
+    if cam.get("stereo_input") == "raw" and cam.get("right_image"):
+        why.append("rectifies the raw stereo pair")
     if cam["calibration"]:
         why.append("publishes the calibration file's intrinsics")
     return why

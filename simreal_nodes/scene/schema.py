@@ -42,8 +42,12 @@ CAMERA = Record({
     "image": Topic("colour or grey image topic", default="/camera/image_raw"),
     "camera_info": Topic("CameraInfo of the image", default="/camera/camera_info"),
     "depth": Topic("depth image (16UC1 mm or 32FC1 m), registered to the colour image", nullable=True),
-    "right_image": Topic("right image of a rectified-or-not stereo pair", nullable=True),
+    "right_image": Topic("right image of a stereo pair (see stereo_input)", nullable=True),
     "right_camera_info": Topic("CameraInfo of the right camera", nullable=True),
+    "stereo_input": Enum(("rectified", "raw"), "rectified: the pair's images are rectified and each CameraInfo "
+                         "describes them (R the identity, no distortion, K = P's 3 x 3; a raw one is refused with "
+                         "its reason). raw: a driver's raw images, rectified in the ingest node from their "
+                         "CameraInfos' lens, R and P, as ROS's stereo_image_proc does", default="rectified"),
     "stereo_min_depth_m": Number("stereo: the nearest depth the dense matching (SGBM) searches, metres; a nearer "
                                  "limit widens the disparity range and costs time", lo=0.05, default=0.4),
     "calibration": FilePath("ROS calibration YAML that overrides CameraInfo", nullable=True),
@@ -55,7 +59,8 @@ CAMERA = Record({
     "rate_hz": Number("publishing rate for video / image-folder sources", lo=0, lo_open=True, default=30.0),
     "loop": Bool("restart a bag / video / folder source at its end", default=False),
     "ingest": Enum(("auto", "always"), "auto: the ingest node starts only when it has work (a file source, "
-                   "compressed images, undistortion, a calibration file) or is the scene's only node; otherwise the "
+                   "compressed images, undistortion, a raw stereo pair, a calibration file) or is the scene's only "
+                   "node; otherwise the "
                    "nodes read the camera topics themselves, one hop less per frame. always: every frame goes "
                    "through the ingest (its /diagnostics name each frame it refuses)", default="auto"),
 })
@@ -343,6 +348,11 @@ def _cross_checks(scene: dict, ctx: Context) -> None:
                          "'stereo'")
     if cam["source"] != "topic" and cam["path"] is None:
         raise SceneError(f"{src}: camera.path: required for camera.source '{cam['source']}'; found nothing")
+    if cam["stereo_input"] == "raw" and (cam["right_image"] is None or cam["calibration"] is not None
+                                         or cam["source"] != "topic"):
+        raise SceneError(f"{src}: camera.stereo_input: 'raw' rectifies a stereo pair from the CameraInfo topics of "
+                         "both cameras (their R and P): it needs camera.right_image, camera.source 'topic' and no "
+                         "camera.calibration")
     aero = scene["aero"]
     if aero["enabled"]:
         if loc["mode"] not in ("mono", "rgbd", "stereo"):

@@ -68,12 +68,13 @@ class MsgFactory:
         return self.Image(header=self.header(ns, frame), height=h, width=w, encoding=encoding, is_bigendian=0,
                           step=raw.size // h, data=raw)
 
-    def camera_info(self, ns, frame, cam, P=None):
+    def camera_info(self, ns, frame, cam, P=None, R=None):
         f = cam.camera_info_fields()
         p = np.asarray(P if P is not None else f["p"], dtype=np.float64)
+        r = np.asarray(R if R is not None else f["r"], dtype=np.float64).ravel()
         return self.Info(header=self.header(ns, frame), height=cam.height, width=cam.width,
                          distortion_model=f["distortion_model"], d=np.asarray(f["d"], np.float64),
-                         k=np.asarray(f["k"], np.float64), r=np.asarray(f["r"], np.float64), p=p,
+                         k=np.asarray(f["k"], np.float64), r=r, p=p,
                          binning_x=0, binning_y=0,
                          roi=self.RoI(x_offset=0, y_offset=0, height=0, width=0, do_rectify=False))
 
@@ -171,17 +172,64 @@ def fisheye_camera(cam: CameraModel) -> CameraModel:
     return CameraModel(cam.width, cam.height, K, np.array(FISHEYE_D), "equidistant", cam.frame_id)
 
 
+RAW_STEREO = (  # a stereo driver's raw pair about the rectified one: focal scale, principal point shift (px at
+    # 640 x 480, scaled with the image), plumb_bob k1 k2 p1 p2 k3, and the raw camera's turn off the rectified frame
+    (0.96, (2.5, -3.0), (-0.20, 0.05, 0.001, -0.001, 0.0), (0.02, -0.015, 0.01)),
+    (0.97, (-4.0, 3.5), (-0.18, 0.04, -0.001, 0.0005, 0.0), (-0.01, 0.02, -0.012)),
+)
+
+
+class RawStereo:
+    """A rectified stereo render published as a driver's raw pair (``make-bag --lens raw``): each camera its own
+    lens (:data:`RAW_STEREO`) and turn R off the rectified frame, its CameraInfo K, D, R and P (P the rectified
+    camera: ``cam``'s K, the right's P[0, 3] = -fx * baseline), each raw pixel reading the rectified pixel its ray
+    lands on (``cv2.undistortPoints`` with R and P, computed once)."""
+
+    def __init__(self, cam: CameraModel, baseline: float) -> None:
+        import cv2
+
+        s = cam.width / 640.0
+        ys, xs = np.mgrid[0:cam.height, 0:cam.width].astype(np.float64)
+        pts = np.c_[xs.ravel(), ys.ravel()].reshape(-1, 1, 2)
+        self.cams, self.R, self.P, self.maps = [], [], [], []
+        for (scale, (dx, dy), D, rvec), tx in zip(RAW_STEREO, (0.0, -cam.fx * baseline)):
+            K = cam.K.copy()
+            K[0, 0] *= scale
+            K[1, 1] *= scale
+            K[0, 2] += dx * s
+            K[1, 2] += dy * s
+            R = cv2.Rodrigues(np.array(rvec))[0]
+            P = np.c_[cam.K, [tx, 0.0, 0.0]]
+            m = cv2.undistortPoints(pts, K, np.array(D), R=R, P=cam.K).reshape(cam.height, cam.width, 2)
+            self.cams.append(CameraModel(cam.width, cam.height, K, np.array(D), "plumb_bob", cam.frame_id))
+            self.R.append(R)
+            self.P.append(P)
+            self.maps.append(m.astype(np.float32))
+
+    def image(self, i: int, rect: np.ndarray) -> np.ndarray:
+        """Camera ``i``'s (0 left, 1 right) raw image of its rectified one (black where it sees past it)."""
+        import cv2
+
+        m = self.maps[i]
+        return cv2.remap(rect, m[..., 0], m[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
+
+
 def make_bag(name: str, out: str | Path, width: int = 640, height: int = 480, duration: float | None = None,
              fps: float = 30.0, storage: str = "mcap", seed: int = 0, scene_out: str | Path | None = None,
              ssaa: int = 2, progress=None, compress: bool = True, image_format: str = "raw",
              jpeg_quality: int = 90, lens: str | Callable[[CameraModel], CameraModel] = "scene") -> dict:
     """Render the scene into a bag; returns a summary (frames, seconds, bytes). ``lens``: ``scene`` (the scene's
-    own camera), ``fisheye`` (:func:`fisheye_camera`: the frames rendered through an equidistant lens), or a function
-    of the scene's camera giving the one to render through (a benchmark's control camera)."""
+    own camera), ``fisheye`` (:func:`fisheye_camera`: the frames rendered through an equidistant lens), ``raw`` (a
+    stereo scene's pair published as a driver's raw images: :class:`RawStereo`; its scene file says
+    ``camera.stereo_input: raw``), or a function of the scene's camera giving the one to render through (a
+    benchmark's control camera)."""
     scene = make_scene(name, width, height, duration, fps)
-    if lens != "scene":
+    raw_stereo = lens == "raw"
+    if raw_stereo and not scene.stereo_baseline:
+        raise SimrealError(f"--lens raw: '{name}' is not a stereo scene (a raw pair is a stereo driver's)")
+    if lens not in ("scene", "raw"):
         if not callable(lens) and lens != "fisheye":
-            raise SimrealError(f"lens '{lens}': 'scene' or 'fisheye'")
+            raise SimrealError(f"lens '{lens}': 'scene', 'fisheye' or 'raw'")
         if scene.stereo_baseline:
             raise SimrealError(f"--lens {lens}: '{name}' is a rectified stereo pair (no lens distortion left)")
         scene.camera = (fisheye_camera if lens == "fisheye" else lens)(scene.camera)  # type: ignore[operator]
@@ -200,6 +248,7 @@ def make_bag(name: str, out: str | Path, width: int = 640, height: int = 480, du
         r.release()
         r = Renderer(cam, ssaa=ssaa)
         scene.build(scene, r, models)
+    raw = RawStereo(cam, scene.stereo_baseline) if raw_stereo and scene.stereo_baseline else None
     rng = np.random.default_rng(seed)
     fac = MsgFactory()
     frame = "camera_optical_frame"
@@ -220,7 +269,12 @@ def make_bag(name: str, out: str | Path, width: int = 640, height: int = 480, du
             T = scene.camera_pose(t)
             rgb, depth = render_frame(scene, r, t, T)
             rgb = W.pixel_noise(rgb, scene.pixel_sigma, rng)
-            w.write("/camera/camera_info", ns, fac.camera_info(ns, frame, cam), "sensor_msgs/msg/CameraInfo")
+            if raw is not None:
+                rgb = raw.image(0, rgb)
+                w.write("/camera/camera_info", ns, fac.camera_info(ns, frame, raw.cams[0], raw.P[0].ravel(), raw.R[0]),
+                        "sensor_msgs/msg/CameraInfo")
+            else:
+                w.write("/camera/camera_info", ns, fac.camera_info(ns, frame, cam), "sensor_msgs/msg/CameraInfo")
             if image_format == "raw":
                 w.write("/camera/image_raw", ns, fac.image(ns, frame, rgb, "rgb8"), "sensor_msgs/msg/Image")
             else:
@@ -237,8 +291,12 @@ def make_bag(name: str, out: str | Path, width: int = 640, height: int = 480, du
                 P = np.zeros((3, 4))
                 P[:, :3] = cam.K
                 P[0, 3] = -cam.fx * b
-                w.write("/camera/right/camera_info", ns,
-                        fac.camera_info(ns, "camera_right_optical_frame", cam, P.ravel()), "sensor_msgs/msg/CameraInfo")
+                if raw is not None:
+                    rgb_r = raw.image(1, rgb_r)
+                    info_r = fac.camera_info(ns, "camera_right_optical_frame", raw.cams[1], raw.P[1].ravel(), raw.R[1])
+                else:
+                    info_r = fac.camera_info(ns, "camera_right_optical_frame", cam, P.ravel())
+                w.write("/camera/right/camera_info", ns, info_r, "sensor_msgs/msg/CameraInfo")
                 if image_format == "raw":
                     w.write("/camera/right/image_raw", ns, fac.image(ns, "camera_right_optical_frame", rgb_r, "rgb8"),
                             "sensor_msgs/msg/Image")
@@ -263,6 +321,8 @@ def make_bag(name: str, out: str | Path, width: int = 640, height: int = 480, du
         doc = scene.scene_yaml(scene)
         if image_format != "raw":
             doc["camera"]["compressed"] = True
+        if raw is not None:
+            doc["camera"]["stereo_input"] = "raw"
         Path(scene_out).parent.mkdir(parents=True, exist_ok=True)
         Path(scene_out).write_text(f"# Generated by `simreal make-bag {name}` together with its bag.\n"
                                    + yaml.safe_dump(doc, sort_keys=False, width=120))

@@ -12,6 +12,7 @@ from simreal_nodes.camera import CameraModel
 from simreal_nodes.errors import CameraInfoError, ImageFormatError
 from simreal_nodes.io import images
 from simreal_nodes.io.sources import Frame
+from simreal_nodes.vision.rectify import StereoRectification, rectification_of, rectified_problem
 
 
 class Undistorter:
@@ -48,20 +49,30 @@ class Checked:
 class IngestCamera:
     """The camera an ingest publishes: its intrinsics (a calibration file, if given, wins over CameraInfo), the
     undistortion that goes with them when asked (the published CameraInfo is then the ideal pinhole one), the right
-    camera of a stereo pair, and the one check every incoming image of a stream goes through."""
+    camera of a stereo pair, and the one check every incoming image of a stream goes through. ``stereo_raw``: the
+    pair's images are raw, rectified here from their CameraInfos' R and P (:mod:`~simreal_nodes.vision.rectify`;
+    the published CameraInfos are then the rectified cameras'); without it a right CameraInfo that describes raw
+    images is refused with its reason (a raw pair matched along rows as if rectified would give wrong depths)."""
 
-    def __init__(self, undistort: bool, calibration: CameraModel | None = None):
+    def __init__(self, undistort: bool, calibration: CameraModel | None = None, stereo_raw: bool = False):
         self.undistort = undistort
         self.calibration = calibration
+        self.stereo_raw = stereo_raw
         self.cam: CameraModel | None = calibration
         self.right: CameraModel | None = None
         self.right_P: np.ndarray | None = None  # the right camera's projection: its P[0, 3] = -fx * baseline
         self.info_error = ""  # why the last CameraInfo was unusable ('' = it was not)
         self._und: Undistorter | None = None
+        # a raw stereo pair: each CameraInfo's (R, P), the rectification built from both, why it could not be
+        self._left_rp: tuple[np.ndarray, np.ndarray] | None = None
+        self._right_rp: tuple[np.ndarray, np.ndarray] | None = None
+        self._rect: StereoRectification | None = None
+        self.rect_error = ""
 
     def set_camera(self, cam: CameraModel) -> None:
         self.cam = cam
-        if self.undistort and cam.has_distortion and (self._und is None or not self._und.matches(cam)):
+        if self.undistort and not self.stereo_raw and cam.has_distortion and (
+                self._und is None or not self._und.matches(cam)):
             self._und = Undistorter(cam)
 
     def camera_info(self, msg) -> str:
@@ -71,30 +82,64 @@ class IngestCamera:
             return ""
         try:
             cam = CameraModel.from_camera_info(msg)
+            rp = rectification_of(msg) if self.stereo_raw else None
         except CameraInfoError as e:
             self.info_error, self.cam = str(e), None
             return self.info_error
         self.info_error = ""
         if not cam.same_as(self.cam):
             self.set_camera(cam)
+        if rp is not None:
+            self._left_rp = rp
+            self._rectify()
         return ""
 
     def right_info(self, msg) -> str:
         """Take the right camera's CameraInfo: '' or why it is unusable (then no right camera)."""
         try:
             self.right = CameraModel.from_camera_info(msg)
+            if self.stereo_raw:
+                self._right_rp = rectification_of(msg)
+            elif why := rectified_problem(msg):
+                raise CameraInfoError(f"it describes raw images ({why}): the pair is matched along its rows, which "
+                                      "needs rectified images; set camera.stereo_input: raw to rectify them here")
         except CameraInfoError as e:
             self.right = self.right_P = None
             return str(e)
         P = np.asarray(msg.p, dtype=np.float64)
         self.right_P = P.reshape(3, 4) if P.size == 12 and np.all(np.isfinite(P)) else None
+        if self.stereo_raw:
+            self._rectify()
+            return self.rect_error
         return ""
+
+    def _rectify(self) -> None:
+        """The raw pair's rectification, (re)built once both CameraInfos are in hand (kept while they stay)."""
+        if self.cam is None or self.right is None or self._left_rp is None or self._right_rp is None:
+            return
+        if self._rect is not None and self._rect.same(self.cam, self._left_rp, self.right, self._right_rp):
+            return
+        try:
+            self._rect, self.rect_error = StereoRectification(self.cam, self._left_rp, self.right,
+                                                              self._right_rp), ""
+        except CameraInfoError as e:
+            self._rect, self.rect_error = None, str(e)
 
     @property
     def out_camera(self) -> CameraModel:
-        """The camera of the published images: the ideal one when they are undistorted."""
+        """The camera of the published images: the ideal one when they are undistorted, the rectified one of a raw
+        stereo pair."""
         assert self.cam is not None  # asked only once a frame passed check / file_frame, which need the camera
+        if self._rect is not None:
+            return self._rect.left_camera
         return self._und.ideal if self._und is not None else self.cam
+
+    @property
+    def out_right(self) -> tuple[CameraModel | None, np.ndarray | None]:
+        """The published right camera and its projection (the baseline in its P[0, 3])."""
+        if self._rect is not None:
+            return self._rect.right_camera, self._rect.right_P
+        return self.right, self.right_P
 
     def file_frame(self, f: Frame) -> str:
         """Take a frame of a file source (a bag's carries its CameraInfo, unless a calibration file wins): '' or
@@ -133,6 +178,9 @@ class IngestCamera:
             return Checked(f"depth encoding '{enc}' (expected 16UC1 or 32FC1)")
         if kind == "right" and self.right is None:
             return Checked("right image without a valid right CameraInfo")
+        if self.stereo_raw and kind in ("image", "right") and self._rect is None:
+            return Checked("waiting for both CameraInfos of the raw stereo pair to rectify it"
+                           + (f" ({self.rect_error})" if self.rect_error else ""))
         if arr is None:
             try:
                 arr = images.image_to_array(msg)
@@ -143,4 +191,6 @@ class IngestCamera:
             if (arr.shape[1], arr.shape[0]) != (self.cam.width, self.cam.height):
                 return Checked(f"image is {arr.shape[1]}x{arr.shape[0]} but CameraInfo says "
                                f"{self.cam.width}x{self.cam.height}")
+        if self._rect is not None and kind in ("image", "right"):
+            return Checked(pixels=self._rect.left(arr) if kind == "image" else self._rect.right(arr))
         return Checked(pixels=self.undistorted(kind, arr) if kind != "right" and self._und is not None else None)

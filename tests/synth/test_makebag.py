@@ -69,6 +69,39 @@ def test_a_fisheye_bag_carries_its_lens_in_camera_info(tmp_path):
         make_bag("aluminium_beam", tmp_path / "w", 160, 120, duration=0.1, fps=15, ssaa=1, lens="wide")
 
 
+def test_a_raw_stereo_bag_carries_each_camera_s_lens_and_rectification(tmp_path):
+    """``--lens raw`` (stereo scenes): both CameraInfos describe raw images (their own lens, R turned, P the
+    rectified camera, the right one's baseline in P), which the ingest's rectification takes back to the rendered
+    rectified pair; the scene file asks for it; a scene that is no stereo pair is refused."""
+    from simreal_nodes.camera import CameraModel
+    from simreal_nodes.errors import SimrealError
+    from simreal_nodes.vision.rectify import StereoRectification, rectification_of, rectified_problem
+    from simreal_nodes.vision.stereo import baseline_from_projection
+
+    make_bag("family-3-stereo", tmp_path / "raw", 160, 120, duration=0.1, fps=15, ssaa=1, lens="raw",
+             scene_out=tmp_path / "raw.yaml")
+    make_bag("family-3-stereo", tmp_path / "rect", 160, 120, duration=0.1, fps=15, ssaa=1)
+    raw = {m.topic: bags.decode(m) for m in bags.read_bag(tmp_path / "raw")}
+    rect = {m.topic: bags.decode(m) for m in bags.read_bag(tmp_path / "rect")}
+    infos = [raw["/camera/camera_info"], raw["/camera/right/camera_info"]]
+    assert all("R is not the identity" in rectified_problem(m) for m in infos)
+    assert rectified_problem(rect["/camera/right/camera_info"]) == ""
+    assert baseline_from_projection(infos[1].p) == pytest.approx(baseline_from_projection(
+        rect["/camera/right/camera_info"].p))
+    cams = [CameraModel.from_camera_info(m) for m in infos]
+    rectifier = StereoRectification(cams[0], rectification_of(infos[0]), cams[1], rectification_of(infos[1]))
+    for topic, fn in (("/camera/image_raw", rectifier.left), ("/camera/right/image_raw", rectifier.right)):
+        got = fn(image_to_array(raw[topic])).astype(float)
+        want = image_to_array(rect[topic]).astype(float)
+        inner = (slice(25, 95), slice(30, 130))
+        assert np.median(np.abs(got[inner] - want[inner])) < 4.0  # (two resamplings and their own pixel noise)
+        assert np.median(np.abs(image_to_array(raw[topic]).astype(float)[inner] - want[inner])) > \
+            2 * np.median(np.abs(got[inner] - want[inner]))
+    assert "stereo_input: raw" in (tmp_path / "raw.yaml").read_text()
+    with pytest.raises(SimrealError, match="not a stereo scene"):
+        make_bag("aluminium_beam", tmp_path / "m", 160, 120, duration=0.1, fps=15, ssaa=1, lens="raw")
+
+
 def test_compressed_images_and_sqlite3(tmp_path):
     """A JPEG bag in sqlite3 holds every frame, and each decodes to the picture the same command renders
     uncompressed (the rendering is deterministic): JPEG's rounding only (measured: mean 2.1 grey levels, 0.1 % of

@@ -139,3 +139,68 @@ def test_a_fisheye_image_is_undistorted_to_the_pinhole_image_of_its_k():
         ys, xs = np.nonzero(lab == k)
         c = np.array([np.sum(xs * gray[ys, xs]), np.sum(ys * gray[ys, xs])]) / gray[ys, xs].sum()
         assert np.min(np.linalg.norm(truth - c, axis=1)) < 0.3
+
+
+def _raw_pair(rect: np.ndarray, K: np.ndarray, baseline: float):
+    """A raw stereo pair made from a rectified one (``rect``: its left and right images, camera K, ``baseline``):
+    each raw camera its own K and barrel lens, turned against the rectified frame by R, its CameraInfo as a driver
+    publishes it (K, D, R, P). Each raw pixel reads the rectified pixel its ray lands on (``cv2.undistortPoints``
+    with R and P: the point mapping, not the maps under test)."""
+    import cv2
+
+    h, w = rect[0].shape[:2]
+    out, infos = [], []
+    for img, (Kr, D, rvec, tx) in zip(rect, ((np.array([[150.0, 0, 81.0], [0, 149.0, 58.5], [0, 0, 1]]),
+                                              [-0.2, 0.05, 0.001, -0.001, 0.0], [0.02, -0.015, 0.01], 0.0),
+                                             (np.array([[152.0, 0, 78.5], [0, 151.0, 61.0], [0, 0, 1]]),
+                                              [-0.18, 0.04, -0.001, 0.0005, 0.0], [-0.01, 0.02, -0.012],
+                                              -K[0, 0] * baseline))):
+        R = cv2.Rodrigues(np.array(rvec))[0]
+        P = np.c_[K, [tx, 0.0, 0.0]]
+        ys, xs = np.mgrid[0:h, 0:w].astype(np.float64)
+        p = cv2.undistortPoints(np.c_[xs.ravel(), ys.ravel()].reshape(-1, 1, 2), Kr, np.array(D), R=R, P=K)
+        p = p.reshape(h, w, 2).astype(np.float32)
+        out.append(cv2.remap(img, p[..., 0], p[..., 1], cv2.INTER_CUBIC, borderMode=cv2.BORDER_CONSTANT))
+        cam = CameraModel(w, h, Kr, D)
+        f = cam.camera_info_fields()
+        f["r"], f["p"] = [float(x) for x in R.ravel()], [float(x) for x in P.ravel()]
+        infos.append(SimpleNamespace(header=SimpleNamespace(frame_id="cam"), **f))
+    return out, infos
+
+
+def test_a_raw_stereo_pair_is_rectified_in_the_ingest_and_a_raw_one_is_not_taken_for_rectified():
+    """``stereo_input: raw``: a driver's raw pair (its own lenses, turned by its R) comes out as the rectified pair
+    it was made from (within a few grey levels where the raw view covers it: two resamplings), published with the
+    rectified cameras (K = P's, no distortion) and the baseline in the right P; the images wait until both
+    CameraInfos are in. Without it, the raw right CameraInfo is refused with what makes it raw, and its images are
+    not passed on (before, they were matched along rows as if rectified)."""
+    import cv2
+
+    from simreal_nodes.vision.stereo import baseline_from_projection
+
+    rng = np.random.default_rng(2)
+    K = np.array([[140.0, 0, 79.5], [0, 140.0, 59.5], [0, 0, 1]])
+    tex = cv2.GaussianBlur(rng.uniform(0, 255, (120, 160)).astype(np.float32), (0, 0), 2.0)
+    tex = cv2.normalize(tex, None, 0, 255, cv2.NORM_MINMAX).astype(np.uint8)
+    rect = [tex, np.roll(tex, -6, axis=1)]  # a plane 6 px of disparity away
+    raw, (info_l, info_r) = _raw_pair(rect, K, 0.1)
+    ic = IngestCamera(undistort=False, stereo_raw=True)
+    assert ic.camera_info(info_l) == ""
+    assert "waiting for both CameraInfos" in ic.check("image", _msg(raw[0], "mono8")).why
+    assert ic.right_info(info_r) == ""
+    got = [ic.check(kind, _msg(img, "mono8")) for kind, img in (("image", raw[0]), ("right", raw[1]))]
+    assert all(c.why == "" and c.pixels is not None for c in got)
+    for c, want in zip(got, rect):
+        inner = (slice(20, 100), slice(30, 130))
+        assert np.median(np.abs(c.pixels[inner].astype(float) - want[inner])) < 3.0
+        assert np.median(np.abs(np.asarray(raw[0][inner], float) - want[inner])) > 10  # the raw view differs
+    assert np.allclose(ic.out_camera.K, K) and not ic.out_camera.has_distortion
+    right, right_P = ic.out_right
+    assert right is not None and np.allclose(right.K, K) and not right.has_distortion
+    assert baseline_from_projection(right_P) == pytest.approx(0.1)
+
+    plain = IngestCamera(undistort=False)
+    plain.camera_info(info_l)
+    why = plain.right_info(info_r)
+    assert "describes raw images" in why and "R is not the identity" in why and "stereo_input: raw" in why
+    assert plain.check("right", _msg(raw[1], "mono8")).why == "right image without a valid right CameraInfo"

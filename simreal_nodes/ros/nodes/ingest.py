@@ -41,7 +41,10 @@ class IngestNode(SimrealNode):
         right_info = self.param("right_camera_info_topic", cam.get("right_camera_info") or "", "right CameraInfo topic")
         compressed = self.param("compressed", bool(cam.get("compressed", False)),
                                 "subscribe to <image>/compressed (sensor_msgs/CompressedImage) instead of raw images")
-        self.core = IngestCamera(undistort, CameraModel.from_calibration_yaml(cal) if cal else None)
+        stereo_input = self.param("stereo_input", cam.get("stereo_input", "rectified"),
+                                  "rectified | raw: a raw stereo pair is rectified here from its CameraInfos' R and P")
+        self.core = IngestCamera(undistort, CameraModel.from_calibration_yaml(cal) if cal else None,
+                                 stereo_raw=stereo_input == "raw")
         q = data_qos(self.lossless)
         self.pubs = {"image": self.create_publisher(Image, graph.CAM_IMAGE, q)}
         self.pub_info = {"image": self.create_publisher(CameraInfo, graph.CAM_INFO, q)}
@@ -142,10 +145,10 @@ class IngestNode(SimrealNode):
     def _publish(self, kind: str, msg: Image | bytes, stamp, frame_id: str, t0: float | None) -> None:
         """The image (a message or its serialized bytes) with its CameraInfo (the depth without)."""
         if kind != "depth":
-            cam = self.core.right if kind == "right" else self.core.out_camera
+            cam, right_P = self.core.out_right if kind == "right" else (self.core.out_camera, None)
             info = camera_info_msg(cam, stamp, frame_id)
-            if kind == "right" and self.core.right_P is not None:  # the baseline lives in P: pass it on unchanged
-                info.p = [float(x) for x in self.core.right_P.ravel()]
+            if right_P is not None:  # the baseline lives in P: passed on (a raw pair's: the rectified right's)
+                info.p = [float(x) for x in right_P.ravel()]
             self.pub_info[kind].publish(info)
         self.pubs[kind].publish(msg)
         if t0 is not None:
