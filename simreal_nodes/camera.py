@@ -226,7 +226,9 @@ class CameraModel:
         f = np.array([self.fx, self.fy])
         xn = (uv - self.K[:2, 2]) / f  # distorted normalized coordinates
         rd = np.hypot(xn[:, 0], xn[:, 1])
-        inside = rd < theta_d[-1]  # past the table: at or past 90 degrees, or past the lens curve's turning point
+        # past the table (at or past 90 degrees, or past the lens curve's turning point) or past pi / 2, where
+        # OpenCV's undistortion stops (undistort_points: NaN)
+        inside = rd < min(theta_d[-1], np.pi / 2)
         t = np.interp(rd, theta_d, theta)
         k1, k2, k3, k4 = self.D
         t2 = t * t

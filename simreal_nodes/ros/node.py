@@ -231,21 +231,25 @@ class SimrealNode(Node):
 
     def stereo_baseline(self, msg, current: float | None) -> float | None:
         """Stereo baseline (metres) of the right camera's CameraInfo, or ``current`` (status set to error with the
-        reason) when its projection matrix holds none; None (status error) when the CameraInfo describes raw images
-        (a pair matched along its rows must be rectified: the ingest rectifies a raw one with
-        ``camera.stereo_input: raw``)."""
+        reason) when it is malformed or its projection matrix holds none; None (status error) when it describes raw
+        images (a pair matched along its rows must be rectified: the ingest reads a raw pair with
+        ``camera.stereo_input: raw`` or ``image_rect``)."""
+        from simreal_nodes.errors import CameraInfoError
         from simreal_nodes.vision.rectify import rectified_problem
         from simreal_nodes.vision.stereo import baseline_from_projection
 
-        if why := rectified_problem(msg):
-            self.set_status("error", f"right CameraInfo describes raw images ({why}): stereo needs a rectified pair; "
-                                     "set camera.stereo_input: raw to rectify it in the ingest")
-            return None
         try:
-            return baseline_from_projection(msg.p)
-        except ValueError as e:
-            self.set_status("error", str(e))
+            baseline = baseline_from_projection(msg.p)
+            why = rectified_problem(msg)
+        except (ValueError, CameraInfoError) as e:
+            self.set_status("error", f"unusable right CameraInfo: {e}")
             return current
+        if why:
+            self.set_status("error", f"right CameraInfo describes raw images ({why}): stereo needs a rectified pair; "
+                                     "set camera.stereo_input to raw (a driver's raw images) or image_rect (rectified "
+                                     "images beside the raw cameras' CameraInfo)")
+            return None
+        return baseline
 
     def age_ms(self, stamp) -> float:
         """How old an input stamped ``stamp`` is now (meaningful for live sources only)."""

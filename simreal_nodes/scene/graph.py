@@ -61,6 +61,8 @@ def ingest_work(scene: dict, source: str | None = None) -> list[str]:
         why.append("undistorts the images")
     if cam.get("stereo_input") == "raw" and cam.get("right_image"):
         why.append("rectifies the raw stereo pair")
+    if cam.get("stereo_input") == "image_rect" and cam.get("right_image"):
+        why.append("publishes the image_rect pair's rectified cameras")
     if cam["calibration"]:
         why.append("publishes the calibration file's intrinsics")
     return why

@@ -44,10 +44,12 @@ CAMERA = Record({
     "depth": Topic("depth image (16UC1 mm or 32FC1 m), registered to the colour image", nullable=True),
     "right_image": Topic("right image of a stereo pair (see stereo_input)", nullable=True),
     "right_camera_info": Topic("CameraInfo of the right camera", nullable=True),
-    "stereo_input": Enum(("rectified", "raw"), "rectified: the pair's images are rectified and each CameraInfo "
-                         "describes them (R the identity, no distortion, K = P's 3 x 3; a raw one is refused with "
-                         "its reason). raw: a driver's raw images, rectified in the ingest node from their "
-                         "CameraInfos' lens, R and P, as ROS's stereo_image_proc does", default="rectified"),
+    "stereo_input": Enum(("rectified", "raw", "image_rect"), "rectified: the pair's images are rectified and "
+                         "each CameraInfo describes them (R the identity, no distortion, K = P's 3 x 3; a raw one is "
+                         "refused with its reason). raw: a driver's raw images, rectified in the ingest node from "
+                         "their CameraInfos' lens, R and P, as ROS's stereo_image_proc does. image_rect: rectified "
+                         "images beside the raw cameras' CameraInfo (ROS's image_rect topics): the ingest publishes "
+                         "the rectified cameras, read from P", default="rectified"),
     "stereo_min_depth_m": Number("stereo: the nearest depth the dense matching (SGBM) searches, metres; a nearer "
                                  "limit widens the disparity range and costs time", lo=0.05, default=0.4),
     "calibration": FilePath("ROS calibration YAML that overrides CameraInfo", nullable=True),
@@ -348,11 +350,12 @@ def _cross_checks(scene: dict, ctx: Context) -> None:
                          "'stereo'")
     if cam["source"] != "topic" and cam["path"] is None:
         raise SceneError(f"{src}: camera.path: required for camera.source '{cam['source']}'; found nothing")
-    if cam["stereo_input"] == "raw" and (cam["right_image"] is None or cam["calibration"] is not None
-                                         or cam["source"] != "topic"):
-        raise SceneError(f"{src}: camera.stereo_input: 'raw' rectifies a stereo pair from the CameraInfo topics of "
-                         "both cameras (their R and P): it needs camera.right_image, camera.source 'topic' and no "
-                         "camera.calibration")
+    if cam["stereo_input"] != "rectified" and (cam["right_image"] is None or cam["right_camera_info"] is None
+                                               or cam["calibration"] is not None or cam["source"] != "topic"
+                                               or cam["depth"] is not None):
+        raise SceneError(f"{src}: camera.stereo_input: '{cam['stereo_input']}' reads a stereo pair through the "
+                         "CameraInfo topics of both cameras (their R and P): it needs camera.right_image and "
+                         "camera.right_camera_info, camera.source 'topic', and no camera.calibration or camera.depth")
     aero = scene["aero"]
     if aero["enabled"]:
         if loc["mode"] not in ("mono", "rgbd", "stereo"):

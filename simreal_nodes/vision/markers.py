@@ -377,8 +377,9 @@ class MarkerLocalizer:
         K = self.cam.K
 
         def errors(rvec, tvec):
-            if stretch is not None:
-                return np.linalg.norm(self.cam.project(obj @ cv2.Rodrigues(rvec)[0].T + tvec.ravel()) - img, axis=1)
+            if stretch is not None:  # (a corner behind the camera has no pixel: an infinite error)
+                e = np.linalg.norm(self.cam.project(obj @ cv2.Rodrigues(rvec)[0].T + tvec.ravel()) - img, axis=1)
+                return np.where(np.isfinite(e), e, np.inf)
             proj, _ = cv2.projectPoints(obj, rvec, tvec, K, None)
             return np.linalg.norm(proj.reshape(-1, 2) - und, axis=1)
 
@@ -408,7 +409,7 @@ class MarkerLocalizer:
             err = errors(rvec, tvec)
         T_cw = G.make_T(cv2.Rodrigues(rvec)[0], tvec.ravel())
         res.rms_px = float(np.sqrt(np.mean(err ** 2)))
-        if res.rms_px > 3.0:
+        if not res.rms_px <= 3.0:
             res.reason = (f"markers inconsistent with the layout (reprojection {res.rms_px:.1f} px): "
                           "moved marker or wrong size?")
             return res, None

@@ -35,6 +35,7 @@ class Undistorter:
 
 
 _STREAM_NAMES = {"image": "image", "depth": "depth image", "right": "right image"}
+STEREO_INPUTS = ("rectified", "raw", "image_rect")  # camera.stereo_input (IngestCamera)
 
 
 @dataclass
@@ -49,29 +50,39 @@ class Checked:
 class IngestCamera:
     """The camera an ingest publishes: its intrinsics (a calibration file, if given, wins over CameraInfo), the
     undistortion that goes with them when asked (the published CameraInfo is then the ideal pinhole one), the right
-    camera of a stereo pair, and the one check every incoming image of a stream goes through. ``stereo_raw``: the
-    pair's images are raw, rectified here from their CameraInfos' R and P (:mod:`~simreal_nodes.vision.rectify`;
-    the published CameraInfos are then the rectified cameras'); without it a right CameraInfo that describes raw
-    images is refused with its reason (a raw pair matched along rows as if rectified would give wrong depths)."""
+    camera of a stereo pair, and the one check every incoming image of a stream goes through. ``stereo_input``
+    (:mod:`~simreal_nodes.vision.rectify`): ``rectified``, a pair whose CameraInfos describe rectified images (a
+    right one that describes raw images is refused with its reason: a raw pair matched along rows as if rectified
+    gives wrong depths); ``raw``, a driver's raw pair, rectified here from its CameraInfos' lens, R and P;
+    ``image_rect``, rectified images beside the raw cameras' CameraInfos (ROS's image_rect topics), their cameras
+    read from P. With ``raw`` and ``image_rect`` the published CameraInfos are the rectified cameras'."""
 
-    def __init__(self, undistort: bool, calibration: CameraModel | None = None, stereo_raw: bool = False):
+    def __init__(self, undistort: bool, calibration: CameraModel | None = None, stereo_input: str = "rectified"):
+        if stereo_input not in STEREO_INPUTS:
+            raise ValueError(f"stereo_input '{stereo_input}': one of {', '.join(STEREO_INPUTS)}")
         self.undistort = undistort
         self.calibration = calibration
-        self.stereo_raw = stereo_raw
+        self.stereo_input = stereo_input
         self.cam: CameraModel | None = calibration
         self.right: CameraModel | None = None
         self.right_P: np.ndarray | None = None  # the right camera's projection: its P[0, 3] = -fx * baseline
         self.info_error = ""  # why the last CameraInfo was unusable ('' = it was not)
         self._und: Undistorter | None = None
-        # a raw stereo pair: each CameraInfo's (R, P), the rectification built from both, why it could not be
+        # a pair read through its R and P: each CameraInfo's (R, P), the rectification built from both, why it
+        # could not be
         self._left_rp: tuple[np.ndarray, np.ndarray] | None = None
         self._right_rp: tuple[np.ndarray, np.ndarray] | None = None
         self._rect: StereoRectification | None = None
         self.rect_error = ""
 
+    @property
+    def _by_p(self) -> bool:
+        """The pair's cameras come from the CameraInfos' R and P (raw or image_rect input)."""
+        return self.stereo_input != "rectified"
+
     def set_camera(self, cam: CameraModel) -> None:
         self.cam = cam
-        if self.undistort and not self.stereo_raw and cam.has_distortion and (
+        if self.undistort and not self._by_p and cam.has_distortion and (
                 self._und is None or not self._und.matches(cam)):
             self._und = Undistorter(cam)
 
@@ -82,9 +93,10 @@ class IngestCamera:
             return ""
         try:
             cam = CameraModel.from_camera_info(msg)
-            rp = rectification_of(msg) if self.stereo_raw else None
+            rp = rectification_of(msg) if self._by_p else None
         except CameraInfoError as e:
             self.info_error, self.cam = str(e), None
+            self._left_rp, self._rect = None, None
             return self.info_error
         self.info_error = ""
         if not cam.same_as(self.cam):
@@ -92,36 +104,45 @@ class IngestCamera:
         if rp is not None:
             self._left_rp = rp
             self._rectify()
+            return self.rect_error
         return ""
 
     def right_info(self, msg) -> str:
         """Take the right camera's CameraInfo: '' or why it is unusable (then no right camera)."""
         try:
-            self.right = CameraModel.from_camera_info(msg)
-            if self.stereo_raw:
+            right = CameraModel.from_camera_info(msg)
+            if self._by_p:
                 self._right_rp = rectification_of(msg)
-            elif why := rectified_problem(msg):
-                raise CameraInfoError(f"it describes raw images ({why}): the pair is matched along its rows, which "
-                                      "needs rectified images; set camera.stereo_input: raw to rectify them here")
+            else:
+                why = rectified_problem(msg)
+                if self.cam is not None and self.cam.has_distortion:
+                    why = "; ".join(w for w in (why, "the left camera's lens has distortion") if w)
+                if why:
+                    raise CameraInfoError(
+                        f"it describes raw images ({why}): the pair is matched along its rows, which needs rectified "
+                        "images; set camera.stereo_input to raw for a driver's raw images (rectified here), or to "
+                        "image_rect for rectified images beside the raw cameras' CameraInfo (ROS's image_rect)")
         except CameraInfoError as e:
             self.right = self.right_P = None
+            self._right_rp, self._rect = None, None
             return str(e)
+        self.right = right
         P = np.asarray(msg.p, dtype=np.float64)
         self.right_P = P.reshape(3, 4) if P.size == 12 and np.all(np.isfinite(P)) else None
-        if self.stereo_raw:
+        if self._by_p:
             self._rectify()
             return self.rect_error
         return ""
 
     def _rectify(self) -> None:
-        """The raw pair's rectification, (re)built once both CameraInfos are in hand (kept while they stay)."""
+        """The pair's rectification, (re)built once both CameraInfos are in hand (kept while they stay)."""
         if self.cam is None or self.right is None or self._left_rp is None or self._right_rp is None:
             return
         if self._rect is not None and self._rect.same(self.cam, self._left_rp, self.right, self._right_rp):
             return
         try:
-            self._rect, self.rect_error = StereoRectification(self.cam, self._left_rp, self.right,
-                                                              self._right_rp), ""
+            self._rect, self.rect_error = StereoRectification(self.cam, self._left_rp, self.right, self._right_rp,
+                                                              rectified=self.stereo_input == "image_rect"), ""
         except CameraInfoError as e:
             self._rect, self.rect_error = None, str(e)
 
@@ -178,8 +199,11 @@ class IngestCamera:
             return Checked(f"depth encoding '{enc}' (expected 16UC1 or 32FC1)")
         if kind == "right" and self.right is None:
             return Checked("right image without a valid right CameraInfo")
-        if self.stereo_raw and kind in ("image", "right") and self._rect is None:
-            return Checked("waiting for both CameraInfos of the raw stereo pair to rectify it"
+        if self._by_p and kind == "depth":
+            return Checked(f"a depth image beside a stereo pair read through its R and P (stereo_input "
+                           f"{self.stereo_input}) is not rectified with it")
+        if self._by_p and kind in ("image", "right") and self._rect is None:
+            return Checked("waiting for both CameraInfos of the stereo pair to rectify it"
                            + (f" ({self.rect_error})" if self.rect_error else ""))
         if arr is None:
             try:
@@ -191,6 +215,11 @@ class IngestCamera:
             if (arr.shape[1], arr.shape[0]) != (self.cam.width, self.cam.height):
                 return Checked(f"image is {arr.shape[1]}x{arr.shape[0]} but CameraInfo says "
                                f"{self.cam.width}x{self.cam.height}")
+        if kind == "right":
+            assert self.right is not None  # a right image without its camera returned above
+            if (arr.shape[1], arr.shape[0]) != (self.right.width, self.right.height):
+                return Checked(f"right image is {arr.shape[1]}x{arr.shape[0]} but its CameraInfo says "
+                               f"{self.right.width}x{self.right.height}")
         if self._rect is not None and kind in ("image", "right"):
             return Checked(pixels=self._rect.left(arr) if kind == "image" else self._rect.right(arr))
         return Checked(pixels=self.undistorted(kind, arr) if kind != "right" and self._und is not None else None)

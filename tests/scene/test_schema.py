@@ -41,6 +41,8 @@ def test_minimal_scene_gets_defaults_and_starts_only_ingest(tmp_path):
     ("{source: video, path: CALIB}", "topic", []),  # a replay: the player publishes the frames
     ("{calibration: CALIB, depth: /d}", "topic", ["publishes the calibration file's intrinsics"]),
     ("{right_image: /r, right_camera_info: /ri, stereo_input: raw}", None, ["rectifies the raw stereo pair"]),
+    ("{right_image: /r, right_camera_info: /ri, stereo_input: image_rect}", None,
+     ["publishes the image_rect pair's rectified cameras"]),
     ("{right_image: /r, right_camera_info: /ri}", None, []),  # rectified (the default): read as they are
 ])
 def test_the_ingest_starts_only_when_it_has_work(tmp_path, camera, source, why):
@@ -75,8 +77,11 @@ def test_the_ingest_starts_only_when_it_has_work(tmp_path, camera, source, why):
     (BASE.replace("mode: static", "mode: sttic"),
      r"localization.mode: expected one of 'markers', 'mono'.*found 'sttic'"),
     (BASE + "camera: {undistort: 3}\n", r"camera.undistort: expected true or false; found 3 \(int\)"),
-    (BASE + "camera: {stereo_input: raw}\n", r"camera.stereo_input: 'raw' rectifies a stereo pair .* needs "
-                                             r"camera.right_image"),
+    (BASE + "camera: {stereo_input: raw}\n", r"camera.stereo_input: 'raw' reads a stereo pair .* needs "
+                                             r"camera.right_image and camera.right_camera_info"),
+    (BASE + "camera: {stereo_input: image_rect, right_image: /r}\n", r"camera.stereo_input: 'image_rect' reads"),
+    (BASE + "camera: {stereo_input: raw, right_image: /r, right_camera_info: /ri, depth: /d}\n",
+     r"no camera.calibration or camera.depth"),
     (BASE + "camera: {stereo_input: rectify}\n", r"camera.stereo_input: expected one of 'rectified', 'raw'"),
     (BASE + "camera: {image: camera/image}\n", r"camera.image: expected a ROS topic name"),
     (BASE.replace("simreal_scene: 1", "simreal_scene: 7"), r"simreal_scene: expected format version 1; found 7"),

@@ -74,8 +74,13 @@ def test_every_stream_states_why_it_is_left_out():
     assert ic.check("image", broken).why.startswith("malformed image: ")
     assert ic.check("depth", _msg(img, "bgr8")).why == "depth encoding 'bgr8' (expected 16UC1 or 32FC1)"
     assert ic.check("right", _msg(img, "bgr8")).why == "right image without a valid right CameraInfo"
+    # a stereo pair matched along rows must be rectified: a left lens with distortion says it is not
+    assert "the left camera's lens has distortion" in ic.right_info(_info(PINHOLE))
+    ic.camera_info(_info(PINHOLE))
     assert ic.right_info(_info(PINHOLE)) == "" and ic.check("right", _msg(img, "bgr8")).why == ""
     assert ic.check("right", broken).why.startswith("malformed right image: ")
+    assert ic.check("right", _msg(img[:40], "bgr8")).why == "right image is 64x40 but its CameraInfo says 64x48"
+    ic.camera_info(_info(DIST))
     # a decompressed one (its message has no encoding field): the decoder's encoding decides
     packed = SimpleNamespace(format="png")
     depth = np.full((48, 64), 1000, np.uint16)
@@ -184,16 +189,16 @@ def test_a_raw_stereo_pair_is_rectified_in_the_ingest_and_a_raw_one_is_not_taken
     tex = cv2.normalize(tex, None, 0, 255, cv2.NORM_MINMAX).astype(np.uint8)
     rect = [tex, np.roll(tex, -6, axis=1)]  # a plane 6 px of disparity away
     raw, (info_l, info_r) = _raw_pair(rect, K, 0.1)
-    ic = IngestCamera(undistort=False, stereo_raw=True)
+    ic = IngestCamera(undistort=False, stereo_input="raw")
     assert ic.camera_info(info_l) == ""
     assert "waiting for both CameraInfos" in ic.check("image", _msg(raw[0], "mono8")).why
     assert ic.right_info(info_r) == ""
     got = [ic.check(kind, _msg(img, "mono8")) for kind, img in (("image", raw[0]), ("right", raw[1]))]
     assert all(c.why == "" and c.pixels is not None for c in got)
-    for c, want in zip(got, rect):
+    for c, want, came in zip(got, rect, raw):
         inner = (slice(20, 100), slice(30, 130))
         assert np.median(np.abs(c.pixels[inner].astype(float) - want[inner])) < 3.0
-        assert np.median(np.abs(np.asarray(raw[0][inner], float) - want[inner])) > 10  # the raw view differs
+        assert np.median(np.abs(np.asarray(came[inner], float) - want[inner])) > 10  # the raw view differs
     assert np.allclose(ic.out_camera.K, K) and not ic.out_camera.has_distortion
     right, right_P = ic.out_right
     assert right is not None and np.allclose(right.K, K) and not right.has_distortion
@@ -202,5 +207,22 @@ def test_a_raw_stereo_pair_is_rectified_in_the_ingest_and_a_raw_one_is_not_taken
     plain = IngestCamera(undistort=False)
     plain.camera_info(info_l)
     why = plain.right_info(info_r)
-    assert "describes raw images" in why and "R is not the identity" in why and "stereo_input: raw" in why
+    assert "describes raw images" in why and "R is not the identity" in why and "stereo_input to raw" in why
     assert plain.check("right", _msg(raw[1], "mono8")).why == "right image without a valid right CameraInfo"
+    # the same rectified images beside the raw cameras' CameraInfos (ROS's image_rect topics): passed as they are,
+    # published with the rectified cameras read from P
+    rect_in = IngestCamera(undistort=False, stereo_input="image_rect")
+    assert rect_in.camera_info(info_l) == "" and rect_in.right_info(info_r) == ""
+    for kind, img in (("image", rect[0]), ("right", rect[1])):
+        c = rect_in.check(kind, _msg(img, "mono8"))
+        assert c.why == "" and c.pixels is None
+    assert np.allclose(rect_in.out_camera.K, K) and not rect_in.out_camera.has_distortion
+    assert baseline_from_projection(rect_in.out_right[1]) == pytest.approx(0.1)
+    # a depth stream is not rectified with the pair: refused; a CameraInfo gone bad drops the rectification
+    depth = np.full((120, 160), 1000, np.uint16)
+    assert "is not rectified with it" in ic.check("depth", _msg(depth, "16UC1")).why
+    broken = SimpleNamespace(**{**vars(info_r), "p": [float("nan")] * 12})
+    assert "NaN" in ic.right_info(broken)
+    assert ic.check("image", _msg(raw[0], "mono8")).why.startswith("waiting for both CameraInfos")
+    assert ic.right_info(info_r) == "" and ic.check("image", _msg(raw[0], "mono8")).why == ""
+

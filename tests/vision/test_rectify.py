@@ -26,8 +26,9 @@ def _info(cam: CameraModel, R: np.ndarray, P: np.ndarray) -> SimpleNamespace:
     return SimpleNamespace(header=SimpleNamespace(frame_id="cam"), **f)
 
 
-def _rig(fisheye: bool):
-    """The raw pair and the rectification a stereo calibration gives it (each camera's R, P)."""
+def _rig(fisheye: bool, zero_disparity: bool = True):
+    """The raw pair and the rectification a stereo calibration gives it (each camera's R, P); without
+    ``zero_disparity`` (plumb_bob only) the two rectified cameras' principal points differ."""
     if fisheye:
         D1, D2 = np.array([-0.021, 0.0043, -0.0012, 0.0001]), np.array([-0.018, 0.0031, -0.0009, 0.0001])
         left = CameraModel(*SIZE, [[330.0, 0, 321.3], [0, 328.0, 238.6], [0, 0, 1]], D1, "equidistant")
@@ -39,16 +40,18 @@ def _rig(fisheye: bool):
         left = CameraModel(*SIZE, [[525.0, 0, 321.3], [0, 523.0, 238.6], [0, 0, 1]], [-0.25, 0.08, 0.001, -0.0008, 0])
         right = CameraModel(*SIZE, [[528.0, 0, 317.9], [0, 526.5, 241.2], [0, 0, 1]], [-0.22, 0.06, -0.0005, 0.001, 0])
         R1, R2, P1, P2, *_ = cv2.stereoRectify(left.K, left.D, right.K, right.D, SIZE, R_LR, T_LR.reshape(3, 1),
-                                               flags=cv2.CALIB_ZERO_DISPARITY, alpha=0)
+                                               flags=cv2.CALIB_ZERO_DISPARITY if zero_disparity else 0, alpha=0)
+        assert zero_disparity == (abs(P1[0, 2] - P2[0, 2]) < 1e-6)
     return left, right, (R1, P1), (R2, P2)
 
 
-@pytest.mark.parametrize("fisheye", [False, True])
-def test_a_raw_pair_is_rectified_from_its_camera_info(fisheye):
+@pytest.mark.parametrize("fisheye,zero_disparity", [(False, True), (False, False), (True, True)])
+def test_a_raw_pair_is_rectified_from_its_camera_info(fisheye, zero_disparity):
     """Points 1-5 m in front: their rectified pixels lie on the same row in both images, their disparity gives
     their depth in the rectified left camera (Z = f b / d), and the maps take each rectified pixel to the raw pixel
-    its ray lands on (0.05 px: OpenCV's fixed-point maps); the rectified cameras have no distortion and P's K."""
-    left, right, rp_l, rp_r = _rig(fisheye)
+    its ray lands on (0.05 px: OpenCV's fixed-point maps); the rectified cameras have no distortion and the left
+    P's K (a calibration whose right P has another principal point: the right image shifted to the left's)."""
+    left, right, rp_l, rp_r = _rig(fisheye, zero_disparity)
     rect = StereoRectification(left, rectification_of(_info(left, *rp_l)), right,
                                rectification_of(_info(right, *rp_r)))
     assert rect.baseline == pytest.approx(np.linalg.norm(T_LR), rel=1e-6)
@@ -96,3 +99,8 @@ def test_a_raw_pair_s_camera_info_is_told_from_a_rectified_one():
     bad[1, 2] += 5.0  # the right camera's rows elsewhere: no rectified pair
     with pytest.raises(CameraInfoError, match="not one rectified camera"):
         StereoRectification(left, rp_l, right, (rp_r[0], bad))
+    with pytest.raises(CameraInfoError, match="focal lengths must be positive"):
+        rectified_problem(SimpleNamespace(**{**vars(_info(ideal, np.eye(3), P)), "k": [0.0] * 9}))
+    shifted = _rig(False, zero_disparity=False)
+    with pytest.raises(CameraInfoError, match="principal points differ"):  # already rectified: no map to shift by
+        StereoRectification(shifted[0], shifted[2], shifted[1], shifted[3], rectified=True)

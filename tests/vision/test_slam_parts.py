@@ -582,6 +582,9 @@ def test_a_pose_refined_in_the_camera_s_own_pixels():
     T_ls = G.make_T(cv2.Rodrigues(best[:3])[0], best[3:])
     T_img = image_pose_lm(T0, X, px, w, fish, 50, 1e-12)
     np.testing.assert_allclose(T_img, T_ls, atol=1e-8)
+    # OpenCV projects points behind a camera to mirrored pixels: a pose with any behind it is no solution
+    behind = G.make_T(t=[0.0, 0.0, -10.0])
+    np.testing.assert_array_equal(image_pose_lm(behind, X, px, w, fish, 50, 1e-12), behind)
 
     und = fish.undistort_points(px)
     sigma2 = (np.sqrt(1.0 / w) * fish.stretch(px)) ** 2 * 9  # * 9: every match an inlier
@@ -755,27 +758,47 @@ def test_deformable_tracks_reacquire_by_descriptor_and_widely_after_a_gap():
 
 
 def test_deformable_reacquisition_radius_is_in_a_fisheye_s_own_pixels():
-    """The re-acquisition radius (``deformable_radius``, 20 px) means image pixels: where a fisheye stretches the
-    ideal image the features carry the stretch, and a feature 30 ideal pixels from its prediction is 15 image pixels
-    away at a stretch of 2 (found), 25 at 1.2 (not found, as without a stretch)."""
-    X, desc = scene()
-    ids = np.arange(0, 30)
-    seen_at = {}
-    for stretch in (None, 1.2, 2.0):
-        ctx = context(reacquire_below=8, reacquire_wide_px=20.0, deformable_radius=20.0)
-        depth_map(ctx, X, desc)
+    """The re-acquisition radius (``deformable_radius``, 20 px) means image pixels: through a fisheye, object points
+    50-60 degrees off the axis (the ideal image stretched 2-4 times there) whose features lie 15 image pixels from
+    the prediction are re-acquired, those 25 image pixels away are not; in ideal pixels (stop 100) the nearer ones
+    were 30-60 pixels off and lost."""
+    fish = CameraModel(640, 480, [[300.0, 0, 319.5], [0, 300.0, 239.5], [0, 0, 1]],
+                       [-0.021, 0.0043, -0.0012, 0.0001], "equidistant")
+    rng = np.random.default_rng(7)
+    n = 120  # (an RGB-D map starts from 100 features with depth)
+    # left and right of the centre (the image's wide side), within 20 degrees of its horizontal
+    ang, phi = np.radians(rng.uniform(50, 60, n)), np.radians(rng.uniform(-20, 20, n) + 180 * (np.arange(n) % 2))
+    rays = np.c_[np.sin(ang) * np.cos(phi), np.sin(ang) * np.sin(phi), np.cos(ang)]
+    X = rays / rays[:, 2:] * rng.uniform(2.0, 4.0, (n, 1))  # z 2-4 m
+    desc = rng.integers(0, 256, (n, 32), dtype=np.uint8)
+    px = fish.project(X)
+    assert np.all((px > 0) & (px < [639, 479]))
+
+    def features(shift_px: float) -> Features:
+        """The points' features moved ``shift_px`` image pixels radially (away from the image's centre)."""
+        out = px + shift_px * (px - [319.5, 239.5]) / np.linalg.norm(px - [319.5, 239.5], axis=1, keepdims=True)
+        return Features(out.astype(np.float32), fish.undistort_points(out), np.zeros(n, np.int32), desc,
+                        np.ones(n, np.float32), 1.2, fish.stretch(out))
+
+    found = {}
+    for shift in (15.0, 25.0):
+        ctx = SlamContext(fish, fish.K.copy(), "rgbd", 0.08,
+                          SlamConfig(reacquire_below=8, reacquire_wide_px=20.0, deformable_radius=20.0))
+        init = Initializer(ctx, LocalMapper(ctx, async_mapping=False), None)
+        ctx.frame_id += 1
+        assert init.initialize(features(0.0), X[:, 2], 0).state == OK
         tracks = DeformableTracks(ctx)
-        tracks.set_deformable(ids, X[ids])
+        ids = np.array(sorted(ctx.map.points))
+        tracks.set_deformable(ids, ctx.map._pos[ctx.map.rows(ids)])
         ctx.frame_id = 10
         tracks.new_frame(np.zeros((480, 640), np.uint8))
-        f, idx, _ = view(X, desc, np.eye(4), sel=ids, shift_px=30.0)
-        if stretch is not None:
-            f = dataclasses.replace(f, stretch=np.full(len(f), stretch))
+        f = features(shift)
+        ideal_off = np.linalg.norm(f.und - fish.undistort_points(px), axis=1)
         res = TrackResult(OK)
         tracks.observe(f, np.eye(4), res, exclude=np.zeros(0, np.int64))
-        seen_at[stretch] = (len(idx), len(res.obs_ids))
-    n = seen_at[None][0]  # (one of the points moves out of the image)
-    assert n > 25 and seen_at[None] == (n, 0) and seen_at[1.2] == (n, 0) and seen_at[2.0] == (n, n), seen_at
+        found[shift] = (len(ids), len(res.obs_ids), float(np.median(ideal_off)))
+    assert found[15.0][0] == n and found[15.0][1] == n and found[15.0][2] > 30, found
+    assert found[25.0][1] == 0, found
 
 
 def test_deformable_descriptors_of_erased_points_are_forgotten():

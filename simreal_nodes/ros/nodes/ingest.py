@@ -20,7 +20,7 @@ from simreal_nodes.ros.node import SimrealNode, guarded, run_node
 from simreal_nodes.ros.qos import data_qos
 from simreal_nodes.scene import graph
 from simreal_nodes.scene.schema import load_scene
-from simreal_nodes.vision.undistort import IngestCamera
+from simreal_nodes.vision.undistort import STEREO_INPUTS, IngestCamera
 
 
 class IngestNode(SimrealNode):
@@ -42,9 +42,14 @@ class IngestNode(SimrealNode):
         compressed = self.param("compressed", bool(cam.get("compressed", False)),
                                 "subscribe to <image>/compressed (sensor_msgs/CompressedImage) instead of raw images")
         stereo_input = self.param("stereo_input", cam.get("stereo_input", "rectified"),
-                                  "rectified | raw: a raw stereo pair is rectified here from its CameraInfos' R and P")
+                                  "rectified | raw | image_rect: what a stereo pair's images and CameraInfos are "
+                                  "(raw: rectified here from the CameraInfos' lens, R and P)")
+        if stereo_input not in STEREO_INPUTS:
+            self.get_logger().error(f"stereo_input '{stereo_input}' is none of {', '.join(STEREO_INPUTS)}: taking the "
+                                    "pair as rectified (a raw one is then refused)")
+            stereo_input = "rectified"
         self.core = IngestCamera(undistort, CameraModel.from_calibration_yaml(cal) if cal else None,
-                                 stereo_raw=stereo_input == "raw")
+                                 stereo_input=stereo_input)
         q = data_qos(self.lossless)
         self.pubs = {"image": self.create_publisher(Image, graph.CAM_IMAGE, q)}
         self.pub_info = {"image": self.create_publisher(CameraInfo, graph.CAM_INFO, q)}

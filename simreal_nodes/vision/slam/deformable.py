@@ -202,7 +202,7 @@ class DeformableTracks:
                    has_pred: np.ndarray, todo: list[int], radius: float) -> dict[int, int]:
         """Step 2 of :meth:`_measure` for the points ``todo`` (rows of ``ids_a``, ``D``, ``uv``): point id -> the
         feature (index into ``f``) it is re-acquired at. A point's candidates are the features of ``kp_idx`` within
-        ``radius`` (image pixels: a fisheye's times its stretch in ideal ones) of its search centres (its predicted
+        ``radius`` (image pixels: a fisheye's searched in its own pixels) of its search centres (its predicted
         pixel, where it has a prediction or no last observation, and its last observation); its match is the candidate
         at the least Hamming distance to the map's descriptor or to that of its last ORB match, if within 50 bits (a
         tie: the first in the order the set of candidates iterates). The centres are searched in one query and the
@@ -221,16 +221,16 @@ class DeformableTracks:
         Q = np.asarray(centres, np.float64).reshape(-1, 2)
         finite = np.all(np.isfinite(Q), axis=1)
         hits = np.empty(len(Q), object)
-        # a fisheye's radius is in its own pixels: each feature within radius times the lens's stretch there (the
-        # ideal image's pixels per image pixel); found within the largest such radius, then each held to its own
-        stretch = None if f.stretch is None else f.stretch[kp_idx]
-        reach = radius if stretch is None else radius * float(stretch.max(initial=1.0))
-        hits[finite] = cKDTree(f.und[kp_idx]).query_ball_point(Q[finite], reach, return_sorted=False)
-        if stretch is not None:
-            for q in np.flatnonzero(finite):
-                h = np.asarray(hits[q], np.int64)
-                d = np.linalg.norm(f.und[kp_idx[h]] - Q[q], axis=1)
-                hits[q] = h[d <= radius * stretch[h]].tolist()
+        if f.stretch is None:
+            hits[finite] = cKDTree(f.und[kp_idx]).query_ball_point(Q[finite], radius, return_sorted=False)
+        else:
+            # a fisheye's radius is in its own pixels (its ideal image is stretched towards the edge, more radially
+            # than across): the centres taken through the lens, the features searched where they were measured
+            cam = self.ctx.cam
+            at = cam.project(cam.backproject(Q, np.ones(len(Q))))
+            finite &= np.all(np.isfinite(at), axis=1)
+            hits[finite] = cKDTree(np.asarray(f.uv[kp_idx], np.float64)).query_ball_point(at[finite], radius,
+                                                                                          return_sorted=False)
         near: list[set[int]] = [set() for _ in todo]
         for t, ok, h in zip(owner, finite, hits):
             if ok:

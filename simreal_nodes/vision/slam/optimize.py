@@ -49,7 +49,9 @@ def image_pose_lm(T_cw: np.ndarray, P: np.ndarray, uv: np.ndarray, w: np.ndarray
     def cost(x):
         proj, J = project(x)
         r = proj - uv
-        return r, J, float(np.sum(w * np.sum(r * r, axis=1)))
+        # OpenCV projects a point behind the camera to a mirrored pixel: such a pose costs infinitely much
+        z = P @ cv2.Rodrigues(x[:3])[0][2] + x[5]
+        return r, J, float(np.sum(w * np.sum(r * r, axis=1))) if np.all(z > 1e-9) else np.inf
 
     x = np.r_[cv2.Rodrigues(T_cw[:3, :3])[0].ravel(), T_cw[:3, 3]]
     r, J, c = cost(x)
