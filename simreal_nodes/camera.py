@@ -53,14 +53,19 @@ class CameraModel:
 
     @classmethod
     def from_camera_info(cls, msg) -> CameraModel:
-        """From a sensor_msgs/CameraInfo (rclpy or rosbags message); validates it."""
+        """From a sensor_msgs/CameraInfo (rclpy or rosbags message); validates it. A CameraInfo with binning or a
+        region of interest (a camera that sends a binned or cropped part of its calibrated sensor) gives the camera of
+        the images it sends: K reduced as ROS's image_geometry reduces it (:func:`sensor_reduction`), the size the
+        region's divided by the binning; the lens coefficients are the sensor's (they act on normalized
+        coordinates, which the reduction keeps)."""
         k = np.asarray(msg.k, dtype=np.float64)
         if k.size != 9:
             raise CameraInfoError(f"CameraInfo.k has {k.size} values, expected 9")
         d = np.asarray(msg.d, dtype=np.float64)
         model = str(msg.distortion_model)
         frame = str(msg.header.frame_id) or "camera_optical_frame"
-        return cls(int(msg.width), int(msg.height), k.reshape(3, 3), d, model, frame)
+        S, (w, h) = sensor_reduction(msg)
+        return cls(w, h, S @ k.reshape(3, 3), d, model, frame)
 
     def validate(self) -> None:
         if self.width <= 0 or self.height <= 0:
@@ -367,4 +372,35 @@ def _larger_singular_value(a, b, c, e):
     """The larger singular value of each 2 x 2 matrix [[a, b], [c, e]] (arrays of the entries)."""
     p, q = (a * a + b * b + c * c + e * e) / 2, a * e - b * c
     return np.sqrt(p + np.sqrt(np.maximum(p * p - q * q, 0.0)))
+
+
+def sensor_reduction(msg) -> tuple[np.ndarray, tuple[int, int]]:
+    """The 3 x 3 map S from a CameraInfo's full-sensor pixels to the pixels of the images the camera sends, and their
+    size (width, height): its binning (``binning_x`` / ``binning_y``, 0 or 1 for none) and region of interest
+    (``roi``, in full-sensor pixels; all zero for the whole sensor), as REP 104 defines them and ROS's image_geometry
+    applies them (u' = (u - x_offset) / binning_x: K' = S K, P' = S P). The identity and the CameraInfo's own size
+    when it has neither; CameraInfoError for a binning or region that does not fit the sensor."""
+    try:
+        W, H = int(msg.width), int(msg.height)
+        bx, by = int(getattr(msg, "binning_x", 0) or 0), int(getattr(msg, "binning_y", 0) or 0)
+        roi = getattr(msg, "roi", None)
+        rx, ry, rw, rh = ((int(roi.x_offset), int(roi.y_offset), int(roi.width), int(roi.height)) if roi is not None
+                          else (0, 0, 0, 0))
+    except (TypeError, ValueError, OverflowError, AttributeError) as e:
+        raise CameraInfoError(f"CameraInfo size, binning or region of interest is not whole numbers: {e}") from None
+    if W <= 0 or H <= 0:  # (no sensor to reduce: the model's own check says so)
+        return np.eye(3), (W, H)
+    if bx < 0 or by < 0:
+        raise CameraInfoError(f"CameraInfo binning {bx} x {by} is negative")
+    bx, by = max(bx, 1), max(by, 1)
+    if rw == 0 and rh == 0 and rx == 0 and ry == 0:  # all zero: the whole sensor
+        rw, rh = W, H
+    if rw <= 0 or rh <= 0 or rx < 0 or ry < 0 or rx + rw > W or ry + rh > H:
+        raise CameraInfoError(f"CameraInfo region of interest {rw}x{rh} at ({rx}, {ry}) does not fit its {W}x{H} "
+                              "sensor")
+    w, h = rw // bx, rh // by
+    if w <= 0 or h <= 0:
+        raise CameraInfoError(f"CameraInfo binning {bx} x {by} leaves no pixel of the {rw}x{rh} region")
+    S = np.array([[1.0 / bx, 0.0, -rx / bx], [0.0, 1.0 / by, -ry / by], [0.0, 0.0, 1.0]])
+    return S, (w, h)
 

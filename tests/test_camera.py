@@ -175,3 +175,42 @@ def test_a_fisheyes_stretch_is_the_undistortions_jacobian_in_closed_form():
             np.testing.assert_allclose(cam.stretch(np.array([[cam.cx, cam.cy]])), 1.0, rtol=1e-9)
     far = np.array([[cam.cx + 280 * 1.7, cam.cy]])  # past 90 degrees
     assert np.isnan(cam.stretch(far)).all() and np.isnan(cam.undistort_points(far)).all()
+
+
+@pytest.mark.parametrize("model,D", [("plumb_bob", [-0.25, 0.08, 0.001, -0.0008, 0.0]), ("equidistant", FISHEYE_D)])
+def test_a_binned_and_cropped_camera_info_gives_the_camera_of_the_images_sent(model, D):
+    """REP 104: a CameraInfo's K and D are the full sensor's; with binning and a region of interest the camera sends
+    the region binned (image_geometry reduces K so). The model is the sent images' camera: its size the region's over
+    the binning, and every ray lands where the full camera puts it, moved and divided as the pixels are (1e-9 px);
+    the undistortion agrees the same way. A region off the sensor or a binning that leaves no pixel is refused;
+    binning 0 or 1 and an all-zero region are the whole sensor."""
+    from types import SimpleNamespace
+
+    from simreal_nodes.camera import sensor_reduction
+
+    K = [400.0, 0, 321.3, 0, 398.0, 238.6, 0, 0, 1]
+    full = CameraModel.from_camera_info(Info(640, 480, K, D, model))
+
+    def info(bx, by, roi):
+        m = Info(640, 480, K, D, model)
+        m.binning_x, m.binning_y = bx, by
+        m.roi = SimpleNamespace(x_offset=roi[0], y_offset=roi[1], width=roi[2], height=roi[3], do_rectify=False)
+        return m
+
+    cam = CameraModel.from_camera_info(info(2, 2, (100, 50, 400, 300)))
+    assert (cam.width, cam.height) == (200, 150) and cam.fisheye == full.fisheye
+    rng = np.random.default_rng(5)
+    P = np.c_[rng.uniform(-0.4, 0.5, 100), rng.uniform(-0.3, 0.3, 100), np.ones(100)] * rng.uniform(1, 3, (100, 1))
+    np.testing.assert_allclose(cam.project(P), (full.project(P) - [100, 50]) / 2, atol=1e-9)
+    np.testing.assert_allclose(cam.project(P, distort=False), (full.project(P, distort=False) - [100, 50]) / 2,
+                               atol=1e-9)
+    uv = full.project(P)
+    np.testing.assert_allclose(cam.undistort_points((uv - [100, 50]) / 2), (full.undistort_points(uv) - [100, 50]) / 2,
+                               atol=1e-6)
+    for plain in (info(0, 0, (0, 0, 0, 0)), info(1, 1, (0, 0, 640, 480)), Info(640, 480, K, D, model)):
+        S, size = sensor_reduction(plain)
+        assert size == (640, 480) and np.array_equal(S, np.eye(3))
+    with pytest.raises(CameraInfoError, match="does not fit its 640x480 sensor"):
+        CameraModel.from_camera_info(info(1, 1, (400, 0, 400, 480)))
+    with pytest.raises(CameraInfoError, match="leaves no pixel"):
+        CameraModel.from_camera_info(info(1000, 1, (0, 0, 0, 0)))

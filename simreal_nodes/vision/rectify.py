@@ -15,7 +15,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from simreal_nodes.camera import CameraModel
+from simreal_nodes.camera import CameraModel, sensor_reduction
 from simreal_nodes.errors import CameraInfoError
 
 IDENTITY_TOL = 1e-6  # a CameraInfo's R and K against the identity and P's 3 x 3 (a rectified pair's own, exact)
@@ -31,7 +31,7 @@ def rectification_of(msg) -> tuple[np.ndarray, np.ndarray]:
     if not (np.all(np.isfinite(r)) and np.all(np.isfinite(p))):
         raise CameraInfoError("CameraInfo R or P has NaN or inf entries")
     R = r.reshape(3, 3) if np.any(r) else np.eye(3)
-    P = p.reshape(3, 4)
+    P = sensor_reduction(msg)[0] @ p.reshape(3, 4)  # (binning and a region of interest, as for K)
     if P[0, 0] <= 0 or P[1, 1] <= 0 or abs(P[2, 2] - 1.0) > 1e-9:
         raise CameraInfoError(f"CameraInfo P is not a rectified camera's projection: {P.tolist()}")
     if abs(np.linalg.det(R) - 1.0) > 1e-3 or not np.allclose(R @ R.T, np.eye(3), atol=1e-3):

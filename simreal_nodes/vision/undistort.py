@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from simreal_nodes.camera import CameraModel
+from simreal_nodes.camera import CameraModel, sensor_reduction
 from simreal_nodes.errors import CameraInfoError, ImageFormatError
 from simreal_nodes.io import images
 from simreal_nodes.io.sources import Frame
@@ -128,7 +128,8 @@ class IngestCamera:
             return str(e)
         self.right = right
         P = np.asarray(msg.p, dtype=np.float64)
-        self.right_P = P.reshape(3, 4) if P.size == 12 and np.all(np.isfinite(P)) else None
+        # (of the images the camera sends, as K: a binned or cropped sensor's)
+        self.right_P = sensor_reduction(msg)[0] @ P.reshape(3, 4) if P.size == 12 and np.all(np.isfinite(P)) else None
         if self._by_p:
             self._rectify()
             return self.rect_error
