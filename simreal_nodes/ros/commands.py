@@ -144,14 +144,15 @@ def replay(bag: str, scene_file: str, rate: float = 1.0, lossless: bool = False,
         raise BagError(f"bag {bag} has no topic {img} (the scene's camera.image){hint}; it has: "
                        f"{', '.join(sorted(topics)) or 'no topics'}")
     right = image_topic(cam, right=True)
-    wanted = [img, cam["camera_info"], cam["depth"], right, cam["right_camera_info"]]
+    depth_info = cam.get("depth_camera_info")
+    wanted = [img, cam["camera_info"], cam["depth"], depth_info, right, cam["right_camera_info"]]
     inputs = {t: topics[t] for t in wanted if t and t in topics}
-    for t, key in ((cam["camera_info"], "camera_info"), (cam["depth"], "depth"), (right, "right_image"),
-                   (cam["right_camera_info"], "right_camera_info")):
+    for t, key in ((cam["camera_info"], "camera_info"), (cam["depth"], "depth"), (depth_info, "depth_camera_info"),
+                   (right, "right_image"), (cam["right_camera_info"], "right_camera_info")):
         if t and t not in topics:  # the nodes that need it wait for it: every frame would time out in lossless
             echo(f"[replay] warning: bag {bag} has no topic {t} (the scene's camera.{key}); the nodes that read it "
                  "will wait for it")
-    hold_for = tuple(t for t in (cam["depth"], right, cam["right_camera_info"]) if t and t in topics)
+    hold_for = tuple(t for t in (cam["depth"], depth_info, right, cam["right_camera_info"]) if t and t in topics)
 
     if standby is None:
         standby = not lossless

@@ -59,6 +59,8 @@ def ingest_work(scene: dict, source: str | None = None) -> list[str]:
         why.append("decompresses the images")
     if cam["undistort"]:
         why.append("undistorts the images")
+    if cam.get("depth_camera_info") and cam.get("depth"):
+        why.append("registers the depth images to the colour camera")
     if cam.get("stereo_input") == "raw" and cam.get("right_image"):
         why.append("rectifies the raw stereo pair")
     if cam.get("stereo_input") == "image_rect" and cam.get("right_image"):
@@ -259,8 +261,9 @@ def required_nodes(scene: dict, lossless: bool = False, source: str | None = Non
         if stereo:
             ingest_out[CAM_RIGHT_IMAGE] = "sensor_msgs/msg/Image"
             ingest_out[CAM_RIGHT_INFO] = "sensor_msgs/msg/CameraInfo"
-        ingest_in = [x for x in (image_topic(cam), cam["camera_info"], cam["depth"], image_topic(cam, right=True),
-                                 cam["right_camera_info"]) if x] if (source or cam["source"]) == "topic" else []
+        ingest_in = [x for x in (image_topic(cam), cam["camera_info"], cam["depth"], cam.get("depth_camera_info"),
+                                 image_topic(cam, right=True), cam["right_camera_info"]) if x] \
+            if (source or cam["source"]) == "topic" else []
         nodes.append(NodeSpec("ingest", dict(common, **({"source": source} if source else {})), ingest_in,
                               ingest_out))
     else:

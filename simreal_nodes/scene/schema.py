@@ -41,7 +41,13 @@ POSE7 = "a pose [x, y, z, qx, qy, qz, qw] (metres, unit quaternion)"
 CAMERA = Record({
     "image": Topic("colour or grey image topic", default="/camera/image_raw"),
     "camera_info": Topic("CameraInfo of the image", default="/camera/camera_info"),
-    "depth": Topic("depth image (16UC1 mm or 32FC1 m), registered to the colour image", nullable=True),
+    "depth": Topic("depth image (16UC1 mm or 32FC1 m), registered to the colour image unless "
+                   "depth_camera_info says otherwise", nullable=True),
+    "depth_camera_info": Topic("CameraInfo of the depth images' own camera, when they are not registered to the "
+                               "colour image (a depth camera beside the colour one, e.g. RealSense without "
+                               "align_depth): with depth_to_color the ingest registers them", nullable=True),
+    "depth_to_color": Vector(7, what=POSE7, doc="the depth camera's optical frame in the colour camera's optical "
+                             "frame (what a driver publishes on /tf_static between the two)", nullable=True),
     "right_image": Topic("right image of a stereo pair (see stereo_input)", nullable=True),
     "right_camera_info": Topic("CameraInfo of the right camera", nullable=True),
     "stereo_input": Enum(("rectified", "raw", "image_rect"), "rectified: the pair's images are rectified and "
@@ -61,10 +67,10 @@ CAMERA = Record({
     "rate_hz": Number("publishing rate for video / image-folder sources", lo=0, lo_open=True, default=30.0),
     "loop": Bool("restart a bag / video / folder source at its end", default=False),
     "ingest": Enum(("auto", "always"), "auto: the ingest node starts only when it has work (a file source, "
-                   "compressed images, undistortion, a raw stereo pair, a calibration file) or is the scene's only "
-                   "node; otherwise the "
-                   "nodes read the camera topics themselves, one hop less per frame. always: every frame goes "
-                   "through the ingest (its /diagnostics name each frame it refuses)", default="auto"),
+                   "compressed images, undistortion, a stereo pair read through its R and P, depth to register, a "
+                   "calibration file) or is the scene's only node; otherwise the nodes read the camera topics "
+                   "themselves, one hop less per frame. always: every frame goes through the ingest (its "
+                   "/diagnostics name each frame it refuses)", default="auto"),
 })
 
 MARKERS = Record({
@@ -350,6 +356,10 @@ def _cross_checks(scene: dict, ctx: Context) -> None:
                          "'stereo'")
     if cam["source"] != "topic" and cam["path"] is None:
         raise SceneError(f"{src}: camera.path: required for camera.source '{cam['source']}'; found nothing")
+    if (cam["depth_camera_info"] is None) != (cam["depth_to_color"] is None) or (
+            cam["depth_camera_info"] is not None and (cam["depth"] is None or cam["source"] != "topic")):
+        raise SceneError(f"{src}: camera.depth_camera_info / camera.depth_to_color: registering a depth camera's "
+                         "images to the colour camera needs both, camera.depth and camera.source 'topic'")
     if cam["stereo_input"] != "rectified" and (cam["right_image"] is None or cam["right_camera_info"] is None
                                                or cam["calibration"] is not None or cam["source"] != "topic"
                                                or cam["depth"] is not None):

@@ -57,9 +57,16 @@ class IngestCamera:
     ``image_rect``, rectified images beside the raw cameras' CameraInfos (ROS's image_rect topics), their cameras
     read from P. With ``raw`` and ``image_rect`` the published CameraInfos are the rectified cameras'."""
 
-    def __init__(self, undistort: bool, calibration: CameraModel | None = None, stereo_input: str = "rectified"):
+    def __init__(self, undistort: bool, calibration: CameraModel | None = None, stereo_input: str = "rectified",
+                 depth_to_color: np.ndarray | None = None):
+        """``depth_to_color``: the depth images come from a camera of their own, whose optical frame this pose (4 x 4)
+        places in the colour camera's: they are registered to the colour camera here (:meth:`depth_info` gives
+        their camera; :func:`~simreal_nodes.vision.depth.register_depth`)."""
         if stereo_input not in STEREO_INPUTS:
             raise ValueError(f"stereo_input '{stereo_input}': one of {', '.join(STEREO_INPUTS)}")
+        self.depth_to_color = None if depth_to_color is None else np.asarray(depth_to_color, np.float64)
+        self.depth_cam: CameraModel | None = None
+        self.depth_error = ""
         self.undistort = undistort
         self.calibration = calibration
         self.stereo_input = stereo_input
@@ -134,6 +141,32 @@ class IngestCamera:
             self._rectify()
             return self.rect_error
         return ""
+
+    def depth_info(self, msg) -> str:
+        """Take the depth camera's CameraInfo (depth images registered here): '' or why it is unusable."""
+        try:
+            self.depth_cam, self.depth_error = CameraModel.from_camera_info(msg), ""
+        except CameraInfoError as e:
+            self.depth_cam, self.depth_error = None, str(e)
+        return self.depth_error
+
+    def _registered(self, arr: np.ndarray, encoding: str) -> Checked:
+        """A depth image of the depth camera registered to the colour camera, in its own encoding (millimetres with
+        0 for none, or metres with NaN)."""
+        from simreal_nodes.vision.depth import register_depth
+
+        if self.depth_cam is None:
+            return Checked(f"unusable depth CameraInfo: {self.depth_error}" if self.depth_error
+                           else "waiting for the depth camera's CameraInfo to register the depth image")
+        assert self.cam is not None and self.depth_to_color is not None
+        if (arr.shape[1], arr.shape[0]) != (self.depth_cam.width, self.depth_cam.height):
+            return Checked(f"depth image is {arr.shape[1]}x{arr.shape[0]} but its CameraInfo says "
+                           f"{self.depth_cam.width}x{self.depth_cam.height}")
+        z = register_depth(images.depth_to_metres(arr, encoding), self.depth_cam, self.cam, self.depth_to_color)
+        if encoding == "32FC1":
+            return Checked(pixels=z)
+        mm = np.rint(np.nan_to_num(z, nan=0.0) * 1e3)
+        return Checked(pixels=np.where(mm <= 65535, mm, 0).astype(np.uint16))
 
     def _rectify(self) -> None:
         """The pair's rectification, (re)built once both CameraInfos are in hand (kept while they stay)."""
@@ -221,6 +254,14 @@ class IngestCamera:
             if (arr.shape[1], arr.shape[0]) != (self.right.width, self.right.height):
                 return Checked(f"right image is {arr.shape[1]}x{arr.shape[0]} but its CameraInfo says "
                                f"{self.right.width}x{self.right.height}")
+        if kind == "depth" and self.depth_to_color is not None:
+            if self.cam is None:
+                return Checked("waiting for a valid CameraInfo to register the depth image to")
+            reg = self._registered(arr, enc or "")
+            if reg.why or self._und is None:
+                return reg
+            assert reg.pixels is not None
+            return Checked(pixels=self.undistorted(kind, reg.pixels))
         if self._rect is not None and kind in ("image", "right"):
             return Checked(pixels=self._rect.left(arr) if kind == "image" else self._rect.right(arr))
         return Checked(pixels=self.undistorted(kind, arr) if kind != "right" and self._und is not None else None)

@@ -44,6 +44,8 @@ def test_minimal_scene_gets_defaults_and_starts_only_ingest(tmp_path):
     ("{right_image: /r, right_camera_info: /ri, stereo_input: image_rect}", None,
      ["publishes the image_rect pair's rectified cameras"]),
     ("{right_image: /r, right_camera_info: /ri}", None, []),  # rectified (the default): read as they are
+    ("{depth: /d, depth_camera_info: /di, depth_to_color: [-0.015, 0, 0, 0, 0, 0, 1]}", None,
+     ["registers the depth images to the colour camera"]),
 ])
 def test_the_ingest_starts_only_when_it_has_work(tmp_path, camera, source, why):
     """Issue 18: no hop that does nothing. Without decompression, undistortion, a calibration file or a file to read,
@@ -83,6 +85,9 @@ def test_the_ingest_starts_only_when_it_has_work(tmp_path, camera, source, why):
     (BASE + "camera: {stereo_input: raw, right_image: /r, right_camera_info: /ri, depth: /d}\n",
      r"no camera.calibration or camera.depth"),
     (BASE + "camera: {stereo_input: rectify}\n", r"camera.stereo_input: expected one of 'rectified', 'raw'"),
+    (BASE + "camera: {depth: /d, depth_camera_info: /di}\n", r"registering a depth camera's images .* needs both"),
+    (BASE + "camera: {depth_camera_info: /di, depth_to_color: [0, 0, 0, 0, 0, 0, 1]}\n",
+     r"needs both, camera.depth"),
     (BASE + "camera: {image: camera/image}\n", r"camera.image: expected a ROS topic name"),
     (BASE.replace("simreal_scene: 1", "simreal_scene: 7"), r"simreal_scene: expected format version 1; found 7"),
     (BASE.replace("name: cam_only\n", ""), r"name: required key is missing"),

@@ -226,3 +226,36 @@ def test_a_raw_stereo_pair_is_rectified_in_the_ingest_and_a_raw_one_is_not_taken
     assert ic.check("image", _msg(raw[0], "mono8")).why.startswith("waiting for both CameraInfos")
     assert ic.right_info(info_r) == "" and ic.check("image", _msg(raw[0], "mono8")).why == ""
 
+
+
+def test_a_depth_camera_s_images_are_registered_to_the_colour_camera_in_the_ingest():
+    """With ``depth_to_color`` the ingest registers the depth images of their own camera (its CameraInfo) to the
+    colour camera, in their own encoding (millimetres with 0 for none, or metres with NaN), and says what it waits
+    for: the colour CameraInfo, the depth CameraInfo; a depth image of another size than its CameraInfo is refused."""
+    from simreal_nodes import geometry as G
+    from simreal_nodes.vision.depth import register_depth
+    from tests.vision.test_depth import _scene_depth
+
+    color = CameraModel(160, 120, [[150.0, 0, 80.5], [0, 150.0, 60.2], [0, 0, 1]], [0.04, -0.01, 0, 0, 0])
+    depth_cam = CameraModel(160, 120, [[145.0, 0, 79.3], [0, 145.0, 59.1], [0, 0, 1]], [-0.03, 0.01, 0, 0, 0])
+    T = G.make_T(G.exp_so3([0.004, -0.006, 0.003]), [-0.025, 0.001, 0.002])
+    raw = _scene_depth(depth_cam, T)
+    mm = np.where(np.isfinite(raw), np.rint(raw * 1e3), 0).astype(np.uint16)
+    ic = IngestCamera(undistort=False, depth_to_color=T)
+    assert ic.check("depth", _msg(mm, "16UC1")).why == "waiting for a valid CameraInfo to register the depth image to"
+    ic.camera_info(_info(color))
+    assert "waiting for the depth camera's CameraInfo" in ic.check("depth", _msg(mm, "16UC1")).why
+    bad = _info(depth_cam)
+    bad.k = [0.0] * 9
+    assert ic.depth_info(bad) != "" and ic.check("depth", _msg(mm, "16UC1")).why.startswith("unusable depth")
+    assert ic.depth_info(_info(depth_cam)) == ""
+    got = ic.check("depth", _msg(mm, "16UC1"))
+    want = register_depth(mm.astype(np.float32) * 1e-3, depth_cam, color, T)
+    assert got.why == "" and got.pixels.dtype == np.uint16 and got.pixels.shape == (120, 160)
+    np.testing.assert_array_equal(got.pixels, np.where(np.isfinite(want), np.rint(want * 1e3), 0).astype(np.uint16))
+    truth = _scene_depth(color, np.eye(4))
+    near = (got.pixels > 0) & np.isfinite(truth)
+    assert near.mean() > 0.9 and np.median(np.abs(got.pixels[near] * 1e-3 - truth[near])) < 1e-3
+    metres = ic.check("depth", _msg(raw, "32FC1"))
+    assert metres.pixels.dtype == np.float32 and np.isnan(metres.pixels).any()
+    assert "is 160x100 but its CameraInfo says 160x120" in ic.check("depth", _msg(mm[:100], "16UC1")).why

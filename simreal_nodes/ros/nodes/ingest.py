@@ -8,9 +8,11 @@ wins), images undistorted if asked. A malformed Image or unusable CameraInfo is 
 from __future__ import annotations
 
 import functools
+import math
 
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image
 
+from simreal_nodes import geometry as G
 from simreal_nodes.camera import CameraModel
 from simreal_nodes.errors import ImageFormatError
 from simreal_nodes.io import images, sources
@@ -48,8 +50,25 @@ class IngestNode(SimrealNode):
             self.get_logger().error(f"stereo_input '{stereo_input}' is none of {', '.join(STEREO_INPUTS)}: taking the "
                                     "pair as rectified (a raw one is then refused)")
             stereo_input = "rectified"
+        depth_info = self.param("depth_camera_info_topic", cam.get("depth_camera_info") or "",
+                                "CameraInfo of the depth images' own camera ('' = depth registered to the colour "
+                                "image); with depth_to_color the depth is registered here")
+        pose_text = self.param("depth_to_color", " ".join(str(float(x)) for x in (cam.get("depth_to_color") or [])),
+                               "the depth camera's optical frame in the colour camera's: 'x y z qx qy qz qw' "
+                               "(metres, unit quaternion; '' = none)")
+        try:
+            pose7 = [float(x) for x in str(pose_text).split()]
+        except ValueError:
+            pose7 = [float("nan")]
+        to_color = None
+        if depth_info and len(pose7) == 7 and all(map(math.isfinite, pose7)) and math.hypot(*pose7[3:]) > 0.5:
+            to_color = G.pose7_to_matrix(pose7)
+        elif depth_info or pose7:
+            self.get_logger().error("depth registration needs both depth_camera_info_topic and a finite 7-value "
+                                    "depth_to_color: the depth is passed on as registered")
+            depth_info = ""
         self.core = IngestCamera(undistort, CameraModel.from_calibration_yaml(cal) if cal else None,
-                                 stereo_input=stereo_input)
+                                 stereo_input=stereo_input, depth_to_color=to_color)
         q = data_qos(self.lossless)
         self.pubs = {"image": self.create_publisher(Image, graph.CAM_IMAGE, q)}
         self.pub_info = {"image": self.create_publisher(CameraInfo, graph.CAM_INFO, q)}
@@ -64,6 +83,8 @@ class IngestNode(SimrealNode):
             self._subscribe_image("image", self.image_topic, compressed, trigger)
             if self.depth_topic:
                 self._subscribe_image("depth", self.depth_topic, False, q)
+                if depth_info:
+                    self.create_subscription(CameraInfo, depth_info, self.on_depth_info, q)
             if right_topic:
                 self.create_subscription(CameraInfo, right_info, self.on_right_info, q)
                 self._subscribe_image("right", right_topic, compressed, q)
@@ -82,6 +103,11 @@ class IngestNode(SimrealNode):
             if why != before:
                 self.get_logger().error(f"unusable CameraInfo on {self.info_topic}: {why}")
             self.set_status("error", f"unusable CameraInfo: {why}")
+
+    @guarded
+    def on_depth_info(self, msg: CameraInfo) -> None:
+        if why := self.core.depth_info(msg):
+            self.set_status("error", f"unusable depth CameraInfo: {why}")
 
     @guarded
     def on_right_info(self, msg: CameraInfo) -> None:
