@@ -11,6 +11,7 @@ scene calls :func:`build_spec_models` first; the nodes, which validate the same 
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Any
 
@@ -356,6 +357,8 @@ def _cross_checks(scene: dict, ctx: Context) -> None:
                          "'stereo'")
     if cam["source"] != "topic" and cam["path"] is None:
         raise SceneError(f"{src}: camera.path: required for camera.source '{cam['source']}'; found nothing")
+    if cam["depth_to_color"] is not None and math.hypot(*cam["depth_to_color"][3:]) < 1e-6:
+        raise SceneError(f"{src}: camera.depth_to_color: its quaternion (the last four values) is zero: no rotation")
     if (cam["depth_camera_info"] is None) != (cam["depth_to_color"] is None) or (
             cam["depth_camera_info"] is not None and (cam["depth"] is None or cam["source"] != "topic")):
         raise SceneError(f"{src}: camera.depth_camera_info / camera.depth_to_color: registering a depth camera's "

@@ -58,10 +58,12 @@ class IngestCamera:
     read from P. With ``raw`` and ``image_rect`` the published CameraInfos are the rectified cameras'."""
 
     def __init__(self, undistort: bool, calibration: CameraModel | None = None, stereo_input: str = "rectified",
-                 depth_to_color: np.ndarray | None = None):
+                 depth_to_color: np.ndarray | None = None, depth_refused: str = ""):
         """``depth_to_color``: the depth images come from a camera of their own, whose optical frame this pose (4 x 4)
         places in the colour camera's: they are registered to the colour camera here (:meth:`depth_info` gives
-        their camera; :func:`~simreal_nodes.vision.depth.register_depth`)."""
+        their camera; :func:`~simreal_nodes.vision.depth.register_depth`). ``depth_refused``: why depth images
+        cannot be registered as asked (a bad pose): each is refused with it rather than passed on unregistered."""
+        self.depth_refused = depth_refused
         if stereo_input not in STEREO_INPUTS:
             raise ValueError(f"stereo_input '{stereo_input}': one of {', '.join(STEREO_INPUTS)}")
         self.depth_to_color = None if depth_to_color is None else np.asarray(depth_to_color, np.float64)
@@ -254,6 +256,8 @@ class IngestCamera:
             if (arr.shape[1], arr.shape[0]) != (self.right.width, self.right.height):
                 return Checked(f"right image is {arr.shape[1]}x{arr.shape[0]} but its CameraInfo says "
                                f"{self.right.width}x{self.right.height}")
+        if kind == "depth" and self.depth_refused:
+            return Checked(self.depth_refused)
         if kind == "depth" and self.depth_to_color is not None:
             if self.cam is None:
                 return Checked("waiting for a valid CameraInfo to register the depth image to")

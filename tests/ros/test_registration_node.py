@@ -71,8 +71,8 @@ def test_depth_from_a_camera_of_its_own_is_registered_by_the_ingest(tmp_path):
     """The family scene's depth re-made as a depth camera 25 mm aside sees it (its own K and lens, a small turn; its
     CameraInfo on /camera/depth/camera_info), as a RealSense without align_depth publishes it. With
     `camera.depth_camera_info` and `camera.depth_to_color` the ingest registers it to the colour camera: the beam is
-    registered and tracked and the camera is where the registered bag puts it (scratch, 6 s at 320 x 240: 4.5 mm
-    rms against 4.8 mm from the rendered registered depth, 11.7 mm with the unregistered depth read as registered)."""
+    registered and tracked and the camera is where the registered bag puts it (scratch, 6 s at 320 x 240: 4.9 mm
+    rms against 4.7 mm from the rendered registered depth, 11.6 mm with the unregistered depth read as registered)."""
     import json
 
     import numpy as np
@@ -122,4 +122,5 @@ def test_depth_from_a_camera_of_its_own_is_registered_by_the_ingest(tmp_path):
     assert reasons and not reasons[-1].startswith("waiting for registration"), reasons[-1]
     assert main(["eval-trajectory", str(out), "--truth", str(src / "fam"),
                  "--json", str(tmp_path / "t.json")]) == 0
-    assert json.loads((tmp_path / "t.json").read_text())["rmse"] < 0.015
+    # this clip, scratch: 3.4 mm rms registered here, 15.2 mm with the same depth read as registered
+    assert json.loads((tmp_path / "t.json").read_text())["rmse"] < 0.007

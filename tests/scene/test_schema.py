@@ -86,6 +86,8 @@ def test_the_ingest_starts_only_when_it_has_work(tmp_path, camera, source, why):
      r"no camera.calibration or camera.depth"),
     (BASE + "camera: {stereo_input: rectify}\n", r"camera.stereo_input: expected one of 'rectified', 'raw'"),
     (BASE + "camera: {depth: /d, depth_camera_info: /di}\n", r"registering a depth camera's images .* needs both"),
+    (BASE + "camera: {depth: /d, depth_camera_info: /di, depth_to_color: [0, 0, 0, 0, 0, 0, 0]}\n",
+     r"camera.depth_to_color: its quaternion .* is zero"),
     (BASE + "camera: {depth_camera_info: /di, depth_to_color: [0, 0, 0, 0, 0, 0, 1]}\n",
      r"needs both, camera.depth"),
     (BASE + "camera: {image: camera/image}\n", r"camera.image: expected a ROS topic name"),

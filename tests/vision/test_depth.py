@@ -142,3 +142,30 @@ def test_a_depth_camera_s_image_is_registered_to_the_colour_camera():
         register_depth(raw[:100], DEPTH_CAM, COLOR, T_COLOR_DEPTH)
     # nothing valid: nothing registered
     assert np.isnan(register_depth(np.zeros_like(raw), DEPTH_CAM, COLOR, T_COLOR_DEPTH)).all()
+
+
+def test_depth_registration_at_the_extremes():
+    """A depth camera 4.6 times coarser than the colour camera still covers the colour image (footprints of several
+    pixels, centred); a strong barrel colour lens (k1 = -0.3) does not take points far outside its view back into
+    the image (its polynomial folds back there); a frame whose depth reaches nothing in the colour view, or has none,
+    registers to no depth rather than failing."""
+    from simreal_nodes.vision.depth import register_depth
+
+    coarse = CameraModel(140, 104, [[580.0 / 4.6, 0, 69.5], [0, 580.0 / 4.6, 51.5], [0, 0, 1]])
+    truth = _scene_depth(COLOR, np.eye(4))
+    reg = register_depth(_scene_depth(coarse, T_COLOR_DEPTH), coarse, COLOR, T_COLOR_DEPTH)
+    ok = np.isfinite(reg)
+    assert ok.mean() > 0.97, ok.mean()
+    assert np.median(np.abs(reg[ok] - truth[ok])) < 2e-3
+
+    barrel = CameraModel(640, 480, [[600.0, 0, 320.0], [0, 600.0, 240.0], [0, 0, 1]], [-0.3, 0.0, 0.0, 0.0, 0.0])
+    wide = CameraModel(640, 480, [[150.0, 0, 320.0], [0, 150.0, 240.0], [0, 0, 1]])  # 130 degrees across
+    far_off = np.full((480, 640), 0.6, np.float32)
+    far_off[:, 200:440] = np.nan  # only what lies 50-65 degrees off the axis, beyond the barrel camera's view
+    reg = register_depth(far_off, wide, barrel, np.eye(4))
+    assert np.isnan(reg).all(), np.isfinite(reg).sum()
+    assert barrel.project(np.array([[np.tan(np.radians(60)), 0.0, 1.0]]))[0, 0] < 640  # (folded back inside)
+
+    behind = G.make_T(G.exp_so3([0.0, np.pi, 0.0]), [0.0, 0.0, 0.0])  # the depth camera looking backwards
+    assert np.isnan(register_depth(_scene_depth(DEPTH_CAM, T_COLOR_DEPTH), DEPTH_CAM, COLOR, behind)).all()
+    assert np.isnan(register_depth(np.full((480, 640), np.nan, np.float32), DEPTH_CAM, COLOR, T_COLOR_DEPTH)).all()

@@ -259,3 +259,7 @@ def test_a_depth_camera_s_images_are_registered_to_the_colour_camera_in_the_inge
     metres = ic.check("depth", _msg(raw, "32FC1"))
     assert metres.pixels.dtype == np.float32 and np.isnan(metres.pixels).any()
     assert "is 160x100 but its CameraInfo says 160x120" in ic.check("depth", _msg(mm[:100], "16UC1")).why
+    refused = IngestCamera(undistort=False, depth_refused="depth registration needs a pose")
+    refused.camera_info(_info(color))
+    assert refused.check("depth", _msg(mm, "16UC1")).why == "depth registration needs a pose"
+

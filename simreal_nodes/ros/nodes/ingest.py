@@ -60,15 +60,15 @@ class IngestNode(SimrealNode):
             pose7 = [float(x) for x in str(pose_text).split()]
         except ValueError:
             pose7 = [float("nan")]
-        to_color = None
-        if depth_info and len(pose7) == 7 and all(map(math.isfinite, pose7)) and math.hypot(*pose7[3:]) > 0.5:
+        to_color, refused = None, ""
+        if depth_info and len(pose7) == 7 and all(map(math.isfinite, pose7)) and math.hypot(*pose7[3:]) > 1e-6:
             to_color = G.pose7_to_matrix(pose7)
         elif depth_info or pose7:
-            self.get_logger().error("depth registration needs both depth_camera_info_topic and a finite 7-value "
-                                    "depth_to_color: the depth is passed on as registered")
-            depth_info = ""
+            refused = (f"depth registration needs depth_camera_info_topic and depth_to_color 'x y z qx qy qz qw' "
+                       f"(finite, a non-zero quaternion); got '{depth_info}' and '{pose_text}'")
+            self.get_logger().error(refused + ": no depth is passed on")
         self.core = IngestCamera(undistort, CameraModel.from_calibration_yaml(cal) if cal else None,
-                                 stereo_input=stereo_input, depth_to_color=to_color)
+                                 stereo_input=stereo_input, depth_to_color=to_color, depth_refused=refused)
         q = data_qos(self.lossless)
         self.pubs = {"image": self.create_publisher(Image, graph.CAM_IMAGE, q)}
         self.pub_info = {"image": self.create_publisher(CameraInfo, graph.CAM_INFO, q)}
@@ -106,7 +106,10 @@ class IngestNode(SimrealNode):
 
     @guarded
     def on_depth_info(self, msg: CameraInfo) -> None:
+        before = self.core.depth_error
         if why := self.core.depth_info(msg):
+            if why != before:
+                self.get_logger().error(f"unusable depth CameraInfo: {why}")
             self.set_status("error", f"unusable depth CameraInfo: {why}")
 
     @guarded
