@@ -119,53 +119,18 @@ def stereo_rows() -> list[dict]:
     return rows
 
 
-def _depth_aside_bag(src: Path, out: Path, T_color_depth: np.ndarray) -> None:
-    """``src``'s bag with its registered depth re-made as a depth camera at ``T_color_depth`` sees it, that camera's
-    CameraInfo on /camera/depth/camera_info."""
-    from simreal_nodes import geometry as G
-    from simreal_nodes.camera import CameraModel
-    from simreal_nodes.io import bags
-    from simreal_nodes.io.images import image_to_array
-    from simreal_nodes.synth.makebag import MsgFactory
-    from simreal_nodes.vision.depth import register_depth
-
-    fac = MsgFactory()
-    color = depth_cam = None
-    with bags.BagWriter(out, "mcap") as w:
-        for m in bags.read_bag(src):
-            msg = bags.decode(m)
-            if m.topic == "/camera/camera_info":
-                color = CameraModel.from_camera_info(msg)
-                s = color.width / 640
-                depth_cam = CameraModel(color.width, color.height, [[580.0 * s, 0, color.cx - 3.1 * s],
-                                                                    [0, 580.0 * s, color.cy + 2.2 * s], [0, 0, 1]],
-                                        [-0.04, 0.01, 0.0, 0.0, 0.0])
-                w.write("/camera/depth/camera_info", m.log_time_ns,
-                        fac.camera_info(m.log_time_ns, "camera_depth_optical_frame", depth_cam),
-                        "sensor_msgs/msg/CameraInfo")
-            if m.topic == "/camera/depth/image_raw":
-                assert color is not None and depth_cam is not None  # the bag's CameraInfo comes first
-                z = image_to_array(msg).astype(np.float32) * 1e-3
-                z[z == 0] = np.nan
-                zd = register_depth(z, color, depth_cam, G.inv(T_color_depth))
-                mm = np.where(np.isfinite(zd), np.rint(zd * 1e3), 0).astype(np.uint16)
-                w.write(m.topic, m.log_time_ns, fac.image(m.log_time_ns, "camera_depth_optical_frame", mm, "16UC1"),
-                        "sensor_msgs/msg/Image")
-                continue
-            w.write_raw(m.topic, m.log_time_ns, m.raw, m.msgtype)
-
-
 def depth_rows(work: Path) -> list[dict]:
     import yaml
 
     from simreal_nodes import geometry as G
     from simreal_nodes.cli import main as cli
     from simreal_nodes.ros.commands import replay
+    from simreal_nodes.synth.makebag import depth_aside_bag
 
     T = G.make_T(G.exp_so3([0.004, -0.006, 0.003]), [-0.025, 0.001, 0.002])
     assert cli(["make-bag", "family", "--seed", "3", "-o", str(work / "fam"), "--resolution", "320x240",
                 "--duration", "6", "--fps", "15", "--ssaa", "1", "--scene-out", str(work / "fam.yaml"), "-q"]) == 0
-    _depth_aside_bag(work / "fam", work / "aside", T)
+    depth_aside_bag(work / "fam", work / "aside", T)
     doc = yaml.safe_load((work / "fam.yaml").read_text())
     doc["camera"]["depth_camera_info"] = "/camera/depth/camera_info"
     doc["camera"]["depth_to_color"] = [float(x) for x in G.matrix_to_pose7(T)]

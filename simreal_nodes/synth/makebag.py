@@ -329,3 +329,38 @@ def make_bag(name: str, out: str | Path, width: int = 640, height: int = 480, du
     size = sum(f.stat().st_size for f in out.rglob("*") if f.is_file())
     return {"scene": name, "frames": n, "seconds": time.perf_counter() - t0, "bytes": size, "path": str(out),
             "resolution": f"{cam.width}x{cam.height}"}
+
+
+def depth_aside_bag(src: str | Path, out: str | Path, T_color_depth: np.ndarray) -> None:
+    """An RGB-D bag ``src`` written to ``out`` with its registered depth re-made as a depth camera of its own at
+    ``T_color_depth`` (its optical frame in the colour camera's) sees it, as a RealSense without align_depth
+    publishes it: the camera's K 580/640 of the image width in pixels, its principal point a few pixels off and a
+    mild barrel lens, its CameraInfo on /camera/depth/camera_info (``camera.depth_camera_info``), each depth image
+    the colour depth registered to it (:func:`~simreal_nodes.vision.depth.register_depth`, so pixels the colour
+    camera did not see stay empty); every other message copied."""
+    from simreal_nodes.io.images import image_to_array
+    from simreal_nodes.vision.depth import register_depth
+
+    fac = MsgFactory()
+    color = depth_cam = None
+    with bags.BagWriter(out, "mcap") as w:
+        for m in bags.read_bag(src):
+            msg = bags.decode(m)
+            if m.topic == "/camera/camera_info":
+                color = CameraModel.from_camera_info(msg)
+                s = color.width / 640
+                K = np.array([[580.0 * s, 0, color.cx - 3.1 * s], [0, 580.0 * s, color.cy + 2.2 * s], [0, 0, 1]])
+                depth_cam = CameraModel(color.width, color.height, K, np.array([-0.04, 0.01, 0.0, 0.0, 0.0]))
+                w.write("/camera/depth/camera_info", m.log_time_ns,
+                        fac.camera_info(m.log_time_ns, "camera_depth_optical_frame", depth_cam),
+                        "sensor_msgs/msg/CameraInfo")
+            if m.topic == "/camera/depth/image_raw":
+                assert color is not None and depth_cam is not None  # the bag's CameraInfo comes first
+                z = image_to_array(msg).astype(np.float32) * 1e-3
+                z[z == 0] = np.nan
+                zd = register_depth(z, color, depth_cam, G.inv(T_color_depth))
+                mm = np.where(np.isfinite(zd), np.rint(zd * 1e3), 0).astype(np.uint16)
+                w.write(m.topic, m.log_time_ns, fac.image(m.log_time_ns, "camera_depth_optical_frame", mm, "16UC1"),
+                        "sensor_msgs/msg/Image")
+                continue
+            w.write_raw(m.topic, m.log_time_ns, m.raw, m.msgtype)

@@ -144,6 +144,17 @@ def _stretch_grid(width: int, height: int, K: tuple, D: tuple, model: str) -> np
     return cam.stretch(np.c_[us.ravel(), vs.ravel()].astype(np.float64)).reshape(height, width).astype(np.float32)
 
 
+def prepare_registration(depth_cam: CameraModel, color_cam: CameraModel) -> None:
+    """Build the tables :func:`register_depth` reads for this pair of cameras (the colour lens's, the depth lens's
+    stretch; about 0.4 s at 640 x 480), so that a node makes them when the cameras are known, not on a frame."""
+    if color_cam.has_distortion:
+        _lens_lut(color_cam.width, color_cam.height, tuple(color_cam.K.ravel()), tuple(np.ravel(color_cam.D)),
+                  color_cam.distortion_model)
+    if depth_cam.has_distortion:
+        _stretch_grid(depth_cam.width, depth_cam.height, tuple(depth_cam.K.ravel()), tuple(np.ravel(depth_cam.D)),
+                      depth_cam.distortion_model)
+
+
 def register_depth(depth_m: np.ndarray, depth_cam: CameraModel, color_cam: CameraModel,
                    T_color_depth: np.ndarray, min_depth: float = 0.05, max_depth: float = 20.0) -> np.ndarray:
     """A depth image (metres; NaN, 0, inf or negative invalid) of a depth camera that is not the colour camera

@@ -110,6 +110,7 @@ class IngestCamera:
         self.info_error = ""
         if not cam.same_as(self.cam):
             self.set_camera(cam)
+            self._prepare_registration()
         if rp is not None:
             self._left_rp = rp
             self._rectify()
@@ -147,10 +148,22 @@ class IngestCamera:
     def depth_info(self, msg) -> str:
         """Take the depth camera's CameraInfo (depth images registered here): '' or why it is unusable."""
         try:
-            self.depth_cam, self.depth_error = CameraModel.from_camera_info(msg), ""
+            depth_cam = CameraModel.from_camera_info(msg)
         except CameraInfoError as e:
             self.depth_cam, self.depth_error = None, str(e)
-        return self.depth_error
+            return self.depth_error
+        if not depth_cam.same_as(self.depth_cam):
+            self.depth_cam = depth_cam
+            self._prepare_registration()
+        self.depth_error = ""
+        return ""
+
+    def _prepare_registration(self) -> None:
+        """The depth registration's tables, made when both cameras are known (not on the first depth frame)."""
+        if self.depth_to_color is not None and self.depth_cam is not None and self.cam is not None:
+            from simreal_nodes.vision.depth import prepare_registration
+
+            prepare_registration(self.depth_cam, self.cam)
 
     def _registered(self, arr: np.ndarray, encoding: str) -> Checked:
         """A depth image of the depth camera registered to the colour camera, in its own encoding (millimetres with
