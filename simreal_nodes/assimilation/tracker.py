@@ -456,18 +456,23 @@ class DeformableTracker:
     def _dot_measurements(self, image_bgr: np.ndarray, T_cw: np.ndarray) -> tuple[Measurements | None, int]:
         from simreal_nodes.vision.blobs import detect_color_blobs
 
-        found = detect_color_blobs(image_bgr, self.cfg.dot_color)
         # the constructor linked the dots (it raises without them) for the dot measurements this serves
         assert self._dot_links is not None and self.cfg.dots is not None
         nodes, w = self._dot_links
         X = G.transform(self.T_map_obj, self.cfg.dots)
-        if len(found) == 0:
-            return None, 0
         # predicted dot pixels with the current estimate
         state = self.model_state
         dX, _ = self._disp_fn(nodes, w)(state.mu)
         Xw = X + dX @ (self.R_wo @ state.rotation()).T
         pred, z = _project(T_cw, Xw, self.K)
+        # blobs are looked for only where one may be associated with a dot: within the association radius of a
+        # prediction in front of the camera (issue 18: a tenth to a third of the image for the demo's dots)
+        box = self._dot_box(pred[(z > 0) & np.isfinite(pred).all(axis=1)])
+        if box is None:
+            return None, 0
+        found = detect_color_blobs(image_bgr, self.cfg.dot_color, within=box)
+        if len(found) == 0:
+            return None, 0
         und = self.cam.undistort_points(found)
         ray = np.isfinite(und).all(axis=1)
         if not ray.all():  # a fisheye's blob past 90 degrees off the axis: no ray to fit
@@ -485,6 +490,27 @@ class DeformableTracker:
         # (no map point ids: dots; a fisheye's stretch weighs each residual as in _map_point_measurements)
         sigma = self.cam.stretch(found[j[ok]]) if self.cam.fisheye else np.zeros(0)
         return (X[ok], und[j[ok]], nodes[ok], w[ok], np.zeros(0, np.int64), sigma), len(found)
+
+    def _dot_box(self, pred: np.ndarray) -> tuple[float, float, float, float] | None:
+        """The image-pixel box that holds every point within ``dot_radius_px`` (ideal pixels) of the predicted dots
+        ``pred`` (ideal pixels, in front of the camera): with a lens, the bounds of each disc's rim taken through it
+        (32 points a rim, the box grown by a pixel for the rim's curve between them); None without a prediction."""
+        if not len(pred):
+            return None
+        r = float(self.cfg.dot_radius_px)
+        if not self.cam.has_distortion:
+            lo, hi = pred.min(axis=0) - r, pred.max(axis=0) + r
+        else:
+            t = np.linspace(0.0, 2.0 * np.pi, 32, endpoint=False)
+            rim = (pred[:, None, :] + r * np.stack((np.cos(t), np.sin(t)), axis=1)[None]).reshape(-1, 2)
+            y = (rim[:, 1] - self.cam.cy) / self.cam.fy
+            x = (rim[:, 0] - self.cam.cx - self.cam.K[0, 1] * y) / self.cam.fx
+            raw = self.cam.project(np.c_[x, y, np.ones(len(x))])
+            raw = raw[np.isfinite(raw).all(axis=1)]
+            if not len(raw):
+                return None
+            lo, hi = raw.min(axis=0) - 1.0, raw.max(axis=0) + 1.0
+        return float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1])
 
     # -- per frame ----------------------------------------------------------------------------------------------
     def update(self, T_wc: np.ndarray | None, ids: np.ndarray | None = None, P_map: np.ndarray | None = None,
@@ -534,7 +560,7 @@ class DeformableTracker:
         if meas is None or len(meas[0]) < self.cfg.min_measurements:
             n = 0 if meas is None else len(meas[0])
             why = (f"too few measurements on the object ({n}, need {self.cfg.min_measurements}; "
-                   f"{found} candidates seen)")
+                   f"{found} candidates seen{' near the predicted dots' if self.cfg.measurements == 'dots' else ''})")
             alone = self._depth_alone(est, T_wc, depth, why)  # None but with map points and depth_fit
             if alone is not None:
                 alone.measurements = n

@@ -520,3 +520,65 @@ def test_dots_seen_through_a_fisheye_read_the_load():
     err = {key: np.median(np.abs(np.array(v) - s_true)) for key, v in ests.items()}
     assert err["equidistant"] < 0.005 * SPAN, err
     assert err["plumb_bob"] > 4 * err["equidistant"], err
+
+
+@pytest.mark.parametrize("lens", ["none", "pincushion", "equidistant"])
+def test_dots_looked_for_near_their_predictions_measure_what_the_whole_image_does(lens, monkeypatch):
+    """The tracker looks for its dots only in the box of pixels that can hold a dot it would associate (within the
+    association radius of a prediction, taken through the lens): the measurements are those the whole image gives,
+    through no lens, a plumb_bob lens that stretches the image outwards (the box from the radius alone would be too
+    small there) and a fisheye; every pixel within the radius of a prediction (ideal pixels) lies in the box."""
+    import cv2
+
+    from simreal_nodes.assimilation.tracker import tracker_config
+    from simreal_nodes.camera import CameraModel
+    from simreal_nodes.synth.scenes import BEAM_ORIGIN, _interp_disp, aluminium_beam, beam_dots
+    from simreal_nodes.vision import blobs
+
+    sc = aluminium_beam()
+    sc.state["dots_ref"] = np.zeros((1, 3))
+    scene = build_spec_models(validate_scene(sc.scene_yaml(sc), "dots", "."))
+    o = scene["objects"][0]
+    m = load_model(o["model"], fields=["displacement"])
+    K = [[336.0, 0, 319.8], [0, 336.0, 239.3], [0, 0, 1]]
+    cam = {"none": CameraModel(640, 480, K), "pincushion": CameraModel(640, 480, K, [0.3, 0.1, 0, 0, 0]),
+           "equidistant": CameraModel(640, 480, K, [-0.021, 0.0043, -0.0012, 0.0001], "equidistant")}[lens]
+    dots = beam_dots(m)
+    T_obj = G.make_T(t=BEAM_ORIGIN)
+    o["tracking"].update(measurements="dots", dots=dots.tolist())
+    tr = DeformableTracker(m, T_obj, o["parameters"], cam, tracker_config(o))
+    X = G.transform(T_obj, dots + _interp_disp(m, [0.3], dots))  # loaded: the dots off their predictions
+    T_wc = G.look_at([0.1, -0.3, 0.32], [0.25, 0.02, 0.1])
+    img = np.full((480, 640, 3), 128, np.uint8)
+    for u, v in cam.project(G.transform(G.inv(T_wc), X)):
+        cv2.circle(img, (round(u * 16), round(v * 16)), 40, (242, 64, 26), -1, cv2.LINE_AA, shift=4)
+    cv2.circle(img, (60, 60), 4, (242, 64, 26), -1)  # a blue spot far from the beam
+    T_cw = G.inv(T_wc)
+    got, n_got = tr._dot_measurements(img, T_cw)
+    whole = blobs.detect_color_blobs
+    monkeypatch.setattr(blobs, "detect_color_blobs", lambda bgr, color, within=None: whole(bgr, color))
+    want, n_want = tr._dot_measurements(img, T_cw)
+    assert got is not None and want is not None and len(got[0]) >= 12 and n_want == n_got + 1
+    for a, b in zip(got, want):
+        np.testing.assert_allclose(a, b, atol=1e-9)
+    # the box holds every pixel within the radius of each prediction
+    pred, z = _predicted_dots(tr, T_cw)
+    box = tr._dot_box(pred[z > 0])
+    rng = np.random.default_rng(0)
+    ang, rad = rng.uniform(0, 2 * np.pi, (len(pred), 200)), tr.cfg.dot_radius_px * np.sqrt(rng.uniform(0, 1, 200))
+    ideal = (pred[:, None, :] + rad[None, :, None] * np.stack((np.cos(ang), np.sin(ang)), axis=2)).reshape(-1, 2)
+    y = (ideal[:, 1] - cam.cy) / cam.fy
+    raw = cam.project(np.c_[(ideal[:, 0] - cam.cx) / cam.fx, y, np.ones(len(y))])
+    assert np.all((raw[:, 0] >= box[0]) & (raw[:, 0] <= box[2]) & (raw[:, 1] >= box[1]) & (raw[:, 1] <= box[3]))
+    if lens == "pincushion":  # the radius alone in image pixels would not hold them
+        lo, hi = pred.min(axis=0) - tr.cfg.dot_radius_px, pred.max(axis=0) + tr.cfg.dot_radius_px
+        assert np.any((raw < lo) | (raw > hi))
+
+
+def _predicted_dots(tr, T_cw):
+    from simreal_nodes.assimilation.tracker import _project
+
+    nodes, w = tr._dot_links
+    X = G.transform(tr.T_map_obj, tr.cfg.dots)
+    dX, _ = tr._disp_fn(nodes, w)(tr.model_state.mu)
+    return _project(T_cw, X + dX @ (tr.R_wo @ tr.model_state.rotation()).T, tr.K)
