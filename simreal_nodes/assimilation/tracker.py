@@ -494,7 +494,9 @@ class DeformableTracker:
     def _dot_box(self, pred: np.ndarray) -> tuple[float, float, float, float] | None:
         """The image-pixel box that holds every point within ``dot_radius_px`` (ideal pixels) of the predicted dots
         ``pred`` (ideal pixels, in front of the camera): with a lens, the bounds of each disc's rim taken through it
-        (32 points a rim, the box grown by a pixel for the rim's curve between them); None without a prediction."""
+        (32 points a rim, the box grown by a pixel for the rim's curve between them); None without a prediction.
+        Where a plumb_bob lens's curve turns back (far outside the image for a strong barrel) the rim does not bound
+        the disc's pixels; the undistortion does not converge there either, so no association holds there."""
         if not len(pred):
             return None
         r = float(self.cfg.dot_radius_px)

@@ -23,7 +23,9 @@ def detect_color_blobs(bgr: np.ndarray, rgb_color, hue_tol: float = 14.0, min_sa
     predicts its dots), and the same ones are returned as from the whole image (to rounding), read over the box grown by
     :func:`blob_reach` only: a blob of at most ``max_area`` pixels shaped like a disc lies in that window whatever
     its weights. A blob that touches the window's edge inside the image may reach the box from outside it: then
-    the whole image is read after all (exact for blobs of any shape, at the whole image's cost)."""
+    the whole image is read after all (at the whole image's cost). Not found: a blob wholly outside the window whose
+    centroid lies in the box (a ring or a U around the window, farther than the reach from its own centroid:
+    nothing a glued dot looks like)."""
     if bgr.ndim != 3:
         return np.zeros((0, 2))
     if within is not None:

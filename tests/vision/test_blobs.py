@@ -3,6 +3,7 @@ image finds there, and reads the whole image when a blob crosses the window's ed
 
 import cv2
 import numpy as np
+import pytest
 
 from simreal_nodes.vision.blobs import blob_reach, detect_color_blobs
 
@@ -43,18 +44,27 @@ def test_the_window_finds_what_the_whole_image_finds_in_the_box():
         np.testing.assert_allclose(got[np.lexsort(got.T)], want[np.lexsort(want.T)], atol=1e-9)
 
 
-def test_a_blob_crossing_the_window_edge_is_read_from_the_whole_image():
-    """A long blue stroke (under the area limit) from far outside into the box: its part in the window alone would
-    give another centroid (in the box); the whole image is read instead."""
+@pytest.mark.parametrize("side", ["left", "right", "top", "bottom"])
+def test_a_blob_crossing_the_window_edge_is_read_from_the_whole_image(side):
+    """A long blue stroke (under the area limit) from far outside the window into the box, from each side: its part in
+    the window alone would give a centroid in the box; the whole image is read instead (its centroid outside)."""
+    r = blob_reach(2000)
     img = np.full((480, 640, 3), 128, np.uint8)
-    cv2.line(img, (100, 240), (440, 240), BGR, 3)
-    box = (380.0, 230.0, 420.0, 250.0)
-    assert 341 * 3 < 2000 and 380 - blob_reach(2000) > 100  # under the area limit; the window cuts the stroke
+    strokes = {"left": ((100, 240), (440, 240), (380.0, 230.0, 420.0, 250.0)),
+               "right": ((540, 240), (200, 240), (220.0, 230.0, 260.0, 250.0)),
+               "top": ((320, 20), (320, 400), (310.0, 340.0, 330.0, 380.0)),
+               "bottom": ((320, 460), (320, 80), (310.0, 100.0, 330.0, 140.0))}
+    p0, p1, box = strokes[side]
+    cv2.line(img, p0, p1, BGR, 3)
     full = detect_color_blobs(img, BLUE)
-    assert len(full) == 1 and not len(_in_box(full, box))  # its centroid (x 270) lies outside the box
+    assert len(full) == 1 and not len(_in_box(full, box))  # the stroke's centroid lies outside the box
+    assert 3 * 400 < 2000  # under the area limit
     assert not len(detect_color_blobs(img, BLUE, within=box))
-    cut = detect_color_blobs(img[:, 380 - blob_reach(2000):], BLUE) + (380 - blob_reach(2000), 0)
-    assert len(_in_box(cut, box)) == 1  # what the window alone would have returned
+    # what the window alone would have returned: the stroke's part in it, centred in the box
+    a0, b0 = max(int(box[0]) - r, 0), max(int(box[1]) - r, 0)
+    a1, b1 = min(int(np.ceil(box[2])) + r + 1, 640), min(int(np.ceil(box[3])) + r + 1, 480)
+    cut = detect_color_blobs(img[b0:b1, a0:a1], BLUE) + (a0, b0)
+    assert len(_in_box(cut, box)) == 1
 
 
 def test_windows_without_pixels_find_nothing():

@@ -73,8 +73,9 @@ class LocalizationNode(SimrealNode):
         self.create_subscription(CameraInfo, cam["info"], self.on_info, q)
         depth = self.param("live_queue", 1 if self.mode in ("markers", "static") else 5,
                            "live: images kept while busy (1 = newest first, least latency; SLAM modes default to 5: "
-                           "smaller gaps between the frames tracked keep their features, a few frames of lag; "
-                           "markers need no continuity)", read_only=True)
+                           "the oldest of the five newest, a few frames of lag for a few more frames tracked; "
+                           "benchmarks/results/live_queue.md measures the trade; markers need no continuity)",
+                           read_only=True)
         self.subscribe_image(cam["image"], "image", data_qos(self.lossless, depth=max(1, int(depth))))
         if self.mode == "rgbd":
             self.subscribe_image(cam["depth"], "depth", q)
