@@ -561,18 +561,30 @@ def test_dots_looked_for_near_their_predictions_measure_what_the_whole_image_doe
     assert got is not None and want is not None and len(got[0]) >= 12 and n_want == n_got + 1
     for a, b in zip(got, want):
         np.testing.assert_allclose(a, b, atol=1e-9)
-    # the box holds every pixel within the radius of each prediction
+    # no image pixel outside the box has its ideal position (the lens's undistortion, not the box's projection)
+    # within the radius of a prediction: the image sampled every pixel, and every quarter pixel within 8 px of the box
     pred, z = _predicted_dots(tr, T_cw)
     box = tr._dot_box(pred[z > 0])
-    rng = np.random.default_rng(0)
-    ang, rad = rng.uniform(0, 2 * np.pi, (len(pred), 200)), tr.cfg.dot_radius_px * np.sqrt(rng.uniform(0, 1, 200))
-    ideal = (pred[:, None, :] + rad[None, :, None] * np.stack((np.cos(ang), np.sin(ang)), axis=2)).reshape(-1, 2)
-    y = (ideal[:, 1] - cam.cy) / cam.fy
-    raw = cam.project(np.c_[(ideal[:, 0] - cam.cx) / cam.fx, y, np.ones(len(y))])
-    assert np.all((raw[:, 0] >= box[0]) & (raw[:, 0] <= box[2]) & (raw[:, 1] >= box[1]) & (raw[:, 1] <= box[3]))
+    r = tr.cfg.dot_radius_px
+
+    def near(raw):
+        und = cam.undistort_points(raw)
+        return np.min([np.hypot(*(und - p).T) for p in pred], axis=0) <= r
+
+    def inside(raw):
+        return (raw[:, 0] >= box[0]) & (raw[:, 0] <= box[2]) & (raw[:, 1] >= box[1]) & (raw[:, 1] <= box[3])
+
+    coarse = np.stack(np.meshgrid(np.arange(640.0), np.arange(480.0)), axis=-1).reshape(-1, 2)
+    u, v = np.meshgrid(np.arange(max(box[0] - 8, 0), min(box[2] + 8, 640), 0.25),
+                       np.arange(max(box[1] - 8, 0), min(box[3] + 8, 480), 0.25))
+    band = np.c_[u.ravel(), v.ravel()]
+    band = band[~inside(band)]
+    hit = near(coarse)
+    assert hit.sum() > 12 * 300  # the discs' pixels
+    assert not near(band).any() and np.all(inside(coarse[hit]))
     if lens == "pincushion":  # the radius alone in image pixels would not hold them
-        lo, hi = pred.min(axis=0) - tr.cfg.dot_radius_px, pred.max(axis=0) + tr.cfg.dot_radius_px
-        assert np.any((raw < lo) | (raw > hi))
+        lo, hi = pred.min(axis=0) - r, pred.max(axis=0) + r
+        assert np.any((coarse[hit] < lo) | (coarse[hit] > hi))
 
 
 def _predicted_dots(tr, T_cw):
