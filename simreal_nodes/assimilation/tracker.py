@@ -457,14 +457,9 @@ class DeformableTracker:
         from simreal_nodes.vision.blobs import detect_color_blobs
 
         # the constructor linked the dots (it raises without them) for the dot measurements this serves
-        assert self._dot_links is not None and self.cfg.dots is not None
+        assert self._dot_links is not None
         nodes, w = self._dot_links
-        X = G.transform(self.T_map_obj, self.cfg.dots)
-        # predicted dot pixels with the current estimate
-        state = self.model_state
-        dX, _ = self._disp_fn(nodes, w)(state.mu)
-        Xw = X + dX @ (self.R_wo @ state.rotation()).T
-        pred, z = _project(T_cw, Xw, self.K)
+        X, pred, z = self._predicted_dots(T_cw)
         # blobs are looked for only where one may be associated with a dot: within the association radius of a
         # prediction in front of the camera (issue 18: a tenth to a third of the image for the demo's dots)
         box = self._dot_box(pred[(z > 0) & np.isfinite(pred).all(axis=1)])
@@ -491,6 +486,16 @@ class DeformableTracker:
         sigma = self.cam.stretch(found[j[ok]]) if self.cam.fisheye else np.zeros(0)
         return (X[ok], und[j[ok]], nodes[ok], w[ok], np.zeros(0, np.int64), sigma), len(found)
 
+    def _predicted_dots(self, T_cw: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The glued dots at rest in the map frame (N, 3), and where the current estimate puts them: ideal pixels
+        (N, 2) and depths (N,) seen from ``T_cw``."""
+        assert self._dot_links is not None and self.cfg.dots is not None
+        X = G.transform(self.T_map_obj, self.cfg.dots)
+        state = self.model_state
+        dX, _ = self._disp_fn(*self._dot_links)(state.mu)
+        pred, z = _project(T_cw, X + dX @ (self.R_wo @ state.rotation()).T, self.K)
+        return X, pred, z
+
     def _dot_box(self, pred: np.ndarray) -> tuple[float, float, float, float] | None:
         """The image-pixel box that holds every point within ``dot_radius_px`` (ideal pixels) of the predicted dots
         ``pred`` (ideal pixels, in front of the camera): with a lens, the bounds of each disc's rim taken through it
@@ -505,9 +510,7 @@ class DeformableTracker:
         else:
             t = np.linspace(0.0, 2.0 * np.pi, 32, endpoint=False)
             rim = (pred[:, None, :] + r * np.stack((np.cos(t), np.sin(t)), axis=1)[None]).reshape(-1, 2)
-            y = (rim[:, 1] - self.cam.cy) / self.cam.fy
-            x = (rim[:, 0] - self.cam.cx - self.cam.K[0, 1] * y) / self.cam.fx
-            raw = self.cam.project(np.c_[x, y, np.ones(len(x))])
+            raw = self.cam.project(self.cam.backproject(rim, np.ones(len(rim))))
             raw = raw[np.isfinite(raw).all(axis=1)]
             if not len(raw):
                 return None

@@ -260,22 +260,12 @@ def _fast(det: cv2.FastFeatureDetector, img: np.ndarray, box: tuple[int, int, in
           mask: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
     """FAST corners with their scores inside ``box`` (x0, y0, x1, y1): detected on the box grown by FAST's
     3-pixel circle, so that a corner may lie on the box's edge, and those outside the box dropped."""
-    x0, y0, x1, y1 = box
-    h, w = img.shape
-    a0, b0, a1, b1 = max(x0 - 3, 0), max(y0 - 3, 0), min(x1 + 3, w), min(y1 + 3, h)
-    sub = np.ascontiguousarray(img[b0:b1, a0:a1])
-    kps = det.detect(sub, None if mask is None else np.ascontiguousarray(mask[b0:b1, a0:a1]))
-    if not kps:
-        return np.zeros((0, 2), np.int64), np.zeros(0, np.float32)
-    p = np.rint(cv2.KeyPoint_convert(kps)).astype(np.int64) + (a0, b0)  # type: ignore[attr-defined]
-    r = np.fromiter(map(_RESPONSE, kps), np.float32, len(kps))
-    ok = (p[:, 0] >= x0) & (p[:, 0] < x1) & (p[:, 1] >= y0) & (p[:, 1] < y1)
-    return p[ok], r[ok]
+    return _fast_boxes(det, img, [box], mask)
 
 
 def _fast_boxes(det: cv2.FastFeatureDetector, img: np.ndarray, boxes: list[tuple[int, int, int, int]],
                 mask: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`_fast` over several boxes, their corners in the boxes' order: the same sub-images given to OpenCV's
+    """:func:`_fast` over several boxes, their corners in the boxes' order: the sub-images given to OpenCV's
     detector in one call (it loops over them itself) and their keypoints converted in one call (the empty cells'
     fall-back: dozens of small boxes a level, where a call per box cost more in Python than in FAST)."""
     h, w = img.shape

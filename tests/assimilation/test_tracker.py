@@ -563,7 +563,7 @@ def test_dots_looked_for_near_their_predictions_measure_what_the_whole_image_doe
         np.testing.assert_allclose(a, b, atol=1e-9)
     # no image pixel outside the box has its ideal position (the lens's undistortion, not the box's projection)
     # within the radius of a prediction: the image sampled every pixel, and every quarter pixel within 8 px of the box
-    pred, z = _predicted_dots(tr, T_cw)
+    _, pred, z = tr._predicted_dots(T_cw)
     box = tr._dot_box(pred[z > 0])
     r = tr.cfg.dot_radius_px
 
@@ -585,12 +585,3 @@ def test_dots_looked_for_near_their_predictions_measure_what_the_whole_image_doe
     if lens == "pincushion":  # the radius alone in image pixels would not hold them
         lo, hi = pred.min(axis=0) - r, pred.max(axis=0) + r
         assert np.any((coarse[hit] < lo) | (coarse[hit] > hi))
-
-
-def _predicted_dots(tr, T_cw):
-    from simreal_nodes.assimilation.tracker import _project
-
-    nodes, w = tr._dot_links
-    X = G.transform(tr.T_map_obj, tr.cfg.dots)
-    dX, _ = tr._disp_fn(nodes, w)(tr.model_state.mu)
-    return _project(T_cw, X + dX @ (tr.R_wo @ tr.model_state.rotation()).T, tr.K)
