@@ -50,7 +50,8 @@ class LocalizationNode(SimrealNode):
                                  "monocular: metric distance between the first two keyframes (0 = unknown)")
         loop = self.param("loop_closing", bool(loc.get("loop_closing", False)),
                           "SLAM: close loops (Sim3, essential graph, global BA)", read_only=True)
-        async_mapping = self.param("async_mapping", True, "run local bundle adjustment in a worker process")
+        async_mapping = self.param("async_mapping", True, "run local bundle adjustment in a worker process (a "
+                                   "lock-step lossless replay sets it false: its estimates then repeat to the bit)")
         frozen = self.param("localization_only", bool(loc.get("localization_only", False)), "start with mapping frozen")
         section = dict(loc, mode=self.mode, features=n_features, scale_factor=scale, pyramid_levels=levels,
                        known_scale_m=known_scale or None, loop_closing=loop)
