@@ -90,9 +90,9 @@ def replay_parameters(node: str, lossless: bool, in_flight: int) -> dict:
     next frame: every frame then meets the map the one before left, and a replay's estimates repeat to the bit (in
     the mapping's process of its own, live's default, a BA's result reached the tracking a frame or two earlier or
     later from run to run: two lock-step replays of the foam beam parted from its first keyframe on, 1.2 mm apart;
-    the cost, 6-11 % fewer frames a second there, scratch). With frames in flight the tracker's word reaches the localization by
-    the run's timing anyway (:func:`replay`), and the BA's own process keeps its work off the SLAM's core (with 4 in
-    flight 23.1 against 21.7 frames a second on the foam beam)."""
+    the cost, 6-11 % fewer frames a second there, scratch). With frames in flight the tracker's word reaches the
+    localization by the run's timing anyway (:func:`replay`), and the BA's own process keeps its work off the SLAM's
+    core (with 4 in flight 23.1 against 21.7 frames a second on the foam beam, scratch)."""
     if node == "localization" and lossless and in_flight <= 1:
         return {"async_mapping": False}
     return {}
