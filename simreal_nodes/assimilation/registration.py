@@ -888,7 +888,8 @@ def _slide_cover(P: np.ndarray, T: np.ndarray, S: np.ndarray, N: np.ndarray, cam
     hi = np.full(len(Sf), np.inf)  # at the shift ``at``, each face's distance is at most hi and at least lo
     lo = np.zeros(len(Sf))
     at = np.zeros(len(Sf))
-    eps = 1e-9  # metres: the bounds' rounding (the sums are of millimetres), far below any face's spacing
+    eps = 1e-9  # metres: a margin far above the bounds' rounding (about 1e-15 m on sums of millimetres), so a
+    # bound that decides a face decides it as the search's own test (d^2 < r^2) would
     for k, dx in enumerate(shifts):
         Q = Sf + dx * axis
         idx = np.flatnonzero(cams.measurable((Q - T[:3, 3]) @ T[:3, :3]))

@@ -85,16 +85,17 @@ def recorded_topics(nodes: list[NodeSpec], record_images: bool = True) -> tuple[
 
 
 def replay_parameters(node: str, lossless: bool, in_flight: int) -> dict:
-    """What a replay sets on ``node`` beyond the scene's parameters. A lock-step lossless replay (one frame in
-    flight) runs the SLAM's local bundle adjustment in the localization's own process, each keyframe's before the
-    next frame: every frame then meets the map the one before left, and a replay's estimates repeat to the bit (in
-    the mapping's process of its own, live's default, a BA's result reached the tracking a frame or two earlier or
-    later from run to run: two lock-step replays of the foam beam parted from its first keyframe on, 1.2 mm apart;
-    the cost, 6-11 % fewer frames a second there, scratch). With frames in flight the tracker's word reaches the
-    localization by the run's timing anyway (:func:`replay`), and the BA's own process keeps its work off the SLAM's
-    core (with 4 in flight 23.1 against 21.7 frames a second on the foam beam, scratch)."""
-    if node == "localization" and lossless and in_flight <= 1:
-        return {"async_mapping": False}
+    """What a replay sets on ``node`` beyond the scene's parameters. A lossless graph runs the SLAM's local bundle
+    adjustment in the localization's own process (its ``async_mapping`` parameter's default there), each keyframe's
+    before the next frame: in lock-step every frame then meets the map the one before left, and a replay's estimates
+    repeat to the bit (in the mapping's process of its own, live's default, a BA's result reached the tracking a frame
+    or two earlier or later from run to run: two lock-step replays of the foam beam parted from its first keyframe
+    on, 1.2 mm apart; the cost, 6-11 % fewer frames a second there, scratch). With frames in flight the tracker's
+    word reaches the localization by the run's timing anyway (:func:`replay`), and the BA's own process keeps its
+    work off the SLAM's core (with 4 in flight 23.1 against 21.7 frames a second on the foam beam, scratch): such a
+    replay asks for it."""
+    if node == "localization" and lossless and in_flight > 1:
+        return {"async_mapping": True}
     return {}
 
 

@@ -24,9 +24,9 @@ def test_probe_pushes_crossed_beams_through_the_graph(tmp_path):
         bag, scene = tmp_path / name, tmp_path / f"{name}.yaml"
     info = {"frames": sum(1 for _ in bags.read_bag(bag, topics=["/camera/camera_info"]))}
     out = tmp_path / "run"
-    # synchronous local BA: the localization (and so the contacts) is the same on every run
-    stats, _report, counts = replay(str(bag), str(scene), lossless=True, record=str(out),
-                                   extra_params={"localization": {"async_mapping": False}})
+    # lock-step: the local BA synchronous (the lossless default), the localization (and so the contacts) the same on
+    # every run
+    stats, _report, counts = replay(str(bag), str(scene), lossless=True, record=str(out))
     n = info["frames"]
     assert stats.frames_completed == n and stats.frames_dropped == 0
     for t in ("/simreal/objects/beam_a/contact", "/simreal/objects/beam_b/contact",

@@ -50,8 +50,10 @@ class LocalizationNode(SimrealNode):
                                  "monocular: metric distance between the first two keyframes (0 = unknown)")
         loop = self.param("loop_closing", bool(loc.get("loop_closing", False)),
                           "SLAM: close loops (Sim3, essential graph, global BA)", read_only=True)
-        async_mapping = self.param("async_mapping", True, "run local bundle adjustment in a worker process (a "
-                                   "lock-step lossless replay sets it false: its estimates then repeat to the bit)")
+        # lossless: the BA in this process, each keyframe's before the next frame (a lock-step replay repeats to the
+        # bit; simreal_nodes.ros.commands.replay_parameters); live: in a process of its own, off the tracking's core
+        async_mapping = self.param("async_mapping", not self.lossless,
+                                   "run local bundle adjustment in a worker process (default: live yes, lossless no)")
         frozen = self.param("localization_only", bool(loc.get("localization_only", False)), "start with mapping frozen")
         section = dict(loc, mode=self.mode, features=n_features, scale_factor=scale, pyramid_levels=levels,
                        known_scale_m=known_scale or None, loop_closing=loop)
