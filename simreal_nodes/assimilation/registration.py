@@ -896,16 +896,16 @@ def _slide_cover(P: np.ndarray, T: np.ndarray, S: np.ndarray, N: np.ndarray, cam
         gap = np.abs(dx - at[idx])
         inside = hi[idx] + gap < r - eps
         unsure = idx[~inside & (lo[idx] - gap <= r + eps)]
+        found = 0
         if len(unsure):
             d = tree.query(Q[unsure], distance_upper_bound=2 * r)[0]
             hi[unsure], lo[unsure], at[unsure] = d, np.where(np.isfinite(d), d, 2 * r), dx
             near = np.abs(d - r) <= eps  # on the bound itself: the search's own test decides, as it did
-            found = np.asarray(d < r)
+            hit = np.asarray(d < r)
             if np.any(near):
-                found[near] = np.isfinite(tree.query(Q[unsure[near]], distance_upper_bound=r)[0])
-            cover[k] = (int(inside.sum()) + int(found.sum())) / max(len(Sf), 1)
-        else:
-            cover[k] = int(inside.sum()) / max(len(Sf), 1)
+                hit[near] = np.isfinite(tree.query(Q[unsure[near]], distance_upper_bound=r)[0])
+            found = int(hit.sum())
+        cover[k] = (int(inside.sum()) + found) / max(len(Sf), 1)
     return axis, shifts, cover
 
 
