@@ -25,11 +25,13 @@ from simreal_nodes.assimilation.registration import (
     depth_cloud,
     register_loaded,
     register_rgbd,
+    turned_about_axis,
 )
 from simreal_nodes.assimilation.registration_worker import BackgroundRegistration
 from simreal_nodes.assimilation.tracker import DeformableTracker, Estimate, deformable_feedback, tracker_config
 from simreal_nodes.camera import CameraModel
 from simreal_nodes.rom.model import ReducedModel
+from simreal_nodes.rom.state import ALPHA_Z
 from simreal_nodes.states import EstimateState
 from simreal_nodes.vision.stereo import stereo_depth
 
@@ -87,15 +89,41 @@ class ObjectTrackers:
             if reg is not None and reg.state is not None and tr.cfg.reference == "depth":
                 tr.reference_state = reg.state.copy()
                 tr.values[:len(reg.state)] = reg.state
+                if self._takes_turn(o):  # the direction the load bends the body of revolution in (register_loaded)
+                    i = tr.layout.alpha_index
+                    tr.values[i] = float(np.clip(reg.turn, tr.lo[i], tr.hi[i]))
             self.trackers[o["id"]] = tr
         return tr
 
     def _pose(self, o: dict[str, Any]) -> np.ndarray:
-        """The object's pose in the map: the scene's, the registered one, or (not registered yet) the guess."""
+        """The object's pose in the map: the scene's, the registered one, or (not registered yet) the guess. A body of
+        revolution registered deformed (:attr:`Registration.turn`) is turned by what its tracker's alpha_z does not
+        carry of that turn: nothing where the tracker starts alpha_z from it (:meth:`_takes_turn`), the turn beyond a
+        fixed alpha_z's value, the whole turn where there is no alpha_z (or the tracker starts at rest)."""
         if o["anchor"]["kind"] != "registration":
             return G.pose7_to_matrix(o["anchor"]["pose"])
         reg = self.registrations.get(o["id"])
-        return reg.T_map_obj if reg is not None else G.pose7_to_matrix(o["anchor"]["guess"])
+        if reg is None:
+            return G.pose7_to_matrix(o["anchor"]["guess"])
+        turn = 0.0 if self._takes_turn(o) else reg.turn
+        p = o["parameters"].get(ALPHA_Z, {})
+        if reg.turn and self._has_alpha(o) and p.get("mode") == "fixed":
+            turn = reg.turn - float(p.get("value", 0.0))
+        if not turn:
+            return reg.T_map_obj
+        return turned_about_axis(reg.T_map_obj, turn, self.models[o["id"]].points.mean(axis=0))
+
+    def _has_alpha(self, o: dict[str, Any]) -> bool:
+        """Whether object ``o``'s tracker carries alpha_z (the scene names it, its model declares it)."""
+        return ALPHA_Z in o["parameters"] and any(r["name"] == ALPHA_Z for r in self.models[o["id"]].rigid_parameters)
+
+    def _takes_turn(self, o: dict[str, Any]) -> bool:
+        """Whether object ``o``'s tracker starts its alpha_z from the registration's :attr:`Registration.turn`: it
+        estimates alpha_z (tracked or constant) and starts from the registration's state (``reference: depth``)."""
+        reg = self.registrations.get(o["id"])
+        return (reg is not None and reg.turn != 0.0 and reg.state is not None and self._has_alpha(o)
+                and o["parameters"][ALPHA_Z].get("mode", "tracked") != "fixed"
+                and tracker_config(o, **self.cfg_overrides).reference == "depth")
 
     def update(self, T_wc: np.ndarray | None, ids: np.ndarray | None = None, P: np.ndarray | None = None,
                uv: np.ndarray | None = None, bgr: np.ndarray | None = None,

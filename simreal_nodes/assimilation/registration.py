@@ -398,6 +398,13 @@ class Registration:
     # why the position along the object's axis is the guess's (:attr:`RegistrationConfig.slide_from_guess`), '' when
     # the data placed it; part of ``doubt`` too
     along_from_guess: str = ""
+    # the model's rest shape is a body of revolution about its z axis (:func:`revolves_about_z`): the depth does not
+    # say how it is turned about that axis, and the pose keeps the guess's turn
+    revolves: bool = False
+    # such a body registered deformed (:func:`register_loaded`): the turn (radians, about its z axis through the
+    # model's centroid, from the guess's turn) its deformed fit needed, the direction the load bends it in. Not in
+    # ``T_map_obj``: a tracker with alpha_z starts from it (:func:`turned_about_axis` puts it in a pose)
+    turn: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -653,8 +660,8 @@ def register_rgbd(cloud: np.ndarray, model: ReducedModel, guess: np.ndarray, cam
     if spin_free:  # the depth does not say how it is turned about its axis: it keeps the guess's turn
         T = G.inv(turned_like(G.inv(T), guess, centre))
     fitness, rmse, hits = _quality(P, T, S, N, cams, cfg.inlier_dist)
-    out = _judged(Registration(G.inv(T), fitness, rmse, hits, plane, slide_spread(P, T, S, N, cams, cfg)),
-                  P, T, S, N, cfg)
+    out = _judged(Registration(G.inv(T), fitness, rmse, hits, plane, slide_spread(P, T, S, N, cams, cfg),
+                               revolves=spin_free), P, T, S, N, cfg)
     if fitness < cfg.min_fitness or rmse > cfg.max_rmse:
         raise RegistrationError(f"registration refused: {100 * fitness:.0f} % of the model surface facing the "
                                 f"camera is matched (at least {100 * cfg.min_fitness:.0f} % needed), residual "
@@ -708,7 +715,7 @@ def _slid_to_guess(out: Registration, P: np.ndarray, T: np.ndarray, S: np.ndarra
     T = G.make_T(t=-dx * axis) @ T  # the model moves by dx along the axis: object-frame points move by -dx
     fitness, rmse, hits = _quality(P, T, S, N, cams, cfg.inlier_dist)
     slid = _judged(Registration(G.inv(T), fitness, rmse, hits, out.plane, out.slide_spread, out.state,
-                                out.state_reason), P, T, S, N, cfg)
+                                out.state_reason, revolves=out.revolves), P, T, S, N, cfg)
     if fitness < cfg.min_fitness or rmse > cfg.max_rmse:
         raise RegistrationError(f"registration refused: placed along its axis by the guess (anchor.guess), "
                                 f"{100 * fitness:.0f} % of the model surface facing the camera is matched (at least "
@@ -732,8 +739,33 @@ def register_loaded(cloud: np.ndarray, model: ReducedModel, guess: np.ndarray, c
     beam's rigid fit is tilted to split the difference, or refused on its residual). Where the depth shows a
     deformation, the deformed fit replaces the rigid one: its pose (levelled onto the support plane, then a
     translation and a turn about the up axis with the deformation), judged again on the deformed surface with the
-    same thresholds, and its state in :attr:`Registration.state`. Otherwise the rigid fit stands as it was."""
-    cfg = cfg or RegistrationConfig()
+    same thresholds, and its state in :attr:`Registration.state`. Otherwise the rigid fit stands as it was.
+
+    A body of revolution about its z axis (:attr:`Registration.revolves`) keeps the guess's turn about that axis here
+    too: the deformed fit turns the model until its bend points the way the depth shows, a turn that is the load's
+    direction (the boot's alpha_z), not the pose, since the rest shape does not show it. It is given apart, in
+    :attr:`Registration.turn`. Until stop 104 it stayed in the pose: the boot registered with its lever bent was
+    turned 14-27 degrees about its axis, and its tracker, measuring alpha_z from that pose, read alpha_z as far off
+    (a scratch run of the 8 s boot clip, placed after its lever moved)."""
+    reg = _register_loaded(cloud, model, guess, cam_centres, lo, hi, cfg or RegistrationConfig(), state_cfg, seed,
+                           n_modes)
+    if not reg.revolves or reg.state is None:
+        return reg
+    centre = model.points.mean(axis=0)
+    turn = G.turn_about_z(np.asarray(guess, np.float64)[:3, :3].T @ reg.T_map_obj[:3, :3])
+    return replace(reg, T_map_obj=turned_like(reg.T_map_obj, guess, centre), turn=turn)
+
+
+def turned_about_axis(T_map_obj: np.ndarray, turn: float, centre: np.ndarray) -> np.ndarray:
+    """The pose ``T_map_obj`` turned by ``turn`` (radians) about its own z axis through ``centre`` (object frame):
+    a registration's :attr:`Registration.turn` put back into its pose, for a consumer with no alpha_z to carry it."""
+    return T_map_obj @ G.make_T(t=centre) @ G.make_T(G.rot_axis("z", turn)) @ G.make_T(t=-centre)
+
+
+def _register_loaded(cloud: np.ndarray, model: ReducedModel, guess: np.ndarray, cam_centres: np.ndarray | DepthViews,
+                     lo: np.ndarray, hi: np.ndarray, cfg: RegistrationConfig, state_cfg: DepthStateConfig | None,
+                     seed: int, n_modes: int | None) -> Registration:
+    """:func:`register_loaded` with the deformed fit's turn in its pose."""
     try:
         reg, failed = register_rgbd(cloud, model, guess, cam_centres, cfg, seed), None
     except RegistrationError as e:
@@ -754,7 +786,7 @@ def register_loaded(cloud: np.ndarray, model: ReducedModel, guess: np.ndarray, c
     T = G.inv(st.T_map_obj)
     fitness, rmse, hits = _quality(P, T, S, N, cams, cfg.inlier_dist)
     out = _judged(Registration(st.T_map_obj, fitness, rmse, hits, reg.plane, slide_spread(P, T, S, N, cams, cfg),
-                               st.mu.copy(), st.reason), P, T, S, N, cfg)
+                               st.mu.copy(), st.reason, revolves=reg.revolves), P, T, S, N, cfg)
     if fitness < cfg.min_fitness or rmse > cfg.max_rmse:
         raise RegistrationError(f"registration refused (deformed fit: {st.reason}): {100 * fitness:.0f} % of the "
                                 f"model surface facing the camera matched, residual {1e3 * rmse:.1f} mm, slide "
@@ -772,7 +804,7 @@ def register_loaded(cloud: np.ndarray, model: ReducedModel, guess: np.ndarray, c
         T = _pin_slide(P, T, S, N, cams, cfg)
         fitness, rmse, hits = _quality(P, T, S, N, cams, cfg.inlier_dist)
         pinned = _judged(Registration(G.inv(T), fitness, rmse, hits, reg.plane, slide_spread(P, T, S, N, cams, cfg),
-                                      st.mu.copy(), st.reason), P, T, S, N, cfg)
+                                      st.mu.copy(), st.reason, revolves=reg.revolves), P, T, S, N, cfg)
         if fitness < cfg.min_fitness or rmse > cfg.max_rmse:
             raise RegistrationError(f"registration refused (deformed fit: {st.reason}): {100 * fitness:.0f} % of the "
                                     f"model surface facing the camera matched, residual {1e3 * rmse:.1f} mm", pinned)

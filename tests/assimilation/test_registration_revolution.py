@@ -9,17 +9,23 @@ import pytest
 from scipy.spatial import cKDTree
 
 from simreal_nodes import geometry as G
+from simreal_nodes.assimilation.objects import ObjectTrackers
 from simreal_nodes.assimilation.registration import (
+    Registration,
     RegistrationConfig,
     _n_samples,
     icp_point_to_plane,
     lifted_onto,
+    register_loaded,
     register_rgbd,
     revolves_about_z,
     sample_surface,
+    turned_about_axis,
 )
+from simreal_nodes.camera import CameraModel
 from simreal_nodes.rom.build import cached_model
 from simreal_nodes.rom.model_file import load_model
+from simreal_nodes.scene.schema import validate_scene
 
 # the boot's axis frame in the map: turned about its axis and tilted as a camera frame would see a table
 # the boot scene file's polish (anchor.polish_mm: 4): the fine stage alone can stop a pleat away on the bellows
@@ -45,14 +51,15 @@ def _faces(rng, centre, size, n: int) -> np.ndarray:
     return u * np.asarray(size) + np.asarray(centre)
 
 
-def _cloud(model, floor_z: float) -> tuple[np.ndarray, np.ndarray]:
-    """(points in the map, camera centres in the map): the model surface facing three cameras about 0.6 m away, a
-    floor at height ``floor_z`` of the object frame around it and two boxes of clutter a few centimetres from it
-    (which a fit of the bellows alone may turn towards), all with 0.5 mm noise."""
+def _cloud(model, floor_z: float, V: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(points in the map, camera centres in the map): the model surface (its nodes at ``V``, object frame, where
+    given: a deformed shape) facing three cameras about 0.6 m away, a floor at height ``floor_z`` of the object
+    frame around it and two boxes of clutter a few centimetres from it (which a fit of the bellows alone may turn
+    towards), all with 0.5 mm noise."""
     rng = np.random.default_rng(3)
     c = model.points.mean(axis=0)
     cams = np.array([c + 0.6 * np.array([np.cos(a), np.sin(a), 0.7]) for a in np.deg2rad([-20.0, 0.0, 20.0])])
-    S, N = sample_surface(model.points, model.surface, 40000, seed=1)
+    S, N = sample_surface(model.points if V is None else V, model.surface, 40000, seed=1)
     seen = np.zeros(len(S), bool)
     for cam in cams:
         seen |= np.einsum("ij,ij->i", N, cam - S) > 0
@@ -141,3 +148,72 @@ def test_a_guess_under_the_support_plane_is_lifted_onto_it(boot):
                         cams, CFG)
     mm, tilt = _error(reg.T_map_obj)
     assert mm < 1.0 and tilt < 0.3, (mm, tilt)
+
+
+def _bent(boot, theta_deg: float, turn_deg: float) -> np.ndarray:
+    """The boot's nodes (object frame) with its lever at ``theta_deg`` and the whole bent boot turned ``turn_deg``
+    about its axis: the bellows bent that way (alpha_z ``turn_deg`` on the true pose)."""
+    c = boot.points.mean(axis=0)
+    u = boot.deformation_view(None).field.evaluate(np.array([np.deg2rad(theta_deg)]))
+    return (boot.points + u - c) @ G.rot_axis("z", np.deg2rad(turn_deg)).T + c
+
+
+def test_a_boot_registered_bent_keeps_the_guess_turn_and_gives_the_bend_its_direction(boot):
+    """Registered while its lever is bent 20 degrees, the bellows bending 25 degrees about its axis from where alpha_z
+    0 points on the true pose, the boot keeps the guess's turn about its axis (as at rest) and the turn its deformed
+    fit needed is the load's direction, given apart (``Registration.turn``), from which the tracker starts alpha_z.
+    Until stop 104 that turn stayed in the pose: the boot registered bent was turned by the bend's direction (14-27
+    degrees on the 8 s boot clip's depth), and alpha_z, measured from that pose, read as far off (this test's first
+    assertion fails on that code: checked)."""
+    P, cams = _cloud(boot, floor_z=-0.04, V=_bent(boot, 20.0, 25.0))
+    guess = T_TRUE @ G.make_T(G.rot_axis("x", np.deg2rad(4.0)), [0.02, -0.025, 0.01])
+    reg = register_loaded(P, boot, guess, cams, np.array([0.0]), np.array([np.deg2rad(52.0)]), CFG)
+    assert abs(np.rad2deg(G.turn_about_z(guess[:3, :3].T @ reg.T_map_obj[:3, :3]))) < 0.5
+    assert reg.revolves and reg.state is not None
+    assert abs(np.rad2deg(reg.state[0]) - 20.0) < 1.0, np.rad2deg(reg.state)
+    assert abs(np.rad2deg(reg.turn) - 25.0) < 2.0, np.rad2deg(reg.turn)
+    mm, tilt = _error(reg.T_map_obj)
+    # the deformed fit's axis origin sits 4-5 mm off here, as it does for the same bend with alpha_z 0 (noted in
+    # docs/family.md, stop 104; not this test's subject)
+    assert mm < 6.0 and tilt < 0.5, (mm, tilt)
+    # at rest there is no bend to give a direction: the turn is 0 and the pose the rigid fit's
+    rest = register_loaded(_cloud(boot, floor_z=-0.04)[0], boot, guess, cams, np.array([0.0]),
+                           np.array([np.deg2rad(52.0)]), CFG)
+    assert rest.state is None and rest.turn == 0.0 and rest.revolves
+
+
+def _boot_scene(alpha: dict | None, reference: str = "depth") -> dict:
+    params = {"theta": {"mode": "tracked"}} | ({"alpha_z": alpha} if alpha is not None else {})
+    doc = {"simreal_scene": 1, "name": "boot", "localization": {"mode": "rgbd"},
+           "camera": {"depth": "/camera/depth/image_raw"},
+           "objects": [{"id": "boot", "model": "spec:joint_boot",
+                        "anchor": {"kind": "registration", "guess": [0, 0, 0.6, 0, 0, 0, 1]},
+                        "parameters": params,
+                        "tracking": {"enabled": True, "measurements": "map_points", "reference": reference}}]}
+    return validate_scene(doc, "boot", ".")
+
+
+@pytest.mark.parametrize("alpha, reference, in_pose, alpha_start", [
+    ({"mode": "constant", "initial": 0.0}, "depth", 0.0, 0.4),  # the tracker starts alpha_z at the turn
+    ({"mode": "tracked"}, "depth", 0.0, 0.4),
+    ({"mode": "fixed", "value": 0.1}, "depth", 0.3, 0.1),  # the user's alpha_z stands: the pose takes the rest
+    (None, "depth", 0.4, None),  # no alpha_z to carry it: the pose takes it all
+    ({"mode": "constant", "initial": 0.0}, "rest", 0.4, 0.0),  # a tracker that starts at rest takes no state
+])
+def test_the_registration_turn_starts_alpha_z_or_stays_in_the_pose(boot, alpha, reference, in_pose, alpha_start):
+    """Where a body of revolution's registration turn goes (``ObjectTrackers``): the deformed shape in the map is the
+    registration's in every case, the turn carried by the tracker's alpha_z where it estimates alpha_z from the
+    registration's state, else (in part) by the pose."""
+    scene = _boot_scene(alpha, reference)
+    o = scene["objects"][0]
+    objs = ObjectTrackers(scene["objects"], {"boot": boot}, registration=CFG)
+    T = G.make_T(G.rot_axis("x", -1.9), [0.05, 0.1, 0.6])
+    objs.registrations["boot"] = Registration(T, 0.9, 0.001, 5000, None, state=np.array([0.3]), revolves=True,
+                                              turn=0.4)
+    objs.set_camera(CameraModel.from_intrinsics(640, 480, 525.0, 525.0, 320.0, 240.0))
+    tr = objs.trackers["boot"]
+    assert np.allclose(tr.T_map_obj, turned_about_axis(T, in_pose, boot.points.mean(axis=0)), atol=1e-12)
+    if alpha_start is not None:
+        assert tr.values[tr.layout.alpha_index] == pytest.approx(alpha_start)
+    assert tr.values[0] == pytest.approx(0.3 if reference == "depth" else tr._initial[0])
+    assert objs._pose(o) is not None
