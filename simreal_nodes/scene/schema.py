@@ -132,7 +132,8 @@ ANCHOR = Record({
                  "standing on it) or auto (upright for depth from a stereo pair, else full)", default="auto"),
     "polish_mm": Number("registration: > 0: the fit is also refined from starts this far away along each object "
                         "axis and the one most faces meet within 2 mm kept (a ridged surface, the joint boot's "
-                        "bellows, can hold the fine stage a ridge away; 0: off)", lo=0, hi=50, default=0),
+                        "bellows, can hold the fine stage a ridge away; the fit of an object registered loaded "
+                        "too; 0: off)", lo=0, hi=50, default=0),
 })
 
 TRACKING = Record({

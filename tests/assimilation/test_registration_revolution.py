@@ -161,7 +161,8 @@ def _bent(boot, theta_deg: float, turn_deg: float) -> np.ndarray:
 def test_a_boot_registered_bent_keeps_the_guess_turn_and_gives_the_bend_its_direction(boot):
     """Registered while its lever is bent 20 degrees, the bellows bending 25 degrees about its axis from where alpha_z
     0 points on the true pose, the boot keeps the guess's turn about its axis (as at rest) and the turn its deformed
-    fit needed is the load's direction, given apart (``Registration.turn``), from which the tracker starts alpha_z.
+    fit needed is the load's direction, given apart (``Registration.turn``), from which the tracker starts alpha_z,
+    and the deformed fit is placed as well as a rigid one.
     Until stop 104 that turn stayed in the pose: the boot registered bent was turned by the bend's direction (14-27
     degrees on the 8 s boot clip's depth), and alpha_z, measured from that pose, read as far off (this test's first
     assertion fails on that code: checked)."""
@@ -170,12 +171,12 @@ def test_a_boot_registered_bent_keeps_the_guess_turn_and_gives_the_bend_its_dire
     reg = register_loaded(P, boot, guess, cams, np.array([0.0]), np.array([np.deg2rad(52.0)]), CFG)
     assert abs(np.rad2deg(G.turn_about_z(guess[:3, :3].T @ reg.T_map_obj[:3, :3]))) < 0.5
     assert reg.revolves and reg.state is not None
-    assert abs(np.rad2deg(reg.state[0]) - 20.0) < 1.0, np.rad2deg(reg.state)
-    assert abs(np.rad2deg(reg.turn) - 25.0) < 2.0, np.rad2deg(reg.turn)
+    assert abs(np.rad2deg(reg.state[0]) - 20.0) < 0.5, np.rad2deg(reg.state)
+    assert abs(np.rad2deg(reg.turn) - 25.0) < 1.0, np.rad2deg(reg.turn)
+    # the deformed fit polished (``RegistrationConfig.polish``, the boot scene's 4 mm): without it the fit stopped a
+    # pleat away, 4.6 mm off with the lever read 19.7 degrees (checked)
     mm, tilt = _error(reg.T_map_obj)
-    # the deformed fit's axis origin sits 4-5 mm off here, as it does for the same bend with alpha_z 0 (noted in
-    # docs/family.md, stop 104; not this test's subject)
-    assert mm < 6.0 and tilt < 0.5, (mm, tilt)
+    assert mm < 0.5 and tilt < 0.2, (mm, tilt)
     # at rest there is no bend to give a direction: the turn is 0 and the pose the rigid fit's
     rest = register_loaded(_cloud(boot, floor_z=-0.04)[0], boot, guess, cams, np.array([0.0]),
                            np.array([np.deg2rad(52.0)]), CFG)
