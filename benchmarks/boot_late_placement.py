@@ -61,14 +61,15 @@ class LatePlacement(ObjectTrackers):
         if self.held is None:
             if self.now_ns < self.views_from_ns:
                 return "waiting for registration (its views later in the clip)"
-            posed = self._posed.get(o["id"], -1)
+            # a depth view is taken this frame where the registration counts a posed frame with depth at its step
+            # (ObjectTrackers._register); its stamp goes in first, as the registration may run on it at once
+            step = (self._posed.get(o["id"], -1) + 1) % self.registration.every
+            if T_wc is not None and depth is not None and step == 0:
+                self._view_stamps.append(self.now_ns)
             t = time.perf_counter()
             why = super()._register(o, T_wc, depth)
             if self.held is not None:
                 self.seconds = time.perf_counter() - t  # the registration that was placed: its call
-            k = self._posed.get(o["id"], -1)
-            if k != posed and k % self.registration.every == 0:
-                self._view_stamps.append(self.now_ns)
             if self.held is None:
                 return why
         if self.now_ns < self.place_ns:

@@ -68,6 +68,8 @@ def main():
                        alpha_median_deg=float(np.median(err["alpha_z"])) if len(err["alpha_z"]) else float("nan"),
                        lost_frames=err["lost"], tracked=bool(theta < 2.0),
                        theta_after_median_deg=float(np.median(after["theta"])) if after and len(after["theta"])
+                       else float("nan"),
+                       alpha_after_median_deg=float(np.median(after["alpha_z"])) if after and len(after["alpha_z"])
                        else float("nan"), lost_after=after["lost"] if after else "n/a",
                        fps_through=d["fps_through"], latency_p50=lat["p50"], latency_p95=lat["p95"])
             rows.append(row)
@@ -148,6 +150,7 @@ def report(rows, machine: dict | None = None):
                              ("alpha_median_deg", "alpha_z median err (deg)", "{:.2f}"),
                              ("lost_frames", "frames lost", "{}"),
                              ("theta_after_median_deg", "theta median err from the placement on (deg)", "{:.2f}"),
+                             ("alpha_after_median_deg", "alpha_z from the placement on (deg)", "{:.2f}"),
                              ("lost_after", "frames lost from the placement on", "{}"),
                              ("fps_through", "fps through", "{:.1f}"),
                              ("latency_p50", "latency p50 (ms)", "{:.0f}"), ("latency_p95", "p95 (ms)", "{:.0f}")],

@@ -114,8 +114,15 @@ class ObjectTrackers:
         return turned_about_axis(reg.T_map_obj, turn, self.models[o["id"]].points.mean(axis=0))
 
     def _has_alpha(self, o: dict[str, Any]) -> bool:
-        """Whether object ``o``'s tracker carries alpha_z (the scene names it, its model declares it)."""
-        return ALPHA_Z in o["parameters"] and any(r["name"] == ALPHA_Z for r in self.models[o["id"]].rigid_parameters)
+        """Whether object ``o``'s tracker carries alpha_z (the scene names it, its model declares it) and turns the
+        model about the axis a registration turns it about (the vertical through the model's centroid, within 1 mm):
+        then a registration's turn and alpha_z are the same turn."""
+        model = self.models[o["id"]]
+        rigid = next((r for r in model.rigid_parameters if r["name"] == ALPHA_Z), None)
+        if ALPHA_Z not in o["parameters"] or rigid is None:
+            return False
+        origin = np.asarray(rigid.get("origin", (0.0, 0.0, 0.0)), np.float64)
+        return rigid.get("axis", "z") == "z" and bool(np.hypot(*(model.points.mean(axis=0)[:2] - origin[:2])) < 1e-3)
 
     def _takes_turn(self, o: dict[str, Any]) -> bool:
         """Whether object ``o``'s tracker starts its alpha_z from the registration's :attr:`Registration.turn`: it

@@ -748,13 +748,23 @@ def register_loaded(cloud: np.ndarray, model: ReducedModel, guess: np.ndarray, c
     :attr:`Registration.turn`. Until stop 104 it stayed in the pose: the boot registered with its lever bent was
     turned 14-27 degrees about its axis, and its tracker, measuring alpha_z from that pose, read alpha_z as far off
     (a scratch run of the 8 s boot clip, placed after its lever moved)."""
-    reg = _register_loaded(cloud, model, guess, cam_centres, lo, hi, cfg or RegistrationConfig(), state_cfg, seed,
-                           n_modes)
-    if not reg.revolves or reg.state is None:
-        return reg
+    guess = np.asarray(guess, np.float64)
     centre = model.points.mean(axis=0)
-    turn = G.turn_about_z(np.asarray(guess, np.float64)[:3, :3].T @ reg.T_map_obj[:3, :3])
-    return replace(reg, T_map_obj=turned_like(reg.T_map_obj, guess, centre), turn=turn)
+
+    def apart(reg: Registration) -> Registration:
+        if not reg.revolves or reg.state is None:
+            return reg
+        turn = G.turn_about_z(guess[:3, :3].T @ reg.T_map_obj[:3, :3])
+        return replace(reg, T_map_obj=turned_like(reg.T_map_obj, guess, centre), turn=turn)
+
+    try:
+        reg = _register_loaded(cloud, model, guess, cam_centres, lo, hi, cfg or RegistrationConfig(), state_cfg,
+                               seed, n_modes)
+    except RegistrationError as e:  # a refused fit it carries is given in the same convention
+        if len(e.args) >= 2 and isinstance(e.args[1], Registration):
+            e.args = (e.args[0], apart(e.args[1]), *e.args[2:])
+        raise
+    return apart(reg)
 
 
 def turned_about_axis(T_map_obj: np.ndarray, turn: float, centre: np.ndarray) -> np.ndarray:
@@ -838,7 +848,8 @@ def _polished_state(cloud: np.ndarray, model: ReducedModel, st: DepthState,
     """``RegistrationConfig.polish`` for a deformed fit: its deformed shape (``shape``: displacement, surface samples,
     normals, object points) polished as :func:`_polished` polishes a rigid fit (upright ICP, a translation and a turn
     about the up axis: the deformed fit's own freedoms), on the object points thinned to 2 mm; where that moves the
-    fit by more than half of ``polish``, the state is fitted again from there (:func:`.depth_state.fit_state`, from the
+    fit by more than half of ``polish`` (its centroid) or turns it by more than a degree, the state is fitted again
+    from there (:func:`.depth_state.fit_state`, from the
     fit's mu) and the shape rebuilt. The deformed fit stops a pleat away on a bent joint boot's bellows as the rigid
     fine stage does (a cloud of the model's own lever bent 20 degrees, the fit started 4 mm off along the bend: 4.5 mm
     off, its cover at 2 mm 0.50 against the right fit's 0.97; the 8 s boot clip registered with its lever at 37
@@ -850,8 +861,9 @@ def _polished_state(cloud: np.ndarray, model: ReducedModel, st: DepthState,
     T = G.inv(st.T_map_obj)
     T_pol = _polished(Pd, T, S, N, cams, cfg,
                       lambda T0: _icp_upright(Pd, tree, N, T0, centre, (0.004, 0.002), iterations=30))
-    moved = np.linalg.norm(G.transform(T_pol @ st.T_map_obj, centre[None])[0] - centre)
-    if moved <= cfg.polish / 2:
+    D = T_pol @ st.T_map_obj  # object -> object: what the polish did
+    moved = np.linalg.norm(G.transform(D, centre[None])[0] - centre)
+    if moved <= cfg.polish / 2 and abs(G.turn_about_z(D[:3, :3])) <= np.deg2rad(1.0):
         return st, u, S, N, P
     again = fit_state(cloud, model, G.inv(T_pol), lo, hi, mu0=st.mu, cfg=state_cfg, n_modes=n_modes)
     if not again.deformed or again.mu is None:

@@ -858,7 +858,12 @@ class DeformableTracker:
             lo, hi = self._free_bounds()
             n_mu = len(self.model.axes)
             cloud = depth_cloud(self.cam, np.asarray(depth), T_wc, stride=2)
-            st = fit_state(cloud, self.model, self.T_map_obj, lo[:n_mu], hi[:n_mu], self.values[:n_mu],
+            # the model as the tracker draws it: turned by alpha_z (a registration's turn, objects.py), as every
+            # later depth fit has it (_fit_depth)
+            T = self.T_map_obj
+            if self.rigid_z and self.values[self.layout.alpha_index] != 0.0:
+                T = T @ G.make_T(self.layout.state(self.values).rotation())
+            st = fit_state(cloud, self.model, T, lo[:n_mu], hi[:n_mu], self.values[:n_mu],
                            self.cfg.depth_state, self.cfg.n_modes or None)
             if st.mu is not None:
                 return st.mu, "deformed as its depth shows, " + ", ".join(

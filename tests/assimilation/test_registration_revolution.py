@@ -21,6 +21,7 @@ from simreal_nodes.assimilation.registration import (
     revolves_about_z,
     sample_surface,
     turned_about_axis,
+    turned_like,
 )
 from simreal_nodes.camera import CameraModel
 from simreal_nodes.rom.build import cached_model
@@ -213,8 +214,60 @@ def test_the_registration_turn_starts_alpha_z_or_stays_in_the_pose(boot, alpha, 
                                               turn=0.4)
     objs.set_camera(CameraModel.from_intrinsics(640, 480, 525.0, 525.0, 320.0, 240.0))
     tr = objs.trackers["boot"]
-    assert np.allclose(tr.T_map_obj, turned_about_axis(T, in_pose, boot.points.mean(axis=0)), atol=1e-12)
+    c = boot.points.mean(axis=0)
+    assert np.allclose(tr.T_map_obj, turned_about_axis(T, in_pose, c), atol=1e-12)
+    alpha = tr.values[tr.layout.alpha_index] if tr.rigid_z else 0.0
     if alpha_start is not None:
-        assert tr.values[tr.layout.alpha_index] == pytest.approx(alpha_start)
+        assert alpha == pytest.approx(alpha_start)
+    # the model as the tracker draws it (alpha_z turns it about the object's z axis) is the registration's fit
+    assert np.allclose(tr.T_map_obj @ G.make_T(G.rot_axis("z", alpha)), turned_about_axis(T, 0.4, c), atol=1e-12)
     assert tr.values[0] == pytest.approx(0.3 if reference == "depth" else tr._initial[0])
-    assert objs._pose(o) is not None
+    assert np.array_equal(objs._pose(o), tr.T_map_obj)
+
+
+def test_the_turn_put_back_undoes_the_guess_turn():
+    """``turned_about_axis`` with the turn ``turned_like`` took out gives the fit back (the turn measured as
+    ``register_loaded`` measures it): the sign the registration's turn is given with."""
+    c = np.array([0.0, 0.0, 0.07])
+    fit = T_TRUE @ G.make_T(t=c) @ G.make_T(G.rot_axis("z", 0.6)) @ G.make_T(t=-c)
+    guess = T_TRUE @ G.make_T(G.rot_axis("x", np.deg2rad(3.0)), [0.01, 0.0, 0.0])
+    turn = G.turn_about_z(guess[:3, :3].T @ fit[:3, :3])
+    assert turn == pytest.approx(0.6, abs=0.01)
+    assert np.allclose(turned_about_axis(turned_like(fit, guess, c), turn, c), fit, atol=1e-12)
+
+
+def test_the_first_depth_read_draws_the_bend_where_alpha_z_turns_it(boot, monkeypatch):
+    """A tracker started from a registration's turn (alpha_z 120 degrees, its pose at the guess's turn) reads the
+    lever from its first depth image with the model turned by alpha_z, as every later depth fit does: drawn
+    unturned, the bend points 120 degrees away from the depth's and the lever is not read (checked: read at rest).
+    The depth image's back-projection is replaced by the cloud it would give."""
+    from simreal_nodes.assimilation import tracker as trk
+
+    P, _ = _cloud(boot, floor_z=-0.04, V=_bent(boot, 20.0, 120.0))
+    monkeypatch.setattr(trk, "depth_cloud", lambda *a, **k: P)
+    params = {"theta": {"mode": "tracked"}, "alpha_z": {"mode": "constant", "initial": 0.0}}
+    cam = CameraModel.from_intrinsics(640, 480, 525.0, 525.0, 320.0, 240.0)
+    tr = trk.DeformableTracker(boot, T_TRUE, params, cam, trk.TrackerConfig(measurements="map_points"))
+    tr.values[tr.layout.alpha_index] = np.deg2rad(120.0)
+    mu, state, seen = tr.reference_from_depth(np.eye(4), np.zeros((480, 640), np.float32))
+    assert seen and mu is not None, state
+    assert abs(np.rad2deg(mu[0]) - 20.0) < 1.0, (np.rad2deg(mu), state)
+
+
+def test_a_turn_about_another_axis_than_alpha_z_stays_in_the_pose(boot):
+    """A model whose alpha_z turns it about an axis 1 cm from the vertical through its centroid (the axis a
+    registration turns a body of revolution about): alpha_z and the registration's turn are not the same turn, so the
+    pose keeps the whole turn and alpha_z its start."""
+    import dataclasses
+
+    rigid = [dict(r, origin=[0.01, 0.0, 0.0]) for r in boot.rigid_parameters]
+    model = dataclasses.replace(boot, rigid_parameters=rigid)
+    scene = _boot_scene({"mode": "constant", "initial": 0.0})
+    objs = ObjectTrackers(scene["objects"], {"boot": model}, registration=CFG)
+    T = G.make_T(G.rot_axis("x", -1.9), [0.05, 0.1, 0.6])
+    objs.registrations["boot"] = Registration(T, 0.9, 0.001, 5000, None, state=np.array([0.3]), revolves=True,
+                                              turn=0.4)
+    objs.set_camera(CameraModel.from_intrinsics(640, 480, 525.0, 525.0, 320.0, 240.0))
+    tr = objs.trackers["boot"]
+    assert np.allclose(tr.T_map_obj, turned_about_axis(T, 0.4, model.points.mean(axis=0)), atol=1e-12)
+    assert tr.values[tr.layout.alpha_index] == 0.0
