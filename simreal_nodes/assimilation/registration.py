@@ -848,12 +848,12 @@ def _polished_state(cloud: np.ndarray, model: ReducedModel, st: DepthState,
     """``RegistrationConfig.polish`` for a deformed fit: its deformed shape (``shape``: displacement, surface samples,
     normals, object points) polished as :func:`_polished` polishes a rigid fit (upright ICP, a translation and a turn
     about the up axis: the deformed fit's own freedoms), on the object points thinned to 2 mm; where that moves the
-    fit by more than half of ``polish`` (its centroid) or turns it by more than a degree, the state is fitted again
-    from there (:func:`.depth_state.fit_state`, from the
-    fit's mu) and the shape rebuilt. The deformed fit stops a pleat away on a bent joint boot's bellows as the rigid
-    fine stage does (a cloud of the model's own lever bent 20 degrees, the fit started 4 mm off along the bend: 4.5 mm
-    off, its cover at 2 mm 0.50 against the right fit's 0.97; the 8 s boot clip registered with its lever at 37
-    degrees: 12 mm off, the lever read 31 degrees). Returns the fit and its shape."""
+    fit's centroid by more than half of ``polish`` or turns it by more than a degree, the state is fitted again from
+    there (:func:`.depth_state.fit_state`, from the fit's mu) and the shape rebuilt; where that fit is not deformed,
+    the fit stands as it was. The deformed fit stops a pleat away on a bent joint boot's bellows as the rigid fine
+    stage does (a cloud of the model's own surface, the lever bent 20 degrees, the fit started 4 mm off along the
+    bend: 4.5 mm off, its cover at 2 mm 0.50 against the right fit's 0.97; the 8 s boot clip registered with its lever
+    at 37 degrees: 12 mm off, the lever read 31 degrees). Returns the fit and its shape."""
     u, S, N, P = shape
     tree = cKDTree(S)
     centre = model.points.mean(axis=0)
