@@ -197,6 +197,30 @@ def test_a_node_process_warms_up_before_it_builds_its_nodes(monkeypatch):
     assert order == [("warm", None), ("build", "warm_a"), ("build", "warm_b"), ("spin", None)]
 
 
+def test_a_signal_while_the_nodes_are_built_stops_the_process_cleanly(monkeypatch):
+    """A stop signal between two node builds of the one-process launch (rclpy's handler shuts the context down; here
+    the first build does it): the second build fails on the dead context, and `run_nodes` closes what it built and
+    returns 0, as a stop during the spin does. Before, the build's RCLError ended the process with exit code 1 and a
+    traceback (`tests/ros/test_launch.py`, SIGTERM right after the ingest node came up, met it in CI)."""
+    import rclpy
+    from rclpy.node import Node
+
+    from simreal_nodes.ros import node as node_mod
+
+    built = []
+
+    def first():
+        n = Node("sig_a")
+        built.append(n)
+        rclpy.shutdown()  # the signal arrives now
+        return n
+
+    monkeypatch.setattr(node_mod, "warm_start", lambda: None)
+    monkeypatch.setattr(node_mod, "spin", lambda ex: pytest.fail("the process spun after the signal"))
+    assert node_mod.run_nodes([first, lambda: Node("sig_b")]) == 0
+    assert len(built) == 1 and not rclpy.ok()
+
+
 def test_live_the_bags_clock_starts_with_its_first_message_in_hand(tmp_path):
     """Issue 18: live, the frames go out at the bag's rate from the first one on, however long the bag took to open
     and yield its first message (counted from before, frame 0 went out late and frame 1 right after it: a busy
