@@ -105,13 +105,19 @@ class ObjectTrackers:
         reg = self.registrations.get(o["id"])
         if reg is None:
             return G.pose7_to_matrix(o["anchor"]["guess"])
-        turn = 0.0 if self._takes_turn(o) else reg.turn
-        p = o["parameters"].get(ALPHA_Z, {})
-        if reg.turn and self._has_alpha(o) and p.get("mode") == "fixed":
-            turn = reg.turn - float(p.get("value", 0.0))
+        turn = self._turn_in_pose(o, reg)
         if not turn:
             return reg.T_map_obj
         return turned_about_axis(reg.T_map_obj, turn, self.models[o["id"]].points.mean(axis=0))
+
+    def _turn_in_pose(self, o: dict[str, Any], reg: Registration) -> float:
+        """The part of ``reg``'s turn that object ``o``'s pose carries (:meth:`_pose`)."""
+        if not reg.turn or self._takes_turn(o):
+            return 0.0
+        p = o["parameters"].get(ALPHA_Z, {})
+        if self._has_alpha(o) and p.get("mode") == "fixed":
+            return reg.turn - float(p.get("value", 0.0))
+        return reg.turn
 
     def _has_alpha(self, o: dict[str, Any]) -> bool:
         """Whether object ``o``'s tracker carries alpha_z (the scene names it, its model declares it) and turns the

@@ -195,6 +195,20 @@ def _boot_scene(alpha: dict | None, reference: str = "depth") -> dict:
     return validate_scene(doc, "boot", ".")
 
 
+# the registered pose of the tests below (map <- object), its deformed fit's turn 0.4 rad and its state (theta 0.3)
+T_REG = G.make_T(G.rot_axis("x", -1.9), [0.05, 0.1, 0.6])
+
+
+def _placed(scene: dict, model) -> tuple[ObjectTrackers, object]:
+    """``ObjectTrackers`` for ``scene``'s boot with a registration found (T_REG, turned 0.4 rad, theta 0.3), and the
+    boot's tracker as built for a 640 x 480 camera."""
+    objs = ObjectTrackers(scene["objects"], {"boot": model}, registration=CFG)
+    objs.registrations["boot"] = Registration(T_REG, 0.9, 0.001, 5000, None, state=np.array([0.3]), revolves=True,
+                                              turn=0.4)
+    objs.set_camera(CameraModel.from_intrinsics(640, 480, 525.0, 525.0, 320.0, 240.0))
+    return objs, objs.trackers["boot"]
+
+
 @pytest.mark.parametrize("alpha, reference, in_pose, alpha_start", [
     ({"mode": "constant", "initial": 0.0}, "depth", 0.0, 0.4),  # the tracker starts alpha_z at the turn
     ({"mode": "tracked"}, "depth", 0.0, 0.4),
@@ -208,19 +222,14 @@ def test_the_registration_turn_starts_alpha_z_or_stays_in_the_pose(boot, alpha, 
     registration's state, else (in part) by the pose."""
     scene = _boot_scene(alpha, reference)
     o = scene["objects"][0]
-    objs = ObjectTrackers(scene["objects"], {"boot": boot}, registration=CFG)
-    T = G.make_T(G.rot_axis("x", -1.9), [0.05, 0.1, 0.6])
-    objs.registrations["boot"] = Registration(T, 0.9, 0.001, 5000, None, state=np.array([0.3]), revolves=True,
-                                              turn=0.4)
-    objs.set_camera(CameraModel.from_intrinsics(640, 480, 525.0, 525.0, 320.0, 240.0))
-    tr = objs.trackers["boot"]
+    objs, tr = _placed(scene, boot)
     c = boot.points.mean(axis=0)
-    assert np.allclose(tr.T_map_obj, turned_about_axis(T, in_pose, c), atol=1e-12)
+    assert np.allclose(tr.T_map_obj, turned_about_axis(T_REG, in_pose, c), atol=1e-12)
     alpha = tr.values[tr.layout.alpha_index] if tr.rigid_z else 0.0
     if alpha_start is not None:
         assert alpha == pytest.approx(alpha_start)
     # the model as the tracker draws it (alpha_z turns it about the object's z axis) is the registration's fit
-    assert np.allclose(tr.T_map_obj @ G.make_T(G.rot_axis("z", alpha)), turned_about_axis(T, 0.4, c), atol=1e-12)
+    assert np.allclose(tr.T_map_obj @ G.make_T(G.rot_axis("z", alpha)), turned_about_axis(T_REG, 0.4, c), atol=1e-12)
     assert tr.values[0] == pytest.approx(0.3 if reference == "depth" else tr._initial[0])
     assert np.array_equal(objs._pose(o), tr.T_map_obj)
 
@@ -262,12 +271,6 @@ def test_a_turn_about_another_axis_than_alpha_z_stays_in_the_pose(boot):
 
     rigid = [dict(r, origin=[0.01, 0.0, 0.0]) for r in boot.rigid_parameters]
     model = dataclasses.replace(boot, rigid_parameters=rigid)
-    scene = _boot_scene({"mode": "constant", "initial": 0.0})
-    objs = ObjectTrackers(scene["objects"], {"boot": model}, registration=CFG)
-    T = G.make_T(G.rot_axis("x", -1.9), [0.05, 0.1, 0.6])
-    objs.registrations["boot"] = Registration(T, 0.9, 0.001, 5000, None, state=np.array([0.3]), revolves=True,
-                                              turn=0.4)
-    objs.set_camera(CameraModel.from_intrinsics(640, 480, 525.0, 525.0, 320.0, 240.0))
-    tr = objs.trackers["boot"]
-    assert np.allclose(tr.T_map_obj, turned_about_axis(T, 0.4, model.points.mean(axis=0)), atol=1e-12)
+    _, tr = _placed(_boot_scene({"mode": "constant", "initial": 0.0}), model)
+    assert np.allclose(tr.T_map_obj, turned_about_axis(T_REG, 0.4, model.points.mean(axis=0)), atol=1e-12)
     assert tr.values[tr.layout.alpha_index] == 0.0
