@@ -23,7 +23,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from simreal_nodes import geometry as G
-from simreal_nodes.assimilation.depth_state import DepthState, DepthStateConfig, fit_state
+from simreal_nodes.assimilation.depth_state import TURN_STEPS, DepthState, DepthStateConfig, fit_state
 from simreal_nodes.camera import CameraModel
 from simreal_nodes.errors import SimrealError
 from simreal_nodes.rom.model import ReducedModel
@@ -784,6 +784,8 @@ def _register_loaded(cloud: np.ndarray, model: ReducedModel, guess: np.ndarray, 
             raise
         reg, failed = e.args[1], e
     T0 = reg.T_map_obj if reg.plane is None else _level(reg.T_map_obj, reg.plane[:3], model.points.mean(axis=0))
+    if reg.revolves:  # its turn about the axis is the load's direction, searched over the circle (stop 105)
+        state_cfg = replace(state_cfg or DepthStateConfig(), turn_steps=TURN_STEPS)
     st = fit_state(cloud, model, T0, lo, hi, cfg=state_cfg, n_modes=n_modes)
     if not st.deformed:
         if failed is not None:

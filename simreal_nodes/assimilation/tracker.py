@@ -22,7 +22,7 @@ from scipy.spatial import cKDTree
 from simreal_nodes import geometry as G
 from simreal_nodes.assimilation import lm
 from simreal_nodes.assimilation.dense import DenseAligner, DenseResult, DenseSettings
-from simreal_nodes.assimilation.depth_state import DepthFit, DepthFollower, DepthStateConfig, fit_state
+from simreal_nodes.assimilation.depth_state import TURN_STEPS, DepthFit, DepthFollower, DepthStateConfig, fit_state
 from simreal_nodes.assimilation.registration import LinkIndex, Links, depth_cloud, link, ray_weights, surface_nodes
 from simreal_nodes.camera import CameraModel
 from simreal_nodes.rom.model import ReducedModel
@@ -678,9 +678,7 @@ class DeformableTracker:
         n_mu = len(self.model.axes)
         fit = self._fit_depth(res.x, T_wc, depth, lo, hi)
         est.debug["depth"] = fit.reason
-        if (self.cfg.depth_turn and self.rigid_z and self.depth.turns_about_axis and fit.mu is not None
-                and fit.turn_held < self.depth.turn_ratio_max):
-            self._turns.append(float(res.x[self.layout.alpha_index]) + fit.turn)
+        self._take_turn(res.x, fit)
         if fit.mu is not None:
             est.debug["image_mu"] = res.x[:n_mu].copy()
             res.x = res.x.copy()
@@ -691,6 +689,15 @@ class DeformableTracker:
             res.residuals = uvm - lm.predict(p, res.x, with_jacobian=False)[0]
             if sig is not None:  # in units of each measurement's noise, as lm.solve gives them
                 res.residuals = res.residuals / sig[:, None]
+
+    def _take_turn(self, x: np.ndarray, fit: DepthFit) -> None:
+        """A depth fit from state ``x`` that holds its turn (the bellows bent, :attr:`.depth_state.DepthFit.turn_held`)
+        adds the object's whole turn, ``x``'s alpha_z plus the fit's turn, to those :attr:`depth_turn` reports the
+        median of (``cfg.depth_turn`` on a body of revolution about its z axis)."""
+        assert self.depth is not None
+        if (self.cfg.depth_turn and self.rigid_z and self.depth.turns_about_axis and fit.mu is not None
+                and fit.turn_held < self.depth.turn_ratio_max):
+            self._turns.append(float(x[self.layout.alpha_index]) + fit.turn)
 
     def _depth_alone(self, est: Estimate, T_wc: np.ndarray, depth: np.ndarray | None, why: str) -> Estimate | None:
         """``cfg.depth_alone`` (with ``depth_fit``): a frame whose images give too few measurements on the object
@@ -705,6 +712,9 @@ class DeformableTracker:
             return None
         fit = self._fit_depth(self.values, T_wc, depth, *self._free_bounds())
         est.debug["depth"] = fit.reason
+        # its turn counts as an image-fitted frame's does: the bent boot placed late is read from its depth alone
+        # until its map points are linked, and its alpha_z stayed at its start meanwhile (stop 105)
+        self._take_turn(self.values, fit)
         if fit.mu is None:
             return None
         self.values = self.values.copy()
@@ -851,7 +861,13 @@ class DeformableTracker:
         """The object's state (mu) in the reference view, how it was judged, and whether the depth saw the object:
         fitted to this frame's depth (:func:`.depth_state.fit_state`, the rigid part a nuisance: the pose is not
         changed) where ``cfg.reference`` is "depth" and there is a depth image; failing that,
-        :attr:`reference_state` (a registration's fit); None: at rest."""
+        :attr:`reference_state` (a registration's fit); None: at rest.
+
+        With ``depth_turn`` on a body of revolution about its z axis (:attr:`_turn_is_alpha`, the boot), the fit also
+        searches the turn about that axis (``turn_steps``), and where it finds the object deformed its turn starts
+        alpha_z (:meth:`_start_turn`), as a registration's turn does (``objects.py``): the boot registered at rest
+        and placed once its lever was bent (a live graph's late registration) kept alpha_z at its start until its
+        map points were linked and searched (6 frames of the 8 s boot clip, 20 degrees off; stop 105)."""
         if self.cfg.reference != "depth":
             return None, "taken to be at rest", False
         if depth is not None:
@@ -863,16 +879,45 @@ class DeformableTracker:
             T = self.T_map_obj
             if self.rigid_z and self.values[self.layout.alpha_index] != 0.0:
                 T = T @ G.make_T(self.layout.state(self.values).rotation())
-            st = fit_state(cloud, self.model, T, lo[:n_mu], hi[:n_mu], self.values[:n_mu],
-                           self.cfg.depth_state, self.cfg.n_modes or None)
+            turns = self._turn_is_alpha
+            dcfg = replace(self.cfg.depth_state, turn_steps=TURN_STEPS) if turns else self.cfg.depth_state
+            st = fit_state(cloud, self.model, T, lo[:n_mu], hi[:n_mu], self.values[:n_mu], dcfg,
+                           self.cfg.n_modes or None)
             if st.mu is not None:
+                turned = ""
+                if turns and self._start_turn(st.rigid):
+                    turned = f", alpha_z from its turn {np.degrees(self.values[self.layout.alpha_index]):.1f} deg"
                 return st.mu, "deformed as its depth shows, " + ", ".join(
-                    f"{nm} {v:.4g}" for nm, v in zip(self.names, st.mu)) + f" ({st.reason})", True
+                    f"{nm} {v:.4g}" for nm, v in zip(self.names, st.mu)) + turned + f" ({st.reason})", True
             if np.isfinite(st.cost):
                 return None, f"at rest as its depth shows ({st.reason})", True
         if self.reference_state is not None:
             return self.reference_state.copy(), "deformed as the registration's depth fit showed", False
         return None, "taken to be at rest (no depth fit)", False
+
+    @property
+    def _turn_is_alpha(self) -> bool:
+        """Whether a depth fit's turn about the object's z axis is alpha_z's: ``depth_turn`` on (the scene says the
+        object is a body of revolution about that axis) and the turn about the axis through the model's centroid is
+        alpha_z's turn (:attr:`.depth_state.DepthFollower.turns_about_axis`)."""
+        return bool(self.cfg.depth_turn and self.rigid_z and self.depth is not None and self.depth.turns_about_axis)
+
+    def _start_turn(self, rigid: np.ndarray) -> bool:
+        """The reference fit's rigid correction ``rigid`` (x, y, z, turn psi; :attr:`.depth_state.DepthState.rigid`):
+        its turn starts alpha_z where the tracker estimates it (a fixed alpha_z stays), and the depth follower starts
+        from what alpha_z does not carry of it (its translation, in the frame turned by alpha_z), where it has not
+        fitted yet. Whether alpha_z was moved."""
+        assert self.depth is not None
+        i = self.layout.alpha_index
+        seed = np.asarray(rigid, np.float64).copy()
+        moved = self.mode[i] != "fixed" and not self.frozen[i]
+        if moved:
+            psi = float(seed[3])
+            self.values[i] = _wrap(self.values[i] + psi, self.lo[i], self.hi[i])
+            seed = np.r_[G.rot_axis("z", -psi) @ seed[:3], 0.0]
+        if self.depth.mu is None:
+            self.depth.rigid = seed
+        return moved
 
     @property
     def needs_depth(self) -> bool:

@@ -184,6 +184,22 @@ def test_a_boot_registered_bent_keeps_the_guess_turn_and_gives_the_bend_its_dire
     assert rest.state is None and rest.turn == 0.0 and rest.revolves
 
 
+@pytest.mark.parametrize("turn_deg", [110.0, -150.0])
+def test_a_boot_registered_bent_any_way_finds_the_bend_direction(boot, turn_deg):
+    """The bellows bent 30 degrees in a direction far from where alpha_z 0 points on the guess: the deformed fit's turn
+    about the axis is searched over the whole circle (``DepthStateConfig.turn_steps``, a body of revolution's
+    registration), so the direction is found, and the lever with it. Until stop 105 the fit's Gauss-Newton turned from
+    the guess alone, a basin of a few degrees: such a boot was registered at rest (checked: this test fails there)."""
+    P, cams = _cloud(boot, floor_z=-0.04, V=_bent(boot, 30.0, turn_deg))
+    guess = T_TRUE @ G.make_T(G.rot_axis("x", np.deg2rad(4.0)), [0.02, -0.025, 0.01])
+    reg = register_loaded(P, boot, guess, cams, np.array([0.0]), np.array([np.deg2rad(52.0)]), CFG)
+    assert reg.state is not None, reg.state_reason
+    assert abs(np.rad2deg(reg.state[0]) - 30.0) < 1.0, np.rad2deg(reg.state)
+    off = (np.rad2deg(reg.turn) - turn_deg + 180.0) % 360.0 - 180.0
+    assert abs(off) < 1.5, np.rad2deg(reg.turn)
+    assert abs(np.rad2deg(G.turn_about_z(guess[:3, :3].T @ reg.T_map_obj[:3, :3]))) < 0.5
+
+
 def _boot_scene(alpha: dict | None, reference: str = "depth") -> dict:
     params = {"theta": {"mode": "tracked"}} | ({"alpha_z": alpha} if alpha is not None else {})
     doc = {"simreal_scene": 1, "name": "boot", "localization": {"mode": "rgbd"},
