@@ -23,6 +23,11 @@ Because mu may have no value that means "at rest" (a model of a load's position 
 compared with the same fit at zero displacement, rigid part refitted: the deformation is taken only when it lowers
 the robust cost by ``min_gain`` and moves the matched surface by ``min_motion`` (90th percentile). Otherwise the
 object is reported at rest.
+
+A body of revolution about the object's z axis (the joint boot) shows its turn psi only through its bend, and
+Gauss-Newton finds that turn within a few degrees of its start only. Where a caller knows the object is one
+(``DepthStateConfig.turn_steps``: a registration's ``revolves``, a tracker's ``depth_turn``), the deformed fit also
+searches psi over the whole circle (:func:`_searched_turn`) and reports how well its shape holds the turn.
 """
 
 from __future__ import annotations
@@ -80,7 +85,8 @@ class DepthState:
     same scale); ``motion``: 90th percentile of |u(mu)| over the samples that matched (m); ``points``: measured
     points used; ``reason``: why ``mu`` is None, or what was found; ``rigid``: the upright rigid correction of
     ``T_map_obj`` on the pose given (x, y, z, turn psi about the object's z axis through the model's centroid), as
-    :class:`DepthFollower` carries it (zeros where no fit ran)."""
+    :class:`DepthFollower` carries it (zeros where no fit ran); ``turn_held``: with ``turn_steps``, how well the
+    deformed fit's shape holds its turn, as :attr:`DepthFit.turn_held` (inf: not computed)."""
 
     mu: Array | None
     T_map_obj: Array
@@ -92,6 +98,7 @@ class DepthState:
     sigma: float
     reason: str
     rigid: Array = field(default_factory=lambda: np.zeros(N_RIGID))
+    turn_held: float = float("inf")
 
     @property
     def deformed(self) -> bool:
@@ -390,7 +397,8 @@ def fit_state(cloud: Array, model: ReducedModel, T_map_obj: Array, lo: Array, hi
               n_modes: int | None = None) -> DepthState:
     """Fit the model's deformation (and an upright rigid correction) to ``cloud`` (map frame, (N, 3): a depth
     image back-projected, see :func:`registration.depth_cloud`). ``lo`` / ``hi``: mu's box (lo == hi: held at
-    ``mu0``'s value). See the module docstring."""
+    ``mu0``'s value). With ``cfg.turn_steps``, the turn about the z axis searched over the circle
+    (:func:`_searched_turn`). See the module docstring."""
     cfg = cfg or DepthStateConfig()
     T = np.asarray(T_map_obj, np.float64)
     lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
@@ -428,8 +436,10 @@ def fit_state(cloud: Array, model: ReducedModel, T_map_obj: Array, lo: Array, hi
         c_t = prob.cost(mu_t, rig_t, thr)
         if c_t < cost:
             mu, rig, cost = mu_t, rig_t, c_t
+    held = float("inf")
     if cfg.turn_steps and cfg.rigid and len(free):
         mu, rig, cost = _searched_turn(prob, mu, rig, cost, lo, hi, thr, cfg.turn_steps)
+        held = _turn_held(prob, mu, rig)
     motion = _motion(prob, mu, rig)
     T_fit = T @ G.make_T(G.rot_axis("z", rig[3]), surf.c - G.rot_axis("z", rig[3]) @ surf.c + rig[:3])
     T_rest = T @ G.make_T(G.rot_axis("z", rig0[3]), surf.c - G.rot_axis("z", rig0[3]) @ surf.c + rig0[:3])
@@ -438,7 +448,7 @@ def fit_state(cloud: Array, model: ReducedModel, T_map_obj: Array, lo: Array, hi
     what = (f"depth: deformed fit {gain:+.0%} on the rest shape's cost, surface moved {1e3 * motion:.1f} mm "
             f"(90th percentile), {len(q)} points, sigma {1e3 * sigma:.1f} mm")
     if gain >= cfg.min_gain and motion >= cfg.min_motion:
-        return DepthState(mu, T_fit, mu, cost, rest_cost, motion, len(q), sigma, what, rig.copy())
+        return DepthState(mu, T_fit, mu, cost, rest_cost, motion, len(q), sigma, what, rig.copy(), held)
     return DepthState(None, T_rest, mu, cost, rest_cost, motion, len(q), sigma, "at rest: " + what, rig0.copy())
 
 
@@ -465,7 +475,8 @@ def _searched_turn(prob: _Problem, mu: Array, rig: Array, cost: float, lo: Array
     ranks ``steps`` turns over the whole circle, each with the fit's mu and, for one free parameter, with 5 more values
     over its range, at the fit's translation and, where that is over TURN_SHIFT off, at the pose's as given (the
     rigid fit of a registration drags a round rest shape towards a bent lever: 18 mm in a test); about the best of
-    each translation, quarter, half and three-quarter steps either side; Gauss-Newton from each such start. The
+    each translation, quarter, half and three-quarter steps either side; Gauss-Newton from the best of those, one
+    start per translation. The
     ranking runs on at most TURN_POINTS of the measured points, the rest on all of them. Returns the best fit and its
     cost where it costs less than ``cost`` and its shape holds its turn (the turn's deviation under TURN_HELD of the
     rest shape's on the same points, as :class:`DepthFollower` judges it: a bellows barely bent holds none, and a
@@ -500,12 +511,16 @@ def _searched_turn(prob: _Problem, mu: Array, rig: Array, cost: float, lo: Array
         c_t = prob.cost(mu_t, rig_t, thr)
         if c_t < best[2]:
             best = (mu_t, rig_t, c_t)
-    if best[2] >= cost:
-        return mu, rig, cost
-    held, rest = prob.turn_std(best[0], best[1]), prob.turn_std(None, best[1])
-    if not (np.isfinite(held) and np.isfinite(rest) and held < TURN_HELD * rest):
+    if best[2] >= cost or not _turn_held(prob, best[0], best[1]) < TURN_HELD:
         return mu, rig, cost
     return best
+
+
+def _turn_held(prob: _Problem, mu: Array, rig: Array) -> float:
+    """How well the shape at (mu, rig) holds its turn: the turn's standard deviation on it over the rest shape's on the
+    same points (:attr:`DepthFit.turn_held`; inf where either is not finite)."""
+    held, rest = prob.turn_std(mu, rig), prob.turn_std(None, rig)
+    return held / rest if np.isfinite(held) and np.isfinite(rest) and rest > 0 else float("inf")
 
 
 @dataclass

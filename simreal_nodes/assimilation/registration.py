@@ -784,7 +784,8 @@ def _register_loaded(cloud: np.ndarray, model: ReducedModel, guess: np.ndarray, 
             raise
         reg, failed = e.args[1], e
     T0 = reg.T_map_obj if reg.plane is None else _level(reg.T_map_obj, reg.plane[:3], model.points.mean(axis=0))
-    if reg.revolves:  # its turn about the axis is the load's direction, searched over the circle (stop 105)
+    if reg.revolves:  # its turn about the axis is the load's direction, searched over the circle (stop 105); the
+        # polish's refit searches it again (the polished pose may have moved the bend), at a second search's cost
         state_cfg = replace(state_cfg or DepthStateConfig(), turn_steps=TURN_STEPS)
     st = fit_state(cloud, model, T0, lo, hi, cfg=state_cfg, n_modes=n_modes)
     if not st.deformed:

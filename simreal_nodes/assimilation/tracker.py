@@ -22,7 +22,14 @@ from scipy.spatial import cKDTree
 from simreal_nodes import geometry as G
 from simreal_nodes.assimilation import lm
 from simreal_nodes.assimilation.dense import DenseAligner, DenseResult, DenseSettings
-from simreal_nodes.assimilation.depth_state import TURN_STEPS, DepthFit, DepthFollower, DepthStateConfig, fit_state
+from simreal_nodes.assimilation.depth_state import (
+    TURN_HELD,
+    TURN_STEPS,
+    DepthFit,
+    DepthFollower,
+    DepthStateConfig,
+    fit_state,
+)
 from simreal_nodes.assimilation.registration import LinkIndex, Links, depth_cloud, link, ray_weights, surface_nodes
 from simreal_nodes.camera import CameraModel
 from simreal_nodes.rom.model import ReducedModel
@@ -694,8 +701,7 @@ class DeformableTracker:
         """A depth fit from state ``x`` that holds its turn (the bellows bent, :attr:`.depth_state.DepthFit.turn_held`)
         adds the object's whole turn, ``x``'s alpha_z plus the fit's turn, to those :attr:`depth_turn` reports the
         median of (``cfg.depth_turn`` on a body of revolution about its z axis)."""
-        assert self.depth is not None
-        if (self.cfg.depth_turn and self.rigid_z and self.depth.turns_about_axis and fit.mu is not None
+        if (self._turn_is_alpha and self.depth is not None and fit.mu is not None
                 and fit.turn_held < self.depth.turn_ratio_max):
             self._turns.append(float(x[self.layout.alpha_index]) + fit.turn)
 
@@ -864,10 +870,11 @@ class DeformableTracker:
         :attr:`reference_state` (a registration's fit); None: at rest.
 
         With ``depth_turn`` on a body of revolution about its z axis (:attr:`_turn_is_alpha`, the boot), the fit also
-        searches the turn about that axis (``turn_steps``), and where it finds the object deformed its turn starts
-        alpha_z (:meth:`_start_turn`), as a registration's turn does (``objects.py``): the boot registered at rest
-        and placed once its lever was bent (a live graph's late registration) kept alpha_z at its start until its
-        map points were linked and searched (6 frames of the 8 s boot clip, 20 degrees off; stop 105)."""
+        searches the turn about that axis (``turn_steps``), and where it finds the object deformed, its shape holding
+        the turn, that turn starts alpha_z and the depth follower (:meth:`_start_turn`; this method's one side effect),
+        as a registration's turn does (``objects.py``): the boot registered at rest and placed once its lever was bent
+        (a live graph's late registration) kept alpha_z at its start until its map points were linked and searched (6
+        frames of the 8 s boot clip, 20 degrees off; stop 105)."""
         if self.cfg.reference != "depth":
             return None, "taken to be at rest", False
         if depth is not None:
@@ -885,7 +892,7 @@ class DeformableTracker:
                            self.cfg.n_modes or None)
             if st.mu is not None:
                 turned = ""
-                if turns and self._start_turn(st.rigid):
+                if turns and st.turn_held < TURN_HELD and self._start_turn(st.rigid):
                     turned = f", alpha_z from its turn {np.degrees(self.values[self.layout.alpha_index]):.1f} deg"
                 return st.mu, "deformed as its depth shows, " + ", ".join(
                     f"{nm} {v:.4g}" for nm, v in zip(self.names, st.mu)) + turned + f" ({st.reason})", True
@@ -898,9 +905,14 @@ class DeformableTracker:
     @property
     def _turn_is_alpha(self) -> bool:
         """Whether a depth fit's turn about the object's z axis is alpha_z's: ``depth_turn`` on (the scene says the
-        object is a body of revolution about that axis) and the turn about the axis through the model's centroid is
-        alpha_z's turn (:attr:`.depth_state.DepthFollower.turns_about_axis`)."""
-        return bool(self.cfg.depth_turn and self.rigid_z and self.depth is not None and self.depth.turns_about_axis)
+        object is a body of revolution about that axis), the fit's turn about the vertical through the model's
+        centroid is a turn about the object's z axis (:attr:`.depth_state.DepthFollower.turns_about_axis`), and so is
+        alpha_z's as the model declares it (its origin within 1 mm of that vertical, as ``objects.py`` asks)."""
+        if not (self.cfg.depth_turn and self.rigid_z and self.depth is not None and self.depth.turns_about_axis):
+            return False
+        rigid = next(r for r in self.model.rigid_parameters if r["name"] == ALPHA_Z)
+        origin = np.asarray(rigid.get("origin", (0.0, 0.0, 0.0)), np.float64)
+        return rigid.get("axis", "z") == "z" and bool(np.hypot(*(self.depth.surf.c[:2] - origin[:2])) < 1e-3)
 
     def _start_turn(self, rigid: np.ndarray) -> bool:
         """The reference fit's rigid correction ``rigid`` (x, y, z, turn psi; :attr:`.depth_state.DepthState.rigid`):
@@ -912,10 +924,13 @@ class DeformableTracker:
         seed = np.asarray(rigid, np.float64).copy()
         moved = self.mode[i] != "fixed" and not self.frozen[i]
         if moved:
+            # the fit places x at R(psi) (x - c) + c + delta in the frame turned by alpha_z; in the frame turned by
+            # alpha_z + psi the same place is x + R(-psi) (c + delta) - c (c: the model's centroid)
             psi = float(seed[3])
+            c = self.depth.surf.c
             self.values[i] = _wrap(self.values[i] + psi, self.lo[i], self.hi[i])
-            seed = np.r_[G.rot_axis("z", -psi) @ seed[:3], 0.0]
-        if self.depth.mu is None:
+            seed = np.r_[G.rot_axis("z", -psi) @ (c + seed[:3]) - c, 0.0]
+        if moved or self.depth.mu is None:  # a follower that fitted already carries a correction of the old frame
             self.depth.rigid = seed
         return moved
 

@@ -243,20 +243,27 @@ def test_a_boot_placed_bent_starts_alpha_z_from_its_first_depth_read(boot, turn_
     tr = DeformableTracker(boot, T_TRUE, params, cam, TrackerConfig(depth_fit=True, depth_turn=True))
     i = tr.layout.alpha_index
     c = boot.points.mean(axis=0)
-    T_bent = T_TRUE @ G.make_T(t=c) @ G.make_T(G.rot_axis("z", np.deg2rad(turn_deg))) @ G.make_T(t=-c)
+    # the boot also 3 mm off the pose the tracker has (a registration's error): the follower's start carries it
+    T_bent = (T_TRUE @ G.make_T(t=c) @ G.make_T(G.rot_axis("z", np.deg2rad(turn_deg))) @ G.make_T(t=-c)
+              @ G.make_T(t=[0.002, -0.002, 0.0]))
     depth = _depth_image(boot, 0.6, cam, T_bent)
+
+    def off(rad: float) -> float:
+        return (np.rad2deg(rad) - turn_deg + 180.0) % 360.0 - 180.0
+
     for k in range(3):
         est = tr.update(np.eye(4), ids=None, depth=depth)
         assert est.state == EstimateState.LOW_CONFIDENCE and "read from the depth alone" in est.reason, est.reason
         if k == 0:
             assert "deformed as its depth shows" in est.debug["reference_state"]
             assert "alpha_z from its turn" in est.debug["reference_state"]
+            assert abs(off(tr.values[i])) < 1.5, np.rad2deg(tr.values[i])  # the images' alpha_z starts there
         assert abs(np.rad2deg(est.values[0]) - np.rad2deg(0.6)) < 1.5, (k, np.rad2deg(est.values[0]))
-        off = (np.rad2deg(est.values[i]) - turn_deg + 180.0) % 360.0 - 180.0
-        assert abs(off) < 1.0, (k, np.rad2deg(est.values[i]), est.debug)
-    # alpha_z fixed at 0 by the scene: the first read does not move it (the depth's turn is reported on it, as on a
-    # frame the images fitted)
+        assert abs(off(est.values[i])) < 1.0, (k, np.rad2deg(est.values[i]), est.debug)
+    # alpha_z fixed at 0 by the scene: the first read does not move it; the depth's turn is reported on it, as on a
+    # frame the images fitted (``depth_turn``)
     params["alpha_z"] = {"mode": "fixed", "value": 0.0}
     tr = DeformableTracker(boot, T_TRUE, params, cam, TrackerConfig(depth_fit=True, depth_turn=True))
-    tr.update(np.eye(4), ids=None, depth=depth)
-    assert tr.values[i] == 0.0
+    est = tr.update(np.eye(4), ids=None, depth=depth)
+    assert tr.values[i] == 0.0 and "alpha_z from its turn" not in est.debug["reference_state"]
+    assert abs(off(est.values[i])) < 1.0, np.rad2deg(est.values[i])
