@@ -1706,7 +1706,10 @@ alpha_z there and measures it, 0.55-0.95 degrees off at the median as before). t
 against 0.21-0.44; its p90 moved both ways (1.5 s views placed at 6 s 0.62 -> 2.67, 2.5 s 1.88 -> 0.55). The price is
 the search (the table's run alone on this host, its CPU probe at 17 ms): the frame the boot is placed in (the tracker
 built, its first depth read) 0.49-0.77 s where the lever was bent then (a scratch trace of stop 104's code: 0.31 s),
-the registration from views at rest 2.9-3.0 s (2.5-2.6 s), from views of the lever bent 4.7-9.3 s (4.1-10.0 s).
+the registration from views at rest 2.9-3.0 s (2.5-2.6 s), from views of the lever bent 4.7-9.3 s (4.1-10.0 s). Live
+(`live_slam`, rerun on this stop's code), the 8 s clip's boot was registered from views at rest and placed after 6.9
+s, the lever already bent: theta 0.29 and alpha_z **0.22** degrees off from then on (stop 104's run: 0.17, and alpha_z
+20, its start kept).
 
 A boot placed at rest gives the same figures as before: development seeds 0-19 (`family_boot_dev_0_19_stop105`) and
 the five boot rows of `thesis_truth` (`thesis_truth_boot`) gave every figure as stop 104's code did in a worktree run
