@@ -518,7 +518,8 @@ def _searched_turn(prob: _Problem, mu: Array, rig: Array, cost: float, lo: Array
 
 def _turn_held(prob: _Problem, mu: Array, rig: Array) -> float:
     """How well the shape at (mu, rig) holds its turn: the turn's standard deviation on it over the rest shape's on the
-    same points (:attr:`DepthFit.turn_held`; inf where either is not finite)."""
+    same points (:attr:`DepthFit.turn_held`; inf where either is not finite: a shape that holds no turn, or a rest
+    shape that meets none of the points, leaves nothing to compare)."""
     held, rest = prob.turn_std(mu, rig), prob.turn_std(None, rig)
     return held / rest if np.isfinite(held) and np.isfinite(rest) and rest > 0 else float("inf")
 
@@ -607,10 +608,6 @@ class DepthFollower:
             return DepthFit(None, len(q), inl, sigma, f"the depth fit explains {100 * inl:.0f} % of the object's "
                                                       f"{len(q)} depth points (need {100 * self.min_inliers:.0f} %)")
         self.mu, self.rigid = mu.copy(), rig.copy()
-        turn_held = float("inf")
-        if self.turns_about_axis and self.judge_turn:
-            held, rest = prob.turn_std(mu, rig), prob.turn_std(None, rig)
-            if np.isfinite(held) and np.isfinite(rest):  # a shape that holds no turn, or a rest shape that meets
-                turn_held = held / rest  # none of the points: nothing to compare
+        turn_held = _turn_held(prob, mu, rig) if self.turns_about_axis and self.judge_turn else float("inf")
         return DepthFit(mu, len(q), inl, sigma, f"depth: {len(q)} points, {100 * inl:.0f} % within the threshold, "
                                                 f"sigma {1e3 * sigma:.1f} mm", float(rig[3]), turn_held)

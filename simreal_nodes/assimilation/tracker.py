@@ -216,6 +216,7 @@ class DeformableTracker:
             self.depth = DepthFollower(model, self.cfg.depth_state, self.cfg.n_modes or None, self.lo[:n_mu],
                                        self.hi[:n_mu])
             self.depth.judge_turn = self.cfg.depth_turn
+        self._turn_is_alpha = self._turn_axis_is_alpha()  # fixed by the model and the settings: once, not per frame
         if self.cfg.measurements == "dense":
             if self.rigid_z:
                 raise ValueError("measurements 'dense' do not estimate alpha_z: use map_points for this object")
@@ -902,8 +903,7 @@ class DeformableTracker:
             return self.reference_state.copy(), "deformed as the registration's depth fit showed", False
         return None, "taken to be at rest (no depth fit)", False
 
-    @property
-    def _turn_is_alpha(self) -> bool:
+    def _turn_axis_is_alpha(self) -> bool:
         """Whether a depth fit's turn about the object's z axis is alpha_z's: ``depth_turn`` on (the scene says the
         object is a body of revolution about that axis), the fit's turn about the vertical through the model's
         centroid is a turn about the object's z axis (:attr:`.depth_state.DepthFollower.turns_about_axis`), and so is
