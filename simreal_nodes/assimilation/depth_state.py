@@ -168,6 +168,7 @@ class _Problem:
         # the tree's placement: its samples, the tree, each point's candidates and the distance beyond which lie
         # the samples that are not its candidates (both filled in when the tree is first reused)
         self._tree: tuple[Array, cKDTree, NDArray[np.int64] | None, Array | None, Array | None] | None = None
+        self._placed: dict[bytes, tuple[Array, cKDTree]] = {}  # :meth:`turn_costs`' trees, by state
 
     def _nearest(self, y: Array) -> tuple[Array, NDArray[np.int64]]:
         """Each measured point's distance to its nearest sample among ``y`` and that sample's index, as
@@ -282,6 +283,31 @@ class _Problem:
         """Mean Tukey cost per measured point; a point with no sample within the radius costs the most."""
         r, ok, _ = self.residuals(mu, rigid)
         return self._mean_cost(r, ok, c)
+
+    def turn_costs(self, mu: Array, t: Array, psis: Array, c: float) -> Array:
+        """:meth:`cost` at each rigid correction (t, psi) for the turns ``psis``, from one search tree: the samples
+        stay where mu places them and the measured points take the inverse of each correction instead. Distances
+        and point-to-plane residuals do not change under a rigid motion of both, so each cost is the one
+        :meth:`cost` gives (to rounding): with y = R (x - c) + c + t and the normal R n, (R n) . (q - y) =
+        n . (q' - x) where q' = R^T (q - c - t) + c. One tree and one query for all the turns, where :meth:`cost`
+        builds a tree for each (the turn moves every sample farther than the kept tree allows). The trees of the
+        last few states are kept (a search asks again for the same states at other translations)."""
+        key = np.asarray(mu, np.float64).tobytes()
+        if key not in self._placed:
+            x, _ = self.s.place(mu, np.zeros(N_RIGID))
+            if len(self._placed) >= 2 * self._KEEP:
+                self._placed.pop(next(iter(self._placed)))
+            self._placed[key] = (x, cKDTree(x, balanced_tree=False, compact_nodes=False))
+        x, tree = self._placed[key]
+        qc = self.q - self.s.c - t
+        qs = np.stack([qc @ G.rot_axis("z", float(p)) for p in psis]) + self.s.c  # (turns, points, 3)
+        dist, k = cast(tuple[Array, NDArray[np.int64]],
+                       tree.query(qs.reshape(-1, 3), distance_upper_bound=self.cfg.radius))
+        ok = np.isfinite(dist)
+        r = np.full(len(dist), np.nan)
+        r[ok] = np.sum(self.s.n[k[ok]] * (qs.reshape(-1, 3)[ok] - x[k[ok]]), axis=1)
+        n = len(self.q)
+        return np.array([self._mean_cost(r[i * n:(i + 1) * n], ok[i * n:(i + 1) * n], c) for i in range(len(psis))])
 
     def solve(self, mu: Array | None, rigid: Array, lo: Array, hi: Array, c: float | None
               ) -> tuple[Array | None, Array, float]:
@@ -472,15 +498,16 @@ TURN_SHIFT = 0.002  # m: the turn search also starts from the pose as given wher
 def _searched_turn(prob: _Problem, mu: Array, rig: Array, cost: float, lo: Array, hi: Array, thr: float,
                    steps: int) -> tuple[Array, Array, float]:
     """The deformed fit (mu, rig) of a body of revolution searched over its turn psi about its axis. A coarse search
-    ranks ``steps`` turns over the whole circle, each with the fit's mu and, for one free parameter, with 5 more values
-    over its range, at the fit's translation and, where that is over TURN_SHIFT off, at the pose's as given (the
-    rigid fit of a registration drags a round rest shape towards a bent lever: 18 mm in a test); about the best of
-    each translation, quarter, half and three-quarter steps either side; Gauss-Newton from the best of those, one
-    start per translation. The
-    ranking runs on at most TURN_POINTS of the measured points, the rest on all of them. Returns the best fit and its
-    cost where it costs less than ``cost`` and its shape holds its turn (the turn's deviation under TURN_HELD of the
-    rest shape's on the same points, as :class:`DepthFollower` judges it: a bellows barely bent holds none, and a
-    search would pick a turn by the noise); else (mu, rig, cost) as given.
+    ranks ``steps`` turns over the whole circle, each with the fit's mu and, for one free parameter, with 5 more
+    values over its range, at the fit's translation and, where that is over TURN_SHIFT off, at the pose's as given
+    (the rigid fit of a registration drags a round rest shape towards a bent lever: 18 mm in a test); about the best
+    of each translation, quarter, half and three-quarter steps either side; Gauss-Newton from the best of those, one
+    start per translation. The ranking runs on at most TURN_POINTS of the measured points, with one search tree per
+    state for all its turns (:meth:`_Problem.turn_costs`; stop 106: a tree per candidate before, the search 0.45 s of
+    CPU on the boot's test image then, 0.18 s now), the rest on all of them. Returns the best fit and its cost where
+    it costs less than ``cost`` and its shape holds its turn (the turn's deviation under TURN_HELD of the rest shape's
+    on the same points, as :class:`DepthFollower` judges it: a bellows barely bent holds none, and a search would pick
+    a turn by the noise); else (mu, rig, cost) as given.
 
     Why (stop 105): the Gauss-Newton's turn has a basin of a few degrees. The bent bellows holds the turn, but its
     round part gives most of the points and their re-association makes the cost bumpy: on the model's own depth image
@@ -500,11 +527,11 @@ def _searched_turn(prob: _Problem, mu: Array, rig: Array, cost: float, lo: Array
     shifts = [rig[:3]] + ([np.zeros(3)] if np.linalg.norm(rig[:3]) > TURN_SHIFT else [])
     best = (mu, rig, cost)
     for t in shifts:
-        costs = np.array([[rank.cost(m, np.r_[t, p], thr) for p in psis] for m in mus])
+        costs = np.array([rank.turn_costs(m, t, psis, thr) for m in mus])
         k, j = np.unravel_index(int(np.argmin(costs)), costs.shape)
         m0, psi0 = mus[int(k)], float(psis[j])
         cand = psi0 + step * np.array([0.0, -0.75, -0.5, -0.25, 0.25, 0.5, 0.75])
-        fine = [float(costs[k, j])] + [rank.cost(m0, np.r_[t, p], thr) for p in cand[1:]]
+        fine = [float(costs[k, j])] + list(rank.turn_costs(m0, t, cand[1:], thr))
         psi = float(np.angle(np.exp(1j * cand[int(np.argmin(fine))])))  # in (-pi, pi]
         mu_t, rig_t, _ = prob.solve(m0, np.r_[t, psi], lo, hi, thr)
         assert mu_t is not None

@@ -126,6 +126,26 @@ def test_the_kept_tree_finds_the_nearest_samples_a_new_tree_would(loaded):
     assert reused > 20  # the kept tree answered most of them
 
 
+def test_the_turn_search_costs_are_the_costs_at_each_turn(loaded):
+    """The turn search ranks its candidates with ``_Problem.turn_costs``: one tree over the samples where the state
+    places them, the measured points turned back instead of the samples turned (a rigid motion of both changes no
+    distance and no point-to-plane residual). Each turn's cost is the one ``cost`` gives with the samples turned
+    (to rounding), over the whole circle, at two states and two translations (a few points change their nearest
+    sample where two lie at the same distance: the costs agree to 1e-9 of their size)."""
+    s = loaded
+    cfg = DepthStateConfig()
+    cloud = depth_cloud(s["seq"]["cam"], s["seq"]["depth"][0], s["seq"]["T"][0], stride=2)
+    q = crop(cloud, s["model"], _off(s["truth"]), cfg)
+    prob = _Problem(_Surface(s["model"], cfg, None), q, cfg)
+    psis = np.deg2rad(np.arange(-180.0, 180.0, 7.5))
+    for m in (s["lo"], 0.5 * (s["lo"] + s["hi"])):
+        for t in (np.zeros(3), np.array([0.003, -0.002, 0.001])):
+            got = prob.turn_costs(m, t, psis, 0.004)
+            want = np.array([prob.cost(m, np.r_[t, p], 0.004) for p in psis])
+            assert np.ptp(want) > 0.1 * want.max()  # the turns differ: the check is not of a constant
+            np.testing.assert_allclose(got, want, rtol=1e-9)
+
+
 def test_an_unloaded_object_reads_at_rest(unloaded):
     s = unloaded
     assert not np.isfinite(s["s"])  # no load in the first frames
