@@ -22,7 +22,8 @@ tracker's time on the frame it was placed in (its first depth read).
 Since stop 105, in both: the tracker's first depth read searches the turn about the boot's axis and starts alpha_z
 there, the frames read from the depth alone (no map points linked yet) give their turn as the image-fitted ones do,
 and the registration's deformed fit searches its turn over the circle (``depth_state._searched_turn``). Stop 104's
-table, on its code, is kept as ``boot_late_placement_stop104``.
+table, on its code, is kept as ``boot_late_placement_stop104``; stop 105's as ``boot_late_placement_stop105`` (stop
+106 ranks the search's candidates from one search tree per state: every figure the same, the times shorter).
 
     ./run bench boot_late_placement
 """

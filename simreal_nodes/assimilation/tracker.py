@@ -663,9 +663,10 @@ class DeformableTracker:
         the depth fit's turn on it (its upright rigid correction turns the model about its centroid, which lies on
         the axis); the estimate reports the median of those turns (the last 300 such frames). The depth sees which
         way the bellows bends, the images (its ORB map points) see it only as well as they follow the material; the
-        images' own alpha_z stays what the links, the search and the freezing use. 0.0 otherwise, and until such a
-        frame."""
-        if not self._turns:
+        images' own alpha_z stays what the links, the search and the freezing use. 0.0 otherwise, until such a
+        frame, and where alpha_z is 'fixed' (given, not estimated: a scene file cannot ask for both, and until stop
+        106 a tracker built with both reported the depth's turn on the fixed value)."""
+        if not self._turns or self.mode[self.layout.alpha_index] == "fixed":
             return 0.0
         t = np.array(self._turns)
         total = t[-1] + float(np.median(_signed_angle(t - t[-1])))

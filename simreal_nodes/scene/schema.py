@@ -205,7 +205,7 @@ TRACKING = Record({
     "depth_turn": Bool("with depth_fit, on a body of revolution about its z axis (the joint boot): alpha_z reported "
                        "with the depth fit's turn about that axis: the median over the frames whose depth held it "
                        "(the last 300; the bent shape holds the turn at least twice as well as the round rest "
-                       "shape)", default=False),
+                       "shape); not with alpha_z 'fixed'", default=False),
     "huber_px": Number("Huber threshold of the robust loss, pixels", lo=0, lo_open=True, default=2.0),
     "modes": Number("number of PGD modes used (0 = all)", integer=True, lo=0, default=0),
     "max_iterations": Number("Levenberg-Marquardt iterations per frame", integer=True, lo=1, hi=500, default=20),
@@ -398,6 +398,10 @@ def _cross_checks(scene: dict, ctx: Context) -> None:
         if o["tracking"]["depth_turn"] and not o["tracking"]["depth_fit"]:
             raise SceneError(f"{src}: objects[{i}].tracking.depth_turn: takes the turn from the depth fit of every "
                              "frame: needs tracking.depth_fit true; found false")
+        if o["tracking"]["depth_turn"] and o["parameters"].get("alpha_z", {}).get("mode") == "fixed":
+            raise SceneError(f"{src}: objects[{i}].tracking.depth_turn: reports alpha_z with the depth's turn, and "
+                             "parameters.alpha_z is 'fixed' (given, not estimated): make alpha_z 'constant' or "
+                             "depth_turn false")
         if o["anchor"]["kind"] == "registration" and loc["mode"] not in ("rgbd", "stereo"):
             # registration works on depth images (assimilation.registration.register_rgbd: RGB-D, or SGBM on a
             # stereo pair); a monocular map's sparse points alone do not place a model to millimetres
