@@ -284,7 +284,7 @@ class _Problem:
         r, ok, _ = self.residuals(mu, rigid)
         return self._mean_cost(r, ok, c)
 
-    def turn_costs(self, mu: Array, t: Array, psis: Array, c: float) -> Array:
+    def turn_costs(self, mu: Array | None, t: Array, psis: Array, c: float) -> Array:
         """:meth:`cost` at each rigid correction (t, psi) for the turns ``psis``, from one search tree: the samples
         stay where mu places them and the measured points take the inverse of each correction instead. Distances
         and point-to-plane residuals do not change under a rigid motion of both, so each cost is the one
@@ -292,7 +292,7 @@ class _Problem:
         n . (q' - x) where q' = R^T (q - c - t) + c. One tree and one query for all the turns, where :meth:`cost`
         builds a tree for each (the turn moves every sample farther than the kept tree allows). The trees of the
         last few states are kept (a search asks again for the same states at other translations)."""
-        key = np.asarray(mu, np.float64).tobytes()
+        key = b"" if mu is None else np.asarray(mu, np.float64).tobytes()  # as :meth:`_associate` keys a state
         if key not in self._placed:
             x, _ = self.s.place(mu, np.zeros(N_RIGID))
             if len(self._placed) >= 2 * self._KEEP:

@@ -130,20 +130,22 @@ def test_the_turn_search_costs_are_the_costs_at_each_turn(loaded):
     """The turn search ranks its candidates with ``_Problem.turn_costs``: one tree over the samples where the state
     places them, the measured points turned back instead of the samples turned (a rigid motion of both changes no
     distance and no point-to-plane residual). Each turn's cost is the one ``cost`` gives with the samples turned
-    (to rounding), over the whole circle, at two states and two translations (a few points change their nearest
-    sample where two lie at the same distance: the costs agree to 1e-9 of their size)."""
+    (to rounding), over the whole circle and finely about no turn (where the points meet the surface), at the rest
+    shape and ten states, two translations, the first states asked for again after the kept trees have moved on (a
+    few points could change their nearest sample where two lie at the same distance: the costs agree to 1e-9)."""
     s = loaded
     cfg = DepthStateConfig()
     cloud = depth_cloud(s["seq"]["cam"], s["seq"]["depth"][0], s["seq"]["T"][0], stride=2)
     q = crop(cloud, s["model"], _off(s["truth"]), cfg)
     prob = _Problem(_Surface(s["model"], cfg, None), q, cfg)
-    psis = np.deg2rad(np.arange(-180.0, 180.0, 7.5))
-    for m in (s["lo"], 0.5 * (s["lo"] + s["hi"])):
-        for t in (np.zeros(3), np.array([0.003, -0.002, 0.001])):
-            got = prob.turn_costs(m, t, psis, 0.004)
-            want = np.array([prob.cost(m, np.r_[t, p], 0.004) for p in psis])
-            assert np.ptp(want) > 0.1 * want.max()  # the turns differ: the check is not of a constant
-            np.testing.assert_allclose(got, want, rtol=1e-9)
+    psis = np.deg2rad(np.r_[np.arange(-180.0, 180.0, 15.0), np.arange(-3.0, 3.01, 0.5)])
+    states = [None] + [s["lo"] + f * (s["hi"] - s["lo"]) for f in np.linspace(0.0, 1.0, 10)]
+    shifted = np.array([0.003, -0.002, 0.001])
+    for m, t in [(m, np.zeros(3)) for m in states] + [(m, shifted) for m in states[:3]]:
+        got = prob.turn_costs(m, t, psis, 0.004)
+        want = np.array([prob.cost(m, np.r_[t, p], 0.004) for p in psis])
+        assert np.ptp(want[24:]) > 0.05 * want.max()  # near no turn the turns differ: not a constant compared
+        np.testing.assert_allclose(got, want, rtol=1e-9)
 
 
 def test_an_unloaded_object_reads_at_rest(unloaded):
