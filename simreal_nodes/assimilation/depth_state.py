@@ -306,8 +306,8 @@ class _Problem:
         ok = np.isfinite(dist)
         r = np.full(len(dist), np.nan)
         r[ok] = np.sum(self.s.n[k[ok]] * (qs.reshape(-1, 3)[ok] - x[k[ok]]), axis=1)
-        n = len(self.q)
-        return np.array([self._mean_cost(r[i * n:(i + 1) * n], ok[i * n:(i + 1) * n], c) for i in range(len(psis))])
+        shape = (len(psis), len(self.q))
+        return np.array([self._mean_cost(ri, oki, c) for ri, oki in zip(r.reshape(shape), ok.reshape(shape))])
 
     def solve(self, mu: Array | None, rigid: Array, lo: Array, hi: Array, c: float | None
               ) -> tuple[Array | None, Array, float]:

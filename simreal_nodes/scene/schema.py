@@ -398,6 +398,7 @@ def _cross_checks(scene: dict, ctx: Context) -> None:
         if o["tracking"]["depth_turn"] and not o["tracking"]["depth_fit"]:
             raise SceneError(f"{src}: objects[{i}].tracking.depth_turn: takes the turn from the depth fit of every "
                              "frame: needs tracking.depth_fit true; found false")
+        # "alpha_z": rom.state.ALPHA_Z, spelt out (importing it would bring scipy into every scene check)
         if o["tracking"]["depth_turn"] and o["parameters"].get("alpha_z", {}).get("mode") == "fixed":
             raise SceneError(f"{src}: objects[{i}].tracking.depth_turn: reports alpha_z with the depth's turn, and "
                              "parameters.alpha_z is 'fixed' (given, not estimated): make alpha_z 'constant' or "
