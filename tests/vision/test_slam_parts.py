@@ -241,10 +241,11 @@ def test_monocular_initializer_sets_a_reference_then_builds_a_unit_depth_map():
 
 @pytest.mark.parametrize("field, value", [("two_view_model", "fundamental"), ("two_view_model", "essential"),
                                           ("homography_ambiguity", "explained"),
-                                          ("homography_ambiguity", "triangulated")])
+                                          ("homography_ambiguity", "triangulated"), ("homography_ratio", 0.40),
+                                          ("homography_ratio", 0.50)])
 def test_monocular_initializer_passes_its_two_view_settings(monkeypatch, field, value):
-    """``SlamConfig.two_view_model`` and ``homography_ambiguity`` reach the two-view reconstruction, the defaults
-    (the five-point model, ORB-SLAM2's count) when not set."""
+    """``SlamConfig.two_view_model``, ``homography_ambiguity`` and ``homography_ratio`` reach the two-view
+    reconstruction, the defaults (the five-point model, ORB-SLAM2's count and ratio) when not set."""
     import simreal_nodes.vision.slam.two_view as tv
 
     f0, f1, _ = arc_views(3, 0.10, 3.0)
@@ -261,7 +262,30 @@ def test_monocular_initializer_passes_its_two_view_settings(monkeypatch, field, 
     init.initialize(f0, None, 0)
     ctx.frame_id = 2
     assert init.initialize(f1, None, 1).state == OK
-    assert [k[{"two_view_model": "general", "homography_ambiguity": "ambiguity"}[field]] for k in seen] == [value]
+    key = {"two_view_model": "general", "homography_ambiguity": "ambiguity", "homography_ratio": "h_ratio"}[field]
+    assert [k[key] for k in seen] == [value]
+
+
+def test_the_homography_ratio_picks_the_model_decomposed():
+    """``h_ratio`` is the homography's least share of the two models' scores: a floor seen from two views 30 cm
+    apart starts from the homography at ORB-SLAM2's 0.40 on most draws and is given to the general model where no
+    share is enough (1.0); a room in depth starts from the general model at 0.40, and a share of 0 sends it to the
+    homography."""
+    import cv2
+
+    kinds = []
+    for seed in range(4):
+        cv2.setRNGSeed(seed)
+        f0, f1, _ = floor_views(seed, 0.3, 3.0)
+        kinds.append(two_view(f0, f1, CAM.K, np.deg2rad(1.0))[0])
+        reason, sol = two_view(f0, f1, CAM.K, np.deg2rad(1.0), h_ratio=1.0)  # a plane leaves E ambiguous: refused
+        assert reason.startswith("fundamental model") and (sol is None or sol.kind == "fundamental"), reason
+    assert kinds.count("homography model") >= 3, kinds
+    f0, f1, _ = arc_views(3, 0.10, 3.0)
+    assert two_view(f0, f1, CAM.K, np.deg2rad(1.0))[0] == "fundamental model"
+    assert two_view(f0, f1, CAM.K, np.deg2rad(1.0), h_ratio=0.0)[0].startswith("homography model")
+    with pytest.raises(ValueError, match="homography_ratio"):
+        SlamConfig(homography_ratio=1.5)
 
 
 def test_tracking_from_a_depth_map_and_a_keyframe():

@@ -73,6 +73,8 @@ class SlamConfig:
     two_view_model: str = "essential"  # mono start: five-point E, or "fundamental" (ORB-SLAM2's eight-point F)
     # "essential" since stop 53: a better first pose (the rendered room's failing noise draw holds) and, with the
     # keyframe fusion, level or better on each of the real 7-Scenes starts (benchmarks/two_view.py)
+    homography_ratio: float = 0.40  # mono start: the homography is decomposed when its share of the two models' scores
+    # S_H / (S_H + S_F) exceeds this (ORB-SLAM2: 0.40; ORB-SLAM3: 0.50), else the general model
     homography_ambiguity: str = "explained"  # a homography start is refused when a second decomposition comes within
     # 75 % of the best one's count of "explained" matches (ORB-SLAM2's) or of "triangulated" points (with parallax)
 
@@ -93,6 +95,9 @@ class SlamConfig:
                 raise ValueError(f"SlamConfig.{f.name} must not be negative, not {getattr(self, f.name)}")
         if self.focus_share > 1:
             raise ValueError(f"SlamConfig.focus_share is a share of the ORB budget (0..1), not {self.focus_share}")
+        if self.homography_ratio > 1:
+            raise ValueError(f"SlamConfig.homography_ratio is a share of two scores (0..1), not "
+                             f"{self.homography_ratio}")
         if self.flow_win < 3 or self.local_kfs < 1 or self.ba_iterations < 1:
             raise ValueError(f"SlamConfig: flow_win >= 3, local_kfs >= 1 and ba_iterations >= 1 needed, not "
                              f"{self.flow_win}, {self.local_kfs}, {self.ba_iterations}")

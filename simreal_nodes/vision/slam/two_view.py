@@ -1,16 +1,16 @@
 """Map initialization: from the first frame's depth (RGB-D / stereo), or two-view for a monocular camera.
 
 The two-view reconstruction follows ORB-SLAM2: a homography and a general two-view model are fitted to the matches
-with a reference frame, scored by their symmetric transfer errors, and the better explained model (homography for
-a planar or low-parallax scene, chosen above a score ratio of 0.40) is decomposed into candidate poses. The general
-model is by default (``SlamConfig.two_view_model = "essential"``) the essential matrix from the five-point RANSAC on
-the calibrated matches, which does not spend three degrees of freedom on intrinsics the camera already has, or
-ORB-SLAM2's eight-point fundamental matrix (``"fundamental"``). The five-point pose is the better first pose (the
-measurements in docs/localization.md, from `benchmarks/two_view.py`). The pose that
-explains most matches wins (its points with parallax in front of both cameras, every point reprojecting: ORB-SLAM2's
-CheckRT), and it is refused without enough parallax (a pure rotation has no depth) or when a second pose comes close
-(an ambiguous decomposition: a plane at low parallax, or F on a near-planar scene; the initialization then waits for
-more motion).
+with a reference frame, scored by their symmetric transfer errors, and the better explained model (homography for a
+planar or low-parallax scene, chosen above a score ratio of 0.40: ``SlamConfig.homography_ratio``) is decomposed into
+candidate poses. The general model is by default (``SlamConfig.two_view_model = "essential"``) the essential matrix
+from the five-point RANSAC on the calibrated matches, which does not spend three degrees of freedom on intrinsics the
+camera already has, or ORB-SLAM2's eight-point fundamental matrix (``"fundamental"``). The five-point pose is the
+better first pose (the measurements in docs/localization.md, from `benchmarks/two_view.py`). The pose that explains
+most matches wins (its points with parallax in front of both cameras, every point reprojecting: ORB-SLAM2's CheckRT),
+and it is refused without enough parallax (a pure rotation has no depth) or when a second pose comes close (an
+ambiguous decomposition: a plane at low parallax, or F on a near-planar scene; the initialization then waits for more
+motion).
 """
 
 from __future__ import annotations
@@ -52,13 +52,15 @@ def initial_matches(f0: Features, f1: Features) -> np.ndarray:
 
 
 def two_view(f0: Features, f1: Features, K: np.ndarray, min_parallax: float,
-             general: str = "essential", ambiguity: str = "explained") -> tuple[str, TwoViewSolution | None]:
+             general: str = "essential", ambiguity: str = "explained",
+             h_ratio: float = 0.40) -> tuple[str, TwoViewSolution | None]:
     """Reconstruct two views of a static scene; returns (why not, None) or ("<kind> model", solution).
     ``min_parallax``: radians, the least median parallax of the triangulated points accepted. ``general``: the
     non-planar model, "essential" (five-point, calibrated; the default) or "fundamental" (ORB-SLAM2's eight-point;
     ``SlamConfig.two_view_model``); ``ambiguity``: how a homography's decompositions are told apart
-    (:func:`_from_h`). Either way the solution's kind is "fundamental" for the general model (as ORB-SLAM2
-    names it) and "homography" for the planar one."""
+    (:func:`_from_h`); ``h_ratio``: the homography's least share of the two models' scores
+    (``SlamConfig.homography_ratio``). Either way the solution's kind is "fundamental" for the general model (as
+    ORB-SLAM2 names it) and "homography" for the planar one."""
     if general not in TWO_VIEW_MODELS:
         raise ValueError(f"two_view: general model {general!r} is not one of {', '.join(TWO_VIEW_MODELS)}")
     if ambiguity not in H_AMBIGUITY:
@@ -81,7 +83,7 @@ def two_view(f0: Features, f1: Features, K: np.ndarray, min_parallax: float,
     sh = _score_h(H, x0, x1)
     sf = _score_f(F, x0, x1)
     rh = sh / max(sh + sf, 1e-9)
-    if rh > 0.40:  # ORB-SLAM2: a homography unless the fundamental matrix explains clearly more
+    if rh > h_ratio:  # ORB-SLAM2 (0.40): a homography unless the general model explains clearly more
         sol = _from_h(H, x0, x1, K, ambiguity)
         kind = "homography"
     else:
@@ -228,7 +230,7 @@ class Initializer:
             return TrackResult(INITIALIZING, "initializing: reference frame set, move the camera sideways")
         f0, s0, _ = self.ref
         reason, sol = two_view(f0, f, ctx.K, ctx.config.min_parallax, general=ctx.config.two_view_model,
-                               ambiguity=ctx.config.homography_ambiguity)
+                               ambiguity=ctx.config.homography_ambiguity, h_ratio=ctx.config.homography_ratio)
         if sol is None:
             ctx.state = INITIALIZING
             return TrackResult(INITIALIZING, f"initializing: {reason}")
