@@ -95,7 +95,7 @@ class SlamConfig:
                 raise ValueError(f"SlamConfig.{f.name} must not be negative, not {getattr(self, f.name)}")
         if self.focus_share > 1:
             raise ValueError(f"SlamConfig.focus_share is a share of the ORB budget (0..1), not {self.focus_share}")
-        if self.homography_ratio > 1:
+        if not 0.0 <= self.homography_ratio <= 1.0:  # NaN too (it would mean "never the homography")
             raise ValueError(f"SlamConfig.homography_ratio is a share of two scores (0..1), not "
                              f"{self.homography_ratio}")
         if self.flow_win < 3 or self.local_kfs < 1 or self.ba_iterations < 1:
