@@ -472,6 +472,14 @@ tracker linked at rest. Culled like any young point again (`rest points culled`,
 more than 8 px from its image neighbours' median offset is dropped) read the boot level (1.50 deg) and the foam beam
 level at 1280 x 720 (3.1 mm) and far worse at 640 x 480 (18.6 mm, p90 399 mm against 26.6 mm): one reason it is not the
 default (`docs/family.md`, stop 68).
+
+Rerun in stop 107 on this code (stop 68's table predated stops 69-106's SLAM and tracker changes; CPU probe 18 ms).
+The default rows: the boot 1.56 deg at the median (1.55), p90 1.74 (1.78), alpha_z 0.26 deg (0.11); the foam beam 3.1
+mm at 1280 x 720 (3.0), p90 6.6 (6.6), and 7.4 mm at 640 x 480 (7.2). Five rows read as before to the tenth; the
+largest moves are the foam's `coherence 8 px` at 640 x 480 (18.6 -> 17.0 mm), the boot with its map frozen (1.56 ->
+1.94 deg) and the boot with the rest points culled (0.71 -> 0.40 deg, p90 0.92 -> 0.94). Rendered by the model they
+fit, these rows check the knobs against each other; the accuracy on independent physics is the first tables'.
+
 ## The dense tracker's time per frame (`python -m benchmarks.dense_budget`)
 
 `benchmarks/results/dense_budget.md` splits the default measurement's time per frame by stage, on the family's
