@@ -267,11 +267,11 @@ def test_monocular_initializer_passes_its_two_view_settings(monkeypatch, field, 
 
 
 def test_the_homography_ratio_picks_the_model_decomposed(monkeypatch):
-    """``h_ratio`` is the homography's least share of the two models' scores: a floor seen from two views 30 cm
-    apart starts from the homography at ORB-SLAM2's 0.40 on most draws and is given to the general model where no
+    """``h_ratio`` is the share of the two models' scores the homography's must exceed: a floor seen from two views 30
+    cm apart starts from the homography at ORB-SLAM2's 0.40 on most draws and is given to the general model where no
     share is enough (1.0); a room in depth starts from the general model at 0.40, and a share of 0 sends it to the
-    homography. With the scores held at a share of 0.45, ORB-SLAM2's 0.40 takes the homography and ORB-SLAM3's
-    0.50 the general model, as does a ratio equal to the share (the homography needs more)."""
+    homography. With the scores held at a share of 0.45, ORB-SLAM2's 0.40 takes the homography and ORB-SLAM3's 0.50
+    the general model, as does a ratio equal to the share (the homography needs more)."""
     import simreal_nodes.vision.slam.two_view as tv
 
     kinds = []

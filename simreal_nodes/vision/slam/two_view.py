@@ -58,7 +58,7 @@ def two_view(f0: Features, f1: Features, K: np.ndarray, min_parallax: float,
     ``min_parallax``: radians, the least median parallax of the triangulated points accepted. ``general``: the
     non-planar model, "essential" (five-point, calibrated; the default) or "fundamental" (ORB-SLAM2's eight-point;
     ``SlamConfig.two_view_model``); ``ambiguity``: how a homography's decompositions are told apart
-    (:func:`_from_h`); ``h_ratio``: the homography's least share of the two models' scores
+    (:func:`_from_h`); ``h_ratio``: the share of the two models' scores the homography's must exceed
     (``SlamConfig.homography_ratio``). Either way the solution's kind is "fundamental" for the general model (as
     ORB-SLAM2 names it) and "homography" for the planar one."""
     if general not in TWO_VIEW_MODELS:
