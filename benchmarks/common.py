@@ -39,7 +39,32 @@ def machine() -> dict:
     except OSError:
         pass
     info["cpu_probe_ms"] = speed_probe()
+    info.update(provenance())
     return info
+
+
+def provenance() -> dict:
+    """What produced a table: ``script`` (the benchmark run as ``__main__``, repository-relative) and ``commit`` (the
+    checkout's full commit, with '+' where its code, not counting results, differs from it; '?' outside git). Read by
+    ``benchmarks.staleness`` to tell whether the code has changed since."""
+    import subprocess
+    import sys
+
+    root = RESULTS.parents[1]
+    main = getattr(sys.modules.get("__main__"), "__file__", None)
+    out = {}
+    if main and Path(main).resolve().is_relative_to(root):
+        out["script"] = str(Path(main).resolve().relative_to(root))
+    try:
+        head = subprocess.run(["git", "-C", str(root), "rev-parse", "HEAD"], capture_output=True, text=True,
+                              check=True).stdout.strip()
+        dirty = subprocess.run(["git", "-C", str(root), "status", "--porcelain", "--", "simreal_nodes",
+                                "simreal_msgs_py", "benchmarks", ":(exclude)benchmarks/results", "requirements.txt"],
+                               capture_output=True, text=True, check=True).stdout.strip()
+        out["commit"] = head + ("+" if dirty else "")
+    except (OSError, subprocess.CalledProcessError):
+        out["commit"] = "?"
+    return out
 
 
 def simd_level(flags: list[str] | set[str]) -> str:

@@ -31,6 +31,10 @@ from simreal_nodes.assimilation.registration import RegistrationConfig
 from simreal_nodes.scene.schema import build_spec_models, validate_scene
 from simreal_nodes.synth.sequence import sequence
 
+# the tables this script writes, under names composed from its options, that the docs quote as current
+# (benchmarks.staleness checks them against the code; other names are labelled runs)
+DEFAULT_TABLES = ("depth_quality", "depth_quality_heldout")
+
 SETTINGS = [("clean", 0.0)] + [("noise", s) for s in (1.0, 2.0, 5.0, 10.0, 20.0)] + \
     [("holes", p) for p in (0.1, 0.25, 0.5)]
 BLOCK = 8  # pixels: holes come in blocks, as where a depth camera loses its pattern

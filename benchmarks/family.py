@@ -46,6 +46,11 @@ from simreal_nodes.states import EstimateState
 from simreal_nodes.synth.family import HELD_OUT_SEEDS, scene_model_error
 from simreal_nodes.synth.sequence import sequence
 
+# the tables this script writes, under names composed from its options, that the docs quote as current
+# (benchmarks.staleness checks them against the code; other names are labelled runs)
+DEFAULT_TABLES = ("family", "family_plate", "family_registration", "family_registration_stereo", "family_stereo",
+                  "family_preloaded", "family_preloaded_heldout")
+
 FPS = 15.0  # like the recording in the issue
 
 

@@ -33,6 +33,10 @@ from benchmarks.thesis_truth import boot_model_error, boot_model_fit
 from simreal_nodes import geometry as G
 from simreal_nodes.synth.boot_family import THETA_RANGE_DEG
 
+# the tables this script writes, under names composed from its options, that the docs quote as current
+# (benchmarks.staleness checks them against the code; other names are labelled runs)
+DEFAULT_TABLES = ("family_boot", "family_boot_registration")
+
 FPS = 15.0
 AT_REST_RAD = 0.02  # frames whose lever is within about a degree of rest are not scored (thesis_truth's rule)
 

@@ -51,6 +51,11 @@ from simreal_nodes.scene.schema import build_spec_models, validate_scene
 from simreal_nodes.states import EstimateState
 from simreal_nodes.synth.sequence import sequence
 
+# the tables this script writes, under names composed from its options, that the docs quote as current
+# (benchmarks.staleness checks them against the code; other names are labelled runs)
+DEFAULT_TABLES = ("flag_calibration_gain", "flag_calibration_margin", "flag_calibration_std",
+                  "flag_calibration_ambiguity", "flag_calibration_registration", "flag_calibration_camera")
+
 DURATION = 6.0  # seconds per scene in the camera sweep (as benchmarks/camera_quality.py)
 # the sets the thresholds were chosen on (stop 35): seeds 0-29 as drawn, seeds 0-9 from 0.5 m and 0.7 m; seeds 0-5
 # as drawn and five other views of seeds 0 and 1

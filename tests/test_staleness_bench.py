@@ -1,0 +1,109 @@
+"""benchmarks/staleness.py: which results tables are older than the code that writes them."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+from pathlib import Path
+
+import pytest
+
+from benchmarks.staleness import Code, closure, default_names, find_script, tables
+
+
+def test_code_compares_statements_not_text():
+    old = 'def f(x):\n    """Doc."""\n    return x + 1  # one\n'
+    same = 'def f(x):\n    """Other doc."""\n\n    return x + 1\n'
+    assert Code.statements("a.py", old) == Code.statements("a.py", same)
+    assert Code.statements("a.py", old) != Code.statements("a.py", "def f(x):\n    return x + 2\n")
+    # other files: byte for byte
+    assert Code.statements("s.yaml", "a: 1\n") != Code.statements("s.yaml", "a: 1 \n")
+
+
+def _git(root: Path, *args: str) -> str:
+    return subprocess.run(["git", "-C", str(root), *args], capture_output=True, text=True, check=True).stdout
+
+
+@pytest.fixture()
+def repo(tmp_path: Path) -> Path:
+    """A repository with a benchmark, the core module it imports inside a function (relatively, through a package),
+    a spec it names, and three tables: the benchmark's own, one under a label, one of no known script."""
+    files = {
+        "benchmarks/__init__.py": "",
+        "benchmarks/bench.py": ('from benchmarks.common import save\n\n\ndef main():\n'
+                                '    from simreal_nodes.core import go\n'
+                                '    save("bench", go("spec:beam"), "Beams under a load: error")\n'),
+        "benchmarks/common.py": "def save(*a):\n    pass\n",
+        "simreal_nodes/__init__.py": "",
+        "simreal_nodes/core/__init__.py": "from .work import go\n",
+        "simreal_nodes/core/work.py": "def go(x):\n    return x\n",
+        "simreal_nodes/specs/beam.yaml": "E: 70e9\n",
+        "simreal_nodes/specs/plate.yaml": "E: 1e9\n",
+        "simreal_nodes/unused.py": "def unused():\n    return 0\n",
+    }
+    for name, text in files.items():
+        (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / name).write_text(text)
+    results = tmp_path / "benchmarks" / "results"
+    results.mkdir()
+    for name, title in (("bench", "Beams under a load: error"), ("bench_knob_2", "Beams under a load: error"),
+                        ("orphan", "Nothing writes this")):
+        (results / f"{name}.json").write_text(json.dumps({"benchmark": name, "title": title, "rows": []}))
+    _git(tmp_path, "init", "-q")
+    _git(tmp_path, "-c", "user.name=t", "-c", "user.email=t@t", "add", ".")
+    _git(tmp_path, "-c", "user.name=t", "-c", "user.email=t@t", "commit", "-qm", "tables")
+    return tmp_path
+
+
+def _states(root: Path) -> dict[str, tuple[str, list[str]]]:
+    return {t.name: (t.state, t.changed_by) for t in tables(root)}
+
+
+def test_the_closure_follows_imports_in_functions_and_packages(repo: Path):
+    files = {str(p.relative_to(repo)) for p in closure(repo / "benchmarks" / "bench.py", repo)}
+    assert files == {"benchmarks/bench.py", "benchmarks/__init__.py", "benchmarks/common.py",
+                     "simreal_nodes/__init__.py", "simreal_nodes/core/__init__.py", "simreal_nodes/core/work.py"}
+
+
+def test_tables_are_current_until_their_code_changes(repo: Path):
+    assert _states(repo) == {"bench": ("current", []), "bench_knob_2": ("labelled", []),
+                             "orphan": ("no script", [])}
+    # a docstring, a comment, a new function and a file the benchmark does not import change nothing
+    (repo / "simreal_nodes/core/work.py").write_text('def go(x):\n    """Doc."""\n    return x  # same\n\n\n'
+                                                      "def other():\n    return 1\n")
+    (repo / "simreal_nodes/unused.py").write_text("def unused():\n    return 1\n")
+    (repo / "simreal_nodes/specs/plate.yaml").write_text("E: 2e9\n")
+    assert _states(repo)["bench"] == ("current", [])
+    # the code it runs, or a spec it names, does
+    (repo / "simreal_nodes/core/work.py").write_text("def go(x):\n    return 2 * x\n")
+    (repo / "simreal_nodes/specs/beam.yaml").write_text("E: 69e9\n")
+    assert _states(repo)["bench"] == ("code changed", ["simreal_nodes/core/work.py", "simreal_nodes/specs/beam.yaml"])
+
+
+def test_a_recorded_commit_is_the_one_compared_against(repo: Path):
+    first = _git(repo, "rev-parse", "HEAD").strip()
+    (repo / "simreal_nodes/core/work.py").write_text("def go(x):\n    return 2 * x\n")
+    _git(repo, "-c", "user.name=t", "-c", "user.email=t@t", "commit", "-qam", "code")
+    # the table rewritten (e.g. a reflowed note) after the code change, but recorded as produced at the first commit
+    doc = {"benchmark": "bench", "title": "Beams under a load: error", "rows": [1],
+           "machine": {"script": "benchmarks/bench.py", "commit": first}}
+    (repo / "benchmarks/results/bench.json").write_text(json.dumps(doc))
+    _git(repo, "-c", "user.name=t", "-c", "user.email=t@t", "commit", "-qam", "table")
+    assert _states(repo)["bench"] == ("code changed", ["simreal_nodes/core/work.py"])
+    # produced on uncommitted code ('+'): the commit that wrote the table stands for it
+    doc["machine"]["commit"] = first + "+"
+    (repo / "benchmarks/results/bench.json").write_text(json.dumps(doc))
+    _git(repo, "-c", "user.name=t", "-c", "user.email=t@t", "commit", "-qam", "table again")
+    assert _states(repo)["bench"] == ("current", [])
+
+
+def test_default_names_and_the_script_of_a_title():
+    src = ('NAME = "live"\nDEFAULT_TABLES = ("fam", "fam_plate")\n\n\ndef main(ap, a, q):\n'
+           '    ap.add_argument("--out", default="mine")\n    save(NAME, [], [], "t")\n'
+           '    save("reg" + q, [], [], "t")\n    save(a.out, [], [], f"Runs of {q} under a load")\n')
+    assert default_names("benchmarks/x.py", src) == {"x", "live", "fam", "fam_plate", "mine", "reg"}
+    sources = {"benchmarks/x.py": src, "benchmarks/y.py": "save('y', [], [], 'Something else entirely')"}
+    assert find_script({"title": "Runs of 3 under a load"}, "z", sources) == "benchmarks/x.py"
+    assert find_script({"title": "Nothing known"}, "y", sources) == "benchmarks/y.py"
+    assert find_script({"title": "Nothing known"}, "z", sources) is None
+    assert find_script({"machine": {"script": "benchmarks/y.py"}}, "z", sources) == "benchmarks/y.py"
