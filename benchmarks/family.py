@@ -959,8 +959,9 @@ width (OpenCV leaves the leftmost columns, as many as the disparity range, witho
 padded first), down to `camera.stereo_min_depth_m` (the family's scene file: half the distance the user guesses the
 object at; `benchmarks/results/stereo_depth.md`: 51 ms on one thread and every beam pixel measured at the median,
 0.9x takes 34 ms and still measures it, 1.2x loses up to 62 % of a beam, and without the padding the worst seed keeps
-63 % of its beam; stop 108's rerun on an AMD EPYC AVX2 host: every coverage figure the same, 78 ms and 53 ms). Three changes were found on development seeds 0-13 and chosen there, each from the data (traced on
-the first three views with the true camera poses, to separate the registration from the SLAM; scratch runs, not kept):
+63 % of its beam; stop 108's rerun on an AMD EPYC AVX2 host: every coverage figure the same, 78 ms and 53 ms).
+Three changes were found on development seeds 0-13 and chosen there, each from the data (traced on the first three
+views with the true camera poses, to separate the registration from the SLAM; scratch runs, not kept):
 
 - the full fine stage of the registration rolled thin beams by degrees about their axis on SGBM depth (seeds 2
   and 5 the most; `test_registration_stereo.py` shows the roll on a rendered scene); on stereo depth the fine stage
