@@ -255,14 +255,16 @@ for 1 to 50 load steps.
   (neo-Hookean) and to a stretch of 5.3 in tension.
 - **Saint Venant-Kirchhoff has no equilibrium past a nominal compressive stress of E / (3 sqrt 3) = 0.192 E** (its
   stiffness goes to zero at a stretch of 1/sqrt 3 = 0.577). Newton says so: each load past it raises a `FemError`
-  naming the load step and how far it got. At 0.2 E it stopped at 0.6224 of the way from 0.18 E to 0.2 E, that is
-  at 0.19245 E: the analytic limit to four digits. It takes 1.9-3.4 s to give up (sub-steps halved down to 1e-4).
-  Neo-Hookean carries any compression (1.0 E: stretch 0.48). A model of a part that may be compressed that far
-  should use neo-Hookean; with SVK the build fails loudly, it does not return a wrong shape.
+  naming the load step and how far it got. At 0.2 E it stopped at 0.6224 of the way from 0.18 E to 0.2 E, that is at
+  0.19245 E: the analytic limit to four digits. It takes 3.5-6.4 s to give up (sub-steps halved down to 1e-4; stop
+  108's run on an AMD EPYC AVX2 host, 1.9-3.4 s on the previous run's). Neo-Hookean carries any compression (1.0 E:
+  stretch 0.48). A model of a part that may be compressed that far should use neo-Hookean; with SVK the build fails
+  loudly, it does not return a wrong shape.
 - **Load steps buy nothing here.** The solver halves a step Newton cannot finish, so one step reaches the same
-  answer as fifty (to 1e-8 % at any count) in 6-12 Newton iterations and 0.03-0.5 s, against 150-200 iterations
-  and 0.8-9 s for fifty steps: 60 % compression of the neo-Hookean cube, and the cantilever under the load whose
-  linear deflection is 60 % of its length (it bends 46 %), with either law. None of these needed a halved step.
+  answer as fifty (to 1e-8 % at any count) in 6-12 Newton iterations and 0.06-0.8 s, against 150-200 iterations and
+  1.4-14 s for fifty steps (stop 108's run; the previous run's host took 0.03-0.5 s and 0.8-9 s): 60 % compression
+  of the neo-Hookean cube, and the cantilever under the load whose linear deflection is 60 % of its length (it bends
+  46 %), with either law. None of these needed a halved step.
   More steps are worth it only to keep intermediate states (the pseudo-time snapshots a model is built from).
 """),
     ("mode_count", """## PGD and POD mode counts against an independent truth
@@ -280,7 +282,9 @@ scene's reduced model against its own independent full-order truth.
   beside each family result.
 - The POD projection (the best any n-term basis from the same snapshots could do) is lower than the PGD's error
   once past 3 modes, but its floor is the same kind of error.
-- Evaluation time: 7-11 us for 1000 nodes from 1 to 19 modes; so keeping all 19 costs little, and they are kept.
+- Evaluation time: 15-39 us for 1000 nodes from 1 to 19 modes (median 18 us; stop 108's run on an AMD EPYC AVX2
+  host, CPU probe 19 ms; the previous run, 2026-11-25, read 7-11 us); so keeping all 19 costs little, and they are
+  kept.
 """),
     ("lm_conditioning", """## The Levenberg-Marquardt normal equations' conditioning
 
