@@ -13,12 +13,14 @@ Per table (``results/<name>.json``):
   that changed the table's JSON (git);
 - the script's code: the files it imports, transitively, within this repository (``benchmarks``, ``simreal_nodes``,
   ``simreal_msgs_py``; every import statement anywhere in a file, so imports inside functions count, with the
-  packages' ``__init__`` modules), and the package's data files (model specs, the DDS profile) whose name or folder
-  one of those files mentions;
-- the state: ``current`` (no commit after the table's changed any of those files), ``code changed`` (the commits that
-  did, the newest first: the table may no longer be what the code gives and is rerun to tell), ``labelled`` (a name
-  the script does not write by default: a run kept under a label, a knob's development sweep or a stop's record,
-  quoted in the docs as such and not expected to follow the code) or ``no script``.
+  packages' ``__init__`` modules), and the packages' data files (model specs, the DDS profile) that one of those
+  files names;
+- the state: ``current`` (none of those files differs as code from the table's commit: :class:`Code`, top-level
+  statements compared by syntax tree less docstrings, new definitions not counted, other files byte for byte),
+  ``code changed`` (the files that differ: the table may no longer be what the code gives and is rerun to tell),
+  ``labelled`` (a name the script does not write by default, :func:`default_names`: a run kept under a label, a
+  knob's development sweep or a stop's record, quoted in the docs as such and not expected to follow the code) or
+  ``no script``.
 
 The check is conservative: a change anywhere in the imported code marks the table, whether or not it moves a number;
 a rerun that gives the same numbers shows it did not. Library versions (requirements.txt) are listed apart: they move
