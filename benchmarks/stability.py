@@ -370,15 +370,16 @@ poses), blur 2.5 2.90 -> 2.19 mm (57 -> 118 poses): blur softens the half-size i
 900, more than 5 mm off 2 -> 0, rms 0.40 -> 0.31 mm (noise 12), 1.24 -> 0.71 mm (blur 1.75), 0.34 -> 0.33 mm (1280 x
 720 as drawn), 0.95 -> 0.83 mm (1280 x 720, blur 3). **The time** (p50 in this table, rerun in stop 109 on an AMD EPYC
 host, probe 19 ms; stop 94's Intel Xeon run, probe 18 ms, in brackets): 7.6 -> 4.9 ms (7.1 -> 4.6) at 640 x 480 as
-drawn, 14.3 -> 5.3 ms (14.1 -> 5.1) with noise 16, 12.3 -> 7.7 ms (11.8 -> 7.3) at 1280 x 720 (27.3 -> 8.4 ms with noise
-12: the detector's candidates grow with the noise and the half-size image averages it away). The cost where the
+drawn, 14.3 -> 5.3 ms (14.1 -> 5.1) with noise 16, 12.3 -> 7.7 ms (11.8 -> 7.3) at 1280 x 720 (27.3 -> 8.4 ms with
+noise 12: the detector's candidates grow with the noise and the half-size image averages it away). The cost where the
 markers are barely read or not at all (blur 2.5-4, most poses refused): the windows and then the full image after the
-half-size one, 4.2 -> 4.8, 3.6 -> 7.0, 3.2 -> 5.0 and 1.6 -> 2.5 ms (3.8 -> 3.9, 3.1 -> 6.1, 2.8 -> 4.3 and 1.4 -> 2.2). At 320 x 240 (two development views added in stop
-94: the committed demo sample's size) the half-size image holds few of the markers (13-30 px a side) and most frames
-need windows: as accurate (poses given 297 -> 298, 27 more than 5 mm off either way, at a median of 1.9 mm: that
-size's own limit), 0.9-1.0 ms slower (4.1 -> 5.1 ms as drawn; stop 94: 0.2-0.7, 3.5 -> 4.2); `detect_scale: 1` is the knob for such images. OpenCV's
-`subpix` corners keep the full image at any scale: from the half-size image's contours their small window lands off
-(tried in scratch: the sharp view's median error doubled).
+half-size one, 4.2 -> 4.8, 3.6 -> 7.0, 3.2 -> 5.0 and 1.6 -> 2.5 ms (3.8 -> 3.9, 3.1 -> 6.1, 2.8 -> 4.3 and 1.4 ->
+2.2). At 320 x 240 (two development views added in stop 94: the committed demo sample's size) the half-size image
+holds few of the markers (13-30 px a side) and most frames need windows: as accurate (poses given 297 -> 298, 27 more
+than 5 mm off either way, at a median of 1.9 mm: that size's own limit), 0.9-1.0 ms slower (4.1 -> 5.1 ms as drawn;
+stop 94: 0.2-0.7, 3.5 -> 4.2); `detect_scale: 1` is the knob for such images. OpenCV's `subpix` corners keep the full
+image at any scale: from the half-size image's contours their small window lands off (tried in scratch: the sharp
+view's median error doubled).
 
 **Stop 80: the corners from the markers' edges** (`localization.markers.corner_refinement: edges`, the default now;
 `vision/markers.py:refine_markers_by_edges`). OpenCV's sub-pixel corner search (`subpix`, the default until stop 80)
