@@ -24,7 +24,9 @@ Per table (``results/<name>.json``):
 
 The check is conservative: a change anywhere in the imported code marks the table, whether or not it moves a number;
 a rerun that gives the same numbers shows it did not. Library versions (requirements.txt) are listed apart: they move
-timings and, across SIMD levels, digits (docs/family.md).
+timings and, across SIMD levels, digits (docs/family.md). Each table's host (``on``: the CPU and SIMD level it
+records) is listed too: compare a rerun with a table from the same kind of host, or expect the digits the SIMD level
+moves (RGB-D SLAM, RANSAC-seeded pairs, greedy solvers) to differ.
 """
 
 from __future__ import annotations
@@ -49,6 +51,7 @@ class Table:
     state: str = ""  # current / code changed / labelled / no script
     changed_by: list[str] = field(default_factory=list)  # files of its code that differ now
     files: int = 0  # files in the script's closure
+    host: str = ""  # the kind of CPU the table was written on (host_of), '' where it does not say
 
 
 def module_file(name: str, root: Path) -> Path | None:
@@ -187,6 +190,18 @@ class Code:
         return any(now.get(k) != v for k, v in then.items())
 
 
+def host_of(doc: dict) -> str:
+    """The kind of host a table records (``machine.cpu`` shortened, with ``machine.simd`` where recorded): a rerun is
+    compared with a table written on the same kind, since the SIMD level moves digits (docs/localization.md: the
+    same code reads `real_slam`'s RGB-D rows and `two_view`'s real pairs differently on AVX2 and AVX-512 hosts)."""
+    m = doc.get("machine") if isinstance(doc, dict) else None
+    if not isinstance(m, dict):
+        return ""
+    cpu = " ".join(str(m.get("cpu") or "").replace("(R)", "").replace("(TM)", "").replace("Processor", "").split())
+    simd = str(m.get("simd") or "")
+    return f"{cpu} ({simd})" if cpu and simd else cpu or simd
+
+
 def written_at(root: Path, path: str) -> str:
     """The last commit that changed ``path`` ('' where none did)."""
     return subprocess.run(["git", "-C", str(root), "log", "-1", "--format=%H", "--", path], capture_output=True,
@@ -269,7 +284,7 @@ def tables(root: Path = ROOT) -> list[Table]:
         if recorded and not recorded.endswith("+") and recorded != "?":
             at = subprocess.run(["git", "-C", str(root), "rev-parse", recorded], capture_output=True, text=True,
                                 check=False).stdout.strip() or at
-        t = Table(name, script, at)
+        t = Table(name, script, at, host=host_of(doc))
         if script is None:
             t.state = "no script"
             out.append(t)
@@ -305,15 +320,17 @@ def report(rows: list[Table], root: Path = ROOT) -> str:
              ", ".join(f"{k}: {len(v)}" for k, v in sorted(by.items())), ""]
     if by.get("code changed"):
         lines += ["## Code changed since the table was written (rerun: `./run bench SCRIPT`)", "",
-                  "| table | script | written at | files of its code that differ now | of |", "|---|---|---|---|---|"]
+                  "| table | script | written at | on | files of its code that differ now | of |",
+                  "|---|---|---|---|---|---|"]
         for t in by["code changed"]:
             shown = ", ".join(Path(c).name for c in t.changed_by[:4]) + (" ..." if len(t.changed_by) > 4 else "")
-            lines.append(f"| {t.name} | {Path(t.script or '').stem} | {subject(root, t.commit)[:18]} | "
+            lines.append(f"| {t.name} | {Path(t.script or '').stem} | {subject(root, t.commit)[:18]} | {t.host} | "
                          f"{len(t.changed_by)}: {shown} | {t.files} |")
         lines.append("")
     if by.get("current"):
         lines += ["## Current (no change to its code since)", "",
-                  ", ".join(f"{t.name} ({Path(t.script or '').stem})" for t in by["current"]), ""]
+                  ", ".join(f"{t.name} ({Path(t.script or '').stem}; {t.host or 'host not recorded'})"
+                            for t in by["current"]), ""]
     for state in ("labelled", "no script"):
         if by.get(state):
             lines += [f"## {state.capitalize()}", "", ", ".join(t.name for t in by[state]), ""]

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from benchmarks.staleness import Code, closure, default_names, find_script, tables
+from benchmarks.staleness import Code, closure, default_names, find_script, host_of, tables
 
 
 def test_code_compares_statements_not_text():
@@ -107,3 +107,19 @@ def test_default_names_and_the_script_of_a_title():
     assert find_script({"title": "Nothing known"}, "y", sources) == "benchmarks/y.py"
     assert find_script({"title": "Nothing known"}, "z", sources) is None
     assert find_script({"machine": {"script": "benchmarks/y.py"}}, "z", sources) == "benchmarks/y.py"
+
+
+def test_host_of_names_the_cpu_and_its_simd_level():
+    assert host_of({"machine": {"cpu": "Intel(R) Xeon(R) Processor", "simd": "AVX-512"}}) == "Intel Xeon (AVX-512)"
+    assert host_of({"machine": {"cpu": "AMD EPYC", "simd": None}}) == "AMD EPYC"  # tables older than the simd field
+    assert host_of({"machine": {"simd": "AVX2"}}) == "AVX2"
+    assert host_of({"rows": []}) == "" and host_of([]) == ""
+
+
+def test_tables_carry_their_host(repo: Path):
+    table = repo / "benchmarks" / "results" / "bench.json"
+    doc = json.loads(table.read_text())
+    doc["machine"] = {"cpu": "AMD EPYC", "simd": "AVX2"}
+    table.write_text(json.dumps(doc))
+    hosts = {t.name: t.host for t in tables(repo)}
+    assert hosts["bench"] == "AMD EPYC (AVX2)" and hosts["orphan"] == ""
