@@ -473,12 +473,15 @@ more than 8 px from its image neighbours' median offset is dropped) read the boo
 level at 1280 x 720 (3.1 mm) and far worse at 640 x 480 (18.6 mm, p90 399 mm against 26.6 mm): one reason it is not the
 default (`docs/family.md`, stop 68).
 
-Rerun in stop 107 on this code (stop 68's table predated stops 69-106's SLAM and tracker changes; CPU probe 18 ms).
-The default rows: the boot 1.56 deg at the median (1.55), p90 1.74 (1.78), alpha_z 0.26 deg (0.11); the foam beam 3.1
-mm at 1280 x 720 (3.0), p90 6.6 (6.6), and 7.4 mm at 640 x 480 (7.2). Five rows read as before to the tenth; the
-largest moves are the foam's `coherence 8 px` at 640 x 480 (18.6 -> 17.0 mm), the boot with its map frozen (1.56 ->
-1.94 deg) and the boot with the rest points culled (0.71 -> 0.40 deg, p90 0.92 -> 0.94). Rendered by the model they
-fit, these rows check the knobs against each other; the accuracy on independent physics is the first tables'.
+Rerun in stop 107 on an Intel Xeon (AVX-512) host and in stop 109 on an AMD EPYC (AVX2) one, on the same code (only a
+docstring differs; stop 68's table predated stops 69-106's SLAM and tracker changes). The default rows, stop 109's
+with stop 107's in brackets: the boot 1.55 deg at the median (1.56; stop 68: 1.55), p90 1.85 (1.74), alpha_z 0.19 deg
+(0.26); the foam beam 2.9 mm at 1280 x 720 (3.1), p90 6.7 (6.6), and 7.3 mm at 640 x 480 (7.4). So the host moves
+these rows: the foam's by at most 0.4 mm at the median but for `coherence 8 px` at 640 x 480 (17.0 -> 18.7 mm), the
+boot's by at most 0.11 deg, and the boot's alpha_z with a 10 mm object shift most (29.7 -> 20.5 deg). Against stop 68:
+the boot with its map frozen 1.56 -> 1.94 deg, with the rest points culled 0.71 -> 0.37 deg (p90 0.92 -> 0.93).
+Rendered by the model they fit, these rows check the knobs against each other; the accuracy on independent physics is
+the first tables'.
 
 ## The dense tracker's time per frame (`python -m benchmarks.dense_budget`)
 
