@@ -16,7 +16,8 @@ Per table (``results/<name>.json``):
   packages' ``__init__`` modules), and the packages' data files (model specs, the DDS profile) that one of those
   files names;
 - the state: ``current`` (none of those files differs as code from the table's commit: :class:`Code`, top-level
-  statements compared by syntax tree less docstrings, new definitions not counted, other files byte for byte),
+  statements compared by syntax tree less docstrings and a script's docs prose (``INTRO``), new definitions not counted,
+  other files byte for byte),
   ``code changed`` (the files that differ: the table may no longer be what the code gives and is rerun to tell),
   ``labelled`` (a name the script does not write by default, :func:`default_names`: a run kept under a label, a
   knob's development sweep or a stop's record, quoted in the docs as such and not expected to follow the code) or
@@ -40,6 +41,10 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("benchmarks", "simreal_nodes", "simreal_msgs_py")
+# the name of a script's docs page prose (a module-level string that only builds docs/*.md: family.py,
+# tracking_scenes.py, stability.py): not compared, so editing the prose a page quotes around its tables does not flag
+# the tables. Other string constants stay code (model specs and shaders are strings too).
+PROSE = "INTRO"
 RESULTS = "benchmarks/results"
 
 
@@ -159,6 +164,9 @@ class Code:
                 node.body = body[1:] or [ast.Pass()]
         out: dict[str, str] = {}
         for node in tree.body:
+            if (isinstance(node, ast.Assign) and [getattr(t, "id", None) for t in node.targets] == [PROSE]
+                    and isinstance(node.value, ast.Constant) and isinstance(node.value.value, str)):
+                continue  # a docs page's prose (see PROSE)
             code = ast.dump(node, include_attributes=False)
             if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
                 key = f"def {node.name}"

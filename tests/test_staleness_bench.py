@@ -16,6 +16,11 @@ def test_code_compares_statements_not_text():
     same = 'def f(x):\n    """Other doc."""\n\n    return x + 1\n'
     assert Code.statements("a.py", old) == Code.statements("a.py", same)
     assert Code.statements("a.py", old) != Code.statements("a.py", "def f(x):\n    return x + 2\n")
+    # a script's docs prose (INTRO) is not code; any other string constant is (specs and shaders are strings too)
+    assert Code.statements("b.py", 'INTRO = "# Page\\nOld words."\nN = 3\n') == \
+        Code.statements("b.py", 'INTRO = "# Page\\nNew words."\nN = 3\n')
+    assert Code.statements("b.py", 'SPEC = "E: 1"\n') != Code.statements("b.py", 'SPEC = "E: 2"\n')
+    assert Code.statements("b.py", 'INTRO = "a"\nN = 3\n') != Code.statements("b.py", 'INTRO = "a"\nN = 4\n')
     # other files: byte for byte
     assert Code.statements("s.yaml", "a: 1\n") != Code.statements("s.yaml", "a: 1 \n")
 
