@@ -477,7 +477,7 @@ Rerun in stop 107 on an Intel Xeon (AVX-512) host and in stop 109 on an AMD EPYC
 docstring differs; stop 68's table predated stops 69-106's SLAM and tracker changes). The default rows, stop 109's
 with stop 107's in brackets: the boot 1.55 deg at the median (1.56; stop 68: 1.55), p90 1.85 (1.74), alpha_z 0.19 deg
 (0.26); the foam beam 2.9 mm at 1280 x 720 (3.1), p90 6.7 (6.6), and 7.3 mm at 640 x 480 (7.4). So the host moves
-these rows: the foam's by at most 0.4 mm at the median but for `coherence 8 px` at 640 x 480 (17.0 -> 18.7 mm), the
+these rows: the foam's by at most 0.2 mm at the median but for `coherence 8 px` at 640 x 480 (17.0 -> 18.7 mm), the
 boot's by at most 0.11 deg, and the boot's alpha_z with a 10 mm object shift most (29.7 -> 20.5 deg). Against stop 68:
 the boot with its map frozen 1.56 -> 1.94 deg, with the rest points culled 0.71 -> 0.37 deg (p90 0.92 -> 0.93).
 Rendered by the model they fit, these rows check the knobs against each other; the accuracy on independent physics is
