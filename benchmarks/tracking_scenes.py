@@ -156,12 +156,13 @@ P2 tetrahedra on twice the model's grid, the weight as a pressure on its footpri
 Venant-Kirchhoff P2 tetrahedra, Newton at each position of the disk), the object's pose not taken from the truth,
 each scene's model error beside its result.
 
-- *Foam beam*, the defaults (dense) and registration (0.1-0.2 mm, 0.02 deg off): median error 1.3 mm (0.18 % of the
+- *Foam beam*, the defaults (dense) and registration (0.1-0.2 mm, 0.02 deg off): median error 1.4 mm (0.18 % of the
   span), mean 1.8 mm at the thesis's 1280 x 720, where the thesis reports a mean "on the order of 1.5 mm": we are
   about 0.3 mm worse (our camera: 15 fps on a hand-held arc about 1 m away; the thesis's path is not given). 640 x
-  480: median 1.6 mm, mean 2.2 mm. (Rerun in stop 86 on this code: the same to the printed digit as stop 80's run. The
-  rows of 2026-11-27 read 1.3 / 1.9 mm and 1.4 / 2.2 mm.) Model error: 1.7 % of the displacement, a load-position bias
-  of 0.9 % of the span when fitted to every surface node.
+  480: median 1.6 mm, mean 2.2 mm. (Stops 107 and 109's runs, on an Intel and an AMD host, the same to the digit; stop
+  86's run read a median of 1.3 mm at 1280 x 720 (1.35 against 1.39 now), as stop 80's did. The rows of 2026-11-27
+  read 1.3 / 1.9 mm and 1.4 / 2.2 mm.) Model error: 1.7 % of the displacement, a load-position bias of 0.9 % of the
+  span when fitted to every surface node.
 - The foam *model* was wrong before this table existed: the spec's 32 linear hexahedra along the beam resolved the
   40 mm support strips as 25 mm, and its deflection was 26 % larger than the converged full-order solve (model bias
   11.8 % of the span; the tracker read the load 11 % of the span off, the model's error, not the tracker's). Its
@@ -170,56 +171,58 @@ each scene's model error beside its result.
 - *Aluminium bar* with the thesis's glued dots: its pose measured by hand (2.0 mm and 0.9 deg off) is fatal as given
   (median 91 mm: a cantilever's bending looks like a turn about its clamp). With `tracking.rest_frames: 10` the pose
   is corrected from the first frames, where the bar is at rest (by 0.4 deg and 2.7 mm; the dots' rms 2.1 -> 0.11 px),
-  and then held: median 2.8 mm (0.59 % of the 480 mm range), mean 2.9 mm; Table 4.1's own measure (at each position
-  the weight rests at, |mean estimate - position|; the median over the six positions) 2.0 mm against the thesis's 2.2
-  mm at the same positions (the thesis does not state its camera resolution; ours is 640 x 480 at 0.45-0.65 m). Rerun
-  in stop 86 on this code, where the markers' edges start from OpenCV's sub-pixel corners (stop 80's run, on commit
-  9b5de31, started them from the unrefined corners): median 2.9 -> 2.8 mm, mean 3.0 -> 2.9 mm, p90 5.8 -> 5.9 mm,
-  Table 4.1's measure 2.1 -> 2.0 mm, the corrected pose 0.04 mm off as before. Stop 80's run itself had moved them
-  from the corners before the edges (the corrected pose's position 0.24 -> 0.04 mm off; the load's median 2.7 -> 2.9
-  mm, mean 3.3 -> 3.0 mm, p90 6.7 -> 5.8 mm, Table 4.1's measure 1.9 -> 2.1 mm), position by position by up to 1.5 mm
-  both ways: one recording's per-position means, not a trend. What stays of the pose error (0.8 deg) is the roll about
-  the row of dots, which does not move them. The rest correction fits the undeformed bar's small rigid motion over the
-  first `rest_frames` frames with a camera pose (Huber, a weak prior of 2 deg / 5 mm for the directions the dots
-  cannot see; the estimate is 'initializing' meanwhile) and is refused, with its reason, when it does not lower the
-  residual or leaves it above 1.5 x Huber, when it is larger than 5 deg / 3 cm, and when the frames were not at rest:
-  a bent cantilever fits a rigid turn to a fraction of a pixel (0.35 px in the unit test), so the same frames are
-  fitted with the deformation free too, and a fit under half the rigid residual (above 0.2 px) refuses it. Off by
-  default: a user who starts the recording unloaded turns it on. The corrected pose lives in the tracker; the overlay
-  and collision nodes still place the object at the scene file's pose. The project's default measurement, dense,
-  cannot read this bar: its surface is plain metal, and every loaded frame is flagged 'no measurable deformation' (0 %
-  OK) rather than reported.
+  and then held: median 2.9 mm (0.60 % of the 480 mm range), mean 3.0 mm (stops 107 and 109; stop 86's run: 2.8 mm,
+  0.59 %, 2.9 mm); Table 4.1's own measure (at each position the weight rests at, |mean estimate - position|; the
+  median over the six positions) 2.0 mm against the thesis's 2.2 mm at the same positions (the thesis does not state
+  its camera resolution; ours is 640 x 480 at 0.45-0.65 m). Rerun in stop 86 on this code, where the markers' edges
+  start from OpenCV's sub-pixel corners (stop 80's run, on commit 9b5de31, started them from the unrefined corners):
+  median 2.9 -> 2.8 mm, mean 3.0 -> 2.9 mm, p90 5.8 -> 5.9 mm, Table 4.1's measure 2.1 -> 2.0 mm, the corrected pose
+  0.04 mm off as before. Stop 80's run itself had moved them from the corners before the edges (the corrected pose's
+  position 0.24 -> 0.04 mm off; the load's median 2.7 -> 2.9 mm, mean 3.3 -> 3.0 mm, p90 6.7 -> 5.8 mm, Table 4.1's
+  measure 1.9 -> 2.1 mm), position by position by up to 1.5 mm both ways: one recording's per-position means, not a
+  trend. What stays of the pose error (0.8 deg) is the roll about the row of dots, which does not move them. The rest
+  correction fits the undeformed bar's small rigid motion over the first `rest_frames` frames with a camera pose
+  (Huber, a weak prior of 2 deg / 5 mm for the directions the dots cannot see; the estimate is 'initializing'
+  meanwhile) and is refused, with its reason, when it does not lower the residual or leaves it above 1.5 x Huber, when
+  it is larger than 5 deg / 3 cm, and when the frames were not at rest: a bent cantilever fits a rigid turn to a
+  fraction of a pixel (0.35 px in the unit test), so the same frames are fitted with the deformation free too, and a
+  fit under half the rigid residual (above 0.2 px) refuses it. Off by default: a user who starts the recording
+  unloaded turns it on. The corrected pose lives in the tracker; the overlay and collision nodes still place the
+  object at the scene file's pose. The project's default measurement, dense, cannot read this bar: its surface is
+  plain metal, and every loaded frame is flagged 'no measurable deformation' (0 % OK) rather than reported.
 - *Joint boot* (§4.5.4, its own table): the real boot rendered from an independent neo-Hookean solve
-  (`synth/scenes.py:boot_truth`: trilinear hexahedra 72 x 2 x 60, two layers through the wall, Newton every 2 deg of the
-  lever; the model: 36 x 1 x 48, NI-PGD), placed by registration from a guess by eye, map points as its scene file says.
-  Stop 105's run (stop 104's code gives the same figures: a run beside it): the lever read from every depth image and
-  alpha_z reported with the depth fit's turn, as the boot's family scene file has it (`tracking.depth_fit` and
-  `depth_turn`, chosen on the family's development seeds, `docs/family.md`; the registration polished,
-  `anchor.polish_mm: 4`, the boot registered as a body of revolution; stop 72's run, the table until stop 105, in
-  brackets): the scene's own view reads theta **0.31 deg** off at the median (0.38), p90 1.15 deg (1.29), alpha_z
-  0.08 deg (0.26; the images' own alpha_z, the table's next column: 0.07), registration 0.2 mm and 0.08 deg off (0.09
-  mm, 0.04 deg). A third view that nothing was chosen on (another arc, the boot turned by 70 deg, another guess):
-  **0.29 deg** (0.22), p90 1.03 deg (0.68), alpha_z **0.49 deg** (0.11; the images' own: 0.47; this view also ran with
-  a first version of `depth_turn`, dropped on the own view, so it is not blind to that choice). A second view, on
-  which the tracker's handling of alpha_z was fixed: 0.19 deg (0.21), alpha_z 0.32 deg (0.43; the images' own: 0.09).
+  (`synth/scenes.py:boot_truth`: trilinear hexahedra 72 x 2 x 60, two layers through the wall, Newton every 2 deg of
+  the lever; the model: 36 x 1 x 48, NI-PGD), placed by registration from a guess by eye, map points as its scene file
+  says. Stop 109's run, on stop 106's code (the turn search; a 2-core AMD EPYC host, probe 27 ms): the lever read from
+  every depth image and alpha_z reported with the depth fit's turn, as the boot's family scene file has it
+  (`tracking.depth_fit` and `depth_turn`, chosen on the family's development seeds, `docs/family.md`; the registration
+  polished, `anchor.polish_mm: 4`, the boot registered as a body of revolution; stop 105's run, then stop 72's, in
+  brackets): the scene's own view reads theta **0.31 deg** off at the median (0.31, 0.38), p90 1.25 deg (1.15, 1.29),
+  alpha_z 0.06 deg (0.08, 0.26; the images' own alpha_z, the table's next column: 0.17, 0.07 in stop 105),
+  registration 0.2 mm and 0.08 deg off (the same; 0.09 mm, 0.04 deg). A third view that nothing was chosen on (another
+  arc, the boot turned by 70 deg, another guess): **0.31 deg** (0.29, 0.22), p90 0.81 deg (1.03, 0.68), alpha_z **0.52
+  deg** (0.49, 0.11; the images' own: 0.02, 0.47 in stop 105; this view also ran with a first version of `depth_turn`,
+  dropped on the own view, so it is not blind to that choice). A second view, on which the tracker's handling of
+  alpha_z was fixed: 0.17 deg (0.19, 0.21), alpha_z 0.36 deg (0.32, 0.43; the images' own: 0.45, 0.09 in stop 105).
   The changes between stop 72 and stop 104 that moved them were not traced one by one (the table was not rerun
-  meanwhile; the held-out view's alpha_z 0.11 -> 0.49 deg is the largest move, within the target of 1 deg). The
-  tracker's time per frame in stop 105's run (65-109 ms) was taken on a loaded host (its CPU probe read 83 ms against
-  15-17 quiet): stop 73's quiet run read 31-35 ms (stop 72: 37-45 ms; stop 71: 68-81; the images alone 9-16 ms; stop
-  84's cheaper depth fit, the same fits, `benchmarks/results/depth_budget.md`). With
-  the knob `outlier_refits: 3` (commit 319a533's table, the images alone) the three read 1.43, 0.15 and 0.17
-  deg (alpha_z 0.45, 0.12, 0.42). Before stop 65 (the map then culled the object points linked at rest) the own view
-  read 0.37 deg. With the Levenberg-Marquardt solver before stop 34 the three views read 0.26, 0.12 and 0.27 deg: its
-  change cost the boot about 0.1 deg.
-  Model error: 3.2 % of the displacement at the median (6.4 % at the largest angles, where the full-order folds
-  buckle more than the one-layer model's; its worst node 17 mm off), a theta bias of 0.4 deg (1.3 deg at most).
-  The thesis gives no figure for this example. The boot's table runs OpenCV on one thread: with its worker
+  meanwhile; the held-out view's alpha_z 0.11 -> 0.49 deg is the largest move, within the target of 1 deg); between
+  stops 105 and 109 the host changed too. The tracker's time per frame: 39-48 ms in stop 109's run (probe 27 ms
+  against 19 quiet on that host); stop 105's run (65-109 ms) was taken on a loaded host (its CPU probe read 83 ms
+  against 15-17 quiet); stop 73's quiet run read 31-35 ms (stop 72: 37-45 ms; stop 71: 68-81; the images alone 9-16
+  ms; stop 84's cheaper depth fit, the same fits, `benchmarks/results/depth_budget.md`). With the knob
+  `outlier_refits: 3` (commit 319a533's table, the images alone) the three read 1.43, 0.15 and 0.17 deg (alpha_z 0.45,
+  0.12, 0.42). Before stop 65 (the map then culled the object points linked at rest) the own view read 0.37 deg. With
+  the Levenberg-Marquardt solver before stop 34 the three views read 0.26, 0.12 and 0.27 deg: its change cost the boot
+  about 0.1 deg. Model error: 3.2 % of the displacement at the median (6.4 % at the largest angles, where the
+  full-order folds buckle more than the one-layer model's; its worst node 17 mm off), a theta bias of 0.4 deg (1.3 deg
+  at most). The thesis gives no figure for this example. The boot's table runs OpenCV on one thread: with its worker
   threads, the second view ended in the mirror basin (alpha_z 177 deg off) in one run of three.
-- The boot's *model* was too coarse around its axis. With 24 cells, the polygon lay 0.43 mm inside the round boot
-  at its base, and registration from a one-sided depth view tilted the boot 1.9 deg to split the difference. The
-  spec now has 48 cells around. That choice was made on the scene's own view. The knob rows keep the old model:
-  theta 0.36 deg and alpha_z 0.45 deg on the scene's own view, and 0.27 deg and 0.48 deg on the held-out one (the
-  table above, the lever read from depth; 1.58 / 0.01 and 0.26 / 1.04 on the images alone in stop 70).
+- The boot's *model* was too coarse around its axis. With 24 cells, the polygon lay 0.43 mm inside the round boot at
+  its base, and registration from a one-sided depth view tilted the boot 1.9 deg to split the difference. The spec now
+  has 48 cells around. That choice was made on the scene's own view. The knob rows keep the old model: theta 0.31 deg
+  and alpha_z 0.62 deg on the scene's own view, and 0.25 deg and 0.30 deg on the held-out one (the table above, stop
+  109's run, the lever read from depth; stop 72's: 0.36 / 0.45 and 0.27 / 0.48; 1.58 / 0.01 and 0.26 / 1.04 on the
+  images alone in stop 70).
 - alpha_z (a constant of the sequence, Fig. 4.19) keeps its value in frames that cannot see it: a frame judged
   undeformed, or one where its standard deviation exceeds 5 % of its range. A global restart no longer searches
   a constant that earlier frames have already pinned. Before this, on the second view, alpha_z drifted while
@@ -261,7 +264,8 @@ How a frame is measured (thesis ch. 4, `vision/slam/deformable.py`, `assimilatio
    keyframe made a copy. Measured in docs/family.md (the stop-65 paragraph): the boot's development medians 0.89 /
    0.98 % -> 0.66 / 0.55 % of the lever's range, its held-out median unchanged (1.65 -> 1.60 %); on the boot's own
    view (the model's render in the unit test: 1.55 degrees off at the median, 0.37 with the rest points culled; the
-   independent render in the table below: 1.45, 0.37 before) the kept points cost a degree.
+   independent render in the table below: 1.45 in stop 65's run, 0.37 before; 0.31 in stop 109's) the kept points cost
+   a degree.
 4. **Assimilation** (Eq. 4.7-4.12). LM with Huber weights from the previous frame's estimate; if that fit is poor
    (RMS above 0.75 x Huber or under 85 % inliers) the cost is evaluated on a coarse grid of the free parameters and
    LM restarted from the best sample (a load moved across mid-span passes a larger deflection, a second basin).
@@ -452,16 +456,17 @@ RGB-D map drifts a few mm while the camera sweeps past the beam, and the object'
 scene also fits a bounded translation of the whole object each frame (`tracking.object_shift_m: 0.01`, a nuisance
 parameter marginalised out of the reported covariance): its supports and unloaded parts fix where the beam is relative
 to the camera. On the foam model of earlier stops (32 linear hexahedra, 26 % too soft: the first table's notes) it took
-the median from 3.2 to 2.0 mm; on the corrected model it trades the other way at the median: 2.8 mm without it and 3.0
-mm with it, p90 13.1 mm against 6.6 mm. The scene keeps it for the shorter tail; on independent physics the default
-dense measurement does better than either (the first table). It is not for an object whose visible part turns (the joint
-boot's lever: the shift absorbs the rotation, the 'object shift' row). The load at mid-span (s = 0.4 m) remains the weak
-position. At 640 x 480 a pixel covers twice the beam (7.2 mm median). Re-measuring tracks against their first image
-(`flow anchor`) gave the best boot numbers with the boot's earlier model of 24 cells around (0.19 deg), not with the
-present one of 48 on the code of 2026-11-25 (0.61 deg against the default's 0.56 deg); on stop 68's code it reads 1.43
-deg against 1.55 and gives the best foam median (1.4 mm against 3.0 mm). Two scenes rendered by their own model do not
-choose a default (the development family does), so it stays a measured knob: on the boot family's development seeds 0-39
-it reads 1.17 % of the lever's range against the default's 0.93 % (`docs/family.md`, stop 68).
+the median from 3.2 to 2.0 mm; on the corrected model it trades the other way at the median: 2.7 mm without it and 2.9
+mm with it, p90 13.2 mm against 6.7 mm (stop 109's run; stop 68's: 2.8 and 3.0 mm, p90 13.1 and 6.6 mm). The scene keeps
+it for the shorter tail; on independent physics the default dense measurement does better than either (the first table).
+It is not for an object whose visible part turns (the joint boot's lever: the shift absorbs the rotation, the 'object
+shift' row). The load at mid-span (s = 0.4 m) remains the weak position. At 640 x 480 a pixel covers twice the beam (7.3
+mm median; stop 68's run: 7.2 mm). Re-measuring tracks against their first image (`flow anchor`) gave the best boot
+numbers with the boot's earlier model of 24 cells around (0.19 deg), not with the present one of 48 on the code of
+2026-11-25 (0.61 deg against the default's 0.56 deg); on stop 68's code it reads 1.43 deg against 1.55 and gives the
+best foam median (1.4 mm against 3.0 mm). Two scenes rendered by their own model do not choose a default (the
+development family does), so it stays a measured knob: on the boot family's development seeds 0-39 it reads 1.17 % of
+the lever's range against the default's 0.93 % (`docs/family.md`, stop 68).
 
 This table was rerun in stop 68; the one before was of 2026-11-25's code. Since then the boot's default row went from
 0.56 to 1.55 deg, the foam beam's from 4.9 to 3.0 mm at 1280 x 720 and from 8.5 to 7.2 mm at 640 x 480. Most of the
