@@ -355,10 +355,11 @@ def write(rows: list[dict], label: str, name: str = "family", measured_on: dict 
     write_doc()
 
 
-TABLES = (("family", "Held-out seeds (the accuracy this project reports): the current defaults (the template averaged "
-           "over up to 20 views at rest since stop 78), `--compose family_heldout_1000_1049_default,"
-           "family_heldout_1050_1099_default` (stops 78-80; until stop 80 this table was stop 59's code: "
-           "`--compose family_stop59,family_room`)"),
+TABLES = (("family", "Held-out seeds (the accuracy this project reports): the current defaults, all 100 in one run "
+           "(`./run bench family`, stop 107; stops 78-80 composed it from two halves, `--compose "
+           "family_heldout_1000_1049_default,family_heldout_1050_1099_default`, with the template averaged over up "
+           "to 20 views at rest since stop 78; until stop 80 it was stop 59's code: `--compose "
+           "family_stop59,family_room`)"),
           ("family_room", "Held-out seeds whose drawn camera path came within 0.1 m of a side wall or through it, "
            "rerun in the widened room (stop 60; the defaults)"),
           ("family_dev_room", "Development seeds whose drawn camera path came within 0.1 m of a side wall or through "

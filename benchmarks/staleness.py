@@ -16,8 +16,8 @@ Per table (``results/<name>.json``):
   packages' ``__init__`` modules), and the packages' data files (model specs, the DDS profile) that one of those
   files names;
 - the state: ``current`` (none of those files differs as code from the table's commit: :class:`Code`, top-level
-  statements compared by syntax tree less docstrings and a script's docs prose (``INTRO``), new definitions not counted,
-  other files byte for byte),
+  statements compared by syntax tree less docstrings and a script's docs prose (``INTRO``, ``TABLES``), new
+  definitions not counted, other files byte for byte),
   ``code changed`` (the files that differ: the table may no longer be what the code gives and is rerun to tell),
   ``labelled`` (a name the script does not write by default, :func:`default_names`: a run kept under a label, a
   knob's development sweep or a stop's record, quoted in the docs as such and not expected to follow the code) or
@@ -41,11 +41,20 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("benchmarks", "simreal_nodes", "simreal_msgs_py")
-# the name of a script's docs page prose (a module-level string that only builds docs/*.md: family.py,
-# tracking_scenes.py, stability.py): not compared, so editing the prose a page quotes around its tables does not flag
-# the tables. Other string constants stay code (model specs and shaders are strings too).
-PROSE = "INTRO"
+# the names of a script's docs page prose (module-level constants made of strings alone that only build docs/*.md:
+# ``INTRO``, the page's text in family.py, tracking_scenes.py and stability.py; ``TABLES``, family.py's section
+# headings, (table, heading) pairs): not compared, so editing the prose a page quotes around its tables does not flag
+# the tables. Other string constants stay code (model specs and shaders are strings too), and so does a prose name
+# whose value holds anything but strings.
+PROSE = ("INTRO", "TABLES")
 RESULTS = "benchmarks/results"
+
+
+def _strings_only(node: ast.expr) -> bool:
+    """A string constant, or a tuple or list of them (nested): a value that can hold prose and nothing else."""
+    if isinstance(node, ast.Constant):
+        return isinstance(node.value, str)
+    return isinstance(node, (ast.Tuple, ast.List)) and all(_strings_only(e) for e in node.elts)
 
 
 @dataclass
@@ -164,8 +173,8 @@ class Code:
                 node.body = body[1:] or [ast.Pass()]
         out: dict[str, str] = {}
         for node in tree.body:
-            if (isinstance(node, ast.Assign) and [getattr(t, "id", None) for t in node.targets] == [PROSE]
-                    and isinstance(node.value, ast.Constant) and isinstance(node.value.value, str)):
+            if (isinstance(node, ast.Assign) and len(node.targets) == 1
+                    and getattr(node.targets[0], "id", None) in PROSE and _strings_only(node.value)):
                 continue  # a docs page's prose (see PROSE)
             code = ast.dump(node, include_attributes=False)
             if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):

@@ -21,6 +21,11 @@ def test_code_compares_statements_not_text():
         Code.statements("b.py", 'INTRO = "# Page\\nNew words."\nN = 3\n')
     assert Code.statements("b.py", 'SPEC = "E: 1"\n') != Code.statements("b.py", 'SPEC = "E: 2"\n')
     assert Code.statements("b.py", 'INTRO = "a"\nN = 3\n') != Code.statements("b.py", 'INTRO = "a"\nN = 4\n')
+    # family.py's section headings, (table, heading) pairs, are prose too; the same name holding anything else is code
+    assert Code.statements("c.py", 'TABLES = (("t", "Old heading"),)\n') == \
+        Code.statements("c.py", 'TABLES = (("t", "New " "heading"), ("u", "More"))\n')
+    assert Code.statements("c.py", 'TABLES = (("t", f(1)),)\n') != Code.statements("c.py", 'TABLES = (("t", f(2)),)\n')
+    assert Code.statements("c.py", 'TABLES = ("t", 1)\n') != Code.statements("c.py", 'TABLES = ("t", 2)\n')
     # other files: byte for byte
     assert Code.statements("s.yaml", "a: 1\n") != Code.statements("s.yaml", "a: 1 \n")
 
