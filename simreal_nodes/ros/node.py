@@ -9,7 +9,9 @@ from __future__ import annotations
 
 import functools
 import os
+import signal
 import sys
+import threading
 import time
 import traceback
 from collections.abc import Callable
@@ -313,16 +315,67 @@ def make_executor(kind: str | None = None):
     return EventsExecutor()
 
 
-def spin(ex) -> None:
-    """Spin until the context shuts down (SIGINT, SIGTERM: ExternalShutdownException), in ``spin_once`` steps: the
-    EventsExecutor of this rclpy wheel (7.1.6) never fires a timer in its own ``spin()`` (measured here). A shutdown
-    that lands between the context's check and the wait set's construction raises RCLError ("the given context is
-    not valid") in either executor; with the context down, that is the end of the spin, not a failure."""
+class StopSignals:
+    """SIGINT and SIGTERM while :func:`run_nodes` runs: they ask the spin to end, and the main thread ends it,
+    between two ``spin_once`` steps; rclpy's own handlers are not installed (``rclpy.init(signal_handler_options=
+    NO)``). Before the executor exists (the nodes being built, a standby waiting) a signal still raises
+    ``KeyboardInterrupt``, so a long build stops at once.
+
+    Why not rclpy's handlers: they shut the context down from a thread of their own, at any moment. When that lands
+    while the EventsExecutor registers the nodes' entities (its first ``spin_once`` does it, in C++), the wait set it
+    builds for a QoS event handler fails on the dead context, the registration stops half done with callbacks
+    registered that the executor no longer tracks, and its destructor aborts the process ("Destroying callback
+    manager with callbacks remaining", exit code -6, or a segfault). The ``KeyboardInterrupt`` that rclpy's handler
+    passes on to Python's struck the same registration from inside (``event_handler.add_to_wait_set``). CI met it
+    in ``tests/ros/test_launch.py``, a SIGINT a millisecond after the one-process launch built its nodes; reproduced
+    here in 2 of 10 such runs (and 14 of 30 with the interrupt alone removed). Here the context stays up until
+    every node is closed and destroyed, so a node's ``close()`` may still publish, and a second signal does not
+    break into it. Installed only from the main thread (the only one that may), over handlers that are Python's
+    defaults; :meth:`restore` puts those back. ``active`` False: rclpy's handlers, as before (the process's owner
+    installed its own)."""
+
+    SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+    def __init__(self) -> None:
+        self.requested: int | None = None
+        self.interrupting = True
+        self.active = threading.current_thread() is threading.main_thread() and all(
+            signal.getsignal(s) in (signal.default_int_handler, signal.SIG_DFL) for s in self.SIGNALS)
+        self._previous = {s: signal.signal(s, self) for s in self.SIGNALS} if self.active else {}
+
+    def __call__(self, signum, frame) -> None:
+        self.requested = signum
+        if self.interrupting:
+            raise KeyboardInterrupt
+
+    def init_options(self):
+        """``rclpy.init``'s ``signal_handler_options``: none of rclpy's while these are in place."""
+        from rclpy.signals import SignalHandlerOptions
+
+        return SignalHandlerOptions.NO if self.active else None
+
+    def restore(self) -> None:
+        for s, handler in self._previous.items():
+            if signal.getsignal(s) is self:
+                signal.signal(s, handler)
+        self._previous = {}
+
+
+#: the longest a stop signal waits for the spin to notice it (a ``spin_once`` step with nothing to do)
+STOP_POLL_S = 0.1
+
+
+def spin(ex, stop: StopSignals | None = None) -> None:
+    """Spin until ``stop`` has a signal, or the context shuts down (another owner's handlers:
+    ExternalShutdownException), in ``spin_once`` steps of at most :data:`STOP_POLL_S`: the EventsExecutor of this
+    rclpy wheel (7.1.6) never fires a timer in its own ``spin()`` (measured here). A shutdown that lands between the
+    context's check and the wait set's construction raises RCLError ("the given context is not valid") in either
+    executor; with the context down, that is the end of the spin, not a failure."""
     from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 
-    while ex.context.ok():
+    while ex.context.ok() and (stop is None or stop.requested is None):
         try:
-            ex.spin_once(timeout_sec=1.0)
+            ex.spin_once(timeout_sec=STOP_POLL_S)
         except _rclpy.RCLError:
             if ex.context.ok():
                 raise
@@ -360,7 +413,8 @@ def run_nodes(builders: list[Callable[[], Node]], args=None) -> int:
     except SimrealError as e:
         print(f"error: {e}", file=sys.stderr, flush=True)
         return 2
-    rclpy.init(args=args)
+    stop = StopSignals()
+    rclpy.init(args=args, signal_handler_options=stop.init_options())
     nodes: list[Node] = []
     # development: a cProfile of the process's spin (SIMREAL_PROFILE_CPU=1: its main thread's CPU time, not wall time)
     profile_dir = os.environ.get("SIMREAL_PROFILE_DIR")
@@ -385,6 +439,7 @@ def run_nodes(builders: list[Callable[[], Node]], args=None) -> int:
                 raise
         if placeholder is not None:
             placeholder.destroy_node()
+        stop.interrupting = False  # from here a signal ends the spin between two steps (StopSignals)
         ex = make_executor()
         for node in nodes:
             ex.add_node(node)
@@ -394,7 +449,7 @@ def run_nodes(builders: list[Callable[[], Node]], args=None) -> int:
             prof = cProfile.Profile(time.thread_time) if os.environ.get("SIMREAL_PROFILE_CPU") == "1" \
                 else cProfile.Profile()
             prof.enable()
-        spin(ex)
+        spin(ex, stop)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
@@ -416,4 +471,5 @@ def run_nodes(builders: list[Callable[[], Node]], args=None) -> int:
                 print(f"[{node.get_name()}] destroy failed: {e}", flush=True)
         if rclpy.ok():
             rclpy.shutdown()
+        stop.restore()
     return 0

@@ -94,3 +94,62 @@ def test_executor_kind_default_environment_and_refusal():
         executor_kind({EXECUTOR_ENV: "multi"})
     with pytest.raises(SimrealError, match="must be one of events, single"):
         ros_environment({}, executor="multi")
+
+
+# A stop signal that lands while the executor takes in the nodes' entities (its first spin_once: the EventsExecutor
+# registers a callback per subscription, from C++, and reads each one's ``handle`` there): the signal is sent from
+# inside the second such read of the spin. With rclpy's handlers (before stop 112), the KeyboardInterrupt they pass
+# on broke the registration half done and the EventsExecutor's destructor aborted the process ("Destroying callback
+# manager with callbacks remaining", exit code -6), as a SIGINT a millisecond after the one-process launch built its
+# nodes did in CI.
+SIGNAL_IN_REGISTRATION = textwrap.dedent("""
+    import os, signal, sys
+    import rclpy
+    from rclpy.node import Node
+    from rclpy.subscription import Subscription
+    from std_msgs.msg import Header
+    from simreal_nodes.ros import node as node_mod
+
+    plain = Subscription.handle.fget
+    reads = []
+
+    def in_spin():
+        f = sys._getframe(2)
+        while f is not None:
+            if f.f_code is node_mod.spin.__code__:
+                return True
+            f = f.f_back
+        return False
+
+    def handle(self):
+        if in_spin():
+            reads.append(1)
+            if len(reads) == 2:
+                os.kill(os.getpid(), signal.SIGINT)
+        return plain(self)
+
+    Subscription.handle = property(handle)
+
+    class Listener(Node):
+        def __init__(self):
+            super().__init__("registration_probe")
+            for i in range(3):
+                self.create_subscription(Header, f"~/in{i}", lambda m: None, 10)
+
+        def close(self):
+            print(f"closed, context up {rclpy.ok()}", flush=True)
+
+    code = node_mod.run_nodes([Listener])
+    print(f"signal read {len(reads) >= 2}, returned {code}", flush=True)
+""")
+
+
+@pytest.mark.parametrize("kind", EXECUTORS)
+def test_a_signal_while_the_executor_registers_the_nodes_ends_the_process_cleanly(kind):
+    p = subprocess.run([sys.executable, "-c", SIGNAL_IN_REGISTRATION], env=ros_environment(executor=kind),
+                       capture_output=True, text=True, timeout=60)
+    out = p.stdout + p.stderr
+    assert "callbacks remaining" not in out, out
+    assert p.returncode == 0, out
+    # the spin ended on the signal, and the nodes closed with the context still up (it goes down after them)
+    assert "signal read True, returned 0" in out and "closed, context up True" in out, out

@@ -192,9 +192,14 @@ def test_a_node_process_warms_up_before_it_builds_its_nodes(monkeypatch):
         return Node(name)
 
     monkeypatch.setattr(node_mod, "warm_start", lambda: order.append(("warm", None)))
-    monkeypatch.setattr(node_mod, "spin", lambda ex: order.append(("spin", None)))
+    monkeypatch.setattr(node_mod, "spin", lambda ex, stop=None: order.append(("spin", None)))
     assert node_mod.run_nodes([lambda: build("warm_a"), lambda: build("warm_b")]) == 0
     assert order == [("warm", None), ("build", "warm_a"), ("build", "warm_b"), ("spin", None)]
+    # the process's stop-signal handlers (StopSignals) are put back as they were once run_nodes is done
+    import signal
+
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL
 
 
 def test_a_signal_while_the_nodes_are_built_stops_the_process_cleanly(monkeypatch):
@@ -216,7 +221,7 @@ def test_a_signal_while_the_nodes_are_built_stops_the_process_cleanly(monkeypatc
         return n
 
     monkeypatch.setattr(node_mod, "warm_start", lambda: None)
-    monkeypatch.setattr(node_mod, "spin", lambda ex: pytest.fail("the process spun after the signal"))
+    monkeypatch.setattr(node_mod, "spin", lambda ex, stop=None: pytest.fail("the process spun after the signal"))
     assert node_mod.run_nodes([first, lambda: Node("sig_b")]) == 0
     assert len(built) == 1 and not rclpy.ok()
 
