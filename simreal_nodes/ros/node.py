@@ -316,10 +316,10 @@ def make_executor(kind: str | None = None):
 
 
 class StopSignals:
-    """SIGINT and SIGTERM while :func:`run_nodes` runs: they ask the spin to end, and the main thread ends it,
-    between two ``spin_once`` steps; rclpy's own handlers are not installed (``rclpy.init(signal_handler_options=
-    NO)``). Before the executor exists (the nodes being built, a standby waiting) a signal still raises
-    ``KeyboardInterrupt``, so a long build stops at once.
+    """SIGINT and SIGTERM while :func:`run_nodes` runs: they ask the spin to end, and the main thread ends it, between
+    two ``spin_once`` steps; rclpy's own handlers are not installed (``rclpy.init(signal_handler_options=NO)``), as
+    ``simreal record`` and the replay's player already did (``commands._StopFlag``). Before the executor exists (the
+    nodes being built, a standby waiting) a signal still raises ``KeyboardInterrupt``, so a long build stops at once.
 
     Why not rclpy's handlers: they shut the context down from a thread of their own, at any moment. When that lands
     while the EventsExecutor registers the nodes' entities (its first ``spin_once`` does it, in C++), the wait set it
