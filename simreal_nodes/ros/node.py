@@ -330,17 +330,20 @@ class StopSignals:
     in ``tests/ros/test_launch.py``, a SIGINT a millisecond after the one-process launch built its nodes; reproduced
     here in 2 of 10 such runs (and 14 of 30 with the interrupt alone removed). Here the context stays up until
     every node is closed and destroyed, so a node's ``close()`` may still publish, and a second signal does not
-    break into it. Installed only from the main thread (the only one that may), over handlers that are Python's
-    defaults; :meth:`restore` puts those back. ``active`` False: rclpy's handlers, as before (the process's owner
-    installed its own)."""
+    break into it. Installed only from the main thread (the only one that may), over handlers no one chose
+    (:data:`NOT_CUSTOM`); :meth:`restore` puts those back. ``active`` False: rclpy's handlers, as before (the
+    process's owner installed its own)."""
 
     SIGNALS = (signal.SIGINT, signal.SIGTERM)
+    #: what a process may find that no one chose for it: Python's defaults, and SIGINT ignored, as a shell starts a
+    #: command in the background (rclpy's handlers took over from all three, and so do these)
+    NOT_CUSTOM = (signal.default_int_handler, signal.SIG_DFL, signal.SIG_IGN, None)
 
     def __init__(self) -> None:
         self.requested: int | None = None
         self.interrupting = True
         self.active = threading.current_thread() is threading.main_thread() and all(
-            signal.getsignal(s) in (signal.default_int_handler, signal.SIG_DFL) for s in self.SIGNALS)
+            signal.getsignal(s) in self.NOT_CUSTOM for s in self.SIGNALS)
         self._previous = {s: signal.signal(s, self) for s in self.SIGNALS} if self.active else {}
 
     def __call__(self, signum, frame) -> None:
@@ -357,7 +360,7 @@ class StopSignals:
     def restore(self) -> None:
         for s, handler in self._previous.items():
             if signal.getsignal(s) is self:
-                signal.signal(s, handler)
+                signal.signal(s, signal.SIG_DFL if handler is None else handler)
         self._previous = {}
 
 

@@ -144,10 +144,17 @@ SIGNAL_IN_REGISTRATION = textwrap.dedent("""
 """)
 
 
+def _ignore_sigint() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+# "ignored": the process starts with SIGINT ignored, as a shell starts a background command (a CI job run with `&`)
+@pytest.mark.parametrize("inherited", ["default", "ignored"])
 @pytest.mark.parametrize("kind", EXECUTORS)
-def test_a_signal_while_the_executor_registers_the_nodes_ends_the_process_cleanly(kind):
+def test_a_signal_while_the_executor_registers_the_nodes_ends_the_process_cleanly(kind, inherited):
     p = subprocess.run([sys.executable, "-c", SIGNAL_IN_REGISTRATION], env=ros_environment(executor=kind),
-                       capture_output=True, text=True, timeout=60)
+                       capture_output=True, text=True, timeout=60,
+                       preexec_fn=_ignore_sigint if inherited == "ignored" else None)
     out = p.stdout + p.stderr
     assert "callbacks remaining" not in out, out
     assert p.returncode == 0, out

@@ -193,13 +193,13 @@ def test_a_node_process_warms_up_before_it_builds_its_nodes(monkeypatch):
 
     monkeypatch.setattr(node_mod, "warm_start", lambda: order.append(("warm", None)))
     monkeypatch.setattr(node_mod, "spin", lambda ex, stop=None: order.append(("spin", None)))
+    import signal
+
+    before = [signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)]
     assert node_mod.run_nodes([lambda: build("warm_a"), lambda: build("warm_b")]) == 0
     assert order == [("warm", None), ("build", "warm_a"), ("build", "warm_b"), ("spin", None)]
     # the process's stop-signal handlers (StopSignals) are put back as they were once run_nodes is done
-    import signal
-
-    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
-    assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL
+    assert [signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)] == before
 
 
 def test_a_signal_while_the_nodes_are_built_stops_the_process_cleanly(monkeypatch):
