@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import json
 import os
-import signal
-import threading
 import time
 from pathlib import Path
 
@@ -27,7 +25,7 @@ from simreal_nodes.launch import (
     thread_variables,
 )
 from simreal_nodes.ros.bagplay import MAX_IN_FLIGHT, Player, Recorder, in_flight_ok
-from simreal_nodes.ros.node import make_executor
+from simreal_nodes.ros.node import StopSignals, make_executor
 from simreal_nodes.scene.graph import (
     NodeSpec,
     image_topic,
@@ -41,21 +39,6 @@ from simreal_nodes.scene.schema import build_spec_models, load_scene
 
 # the outputs a replay with ``record_images`` off counts without writing them
 IMAGE_TYPES = frozenset({"sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage"})
-
-
-class _StopFlag:
-    def __init__(self):
-        self.event = threading.Event()
-        self._old = {}
-
-    def __enter__(self):
-        for s in (signal.SIGINT, signal.SIGTERM):
-            self._old[s] = signal.signal(s, lambda *_: self.event.set())
-        return self
-
-    def __exit__(self, *exc):
-        for s, h in self._old.items():
-            signal.signal(s, h)
 
 
 def _share_node_environment() -> None:
@@ -183,13 +166,13 @@ def replay(bag: str, scene_file: str, rate: float = 1.0, lossless: bool = False,
     recorder = None
     stats = None
     try:
-        with _StopFlag() as stop:
+        with StopSignals(interrupting=False) as stop:
             if record:
                 outputs, count_only = recorded_topics(nodes, record_images)
                 recorder = Recorder(node, record, storage, topics=outputs, count_only=count_only)
             player = Player(node, ex, inputs, img, [n.name for n in nodes if n.per_frame], lossless, rate,
                             frame_timeout_s, echo=echo, in_flight=in_flight)
-            player.should_stop = stop.event.is_set
+            player.should_stop = stop.is_set
             # what the nodes must have subscribed to before the first frame: the graph's topics and the player's
             player.node_inputs = {n.name: [t for t in n.inputs if t.startswith("/simreal/") or t in inputs]
                                   for n in nodes}
@@ -205,8 +188,8 @@ def replay(bag: str, scene_file: str, rate: float = 1.0, lossless: bool = False,
             if launcher and not launcher.start_standbys(ready_timeout_s):
                 echo(f"[replay] warning: not every standby was ready within {ready_timeout_s:.0f} s; playing anyway")
             # live, the first frame meets a quiet graph (lossless loses no frame to a busy start)
-            if launcher and not lossless and not launcher.wait_quiet(QUIET_TIMEOUT_S, should_stop=stop.event.is_set) \
-                    and not stop.event.is_set():
+            if launcher and not lossless and not launcher.wait_quiet(QUIET_TIMEOUT_S, should_stop=stop.is_set) \
+                    and not stop.is_set():
                 echo(f"[replay] warning: the graph was still busy {QUIET_TIMEOUT_S:.0f} s after it came up; playing")
             cpu0, own0 = (launcher.cpu_seconds() if launcher else {}), time.process_time()
             stats = player.play(bags.read_bag(bag, report, topics=inputs.keys()), hold_for=hold_for)
@@ -250,12 +233,12 @@ def record(out: str, topics: list[str] | None = None, storage: str = "mcap", ech
     ex.add_node(node)
     rec = None
     try:
-        with _StopFlag() as stop:
+        with StopSignals(interrupting=False) as stop:
             rec = Recorder(node, out, storage, discover=not topics)
             pending = set(topics or [])
             t_end = time.monotonic() + duration_s if duration_s else None
             echo(f"[record] recording {'all topics' if not topics else ', '.join(topics)} to {out}; Ctrl-C stops")
-            while not stop.event.is_set() and (t_end is None or time.monotonic() < t_end) and not rec.failed:
+            while not stop.is_set() and (t_end is None or time.monotonic() < t_end) and not rec.failed:
                 ex.spin_once(timeout_sec=0.1)
                 if pending:
                     for t, types in node.get_topic_names_and_types():

@@ -316,10 +316,12 @@ def make_executor(kind: str | None = None):
 
 
 class StopSignals:
-    """SIGINT and SIGTERM while :func:`run_nodes` runs: they ask the spin to end, and the main thread ends it, between
-    two ``spin_once`` steps; rclpy's own handlers are not installed (``rclpy.init(signal_handler_options=NO)``), as
-    ``simreal record`` and the replay's player already did (``commands._StopFlag``). Before the executor exists (the
-    nodes being built, a standby waiting) a signal still raises ``KeyboardInterrupt``, so a long build stops at once.
+    """SIGINT and SIGTERM while a process of this project spins: they ask the spin to end, and the main thread ends
+    it, between two ``spin_once`` steps; rclpy's own handlers are not installed (``rclpy.init(signal_handler_options=
+    NO)``). In :func:`run_nodes` (every node process), before the executor exists (the nodes being built, a standby
+    waiting) a signal still raises ``KeyboardInterrupt`` (``interrupting``), so a long build stops at once; ``simreal
+    replay``'s player and ``simreal record`` take them with ``interrupting`` off from the start (a context manager:
+    the handlers go back on leaving it), and read :meth:`is_set` between their steps.
 
     Why not rclpy's handlers: they shut the context down from a thread of their own, at any moment. When that lands
     while the EventsExecutor registers the nodes' entities (its first ``spin_once`` does it, in C++), the wait set it
@@ -339,9 +341,9 @@ class StopSignals:
     #: command in the background (rclpy's handlers took over from all three, and so do these)
     NOT_CUSTOM = (signal.default_int_handler, signal.SIG_DFL, signal.SIG_IGN, None)
 
-    def __init__(self) -> None:
+    def __init__(self, interrupting: bool = True) -> None:
         self.requested: int | None = None
-        self.interrupting = True
+        self.interrupting = interrupting
         self.active = threading.current_thread() is threading.main_thread() and all(
             signal.getsignal(s) in self.NOT_CUSTOM for s in self.SIGNALS)
         self._previous = {s: signal.signal(s, self) for s in self.SIGNALS} if self.active else {}
@@ -350,6 +352,16 @@ class StopSignals:
         self.requested = signum
         if self.interrupting:
             raise KeyboardInterrupt
+
+    def is_set(self) -> bool:
+        """Whether a stop signal came."""
+        return self.requested is not None
+
+    def __enter__(self) -> StopSignals:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.restore()
 
     def init_options(self):
         """``rclpy.init``'s ``signal_handler_options``: none of rclpy's while these are in place."""

@@ -169,7 +169,7 @@ def default_launch(scene: dict, lossless: bool, in_flight: int = 1) -> bool:
     """The launch the CLI picks when told none of ``--one-process``, ``--process-per-node`` and ``--split`` (as
     :func:`process_groups` takes it: True one process, False a process per node): every node in one
     process, but a process per node for a live graph with a node whose work takes longer than a camera frame period
-    (:func:`slow_nodes`: a SLAM localization, 33-38 ms a frame at 640 x 480; the dense tracker, about 120 ms): on one
+    (:func:`slow_nodes`: a SLAM localization, 33-38 ms a frame at 640 x 480; the dense tracker, 135-140 ms): on one
     executor every other node waits for it, while in its own process it runs beside them on another core. Set on
     ``benchmarks/results/graph.md`` (stop 95): one process faster or level in every lossless case and live for the
     markers demo (96 % of the frames through against 93 %), a process per node live for the RGB-D SLAM scenes (the
@@ -188,9 +188,9 @@ def default_launch(scene: dict, lossless: bool, in_flight: int = 1) -> bool:
 
 
 def slow_nodes(scene: dict) -> set[str]:
-    """The nodes whose work a frame outlasts a camera frame period at 640 x 480 on 2 cores: a SLAM localization
-    (33-38 ms a frame) and a dense tracker (about 120 ms); those a split launch (:func:`process_groups`) runs in
-    processes of their own."""
+    """The nodes whose work a frame outlasts a camera frame period at 640 x 480 on 2 cores: a SLAM localization (33-38
+    ms a frame) and a dense tracker (135-140 ms a frame in ``graph.md``'s family-3); those a split launch
+    (:func:`process_groups`) runs in processes of their own."""
     slow = set()
     if scene["localization"]["mode"] in SLAM_MODES:
         slow.add("localization")

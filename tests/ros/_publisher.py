@@ -1,4 +1,6 @@
-"""Run as a separate process by test_two_process.py: publishes N images and N ModelParameters."""
+"""Run as a separate process by test_two_process.py: publishes N images and N ModelParameters (``N W H [READERS]``:
+once READERS subscribers of the parameters, 2 by default, and one of the images where READERS is over 1, are
+there, or after 20 s)."""
 
 import sys
 import time
@@ -29,12 +31,14 @@ def params_msg(i: int) -> ModelParameters:
 
 def main():
     n, w, h = int(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3])
+    readers = int(sys.argv[4]) if len(sys.argv) > 4 else 2  # the parameters' subscribers to wait for
     rclpy.init()
     node = Node("test_publisher")
     pi = node.create_publisher(Image, "/test/image", data_qos(True))
     pp = node.create_publisher(ModelParameters, "/test/params", reliable_qos(100))
     t_end = time.monotonic() + 20
-    while (pi.get_subscription_count() == 0 or pp.get_subscription_count() < 2) and time.monotonic() < t_end:
+    while ((readers > 1 and pi.get_subscription_count() == 0) or pp.get_subscription_count() < readers) \
+            and time.monotonic() < t_end:
         rclpy.spin_once(node, timeout_sec=0.05)
     time.sleep(0.5)
     for i in range(n):
