@@ -1630,7 +1630,8 @@ scene within 0.03 points; alpha_z 0.32 degree both. Level within the tracker's s
 differences (stop 88 above): 0.02 points of the range is 0.01 degree of lever. Kept for the time: live, the
 registration runs in a worker on the cores the SLAM uses, and `benchmarks/live_slam.py` now places the boot 4.8-5.5 s
 after the first frame (stop 88: 5.9-7.6 s; the run before the last, in git history: 4.9-6.1 s; stop 109's run, on an
-AMD EPYC host with AVX2, which `live_slam.md` holds now: 6.5-7.5 s).
+AMD EPYC host with AVX2: 6.5-7.5 s; stop 113's, on the same kind of host, which `live_slam.md` holds now: 6.7-10.1
+s).
 
 Held-out seeds 1000-1019, run once after that choice (`family_boot_stop89_1000_1019`): median of the scene medians
 **0.46 %** (stop 88's run: 0.46 %), p90 **0.67 %** (1.09 %), **100 %** within 1 % (85 %) and within 2 %; alpha_z 0.30
