@@ -44,6 +44,7 @@ from typing import IO
 import yaml
 
 from simreal_nodes.errors import SimrealError
+from simreal_nodes.lifetime import StopSignals
 from simreal_nodes.scene.graph import NodeSpec
 
 FASTDDS_PROFILE = Path(__file__).resolve().parent / "ros" / "fastdds_shm.xml"
@@ -480,24 +481,20 @@ class Launcher:
 
 
 def run_until_signal(launcher: Launcher) -> int:
-    """Block until SIGINT / SIGTERM, then stop the nodes; exit code 0 if all stopped cleanly."""
-    stop = threading.Event()
-
-    def handler(signum, _frame):
-        launcher.echo(f"[launch] {signal.Signals(signum).name}: stopping {len(launcher.nodes)} nodes")
-        stop.set()
-
-    old = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
-    try:
-        launcher.start()
-        while not stop.wait(0.5):
-            if not any(launcher.alive().values()) and all(p.restarts >= launcher.respawn for p in launcher.procs):
-                launcher.echo("[launch] every node has exited")
-                break
-    finally:
-        codes = launcher.stop()
-        for s, h in old.items():
-            signal.signal(s, h)
+    """Block until SIGINT / SIGTERM (:class:`~simreal_nodes.lifetime.StopSignals`: taken only from the main thread,
+    over handlers no one chose, and put back after), or until every node has exited for good; then stop the nodes.
+    Exit code 0 if all stopped cleanly."""
+    with StopSignals(interrupting=False) as stop:
+        try:
+            launcher.start()
+            while not stop.wait(0.5):
+                if not any(launcher.alive().values()) and all(p.restarts >= launcher.respawn for p in launcher.procs):
+                    launcher.echo("[launch] every node has exited")
+                    break
+            if stop.requested is not None:
+                launcher.echo(f"[launch] {signal.Signals(stop.requested).name}: stopping {len(launcher.nodes)} nodes")
+        finally:
+            codes = launcher.stop()
     bad = {n: c for n, c in codes.items() if c not in (0, None, -signal.SIGINT)}
     for n, c in codes.items():
         launcher.echo(f"[launch] {n}: exit code {c}")

@@ -24,8 +24,9 @@ from simreal_nodes.launch import (
     ros_environment,
     thread_variables,
 )
+from simreal_nodes.lifetime import StopSignals
 from simreal_nodes.ros.bagplay import MAX_IN_FLIGHT, Player, Recorder, in_flight_ok
-from simreal_nodes.ros.node import StopSignals, make_executor
+from simreal_nodes.ros.node import make_executor
 from simreal_nodes.scene.graph import (
     NodeSpec,
     image_topic,

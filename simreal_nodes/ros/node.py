@@ -11,7 +11,6 @@ import functools
 import os
 import signal
 import sys
-import threading
 import time
 import traceback
 from collections.abc import Callable
@@ -36,7 +35,7 @@ from simreal_nodes.launch import (
     node_threads,
     set_threads,
 )
-from simreal_nodes.lifetime import end_with_parent
+from simreal_nodes.lifetime import StopSignals, end_with_parent
 from simreal_nodes.metrics import StageMetrics
 from simreal_nodes.ros.convert import image_view, ns_to_stamp, stamp_ns
 from simreal_nodes.ros.qos import reliable_qos
@@ -296,7 +295,6 @@ def _end_with_launcher() -> bool:
     launcher = os.environ.get(LAUNCHER_PID_ENV)
     if not launcher or not launcher.isdigit():
         return True
-    import signal
 
     return end_with_parent(int(launcher), signal.SIGTERM)
 
@@ -315,65 +313,12 @@ def make_executor(kind: str | None = None):
     return EventsExecutor()
 
 
-class StopSignals:
-    """SIGINT and SIGTERM while a process of this project spins: they ask the spin to end, and the main thread ends
-    it, between two ``spin_once`` steps; rclpy's own handlers are not installed (``rclpy.init(signal_handler_options=
-    NO)``). In :func:`run_nodes` (every node process), before the executor exists (the nodes being built, a standby
-    waiting) a signal still raises ``KeyboardInterrupt`` (``interrupting``), so a long build stops at once; ``simreal
-    replay``'s player and ``simreal record`` take them with ``interrupting`` off from the start (a context manager:
-    the handlers go back on leaving it), and read :meth:`is_set` between their steps.
+def _rclpy_signal_options(stop: StopSignals):
+    """``rclpy.init``'s ``signal_handler_options``: none of rclpy's while ``stop``'s handlers are in place (its
+    ``active``), rclpy's own otherwise (the process's owner installed handlers of its own)."""
+    from rclpy.signals import SignalHandlerOptions
 
-    Why not rclpy's handlers: they shut the context down from a thread of their own, at any moment. When that lands
-    while the EventsExecutor registers the nodes' entities (its first ``spin_once`` does it, in C++), the wait set it
-    builds for a QoS event handler fails on the dead context, the registration stops half done with callbacks
-    registered that the executor no longer tracks, and its destructor aborts the process ("Destroying callback
-    manager with callbacks remaining", exit code -6, or a segfault). The ``KeyboardInterrupt`` that rclpy's handler
-    passes on to Python's struck the same registration from inside (``event_handler.add_to_wait_set``). CI met it
-    in ``tests/ros/test_launch.py``, a SIGINT a millisecond after the one-process launch built its nodes; reproduced
-    here in 2 of 10 such runs (and 14 of 30 with the interrupt alone removed). Here the context stays up until
-    every node is closed and destroyed, so a node's ``close()`` may still publish, and a second signal does not
-    break into it. Installed only from the main thread (the only one that may), over handlers no one chose
-    (:data:`NOT_CUSTOM`); :meth:`restore` puts those back. ``active`` False: rclpy's handlers, as before (the
-    process's owner installed its own)."""
-
-    SIGNALS = (signal.SIGINT, signal.SIGTERM)
-    #: what a process may find that no one chose for it: Python's defaults, and SIGINT ignored, as a shell starts a
-    #: command in the background (rclpy's handlers took over from all three, and so do these)
-    NOT_CUSTOM = (signal.default_int_handler, signal.SIG_DFL, signal.SIG_IGN, None)
-
-    def __init__(self, interrupting: bool = True) -> None:
-        self.requested: int | None = None
-        self.interrupting = interrupting
-        self.active = threading.current_thread() is threading.main_thread() and all(
-            signal.getsignal(s) in self.NOT_CUSTOM for s in self.SIGNALS)
-        self._previous = {s: signal.signal(s, self) for s in self.SIGNALS} if self.active else {}
-
-    def __call__(self, signum, frame) -> None:
-        self.requested = signum
-        if self.interrupting:
-            raise KeyboardInterrupt
-
-    def is_set(self) -> bool:
-        """Whether a stop signal came."""
-        return self.requested is not None
-
-    def __enter__(self) -> StopSignals:
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.restore()
-
-    def init_options(self):
-        """``rclpy.init``'s ``signal_handler_options``: none of rclpy's while these are in place."""
-        from rclpy.signals import SignalHandlerOptions
-
-        return SignalHandlerOptions.NO if self.active else None
-
-    def restore(self) -> None:
-        for s, handler in self._previous.items():
-            if signal.getsignal(s) is self:
-                signal.signal(s, signal.SIG_DFL if handler is None else handler)
-        self._previous = {}
+    return SignalHandlerOptions.NO if stop.active else None
 
 
 #: the longest a stop signal waits for the spin to notice it (a ``spin_once`` step with nothing to do)
@@ -429,7 +374,7 @@ def run_nodes(builders: list[Callable[[], Node]], args=None) -> int:
         print(f"error: {e}", file=sys.stderr, flush=True)
         return 2
     stop = StopSignals()
-    rclpy.init(args=args, signal_handler_options=stop.init_options())
+    rclpy.init(args=args, signal_handler_options=_rclpy_signal_options(stop))
     nodes: list[Node] = []
     # development: a cProfile of the process's spin (SIMREAL_PROFILE_CPU=1: its main thread's CPU time, not wall time)
     profile_dir = os.environ.get("SIMREAL_PROFILE_DIR")
