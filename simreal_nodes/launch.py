@@ -483,17 +483,24 @@ class Launcher:
 def run_until_signal(launcher: Launcher) -> int:
     """Block until SIGINT / SIGTERM (:class:`~simreal_nodes.lifetime.StopSignals`: taken only from the main thread,
     over handlers no one chose, and put back after), or until every node has exited for good; then stop the nodes.
-    Exit code 0 if all stopped cleanly."""
+    Exit code 0 if all stopped cleanly. Where the process chose its own handlers (or this is not the main thread), it
+    says so and keeps them: they decide when it stops; a ``KeyboardInterrupt`` they let through stops the nodes as
+    SIGINT does."""
     with StopSignals(interrupting=False) as stop:
+        if not stop.active:
+            launcher.echo("[launch] SIGINT / SIGTERM left to the handlers this process has (its own, or not the main "
+                          "thread): they decide when the nodes stop")
         try:
             launcher.start()
             while not stop.wait(0.5):
                 if not any(launcher.alive().values()) and all(p.restarts >= launcher.respawn for p in launcher.procs):
                     launcher.echo("[launch] every node has exited")
                     break
+        except KeyboardInterrupt:
+            stop.requested = signal.SIGINT
+        finally:
             if stop.requested is not None:
                 launcher.echo(f"[launch] {signal.Signals(stop.requested).name}: stopping {len(launcher.nodes)} nodes")
-        finally:
             codes = launcher.stop()
     bad = {n: c for n, c in codes.items() if c not in (0, None, -signal.SIGINT)}
     for n, c in codes.items():

@@ -79,7 +79,8 @@ class StopSignals:
     def wait(self, timeout: float) -> bool:
         """Sleep until a stop signal comes (noticed within :data:`WAIT_STEP_S`) or ``timeout`` seconds pass; whether
         one came. Polled: a ``threading.Event`` set from the handler (the launcher's way until stop 114) deadlocks
-        when the signal lands while the main thread holds the event's own lock, inside ``Event.wait``."""
+        when the handler runs in the short stretches where ``Event.wait`` holds the event's own (non-reentrant) lock,
+        before and after its blocking sleep (not during it: the sleep releases it)."""
         t_end = time.monotonic() + timeout
         while self.requested is None:
             left = t_end - time.monotonic()

@@ -1,9 +1,12 @@
 """The launcher's environment for its node processes: DDS discovery stays on this host unless widened; the
-libraries' thread pools sized to one thread unless asked."""
+libraries' thread pools sized to one thread unless asked; `run_until_signal`'s stop (a stub launcher, no
+processes)."""
 
 import os
+import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -18,6 +21,7 @@ from simreal_nodes.launch import (
     Launcher,
     node_threads,
     ros_environment,
+    run_until_signal,
 )
 from simreal_nodes.scene.graph import NodeSpec
 
@@ -406,3 +410,75 @@ def test_split_puts_the_slow_nodes_in_processes_of_their_own(monkeypatch, capsys
         commands.replay(str(SAMPLES / sample), str(SAMPLES / f"{sample}.yaml"), lossless=True, one_process="split",
                         echo=lambda *a: None, in_flight=4)
     assert seen["groups"] == groups
+
+
+class _StubLauncher:
+    """What `run_until_signal` uses of a Launcher, without processes: nodes that run until stopped (or have exited,
+    ``exited``), and a log of what it was asked."""
+
+    def __init__(self, exited: bool = False, codes: dict | None = None):
+        self.nodes = [NodeSpec("ingest"), NodeSpec("overlay")]
+        self.respawn = 0
+        self.procs = [type("P", (), {"restarts": 0})() for _ in self.nodes]
+        self.lines: list[str] = []
+        self.calls: list[str] = []
+        self.exited = exited
+        self.codes = codes if codes is not None else {"ingest": 0, "overlay": -signal.SIGINT}
+
+    def echo(self, line: str) -> None:
+        self.lines.append(line)
+
+    def start(self):
+        self.calls.append("start")
+        return self
+
+    def alive(self) -> dict[str, bool]:
+        return {n.name: not self.exited for n in self.nodes}
+
+    def stop(self) -> dict:
+        self.calls.append("stop")
+        return self.codes
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_run_until_signal_stops_the_nodes_at_a_signal_and_puts_the_handlers_back(sig):
+    before = [signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)]
+    launcher = _StubLauncher()
+    timer = threading.Timer(0.3, os.kill, (os.getpid(), sig))
+    timer.start()
+    t0 = time.monotonic()
+    code = run_until_signal(launcher)
+    timer.join()
+    assert code == 0
+    assert time.monotonic() - t0 < 5.0
+    assert launcher.calls == ["start", "stop"]
+    assert f"[launch] {signal.Signals(sig).name}: stopping 2 nodes" in launcher.lines
+    assert "[launch] overlay: exit code -2" in launcher.lines
+    assert [signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)] == before
+
+
+def test_run_until_signal_returns_1_when_a_node_failed_and_ends_when_all_have_exited():
+    launcher = _StubLauncher(exited=True, codes={"ingest": 0, "overlay": 1})
+    assert run_until_signal(launcher) == 1
+    assert launcher.calls == ["start", "stop"]
+    assert "[launch] every node has exited" in launcher.lines
+    assert not any("stopping" in line for line in launcher.lines)
+
+
+def test_run_until_signal_keeps_a_process_own_handler_and_says_so():
+    def own(signum, frame):
+        raise KeyboardInterrupt  # the owner's way to stop: it reaches the launcher as SIGINT would
+
+    previous = signal.signal(signal.SIGTERM, own)
+    try:
+        launcher = _StubLauncher()
+        timer = threading.Timer(0.3, os.kill, (os.getpid(), signal.SIGTERM))
+        timer.start()
+        assert run_until_signal(launcher) == 0
+        timer.join()
+        assert signal.getsignal(signal.SIGTERM) is own
+        assert any("left to the handlers this process has" in line for line in launcher.lines)
+        assert "[launch] SIGINT: stopping 2 nodes" in launcher.lines
+        assert launcher.calls == ["start", "stop"]
+    finally:
+        signal.signal(signal.SIGTERM, previous)

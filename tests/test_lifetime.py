@@ -22,7 +22,7 @@ def test_wait_ends_at_a_signal_and_the_handlers_go_back(sig):
     before = [signal.getsignal(s) for s in StopSignals.SIGNALS]
     with StopSignals(interrupting=False) as stop:
         assert stop.active and not stop.is_set()
-        _signal_later(sig, 0.2).join()  # delivered while the main thread sleeps in wait below or before it
+        _signal_later(sig, 0.2).join()  # it comes before the wait below (a signal during a wait: the test after)
         t0 = time.monotonic()
         assert stop.wait(10.0)
         assert time.monotonic() - t0 < 1.0
@@ -38,7 +38,7 @@ def test_wait_returns_false_after_its_timeout_without_a_signal():
         assert not stop.is_set()
 
 
-def test_a_signal_during_wait_ends_it_within_a_step():
+def test_a_signal_during_wait_ends_it_long_before_its_timeout():
     with StopSignals(interrupting=False) as stop:
         timer = _signal_later(signal.SIGINT, 0.3)
         t0 = time.monotonic()
@@ -54,6 +54,18 @@ def test_interrupting_raises_keyboard_interrupt():
         os.kill(os.getpid(), signal.SIGINT)
         time.sleep(5.0)  # the handler raises here
     assert stop.requested == signal.SIGINT
+
+
+def test_sigint_ignored_as_a_background_job_is_taken_over_and_put_back():
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        with StopSignals(interrupting=False) as stop:
+            assert stop.active and signal.getsignal(signal.SIGINT) is stop
+            os.kill(os.getpid(), signal.SIGINT)
+            assert stop.wait(5.0) and stop.requested == signal.SIGINT
+        assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def test_handlers_a_process_chose_are_kept():

@@ -295,7 +295,6 @@ def _end_with_launcher() -> bool:
     launcher = os.environ.get(LAUNCHER_PID_ENV)
     if not launcher or not launcher.isdigit():
         return True
-
     return end_with_parent(int(launcher), signal.SIGTERM)
 
 

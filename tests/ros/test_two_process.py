@@ -67,7 +67,7 @@ def test_images_and_parameters_between_processes_and_through_a_bag(tmp_path):
 
 def test_simreal_record_stopped_by_sigint_writes_a_readable_bag(tmp_path):
     """`simreal record` of a live topic, Ctrl-C while messages still come: it exits 0 and the bag holds the messages
-    it got, in order and intact (the recorder owns SIGINT: `node.StopSignals`, not interrupting)."""
+    it got, in order and intact (the recorder owns SIGINT: `lifetime.StopSignals`, not interrupting)."""
     import signal
 
     env = ros_environment()
