@@ -134,6 +134,45 @@ def test_an_equidistant_camera_is_a_fisheye_not_a_pinhole_with_four_coefficients
     assert not cam.same_as(None)
 
 
+def _plumb_bob(x, y, D):
+    """Brown-Conrady written out (ROS's plumb_bob, OpenCV's k1 k2 p1 p2 k3 order) on normalised coordinates."""
+    k1, k2, p1, p2, k3 = D
+    r2 = x * x + y * y
+    radial = 1 + k1 * r2 + k2 * r2 ** 2 + k3 * r2 ** 3
+    return (x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x),
+            y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y)
+
+
+def test_a_plumb_bob_undistortion_map_takes_each_ideal_pixel_to_its_distorted_pixel():
+    """The ingest's undistortion of a plumb_bob lens (``Undistorter``, on ``undistort_maps``): each pixel of the
+    ideal image reads the raw pixel its ray lands on by the lens model written out here, and a raw image's dot moves
+    to where the pinhole puts its ray."""
+    import cv2
+
+    from simreal_nodes.vision.undistort import Undistorter
+
+    D = [-0.28, 0.09, 0.0012, -0.0009, 0.01]
+    cam = CameraModel(640, 480, [[520.0, 0, 318.7], [0, 515.0, 241.2], [0, 0, 1]], D, "plumb_bob")
+    mx, my = cam.undistort_maps(cam.K, (640, 480), cv2.CV_32FC1)
+    ys, xs = np.mgrid[0:480:37, 0:640:41]
+    xd, yd = _plumb_bob((xs.ravel() - cam.cx) / cam.fx, (ys.ravel() - cam.cy) / cam.fy, D)
+    expect = np.c_[cam.fx * xd + cam.cx, cam.fy * yd + cam.cy]
+    assert np.median(np.linalg.norm(expect - np.c_[xs.ravel(), ys.ravel()], axis=1)) > 5  # a lens that bends
+    np.testing.assert_allclose(np.c_[mx[ys, xs].ravel(), my[ys, xs].ravel()], expect, atol=2e-3)
+    # a bright dot in the raw image at the distorted pixel of a ray lands, undistorted, on the ray's pinhole pixel
+    und = Undistorter(cam)
+    for u, v in ((100.0, 80.0), (560.0, 420.0), (320.0, 240.0)):
+        x, y = (u - cam.cx) / cam.fx, (v - cam.cy) / cam.fy
+        xr, yr = _plumb_bob(x, y, D)
+        raw = np.zeros((480, 640), np.uint8)
+        cv2.circle(raw, (round(4 * (cam.fx * xr + cam.cx)), round(4 * (cam.fy * yr + cam.cy))), 8, 255, -1,
+                   cv2.LINE_AA, shift=2)
+        out = und.image(raw).astype(float)
+        yy, xx = np.mgrid[:480, :640]
+        centre = np.array([(out * xx).sum(), (out * yy).sum()]) / out.sum()
+        assert np.linalg.norm(centre - [u, v]) < 0.3, (u, v, centre)
+
+
 def test_a_fisheye_undistortion_map_takes_each_ideal_pixel_to_its_fisheye_pixel():
     """The maps the ingest's undistortion and the dense tracker remap with (``undistort_maps``): each pixel of the
     ideal pinhole image reads the fisheye pixel its ray lands on; undistorting that pixel gives the ideal one back."""

@@ -130,8 +130,9 @@ def test_focus_regions_held_stay_few_whatever_the_senders_invent():
 
 
 def test_focus_polygons_that_are_not_finite_or_far_off_steer_nothing_and_break_nothing():
-    """The feature extractor takes any polygon it is given: one with NaN is ignored, one with huge coordinates is
-    clipped (its pixel bounds must fit an int), and the frame's features come out as without them."""
+    """The feature extractor takes any polygon it is given: one with NaN is ignored (the features exactly those
+    without it), one with huge coordinates is clipped (its pixel bounds must fit an int) and steers within the
+    image."""
     from simreal_nodes.vision.orb import OrbExtractor
 
     rng = np.random.default_rng(2)
@@ -140,8 +141,12 @@ def test_focus_polygons_that_are_not_finite_or_far_off_steer_nothing_and_break_n
     plain = ex.extract(img)
     nan = np.array([[0, 0], [np.nan, 5.0], [10, 10]])
     huge = np.array([[-1e30, -1e30], [1e30, -1e30], [1e30, 1e30], [-1e30, 1e30]])
+    ignored = ex.extract(img, focus=[nan], focus_share=0.2)
+    np.testing.assert_array_equal(ignored.uv, plain.uv)
+    np.testing.assert_array_equal(ignored.desc, plain.desc)
     got = ex.extract(img, focus=[nan, huge], focus_share=0.2)
     assert len(got) == pytest.approx(len(plain), rel=0.05)
+    assert np.all((got.uv >= 0) & (got.uv < [320, 240]))
 
 
 def test_live_map_stats_give_the_maps_size_for_the_diagnostics():

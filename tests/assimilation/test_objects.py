@@ -31,5 +31,8 @@ def test_object_trackers_on_the_aluminium_beam():
     ids, P, drop = trackers.feedback()  # glued dots: no map point on the object
     assert len(ids) == 0 and P.shape == (0, 3) and len(drop) == 0
     del trackers.trackers[o["id"]]  # (a build that failed on CameraInfo) -> built on the next frame
-    assert trackers.update(T_wc, bgr=bgr)[o["id"]].state in (EstimateState.OK, EstimateState.LOW_CONFIDENCE,
-                                                             EstimateState.LOST) and o["id"] in trackers.trackers
+    again = trackers.update(T_wc, bgr=bgr)[o["id"]]
+    assert o["id"] in trackers.trackers and trackers.trackers[o["id"]].cfg.huber_px == 3.5  # with the overrides
+    # the rebuilt tracker, fresh on the same frame as the first one was, gives the first one's estimate
+    assert again.state == EstimateState.OK
+    np.testing.assert_allclose(again.values, est[o["id"]].values, rtol=0, atol=1e-12)

@@ -41,9 +41,12 @@ def test_draw(overlay):
     assert out is img and states == {} and why == "no camera pose: image passed through without overlay"
     assert overlay.markers() == []  # nothing drawn yet
     rest, states, why = overlay.draw(img, VIEW, {"beam": None})  # no parameters yet: the rest shape
-    assert why == "" and (rest != img).any() and states["beam"].modes >= 0
+    drawn = (rest != img).any(axis=2).sum()
+    assert why == "" and drawn > 500 and states["beam"].modes >= 1  # the beam covers about 1000 px here
     bent, _, _ = overlay.draw(img, VIEW, {"beam": (["s"], [0.5])})
-    assert (bent != rest).any()
+    assert (bent != rest).any(axis=2).sum() > 0.5 * drawn  # coloured by its displacement
+    near, _, _ = overlay.draw(img, VIEW, {"beam": (["s"], [0.1])})
+    assert (near != bent).any(axis=2).sum() > 0.5 * drawn  # the parameters reach the drawing
     overlay.latest["beam"] = (["s"], [0.5])  # none with this frame: the latest received are drawn
     again, _, _ = overlay.draw(img, VIEW, {"beam": None})
     np.testing.assert_array_equal(again, bent)

@@ -1,6 +1,8 @@
 """The model cache is keyed on the builders' code as well as the spec: a model built by other code is rebuilt."""
 
+import shutil
 import textwrap
+from pathlib import Path
 
 import pytest
 
@@ -40,9 +42,31 @@ def test_source_digest_follows_code_not_prose(tmp_path):
     assert _package(tmp_path, 'def g():\n    return 2\n') != ref  # its code does
 
 
-def test_builder_version_covers_the_fem_and_pgd_code():
+def test_builder_version_covers_the_fem_and_pgd_code(tmp_path):
     assert build.builder_version() == source_digest(build.REPO, "simreal_nodes.rom.build")
-    assert build.builder_version() != source_digest(build.REPO, "simreal_nodes.rom.pgd")
+    # a copy of the package's code: the digest moves with a code change in each module the builders use, and with
+    # nothing else (a docstring there; code in a module they do not import)
+    shutil.copytree(build.REPO / "simreal_nodes", tmp_path / "simreal_nodes",
+                    ignore=lambda d, names: [n for n in names if not (n.endswith(".py") or (Path(d) / n).is_dir())])
+    ref = source_digest(tmp_path, "simreal_nodes.rom.build")
+    assert ref == build.builder_version()
+    for rel in ("rom/pgd.py", "rom/nipgd.py", "rom/separated.py", "physics/fem.py", "physics/materials.py",
+                "physics/meshes.py"):
+        f = tmp_path / "simreal_nodes" / rel
+        text = f.read_text()
+        f.write_text(text + "\n_PROBE = 1\n")
+        assert source_digest(tmp_path, "simreal_nodes.rom.build") != ref, rel
+        f.write_text(text)
+    pgd = tmp_path / "simreal_nodes" / "rom" / "pgd.py"
+    text = pgd.read_text()
+    pgd.write_text(text + "\n\ndef _probe():\n    \"\"\"Prose only.\"\"\"\n")
+    changed = source_digest(tmp_path, "simreal_nodes.rom.build")
+    pgd.write_text(text + "\n\ndef _probe():\n    \"\"\"Other prose.\"\"\"\n")
+    assert source_digest(tmp_path, "simreal_nodes.rom.build") == changed  # a docstring does not count
+    pgd.write_text(text)
+    node = tmp_path / "simreal_nodes" / "ros" / "node.py"
+    node.write_text(node.read_text() + "\n_PROBE = 1\n")
+    assert source_digest(tmp_path, "simreal_nodes.rom.build") == ref  # not the builders' code
 
 
 def test_cached_model_is_rebuilt_when_the_builder_changes(tmp_path, monkeypatch):

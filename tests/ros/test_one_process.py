@@ -97,8 +97,11 @@ def test_one_process_gives_the_estimates_of_a_process_per_node(tmp_path):
     print({one: (e.median_abs, e.span) for one, e in err.items()})
     np.testing.assert_array_equal(runs[True].stamps, runs[False].stamps)
     # the same load position, frame by frame: the nodes compute the same things in the same order of frames
-    diff = np.abs(runs[True].values[:, 0] - runs[False].values[:, 0])
-    assert np.nanmedian(diff) <= 1e-3 * err[False].span, np.nanmedian(diff)
+    a, b = runs[True].values[:, 0], runs[False].values[:, 0]
+    np.testing.assert_array_equal(np.isnan(a), np.isnan(b))  # the same frames without an estimate
+    assert np.isfinite(a).sum() > 0.5 * len(a)
+    diff = np.abs(a - b)
+    assert np.nanmax(diff) <= 1e-6 * err[False].span, np.nanmax(diff)  # every frame's, not most frames'
     assert err[True].median_abs <= 1.2 * err[False].median_abs + 1e-3 * err[False].span
 
 

@@ -68,6 +68,20 @@ def test_umeyama_recovers_a_similarity_and_ate_rpe(tmp_path):
     lost = [None if i == 4 else T for i, T in enumerate(Ts)]
     r = rpe(lost, Ts, delta=2)
     assert r["n"] == 6 and r["trans_rmse"] < 1e-12
+    # one estimate 10 mm off along its own x: the two pairs it belongs to are each 10 mm off, the other 7 exact
+    off = list(Ts)
+    off[5] = Ts[5] @ G.make_T(t=[0.01, 0, 0])
+    r = rpe(off, Ts)
+    assert r["n"] == 9
+    assert r["trans_rmse"] == pytest.approx(0.01 * np.sqrt(2 / 9), rel=1e-9)
+    assert r["rot_rmse_deg"] < 1e-9
+    # one estimate turned by 1 degree: two pairs 1 degree off
+    off[5] = Ts[5] @ G.make_T(G.rot_axis("x", np.deg2rad(1.0)))
+    assert rpe(off, Ts)["rot_rmse_deg"] == pytest.approx(np.sqrt(2 / 9), rel=1e-9)
+    # a monocular estimate at half the scale, read with scale 2, is exact
+    half = [G.make_T(T[:3, :3], T[:3, 3] / 2) for T in Ts]
+    assert rpe(half, Ts)["trans_rmse"] > 0.1
+    assert rpe(half, Ts, scale=2.0)["trans_rmse"] < 1e-12
     write_tum(tmp_path / "t.txt", np.arange(10) * 0.1, Ts)
     _t, back = read_tum(tmp_path / "t.txt")
     np.testing.assert_allclose(back[3], Ts[3], atol=1e-8)
