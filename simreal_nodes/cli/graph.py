@@ -73,7 +73,13 @@ def _threads(text: str) -> int:
 
 def cmd_launch(a: argparse.Namespace) -> int:
     from simreal_nodes.launch import Launcher, run_until_signal
-    from simreal_nodes.scene.graph import ingest_note, launch_choice, process_groups, required_nodes
+    from simreal_nodes.scene.graph import (
+        ingest_note,
+        launch_choice,
+        process_groups,
+        required_nodes,
+        unestimated_notes,
+    )
     from simreal_nodes.scene.schema import build_spec_models, load_scene
 
     scene = build_spec_models(load_scene(a.scene))  # before the nodes start: they load the built models
@@ -81,6 +87,8 @@ def cmd_launch(a: argparse.Namespace) -> int:
     how_run, how = launch_choice(scene, a.lossless, a.one_process)
     print(f"[launch] scene '{scene['name']}': starting {', '.join(n.name for n in nodes)} "
           f"({ingest_note(scene, nodes)}; {how})")
+    for note in unestimated_notes(scene):
+        print(f"[launch] {note}")
     return run_until_signal(Launcher(nodes, remaps=_remaps(a.remap), respawn=a.respawn, namespace=a.namespace,
                                      discovery_range=a.discovery_range, standby=not a.no_standby,
                                      groups=process_groups(scene, nodes, how_run), executor=a.executor,

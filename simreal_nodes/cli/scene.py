@@ -9,7 +9,7 @@ from simreal_nodes.errors import SimrealError
 
 
 def cmd_check_scene(a: argparse.Namespace) -> int:
-    from simreal_nodes.scene.graph import ingest_note, required_nodes
+    from simreal_nodes.scene.graph import ingest_note, required_nodes, unestimated_notes
     from simreal_nodes.scene.schema import load_scene
 
     scene = load_scene(a.scene)  # spec:NAME models are named, not built
@@ -18,6 +18,8 @@ def cmd_check_scene(a: argparse.Namespace) -> int:
           f"nodes: {', '.join(n.name for n in nodes)} ({ingest_note(scene, nodes)})")
     for n in nodes:
         print(f"  {n.name}: in {', '.join(n.inputs) or '-'}; out {', '.join(n.outputs)}")
+    for note in unestimated_notes(scene):
+        print(note)
     return 0
 
 

@@ -35,6 +35,7 @@ from simreal_nodes.scene.graph import (
     output_topics,
     process_groups,
     required_nodes,
+    unestimated_notes,
 )
 from simreal_nodes.scene.schema import build_spec_models, load_scene
 
@@ -130,6 +131,8 @@ def replay(bag: str, scene_file: str, rate: float = 1.0, lossless: bool = False,
     how_run, how = launch_choice(scene, lossless, one_process, in_flight if lossless else 1)
     how = f"; {how}{pools}" if launch else ""
     echo(f"[replay] nodes: {', '.join(n.name for n in nodes)} ({ingest_note(scene, nodes, 'topic')}{how})")
+    for note in unestimated_notes(scene):
+        echo(f"[replay] {note}")
     for n in nodes:
         n.parameters.update(replay_parameters(n.name, lossless, in_flight))
         n.parameters.update((extra_params or {}).get(n.name, {}))

@@ -78,6 +78,22 @@ def ingest_note(scene: dict, nodes: list[NodeSpec], source: str | None = None) -
     return f"no ingest: the nodes read {image_topic(scene['camera'])} and its CameraInfo themselves"
 
 
+def unestimated_notes(scene: dict) -> list[str]:
+    """One line for each object that no node estimates (neither ``tracking`` nor ``collision`` enabled): the
+    overlay draws it at its parameters' starting values. Deliberate in a scene that only shows a model, a slip in one
+    whose parameters are meant to be ``tracked`` (the schema's default mode), so the commands that read a scene say
+    it."""
+    notes = []
+    for i, o in enumerate(scene["objects"]):
+        if o["tracking"]["enabled"] or o["collision"]["enabled"]:
+            continue
+        shown = "the overlay draws it at its parameters' starting values" if scene["overlay"]["enabled"] else \
+            "and no overlay draws it"
+        notes.append(f"note: objects[{i}] '{o['id']}': nothing estimates its parameters (tracking.enabled and "
+                     f"collision.enabled are off); {shown}. Set tracking.enabled: true to fit it to the images")
+    return notes
+
+
 def camera_topics(camera: dict | None, direct: bool) -> dict[str, str]:
     """The camera topics a node reads, those of the streams the camera has (``image``, ``info``; ``depth``;
     ``right``, ``right_info``): the camera's own (``direct``: no ingest in the graph) or the ingest's outputs.

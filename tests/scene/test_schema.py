@@ -291,3 +291,26 @@ def test_process_groups_of_each_launch(mode, measurements, slow):
     assert [g for g in split if len(g) > 1] == [[n for n in names if n not in slow]]
     with pytest.raises(ValueError, match="launch"):
         process_groups(scene, nodes, "two")
+
+
+def test_an_object_that_nothing_estimates_is_noted(tmp_path):
+    """An object whose parameters no node estimates (tracking and collision off, the defaults) is drawn at its
+    starting values: `check-scene`, `launch` and `replay` say so, since its parameters are `tracked` by default."""
+    from simreal_nodes.scene.graph import unestimated_notes
+
+    obj = """
+    objects:
+    - id: beam
+      model: spec:aluminium_beam
+      anchor: {kind: pose, pose: [0, 0, 0.1, 0, 0, 0, 1]}
+      parameters: {s: {mode: tracked}}
+    """
+    drawn = load_scene(write(tmp_path, BASE.replace("overlay: {enabled: false}", "") + textwrap.dedent(obj)))
+    notes = unestimated_notes(drawn)
+    assert len(notes) == 1 and "objects[0] 'beam'" in notes[0] and "Set tracking.enabled: true" in notes[0]
+    assert "the overlay draws it" in notes[0]
+    assert "tracker" not in [n.name for n in required_nodes(drawn)]
+    tracked = load_scene(write(tmp_path, BASE + textwrap.dedent(obj) + "  tracking: {enabled: true}\n"))
+    assert unestimated_notes(tracked) == [] and "tracker" in [n.name for n in required_nodes(tracked)]
+    hidden = load_scene(write(tmp_path, BASE + textwrap.dedent(obj)))  # overlay off too: the object does nothing
+    assert "no overlay draws it" in unestimated_notes(hidden)[0]
