@@ -314,3 +314,17 @@ def test_an_object_that_nothing_estimates_is_noted(tmp_path):
     assert unestimated_notes(tracked) == [] and "tracker" in [n.name for n in required_nodes(tracked)]
     hidden = load_scene(write(tmp_path, BASE + textwrap.dedent(obj)))  # overlay off too: the object does nothing
     assert "no overlay draws it" in unestimated_notes(hidden)[0]
+
+
+def test_the_readme_example_scene_is_valid(tmp_path):
+    """The README's example scene passes the schema as written, and starts what its comments say."""
+    from simreal_nodes.scene.graph import unestimated_notes
+
+    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
+    start = readme.index("```yaml\n") + len("```yaml\n")
+    f = tmp_path / "my_beam.yaml"
+    f.write_text(readme[start:readme.index("```", start)])
+    s = load_scene(f)
+    assert s["localization"]["mode"] == "rgbd" and s["objects"][0]["anchor"]["kind"] == "registration"
+    assert [n.name for n in required_nodes(s)] == ["localization", "tracker", "overlay"]
+    assert unestimated_notes(s) == []
