@@ -53,14 +53,16 @@ def initial_matches(f0: Features, f1: Features) -> np.ndarray:
 
 def two_view(f0: Features, f1: Features, K: np.ndarray, min_parallax: float,
              general: str = "essential", ambiguity: str = "explained",
-             h_ratio: float = 0.40) -> tuple[str, TwoViewSolution | None]:
+             h_ratio: float = 0.40, fallback: bool = False) -> tuple[str, TwoViewSolution | None]:
     """Reconstruct two views of a static scene; returns (why not, None) or ("<kind> model", solution).
     ``min_parallax``: radians, the least median parallax of the triangulated points accepted. ``general``: the
     non-planar model, "essential" (five-point, calibrated; the default) or "fundamental" (ORB-SLAM2's eight-point;
     ``SlamConfig.two_view_model``); ``ambiguity``: how a homography's decompositions are told apart
     (:func:`_from_h`); ``h_ratio``: the share of the two models' scores the homography's must exceed
-    (``SlamConfig.homography_ratio``). Either way the solution's kind is "fundamental" for the general model (as
-    ORB-SLAM2 names it) and "homography" for the planar one."""
+    (``SlamConfig.homography_ratio``); ``fallback``: where the homography wins the score but no decomposition of it
+    is accepted, reconstruct from the general model instead of waiting (``SlamConfig.homography_fallback``). Either
+    way the solution's kind is "fundamental" for the general model (as ORB-SLAM2 names it) and "homography" for the
+    planar one."""
     if general not in TWO_VIEW_MODELS:
         raise ValueError(f"two_view: general model {general!r} is not one of {', '.join(TWO_VIEW_MODELS)}")
     if ambiguity not in H_AMBIGUITY:
@@ -83,10 +85,11 @@ def two_view(f0: Features, f1: Features, K: np.ndarray, min_parallax: float,
     sh = _score_h(H, x0, x1)
     sf = _score_f(F, x0, x1)
     rh = sh / max(sh + sf, 1e-9)
+    sol = None
     if rh > h_ratio:  # ORB-SLAM2 (0.40): a homography unless the general model explains clearly more
         sol = _from_h(H, x0, x1, K, ambiguity)
         kind = "homography"
-    else:
+    if sol is None and (rh <= h_ratio or fallback):
         sol = _from_f(E, x0, x1, mf.ravel().astype(bool), K)
         kind = "fundamental"
     if sol is None:
@@ -230,7 +233,8 @@ class Initializer:
             return TrackResult(INITIALIZING, "initializing: reference frame set, move the camera sideways")
         f0, s0, _ = self.ref
         reason, sol = two_view(f0, f, ctx.K, ctx.config.min_parallax, general=ctx.config.two_view_model,
-                               ambiguity=ctx.config.homography_ambiguity, h_ratio=ctx.config.homography_ratio)
+                               ambiguity=ctx.config.homography_ambiguity, h_ratio=ctx.config.homography_ratio,
+                               fallback=ctx.config.homography_fallback)
         if sol is None:
             ctx.state = INITIALIZING
             return TrackResult(INITIALIZING, f"initializing: {reason}")
