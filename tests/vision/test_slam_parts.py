@@ -173,6 +173,30 @@ def test_homography_start_on_a_floor_at_low_parallax(ambiguity):
                 assert reason == "homography model gives no valid reconstruction"
 
 
+def test_a_refused_homography_falls_back_to_the_general_model_only_when_asked():
+    """``homography_fallback``: the 4 cm floor above, where the homography wins the score and every decomposition is
+    refused as ambiguous: by default the start waits; with the fallback the same frames are reconstructed from the
+    essential matrix where it gives a valid pose (draw 3: within 10 deg of the true direction of travel) and refused
+    with the general model's reason where it does not."""
+    import cv2
+
+    for seed in range(4):
+        cv2.setRNGSeed(seed)
+        f0, f1, T1 = slid_floor_views(seed, 0.04)
+        cv2.setRNGSeed(seed)
+        reason, sol = two_view(f0, f1, CAM.K, np.deg2rad(1.0))
+        if seed != 1:  # draw 1's parallax is too small for either model
+            assert sol is None and reason == "homography model gives no valid reconstruction"
+        cv2.setRNGSeed(seed)
+        reason, sol = two_view(f0, f1, CAM.K, np.deg2rad(1.0), fallback=True)
+        if seed == 3:
+            assert sol is not None and sol.kind == "fundamental", reason
+            t = T1[:3, 3] / np.linalg.norm(T1[:3, 3])
+            assert np.rad2deg(np.arccos(np.clip(sol.t @ t, -1, 1))) < 10.0
+        elif seed != 1:
+            assert sol is None and reason == "fundamental model gives no valid reconstruction"
+
+
 def test_two_view_refuses_a_pure_rotation():
     X, desc = scene()
     f0, _, _ = view(X, desc, np.eye(4))
