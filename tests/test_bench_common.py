@@ -2,6 +2,7 @@
 the pairs that the A/B benchmarks summarize."""
 
 import os
+from pathlib import Path
 
 import pytest
 
@@ -105,3 +106,15 @@ def test_malloc_trim_returns_what_the_heap_held_free():
     assert before["rss"] - after["rss"] > 40
     assert after["malloc_used"] == pytest.approx(before["malloc_used"], abs=1)
     del keep
+
+
+def test_every_benchmark_is_described_in_docs_benchmarks_md():
+    """`docs/benchmarks.md` says what each benchmark measures: every `benchmarks/NAME.py` that `./run bench` lists is
+    named there (a new benchmark without a line fails here)."""
+    root = Path(__file__).resolve().parents[1]
+    doc = (root / "docs" / "benchmarks.md").read_text()
+    listed = sorted(p.stem for p in (root / "benchmarks").glob("*.py")
+                    if p.stem not in ("common", "__init__", "orb_vocabulary"))
+    assert len(listed) > 50
+    missing = [n for n in listed if f"`{n}`" not in doc]
+    assert not missing, missing
