@@ -496,8 +496,8 @@ def run_until_signal(launcher: Launcher) -> int:
                 if not any(launcher.alive().values()) and all(p.restarts >= launcher.respawn for p in launcher.procs):
                     launcher.echo("[launch] every node has exited")
                     break
-        except KeyboardInterrupt:
-            stop.requested = signal.SIGINT
+        except KeyboardInterrupt:  # from a handler of the process's own (or SIGINT's default, off the main thread)
+            launcher.echo(f"[launch] KeyboardInterrupt: stopping {len(launcher.nodes)} nodes")
         finally:
             if stop.requested is not None:
                 launcher.echo(f"[launch] {signal.Signals(stop.requested).name}: stopping {len(launcher.nodes)} nodes")

@@ -416,7 +416,7 @@ class _StubLauncher:
     """What `run_until_signal` uses of a Launcher, without processes: nodes that run until stopped (or have exited,
     ``exited``), and a log of what it was asked."""
 
-    def __init__(self, exited: bool = False, codes: dict | None = None):
+    def __init__(self, exited: bool = False, codes: dict | None = None, signal_at_start: int | None = None):
         self.nodes = [NodeSpec("ingest"), NodeSpec("overlay")]
         self.respawn = 0
         self.procs = [type("P", (), {"restarts": 0})() for _ in self.nodes]
@@ -424,12 +424,17 @@ class _StubLauncher:
         self.calls: list[str] = []
         self.exited = exited
         self.codes = codes if codes is not None else {"ingest": 0, "overlay": -signal.SIGINT}
+        self.signal_at_start = signal_at_start  # sent 0.3 s after start(): the handlers are in place by then
+        self.timer: threading.Timer | None = None
 
     def echo(self, line: str) -> None:
         self.lines.append(line)
 
     def start(self):
         self.calls.append("start")
+        if self.signal_at_start is not None:
+            self.timer = threading.Timer(0.3, os.kill, (os.getpid(), self.signal_at_start))
+            self.timer.start()
         return self
 
     def alive(self) -> dict[str, bool]:
@@ -443,12 +448,10 @@ class _StubLauncher:
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
 def test_run_until_signal_stops_the_nodes_at_a_signal_and_puts_the_handlers_back(sig):
     before = [signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)]
-    launcher = _StubLauncher()
-    timer = threading.Timer(0.3, os.kill, (os.getpid(), sig))
-    timer.start()
+    launcher = _StubLauncher(signal_at_start=sig)
     t0 = time.monotonic()
     code = run_until_signal(launcher)
-    timer.join()
+    launcher.timer.join()
     assert code == 0
     assert time.monotonic() - t0 < 5.0
     assert launcher.calls == ["start", "stop"]
@@ -471,14 +474,12 @@ def test_run_until_signal_keeps_a_process_own_handler_and_says_so():
 
     previous = signal.signal(signal.SIGTERM, own)
     try:
-        launcher = _StubLauncher()
-        timer = threading.Timer(0.3, os.kill, (os.getpid(), signal.SIGTERM))
-        timer.start()
+        launcher = _StubLauncher(signal_at_start=signal.SIGTERM)
         assert run_until_signal(launcher) == 0
-        timer.join()
+        launcher.timer.join()
         assert signal.getsignal(signal.SIGTERM) is own
         assert any("left to the handlers this process has" in line for line in launcher.lines)
-        assert "[launch] SIGINT: stopping 2 nodes" in launcher.lines
+        assert "[launch] KeyboardInterrupt: stopping 2 nodes" in launcher.lines
         assert launcher.calls == ["start", "stop"]
     finally:
         signal.signal(signal.SIGTERM, previous)

@@ -40,13 +40,13 @@ def test_wait_returns_false_after_its_timeout_without_a_signal():
 
 def test_a_signal_during_wait_ends_it_long_before_its_timeout():
     with StopSignals(interrupting=False) as stop:
-        timer = _signal_later(signal.SIGINT, 0.3)
         t0 = time.monotonic()
+        timer = _signal_later(signal.SIGINT, 0.3)
         came = stop.wait(10.0)
         waited = time.monotonic() - t0
         timer.join()
     assert came
-    assert 0.25 < waited < 0.3 + 0.5  # the signal's delay, plus at most a step or two of a loaded machine
+    assert 0.3 <= waited < 0.3 + 0.5  # the signal's delay, plus at most a step or two of a loaded machine
 
 
 def test_interrupting_raises_keyboard_interrupt():

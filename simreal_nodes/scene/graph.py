@@ -79,18 +79,29 @@ def ingest_note(scene: dict, nodes: list[NodeSpec], source: str | None = None) -
 
 
 def unestimated_notes(scene: dict) -> list[str]:
-    """One line for each object that no node estimates (neither ``tracking`` nor ``collision`` enabled): the
-    overlay draws it at its parameters' starting values. Deliberate in a scene that only shows a model, a slip in one
-    whose parameters are meant to be ``tracked`` (the schema's default mode), so the commands that read a scene say
-    it."""
+    """One line for each object that no node estimates (neither ``tracking`` nor ``collision`` enabled): nothing
+    publishes its parameters, so the overlay draws it with each at the low end of its range (the rest shape's end;
+    ``parameters.*.initial`` and ``fixed`` values are applied only by a tracker). Deliberate in a scene that only
+    shows a model, a slip in one whose parameters are meant to be ``tracked`` (the schema's default mode), so the
+    commands that read a scene say it, with what would estimate it."""
     notes = []
     for i, o in enumerate(scene["objects"]):
         if o["tracking"]["enabled"] or o["collision"]["enabled"]:
             continue
-        shown = "the overlay draws it at its parameters' starting values" if scene["overlay"]["enabled"] else \
-            "and no overlay draws it"
-        notes.append(f"note: objects[{i}] '{o['id']}': nothing estimates its parameters (tracking.enabled and "
-                     f"collision.enabled are off); {shown}. Set tracking.enabled: true to fit it to the images")
+        shown = ("the overlay draws it with each parameter at the low end of its range (initial and fixed values are "
+                 "applied only by a tracker)") if scene["overlay"]["enabled"] else "and no overlay draws it"
+        pushers = [f"objects[{j}]" for j, p in enumerate(scene["objects"])
+                   if p["collision"]["enabled"] and o["id"] in p["collision"]["pushes"]]
+        modes = {p["mode"] for p in o["parameters"].values()}
+        if pushers:
+            verb = "pushes" if len(pushers) == 1 else "push"
+            advice = f"{' and '.join(pushers)} {verb} it: set its collision.enabled: true to take the contact"
+        elif modes == {"fixed"}:
+            advice = "set tracking.enabled: true to have its fixed values drawn"
+        else:
+            advice = "set tracking.enabled: true to fit it to the images"
+        notes.append(f"note: objects[{i}] '{o['id']}': nothing publishes its parameters (tracking.enabled and "
+                     f"collision.enabled are off); {shown}. To estimate it, {advice}")
     return notes
 
 

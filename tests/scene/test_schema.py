@@ -294,8 +294,9 @@ def test_process_groups_of_each_launch(mode, measurements, slow):
 
 
 def test_an_object_that_nothing_estimates_is_noted(tmp_path):
-    """An object whose parameters no node estimates (tracking and collision off, the defaults) is drawn at its
-    starting values: `check-scene`, `launch` and `replay` say so, since its parameters are `tracked` by default."""
+    """An object whose parameters no node estimates (tracking and collision off, the defaults) is drawn at the low
+    end of each parameter's range: `check-scene`, `launch` and `replay` say so, and what would estimate it (its
+    parameters are `tracked` by default)."""
     from simreal_nodes.scene.graph import unestimated_notes
 
     obj = """
@@ -307,13 +308,26 @@ def test_an_object_that_nothing_estimates_is_noted(tmp_path):
     """
     drawn = load_scene(write(tmp_path, BASE.replace("overlay: {enabled: false}", "") + textwrap.dedent(obj)))
     notes = unestimated_notes(drawn)
-    assert len(notes) == 1 and "objects[0] 'beam'" in notes[0] and "Set tracking.enabled: true" in notes[0]
-    assert "the overlay draws it" in notes[0]
+    assert len(notes) == 1 and "objects[0] 'beam'" in notes[0] and "set tracking.enabled: true to fit" in notes[0]
+    assert "the overlay draws it with each parameter at the low end of its range" in notes[0]
+    fixed_obj = textwrap.dedent(obj).replace("{mode: tracked}", "{mode: fixed, value: 0.2}")
+    fixed = load_scene(write(tmp_path, BASE + fixed_obj))
+    assert "to have its fixed values drawn" in unestimated_notes(fixed)[0]
     assert "tracker" not in [n.name for n in required_nodes(drawn)]
     tracked = load_scene(write(tmp_path, BASE + textwrap.dedent(obj) + "  tracking: {enabled: true}\n"))
     assert unestimated_notes(tracked) == [] and "tracker" in [n.name for n in required_nodes(tracked)]
     hidden = load_scene(write(tmp_path, BASE + textwrap.dedent(obj)))  # overlay off too: the object does nothing
     assert "no overlay draws it" in unestimated_notes(hidden)[0]
+    # the crossed beams' lower beam with its collision off: the upper beam's push never reaches it
+    sample = Path(__file__).resolve().parents[2] / "bags" / "samples" / "crossed_beams_probe_320x240.yaml"
+    assert unestimated_notes(load_scene(sample)) == []
+    text = sample.read_text()
+    lower = text.index("- id: beam_b")
+    f = tmp_path / "crossed.yaml"
+    off = text[lower:].replace("  collision:\n    enabled: true", "  collision:\n    enabled: false", 1)
+    f.write_text(text[:lower] + off)
+    notes = unestimated_notes(load_scene(f))
+    assert len(notes) == 1 and "objects[1] 'beam_b'" in notes[0] and "objects[0] pushes it" in notes[0], notes
 
 
 def test_the_readme_example_scene_is_valid(tmp_path):

@@ -77,7 +77,8 @@ class SlamConfig:
     # S_H / (S_H + S_F) exceeds this (ORB-SLAM2: 0.40; ORB-SLAM3: 0.50), else the general model
     homography_ambiguity: str = "explained"  # a homography start is refused when a second decomposition comes within
     # 75 % of the best one's count of "explained" matches (ORB-SLAM2's) or of "triangulated" points (with parallax)
-    homography_fallback: bool = False  # a homography refused as ambiguous: try the general model on the same frames
+    homography_fallback: bool = False  # a homography no decomposition of which is accepted (ambiguous, too few good
+    # points): try the general model on the same frames
     # (ORB-SLAM2 waits for more motion; stop 114 measured it on development seeds, docs/localization.md)
 
     loop_closing: bool = False  # search every new keyframe for a loop and correct the map (:mod:`.loop_closing`)

@@ -85,22 +85,25 @@ def two_view(f0: Features, f1: Features, K: np.ndarray, min_parallax: float,
     sh = _score_h(H, x0, x1)
     sf = _score_f(F, x0, x1)
     rh = sh / max(sh + sf, 1e-9)
-    sol = None
-    if rh > h_ratio:  # ORB-SLAM2 (0.40): a homography unless the general model explains clearly more
+    use_h = bool(rh > h_ratio)  # ORB-SLAM2 (0.40): a homography unless the general model explains clearly more
+    sol: _Reconstruction | None = None
+    kind, note = "homography", ""
+    if use_h:
         sol = _from_h(H, x0, x1, K, ambiguity)
-        kind = "homography"
-    if sol is None and (rh <= h_ratio or fallback):
+    if not use_h or (sol is None and fallback):
+        note = "homography refused; " if use_h else ""
         sol = _from_f(E, x0, x1, mf.ravel().astype(bool), K)
         kind = "fundamental"
     if sol is None:
-        return f"{kind} model gives no valid reconstruction", None
+        return f"{note}{kind} model gives no valid reconstruction", None
     R, t, P, good, parallax = sol
     if parallax < min_parallax:
         return (f"not enough parallax ({np.rad2deg(parallax):.2f} deg, need {np.rad2deg(min_parallax):.1f}): "
                 "a pure rotation cannot initialize a monocular map, translate the camera"), None
     if good.sum() < 50:
         return f"only {int(good.sum())} points triangulate well (need 50)", None
-    return f"{kind} model", TwoViewSolution(R, t, P[good], m[good, 0], m[good, 1], kind)
+    return f"{kind} model" + (" (homography refused)" if note else ""), TwoViewSolution(R, t, P[good], m[good, 0],
+                                                                                        m[good, 1], kind)
 
 
 _Reconstruction = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]  # R, t, points, good, parallax
