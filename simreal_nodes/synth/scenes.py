@@ -9,8 +9,10 @@ user would know (camera topics, marker layout, where a virtual object is placed)
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import json
+import os
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -902,23 +904,52 @@ def _cached_truth(prefix: str, key: list, names: tuple[str, ...], solve, make, f
     from simreal_nodes.rom.build import cache_dir
 
     f = cache_dir().parent / "truth" / f"{prefix}-{hashlib.sha256(json.dumps(key).encode()).hexdigest()[:16]}.npz"
-    if f.is_file():
-        try:
-            with np.load(f, allow_pickle=False) as z:
-                obj = make({n: np.array(z[n]) for n in names}, json.loads(str(z["info"])))
-            if fits(obj):
-                return obj
-        except Exception:  # noqa: BLE001 - a damaged cache file (bad zip, truncated member, ...) is solved again
-            pass
-    obj = solve()
+
+    def cached():
+        if f.is_file():
+            try:
+                with np.load(f, allow_pickle=False) as z:
+                    obj = make({n: np.array(z[n]) for n in names}, json.loads(str(z["info"])))
+                if fits(obj):
+                    return obj
+            except Exception:  # noqa: BLE001 - a damaged cache file (bad zip, truncated member, ...) is solved again
+                pass
+        return None
+
+    if (obj := cached()) is not None:
+        return obj
     f.parent.mkdir(parents=True, exist_ok=True)
-    tmp = f.with_suffix(".tmp.npz")
-    np.savez_compressed(tmp, **{n: getattr(obj, n) for n in names}, info=json.dumps(obj.info))
-    tmp.replace(f)
+    # One process solves a missing truth while the others wait for its file (the benchmarks' parallel scenes share
+    # one: until stop 114 each solved it, and their common temporary file made all but the first fail on replacing
+    # it); the temporary file is the process's own either way.
+    with _exclusive(f.with_name(f.name + ".lock")):
+        if (obj := cached()) is not None:
+            return obj
+        obj = solve()
+        tmp = f.with_name(f"{f.stem}.{os.getpid()}.tmp.npz")
+        np.savez_compressed(tmp, **{n: getattr(obj, n) for n in names}, info=json.dumps(obj.info))
+        tmp.replace(f)
     for old in f.parent.glob(f"{prefix}-*.npz"):  # earlier code's or model's truths of the same set-up
         if old != f and not old.name.endswith(".tmp.npz"):  # (another process's file being written is left alone)
             old.unlink(missing_ok=True)
     return obj
+
+
+@contextlib.contextmanager
+def _exclusive(lock_path):
+    """Hold an exclusive lock on ``lock_path`` (created if missing) between processes: Linux ``flock``; elsewhere no
+    lock is taken (each process then solves for itself, as before)."""
+    try:
+        import fcntl
+    except ImportError:  # not POSIX
+        yield
+        return
+    with open(lock_path, "a") as fh:
+        fcntl.flock(fh, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(fh, fcntl.LOCK_UN)
 
 
 def crossed_beams_svk_truth(model, spec_name: str, press_point, T_ab, radius: float, press: float):
