@@ -356,7 +356,9 @@ def write(rows: list[dict], label: str, name: str = "family", measured_on: dict 
 
 
 TABLES = (("family", "Held-out seeds (the accuracy this project reports): the current defaults, all 100 in one run "
-           "(`./run bench family`, stop 107; stops 78-80 composed it from two halves, `--compose "
+           "(`./run bench family`, stop 107; rerun in stop 114 on that session's code, 91 scenes and then the other 9 "
+           "with `--resume`, every row's estimates, errors and registration the same to the bit, only the times "
+           "moved; stops 78-80 composed it from two halves, `--compose "
            "family_heldout_1000_1049_default,family_heldout_1050_1099_default`, with the template averaged over up "
            "to 20 views at rest since stop 78; until stop 80 it was stop 59's code: `--compose "
            "family_stop59,family_room`)"),
