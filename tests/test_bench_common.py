@@ -118,3 +118,47 @@ def test_every_benchmark_is_described_in_docs_benchmarks_md():
     assert len(listed) > 50
     missing = [n for n in listed if f"`{n}`" not in doc]
     assert not missing, missing
+
+
+def _figures_of(text: str, rows_with: set[str]) -> set[str]:
+    """Every number in a results table's summary (its text outside the rows: a figure that only some row holds is
+    one scene's) and in the rows that name one of ``rows_with`` (a resolution the page names), each also rounded to
+    fewer decimals (a page quotes 0.176 as 0.18)."""
+    import re
+
+    kept = "\n".join(line for line in text.splitlines()
+                     if not line.lstrip().startswith("|") or any(f"| {w} |" in line for w in rows_with))
+    out = set()
+    for x in re.findall(r"(?<![\d.])\d+(?:\.\d+)?(?!\d)", kept):
+        out.add(x)
+        for k in range(len(x.partition(".")[2])):
+            out.add(f"{float(x):.{k}f}")
+    return out
+
+
+def test_the_readme_quotes_its_headline_figures_from_the_tables_it_names():
+    """The README's "How well it works": each bullet that quotes a figure (a percentage or millimetres; not the
+    thesis's own, in "(the thesis: ...)") names the results table it comes from, and the figure is in that table's
+    summary, or in its rows at the resolution the bullet names, to the decimals quoted. A rerun that moves a number
+    fails here until the README says the new one (issue 20: published numbers regenerate)."""
+    import re
+
+    root = Path(__file__).resolve().parents[1]
+    results = root / "benchmarks" / "results"
+    readme = (root / "README.md").read_text()
+    assert "## How well it works" in readme
+    section = readme.split("## How well it works", 1)[1].split("\n## ", 1)[0]
+    quoted = 0
+    for bullet in re.split(r"\n(?=- )", section):
+        ours = re.sub(r"\(the thesis:[^)]*\)", "", bullet)
+        figures = re.findall(r"(?<![\w.])(\d+(?:\.\d+)?) ?(?:%|mm\b)", ours)
+        if not figures:
+            continue
+        tables = [n for n in re.findall(r"`([a-z0-9_]+)\.md`", bullet) if (results / f"{n}.md").is_file()]
+        assert tables, f"a bullet quotes {figures} but names no table in benchmarks/results: {bullet[:80]!r}"
+        resolutions = set(re.findall(r"\d+x\d+", bullet))
+        written = _figures_of(" ".join((results / f"{n}.md").read_text() for n in tables), resolutions)
+        missing = [f for f in figures if f not in written]
+        assert not missing, f"{missing} quoted from {tables} but not in them: {bullet[:80]!r}"
+        quoted += len(figures)
+    assert quoted >= 15  # the section quotes the beam, plate, boot, foam and camera figures
