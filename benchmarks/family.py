@@ -717,7 +717,7 @@ The rules that make it evidence:
   model surface to the first depth images) from a guess as a user gives it by eye, the true pose in the first
   camera frame moved by about 5 cm and 10 degrees rms; the registration's pose error against the truth is in
   each row (`python -m benchmarks.family --seeds 0-9 --registration` measures that step alone:
-  `benchmarks/results/family_registration.md`: 0.47 mm and 0.14 degrees at the median on seeds 0-9; the
+  `benchmarks/results/family_registration.md`: 0.45 mm and 0.14 degrees at the median on seeds 0-9; the
   held-out rows carry the registration's error for every scene). The guess is the one number in a scene
   file computed from the truth (in the first camera frame, through the rendered trajectory): 5 cm / 10 degrees
   off, it only picks the basin.
@@ -971,7 +971,7 @@ views with the true camera poses, to separate the registration from the SLAM; sc
 
 - the full fine stage of the registration rolled thin beams by degrees about their axis on SGBM depth (seeds 2
   and 5 the most; `test_registration_stereo.py` shows the roll on a rendered scene); on stereo depth the fine stage
-  keeps the support plane's roll and pitch (`RegistrationConfig.for_camera`: 0.05-0.06 degree at the median in the
+  keeps the support plane's roll and pitch (`RegistrationConfig.for_camera`: 0.04-0.06 degree at the median in the
   tables below); RGB-D keeps the full stage;
 - without the padding the leftmost 128-256 columns had no depth; a cantilever's clamped end there let the fit slide
   along the beam (seeds 6 and 8: centimetres off; 1.6 and 2.1 mm with it in `family_registration_stereo`);
