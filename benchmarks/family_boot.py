@@ -38,6 +38,7 @@ from simreal_nodes.synth.boot_family import THETA_RANGE_DEG
 DEFAULT_TABLES = ("family_boot", "family_boot_registration")
 
 FPS = 15.0
+TRIES = 3  # the registration-alone run: frames for this many tries of the registration (a refused one starts over)
 AT_REST_RAD = 0.02  # frames whose lever is within about a degree of rest are not scored (thesis_truth's rule)
 
 
@@ -209,29 +210,34 @@ def write(rows: list[dict], label: str, name: str) -> None:
 
 
 def run_registration(seed: int, anchor: dict | None = None) -> dict:
-    """The registration step alone on a boot scene's first frames (as many as it collects), with the scene file's
-    guess and ``anchor`` keys changed: the error of the boot's axis frame (its origin, in mm, split into the part
-    along the first camera's line of sight and across it, horizontally, and the vertical; the axis's tilt)."""
+    """The registration step alone on a boot scene's first frames, with the scene file's guess and ``anchor`` keys
+    changed: the error of the boot's axis frame (its origin, in mm, split into the part along the first camera's
+    line of sight and across it, horizontally, and the vertical; the axis's tilt). A refused fit starts collecting
+    its views again, as in the graph: up to ``TRIES`` tries' frames run, and the row says how many were refused."""
     from simreal_nodes.assimilation.offline import Pipeline
     from simreal_nodes.assimilation.registration import RegistrationConfig
     from simreal_nodes.scene.schema import build_spec_models, validate_scene
     from simreal_nodes.synth.sequence import sequence
 
     cfg = RegistrationConfig()
-    seq = sequence.__wrapped__(f"family-boot-{seed}", 640, 480, fps=FPS, frames=cfg.frames * cfg.every + 2)
+    seq = sequence.__wrapped__(f"family-boot-{seed}", 640, 480, fps=FPS, frames=TRIES * (cfg.frames * cfg.every + 2))
     sc = seq["scene"]
     doc = copy.deepcopy(sc.scene_yaml(sc))
     doc["objects"][0]["anchor"].update(anchor or {})
     pipe = Pipeline(build_spec_models(validate_scene(doc, sc.name, ".")), seq["cam"])
-    t0, frame, reason = time.perf_counter(), -1, ""
+    t0, frame, reason, refused = time.perf_counter(), -1, "", []
     for i in range(len(seq["rgb"])):
         _, out = pipe.step(np.ascontiguousarray(seq["rgb"][i][:, :, ::-1]), int(i * 1e9 / FPS), seq["depth"][i])
         reason = out["boot"].reason
+        if "refused" in reason:
+            refused.append(reason.split("refused: ", 1)[-1])
         if "boot" in pipe.objects.registrations:
             frame = i
             break
-    row = {"seed": seed, "distance_m": round(sc.state["draw"].distance, 2), "frame": frame,
-           "seconds": round(time.perf_counter() - t0, 1), "reason": "" if frame >= 0 else reason}
+    why = ("" if frame >= 0 else reason) if not refused else \
+        (f"placed on try {len(refused) + 1}" if frame >= 0 else "not placed") + f"; try 1 refused: {refused[0]}"
+    row = {"seed": seed, "distance_m": round(sc.state["draw"].distance, 2), "frame": frame, "refused": len(refused),
+           "seconds": round(time.perf_counter() - t0, 1), "reason": why}
     reg = pipe.objects.registrations.get("boot")
     if reg is None:
         return row | {k: float("nan") for k in ("registration_mm", "along_mm", "across_mm", "vertical_mm",
@@ -254,7 +260,8 @@ REG_COLS = [("seed", "seed", "{}"), ("distance_m", "camera (m)", "{:.2f}"),
                                                                     "{:+.2f}"),
             ("across_mm", "across (mm)", "{:+.2f}"), ("vertical_mm", "vertical (mm)", "{:+.2f}"),
             ("registration_tilt_deg", "axis tilt (deg)", "{:.2f}"), ("fitness", "fitness", "{:.2f}"),
-            ("frame", "placed at frame", "{}"), ("seconds", "time (s)", "{:.1f}"), ("reason", "why not placed", "{}")]
+            ("frame", "placed at frame", "{}"), ("refused", "tries refused", "{}"), ("seconds", "time (s)", "{:.1f}"),
+            ("reason", "why not placed, or refused first", "{}")]
 
 
 def write_registration(rows: list[dict], label: str, name: str) -> None:
@@ -265,7 +272,9 @@ def write_registration(rows: list[dict], label: str, name: str) -> None:
              "base's centre) against the truth, split along the first camera's horizontal line of sight, across "
              "it and vertically; the axis's tilt. Over scenes: median "
              f"{np.nanmedian(mm):.2f} mm and {np.nanmedian(tilt):.2f} deg, worst {np.nanmax(mm):.2f} mm and "
-             f"{np.nanmax(tilt):.2f} deg; {int(np.sum(np.isnan(mm)))} not placed.")
+             f"{np.nanmax(tilt):.2f} deg; {int(np.sum(np.isnan(mm)))} not placed; "
+             f"{sum(1 for r in rows if r.get('refused', 0) and r['frame'] >= 0)} placed on a later try (a refused fit "
+             f"collects its views again; up to {TRIES} tries' frames run).")
 
     def plot(plt):
         fig, ax = plt.subplots(figsize=(6, 3.8))
