@@ -35,6 +35,7 @@ from __future__ import annotations
 import argparse
 import ast
 import json
+import re
 import subprocess
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -66,6 +67,7 @@ class Table:
     changed_by: list[str] = field(default_factory=list)  # files of its code that differ now
     files: int = 0  # files in the script's closure
     host: str = ""  # the kind of CPU the table was written on (host_of), '' where it does not say
+    quoted: list[str] = field(default_factory=list)  # the pages that publish it (quoted_by)
 
 
 def module_file(name: str, root: Path) -> Path | None:
@@ -283,6 +285,7 @@ def tables(root: Path = ROOT) -> list[Table]:
     sources = {f: (root / f).read_text() for f in tracked
                if f.startswith("benchmarks/") and f.endswith(".py") and (root / f).is_file()}
     code = Code(root)
+    texts = pages(root)
     closures: dict[str, list[str]] = {}
     defaults: dict[str, set[str]] = {}
     out = []
@@ -301,7 +304,7 @@ def tables(root: Path = ROOT) -> list[Table]:
         if recorded and not recorded.endswith("+") and recorded != "?":
             at = subprocess.run(["git", "-C", str(root), "rev-parse", recorded], capture_output=True, text=True,
                                 check=False).stdout.strip() or at
-        t = Table(name, script, at, host=host_of(doc))
+        t = Table(name, script, at, host=host_of(doc), quoted=quoted_by(name, texts))
         if script is None:
             t.state = "no script"
             out.append(t)
@@ -322,6 +325,23 @@ def tables(root: Path = ROOT) -> list[Table]:
     return out
 
 
+def pages(root: Path) -> dict[str, str]:
+    """The pages that quote results: the README and docs/*.md but the status log (its closing notes quote tables as
+    they stood at each stop) and the benchmarks' index (it names every script, quoting none)."""
+    found = [root / "README.md", *sorted((root / "docs").glob("*.md"))]
+    return {str(p.relative_to(root)): p.read_text() for p in found
+            if p.is_file() and p.name not in ("status.md", "benchmarks.md")}
+
+
+def quoted_by(name: str, texts: dict[str, str]) -> list[str]:
+    """The pages that name table ``name``: as ``name.md``, or in backticks where the name has an underscore (a
+    one-word name such as `graph` or `localization` in backticks is as often a scene key or a mode). Where a rerun's
+    numbers must be read back; a stale table no page names is the least urgent."""
+    forms = [rf"(?<![\w.-]){re.escape(name)}\.md\b"] + ([rf"`{re.escape(name)}`"] if "_" in name else [])
+    pat = re.compile("|".join(forms))
+    return [page for page, text in texts.items() if pat.search(text)]
+
+
 def subject(root: Path, commit: str) -> str:
     return subprocess.run(["git", "-C", str(root), "log", "-1", "--format=%h %cs %s", commit], capture_output=True,
                           text=True, check=True).stdout.strip()
@@ -337,12 +357,15 @@ def report(rows: list[Table], root: Path = ROOT) -> str:
              ", ".join(f"{k}: {len(v)}" for k, v in sorted(by.items())), ""]
     if by.get("code changed"):
         lines += ["## Code changed since the table was written (rerun: `./run bench SCRIPT`)", "",
-                  "| table | script | written at | on | files of its code that differ now | of |",
-                  "|---|---|---|---|---|---|"]
-        for t in by["code changed"]:
+                  "The pages that publish a table first (the README and docs/: where its numbers must be read "
+                  "back after a rerun).", "",
+                  "| table | script | written at | on | files of its code that differ now | of | quoted in |",
+                  "|---|---|---|---|---|---|---|"]
+        for t in sorted(by["code changed"], key=lambda t: (-len(t.quoted), t.name)):
             shown = ", ".join(Path(c).name for c in t.changed_by[:4]) + (" ..." if len(t.changed_by) > 4 else "")
+            quoted = ", ".join(Path(q).stem for q in t.quoted) or "no page"
             lines.append(f"| {t.name} | {Path(t.script or '').stem} | {subject(root, t.commit)[:18]} | {t.host} | "
-                         f"{len(t.changed_by)}: {shown} | {t.files} |")
+                         f"{len(t.changed_by)}: {shown} | {t.files} | {quoted} |")
         lines.append("")
     if by.get("current"):
         lines += ["## Current (no change to its code since)", "",

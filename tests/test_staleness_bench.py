@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from benchmarks.staleness import Code, closure, default_names, find_script, host_of, tables
+from benchmarks.staleness import Code, closure, default_names, find_script, host_of, quoted_by, tables
 
 
 def test_code_compares_statements_not_text():
@@ -133,3 +133,15 @@ def test_tables_carry_their_host(repo: Path):
     table.write_text(json.dumps(doc))
     hosts = {t.name: t.host for t in tables(repo)}
     assert hosts["bench"] == "AMD EPYC (AVX2)" and hosts["orphan"] == ""
+
+
+def test_a_table_lists_the_pages_that_publish_it(repo: Path):
+    (repo / "docs").mkdir()
+    (repo / "README.md").write_text("Beams: `bench.md` says 0.4 %.\n")
+    (repo / "docs/overview.md").write_text("See benchmarks/results/bench.md and `bench_knob_2`.\n")
+    (repo / "docs/status.md").write_text("bench.md and orphan.md as they stood at a stop\n")
+    (repo / "docs/benchmarks.md").write_text("| `orphan` | what orphan.md measures |\n")
+    quoted = {t.name: t.quoted for t in tables(repo)}
+    assert quoted == {"bench": ["README.md", "docs/overview.md"], "bench_knob_2": ["docs/overview.md"], "orphan": []}
+    # another table's name that contains it, or a one-word name in backticks (a scene key, a mode), is not a quote
+    assert quoted_by("bench", {"a.md": "the mybench.md table", "b.md": "bench_2.md", "c.md": "`bench`"}) == []
