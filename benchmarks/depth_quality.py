@@ -3,7 +3,7 @@ accurate as the depth camera gets worse.
 
     ./run bench depth_quality                     # development seeds 0-9 of the scene family, RGB-D, 640x480
     python -m benchmarks.depth_quality --held-out  # held-out seeds 1000-1009: depth_quality_heldout
-    python -m benchmarks.depth_quality --seeds 0-4  # fewer (a table of its own: --out NAME)
+    python -m benchmarks.depth_quality --seeds 0-4 --out NAME  # fewer seeds: a table of its own
 
 Each seed's first frames are rendered once (independent physics, `synth/family.py`), then the registration step
 (`benchmarks/family.py:run_registration`'s loop: SLAM poses, the scene file's guess, support plane and ICP) runs on
@@ -144,10 +144,13 @@ def main() -> None:
         return fig
 
     seeds_txt = sorted({r["seed"] for r in runs})
+    as_run = (f"{seeds_txt[0]}-{seeds_txt[-1]}" if seeds_txt == list(range(seeds_txt[0], seeds_txt[-1] + 1))
+              else ",".join(map(str, seeds_txt)))
+    default = "depth_quality_heldout" if a.held_out else "depth_quality"
     save(name, rows, cols, "Depth noise and holes against the registration" + (" (held-out seeds)" if a.held_out
                                                                                   else ""),
-         f"`python -m benchmarks.depth_quality --seeds {seeds_txt[0]}-{seeds_txt[-1]}"
-         f"{' --held-out' if a.held_out else ''}` (see its docstring): "
+         f"`python -m benchmarks.depth_quality --seeds {as_run}"
+         f"{' --held-out' if a.held_out else ''}{'' if name == default else ' --out ' + name}` (see its docstring): "
          f"{'held-out' if a.held_out else 'development'} seeds {', '.join(map(str, seeds_txt))} of the RGB-D scene "
          "family at 640x480, each scene's "
          "first frames rendered once and registered under each setting; the registration's target is 3 mm and "
