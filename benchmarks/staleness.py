@@ -334,10 +334,13 @@ def pages(root: Path) -> dict[str, str]:
 
 
 def quoted_by(name: str, texts: dict[str, str]) -> list[str]:
-    """The pages that name table ``name``: as ``name.md``, or in backticks where the name has an underscore (a
-    one-word name such as `graph` or `localization` in backticks is as often a scene key or a mode). Where a rerun's
-    numbers must be read back; a stale table no page names is the least urgent."""
-    forms = [rf"(?<![\w.-]){re.escape(name)}\.md\b"] + ([rf"`{re.escape(name)}`"] if "_" in name else [])
+    """The pages that name table ``name``: its file (``name.md``, ``.png`` or ``.json``, bare or under ``results/``:
+    ``docs/name.md`` is a page), the command that writes it (``./run bench name``, ``--out name``), or the name in
+    backticks where it has an underscore (a one-word name such as `graph` in backticks is as often a scene key or a
+    mode). Where a rerun's numbers must be read back; a stale table no page names is the least urgent."""
+    n = re.escape(name)
+    forms = [rf"(?:results/|(?<![\w./-])){n}\.(?:md|png|json)\b", rf"(?:bench|--out|--name)[ =]{n}(?![\w-])"]
+    forms += [rf"`{n}`"] if "_" in name else []
     pat = re.compile("|".join(forms))
     return [page for page, text in texts.items() if pat.search(text)]
 

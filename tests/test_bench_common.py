@@ -121,18 +121,22 @@ def test_every_benchmark_is_described_in_docs_benchmarks_md():
 
 
 def _figures_of(text: str, rows_with: set[str]) -> set[str]:
-    """Every number in a results table's summary (its text outside the rows: a figure that only some row holds is
-    one scene's) and in the rows that name one of ``rows_with`` (a resolution the page names), each also rounded to
-    fewer decimals (a page quotes 0.176 as 0.18)."""
+    """Every figure with a unit (%, mm, deg) in a results table's summary (its text outside the rows and the machine
+    line: a figure that only some row holds is one scene's), and every number in the rows that name one of
+    ``rows_with`` (a resolution the page names); each also rounded half up to fewer decimals (0.176 as 0.18)."""
     import re
+    from decimal import ROUND_HALF_UP, Decimal
 
-    kept = "\n".join(line for line in text.splitlines()
-                     if not line.lstrip().startswith("|") or any(f"| {w} |" in line for w in rows_with))
+    lines = text.splitlines()
+    summary = " ".join(x for x in lines if not x.lstrip().startswith(("|", "Machine:")))
+    rows = " ".join(x for x in lines if x.lstrip().startswith("|") and any(f"| {w} |" in x for w in rows_with))
+    found = re.findall(r"(?<![\d.])(\d+(?:\.\d+)?) ?(?:%|mm\b|deg)", summary)
+    found += re.findall(r"(?<![\d.])\d+(?:\.\d+)?(?!\d)", rows)
     out = set()
-    for x in re.findall(r"(?<![\d.])\d+(?:\.\d+)?(?!\d)", kept):
+    for x in found:
         out.add(x)
         for k in range(len(x.partition(".")[2])):
-            out.add(f"{float(x):.{k}f}")
+            out.add(str(Decimal(x).quantize(Decimal(1).scaleb(-k), rounding=ROUND_HALF_UP)))
     return out
 
 
@@ -150,15 +154,18 @@ def test_the_readme_quotes_its_headline_figures_from_the_tables_it_names():
     section = readme.split("## How well it works", 1)[1].split("\n## ", 1)[0]
     quoted = 0
     for bullet in re.split(r"\n(?=- )", section):
-        ours = re.sub(r"\(the thesis:[^)]*\)", "", bullet)
-        figures = re.findall(r"(?<![\w.])(\d+(?:\.\d+)?) ?(?:%|mm\b)", ours)
-        if not figures:
-            continue
-        tables = [n for n in re.findall(r"`([a-z0-9_]+)\.md`", bullet) if (results / f"{n}.md").is_file()]
-        assert tables, f"a bullet quotes {figures} but names no table in benchmarks/results: {bullet[:80]!r}"
-        resolutions = set(re.findall(r"\d+x\d+", bullet))
-        written = _figures_of(" ".join((results / f"{n}.md").read_text() for n in tables), resolutions)
-        missing = [f for f in figures if f not in written]
-        assert not missing, f"{missing} quoted from {tables} but not in them: {bullet[:80]!r}"
-        quoted += len(figures)
+        tables: list[str] = []
+        for sentence in re.split(r"(?<=[.:])\s+(?=\*\*|[A-Z])", bullet):  # a sentence reads the tables named in
+            tables += [n for n in re.findall(r"`([a-z0-9_]+)\.md`", sentence)  # it and before it in its bullet
+                       if (results / f"{n}.md").is_file()]
+            figures = re.findall(r"(?<![\w.])(\d+(?:\.\d+)?) ?(?:%|mm\b)",
+                                 re.sub(r"\(the thesis:[^)]*\)", "", sentence))
+            if not figures:
+                continue
+            assert tables, f"{figures} quoted but no table in benchmarks/results named: {sentence[:80]!r}"
+            resolutions = set(re.findall(r"\d+x\d+", sentence))
+            written = _figures_of(" ".join((results / f"{n}.md").read_text() for n in tables), resolutions)
+            missing = [f for f in figures if f not in written]
+            assert not missing, f"{missing} quoted from {tables} but not in them: {sentence[:80]!r}"
+            quoted += len(figures)
     assert quoted >= 15  # the section quotes the beam, plate, boot, foam and camera figures

@@ -143,5 +143,10 @@ def test_a_table_lists_the_pages_that_publish_it(repo: Path):
     (repo / "docs/benchmarks.md").write_text("| `orphan` | what orphan.md measures |\n")
     quoted = {t.name: t.quoted for t in tables(repo)}
     assert quoted == {"bench": ["README.md", "docs/overview.md"], "bench_knob_2": ["docs/overview.md"], "orphan": []}
-    # another table's name that contains it, or a one-word name in backticks (a scene key, a mode), is not a quote
-    assert quoted_by("bench", {"a.md": "the mybench.md table", "b.md": "bench_2.md", "c.md": "`bench`"}) == []
+    # another table's name that contains it, a docs page of the same name, or a one-word name in backticks (a scene
+    # key, a mode) is not a quote; its plot, its results path and the command that writes it are
+    assert quoted_by("bench", {"a.md": "the mybench.md table", "b.md": "bench_2.md", "c.md": "`bench`",
+                               "d.md": "see docs/bench.md", "e.md": "--out bench_2, ./run bench benches"}) == []
+    assert quoted_by("bench", {"a.md": "![x](../benchmarks/results/bench.png)", "b.md": "`./run bench bench`",
+                               "c.md": "python -m benchmarks.x --out bench)", "d.md": "bench.json"}) == \
+        ["a.md", "b.md", "c.md", "d.md"]
