@@ -796,7 +796,8 @@ def _register_loaded(cloud: np.ndarray, model: ReducedModel, guess: np.ndarray, 
     u = model.deformation_view(None, n_modes).field.evaluate(st.mu)
     S, N = sample_surface(model.points + u, model.surface, _n_samples(model, 0.0025), seed)
     cams = _views(cam_centres)
-    P = _object_points(cloud, st.T_map_obj, model.points + u, float(model.points[:, 2].min()), reg.plane, cfg)
+    P = _object_points(cloud, st.T_map_obj, model.points + u, float(model.points[:, 2].min()), reg.plane, cfg,
+                       rest=model.points)
     if cfg.polish > 0:
         st, u, S, N, P = _polished_state(cloud, model, st, (u, S, N, P), lo, hi, cams, reg.plane, cfg, state_cfg,
                                          seed, n_modes)
@@ -873,7 +874,8 @@ def _polished_state(cloud: np.ndarray, model: ReducedModel, st: DepthState,
         return st, u, S, N, P
     u = model.deformation_view(None, n_modes).field.evaluate(again.mu)
     S, N = sample_surface(model.points + u, model.surface, _n_samples(model, 0.0025), seed)
-    P = _object_points(cloud, again.T_map_obj, model.points + u, float(model.points[:, 2].min()), plane, cfg)
+    P = _object_points(cloud, again.T_map_obj, model.points + u, float(model.points[:, 2].min()), plane, cfg,
+                       rest=model.points)
     return again, u, S, N, P
 
 
@@ -891,17 +893,28 @@ def _level(T_map_obj: np.ndarray, up: np.ndarray, centre: np.ndarray) -> np.ndar
 
 
 def _object_points(cloud: np.ndarray, T_map_obj: np.ndarray, V: np.ndarray, z_under: float,
-                   plane: np.ndarray | None, cfg: RegistrationConfig) -> np.ndarray:
+                   plane: np.ndarray | None, cfg: RegistrationConfig, rest: np.ndarray | None = None) -> np.ndarray:
     """The fused cloud (map frame) as :func:`register_rgbd` judges it: on the ``voxel`` grid, off the support
-    plane, within ``margin`` of the box of V (object frame) and above the contact band over the rest shape's
-    underside ``z_under`` (where the supports meet it)."""
+    plane, within ``margin`` of the box of V (object frame) and above the contact band over the underside (where
+    the supports meet it): the rest shape's, at height ``z_under``; for a deformed shape V whose rest nodes are
+    ``rest``, the band follows the bent underside (each point against the underside node nearest it across the
+    object), so a beam that sags by more than the band keeps its lower faces where it sags (stop 115: its cover,
+    judged on the whole bent surface, had counted them as unmatched). Where the underside does not move (at the
+    supports, or u = 0) the rule is the rest shape's."""
     P = _down(np.asarray(cloud, dtype=np.float64), cfg.voxel)
     if plane is not None:
         P = P[P @ plane[:3] + plane[3] > cfg.floor_clear]
     Q = G.transform(G.inv(T_map_obj), P)
     lo, hi = V.min(axis=0) - cfg.margin, V.max(axis=0) + cfg.margin
     keep = np.all((lo < Q) & (hi > Q), axis=1)
-    keep &= Q[:, 2] > z_under + cfg.contact_band
+    floor = np.full(len(Q), z_under)
+    if rest is not None:
+        under = np.flatnonzero(rest[:, 2] <= z_under + 1e-9)
+        sag = V[under, 2] - rest[under, 2]
+        if len(under) and np.any(sag != 0.0):
+            _, nearest = cKDTree(V[under, :2]).query(Q[:, :2])
+            floor = z_under + sag[nearest]
+    keep &= Q[:, 2] > floor + cfg.contact_band
     out: np.ndarray = P[keep]
     return out
 
