@@ -81,14 +81,15 @@ def main() -> None:
     ap.add_argument("--out", help="results name (default depth_quality, or depth_quality_heldout with --held-out)")
     ap.add_argument("--report", action="store_true", help="rewrite table and plot from the results JSON")
     ap.add_argument("--held-out", action="store_true",
-                    help="held-out seeds (1000-1099) into depth_quality_heldout: scores the noise flag chosen on the "
-                         "development seeds; nothing may be tuned on it")
+                    help="held-out seeds (1000-1099; 1000-1009 into depth_quality_heldout): scores the noise flag "
+                         "chosen on the development seeds; nothing may be tuned on it")
     a = ap.parse_args()
-    name = a.out or ("depth_quality_heldout" if a.held_out else "depth_quality")
+    published = ("depth_quality_heldout", "1000-1009") if a.held_out else ("depth_quality", "0-9")
+    name = a.out or published[0]
     if a.seeds is None:
-        a.seeds = "1000-1009" if a.held_out else "0-9"
-    elif not a.out and a.seeds != ("1000-1009" if a.held_out else "0-9"):
-        raise SystemExit(f"--seeds {a.seeds} is not the published table's: name its table with --out")
+        a.seeds = published[1]
+    elif name == published[0] and a.seeds != published[1]:
+        raise SystemExit(f"--seeds {a.seeds} is not the published table's ({published[1]}): name another with --out")
     if a.report:
         runs = json.loads((RESULTS / f"{name}.json").read_text())["runs"]
     else:

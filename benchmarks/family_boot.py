@@ -229,8 +229,8 @@ def run_registration(seed: int, anchor: dict | None = None) -> dict:
     for i in range(len(seq["rgb"])):
         _, out = pipe.step(np.ascontiguousarray(seq["rgb"][i][:, :, ::-1]), int(i * 1e9 / FPS), seq["depth"][i])
         reason = out["boot"].reason
-        if "refused" in reason:
-            refused.append(reason.split("refused: ", 1)[-1])
+        if reason.startswith("waiting for registration: "):  # a try that ended without a pose (refused or failed)
+            refused.append(reason.removeprefix("waiting for registration: "))
         if "boot" in pipe.objects.registrations:
             frame = i
             break

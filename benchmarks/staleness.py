@@ -286,6 +286,7 @@ def tables(root: Path = ROOT) -> list[Table]:
                if f.startswith("benchmarks/") and f.endswith(".py") and (root / f).is_file()}
     code = Code(root)
     texts = pages(root)
+    named = frozenset(p.name for p in (root / "docs").glob("*.md"))
     closures: dict[str, list[str]] = {}
     defaults: dict[str, set[str]] = {}
     out = []
@@ -304,7 +305,7 @@ def tables(root: Path = ROOT) -> list[Table]:
         if recorded and not recorded.endswith("+") and recorded != "?":
             at = subprocess.run(["git", "-C", str(root), "rev-parse", recorded], capture_output=True, text=True,
                                 check=False).stdout.strip() or at
-        t = Table(name, script, at, host=host_of(doc), quoted=quoted_by(name, texts))
+        t = Table(name, script, at, host=host_of(doc), quoted=quoted_by(name, texts, named))
         if script is None:
             t.state = "no script"
             out.append(t)
@@ -333,13 +334,15 @@ def pages(root: Path) -> dict[str, str]:
             if p.is_file() and p.name not in ("status.md", "benchmarks.md")}
 
 
-def quoted_by(name: str, texts: dict[str, str]) -> list[str]:
-    """The pages that name table ``name``: its file (``name.md``, ``.png`` or ``.json``, bare or under ``results/``:
-    ``docs/name.md`` is a page), the command that writes it (``./run bench name``, ``--out name``), or the name in
+def quoted_by(name: str, texts: dict[str, str], pages_named: frozenset[str] = frozenset()) -> list[str]:
+    """The pages that name table ``name``: its file (``name.md``, ``.png`` or ``.json``, under ``results/``, or bare
+    where no docs page in ``pages_named`` has that name: ``family.md`` bare is docs/family.md), the command that
+    writes it (``./run bench name``, ``--out name``), or the name in
     backticks where it has an underscore (a one-word name such as `graph` in backticks is as often a scene key or a
     mode). Where a rerun's numbers must be read back; a stale table no page names is the least urgent."""
     n = re.escape(name)
-    forms = [rf"(?:results/|(?<![\w./-])){n}\.(?:md|png|json)\b", rf"(?:bench|--out|--name)[ =]{n}(?![\w-])"]
+    bare = "" if f"{name}.md" in pages_named else r"|(?<![\w./-])"  # `family.md` bare is the docs page then
+    forms = [rf"(?:results/{bare}){n}\.(?:md|png|json)\b", rf"(?:bench|--out|--name)[ =]{n}(?![\w-])"]
     forms += [rf"`{n}`"] if "_" in name else []
     pat = re.compile("|".join(forms))
     return [page for page, text in texts.items() if pat.search(text)]

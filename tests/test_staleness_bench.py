@@ -150,3 +150,7 @@ def test_a_table_lists_the_pages_that_publish_it(repo: Path):
     assert quoted_by("bench", {"a.md": "![x](../benchmarks/results/bench.png)", "b.md": "`./run bench bench`",
                                "c.md": "python -m benchmarks.x --out bench)", "d.md": "bench.json"}) == \
         ["a.md", "b.md", "c.md", "d.md"]
+    # a table named as a docs page: only its results path is a quote (the bare name is the page)
+    pages = {"a.md": "see `bench.md` and docs/bench.md", "b.md": "benchmarks/results/bench.md"}
+    assert quoted_by("bench", pages, frozenset({"bench.md"})) == ["b.md"]
+    assert quoted_by("bench", pages) == ["a.md", "b.md"]

@@ -597,7 +597,7 @@ def test_the_contact_band_follows_a_bent_underside_and_is_the_rest_rule_where_no
 
     def judged(height: float, **kw) -> np.ndarray:  # the front face's points kept, by their x
         front = np.c_[xs, np.zeros_like(xs), under + height]
-        kept = _object_points(G.transform(T, front), T, kw.pop("V", bent), 0.0, None, cfg, **kw)
+        kept = _object_points(G.transform(T, front), T, bent, 0.0, None, cfg, **kw)
         return np.sort(np.round(G.transform(G.inv(T), kept)[:, 0], 3))
 
     np.testing.assert_array_equal(judged(0.005, rest=rest), np.round(xs, 3))
@@ -606,3 +606,9 @@ def test_the_contact_band_follows_a_bent_underside_and_is_the_rest_rule_where_no
     cloud = G.transform(T, np.c_[xs, np.zeros_like(xs), 0.001 + 0.01 * (xs % 0.01 > 0.004)])
     np.testing.assert_array_equal(_object_points(cloud, T, rest, 0.0, None, cfg, rest=rest),
                                   _object_points(cloud, T, rest, 0.0, None, cfg))
+    # only the underside counts: the top nodes moved (a lever turned over a clamped base, the boot) and the
+    # underside not is the rest rule too
+    lifted = rest.copy()
+    lifted[rest[:, 2] > 0, 2] -= 0.02
+    np.testing.assert_array_equal(_object_points(cloud, T, lifted, 0.0, None, cfg, rest=rest),
+                                  _object_points(cloud, T, lifted, 0.0, None, cfg))
