@@ -147,11 +147,11 @@ def main() -> None:
     seeds_txt = sorted({r["seed"] for r in runs})
     as_run = (f"{seeds_txt[0]}-{seeds_txt[-1]}" if seeds_txt == list(range(seeds_txt[0], seeds_txt[-1] + 1))
               else ",".join(map(str, seeds_txt)))
-    default = "depth_quality_heldout" if a.held_out else "depth_quality"
     save(name, rows, cols, "Depth noise and holes against the registration" + (" (held-out seeds)" if a.held_out
                                                                                   else ""),
          f"`python -m benchmarks.depth_quality --seeds {as_run}"
-         f"{' --held-out' if a.held_out else ''}{'' if name == default else ' --out ' + name}` (see its docstring): "
+         f"{' --held-out' if a.held_out else ''}{'' if name == published[0] else ' --out ' + name}` "
+         "(see its docstring): "
          f"{'held-out' if a.held_out else 'development'} seeds {', '.join(map(str, seeds_txt))} of the RGB-D scene "
          "family at 640x480, each scene's "
          "first frames rendered once and registered under each setting; the registration's target is 3 mm and "

@@ -234,8 +234,10 @@ def run_registration(seed: int, anchor: dict | None = None) -> dict:
         if "boot" in pipe.objects.registrations:
             frame = i
             break
-    why = ("" if frame >= 0 else reason) if not refused else \
-        (f"placed on try {len(refused) + 1}" if frame >= 0 else "not placed") + f"; try 1 refused: {refused[0]}"
+    if refused:
+        why = (f"placed on try {len(refused) + 1}" if frame >= 0 else "not placed") + f"; try 1 refused: {refused[0]}"
+    else:
+        why = "" if frame >= 0 else reason
     row = {"seed": seed, "distance_m": round(sc.state["draw"].distance, 2), "frame": frame, "refused": len(refused),
            "seconds": round(time.perf_counter() - t0, 1), "reason": why}
     reg = pipe.objects.registrations.get("boot")

@@ -337,9 +337,9 @@ def pages(root: Path) -> dict[str, str]:
 def quoted_by(name: str, texts: dict[str, str], pages_named: frozenset[str] = frozenset()) -> list[str]:
     """The pages that name table ``name``: its file (``name.md``, ``.png`` or ``.json``, under ``results/``, or bare
     where no docs page in ``pages_named`` has that name: ``family.md`` bare is docs/family.md), the command that
-    writes it (``./run bench name``, ``--out name``), or the name in
-    backticks where it has an underscore (a one-word name such as `graph` in backticks is as often a scene key or a
-    mode). Where a rerun's numbers must be read back; a stale table no page names is the least urgent."""
+    writes it (``./run bench name``, ``--out name``), or the name in backticks where it has an underscore (a one-word
+    name such as `graph` in backticks is as often a scene key or a mode). Where a rerun's numbers must be read back;
+    a stale table no page names is the least urgent."""
     n = re.escape(name)
     bare = "" if f"{name}.md" in pages_named else r"|(?<![\w./-])"  # `family.md` bare is the docs page then
     forms = [rf"(?:results/{bare}){n}\.(?:md|png|json)\b", rf"(?:bench|--out|--name)[ =]{n}(?![\w-])"]

@@ -895,13 +895,12 @@ def _level(T_map_obj: np.ndarray, up: np.ndarray, centre: np.ndarray) -> np.ndar
 def _object_points(cloud: np.ndarray, T_map_obj: np.ndarray, V: np.ndarray, z_under: float,
                    plane: np.ndarray | None, cfg: RegistrationConfig, rest: np.ndarray | None = None) -> np.ndarray:
     """The fused cloud (map frame) as a fit judges it (:func:`register_rgbd`, and the deformed fit with ``rest``):
-    on the ``voxel`` grid, off the support
-    plane, within ``margin`` of the box of V (object frame) and above the contact band over the underside (where
-    the supports meet it): the rest shape's, at height ``z_under``; for a deformed shape V whose rest nodes are
-    ``rest``, the band follows the bent underside (each point against the underside node nearest it across the
-    object), so a beam that sags by more than the band keeps its lower faces where it sags (stop 115: its cover,
-    judged on the whole bent surface, had counted them as unmatched). Where the underside does not move (at the
-    supports, or u = 0) the rule is the rest shape's."""
+    on the ``voxel`` grid, off the support plane, within ``margin`` of the box of V (object frame) and above the
+    contact band over the underside (where the supports meet it): the rest shape's, at height ``z_under``; for a
+    deformed shape V whose rest nodes are ``rest``, the band follows the bent underside (each point against the
+    underside node nearest it across the object), so a beam that sags by more than the band keeps its lower faces
+    where it sags (stop 115: its cover, judged on the whole bent surface, had counted them as unmatched). Where the
+    underside does not move (at the supports, or u = 0) the rule is the rest shape's."""
     P = _down(np.asarray(cloud, dtype=np.float64), cfg.voxel)
     if plane is not None:
         P = P[P @ plane[:3] + plane[3] > cfg.floor_clear]
