@@ -859,8 +859,10 @@ def _pinned_state(cloud: np.ndarray, model: ReducedModel, st: DepthState,
     the deformed fit, whose cost crops the cloud around the model, does not move it back (held-out seeds 1018 and
     1025 until stop 116: placed 57 and 53 mm along the axis without a doubt, the deformed shape's cover 0.78 there
     against 1.00 in place). ``shape``: the fit's displacement, surface samples, normals and object points. Where
-    the slide covers no better, or the state fitted again is not deformed, the fit and its shape are returned as
-    they were."""
+    the slide covers no better, or the state fitted again is not deformed or covers no more of its faces than the
+    fit did (a shape fitted far from its load's place slides the wrong way: a cantilever's own surface bent 65 mm
+    at its tip, the fit started 50 mm towards the clamp, slides 68 mm further), the fit and its shape are returned
+    as they were."""
     u, S, N, P = shape
     T = G.inv(st.T_map_obj)
     T_pin = _pin_slide(P, T, S, N, cams, cfg)
@@ -869,11 +871,14 @@ def _pinned_state(cloud: np.ndarray, model: ReducedModel, st: DepthState,
     again = fit_state(cloud, model, G.inv(T_pin), lo, hi, mu0=st.mu, cfg=state_cfg, n_modes=n_modes)
     if not again.deformed or again.mu is None:
         return st, u, S, N, P
-    u = model.deformation_view(None, n_modes).field.evaluate(again.mu)
-    S, N = sample_surface(model.points + u, model.surface, _n_samples(model, 0.0025), seed)
-    P = _object_points(cloud, again.T_map_obj, model.points + u, float(model.points[:, 2].min()), plane, cfg,
-                       rest=model.points)
-    return again, u, S, N, P
+    u2 = model.deformation_view(None, n_modes).field.evaluate(again.mu)
+    S2, N2 = sample_surface(model.points + u2, model.surface, _n_samples(model, 0.0025), seed)
+    P2 = _object_points(cloud, again.T_map_obj, model.points + u2, float(model.points[:, 2].min()), plane, cfg,
+                        rest=model.points)
+    if (_quality(P2, G.inv(again.T_map_obj), S2, N2, cams, cfg.inlier_dist)[0]
+            <= _quality(P, T, S, N, cams, cfg.inlier_dist)[0]):
+        return st, u, S, N, P
+    return again, u2, S2, N2, P2
 
 
 def _polished_state(cloud: np.ndarray, model: ReducedModel, st: DepthState,
@@ -938,16 +943,15 @@ def _object_points(cloud: np.ndarray, T_map_obj: np.ndarray, V: np.ndarray, z_un
         P = P[P @ plane[:3] + plane[3] > cfg.floor_clear]
     Q = G.transform(G.inv(T_map_obj), P)
     lo, hi = V.min(axis=0) - cfg.margin, V.max(axis=0) + cfg.margin
-    keep = np.all((lo < Q) & (hi > Q), axis=1)
-    floor = np.full(len(Q), z_under)
+    keep = np.flatnonzero(np.all((lo < Q) & (hi > Q), axis=1))  # a NaN coordinate fails both comparisons
+    floor = np.full(len(keep), z_under)
     if rest is not None:
         under = np.flatnonzero(rest[:, 2] <= z_under + 1e-9)
         sag = V[under, 2] - rest[under, 2]
-        if len(under) and np.any(sag != 0.0):
-            _, nearest = cKDTree(V[under, :2]).query(Q[:, :2])
+        if len(under) and np.any(sag != 0.0):  # only the points in the box are searched
+            _, nearest = cKDTree(V[under, :2]).query(Q[keep, :2])
             floor = z_under + sag[nearest]
-    keep &= Q[:, 2] > floor + cfg.contact_band
-    out: np.ndarray = P[keep]
+    out: np.ndarray = P[keep[Q[keep, 2] > floor + cfg.contact_band]]
     return out
 
 
