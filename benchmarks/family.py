@@ -50,7 +50,8 @@ from simreal_nodes.synth.sequence import sequence
 # the tables this script writes, under names composed from its options, that the docs quote as current
 # (benchmarks.staleness checks them against the code; other names are labelled runs)
 DEFAULT_TABLES = ("family", "family_plate", "family_registration", "family_registration_stereo", "family_stereo",
-                  "family_preloaded", "family_preloaded_heldout")
+                  "family_preloaded", "family_preloaded_heldout", "family_registration_preloaded",
+                  "family_registration_preloaded_heldout")
 
 FPS = 15.0  # like the recording in the issue
 # the registration-alone run of loaded beams (``--registration --preloaded``): frames for this many tries (a refused
@@ -721,7 +722,11 @@ TABLES = (("family", "Held-out seeds (the accuracy this project reports): the cu
           ("family_dev_rgbd_0_19", "RGB-D on the same development seeds 0-19 and the same code, beside the stereo "
            "table (`--seeds 0-19 --out family_dev_rgbd_0_19`)"),
           ("family_registration_stereo", "Stereo pair: the registration step alone, development seeds 0-9 "
-           "(`--registration --sensor stereo`)"))
+           "(`--registration --sensor stereo`)"),
+          ("family_registration_preloaded", "Loaded beams: the registration step alone, development seeds 0-49 "
+           "(`--registration --preloaded`)"),
+          ("family_registration_preloaded_heldout", "Loaded beams: the registration step alone, held-out seeds "
+           "1000-1029 (`--registration --preloaded --seeds 1000-1029`)"))
 
 
 def write_doc() -> None:

@@ -860,9 +860,10 @@ def _pinned_state(cloud: np.ndarray, model: ReducedModel, st: DepthState,
     1025 until stop 116: placed 57 and 53 mm along the axis without a doubt, the deformed shape's cover 0.78 there
     against 1.00 in place). ``shape``: the fit's displacement, surface samples, normals and object points. Where
     the slide covers no better, or the state fitted again is not deformed or covers no more of its faces than the
-    fit did (a shape fitted far from its load's place slides the wrong way: a cantilever's own surface bent 65 mm
-    at its tip, the fit started 50 mm towards the clamp, slides 68 mm further), the fit and its shape are returned
-    as they were."""
+    fit did (a shape fitted far from its load's place can slide the wrong way: a cantilever's own surface bent 65
+    mm at its tip, the fit started 50 mm towards the clamp, slid 68 mm further while the state's crop dropped the
+    band over the rest underside, :func:`.depth_state.fit_state`), the fit and its shape are returned as they
+    were."""
     u, S, N, P = shape
     T = G.inv(st.T_map_obj)
     T_pin = _pin_slide(P, T, S, N, cams, cfg)
