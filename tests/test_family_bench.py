@@ -29,3 +29,29 @@ def test_the_most_common_reason_breaks_ties_by_first_seen_not_by_hash():
     assert most_common(["waiting (2 of 3)", "waiting (1 of 3)", "waiting (1 of 3)", "waiting (2 of 3)"]) == \
         "waiting (2 of 3)"
     assert most_common(["lost", "lost", "flagged"]) == "lost"
+
+
+def test_the_loaded_registration_table_names_the_fits_placed_far_off_and_those_with_no_doubt(tmp_path, monkeypatch):
+    """``--registration --preloaded``: a fit a centimetre or more off is named, and named again as silent where it
+    raised no doubt (a tracker started there reads the load from a misplaced model); a refused scene counts as
+    refused, not as far off; the state's error is summarised over the fits that have one."""
+    import json
+
+    import benchmarks.common as common
+    from benchmarks.family import write_registration_loaded
+
+    monkeypatch.setattr(common, "RESULTS", tmp_path)
+
+    def row(seed, mm, doubt="", state=0.5):
+        return {"seed": seed, "support": "cantilever", "length_mm": 500, "height_mm": 10.0, "distance_m": 0.6,
+                "guess_mm": 50.0, "guess_deg": 10.0, "registration_mm": mm, "registration_max_mm": mm,
+                "registration_deg": 0.1, "registration_fitness": 0.9, "frame": 8, "seconds": 1.0, "reason": "",
+                "state_err_pct": state, "slide_spread_mm": 10.0, "registration_doubt": doubt}
+
+    rows = [row(1, 1.0), row(2, 57.0), row(3, 12.0, doubt="the fit can slide"),
+            row(4, float("nan"), state=float("nan")), row(5, 2.0, state=1.5)]
+    write_registration_loaded(rows, "development seeds 1-5", "reg_loaded")
+    doc = json.loads((tmp_path / "reg_loaded.json").read_text())
+    assert doc["summary"]["far"] == [2, 3] and doc["summary"]["silent"] == [2] and doc["summary"]["refused"] == 1
+    assert doc["summary"]["median_state_err_pct"] == 0.5
+    assert "with no doubt raised: 1 (2)" in (tmp_path / "reg_loaded.md").read_text()
