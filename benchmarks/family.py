@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from benchmarks.common import RESULTS, save
+from benchmarks.common import RESULTS, save, saved_machine
 from simreal_nodes import geometry as G
 from simreal_nodes.assimilation.offline import Pipeline
 from simreal_nodes.assimilation.registration import RegistrationConfig
@@ -251,10 +251,16 @@ def run_registration(seed: int, width: int = 640, height: int = 480, sensor: str
            **registration_error(pipe, seq), "frame": frame, "seconds": round(time.perf_counter() - t0, 1),
            "reason": "" if frame >= 0 else reason}
     if preloaded:
-        truth = np.asarray(seq["truth"][0].params["beam"][2], dtype=np.float64)
+        # the truth over the frames whose views were fused (a later try's, where one was refused): the load may have
+        # moved on between tries, and a state read while it moved has no one truth (the row says so)
+        last = frame if frame >= 0 else len(seq["rgb"]) - 1
+        fused = [np.asarray(seq["truth"][i].params["beam"][2], dtype=np.float64)
+                 for i in range(max(0, last - cfg.frames * cfg.every + 1), last + 1)]
+        truth = fused[-1]
         reg = pipe.objects.registrations.get("beam")
         mu = None if reg is None or reg.state is None else np.asarray(reg.state, dtype=np.float64)[:len(truth)]
         row.update(truth=truth.tolist(), state=None if mu is None else mu.tolist(),
+                   load_moved=bool(np.ptp(np.array(fused), axis=0).max() > 0),
                    # NaN: not placed, or placed with no deformation fitted (its rest shape stood)
                    state_err_pct=float("nan") if mu is None else
                    float(np.max(100 * np.abs(mu - truth) / np.asarray(d.spans))))
@@ -292,7 +298,7 @@ def write_registration(rows: list[dict], label: str, suffix: str = "") -> None:
                             "refused": int(np.isnan(mm).sum()), "label": label}})
 
 
-def write_registration_loaded(rows: list[dict], label: str, name: str) -> None:
+def write_registration_loaded(rows: list[dict], label: str, name: str, machine: dict | None = None) -> None:
     """The registration step alone on loaded beams (``--registration --preloaded``): the pose as
     :func:`write_registration` gives it, with the fitted state's error, and the fits placed a centimetre or more off
     with no doubt raised (silent: a tracker started there reads the load from a misplaced model)."""
@@ -301,6 +307,9 @@ def write_registration_loaded(rows: list[dict], label: str, name: str) -> None:
     state = np.array([r["state_err_pct"] for r in rows])
     far = [r["seed"] for r in rows if r["registration_mm"] >= 10.0]
     silent = [r["seed"] for r in rows if r["registration_mm"] >= 10.0 and not r["registration_doubt"]]
+    # placed with its rest shape: every scene here is loaded, so that is a state the depth did not read
+    at_rest = [r["seed"] for r in rows if np.isfinite(r["registration_mm"]) and not np.isfinite(r["state_err_pct"])]
+    moved = [r["seed"] for r in rows if r.get("load_moved")]
     placed = mm[np.isfinite(mm)]
     notes = (f"{label}, the load on from the first frame: the registration step alone (`anchor: registration`, the "
              "deformation fitted with the pose where the depth shows it: `registration.register_loaded`) on each "
@@ -309,14 +318,22 @@ def write_registration_loaded(rows: list[dict], label: str, name: str) -> None:
              f"{np.percentile(placed, 90) if len(placed) else float('nan'):.1f} mm, "
              f"{np.nanmedian(deg):.2f} deg; placed 10 mm or more off: {len(far)} "
              f"({', '.join(map(str, far)) or 'none'}), of them with no doubt raised: {len(silent)} "
-             f"({', '.join(map(str, silent)) or 'none'}). Load state (the fitted mu against the truth at the first "
-             f"frame, % of the load's range; blank where the rest shape stood): {np.nanmedian(state):.1f} % at the "
-             "median. Pose error: the object frame's origin (the beam's clamped corner) against the true pose.")
-    save(name, rows, REG_LOADED_COLS, "Registration of loaded beams on the scene family", notes,
+             f"({', '.join(map(str, silent)) or 'none'}). Load state (the fitted mu against the truth at the last "
+             "fused view, % of the load's range): "
+             f"{np.nanmedian(state) if np.isfinite(state).any() else float('nan'):.1f} % at the median of the fits "
+             f"that read one; placed at rest (the rest shape stood, no state read, blank): {len(at_rest)} "
+             f"({', '.join(map(str, at_rest)) or 'none'}); the load moved while the views were taken: "
+             f"{', '.join(map(str, moved)) or 'none'}. Pose error: the object frame's origin (the beam's clamped "
+             "corner) against the true pose.")
+    # a missing state is null in the JSON and a blank cell, not "nan"
+    shown = [{**r, "state_err_pct": None if not np.isfinite(r["state_err_pct"]) else r["state_err_pct"]} for r in rows]
+    save(name, shown, REG_LOADED_COLS, "Registration of loaded beams on the scene family", notes,
          extra={"summary": {"median_mm": float(np.nanmedian(mm)), "median_deg": float(np.nanmedian(deg)),
                             "p90_mm": float(np.percentile(placed, 90)) if len(placed) else float("nan"),
-                            "refused": int(np.isnan(mm).sum()), "far": far, "silent": silent,
-                            "median_state_err_pct": float(np.nanmedian(state)), "label": label}})
+                            "refused": int(np.isnan(mm).sum()), "far": far, "silent": silent, "at_rest": at_rest,
+                            "load_moved": moved,
+                            "median_state_err_pct": float(np.nanmedian(state)) if np.isfinite(state).any()
+                            else float("nan"), "label": label}, **(machine or {})})
 
 
 COLS = [("seed", "seed", "{}"), ("support", "support", "{}"), ("slenderness", "L/h", "{:.0f}"),
@@ -1068,7 +1085,9 @@ same, run once after those choices): 1.28 -> **1.13 %**, p90 7.71 -> **2.42 %**,
 -> 80 %; two supports 1.08 % and 93 % within 2 %, cantilevers 1.21 % and 69 % (were 1.03 % and 86 %, 1.84 % and 56 %);
 1004 31.6 -> 3.5 %, 1018 14.4 -> 0.90 %, 1024 7.0 -> 0.27 %, 1025 16.2 -> 0.52 %; losses: 1014 0.68 -> 1.45 %, 1020
 0.17 -> 0.65 %, 1019 1.70 -> 2.16 %. The loaded scenes still fall short of the unloaded family's targets on the median
-(1.13 against 1 %) and within 2 % (80 against 90 %); the p90 meets its 3 %.
+(1.13 against 1 %) and within 2 % (80 against 90 %); the p90 meets its 3 %. Said plainly: the two held-out scenes that
+showed the faults (1018, 1025) were captured and studied to find them, so their gains are not independent evidence;
+the other 28 held-out scenes were not looked at before these runs, and both mends were chosen on development scenes.
 
 **Through a stereo pair** (`--sensor stereo`, `simreal make-bag family --seed N --sensor stereo`; stop 32): the same
 draws seen by a rectified pair with a 0.12 m baseline (the right camera blurred along its own path), no depth
@@ -2148,10 +2167,18 @@ def main() -> None:
     a = ap.parse_args()
     seeds = parse_seeds(a.seeds)
     if a.registration and a.preloaded:
-        if a.sensor != "rgbd":
-            raise SystemExit("--registration --preloaded: RGB-D only")
+        if a.sensor != "rgbd" or a.object != "beam" or a.jobs != 1 or a.resume or a.measurements or a.tracking:
+            raise SystemExit("--registration --preloaded: RGB-D beams, one process, no tracking options")
         held = all(s >= HELD_OUT_SEEDS.start for s in seeds)
+        if not held and any(s >= HELD_OUT_SEEDS.start for s in seeds):
+            raise SystemExit("--registration --preloaded: development or held-out seeds, not both in one table")
         name = a.out or "family_registration_preloaded" + ("_heldout" if held else "")
+        if a.report:  # the table and notes again from the results JSON (the run's machine kept)
+            doc = json.loads((RESULTS / f"{name}.json").read_text())
+            write_registration_loaded(
+                [{**r, "state_err_pct": float("nan") if r["state_err_pct"] is None else r["state_err_pct"]}
+                 for r in doc["rows"]], doc["summary"]["label"], name, saved_machine(name))
+            return
         reg_rows = []
         for seed in seeds:
             reg_rows.append(run_registration(seed, preloaded=True))

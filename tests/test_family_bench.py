@@ -34,7 +34,8 @@ def test_the_most_common_reason_breaks_ties_by_first_seen_not_by_hash():
 def test_the_loaded_registration_table_names_the_fits_placed_far_off_and_those_with_no_doubt(tmp_path, monkeypatch):
     """``--registration --preloaded``: a fit a centimetre or more off is named, and named again as silent where it
     raised no doubt (a tracker started there reads the load from a misplaced model); a refused scene counts as
-    refused, not as far off; the state's error is summarised over the fits that have one."""
+    refused, not as far off; the state's error is summarised over the fits that have one, and a placed fit that read
+    no state (its rest shape stood, though every scene is loaded) is counted and shown blank."""
     import json
 
     import benchmarks.common as common
@@ -49,9 +50,13 @@ def test_the_loaded_registration_table_names_the_fits_placed_far_off_and_those_w
                 "state_err_pct": state, "slide_spread_mm": 10.0, "registration_doubt": doubt}
 
     rows = [row(1, 1.0), row(2, 57.0), row(3, 12.0, doubt="the fit can slide"),
-            row(4, float("nan"), state=float("nan")), row(5, 2.0, state=1.5)]
+            row(4, float("nan"), state=float("nan")), row(5, 2.0, state=1.5), row(6, 1.0, state=float("nan"))]
     write_registration_loaded(rows, "development seeds 1-5", "reg_loaded")
     doc = json.loads((tmp_path / "reg_loaded.json").read_text())
     assert doc["summary"]["far"] == [2, 3] and doc["summary"]["silent"] == [2] and doc["summary"]["refused"] == 1
-    assert doc["summary"]["median_state_err_pct"] == 0.5
-    assert "with no doubt raised: 1 (2)" in (tmp_path / "reg_loaded.md").read_text()
+    assert doc["summary"]["median_state_err_pct"] == 0.5 and doc["summary"]["at_rest"] == [6]
+    md = (tmp_path / "reg_loaded.md").read_text()
+    assert "with no doubt raised: 1 (2)" in md
+    assert "placed at rest (the rest shape stood, no state read, blank): 1 (6)" in md
+    assert "nan" not in md.split("\n| 6 |")[1].split("\n")[0]  # the missing state a blank cell
+    assert [r["state_err_pct"] for r in doc["rows"]][5] is None

@@ -440,7 +440,9 @@ def fit_state(cloud: Array, model: ReducedModel, T_map_obj: Array, lo: Array, hi
     tell its load (held-out seed 1018's first views, fitted in the true pose: 3085 points, its load 4.9 % of the
     range off; 4944 points and 0.05 % with the band over the bent underside). So where the fit is deformed and
     the band over its bent underside keeps other points, the state is fitted again on those, from the first fit's
-    mu; the second fit stands where it is deformed too."""
+    mu; the second fit stands where it is deformed too. (Its rest fit, on the same points, meets the lower faces kept
+    only for the bent band as outliers, so the second fit is nearly always judged deformed: the first fit's verdict
+    is the one that decides whether the object is loaded.)"""
     cfg = cfg or DepthStateConfig()
     st = _fit_state(cloud, model, T_map_obj, lo, hi, mu0, cfg, n_modes, None)
     if st.mu is None or cfg.turn_steps:  # a body of revolution (the boot) is clamped by its base, which does not move
@@ -603,7 +605,8 @@ class DepthFit:
 
 class DepthFollower:
     """The state measured from every depth image (``tracking.depth_fit``): the non-rigid point-to-plane fit of
-    :func:`fit_state` (same samples, crop, Tukey cost, upright rigid correction), warm-started frame to frame.
+    :func:`fit_state` (same samples, Tukey cost, upright rigid correction; the crop's band over the rest underside
+    only, not :func:`fit_state`'s second pass over a bent one), warm-started frame to frame.
 
     Why (issue 16, the joint boot): the sparse tracker's measurements are ORB map points followed by optical flow and
     re-acquired by descriptor on a faint, deforming speckle. Labelled against the independent truth

@@ -260,6 +260,16 @@ def test_the_crop_band_follows_a_bent_underside_and_is_the_rest_rule_where_nothi
     still[rest[:, 2] == 0.0] = 0.0  # the top moved, the underside not
     cloud = G.transform(T, np.c_[xs, np.full_like(xs, 0.001), 0.001 + 0.01 * (xs % 0.01 > 0.004)])
     np.testing.assert_array_equal(crop(cloud, model, T, cfg, box, still), crop(cloud, model, T, cfg, box))
+    # the underside bent over its right half only: each point judged by the underside node nearest it across the
+    # object, so 2 mm over the still left half is in the band, 5 mm over the bent right half is kept
+    half = bend.copy()
+    half[rest[:, 0] < 0.3] = 0.0
+    left, right = xs[xs < 0.29], xs[xs > 0.31]
+    sag = -0.02 * np.sin(np.pi * right / 0.6)
+    pts = np.r_[np.c_[left, np.full_like(left, 0.001), np.full_like(left, 0.002)],
+                np.c_[right, np.full_like(right, 0.001), sag + 0.005]]
+    kept_x = np.sort(np.round(crop(G.transform(T, pts), model, T, cfg, box, half)[:, 0], 3))
+    np.testing.assert_array_equal(kept_x, np.round(right, 3))
 
 
 def test_a_bent_cantilevers_tip_is_fitted_with_the_band_over_its_bent_underside():
