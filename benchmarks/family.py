@@ -787,7 +787,7 @@ The rules that make it evidence:
   model surface to the first depth images) from a guess as a user gives it by eye, the true pose in the first
   camera frame moved by about 5 cm and 10 degrees rms; the registration's pose error against the truth is in
   each row (`python -m benchmarks.family --seeds 0-9 --registration` measures that step alone:
-  `benchmarks/results/family_registration.md`: 0.45 mm and 0.14 degrees at the median on seeds 0-9; the
+  `benchmarks/results/family_registration.md`: 0.47 mm and 0.14 degrees at the median on seeds 0-9; the
   held-out rows carry the registration's error for every scene). The guess is the one number in a scene
   file computed from the truth (in the first camera frame, through the rendered trajectory): 5 cm / 10 degrees
   off, it only picks the basin.
