@@ -43,20 +43,23 @@ def test_the_loaded_registration_table_names_the_fits_placed_far_off_and_those_w
 
     monkeypatch.setattr(common, "RESULTS", tmp_path)
 
-    def row(seed, mm, doubt="", state=0.5):
+    def row(seed, mm, doubt="", state=0.5, node_mm=None):
         return {"seed": seed, "support": "cantilever", "length_mm": 500, "height_mm": 10.0, "distance_m": 0.6,
-                "guess_mm": 50.0, "guess_deg": 10.0, "registration_mm": mm, "registration_max_mm": mm,
+                "guess_mm": 50.0, "guess_deg": 10.0, "registration_mm": mm,
+                "registration_max_mm": mm if node_mm is None else node_mm,
                 "registration_deg": 0.1, "registration_fitness": 0.9, "frame": 8, "seconds": 1.0, "reason": "",
                 "state_err_pct": state, "slide_spread_mm": 10.0, "registration_doubt": doubt}
 
     rows = [row(1, 1.0), row(2, 57.0), row(3, 12.0, doubt="the fit can slide"),
-            row(4, float("nan"), state=float("nan")), row(5, 2.0, state=1.5), row(6, 1.0, state=float("nan"))]
-    write_registration_loaded(rows, "development seeds 1-5", "reg_loaded")
+            row(4, float("nan"), state=float("nan")), row(5, 2.0, state=1.5), row(6, 1.0, state=float("nan")),
+            row(7, 2.2, node_mm=72.0)]  # the origin in place, the far end turned off (development seed 40)
+    write_registration_loaded(rows, "development seeds 1-7", "reg_loaded")
     doc = json.loads((tmp_path / "reg_loaded.json").read_text())
-    assert doc["summary"]["far"] == [2, 3] and doc["summary"]["silent"] == [2] and doc["summary"]["refused"] == 1
+    assert doc["summary"]["far"] == [2, 3, 7] and doc["summary"]["silent"] == [2, 7]
+    assert doc["summary"]["refused"] == 1
     assert doc["summary"]["median_state_err_pct"] == 0.5 and doc["summary"]["at_rest"] == [6]
     md = (tmp_path / "reg_loaded.md").read_text()
-    assert "with no doubt raised: 1 (2)" in md
+    assert "with no doubt raised: 2 (2, 7)" in md
     assert "placed at rest (the rest shape stood, no state read, blank): 1 (6)" in md
     assert "nan" not in md.split("\n| 6 |")[1].split("\n")[0]  # the missing state a blank cell
     assert [r["state_err_pct"] for r in doc["rows"]][5] is None
