@@ -1092,6 +1092,37 @@ same, run once after those choices): 1.28 -> **1.13 %**, p90 7.71 -> **2.42 %**,
 showed the faults (1018, 1025) were captured and studied to find them, so their gains are not independent evidence;
 the other 28 held-out scenes were not looked at before these runs, and both mends were chosen on development scenes.
 
+**Stop 117: a tilted rigid fit levelled about the beam's ends.** The loaded registration table of stop 116 left
+three development beams placed at rest (35, 40, 49), one of them silently misplaced: seed 40's origin was 2.2 mm
+off but the beam was turned 4.7 degrees, its far end 72 mm off (the table counted a fit a centimetre off by its
+origin only; it now counts the origin or any model node). Captured (scratch runs of the registration's own views),
+40 and 49 showed one fault: a sagging two-support beam's rest shape, fitted rigidly, follows the sag down from one
+end and tilts (4.7 and 4.0 degrees); levelled onto the support plane about the model's centre it sank by half the
+tilt's drop (35 and 17 mm), and the deformed fit started there read no deformation (its cost -67 % and -35 % on the
+rest shape's). Started in the true pose, they read their loads 0.6 and 0.1 % of the range off. 35 is not this fault: its
+load sits next to the clamp and moves the surface 0.5 mm (at rest is the right reading). **The mend**
+(`registration._levelled_state`, `RegistrationConfig.level_ends_deg`): where the rigid fit is tilted more than 1
+degree from the support plane, it is levelled about each end of the model's long axis too (a beam's supports, a
+cantilever's root, sit at their rest height), the state fitted from each, and the deformed fit whose deformation
+lowers its own rest shape's cost the most is kept. A first version kept the fit that covered most of its faces:
+on development seeds 27 and 46 the covers differed by a thousandth while the loads read 2.6 and 9.5 % off against
+0.2 and 0.5 %; the cost's gain tells them apart (+62 against +93 %, +28 against +56 %). Both tables were run on
+that first version too (not kept), so the held-out table was seen before the switch, which was chosen on those
+two development seeds alone. **The registration step on loaded beams, rerun** (`family_registration_preloaded`,
+`_heldout`): development seeds 0-49, pose 0.84 -> 0.80 mm at the median, p90 3.0 -> 2.4 mm; the state 0.46 ->
+0.42 % of its range at the median, p90 1.89 -> 1.19 %; 40 and 49 placed 1.8 and 0.5 mm off, their loads 1.2 and
+0.14 %; seed 11 (stop 116: 3.4 %, the pose 2.5 mm along the axis) 0.03 %, seed 7 3.7 -> 0.8 %, seed 41 1.9 ->
+0.35 %; a loss: 33 0.09 -> 0.31 %. Held out (1000-1029): 1005 (two supports, stop 116's one silent centimetre,
+its load read at the mirror position) 10.7 -> 2.3 mm and its state 53 -> 2.8 %; no fit a centimetre off any more;
+pose p90 3.2 -> 2.8 mm, the state's median 0.55 % (the same), p90 3.0 -> 2.8 %, worst 53 -> 4.0 %; 1009 (a
+cantilever) still placed at rest, not studied (held out).
+**Tracking, rerun** (the held-out table run once, after the development choice): development seeds 0-19
+(`family_preloaded`) 0.65 % median of the per-scene medians, p90 1.53 %, 80 % within 1 %, 95 % within 2 % (the
+same; 2 and 7 a little better, 11 0.67 -> 0.70 % although its registration's state went 3.4 -> 0.03 %: the tracker
+reads the load again from the images); held out 1.13 -> **1.07 %**, p90 2.42 %, 47 % within 1 %, 80 % within 2 %
+(the same); 1014 1.45 -> 1.07 %, 1018 0.90 -> 0.69 %, 1024 0.27 -> 0.46 %, 1005 0.33 -> 0.43 %. The loaded scenes
+still fall short of the unloaded family's targets on the median (1.07 against 1 %) and within 2 % (80 against 90 %).
+
 **Through a stereo pair** (`--sensor stereo`, `simreal make-bag family --seed N --sensor stereo`; stop 32): the same
 draws seen by a rectified pair with a 0.12 m baseline (the right camera blurred along its own path), no depth
 topic. The SLAM runs in stereo mode, and the trackers' depth (the registration's views, the dense reference view) is
