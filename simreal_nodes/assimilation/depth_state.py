@@ -512,6 +512,39 @@ def _fit_state(cloud: Array, model: ReducedModel, T_map_obj: Array, lo: Array, h
     return DepthState(None, T_rest, mu, cost, rest_cost, motion, len(q), sigma, "at rest: " + what, rig0.copy())
 
 
+
+def held_gains(cloud: Array, model: ReducedModel, T_map_obj: Array, lo: Array, hi: Array,
+               states: list[Array], cfg: DepthStateConfig | None = None, n_modes: int | None = None) -> Array:
+    """How much each of ``states`` lowers the rest shape's cost on ``cloud`` (map frame): ``1 - cost / rest_cost``
+    per state, each held (its upright rigid correction a nuisance, fitted from none and from the rest fit's, the
+    lower cost kept), all on the same points (cropped by the rest rule, :func:`crop`, around every shape ``lo`` ..
+    ``hi`` lets the model take) and at the rest fit's robust scale; NaN for each where too few points are left.
+    States compared on equal terms: :func:`fit_state`'s own gain may come from its second fit's points (the band over
+    the fitted state's bent underside), on their own scale, so two fits' gains are not comparable."""
+    cfg = cfg or DepthStateConfig()
+    T = np.asarray(T_map_obj, np.float64)
+    lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
+    q = crop(cloud, model, T, cfg, extent(model, lo, hi, n_modes=n_modes))
+    if len(q) < cfg.min_points:
+        return np.full(len(states), np.nan)
+    surf = _Surface(model, cfg, n_modes)
+    prob = _Problem(surf, q, cfg, _weak_direction(surf, q, cfg))
+    zero = np.zeros(N_RIGID)
+    _, rig0, thr = prob.solve(None, zero, lo, hi, None)
+    _, rig0, thr = prob.solve(None, rig0, lo, hi, thr)
+    rest_cost = prob.cost(None, rig0, thr)
+    if not rest_cost > 0:
+        return np.full(len(states), np.nan)
+    out = []
+    for mu in states:
+        m = np.clip(np.asarray(mu, np.float64), lo, hi)
+        cost = np.inf
+        for r_start in ([zero, rig0] if cfg.rigid else [zero]):
+            m_t, rig_t, _ = prob.solve(m, r_start, m, m, thr)
+            cost = min(cost, prob.cost(m_t, rig_t, thr))
+        out.append(1.0 - cost / rest_cost)
+    return np.array(out)
+
 def _motion(prob: _Problem, mu: Array, rig: Array) -> float:
     """The 90th percentile of the displacement |u(mu)| over the samples the measured points meet (m)."""
     _, _, k_all, ok = prob._associate(mu, rig)

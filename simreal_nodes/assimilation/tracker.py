@@ -30,6 +30,7 @@ from simreal_nodes.assimilation.depth_state import (
     DepthState,
     DepthStateConfig,
     fit_state,
+    held_gains,
 )
 from simreal_nodes.assimilation.registration import LinkIndex, Links, depth_cloud, link, ray_weights, surface_nodes
 from simreal_nodes.camera import CameraModel
@@ -893,7 +894,7 @@ class DeformableTracker:
             dcfg = replace(self.cfg.depth_state, turn_steps=TURN_STEPS) if turns else self.cfg.depth_state
             st = fit_state(cloud, self.model, T, lo[:n_mu], hi[:n_mu], self.values[:n_mu], dcfg,
                            self.cfg.n_modes or None)
-            agrees = "" if turns else self._registration_agrees(st, cloud, T, dcfg)
+            agrees = "" if turns else self._registration_agrees(st, cloud, T, lo[:n_mu], hi[:n_mu], dcfg)
             if agrees:
                 assert self.reference_state is not None
                 return self.reference_state.copy(), "deformed as the registration's depth fit showed, " + ", ".join(
@@ -910,32 +911,33 @@ class DeformableTracker:
             return self.reference_state.copy(), "deformed as the registration's depth fit showed", False
         return None, "taken to be at rest (no depth fit)", False
 
-    def _registration_agrees(self, st: DepthState, cloud: np.ndarray, T: np.ndarray, cfg: DepthStateConfig) -> str:
+    def _registration_agrees(self, st: DepthState, cloud: np.ndarray, T: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+                             cfg: DepthStateConfig) -> str:
         """Whether this frame's depth agrees with the state a registration found (:attr:`reference_state`, fitted to
-        the registration's depth views fused), ``st`` being this frame's own fit (:meth:`reference_from_depth`): ""
-        where there is no such state, or this frame sees another; else what agreed.
+        the registration's depth views fused), ``st`` being this frame's own fit (:meth:`reference_from_depth`), ``lo``
+        / ``hi`` the state's box: "" where there is no such state, or this frame sees another; else what agreed.
 
-        The frame agrees where the registration's state, held (its rigid part a nuisance, as in ``st``), lowers the
-        rest shape's cost on this frame's points by at most ``cfg.min_gain`` less than the frame's own best fit does
-        (its deformed fit, or the rest shape, gain 0): the yardstick a deformation must pass for the depth to see it
-        at all. A state one depth image cannot tell from another is then taken from the fit on more views: on
-        development seeds 0-19 of the loaded family, the registration's fit (its last view is the reference frame)
-        read the load 0.36 % of its range off (median) where the reference frame's own fit read it 0.63 % off or saw
-        none (seed 4: its 0.5 mm deformation under ``min_motion`` in one view, 1.25 % off from three). Where the load
-        moved or went after the registration's views (a live graph registers in the background), the frame's own fit
-        lowers the cost by more and stands."""
-        if self.reference_state is None or not st.rest_cost > 0:
+        The frame agrees where the registration's state lowers the rest shape's cost on this frame's depth by at most
+        ``cfg.min_gain`` less than the frame's own verdict does (its deformed fit, or the rest shape: no gain), both
+        held on the same points at the same scale (:func:`.depth_state.held_gains`, their rigid parts a nuisance):
+        ``min_gain`` is the yardstick a deformation must pass for the depth to see it at all. A state one depth image
+        cannot tell from another is then taken from the fit on more views: on development seeds 0-19 of the loaded
+        family, the registration's fit (its last view is the reference frame) read the load 0.36 % of its range off
+        (median) where the reference frame's own fit read it 0.63 % off or saw none (seed 4: its 0.5 mm deformation
+        under ``min_motion`` in one view, 1.25 % off from three). Where the load moved or went after the registration's
+        views (a live graph registers in the background), the frame's own verdict lowers the cost by more and
+        stands."""
+        if self.reference_state is None or st.fitted is None:
             return ""
         reg = np.asarray(self.reference_state, np.float64)
-        held = fit_state(cloud, self.model, T, reg, reg, reg, cfg, self.cfg.n_modes or None)
-        if not held.rest_cost > 0:
-            return ""
-        own = max(0.0, 1.0 - st.cost / st.rest_cost)
-        gain = 1.0 - held.cost / held.rest_cost
+        states = [reg] if st.mu is None else [reg, st.mu]
+        gains = held_gains(cloud, self.model, T, lo, hi, states, cfg, self.cfg.n_modes or None)
+        gain, own = float(gains[0]), (float(gains[1]) if st.mu is not None else 0.0)
         if not own - gain <= cfg.min_gain:
             return ""
+        verdict = "its own fit" if st.mu is not None else "the rest shape (its verdict)"
         return (f"this frame's depth agrees: the registration's state lowers the rest shape's cost by {gain:+.1%}, "
-                f"this frame's own fit by {own:+.1%}")
+                f"{verdict} by {own:+.1%}")
 
     def _turn_axis_is_alpha(self) -> bool:
         """Whether a depth fit's turn about the object's z axis is alpha_z's: ``depth_turn`` on (the scene says the
