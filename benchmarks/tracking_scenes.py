@@ -438,8 +438,9 @@ knob tables. The object's state in the reference view: read from its depth where
 (`tracking.reference: depth`, the default, `assimilation/depth_state.py`: the model's deformed surface fitted to the
 depth cloud and compared with the rest shape), else taken to be the rest shape. Where a registration fitted the state
 to its fused depth views (`anchor: registration` on a loaded object), that state stands unless the reference view's
-own depth sees another: its own fit lowering the rest shape's cost by more than `depth_state.min_gain` (1 %) beyond
-what the registration's state lowers it (stop 118: one depth image cannot tell load positions a few % of the range
+own depth sees another: its own verdict (its deformed fit, or the rest shape) lowering the rest shape's cost by more
+than `depth_state.min_gain` (1 %) beyond what the registration's state lowers it, both held on the same points
+(`depth_state.held_gains`; stop 118: one depth image cannot tell load positions a few % of the range
 apart on a cantilever, three views tell them better). A scene loaded from its first frame is measured in
 `docs/family.md` ("loaded from the first frame"). Numbers: `docs/family.md` (the scene family, dense by
 default, the sparse mode beside it).

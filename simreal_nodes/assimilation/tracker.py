@@ -870,8 +870,9 @@ class DeformableTracker:
                              ) -> tuple[np.ndarray | None, str, bool]:
         """The object's state (mu) in the reference view, how it was judged, and whether the depth saw the object:
         fitted to this frame's depth (:func:`.depth_state.fit_state`, the rigid part a nuisance: the pose is not
-        changed) where ``cfg.reference`` is "depth" and there is a depth image; failing that,
-        :attr:`reference_state` (a registration's fit); None: at rest.
+        changed) where ``cfg.reference`` is "depth" and there is a depth image, unless a registration's fit
+        (:attr:`reference_state`) agrees with that depth as well (:meth:`_registration_agrees`: then the
+        registration's, fitted on more views); failing a depth fit, :attr:`reference_state`; None: at rest.
 
         With ``depth_turn`` on a body of revolution about its z axis (:attr:`_turn_is_alpha`, the boot), the fit also
         searches the turn about that axis (``turn_steps``), and where it finds the object deformed, its shape holding

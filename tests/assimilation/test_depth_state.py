@@ -10,7 +10,15 @@ import numpy as np
 import pytest
 
 from simreal_nodes import geometry as G
-from simreal_nodes.assimilation.depth_state import N_RIGID, DepthStateConfig, _Problem, _Surface, crop, fit_state
+from simreal_nodes.assimilation.depth_state import (
+    N_RIGID,
+    DepthStateConfig,
+    _Problem,
+    _Surface,
+    crop,
+    fit_state,
+    held_gains,
+)
 from simreal_nodes.assimilation.objects import ObjectTrackers
 from simreal_nodes.assimilation.registration import (
     RegistrationConfig,
@@ -231,13 +239,29 @@ def test_a_load_that_moved_after_the_registration_is_read_from_the_frame(loaded,
     the range off (it moved after the registration's views) is read where the depth shows it; a load on the
     unloaded scene (taken off) is at rest."""
     s = loaded
-    state = float(np.clip(s["s"] + 0.3 * s["draw"].span, s["lo"][0], s["hi"][0]))
+    off = 0.3 * s["draw"].span
+    state = s["s"] + off if s["s"] + off <= s["hi"][0] else s["s"] - off
     mu, why, seen = _reference_with_registered(s, state)
     assert seen and why.startswith("deformed as its depth shows"), why
     assert abs(mu[0] - s["s"]) / s["draw"].span < 0.03, (mu, s["s"])
     u = unloaded
     mu, why, seen = _reference_with_registered(u, float(np.mean(u["draw"].s_range)))
     assert seen and mu is None and why.startswith("at rest as its depth shows"), why
+
+
+def test_held_gains_rank_states_on_the_same_points(loaded):
+    """:func:`held_gains`: on one depth image of the loaded beam, its true state lowers the rest shape's cost the
+    most, a state 30 % of the range off clearly less; the gains do not depend on which other states are asked for
+    (the same points and scale for all); too few points: NaN."""
+    s = loaded
+    cloud = depth_cloud(s["seq"]["cam"], s["seq"]["depth"][0], s["seq"]["T"][0], stride=1)
+    off = 0.3 * s["draw"].span
+    far = s["s"] + off if s["s"] + off <= s["hi"][0] else s["s"] - off
+    g = held_gains(cloud, s["model"], _off(s["truth"]), s["lo"], s["hi"], [np.array([s["s"]]), np.array([far])])
+    assert g[0] > 0.3 and g[0] > g[1] + 0.05, g
+    alone = held_gains(cloud, s["model"], _off(s["truth"]), s["lo"], s["hi"], [np.array([far])])
+    assert alone[0] == g[1]
+    assert np.isnan(held_gains(np.full((50, 3), np.nan), s["model"], s["truth"], s["lo"], s["hi"], [s["lo"]])).all()
 
 
 @pytest.mark.parametrize("preloaded", [True, False])
