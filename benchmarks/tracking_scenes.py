@@ -441,7 +441,8 @@ to its fused depth views (`anchor: registration` on a loaded object), that state
 own depth sees another: its own verdict (its deformed fit, or the rest shape) lowering the rest shape's cost by more
 than `depth_state.min_gain` (1 %) beyond what the registration's state lowers it, both held on the same points
 (`depth_state.held_gains`; stop 118: one depth image cannot tell load positions a few % of the range
-apart on a cantilever, three views tell them better). A scene loaded from its first frame is measured in
+apart on a cantilever, three views tell them better; a body of revolution whose reference fit reads its turn, the
+boot with `depth_turn`, keeps its own fit). A scene loaded from its first frame is measured in
 `docs/family.md` ("loaded from the first frame"). Numbers: `docs/family.md` (the scene family, dense by
 default, the sparse mode beside it).
 

@@ -512,13 +512,13 @@ def _fit_state(cloud: Array, model: ReducedModel, T_map_obj: Array, lo: Array, h
     return DepthState(None, T_rest, mu, cost, rest_cost, motion, len(q), sigma, "at rest: " + what, rig0.copy())
 
 
-
 def held_gains(cloud: Array, model: ReducedModel, T_map_obj: Array, lo: Array, hi: Array,
                states: list[Array], cfg: DepthStateConfig | None = None, n_modes: int | None = None) -> Array:
     """How much each of ``states`` lowers the rest shape's cost on ``cloud`` (map frame): ``1 - cost / rest_cost``
     per state, each held (its upright rigid correction a nuisance, fitted from none and from the rest fit's, the
     lower cost kept), all on the same points (cropped by the rest rule, :func:`crop`, around every shape ``lo`` ..
-    ``hi`` lets the model take) and at the rest fit's robust scale; NaN for each where too few points are left.
+    ``hi`` lets the model take) and at the rest fit's robust scale; NaN for each where too few points are left or
+    the rest fit costs nothing.
     States compared on equal terms: :func:`fit_state`'s own gain may come from its second fit's points (the band over
     the fitted state's bent underside), on their own scale, so two fits' gains are not comparable."""
     cfg = cfg or DepthStateConfig()
@@ -544,6 +544,7 @@ def held_gains(cloud: Array, model: ReducedModel, T_map_obj: Array, lo: Array, h
             cost = min(cost, prob.cost(m_t, rig_t, thr))
         out.append(1.0 - cost / rest_cost)
     return np.array(out)
+
 
 def _motion(prob: _Problem, mu: Array, rig: Array) -> float:
     """The 90th percentile of the displacement |u(mu)| over the samples the measured points meet (m)."""

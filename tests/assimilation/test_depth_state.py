@@ -251,8 +251,8 @@ def test_a_load_that_moved_after_the_registration_is_read_from_the_frame(loaded,
 
 def test_held_gains_rank_states_on_the_same_points(loaded):
     """:func:`held_gains`: on one depth image of the loaded beam, its true state lowers the rest shape's cost the
-    most, a state 30 % of the range off clearly less; the gains do not depend on which other states are asked for
-    (the same points and scale for all); too few points: NaN."""
+    most, a state 30 % of the range off clearly less; a state's gain does not depend on which other states are asked
+    for; too few points: NaN. (That the gains share their points and scale is by construction, not tested here.)"""
     s = loaded
     cloud = depth_cloud(s["seq"]["cam"], s["seq"]["depth"][0], s["seq"]["T"][0], stride=1)
     off = 0.3 * s["draw"].span
@@ -260,7 +260,7 @@ def test_held_gains_rank_states_on_the_same_points(loaded):
     g = held_gains(cloud, s["model"], _off(s["truth"]), s["lo"], s["hi"], [np.array([s["s"]]), np.array([far])])
     assert g[0] > 0.3 and g[0] > g[1] + 0.05, g
     alone = held_gains(cloud, s["model"], _off(s["truth"]), s["lo"], s["hi"], [np.array([far])])
-    assert alone[0] == g[1]
+    assert alone[0] == pytest.approx(g[1], rel=1e-12)
     assert np.isnan(held_gains(np.full((50, 3), np.nan), s["model"], s["truth"], s["lo"], s["hi"], [s["lo"]])).all()
 
 
