@@ -159,10 +159,10 @@ each scene's model error beside its result.
 - *Foam beam*, the defaults (dense) and registration (0.1-0.2 mm, 0.02 deg off): median error 1.4 mm (0.18 % of the
   span), mean 1.8 mm at the thesis's 1280 x 720, where the thesis reports a mean "on the order of 1.5 mm": we are
   about 0.3 mm worse (our camera: 15 fps on a hand-held arc about 1 m away; the thesis's path is not given). 640 x
-  480: median 1.6 mm, mean 2.2 mm. (Stops 107 and 109's runs, on an Intel and an AMD host, the same to the digit; stop
-  86's run read a median of 1.3 mm at 1280 x 720 (1.35 against 1.39 now), as stop 80's did. The rows of 2026-11-27
-  read 1.3 / 1.9 mm and 1.4 / 2.2 mm.) Model error: 1.7 % of the displacement, a load-position bias of 0.9 % of the
-  span when fitted to every surface node.
+  480: median 1.6 mm, mean 2.2 mm. (Stops 107, 109 and 119's runs, on Intel, AMD and Intel hosts, the same to the
+  digit; stop 119's 640 x 480 p90 4.0 -> 4.1 mm; stop 86's run read a median of 1.3 mm at 1280 x 720 (1.35 against
+  1.39 now), as stop 80's did. The rows of 2026-11-27 read 1.3 / 1.9 mm and 1.4 / 2.2 mm.) Model error: 1.7 % of the
+  displacement, a load-position bias of 0.9 % of the span when fitted to every surface node.
 - The foam *model* was wrong before this table existed: the spec's 32 linear hexahedra along the beam resolved the
   40 mm support strips as 25 mm, and its deflection was 26 % larger than the converged full-order solve (model bias
   11.8 % of the span; the tracker read the load 11 % of the span off, the model's error, not the tracker's). Its
@@ -171,8 +171,8 @@ each scene's model error beside its result.
 - *Aluminium bar* with the thesis's glued dots: its pose measured by hand (2.0 mm and 0.9 deg off) is fatal as given
   (median 91 mm: a cantilever's bending looks like a turn about its clamp). With `tracking.rest_frames: 10` the pose
   is corrected from the first frames, where the bar is at rest (by 0.4 deg and 2.7 mm; the dots' rms 2.1 -> 0.11 px),
-  and then held: median 2.9 mm (0.60 % of the 480 mm range), mean 3.0 mm (stops 107 and 109; stop 86's run: 2.8 mm,
-  0.59 %, 2.9 mm); Table 4.1's own measure (at each position the weight rests at, |mean estimate - position|; the
+  and then held: median 2.9 mm (0.60 % of the 480 mm range), mean 3.0 mm (stops 107, 109 and 119; stop 86's run: 2.8
+  mm, 0.59 %, 2.9 mm); Table 4.1's own measure (at each position the weight rests at, |mean estimate - position|; the
   median over the six positions) 2.0 mm against the thesis's 2.2 mm at the same positions (the thesis does not state
   its camera resolution; ours is 640 x 480 at 0.45-0.65 m). Rerun in stop 86 on this code, where the markers' edges
   start from OpenCV's sub-pixel corners (stop 80's run, on commit 9b5de31, started them from the unrefined corners):
@@ -189,27 +189,28 @@ each scene's model error beside its result.
   fit under half the rigid residual (above 0.2 px) refuses it. Off by default: a user who starts the recording
   unloaded turns it on. The corrected pose lives in the tracker; the overlay and collision nodes still place the
   object at the scene file's pose. The project's default measurement, dense, cannot read this bar: its surface is
-  plain metal, and every loaded frame is flagged 'no measurable deformation' (0 % OK) rather than reported.
+  plain metal: most loaded frames are flagged 'no measurable deformation' rather than reported (14 % of them OK in
+  stop 119's run, 13 % before; the estimate 209 mm off at the median).
 - *Joint boot* (§4.5.4, its own table): the real boot rendered from an independent neo-Hookean solve
   (`synth/scenes.py:boot_truth`: trilinear hexahedra 72 x 2 x 60, two layers through the wall, Newton every 2 deg of
   the lever; the model: 36 x 1 x 48, NI-PGD), placed by registration from a guess by eye, map points as its scene file
-  says. Stop 109's run, on stop 106's code (the turn search; a 2-core AMD EPYC host, probe 27 ms): the lever read from
-  every depth image and alpha_z reported with the depth fit's turn, as the boot's family scene file has it
-  (`tracking.depth_fit` and `depth_turn`, chosen on the family's development seeds, `docs/family.md`; the registration
-  polished, `anchor.polish_mm: 4`, the boot registered as a body of revolution; stop 105's run, then stop 72's, in
-  brackets): the scene's own view reads theta **0.31 deg** off at the median (0.31, 0.38), p90 1.25 deg (1.15, 1.29),
-  alpha_z 0.06 deg (0.08, 0.26; the images' own alpha_z, the table's next column: 0.17, 0.07 in stop 105),
-  registration 0.2 mm and 0.08 deg off (the same; 0.09 mm, 0.04 deg). A third view that nothing was chosen on (another
-  arc, the boot turned by 70 deg, another guess): **0.31 deg** (0.29, 0.22), p90 0.81 deg (1.03, 0.68), alpha_z **0.52
-  deg** (0.49, 0.11; the images' own: 0.02, 0.47 in stop 105; this view also ran with a first version of `depth_turn`,
-  dropped on the own view, so it is not blind to that choice). A second view, on which the tracker's handling of
-  alpha_z was fixed: 0.17 deg (0.19, 0.21), alpha_z 0.36 deg (0.32, 0.43; the images' own: 0.45, 0.09 in stop 105).
-  The changes between stop 72 and stop 104 that moved them were not traced one by one (the table was not rerun
-  meanwhile; the held-out view's alpha_z 0.11 -> 0.49 deg is the largest move, within the target of 1 deg); between
-  stops 105 and 109 the host changed too. The tracker's time per frame: 39-48 ms in stop 109's run (probe 27 ms
-  against 19 quiet on that host); stop 105's run (65-109 ms) was taken on a loaded host (its CPU probe read 83 ms
-  against 15-17 quiet); stop 73's quiet run read 31-35 ms (stop 72: 37-45 ms; stop 71: 68-81; the images alone 9-16
-  ms; stop 84's cheaper depth fit, the same fits, `benchmarks/results/depth_budget.md`). With the knob
+  says. Stop 119's run, on stop 118's code (a 2-core Intel Xeon host, probe 17 ms): the lever read from every depth
+  image and alpha_z reported with the depth fit's turn, as the boot's family scene file has it (`tracking.depth_fit`
+  and `depth_turn`, chosen on the family's development seeds, `docs/family.md`; the registration polished,
+  `anchor.polish_mm: 4`, the boot registered as a body of revolution; stop 109's run, on stop 106's code and an AMD
+  EPYC host, then stop 105's, in brackets): the scene's own view reads theta **0.28 deg** off at the median (0.31,
+  0.31), p90 1.13 deg (1.25, 1.15), alpha_z 0.03 deg (0.06, 0.08; the images' own alpha_z, the table's next column:
+  0.39, 0.17 in stop 109), registration 0.2 mm and 0.08 deg off (the same). A third view that nothing was chosen on
+  (another arc, the boot turned by 70 deg, another guess): **0.28 deg** (0.31, 0.29), p90 1.23 deg (0.81, 1.03),
+  alpha_z **0.49 deg** (0.52, 0.49; the images' own: 0.38, 0.02 in stop 109; this view also ran with a first version
+  of `depth_turn`, dropped on the own view, so it is not blind to that choice). A second view, on which the tracker's
+  handling of alpha_z was fixed: 0.21 deg (0.17, 0.19), alpha_z 0.37 deg (0.36, 0.32; the images' own: 0.06, 0.45 in
+  stop 109). Between stops 109 and 119 the code (the registration, depth fit and tracker changes of stops 110-118) and
+  the host changed, not traced one by one: the medians moved by 0.03-0.04 deg, the held-out view's p90 0.81 -> 1.23
+  deg is the largest move. The tracker's time per frame: 34-44 ms in stop 119's run (quiet); 39-48 ms in stop 109's
+  (probe 27 ms against 19 quiet on that host); stop 105's run (65-109 ms) was taken on a loaded host (its CPU probe
+  read 83 ms against 15-17 quiet); stop 73's quiet run read 31-35 ms (stop 72: 37-45 ms; stop 71: 68-81; the images
+  alone 9-16 ms; stop 84's cheaper depth fit, the same fits, `benchmarks/results/depth_budget.md`). With the knob
   `outlier_refits: 3` (commit 319a533's table, the images alone) the three read 1.43, 0.15 and 0.17 deg (alpha_z 0.45,
   0.12, 0.42). Before stop 65 (the map then culled the object points linked at rest) the own view read 0.37 deg. With
   the Levenberg-Marquardt solver before stop 34 the three views read 0.26, 0.12 and 0.27 deg: its change cost the boot
