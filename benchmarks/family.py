@@ -733,7 +733,8 @@ TABLES = (("family", "Held-out seeds (the accuracy this project reports): the cu
           ("family_preloaded", "The load on from the first frame: development seeds (the reference state from "
            "depth was designed on these)"),
           ("family_preloaded_dev_20_49", "The load on from the first frame: development seeds 20-49 (`--seeds 20-49 "
-           "--preloaded --out family_preloaded_dev_20_49`, stop 119: more development scenes for the loaded cantilevers)"),
+           "--preloaded --out family_preloaded_dev_20_49`, stop 119: more development scenes for the loaded "
+           "cantilevers)"),
           ("family_preloaded_heldout", "The load on from the first frame: held-out seeds"),
           ("family_preloaded_heldout_reference_rest", "The load on from the first frame, held-out seeds 1000-1014, the "
            "reference taken to be the rest shape (`--tracking reference=rest`, the behaviour before stop 30)"),
