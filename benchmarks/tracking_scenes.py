@@ -160,9 +160,10 @@ each scene's model error beside its result.
   span), mean 1.8 mm at the thesis's 1280 x 720, where the thesis reports a mean "on the order of 1.5 mm": we are
   about 0.3 mm worse (our camera: 15 fps on a hand-held arc about 1 m away; the thesis's path is not given). 640 x
   480: median 1.6 mm, mean 2.2 mm. (Stops 107, 109 and 119's runs, on Intel, AMD and Intel hosts, the same to the
-  digit; stop 119's 640 x 480 p90 4.0 -> 4.1 mm; stop 86's run read a median of 1.3 mm at 1280 x 720 (1.35 against
-  1.39 now), as stop 80's did. The rows of 2026-11-27 read 1.3 / 1.9 mm and 1.4 / 2.2 mm.) Model error: 1.7 % of the
-  displacement, a load-position bias of 0.9 % of the span when fitted to every surface node.
+  digit; stop 119's 640 x 480 p90 4.0 -> 4.1 mm and median 0.22 -> 0.21 % of the span; stop 86's run read a median of
+  1.3 mm at 1280 x 720 (1.35 against 1.39 now), as stop 80's did. The rows of 2026-11-27 read 1.3 / 1.9 mm and 1.4 /
+  2.2 mm.) Model error: 1.7 % of the displacement, a load-position bias of 0.9 % of the span when fitted to every
+  surface node.
 - The foam *model* was wrong before this table existed: the spec's 32 linear hexahedra along the beam resolved the
   40 mm support strips as 25 mm, and its deflection was 26 % larger than the converged full-order solve (model bias
   11.8 % of the span; the tracker read the load 11 % of the span off, the model's error, not the tracker's). Its
@@ -220,10 +221,10 @@ each scene's model error beside its result.
   threads, the second view ended in the mirror basin (alpha_z 177 deg off) in one run of three.
 - The boot's *model* was too coarse around its axis. With 24 cells, the polygon lay 0.43 mm inside the round boot at
   its base, and registration from a one-sided depth view tilted the boot 1.9 deg to split the difference. The spec now
-  has 48 cells around. That choice was made on the scene's own view. The knob rows keep the old model: theta 0.31 deg
-  and alpha_z 0.62 deg on the scene's own view, and 0.25 deg and 0.30 deg on the held-out one (the table above, stop
-  109's run, the lever read from depth; stop 72's: 0.36 / 0.45 and 0.27 / 0.48; 1.58 / 0.01 and 0.26 / 1.04 on the
-  images alone in stop 70).
+  has 48 cells around. That choice was made on the scene's own view. The knob rows keep the old model: theta 0.33 deg
+  and alpha_z 0.66 deg on the scene's own view, and 0.28 deg and 0.32 deg on the held-out one (the table above, stop
+  119's run, the lever read from depth; stop 109's: 0.31 / 0.62 and 0.25 / 0.30; stop 72's: 0.36 / 0.45 and 0.27 /
+  0.48; 1.58 / 0.01 and 0.26 / 1.04 on the images alone in stop 70).
 - alpha_z (a constant of the sequence, Fig. 4.19) keeps its value in frames that cannot see it: a frame judged
   undeformed, or one where its standard deviation exceeds 5 % of its range. A global restart no longer searches
   a constant that earlier frames have already pinned. Before this, on the second view, alpha_z drifted while
