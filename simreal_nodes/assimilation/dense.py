@@ -205,20 +205,6 @@ class DenseSettings:
     # deformed fit moves the image more than this many pixels beyond the least motion of the views so far (at rest
     # it varied by 0.013 px at most on development plates 13 and 21 and cantilever 4)
     template_motion_px: float = 0.05
-    # the reference view's state read again from the images (:meth:`DenseAligner.reference_costs`): a reference
-    # taken on a loaded object carries its state from the depth (the registration's fit, a few % of the range off
-    # where the load bends the object a few millimetres), and every later frame is compared with it, so that error
-    # is in every estimate. Once a sound frame's state moves the image this many pixels (90th percentile) from the
-    # reference's, the frame is fitted again with the reference view re-taken at states about the reference's,
-    # ``reference_scan_steps`` of them over +-``reference_scan_span`` of each tracked range, one parameter at a time;
-    # the photometric residual of ``reference_scan_frames`` such frames (each at least ``reference_scan_gap`` frames
-    # after the last) summed, its least (a parabola through the lowest three; an end of the scan: no change) becomes
-    # the reference's state. A reference at rest (the object unloaded when it was taken) is left as it is. 0: off
-    reference_scan_px: float = 0.0
-    reference_scan_span: float = 0.08
-    reference_scan_steps: int = 9
-    reference_scan_frames: int = 3
-    reference_scan_gap: int = 5
 
     def __post_init__(self) -> None:
         if self.grid_brightness not in GRID_BRIGHTNESS:
@@ -563,8 +549,6 @@ class DenseAligner:
         self._counts: list[Array] = []
         self._static_counts: list[Array] = []
         self._mu_ref: Array | None = None
-        # the image the template was taken from, its camera and depth (:meth:`retake`, :meth:`reference_costs`)
-        self._ref_view: tuple[NDArray[np.float32], Array, NDArray[np.float32] | None] | None = None
         self.rigid = np.zeros(N_RIGID)  # rho of the last fit: the next frame's start
         self.cam_corr = np.zeros(N_RIGID)  # epsilon of the last fit
         self.rest_rigid = np.zeros(N_RIGID)  # the same for the zero-displacement fit
@@ -639,9 +623,6 @@ class DenseAligner:
         ``mu_ref``: the object's state in this image (measured elsewhere, e.g. from its depth:
         :mod:`.depth_state`); None: at rest. Each sample keeps its material point (rest position x_k) and takes
         its template intensity where the deformed object puts it, x_k + u_k(mu_ref)."""
-        T_cw = np.asarray(T_cw, np.float64)
-        self._ref_view = (np.array(gray, np.float32), T_cw.copy(),
-                          None if depth is None else np.array(depth, np.float32))
         Xc = G.transform(T_cw @ self.T_mo, np.asarray(self.model.points, np.float64))
         z = float(np.median(Xc[:, 2][Xc[:, 2] > 0])) if np.any(Xc[:, 2] > 0) else 1.0
         smp = sample_surface(self.model, self.s.step_px * z / float(self.K[0, 0]), self.s.max_samples)
@@ -685,45 +666,6 @@ class DenseAligner:
         self.g_info[:], self.g_eta[:] = 0.0, 0.0
         self.g_frame = None
         return True
-
-    @property
-    def reference_mu(self) -> Array | None:
-        """The object's state in the reference view (None: at rest)."""
-        return None if self._mu_ref is None else self._mu_ref.copy()
-
-    def retake(self, mu_ref: Array | None) -> bool:
-        """The reference view taken again from its image with the object in state ``mu_ref`` (:meth:`set_reference`:
-        the nuisances start afresh)."""
-        assert self._ref_view is not None
-        return self.set_reference(*self._ref_view, mu_ref=mu_ref)
-
-    def motion_between(self, T_cw: Array, mu_a: Array, mu_b: Array) -> float:
-        """90th percentile of the image motion (pixels, finest level) between two states of the object in this
-        view."""
-        L = self.levels[0]
-        rows = np.arange(len(L.x))
-        zero = np.zeros(N_RIGID)
-        uv_a, _ = self._geometry(L, rows, np.asarray(mu_a, np.float64), zero, np.asarray(T_cw, np.float64), jac=False)
-        uv_b, _ = self._geometry(L, rows, np.asarray(mu_b, np.float64), zero, np.asarray(T_cw, np.float64), jac=False)
-        mv = np.linalg.norm(uv_a - uv_b, axis=1)
-        return float(np.percentile(mv[np.isfinite(mv)], 90)) if np.isfinite(mv).any() else 0.0
-
-    def reference_costs(self, gray: NDArray[np.generic], T_cw: Array, mu0: Array, lo: Array, hi: Array,
-                        candidates: Array) -> Array:
-        """This image fitted (:meth:`solve`, from ``mu0`` within [lo, hi]) once per candidate state of the reference
-        view, the template re-taken from the reference image at that state by a fresh aligner (the same
-        settings; nothing of this one changes): each fit's photometric residual scale (:attr:`DenseResult.rms`; inf
-        where the template or the fit failed). The reference state the images agree with best has the least."""
-        assert self._ref_view is not None
-        out = np.full(len(candidates), np.inf)
-        for i, mu in enumerate(np.asarray(candidates, np.float64)):
-            other = DenseAligner(self.model, self.T_mo, self.cam, self.n_modes, self.s)
-            if not other.set_reference(*self._ref_view, mu_ref=mu):
-                continue
-            res = other.solve(gray, T_cw, mu0, lo, hi, with_rest=False)
-            if not res.reason and np.isfinite(res.debug.get("mean_square", np.nan)):
-                out[i] = res.debug["mean_square"]
-        return out
 
     def _footprint(self, uv: Array, shape: tuple[int, int], grow_px: float) -> NDArray[np.bool_]:
         """The pixels within ``grow_px`` of the object's samples at pixels ``uv`` (one level's resolution)."""
@@ -1620,9 +1562,7 @@ class DenseAligner:
                          camera_rot_deg=float(np.rad2deg(np.linalg.norm(f.cam[:3]))),
                          camera_trans_mm=float(1e3 * np.linalg.norm(f.cam[3:])),
                          camera_gap_sigma=cam_gap, grid_margin=self.grid_margin, basin_gap=basin_gap,
-                         basin_switched=switched, basin_warm=warm_ran,
-                         mean_square=float(np.mean(np.square(r[np.isfinite(r)]))) if np.isfinite(r).any() else
-                         float("nan"))
+                         basin_switched=switched, basin_warm=warm_ran)
         if other is not None:  # where the other basin's fit ended (benchmarks/family.py records it) and how far apart
             res.debug.update({f"basin_other_{i}": float(other[i]) for i in fi})
             res.debug["basin_apart"] = other_apart

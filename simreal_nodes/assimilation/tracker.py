@@ -196,13 +196,6 @@ class DeformableTracker:
         self._seen_frames = 0
         self._alpha_linked: float | None = None
         self.deforming_frames = 0
-        # DenseSettings.reference_scan_px (:meth:`_scan_reference`): the residual summed per tracked parameter over
-        # the frames scanned so far, how many, the dense frame of the last, whether the reference's state is settled
-        self._ref_scan_sum: dict[int, np.ndarray] = {}
-        self._ref_scan_count = 0
-        self._ref_scan_last = -(10**9)
-        self._ref_scan_done = False
-        self._dense_frame = 0
         self._dot_links: tuple[np.ndarray, np.ndarray] | None = None
         self.outlier_ids = np.zeros(0, np.int64)  # map points the last fit rejected (their image tracks slid)
         self._rms_ref: float | None = None  # running residual RMS of good fits: what "fits badly" is measured against
@@ -866,64 +859,12 @@ class DeformableTracker:
             _doubt(est, why)
         if est.state == EstimateState.OK:  # a sound fit's shading joins the next frames' prior (shading_frames)
             self.dense.accept_shading()
-            self._scan_reference(est, gray, T_cw, lo, hi)
-        self._dense_frame += 1
         # after the shading is fused: this flag changes the frame's state only, not its estimate or the next frames'
         free = np.array([m == "tracked" for m in self.mode]) & ~self.frozen
         why = loosely_held(est, free, self.hi - self.lo, self.cfg.dense.max_std_frac)
         if est.state == EstimateState.OK and why:
             _doubt(est, why)
         return est
-
-    def _scan_reference(self, est: Estimate, gray: np.ndarray, T_cw: np.ndarray, lo: np.ndarray, hi: np.ndarray
-                        ) -> None:
-        """``DenseSettings.reference_scan_px``: the reference view's state read again from the images, where it was
-        taken on a deformed object (its state from the depth) and this sound frame's state ``est`` moves the image
-        far enough from it. The frame is fitted again with the reference re-taken at states about the reference's
-        (:meth:`.dense.DenseAligner.reference_costs`), one tracked parameter at a time; once
-        ``reference_scan_frames`` frames are summed, each parameter's least residual (a parabola's vertex through
-        the lowest three; none at an end of the scan) becomes the reference's, and the template is re-taken there.
-        The next frames are compared with it; this frame's estimate stands."""
-        import time
-
-        s = self.cfg.dense
-        assert self.dense is not None
-        mu_ref = self.dense.reference_mu
-        if (s.reference_scan_px <= 0 or self._ref_scan_done or mu_ref is None
-                or self._dense_frame - self._ref_scan_last < s.reference_scan_gap):
-            return
-        n_mu = len(mu_ref)
-        if self.dense.motion_between(T_cw, est.values[:n_mu], mu_ref) < s.reference_scan_px:
-            return
-        axes = [i for i in range(n_mu) if self.mode[i] == "tracked" and not self.frozen[i] and hi[i] > lo[i]]
-        steps = np.linspace(-s.reference_scan_span, s.reference_scan_span, s.reference_scan_steps)
-        t0 = time.perf_counter()
-        for i in axes:
-            cands = np.repeat(mu_ref[None], len(steps), axis=0)
-            cands[:, i] = mu_ref[i] + steps * (self.hi[i] - self.lo[i])
-            inside = (cands[:, i] >= self.lo[i]) & (cands[:, i] <= self.hi[i])
-            costs = np.full(len(steps), np.inf)
-            costs[inside] = self.dense.reference_costs(gray, T_cw, est.values, lo, hi, cands[inside])
-            self._ref_scan_sum[i] = self._ref_scan_sum.get(i, np.zeros(len(steps))) + costs
-        self._ref_scan_count += 1
-        self._ref_scan_last = self._dense_frame
-        est.debug["reference_scan_ms"] = (time.perf_counter() - t0) * 1e3
-        if self._ref_scan_count < s.reference_scan_frames:
-            return
-        self._ref_scan_done = True
-        new = mu_ref.copy()
-        h = steps[1] - steps[0] if len(steps) > 1 else 0.0
-        for i, c in self._ref_scan_sum.items():
-            j = int(np.argmin(c))
-            if not (0 < j < len(c) - 1 and np.all(np.isfinite(c[j - 1:j + 2]))):
-                continue  # the least at an end of the scan (or next to a failed fit): the reference stays
-            curv = c[j - 1] - 2.0 * c[j] + c[j + 1]
-            d = steps[j] + (0.5 * h * (c[j - 1] - c[j + 1]) / curv if curv > 0 else 0.0)
-            new[i] = float(np.clip(mu_ref[i] + d * (self.hi[i] - self.lo[i]), self.lo[i], self.hi[i]))
-        est.debug["reference_moved"] = float(np.max(np.abs(new - mu_ref) / np.maximum(self.hi - self.lo, 1e-12)[
-            :n_mu]))
-        if np.any(new != mu_ref) and not self.dense.retake(new):
-            self.dense.retake(mu_ref)  # the template at the new state not taken: the old one again
 
     def reference_from_depth(self, T_wc: np.ndarray, depth: np.ndarray | None
                              ) -> tuple[np.ndarray | None, str, bool]:
@@ -1380,7 +1321,6 @@ def tracker_config(obj: dict[str, Any], **overrides: Any) -> TrackerConfig:
                                           template_frames=t["dense_template_frames"],
                                           grid_brightness=t["dense_grid_brightness"],
                                           basin_check=t["dense_basin_check"], basin_warm=t["dense_basin_warm"],
-                                          reference_scan_px=t["dense_reference_scan_px"],
                                           placement_measured=obj["anchor"]["kind"] == "registration"),
                         dots=np.asarray(t["dots"]) if t["dots"] else None, dot_color=tuple(t["dot_color"]))
     return replace(cfg, **overrides)

@@ -188,12 +188,6 @@ TRACKING = Record({
                              "search's winner and runner-up both end far from the last frame's estimate, fit from "
                              "that estimate too and keep the cheapest (a third fit on those frames; it helped no "
                              "development scene: docs/family.md)", default=False),
-    "dense_reference_scan_px": Number("measurements 'dense': where the reference view was taken on a deformed object "
-                                      "(its state read from the depth), read that state again from the images once "
-                                      "a sound frame's state moves the image this many pixels from it (the frame "
-                                      "fitted again with the reference re-taken at 9 states over +-8 % of each "
-                                      "tracked range, summed over 3 such frames; 27 more fits, once); 0: off",
-                                      lo=0.0, hi=10000.0, default=0.0),
     "reference": Enum(("depth", "rest"), "the object's state in the view that later ones are compared with (the "
                       "dense reference view, a registered object's fit): read from the depth image where there is "
                       "one (the model's deformed surface fitted to it; a scene loaded from its first frame), or "
