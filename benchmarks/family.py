@@ -1178,20 +1178,21 @@ within its noise at frames 40, 100 and 112, while the fitted state follows the r
 
 **Stop 120: the reference state read again from the images, tried and dropped (development seeds only; no code
 kept).** Where the load moves the image 8-39 px (development seeds 4, 6, 10, 11, 14, 31, 44) the residual of a later
-frame over reference states is not flat, as it was on seed 5's 3.8 px (stop 119), so a tracker was built that re-took
-its reference view at 9 states over +-8 % of the range about the registration's, once a sound frame's state moved the
+frame over reference states is not flat (it was on seed 5's 3.8 px, stop 119), so a tracker was built that re-took its
+reference view at 9 states over +-8 % of the range about the registration's, once a sound frame's state moved the
 image 4 px from it, summed the residual of 3 such frames and moved the reference to its least (commit caf761e,
 reverted in 0ccaeba). On the loaded development seeds 0-19 it made 1 scene better (0: 0.64 -> 0.49 %), 4 worse (4:
 0.57 -> 0.92 %, 6: 0.46 -> 0.85 %, 11: 0.22 -> 0.38 %, 14: 0.31 -> 1.07 %) and left 15 unchanged: it moved sound
-reference states (the registration's within 0.04-1.25 % of the truth) 1.2-4.2 % of the range (seed 4 from +1.25 to
--2.94 %, 6 from -0.23 to +1.35 %), and a quadratic fitted to seed 14's summed residual puts its least 3.4 % below a
-registration 0.04 % off, six of its standard errors: a bias of the residual, not its noise. With the registration's
-state put about 3 % off on purpose (scratch), it came back to within 1 % on seeds 11 (+3.0 -> -0.8 %) and 31 (-2.8 ->
-+0.2 %), went further off on 10 (+3.3 -> +7.5 %) and found its least at the end of the scan on 44 (-2.8 %, kept). The
-residual over reference states carries biases as large as the registration's errors it was to correct. Also measured
-(scratch): the registration's pose lies level with the floor of its fused cloud within 0.002 degree on development
-seeds 4, 5, 8, 12, 16 and 19 (the true pose tilts 0.002-0.027 degree from that floor in the SLAM's map, the map's own
-tilt), so pinning the pose to the floor would change nothing.
+reference states (the registration's within 0.03-1.25 % of the truth) 1.2-4.2 % of the range (seed 4 from +1.25 to
+-2.94 %, 6 from -0.23 to +1.35 %), and on seed 14, whose registration was 0.04 % off, the scan's parabola through its
+lowest three states moved it 1.2 % while a quadratic fitted to the whole summed residual puts the least 3.4 % below,
+six of its standard errors: a bias of the residual, not its noise. With the registration's state put about 3 % off on
+purpose (scratch), it came back to within 1 % on seeds 11 (+3.0 -> -0.8 %) and 31 (-2.8 -> +0.2 %), went further off
+on 10 (+3.3 -> +7.5 %) and found its least at the end of the scan on 44 (-2.8 %, kept). The residual over reference
+states carries biases as large as the registration's errors it was to correct. Also measured (scratch): the
+registration's pose lies level with the floor of its fused cloud within 0.002 degree on development seeds 4, 5, 8, 12,
+16 and 19 (the true pose tilts 0.002-0.027 degree from that floor in the SLAM's map, the map's own tilt), so pinning
+the pose to the floor would change nothing.
 
 **Through a stereo pair** (`--sensor stereo`, `simreal make-bag family --seed N --sensor stereo`; stop 32): the same
 draws seen by a rectified pair with a 0.12 m baseline (the right camera blurred along its own path), no depth
