@@ -516,11 +516,14 @@ and set of samples in view (not at every iteration and trial step; dropped when 
 the shading's prior until a frame's shading is accepted, the rigid corrections' prior widths; and the robust scale's
 two medians come from one partition each, without `np.median`'s generality. Against stop 95's code (ddb8bd2), probe 15
 ms: 0.91 of the time (pairs' median, 0.85-0.97 over six pairs; 101 ms against 108 at the median of the runs' p50),
-every estimate the same to the bit and no frame's state different (the file holds this run). What remains is spread
-over the stages (p50 per solved frame, this run): Gauss-Newton 36-68 ms, the refinement 20-32 ms, the camera's check
-on the surroundings 12-16 ms, the zero-displacement fit (is there a deformation at all?) with the rest 12-19 ms, the
-coarse search 5-9 ms; the tracker 91-149 ms a frame in all (stop 95's run: 119-201, on the slower host its probe's 18
-ms says; the pairs' ratio is the change). That is still 9-15 times the 10 ms the issue asks of the sparse mode, and
+every estimate the same to the bit and no frame's state different. What remains is spread over the stages (p50 per
+solved frame, that run): Gauss-Newton 36-68 ms, the refinement 20-32 ms, the camera's check on the surroundings 12-16
+ms, the zero-displacement fit (is there a deformation at all?) with the rest 12-19 ms, the coarse search 5-9 ms; the
+tracker 91-149 ms a frame in all (stop 95's run: 119-201, on the slower host its probe's 18 ms says; the pairs' ratio
+is the change). Stop 120 reran this code alone (`dense_budget.md` holds that run, two runs a scene, an Intel host,
+probe 15 ms): Gauss-Newton 38-69 ms, the refinement 20-32, the camera's check 12-16, the rest 13-19, the coarse search
+6-9; the tracker 96-152 ms a frame, every estimate of a scene's second run the same as its first. That is still 10-15
+times the 10 ms the issue asks of the sparse mode, and
 far from camera rate on 2 cores. The sparse mode (`map_points`) is fast but misses the accuracy targets
 (`docs/family.md`).
 
