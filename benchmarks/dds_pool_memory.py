@@ -7,8 +7,10 @@ isolates the middleware: a subscriber process whose callback does nothing (``sen
 the depth named, reliable as the nodes' camera inputs under a lossless replay, or best effort) runs under the memory
 probe of `benchmarks/memprobe` while this process publishes 8 000 images at 600 a second, either all of one size
 (320 x 240 x 3 bytes, the fuzz's camera) or of random sizes up to 3 MB (the fuzz's huge payloads). The probe reads the
-subscriber before, after each quarter and at the end: resident size, Python's allocations, the C allocator's bytes in
-use, and its CPU time (per message it received). The transport and discovery are the nodes'
+subscriber before, after each quarter and at the end, once its bytes in use have stopped moving (two readings a
+second apart within 0.5 MB, at most 30 s after the last message: a slow subscriber is still taking what was queued
+for it): resident size, Python's allocations, the C allocator's bytes in use, and its CPU time (per message it
+received). The transport and discovery are the nodes'
 (`simreal_nodes.launch.ros_environment`: the shared-memory profile, this host only). The subscriber's history memory
 policy is rmw_fastrtps's own (PREALLOCATED_WITH_REALLOC: ``RMW_FASTRTPS_USE_QOS_FROM_XML=0``) or the project
 profile's DYNAMIC (``=1``); the publisher keeps rmw_fastrtps's own.
@@ -43,6 +45,8 @@ POLICY_ENV = {"rmw default": "0", "dynamic": "1"}
 MESSAGES = 8000
 MAX_BYTES = 3_000_000
 RATE_HZ = 600.0
+SETTLE_S = 30.0  # the longest wait, after the last message, for the subscriber's memory to stop moving
+SETTLED_MB = 0.5
 
 
 def _qos(reliability: str, depth: int):
@@ -123,14 +127,24 @@ def run_case(sizes: str, reliability: str, depth: int, policy: str, work: Path, 
             lag = (i + 1) / RATE_HZ - (time.monotonic() - t0)
             if lag > 0:
                 time.sleep(lag)
+        # the subscriber may still be taking what is queued for it (reliable: the writer resends to a slow reader):
+        # read until two readings a second apart agree within SETTLED_MB, at most SETTLE_S
+        t_quiet = time.monotonic()
         time.sleep(2.0)
         read()
+        while time.monotonic() - t_quiet < SETTLE_S:
+            time.sleep(0.5)
+            read()
+            if abs(readings[-1]["malloc_in_use_mb"] - readings[-2]["malloc_in_use_mb"]) < SETTLED_MB:
+                break
+        settle_s = time.monotonic() - t_quiet
     finally:
         sub.send_signal(signal.SIGINT)
         out, _ = sub.communicate(timeout=30)
         node.destroy_node()
     received = next((json.loads(x)["received"] for x in out.splitlines() if x.startswith("{")), None)
     a, b = readings[0], readings[-1]
+    series = readings[:1] + readings[1:-1][:4] + readings[-1:]  # before, each quarter, after
     return {"sizes": sizes, "reliability": reliability, "depth": depth, "policy": policy, "messages": messages,
             "received": received,
             # the subscriber's CPU time from the first reading to the last, per message it received (its probe's
@@ -139,7 +153,7 @@ def run_case(sizes: str, reliability: str, depth: int, policy: str, work: Path, 
             "rss_before": a["rss_mb"], "rss_after": b["rss_mb"], "python_before": a["python_mb"],
             "python_after": b["python_mb"], "in_use_before": a["malloc_in_use_mb"],
             "in_use_after": b["malloc_in_use_mb"], "in_use_growth": b["malloc_in_use_mb"] - a["malloc_in_use_mb"],
-            "in_use_series": " -> ".join(f"{r['malloc_in_use_mb']:.0f}" for r in readings)}
+            "in_use_series": " -> ".join(f"{r['malloc_in_use_mb']:.0f}" for r in series), "settle_s": settle_s}
 
 
 def main() -> None:
@@ -169,7 +183,8 @@ def main() -> None:
             ("rss_before", "RSS before (MB)", "{:.0f}"), ("rss_after", "RSS after (MB)", "{:.0f}"),
             ("python_before", "Python before (MB)", "{:.1f}"), ("python_after", "Python after (MB)", "{:.1f}"),
             ("in_use_series", "C allocator in use (MB): before, each quarter, after", "{}"),
-            ("in_use_growth", "its growth (MB)", "{:.1f}")]
+            ("in_use_growth", "its growth (MB)", "{:.1f}"),
+            ("settle_s", "last reading, s after the last message", "{:.1f}")]
     notes = (f"`python -m benchmarks.dds_pool_memory` (module docstring): a subscriber whose callback only counts, "
              f"{MESSAGES} `sensor_msgs/Image` messages at {RATE_HZ:.0f} a second, of one size (230 400 bytes) or of "
              f"random sizes up to {MAX_BYTES / 1e6:.0f} MB; the subscriber's memory by the probe of "

@@ -35,11 +35,15 @@ def test_a_subscription_keeps_no_buffers_of_large_messages_under_the_nodes_polic
         rclpy.shutdown()
         os.environ.clear()
         os.environ.update(saved)
+    def shown(r: dict) -> str:  # pytest cuts a long dict short: what tells a lagging subscriber from a kept buffer
+        return f"received {r['received']}, in use (MB) {r['in_use_series']}, last read {r['settle_s']:.1f} s after"
+
     for r in rows.values():
-        assert r["received"] and r["received"] > 50, r
+        assert r["received"] and r["received"] > 50, shown(r)
     # 400 messages of up to 3 MB: the preallocating reader keeps about 11 buffers near 3 MB; the dynamic one frees them
-    assert rows["rmw default"]["in_use_growth"] > 15.0, rows["rmw default"]
-    assert rows["dynamic"]["in_use_growth"] < 3.0, rows["dynamic"]
+    # (read once the subscriber's memory has stopped moving: a CI host once read it 9 MB up 2 s after the last message)
+    assert rows["rmw default"]["in_use_growth"] > 15.0, shown(rows["rmw default"])
+    assert rows["dynamic"]["in_use_growth"] < 3.0, shown(rows["dynamic"])
 
 
 def test_fast_dds_reads_the_whole_profile():
