@@ -467,8 +467,21 @@ def fuzz_graph(graph: str, n_messages: int, seed: int, work: Path, valid_every: 
         launcher.stop()
         node.destroy_node()
         rclpy.shutdown()
-    out["log_tail"] = [x for x in lines if "Traceback" in x or "Error" in x][-20:]
+    out["log_tail"] = error_lines(lines)[-40:]
     return out
+
+
+def error_lines(lines: list[str]) -> list[str]:
+    """The log's error lines with each traceback whole (a node's guard logs the innermost frames: where it failed)."""
+    keep, in_tb = [], False
+    for x in lines:
+        if "Traceback" in x:
+            in_tb = True
+        if in_tb or "Error" in x:
+            keep.append(x)
+        if in_tb and "Traceback" not in x and not x.split("] ", 1)[-1].startswith(" "):
+            in_tb = False  # the exception's own line ends it
+    return keep
 
 
 def spin_for(ex, seconds: float) -> None:

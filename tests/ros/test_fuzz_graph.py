@@ -45,3 +45,14 @@ def test_the_graph_survives_hostile_messages(tmp_path, graph):
         assert not s["unexpected"], (name, s["unexpected"])
         assert s["done_after_fuzz"] > 0, (name, "no valid frame finished after the fuzz")
     assert sum(sum(s["rejected"].values()) for s in r["per_node"].values()) > 0  # the fuzz reached the checks
+
+
+def test_the_log_keeps_each_traceback_whole():
+    lines = ["[tracker] [INFO] [1.0] [tracker]: up",
+             "[tracker] [ERROR] [2.0] [tracker]: process failed: ValueError: need at least one array",
+             "[tracker] Traceback (most recent call last):",
+             '[tracker]   File "/x/tracker.py", line 9, in fit',
+             "[tracker]     np.concatenate(parts)",
+             "[tracker] ValueError: need at least one array",
+             "[tracker] [INFO] [3.0] [tracker]: frame 7"]
+    assert fuzz_graph.error_lines(lines) == lines[1:6]
