@@ -77,8 +77,7 @@ def guarded(fn):
             what = f"{type(e).__name__}: {e}"
             self.metrics.error(what)
             self.set_status("error", what)
-            # the innermost frames: where it failed, not the callback chain above it
-            self.get_logger().error(f"{fn.__name__} failed: {what}\n{traceback.format_exc(limit=-4)}",
+            self.get_logger().error(f"{fn.__name__} failed: {what}\n{traceback.format_exc(limit=4)}",
                                     throttle_duration_sec=1.0)
             stamp = _stamp_of(a)
             if stamp is not None:
