@@ -114,11 +114,19 @@ class TrackerNode(SimrealNode):
         """The frame's depth (metres) where the trackers still read it: the RGB-D image, or SGBM on the pair."""
         if not self.core.needs_depth:
             return None
+        cam = self.core.cam
+        assert cam is not None  # process() drops a frame while there is no camera
         if not self.stereo:
-            return images.depth_metres_of(frame["depth"]) if "depth" in frame else None
+            if "depth" not in frame:
+                return None
+            depth = images.depth_metres_of(frame["depth"])
+            cam.check_size(depth, "depth image")  # registered to the image: read through this camera
+            return depth
         if "image" not in frame or "right" not in frame:
             return None
-        return self.core.depth_of_pair(images.bgr8_of(frame["image"]), images.bgr8_of(frame["right"]))
+        left = images.bgr8_of(frame["image"])
+        cam.check_size(left)  # the right image: stereo_depth refuses a pair of two sizes
+        return self.core.depth_of_pair(left, images.bgr8_of(frame["right"]))
 
     @guarded
     def process(self, frame: dict) -> None:
@@ -141,6 +149,8 @@ class TrackerNode(SimrealNode):
         bgr = depth = None
         try:
             bgr = images.bgr8_of(frame["image"]) if "image" in frame and self.need_image else None
+            if bgr is not None:  # an image of another size than CameraInfo's: its pixels are not this camera's
+                self.core.cam.check_size(bgr)
             self.metrics.lap("decode")  # the depth below is work where it is SGBM on a stereo pair
             depth = self._depth(frame)
         except (ImageFormatError, ValueError) as e:
