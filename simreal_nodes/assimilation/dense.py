@@ -643,6 +643,11 @@ class DenseAligner:
             pick = np.arange(0, len(idx), 4**lvl)  # coarser levels: fewer samples, the same spread
             v = bilinear(img, _at_level(uv[pick], lvl)).astype(np.float64)
             good = np.isfinite(v)
+            if not good.any():
+                # no sample where the undistorted image has pixels (a lens whose undistortion sends this part of the
+                # view outside the image, as a hostile CameraInfo's can): no template, as when out of view
+                self.levels = []
+                return False
             sel = idx[pick][good]
             normals = SmoothNormals.build(self.model, smp.face[sel], smp.weights[sel],
                                           np.broadcast_to(eye, (len(sel), 3)), self.n_modes)

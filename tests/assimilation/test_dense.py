@@ -968,3 +968,13 @@ def test_kept_gathers_and_priors_follow_the_template_and_the_shading(model):
     assert np.array_equal(P1, P0 + np.eye(3)) and np.allclose(m1, np.linalg.solve(P1, np.ones(3)))
     al.s.prior_rot_rad = 0.02
     assert al._wide()[0] == 0.02 and not al._wide().flags.writeable
+
+
+@pytest.mark.parametrize("D", [[1e6, 0, 0, 0, 0], [0, 0, 1e3, 0, 0]])
+def test_no_reference_where_the_lens_leaves_no_pixel_of_the_object(model, D):
+    """A CameraInfo's distortion so strong that undistorting sends the object's part of the view outside the image
+    (the graph fuzz's hostile CameraInfo, docs/status.md stop 121): no template, not an exception."""
+    cam = CameraModel.from_intrinsics(320, 240, 300.0, 300.0, 159.5, 119.5, D=D)
+    al = DenseAligner(model, np.eye(4), cam, None, DenseSettings())
+    assert not al.set_reference(render(texture(1.0), pose(), 0.0), G.inv(pose()))
+    assert not al.has_template
