@@ -520,12 +520,14 @@ every estimate the same to the bit and no frame's state different. What remains 
 solved frame, that run): Gauss-Newton 36-68 ms, the refinement 20-32 ms, the camera's check on the surroundings 12-16
 ms, the zero-displacement fit (is there a deformation at all?) with the rest 12-19 ms, the coarse search 5-9 ms; the
 tracker 91-149 ms a frame in all (stop 95's run: 119-201, on the slower host its probe's 18 ms says; the pairs' ratio
-is the change). Stop 120 reran this code alone (`dense_budget.md` holds that run, two runs a scene, an Intel host,
-probe 15 ms): Gauss-Newton 38-69 ms, the refinement 20-32, the camera's check 12-16, the rest 13-19, the coarse search
-6-9; the tracker 96-152 ms a frame, every estimate of a scene's second run the same as its first. That is still 10-15
-times the 10 ms the issue asks of the sparse mode, and
-far from camera rate on 2 cores. The sparse mode (`map_points`) is fast but misses the accuracy targets
-(`docs/family.md`).
+is the change). Stop 120 reran this code alone (two runs a scene, an Intel host, probe 15 ms): Gauss-Newton 38-69
+ms, the refinement 20-32, the camera's check 12-16, the rest 13-19, the coarse search 6-9; the tracker 96-152 ms a
+frame, every estimate of a scene's second run the same as its first. Stop 121's rerun after the dense reference view's
+mend for a hostile lens (`dense_budget.md` holds it, the same host type, probe 16 ms): the same frames solved, every
+estimate of a second run the same as its first, Gauss-Newton 40-73 ms, the refinement 22-33, the camera's check
+14-17, the rest 15-21, the coarse search 6-10; the tracker 104-157 ms a frame. That is still 10-16 times the 10 ms the
+issue asks of the sparse mode, and far from camera rate on 2 cores. The sparse mode (`map_points`) is fast but misses
+the accuracy targets (`docs/family.md`).
 
 ## The joint boot's tracker time per frame (`python -m benchmarks.depth_budget`)
 
