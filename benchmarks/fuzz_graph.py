@@ -472,7 +472,8 @@ def fuzz_graph(graph: str, n_messages: int, seed: int, work: Path, valid_every: 
 
 
 def error_lines(lines: list[str]) -> list[str]:
-    """The log's error lines with each traceback whole (a node's guard logs the innermost frames: where it failed)."""
+    """The log's error lines with each traceback whole (the frames a node's guard logs between its first and last
+    line)."""
     keep, in_tb = [], False
     for x in lines:
         if "Traceback" in x:

@@ -520,7 +520,7 @@ every estimate the same to the bit and no frame's state different. What remains 
 solved frame, that run): Gauss-Newton 36-68 ms, the refinement 20-32 ms, the camera's check on the surroundings 12-16
 ms, the zero-displacement fit (is there a deformation at all?) with the rest 12-19 ms, the coarse search 5-9 ms; the
 tracker 91-149 ms a frame in all (stop 95's run: 119-201, on the slower host its probe's 18 ms says; the pairs' ratio
-is the change). Stop 120 reran this code alone (two runs a scene, an Intel host, probe 15 ms): Gauss-Newton 38-69
+is the change). Stop 120 reran its code alone (two runs a scene, an Intel host, probe 15 ms): Gauss-Newton 38-69
 ms, the refinement 20-32, the camera's check 12-16, the rest 13-19, the coarse search 6-9; the tracker 96-152 ms a
 frame, every estimate of a scene's second run the same as its first. Stop 121's rerun after the dense reference view's
 mend for a hostile lens (`dense_budget.md` holds it, the same host type, probe 16 ms): the same frames solved, every
