@@ -110,8 +110,9 @@ class TrackerNode(SimrealNode):
     def on_right_info(self, msg: CameraInfo) -> None:
         self.core.depth_baseline = self.stereo_baseline(msg, self.core.depth_baseline)
 
-    def _depth(self, frame: dict) -> np.ndarray | None:
-        """The frame's depth (metres) where the trackers still read it: the RGB-D image, or SGBM on the pair."""
+    def _depth(self, frame: dict, left: np.ndarray | None) -> np.ndarray | None:
+        """The frame's depth (metres) where the trackers still read it: the RGB-D image, or SGBM on the pair
+        (``left``: the frame's image already decoded and checked, or None)."""
         if not self.core.needs_depth:
             return None
         cam = self.core.cam
@@ -124,8 +125,9 @@ class TrackerNode(SimrealNode):
             return depth
         if "image" not in frame or "right" not in frame:
             return None
-        left = images.bgr8_of(frame["image"])
-        cam.check_size(left)  # the right image: stereo_depth refuses a pair of two sizes
+        if left is None:
+            left = images.bgr8_of(frame["image"])
+            cam.check_size(left)  # the right image: stereo_depth refuses a pair of two sizes
         return self.core.depth_of_pair(left, images.bgr8_of(frame["right"]))
 
     @guarded
@@ -152,7 +154,7 @@ class TrackerNode(SimrealNode):
             if bgr is not None:  # an image of another size than CameraInfo's: its pixels are not this camera's
                 self.core.cam.check_size(bgr)
             self.metrics.lap("decode")  # the depth below is work where it is SGBM on a stereo pair
-            depth = self._depth(frame)
+            depth = self._depth(frame, bgr)
         except (ImageFormatError, ValueError) as e:
             self.drop(head.stamp, f"malformed image: {e}")
             return
