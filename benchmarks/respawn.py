@@ -19,8 +19,8 @@ Each with the node's standby process (the default for live use: imports done and
 when the node exits) and without (`--no-standby`: a cold restart). With a standby the kill waits until the
 standby has said it is ready.
 
-Each run is a child process of its own, killed with its nodes if it has not finished after
-`RUN_TIMEOUT_S` and run again (at most `TRIES` tries): a run that hangs (the harness's player and recorder once
+Each run is a child process of its own, run again if it fails, or if it has not finished after `RUN_TIMEOUT_S`
+(it is then killed with its nodes; at most `TRIES` tries): a run that hangs (the harness's player and recorder once
 deadlocked inside Fast DDS as a killed node's participant left, eProsima/Fast-DDS#6502) then costs that run, not
 the table, and the table counts such tries.
 
@@ -40,6 +40,7 @@ import sys
 import tempfile
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -150,27 +151,38 @@ def run_once(bag: Path, scene: Path, victim: str, out: Path, standby: bool = Tru
 
 
 def kill_tree(pid: int) -> None:
-    """SIGKILL a process and every process below it (the launcher starts nodes in sessions of their own)."""
+    """SIGKILL a process and every process below it (the launcher starts nodes in sessions of their own). The tree is
+    read first and the root killed first, so that a launcher cannot start a node meanwhile in place of one killed."""
     with contextlib.suppress(psutil.Error):
         root = psutil.Process(pid)
-        for p in [*root.children(recursive=True), root]:
+        for p in [root, *root.children(recursive=True)]:
             with contextlib.suppress(psutil.Error):
                 p.send_signal(signal.SIGKILL)
 
 
-def run_isolated(victim: str, standby: bool, timeout: float = RUN_TIMEOUT_S) -> tuple[dict | None, str]:
-    """:func:`run_once` in a child process: (its row, "") or (None, why the try failed: timed out, or the child's
-    exit status). The child writes its row as JSON; one that outlives ``timeout`` is killed with its nodes."""
+def _run_command(victim: str, standby: bool, row: Path) -> list[str]:
+    return [sys.executable, "-m", "benchmarks.respawn", "--one", victim, "--row", str(row)] + (
+        [] if standby else ["--no-standby"])
+
+
+def run_isolated(victim: str, standby: bool, timeout: float = RUN_TIMEOUT_S,
+                 command: Callable[[str, bool, Path], list[str]] = _run_command) -> tuple[dict | None, str]:
+    """:func:`run_once` in a child process (``command``: its command line, given the victim, the standby setting and
+    the file for its row): (its row, "") or (None, why the try failed: timed out, or the child's exit status). The
+    child writes its row as JSON; one that outlives ``timeout`` is killed with its nodes, as is the child of a
+    benchmark interrupted meanwhile."""
     with tempfile.TemporaryDirectory() as d:
         out = Path(d) / "row.json"
-        cmd = [sys.executable, "-m", "benchmarks.respawn", "--one", victim, "--row", str(out)]
-        child = subprocess.Popen(cmd + ([] if standby else ["--no-standby"]))
+        child = subprocess.Popen(command(victim, standby, out), cwd=REPO)
         try:
             rc = child.wait(timeout)
         except subprocess.TimeoutExpired:
             kill_tree(child.pid)
             child.wait()
             return None, f"timed out after {timeout:.0f} s"
+        except BaseException:
+            kill_tree(child.pid)
+            raise
         if rc != 0 or not out.is_file():
             return None, f"exit status {rc}"
         return json.loads(out.read_text()), ""
@@ -262,8 +274,8 @@ def main():
     save("respawn", summary, cols, "kill -9 of one node mid-replay: respawn and recovery",
          f"`kill -9` {KILL_AFTER_S:.0f} s into a live replay (rate 1) of the aluminium beam demo (320x240, 12 s); "
          "times from the kill, measured on the recording's receive times; median of the runs per node and setting "
-         "(all runs in the JSON). A run that hangs or fails is killed after "
-         f"{RUN_TIMEOUT_S:.0f} s and run again (up to {TRIES} tries; counted in the last column). Standby: the "
+         "(all runs in the JSON). A run that fails, or hangs (killed with its nodes after "
+         f"{RUN_TIMEOUT_S:.0f} s), is run again (up to {TRIES} tries; counted in the last column). Standby: the "
          "launcher's standby process for the node (imports done, DDS participant up) is promoted; cold: a new "
          "process (`--no-standby`). 'nodes': the one-process launch (`--one-process`) killed whole, the tracker's "
          "output measured. The issue's target: tracking back "

@@ -160,10 +160,10 @@ each scene's model error beside its result.
   span), mean 1.8 mm at the thesis's 1280 x 720, where the thesis reports a mean "on the order of 1.5 mm": we are
   about 0.3 mm worse (our camera: 15 fps on a hand-held arc about 1 m away; the thesis's path is not given). 640 x
   480: median 1.6 mm, mean 2.2 mm. (Stops 107, 109, 119 and 122's runs, on Intel, AMD, Intel and AMD hosts, the same
-  to the digit; stop 119's 640 x 480 p90 4.0 -> 4.1 mm and median 0.22 -> 0.21 % of the span; stop 86's run read a
-  median of 1.3 mm at 1280 x 720 (1.35 against 1.39 now), as stop 80's did. The rows of 2026-11-27 read 1.3 / 1.9 mm
-  and 1.4 / 2.2 mm.) Model error: 1.7 % of the displacement, a load-position bias of 0.9 % of the span when fitted to
-  every surface node.
+  to the printed digit; stop 119's 640 x 480 p90 4.0 -> 4.1 mm and median 0.22 -> 0.21 % of the span; stop 86's run
+  read a median of 1.3 mm at 1280 x 720 (1.35 against 1.39 now), as stop 80's did. The rows of 2026-11-27 read 1.3 /
+  1.9 mm and 1.4 / 2.2 mm.) Model error: 1.7 % of the displacement, a load-position bias of 0.9 % of the span when
+  fitted to every surface node.
 - The foam *model* was wrong before this table existed: the spec's 32 linear hexahedra along the beam resolved the
   40 mm support strips as 25 mm, and its deflection was 26 % larger than the converged full-order solve (model bias
   11.8 % of the span; the tracker read the load 11 % of the span off, the model's error, not the tracker's). Its
@@ -205,25 +205,26 @@ each scene's model error beside its result.
   third view that nothing was chosen on (another arc, the boot turned by 70 deg, another guess): **0.29 deg** (0.28,
   0.31), p90 0.84 deg (1.23, 0.81), alpha_z **0.46 deg** (0.49, 0.52; the images' own: 0.38, 0.38 in stop 119; this
   view also ran with a first version of `depth_turn`, dropped on the own view, so it is not blind to that choice). A
-  second view, on which the tracker's handling of alpha_z was fixed: 0.19 deg (0.21, 0.17), alpha_z 0.35 deg (0.37,
+  second view, on which the tracker's handling of alpha_z was fixed: 0.19 deg (0.21, 0.17), alpha_z 0.34 deg (0.37,
   0.36; the images' own: 0.32, 0.06 in stop 119). Between stops 119 and 122 only the host changed for the scene files'
-  rows (the code's one change, a dense reference view refused where no pixel is finite, is not on the boot's map-point
-  path): every registration the same to the printed digit, the tracking after it moved by up to 0.02 deg at the median
-  and 0.39 deg in the held-out view's p90 (1.23 -> 0.84, back near stop 109's AMD run's 0.81). So the p90 move between
-  stops 109 and 119, which stop 119 could not split between the code and the host, points to the host; why a host's
-  arithmetic moves the boot's later frames this much is not traced (the beams' rows of the first table and the
-  registrations repeat to the digit across the two hosts). The tracker's time per frame: 27-35 ms in stop 122's run;
-  34-44 ms in stop 119's (quiet); 39-48 ms in stop 109's (probe 27 ms against 19 quiet on that host); stop 105's run
-  (65-109 ms) was taken on a loaded host (its CPU probe read 83 ms against 15-17 quiet); stop 73's quiet run read
-  31-35 ms (stop 72: 37-45 ms; stop 71: 68-81; the images alone 9-16 ms; stop 84's cheaper depth fit, the same fits,
-  `benchmarks/results/depth_budget.md`). With the knob `outlier_refits: 3` (commit 319a533's table, the images alone)
-  the three read 1.43, 0.15 and 0.17 deg (alpha_z 0.45, 0.12, 0.42). Before stop 65 (the map then culled the object
-  points linked at rest) the own view read 0.37 deg. With the Levenberg-Marquardt solver before stop 34 the three
-  views read 0.26, 0.12 and 0.27 deg: its change cost the boot about 0.1 deg. Model error: 3.2 % of the displacement
-  at the median (6.4 % at the largest angles, where the full-order folds buckle more than the one-layer model's; its
-  worst node 17 mm off), a theta bias of 0.4 deg (1.3 deg at most). The thesis gives no figure for this example. The
-  boot's table runs OpenCV on one thread: with its worker threads, the second view ended in the mirror basin (alpha_z
-  177 deg off) in one run of three.
+  rows (the code's changes since, a dense reference view refused where no pixel is finite and the tracker node's
+  frame-size checks, are not on this ROS-free run's map-point path): every registration the same to the printed digit,
+  the tracking after it moved by up to 0.02 deg at the median and 0.39 deg in the held-out view's p90 (1.23 -> 0.84,
+  back near the 0.81 of stop 109's run, on an AMD EPYC host of the AVX2 kind; this one has AVX-512). So the p90 move
+  between stops 109 and 119, which stop 119 could not split between the code and the host, points to the host; why a
+  host's arithmetic moves the boot's later frames this much is not traced (the beams' rows of the first table and the
+  registrations repeat to the printed digit across the two hosts). The tracker's time per frame: 27-35 ms in stop
+  122's run; 34-44 ms in stop 119's (quiet); 39-48 ms in stop 109's (probe 27 ms against 19 quiet on that host); stop
+  105's run (65-109 ms) was taken on a loaded host (its CPU probe read 83 ms against 15-17 quiet); stop 73's quiet run
+  read 31-35 ms (stop 72: 37-45 ms; stop 71: 68-81; the images alone 9-16 ms; stop 84's cheaper depth fit, the same
+  fits, `benchmarks/results/depth_budget.md`). With the knob `outlier_refits: 3` (commit 319a533's table, the images
+  alone) the three read 1.43, 0.15 and 0.17 deg (alpha_z 0.45, 0.12, 0.42). Before stop 65 (the map then culled the
+  object points linked at rest) the own view read 0.37 deg. With the Levenberg-Marquardt solver before stop 34 the
+  three views read 0.26, 0.12 and 0.27 deg: its change cost the boot about 0.1 deg. Model error: 3.2 % of the
+  displacement at the median (6.4 % at the largest angles, where the full-order folds buckle more than the one-layer
+  model's; its worst node 17 mm off), a theta bias of 0.4 deg (1.3 deg at most). The thesis gives no figure for this
+  example. The boot's table runs OpenCV on one thread: with its worker threads, the second view ended in the mirror
+  basin (alpha_z 177 deg off) in one run of three.
 - The boot's *model* was too coarse around its axis. With 24 cells, the polygon lay 0.43 mm inside the round boot at
   its base, and registration from a one-sided depth view tilted the boot 1.9 deg to split the difference. The spec now
   has 48 cells around. That choice was made on the scene's own view. The knob rows keep the old model: theta 0.34 deg
