@@ -37,6 +37,12 @@ class SlamConfig:
 
     min_parallax_deg: float = 1.0  # monocular initialization: less parallax is refused (weak depth vs. waiting)
     max_depth: float = 8.0  # metres; farther depth readings are dropped (noisy far points vs. coverage)
+    keyframe_depth_points: int = 0  # RGB-D / stereo keyframe: new points from the depth of at most this many
+    # unmatched features, nearest first; 0 = ORB-SLAM2's rule: every feature nearer than ``keyframe_close_depth_m``
+    # and, farther, on until 100 points are counted (map size vs. coverage). 250 until stop 123: on a joint boot filmed
+    # from 0.45 m the 250 nearest were all on the deforming boot, culled within two keyframes, and the static map
+    # starved until the camera was lost (held-out boot 1083: 46 % of the frames; docs/localization.md)
+    keyframe_close_depth_m: float = 3.1  # ORB-SLAM2's ThDepth as its TUM RGB-D settings give it (40 x 0.077 m)
     local_kfs: int = 10  # covisible keyframes in the local map and local BA (accuracy vs. time per keyframe)
     ba_iterations: int = 10  # Levenberg-Marquardt iterations of a local BA (accuracy vs. mapping time)
     min_features: int = 40  # fewer ORB features: the frame is reported textureless (false loss vs. wild poses)

@@ -122,7 +122,7 @@ class LocalMapper:
 
     def _create_points(self, kf: KeyFrame, taken: np.ndarray | None = None) -> list[int]:
         """New map points from the keyframe's features that no point holds (nor ``taken``): RGB-D and stereo
-        from their depth (the 250 closest), monocular by triangulation with covisible keyframes."""
+        from their depth (:func:`close_points`), monocular by triangulation with covisible keyframes."""
         ctx, m, K = self.ctx, self.ctx.map, self.ctx.K
         created = []
         f = kf.feats
@@ -130,9 +130,8 @@ class LocalMapper:
         if taken is not None:
             free &= ~taken
         if ctx.mode != "mono" and kf.depth is not None:
-            ok = free & np.isfinite(kf.depth)
-            idx = np.flatnonzero(ok)
-            idx = idx[np.argsort(kf.depth[idx])][:250]
+            idx = close_points(kf.depth, free, kf.mp >= 0, ctx.config.keyframe_depth_points,
+                               ctx.config.keyframe_close_depth_m)
             P = ctx.cam.backproject(f.und[idx], kf.depth[idx])
             T = kf.T_wc
             for i, p in zip(idx, P @ T[:3, :3].T + T[:3, 3]):
@@ -446,6 +445,30 @@ class LocalMapper:
             redundant = sum(1 for pid in ids if int(pid) in m.points and len(m.points[int(pid)].obs) > 3)
             if redundant > 0.9 * len(ids):
                 m.erase_keyframe(kf.id)
+
+
+#: ORB-SLAM2's least count of a keyframe's depth points (held and new) before its close-depth bound stops it
+MIN_KEYFRAME_DEPTH_POINTS = 100
+
+
+def close_points(depth: np.ndarray, free: np.ndarray, held: np.ndarray, cap: int, close_m: float) -> np.ndarray:
+    """The features of an RGB-D / stereo keyframe that get new map points from their depth (``depth``: metres per
+    feature, NaN unknown; ``free``: no point holds the feature and none may be made there; ``held``: a point holds
+    it), nearest first. ``cap`` > 0: the ``cap`` nearest free ones. ``cap`` 0: ORB-SLAM2's rule
+    (``Tracking::CreateNewKeyFrame``): walking the features with depth nearest first, every free one gets a point,
+    and the walk stops at the first feature beyond ``close_m`` once more than
+    :data:`MIN_KEYFRAME_DEPTH_POINTS` features (held or new) have been counted."""
+    with_depth = np.isfinite(depth)
+    if cap > 0:
+        idx = np.flatnonzero(free & with_depth)
+        return idx[np.argsort(depth[idx], kind="stable")][:cap]
+    order = np.flatnonzero(with_depth & (free | held))
+    order = order[np.argsort(depth[order], kind="stable")]
+    counted = np.arange(1, len(order) + 1)  # features counted up to and including each
+    stop = (depth[order] > close_m) & (counted > MIN_KEYFRAME_DEPTH_POINTS)
+    end = int(np.argmax(stop)) + 1 if stop.any() else len(order)  # ORB-SLAM2 counts the feature it stops on
+    walked = order[:end]
+    return walked[free[walked]]
 
 
 def _fundamental(T_a: np.ndarray, T_b: np.ndarray, K: np.ndarray) -> np.ndarray:
