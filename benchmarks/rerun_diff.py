@@ -44,16 +44,24 @@ def _number(v) -> float | None:
     return float(v)
 
 
-def row_key(rows: list[dict]) -> str | None:
-    """The field that names a row: ``seed`` if every row has one, else the first field holding text in every row."""
+#: text fields that describe a run's outcome rather than name its row (they may differ between runs)
+FREE_TEXT = ("reason", "refusal", "axis_txt", "note", "notes", "doubt")
+
+
+def row_key(rows: list[dict]) -> tuple[str, ...]:
+    """The fields that name a row: ``seed`` where every row has one, then text or yes/no fields present in every row
+    (in their order, outcomes such as ``reason`` left out), as few as make the rows' keys unique; () if none do."""
     if not rows:
-        return None
-    if all("seed" in r for r in rows):
-        return "seed"
-    for k in rows[0]:
-        if all(isinstance(r.get(k), str) for r in rows):
-            return k
-    return None
+        return ()
+    names = (["seed"] if all("seed" in r for r in rows) else []) + [
+        k for k in rows[0] if k != "seed" and not any(w in k for w in FREE_TEXT)
+        and all(isinstance(r.get(k), (str, bool)) for r in rows)]
+    key: list[str] = []
+    for k in names:
+        key.append(k)
+        if len({tuple(r.get(f) for f in key) for r in rows}) == len(rows):
+            return tuple(key)
+    return ()
 
 
 def close(a: float, b: float, rtol: float) -> bool:
@@ -73,12 +81,14 @@ def compare(old: dict, new: dict, rtol: float = 1e-9, fields: list[str] | None =
     """
     orows, nrows = old.get("rows") or [], new.get("rows") or []
     key = row_key(orows) or row_key(nrows)
-    out: dict = {"key": key, "rows_old": len(orows), "rows_new": len(nrows)}
-    if key is None:
+    out: dict = {"key": ", ".join(key) or "row order", "rows_old": len(orows), "rows_new": len(nrows)}
+    if not key:
         by_old, by_new = dict(enumerate(orows)), dict(enumerate(nrows))
     else:
-        by_old = {r.get(key): r for r in orows}
-        by_new = {r.get(key): r for r in nrows}
+        def name(r: dict):
+            return r.get(key[0]) if len(key) == 1 else tuple(r.get(k) for k in key)
+        by_old = {name(r): r for r in orows}
+        by_new = {name(r): r for r in nrows}
     matched = [k for k in by_old if k in by_new]
     out["matched"] = len(matched)
     out["only_old"] = [k for k in by_old if k not in by_new]
@@ -92,7 +102,7 @@ def compare(old: dict, new: dict, rtol: float = 1e-9, fields: list[str] | None =
             if fields and f not in fields:
                 continue
             x, y = _number(a.get(f)), _number(b.get(f))
-            if x is None or y is None or f == key:
+            if x is None or y is None or f in key:
                 continue
             s = stats.setdefault(f, {"n": 0, "moved": 0, "diffs": [], "ratios": []})
             s["n"] += 1

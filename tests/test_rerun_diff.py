@@ -42,7 +42,7 @@ def test_moved_rows_are_counted_and_the_largest_named():
 def test_rows_present_on_one_side_only_and_text_keys():
     old = _table([{"name": "a", "x": 1.0}, {"name": "b", "x": 2.0}])
     new = _table([{"name": "b", "x": 2.0}, {"name": "c", "x": 3.0}])
-    assert row_key(old["rows"]) == "name"
+    assert row_key(old["rows"]) == ("name",)
     d = compare(old, new)
     assert (d["matched"], d["only_old"], d["only_new"]) == (1, ["a"], ["c"])
 
@@ -58,3 +58,13 @@ def test_main_on_a_committed_table_against_itself(capsys):
     assert main(["family_boot"]) == 0  # the work tree's table at HEAD: the same unless a rerun wrote it
     assert "matched by `seed`" in capsys.readouterr().out
     assert main(["no_such_table"]) == 2
+
+
+def test_rows_named_by_several_fields_and_outcomes_left_out_of_the_key():
+    rows = [{"mode": m, "fusion": f, "reason": "lost" if m == "mono" else "", "ate": 1.0}
+            for m in ("mono", "rgbd") for f in ("yes", "no")]
+    assert row_key(rows) == ("mode", "fusion")
+    moved = [dict(r, ate=2.0) if (r["mode"], r["fusion"]) == ("rgbd", "no") else r for r in rows]
+    d = compare(_table(rows), _table(moved))
+    assert (d["matched"], d["identical"], d["fields"]["ate"]["max_row"]) == (4, 3, ("rgbd", "no"))
+    assert row_key([{"seed": 1, "x": 1.0}, {"seed": 1, "x": 2.0}]) == ()  # no key: rows matched in order

@@ -16,7 +16,7 @@ from simreal_nodes.vision.orb import Features
 from simreal_nodes.vision.slam.config import INITIALIZING, LOST, NOT_STARTED, OK, RELOCALIZED, SlamConfig
 from simreal_nodes.vision.slam.context import SlamContext
 from simreal_nodes.vision.slam.deformable import DeformableTracks
-from simreal_nodes.vision.slam.local_mapping import LocalMapper
+from simreal_nodes.vision.slam.local_mapping import LocalMapper, close_points
 from simreal_nodes.vision.slam.relocalization import Relocalizer
 from simreal_nodes.vision.slam.result import TrackResult
 from simreal_nodes.vision.slam.tracking import Tracker
@@ -1076,3 +1076,50 @@ def test_closing_the_mapping_process_does_not_wait_for_its_bundle_adjustment():
     idle = AsyncBundleAdjuster(K, None, 10)  # an idle one is told to end, and does so by itself
     idle.close(timeout=60)  # its imports may still run on a busy host: the end waits for them
     assert idle.proc.exitcode == 0
+
+
+def test_close_points_follow_orb_slam2_s_rule_and_the_cap_keeps_the_nearest():
+    """``close_points``: every free feature nearer than the close depth, and beyond it on until more than 100
+    features (held or new) are counted, the feature the walk stops on included (ORB-SLAM2's CreateNewKeyFrame);
+    with a cap, the cap's nearest free features."""
+    rng = np.random.default_rng(3)
+    depth = np.r_[rng.uniform(0.4, 3.0, 300), rng.uniform(3.2, 6.0, 200), [np.nan] * 20]
+    held = np.zeros(len(depth), bool)
+    held[:40] = True  # 40 near features already hold points
+    free = ~held
+    got = close_points(depth, free, held, 0, 3.1)
+    assert sorted(got.tolist()) == list(range(40, 300)) + [int(np.flatnonzero(depth == depth[300:500].min())[0])]
+    assert np.all(np.diff(depth[got]) >= 0)  # nearest first
+    # few near features: the walk goes on past the close depth until 101 are counted
+    far = np.r_[rng.uniform(0.4, 3.0, 30), rng.uniform(3.2, 6.0, 200)]
+    got = close_points(far, np.ones(230, bool), np.zeros(230, bool), 0, 3.1)
+    assert len(got) == 101 and set(range(30)) <= set(got.tolist())
+    assert np.all(far[got] <= np.sort(far)[100])
+    # the cap: the nearest free ones, held features neither made nor counted
+    got = close_points(depth, free, held, 250, 3.1)
+    assert len(got) == 250 and set(got.tolist()) <= set(range(40, 300))
+    assert depth[got].max() <= np.sort(depth[40:300])[249]
+    assert len(close_points(np.full(5, np.nan), np.ones(5, bool), np.zeros(5, bool), 0, 3.1)) == 0
+
+
+@pytest.mark.parametrize("cap", [0, 250])
+def test_a_near_object_does_not_take_a_keyframe_s_every_new_point(cap):
+    """A deforming object close to the camera (300 features at 0.4-0.6 m) in front of the static scene (400 at 1.5-3
+    m): ORB-SLAM2's rule (cap 0, the default) gives the background its points as well; the old cap of the 250 nearest
+    put every new point on the object, whose points the culling then erases, and the static map starved (held-out
+    boot 1083 lost the camera for 46 % of its frames)."""
+    ctx = context(keyframe_depth_points=cap)
+    rng = np.random.default_rng(7)
+    near = CAM.backproject(np.c_[rng.uniform(200, 440, 300), rng.uniform(150, 330, 300)], rng.uniform(0.4, 0.6, 300))
+    back = CAM.backproject(np.c_[rng.uniform(20, 620, 400), rng.uniform(20, 460, 400)], rng.uniform(1.5, 3.0, 400))
+    X = np.r_[near, back]
+    desc = rng.integers(0, 256, (len(X), 32), dtype=np.uint8)
+    f, idx, z = view(X, desc, np.eye(4))
+    mapper = LocalMapper(ctx, async_mapping=False)
+    ctx.frame_id += 1
+    kf = mapper.insert_keyframe(1, np.eye(4), f, z, np.zeros((0, 2), np.int64), np.zeros(0, bool))
+    on_background = int(np.sum((kf.mp >= 0) & (idx >= 300)))
+    if cap:
+        assert (int(np.sum(kf.mp >= 0)), on_background) == (250, 0)
+    else:
+        assert int(np.sum(kf.mp >= 0)) == len(idx) and on_background == int(np.sum(idx >= 300)) > 350
