@@ -539,10 +539,22 @@ TABLES = (("family", "Held-out seeds (the accuracy this project reports): the cu
            "polished; the map keeps the points linked at rest, no copies of followed points, a parameter the frame "
            "does not measure keeps its value; Huber alone; the lever read from every depth image, "
            "`tracking.depth_fit`; alpha_z reported with the depth fit's turn, `tracking.depth_turn`; both set in the "
-           "boot's family scene file), stop 114's code (an Intel host: median 0.38 %, p90 0.88 %, 93 % within 1 %, "
-           "98 % within 2 %, every registration the same to the bit and every scene's lever moved by 0.02 points at "
-           "the median, at most 0.58, both ways: the turn search's changes of stops 106-113; stop 105's table, "
-           "commit 57695f1: 0.38 %, 0.80 %, 94 %, 97 %; stop 73's stood until then)"),
+           "boot's family scene file), rerun in stop 123 on stop 122's code, whose default path the keyframe knob "
+           "of stop 123 leaves as it was, on an AMD EPYC host (median 0.35 %, p90 0.78 %, 93 % within 1 %, 97 % "
+           "within 2 %; stop 114's run of the same code path on an Intel host: 0.38 %, 0.88 %, 93 %, 98 %, every "
+           "registration the same to 1e-7 mm and the scenes' levers moved by 0.03 points at the median, both ways: "
+           "the host's arithmetic, `python -m benchmarks.rerun_diff family_boot --against 02d378c`; stop 105's "
+           "table, commit 57695f1: 0.38 %, 0.80 %, 94 %, 97 %; stop 73's stood until then)"),
+          ("family_boot_close_points", "The joint boot, held-out seeds, knob: an RGB-D keyframe's new points by "
+           "ORB-SLAM2's rule (`--slam keyframe_depth_points=0 --out family_boot_close_points`, stop 123, once, after "
+           "the development tables below; the same host as `family_boot` above)"),
+          ("family_boot_dev_close_points", "The joint boot, development seeds 0-19, knob: an RGB-D keyframe's new "
+           "points by ORB-SLAM2's rule (`--seeds 0-19 --slam keyframe_depth_points=0 --out "
+           "family_boot_dev_close_points`; run in stop 123 while it was the default)"),
+          ("family_boot_dev_nearest250", "The joint boot, development seeds 0-19, knob: a keyframe's new points from "
+           "its 250 nearest features, the default (`--seeds 0-19 --slam keyframe_depth_points=250 --out "
+           "family_boot_dev_nearest250`), run beside the one above (its nearest sorted stably then, as the default "
+           "does not: the same points but where two features' depths tie at the 250th)"),
           ("family_boot_dev_0_19_stop105", "The joint boot, development seeds 0-19 on stop 105's code (`--seeds 0-19 "
            "--jobs 1 --out family_boot_dev_0_19_stop105`): the turn about the axis searched where the boot is found "
            "bent; every row's figures the same as stop 104's code gave in a run beside it (scratch), the times apart"),

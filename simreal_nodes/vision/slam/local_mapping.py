@@ -454,14 +454,14 @@ MIN_KEYFRAME_DEPTH_POINTS = 100
 def close_points(depth: np.ndarray, free: np.ndarray, held: np.ndarray, cap: int, close_m: float) -> np.ndarray:
     """The features of an RGB-D / stereo keyframe that get new map points from their depth (``depth``: metres per
     feature, NaN unknown; ``free``: no point holds the feature and none may be made there; ``held``: a point holds
-    it), nearest first. ``cap`` > 0: the ``cap`` nearest free ones. ``cap`` 0: ORB-SLAM2's rule
+    it), nearest first. ``cap`` > 0 (the default's 250): the ``cap`` nearest free ones. ``cap`` 0: ORB-SLAM2's rule
     (``Tracking::CreateNewKeyFrame``): walking the features with depth nearest first, every free one gets a point,
     and the walk stops at the first feature beyond ``close_m`` once more than
     :data:`MIN_KEYFRAME_DEPTH_POINTS` features (held or new) have been counted."""
     with_depth = np.isfinite(depth)
     if cap > 0:
         idx = np.flatnonzero(free & with_depth)
-        return idx[np.argsort(depth[idx], kind="stable")][:cap]
+        return idx[np.argsort(depth[idx])][:cap]  # (the sort the cap always had: the same points on ties)
     order = np.flatnonzero(with_depth & (free | held))
     order = order[np.argsort(depth[order], kind="stable")]
     counted = np.arange(1, len(order) + 1)  # features counted up to and including each
