@@ -30,7 +30,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = "benchmarks/results"
-TIMING = re.compile(r"(^|_)(ms|s|fps|per_s)(_|$)|_ms_|fps")
+TIMING = re.compile(r"(^|_)(ms|s|per_s)(_|$)|fps")
 
 
 def is_timing(field: str) -> bool:
