@@ -46,6 +46,7 @@ from simreal_nodes.scene.schema import build_spec_models, validate_scene
 from simreal_nodes.states import EstimateState
 from simreal_nodes.synth.family import HELD_OUT_SEEDS, scene_model_error
 from simreal_nodes.synth.sequence import sequence
+from simreal_nodes.vision.slam.config import SlamConfig
 
 # the tables this script writes, under names composed from its options, that the docs quote as current
 # (benchmarks.staleness checks them against the code; other names are labelled runs)
@@ -75,9 +76,10 @@ def scene_name(seed: int, preloaded: bool = False, sensor: str = "rgbd", object:
 
 def run_scene(seed: int, width: int = 640, height: int = 480, preloaded: bool = False,
               measurements: str | None = None, tracking: dict | None = None, sensor: str = "rgbd",
-              seq: dict | None = None, object: str = "beam") -> dict:
+              seq: dict | None = None, object: str = "beam", slam: dict | None = None) -> dict:
     """One scene through the offline pipeline; ``measurements`` overrides the scene's ``tracking.measurements``,
-    ``tracking`` any other key of its ``tracking`` block (a knob's trade); ``sensor``: ``rgbd`` or ``stereo``;
+    ``tracking`` any other key of its ``tracking`` block (a knob's trade); ``slam``: fields of the SLAM's
+    :class:`~simreal_nodes.vision.slam.config.SlamConfig` (a knob's trade); ``sensor``: ``rgbd`` or ``stereo``;
     ``seq``: the scene's frames already rendered (and perhaps made worse: ``benchmarks/camera_quality.py``);
     ``object``: ``beam`` or ``plate`` (two load parameters: a frame's error is the larger of the two, each in % of
     its own range; each axis's median beside)."""
@@ -93,7 +95,7 @@ def run_scene(seed: int, width: int = 640, height: int = 480, preloaded: bool = 
         doc["objects"][0]["tracking"]["measurements"] = measurements
     doc["objects"][0]["tracking"].update(tracking or {})
     scene = build_spec_models(validate_scene(doc, sc.name, "."))
-    pipe = Pipeline(scene, seq["cam"], baseline=sc.stereo_baseline)
+    pipe = Pipeline(scene, seq["cam"], baseline=sc.stereo_baseline, slam_config=SlamConfig(**slam) if slam else None)
     run = track(pipe, seq, FPS)
     truth, est, states, reasons = run["truth"], run["est"], run["states"], run["reasons"]
     step_ms, cam_err, solve_ms, tracker_ms = run["step_ms"], run["cam_err"], run["solve_ms"], run["tracker_ms"]
@@ -2286,6 +2288,8 @@ def main() -> None:
                     help="override the scenes' tracking.measurements (results name gets the suffix)")
     ap.add_argument("--tracking", action="append", default=[], metavar="KEY=VALUE",
                     help="override a key of the scenes' tracking block (YAML value; results name gets the suffix)")
+    ap.add_argument("--slam", action="append", default=[], metavar="KEY=VALUE",
+                    help="a knob: a field of the SLAM's SlamConfig (YAML value; results name gets the suffix)")
     ap.add_argument("--sensor", choices=("rgbd", "stereo"), default="rgbd",
                     help="the camera the family is seen through (stereo: results name gets the suffix _stereo)")
     ap.add_argument("--object", choices=("beam", "plate"), default="beam",
@@ -2339,6 +2343,9 @@ def main() -> None:
     pairs = [t.partition("=")[::2] for t in a.tracking]
     knobs = {k: yaml.safe_load(v) for k, v in pairs}
     name += "".join(f"_{k}_{v.lower()}" for k, v in pairs)
+    slam_pairs = [t.partition("=")[::2] for t in a.slam]
+    slam = {k: yaml.safe_load(v) for k, v in slam_pairs}
+    name += "".join(f"_{k}_{v.lower()}" for k, v in slam_pairs)
     name = a.out or name
     if a.compose:
         if not a.out:
@@ -2369,6 +2376,7 @@ def main() -> None:
     label += ", stereo pair (SGBM depth)" if a.sensor == "stereo" else ""
     label += f", measurements {a.measurements}" if a.measurements else ""
     label += "".join(f", tracking.{k}: {v}" for k, v in knobs.items())
+    label += "".join(f", SlamConfig.{k}: {v}" for k, v in slam.items())
     rows: list[dict] = []
     if a.resume and (RESULTS / f"{name}.json").exists():
         doc = json.loads((RESULTS / f"{name}.json").read_text())
@@ -2380,7 +2388,7 @@ def main() -> None:
         seeds = [s for s in seeds if s not in done]
         print(f"--resume: {len(done)} seeds kept, {len(seeds)} to run", flush=True)
     job = functools.partial(run_scene, preloaded=a.preloaded, measurements=a.measurements, tracking=knobs,
-                            sensor=a.sensor, object=a.object)
+                            sensor=a.sensor, object=a.object, slam=slam)
     for row in scene_map(job, seeds, a.jobs):
         rows.append(row)
         print({k: v for k, v in row.items() if k != "curve"}, flush=True)
