@@ -37,13 +37,13 @@ class SlamConfig:
 
     min_parallax_deg: float = 1.0  # monocular initialization: less parallax is refused (weak depth vs. waiting)
     max_depth: float = 8.0  # metres; farther depth readings are dropped (noisy far points vs. coverage)
-    keyframe_depth_points: int = 250  # RGB-D / stereo keyframe: new points from the depth of at most this many
-    # unmatched features, nearest first; 0 = ORB-SLAM2's rule: every feature nearer than ``keyframe_close_depth_m``
-    # and, farther, on until 100 points are counted (map size vs. coverage). 0 mends a joint boot filmed from 0.45 m,
-    # whose 250 nearest features were all on the deforming boot and culled, so that the static map starved and the
-    # camera was lost (held-out boot 1083: 46 % of the frames), and lowered the camera's error on the development
-    # beams and boots; but the thesis's boot in a starved graph (every 10th frame) read its lever 3.2 degrees off
-    # against 1.0: a knob until that is understood (docs/localization.md, stop 123)
+    keyframe_depth_points: int = 0  # RGB-D / stereo keyframe: 0 = ORB-SLAM2's rule: new points from the depth of
+    # every unmatched feature nearer than ``keyframe_close_depth_m`` and, farther, on until 100 points are counted;
+    # > 0: of at most this many unmatched features, nearest first (stop 123's default, 250: map size vs. coverage).
+    # The cap starved a joint boot filmed from 0.45 m, whose 250 nearest features were all on the deforming boot
+    # and culled (held-out boot 1083: the camera lost in 46 % of the frames); the rule lowered the camera's error on
+    # the development beams and boots, their loads level and the stereo beams' too (docs/localization.md, stops
+    # 123 and 124)
     keyframe_close_depth_m: float = 3.1  # ORB-SLAM2's ThDepth as its TUM RGB-D settings give it (40 x 0.077 m)
     local_kfs: int = 10  # covisible keyframes in the local map and local BA (accuracy vs. time per keyframe)
     ba_iterations: int = 10  # Levenberg-Marquardt iterations of a local BA (accuracy vs. mapping time)
