@@ -547,8 +547,8 @@ TABLES = (("family", "Held-out seeds (the accuracy this project reports): the cu
            "706df3b, table 124a730, the same host: 0.35 %, 0.78 %, 93 %, 97 %, `python -m benchmarks.rerun_diff "
            "family_boot --against 124a730`; stop 114's run of that code path on an Intel host: 0.38 %, 0.88 %, "
            "93 %, 98 %, every registration the same to 1e-7 mm and the scenes' levers moved by 0.03 points at the "
-           "median, both ways: the host's arithmetic, `python -m benchmarks.rerun_diff family_boot --against "
-           "02d378c`; stop 105's table, commit 57695f1: 0.38 %, 0.80 %, 94 %, 97 %; stop 73's stood until then)"),
+           "median, both ways: the host's arithmetic, stop 123's `rerun_diff` of its cap run against 02d378c; "
+           "stop 105's table, commit 57695f1: 0.38 %, 0.80 %, 94 %, 97 %; stop 73's stood until then)"),
           ("family_boot_close_points", "The joint boot, held-out seeds: an RGB-D keyframe's new points by "
            "ORB-SLAM2's rule, a knob then (`--slam keyframe_depth_points=0 --out family_boot_close_points`, stop 123, "
            "once, after the development tables below; the same host as `family_boot` above; without stop 124's "
