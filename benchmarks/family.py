@@ -770,7 +770,19 @@ TABLES = (("family", "Held-out seeds (the accuracy this project reports): the cu
           ("family_preloaded_heldout", "The load on from the first frame: held-out seeds"),
           ("family_preloaded_heldout_reference_rest", "The load on from the first frame, held-out seeds 1000-1014, the "
            "reference taken to be the rest shape (`--tracking reference=rest`, the behaviour before stop 30)"),
-          ("family_stereo", "Stereo pair: held-out seeds (`--sensor stereo`)"),
+          ("family_stereo", "Stereo pair: held-out seeds (`--sensor stereo --seeds 1000-1029`; rerun in stop 125 "
+           "with ORB-SLAM2's keyframe points on an AMD EPYC host: 0.60 %, p90 2.49 %, 67 % within 1 %, 87 % within "
+           "2 %; stop 122's run with the cap of the 250 nearest on an Intel host, table 5ca0eff: 0.53 %, 1.87 %, "
+           "73 %, 93 %)"),
+          ("family_stereo_cap_probe", "Stereo pair: the three held-out scenes stop 125's rerun moved over 2 %, with "
+           "the cap of the 250 nearest on the same host (`--sensor stereo --seeds 1001,1004,1023 --slam "
+           "keyframe_depth_points=250 --out family_stereo_cap_probe`, a diagnosis)"),
+          ("family_dev_stereo_0_19_close_points", "Stereo pair: development seeds 0-19, ORB-SLAM2's keyframe points "
+           "(the default; `--compose family_dev_stereo_0_9_close_points,family_dev_stereo_10_19_close_points`: "
+           "stop 124's run of 0-9, before the tracker's mend, and stop 125's of 10-19)"),
+          ("family_dev_stereo_0_19_nearest250", "Stereo pair: development seeds 0-19, the cap of the 250 nearest (a "
+           "knob; composed as above from `family_dev_stereo_0_9_nearest250` and "
+           "`family_dev_stereo_10_19_nearest250`)"),
           ("family_dev_stereo", "Stereo pair: development seeds 0-19 (`--sensor stereo`)"),
           ("family_stereo_stop60", "Stereo pair: held-out seeds before stop 61 replaced 1001's row"),
           ("family_dev_stereo_stop60", "Stereo pair: development seeds 0-19 before stop 61 replaced 5, 14 and 18"),
@@ -2042,6 +2054,20 @@ lever bent.) Development seeds 0-19 (`python -m benchmarks.family_boot --seeds 0
 kept as a table) read every figure of `family_boot_dev_0_19_stop105` to the digit, the times apart. Also: a scene may
 no longer fix alpha_z and ask for `depth_turn` (the schema refuses the pair with its reason), and a tracker built with
 both reports the fixed value (until now the depth's turn was added to it: a given alpha_z moved).
+
+**Stop 125: the held-out stereo pair rerun with ORB-SLAM2's keyframe points, and the development stereo seeds
+completed.** `--sensor stereo --seeds 1000-1029` on stop 124's code (AMD EPYC host) against stop 122's run with the
+cap (Intel host, `python -m benchmarks.rerun_diff family_stereo --against 5ca0eff`): **0.60 %** at the median of the
+scene medians (0.53), **p90 2.49 %** (1.87), 67 % within 1 % (73), **87 % within 2 %** (93): short of the 90 %
+target, which the cap's table met. The camera's error 2.15 mm at the median (2.47), lower on 21 of 30. Three
+cantilevers moved over 2 %: 1001 0.87 -> 8.83 %, 1004 0.29 -> 1.30 %, 1023 1.87 -> 2.65 % (a load that moves the image
+2.5 px); the same three with the cap on this host (`family_stereo_cap_probe`) read 0.87, 0.28 and 1.89 %, so the rule
+moved them, not the host; on 1004 the registration, which fuses the first views' depth at the SLAM's poses, moved
+from 9.1 to 17.6 mm, on 1001 from 0.14 to 0.26 degree (not traced further). The development stereo seeds, the
+evidence a default is chosen on, say the rule holds: seeds 10-19 run now with both rules, composed with stop 124's
+0-9 (`family_dev_stereo_0_19_close_points` against `family_dev_stereo_0_19_nearest250`): 0.46 against 0.48 %, p90
+0.87 against 0.84 %, 95 % within 1 % and within 2 % with both, 14 scenes better and 6 worse, the camera 2.23 against
+2.35 mm. The default stays; the held-out stereo shortfall is reported as measured.
 
 **Stop 125: the held-out beams rerun with ORB-SLAM2's keyframe points.** `./run bench family` on stop 124's code
 (the rule the default, the tracker's mend; two scenes at a time on an AMD EPYC host; the table above) against the cap's
