@@ -475,8 +475,8 @@ TABLES = (("family", "Held-out seeds (the accuracy this project reports): the cu
            "same in both)"),
           ("family_plate", "Plates, held-out seeds 1000-1019 rerun in stop 125 with ORB-SLAM2's keyframe points "
            "(`--object plate --seeds 1000-1019 --out family_plate_stop125`, composed as `family_plate`; an AMD EPYC "
-           "host: 1.15 %, p90 2.82 %, 35 % within 1 %, 75 % within 2 %; the run of stop 102's code with the cap of "
-           "the 250 nearest, on an Intel host, table c93e8f3: 1.14 %, 2.58 %, 40 %, 75 %, `python -m "
+           "host: 1.15 %, p90 2.82 %, 35 % within 1 %, 75 % within 2 %; its last run with the cap of the 250 "
+           "nearest, on an Intel host, table c93e8f3: 1.14 %, 2.58 %, 40 %, 75 %, `python -m "
            "benchmarks.rerun_diff family_plate --against c93e8f3`)"),
           ("family_heldout_1050_1099_default", "Beams, held-out seeds 1050-1099 on the current defaults (`--seeds "
            "1050-1099 --out family_heldout_1050_1099_default`: stop 80, run once)"),
@@ -2059,7 +2059,7 @@ both reports the fixed value (until now the depth's turn was added to it: a give
 
 **Stop 125: the held-out plates rerun with ORB-SLAM2's keyframe points.** `--object plate --seeds 1000-1019` on
 stop 124's code (an AMD EPYC host; the first two scenes, then `--resume` for the other 18 after a pause for the
-stereo development runs) against the cap's run of stop 102's code on an Intel host (table c93e8f3): **1.15 %** at the
+stereo development runs) against the cap's last run, on an Intel host (table c93e8f3): **1.15 %** at the
 median of the scene medians (1.14), **p90 2.82 %** (2.58), 35 % within 1 % (40), **75 % within 2 %** (75): the same
 two targets missed (the median and the share within 2 %), the p90 still under 3 %. Bolted at both ends 0.83 % and 91
 % within 2 % (0.85, 91), shelves 1.92 % and 56 % (1.57, 56); the camera's error 1.37 mm at the median (1.45), lower on
