@@ -926,12 +926,16 @@ class DeformableTracker:
         The frame agrees where the registration's state lowers the rest shape's cost on this frame's depth by at most
         ``cfg.min_gain`` less than the frame's own verdict does (its deformed fit, or the rest shape: no gain), both
         held on the same points at the same scale (:func:`.depth_state.held_gains`, their rigid parts a nuisance):
-        ``min_gain`` is the yardstick a deformation must pass for the depth to see it at all. A state one depth image
-        cannot tell from another is then taken from the fit on more views: on development seeds 0-19 of the loaded
-        family, the registration's fit (its last view is the reference frame) read the load 0.36 % of its range off
-        (median) where the reference frame's own fit read it 0.63 % off or saw none (seed 4: its 0.5 mm deformation
-        under ``min_motion`` in one view, 1.25 % off from three). Where the load moved or went after the registration's
-        views (a live graph registers in the background), the frame's own verdict lowers the cost by more and
+        ``min_gain`` is the yardstick a deformation must pass for the depth to see it at all. Where the frame's verdict
+        is the rest shape, the registration's state must lower its cost at all (a gain above zero): a state that fits
+        this frame's depth worse than the rest shape is not one the frame cannot tell apart, the frame speaks against
+        it (held-out stereo seed 1001: the fused views' fit read a load on the unloaded beam, -0.4 % on the reference
+        frame, and every later estimate carried it, 8.8 % of the range off). A state one depth image cannot tell from
+        another is then taken from the fit on more views: on development seeds 0-19 of the loaded family, the
+        registration's fit (its last view is the reference frame) read the load 0.36 % of its range off (median) where
+        the reference frame's own fit read it 0.63 % off or saw none (seed 4: its 0.5 mm deformation under
+        ``min_motion`` in one view, 1.25 % off from three). Where the load moved or went after the registration's views
+        (a live graph registers in the background), the frame's own verdict lowers the cost by more and
         stands."""
         if self.reference_state is None or st.fitted is None:
             return ""
@@ -939,7 +943,7 @@ class DeformableTracker:
         states = [reg] if st.mu is None else [reg, st.mu]
         gains = held_gains(cloud, self.model, T, lo, hi, states, cfg, self.cfg.n_modes or None)
         gain, own = float(gains[0]), (float(gains[1]) if st.mu is not None else 0.0)
-        if not own - gain <= cfg.min_gain:
+        if not own - gain <= cfg.min_gain or not gain > 0.0:
             return ""
         verdict = "its own fit" if st.mu is not None else "the rest shape (its verdict)"
         return (f"this frame's depth agrees: the registration's state lowers the rest shape's cost by {gain:+.1%}, "
