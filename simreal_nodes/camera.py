@@ -26,6 +26,8 @@ CALIBRATION_MODELS = ("plumb_bob", "rational_polynomial", "equidistant")  # `sim
 # the overlay's distortion map: exact every 4th pixel, bilinear between (CameraModel.ideal_pixel_map)
 IDEAL_MAP_STEP = 4
 MAX_IMAGE_SIDE = 16384  # pixels: above any camera the graph serves (and OpenGL's usual texture limit)
+# a pinhole lens's coefficients must map the image's border back onto itself this closely (CameraModel.validate)
+BORDER_ROUND_TRIP_PX = 0.01
 LENS_TABLE_SIZE = 20001  # samples of a fisheye's lens curve over 0-90 degrees (CameraModel.stretch): 8e-5 rad apart
 
 
@@ -97,6 +99,32 @@ class CameraModel:
                                   f"found {len(self.D)}")
         if len(self.D) not in (0, 4, 5, 8, 12, 14):
             raise CameraInfoError(f"{len(self.D)} distortion coefficients (OpenCV takes 4, 5, 8, 12 or 14)")
+        if self.has_distortion and not self.fisheye:
+            miss = self._border_round_trip()
+            if not miss < BORDER_ROUND_TRIP_PX:
+                raise CameraInfoError(
+                    f"the distortion coefficients {np.round(self.D, 6).tolist()} do not invert over the "
+                    f"{self.width}x{self.height} image: its border pixels undistorted and distorted again land up to "
+                    f"{miss:.3g} px from where they were (the lens curve turns back inside the image, or these are "
+                    "not a lens's coefficients: a damaged CameraInfo?)")
+
+    def _border_round_trip(self) -> float:
+        """The largest distance (px) between a pixel on the image's border (its corners, edge midpoints and more:
+        the pixels farthest from the axis, where distortion is strongest) and where it lands undistorted
+        (:meth:`undistort_points`, OpenCV's iteration) and distorted again (:meth:`project`): about 1e-6 px for a
+        real lens, far more (or NaN) where the radial curve turns back before the corners (no ideal pixel to find) or
+        the iteration does not converge. A fisheye is not judged here: its pixels past the curve's turning point
+        are NaN by design (a circular fisheye's dark corners)."""
+        t = np.linspace(0.0, 1.0, 9)
+        w, h = self.width - 1.0, self.height - 1.0
+        uv = np.vstack([np.c_[t * w, np.zeros_like(t)], np.c_[t * w, np.full_like(t, h)],
+                        np.c_[np.zeros_like(t), t * h], np.c_[np.full_like(t, w), t * h]])
+        ideal = self.undistort_points(uv)
+        y = (ideal[:, 1] - self.cy) / self.fy
+        x = (ideal[:, 0] - self.cx - self.K[0, 1] * y) / self.fx
+        with np.errstate(all="ignore"):
+            back = self.project(np.c_[x, y, np.ones(len(x))])
+            return float(np.max(np.linalg.norm(back - uv, axis=1)))
 
     def check_size(self, image: np.ndarray, what: str = "image") -> None:
         """ImageFormatError unless ``image`` (rows x columns [x channels]) has this camera's size: a frame of

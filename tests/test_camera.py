@@ -67,6 +67,22 @@ def test_an_image_of_another_size_than_the_camera_is_refused_with_both_sizes():
         cam.check_size(np.zeros((1, 64)), "depth image")
 
 
+def test_coefficients_that_do_not_invert_over_the_image_are_refused():
+    """Issue 20: a plumb_bob lens whose radial curve turns back before the image's corners (k1 = -0.9 at f = 576: the
+    curve peaks at a normalized radius of 0.41, the corners are at 0.69) has no ideal pixel for its border, and
+    OpenCV's undistortion returned points 244 px off without a word; tangential terms of 0.5 give NaN. Real lenses
+    pass: TUM fr1's (a strong fifth-order term), a strong barrel, 14 small coefficients, and a fisheye's dark corners
+    (NaN by design) are not judged by this."""
+    K = [576.0, 0.0, 321.5, 0.0, 570.0, 238.7, 0.0, 0.0, 1.0]
+    for d in ([-0.9, 0.0, 0.0, 0.0, 0.0], [0.0, 0.0, 0.5, 0.5, 0.0], [-5.0, 0.0, 0.0, 0.0, 0.0]):
+        with pytest.raises(CameraInfoError, match="do not invert over the 640x480 image"):
+            CameraModel.from_camera_info(Info(640, 480, K, d=d))
+    for d in ([0.2624, -0.9531, -0.0054, 0.0026, 1.1633], [-0.35, 0.15, 0.001, -0.001, -0.03], [0.01] * 14):
+        cam = CameraModel.from_camera_info(Info(640, 480, K, d=d))
+        assert cam._border_round_trip() < 1e-6
+    CameraModel.from_camera_info(Info(640, 480, K, d=[-0.9, 0.5, 0.0, 0.0], model="equidistant"))
+
+
 def test_the_ideal_pixel_map_is_within_a_fiftieth_of_a_pixel_of_the_exact_one():
     """Issue 18: the overlay's distortion map is exact every 4th pixel and bilinear between (a tenth of the time of
     every pixel exactly, the first frame waits for it); on a strong barrel distortion (and a mild one) it stays
