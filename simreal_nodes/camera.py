@@ -111,7 +111,7 @@ class CameraModel:
     def _border_round_trip(self) -> float:
         """The largest distance (px) between a pixel on the image's border (its corners, edge midpoints and more:
         the pixels farthest from the axis, where distortion is strongest) and where it lands undistorted
-        (:meth:`undistort_points`, OpenCV's iteration) and distorted again (:meth:`project`): about 1e-6 px for a
+        (:meth:`undistort_points`, OpenCV's iteration) and distorted again (:meth:`project`): about 1e-10 px for a
         real lens, far more (or NaN) where the radial curve turns back before the corners (no ideal pixel to find) or
         the iteration does not converge. A fisheye is not judged here: its pixels past the curve's turning point
         are NaN by design (a circular fisheye's dark corners)."""
