@@ -771,7 +771,7 @@ TABLES = (("family", "Held-out seeds (the accuracy this project reports): the cu
            "cantilevers)"),
           ("family_preloaded_heldout", "The load on from the first frame: held-out seeds (rerun in stop 126 on "
            "ORB-SLAM2's keyframe points and the reference view's mend, an AMD EPYC host; its run before, with the cap, "
-           "on an Intel host, table 7702caf: 0.73 %, p90 3.19 %, 63 % within 1 %, 83 % within 2 %)"),
+           "on an Intel host, table 7503588: 0.73 %, p90 3.19 %, 63 % within 1 %, 83 % within 2 %)"),
           ("family_preloaded_heldout_reference_rest", "The load on from the first frame, held-out seeds 1000-1014, the "
            "reference taken to be the rest shape (`--tracking reference=rest`, the behaviour before stop 30)"),
           ("family_stereo", "Stereo pair: held-out seeds (`--sensor stereo --seeds 1000-1029`; rerun in stop 126 "
@@ -2079,7 +2079,7 @@ rows the same in every accuracy field; **0.56 %** at the median of the scene med
 
 **Stop 126: the loaded held-out beams rerun** (`--preloaded --seeds 1000-1029`, this stop's code: ORB-SLAM2's
 keyframe points and the reference view's mend, an AMD EPYC host) against the cap's last run on an Intel host (`python
--m benchmarks.rerun_diff family_preloaded_heldout --against 7702caf`): **0.68 %** at the median of the scene medians
+-m benchmarks.rerun_diff family_preloaded_heldout --against 7503588`): **0.68 %** at the median of the scene medians
 (0.73), **p90 3.56 %** (3.19), 60 % within 1 % (63), **83 % within 2 %** (83): the median target met, the p90 and
 the share within 2 % missed, as before. 12 scenes better, 17 worse; the largest moves 1023 3.16 -> 3.92 %, 1010 +0.36
 points, 1003 -0.23; the camera's error 1.65 mm at the median (1.68), lower on 21 of 30. Over 2 %: 1009 (6.09 %),

@@ -927,7 +927,8 @@ class DeformableTracker:
         ``cfg.min_gain`` less than the frame's own verdict does (its deformed fit, or the rest shape: no gain), both
         held on the same points at the same scale (:func:`.depth_state.held_gains`, their rigid parts a nuisance):
         ``min_gain`` is the yardstick a deformation must pass for the depth to see it at all. Where the frame's verdict
-        is the rest shape, the registration's state must lower its cost at all (a gain above zero): a state that fits
+        is the rest shape, the registration's state must lower its cost at all (a gain above zero; the code asks it
+        always, and where the frame's own fit is deformed the first condition asks more already): a state that fits
         this frame's depth worse than the rest shape is not one the frame cannot tell apart, the frame speaks against
         it (held-out stereo seed 1001: the fused views' fit read a load on the unloaded beam, -0.4 % on the reference
         frame, and every later estimate carried it, 8.8 % of the range off). A state one depth image cannot tell from
