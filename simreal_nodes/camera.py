@@ -28,6 +28,7 @@ IDEAL_MAP_STEP = 4
 MAX_IMAGE_SIDE = 16384  # pixels: above any camera the graph serves (and OpenGL's usual texture limit)
 # a pinhole lens's coefficients must map the image's border back onto itself this closely (CameraModel.validate)
 BORDER_ROUND_TRIP_PX = 0.01
+_ROUND_TRIPS: dict[tuple, float] = {}  # each lens's border round trip (px), keyed by its size, K, D and model
 LENS_TABLE_SIZE = 20001  # samples of a fisheye's lens curve over 0-90 degrees (CameraModel.stretch): 8e-5 rad apart
 
 
@@ -100,7 +101,14 @@ class CameraModel:
         if len(self.D) not in (0, 4, 5, 8, 12, 14):
             raise CameraInfoError(f"{len(self.D)} distortion coefficients (OpenCV takes 4, 5, 8, 12 or 14)")
         if self.has_distortion and not self.fisheye:
-            miss = self._border_round_trip()
+            # judged once per lens: a node builds its camera from every CameraInfo, which comes with every frame
+            key = (self.width, self.height, self.K.tobytes(), self.D.tobytes(), self.distortion_model)
+            miss = _ROUND_TRIPS.get(key)
+            if miss is None:
+                miss = self._border_round_trip()
+                if len(_ROUND_TRIPS) >= 64:
+                    _ROUND_TRIPS.clear()
+                _ROUND_TRIPS[key] = miss
             if not miss < BORDER_ROUND_TRIP_PX:
                 raise CameraInfoError(
                     f"the distortion coefficients {np.round(self.D, 6).tolist()} do not invert over the "
